@@ -1,0 +1,43 @@
+//! Regenerate `src/arm4_geometry.json`: boxes fitted to the papers' STL meshes.
+//!
+//! `cargo run --release --bin fit_arm4_geometry -- --cell 0.0025`
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use selfmodel::atomic_file::write_json;
+use selfmodel::cli::{run_main, shared_arm_urdf};
+use selfmodel::primitive_fit::fit_boxes;
+use selfmodel::urdf_loader::load_urdf;
+
+/// Fit the built-in arm4's box geometry to the mesh robot (needs ../shared/robots).
+#[derive(Parser)]
+#[command(version, about)]
+struct Args {
+    /// The papers' URDF with its STL meshes.
+    #[arg(long, default_value_os_t = shared_arm_urdf())]
+    urdf: PathBuf,
+    /// Voxel size in metres.
+    #[arg(long, default_value_t = 0.0025)]
+    cell: f64,
+    /// Output JSON.
+    #[arg(long, default_value = "src/arm4_geometry.json")]
+    out: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    run_main(|| {
+        let robot = load_urdf(&args.urdf, selfmodel::arm4::scene_base())?;
+        let mut fitted = std::collections::BTreeMap::new();
+        for (name, geometry) in robot.chain.links.iter().zip(&robot.geometry) {
+            let boxes = fit_boxes(geometry.shapes(), args.cell);
+            println!("{name}: {} triangles -> {} boxes", geometry.shapes().len(), boxes.boxes.len());
+            fitted.insert(name.clone(), boxes);
+        }
+        write_json(&args.out, &fitted)?;
+        println!("wrote {}", args.out.display());
+        Ok(())
+    })
+}

@@ -1,0 +1,27 @@
+//! selfmodel: robots that learn models of themselves.
+//!
+//! A pure-Rust research framework on burn that reproduces and extends two papers: visual
+//! self-models of a robot arm and learned inverse kinematics. This crate holds the library;
+//! `experiments/` holds one thin binary per experiment. See `ARCHITECTURE.md`.
+
+pub mod arm4;
+pub mod atomic_file;
+pub mod bvh;
+pub mod camera;
+pub mod cli;
+pub mod dataset;
+pub mod device;
+pub mod error;
+pub mod kinematics;
+pub mod metrics;
+pub mod npz;
+pub mod preview;
+pub mod primitive_fit;
+pub mod ray_caster;
+pub mod robot;
+pub mod shape;
+pub mod stl_mesh;
+pub mod trajectory;
+pub mod urdf_loader;
+
+pub use error::{Error, Result};
