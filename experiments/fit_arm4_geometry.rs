@@ -1,12 +1,12 @@
 //! Regenerate `src/arm4_geometry.json`: boxes fitted to the papers' STL meshes.
 //!
-//! `cargo run --release --bin fit_arm4_geometry -- --cell 0.0025`
+//! `cargo run --release --bin fit_arm4_geometry -- --cell 0.001`
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::atomic_file::write_json;
+use selfmodel::atomic_file::write_bytes;
 use selfmodel::cli::{run_main, shared_arm_urdf};
 use selfmodel::primitive_fit::fit_boxes;
 use selfmodel::urdf_loader::load_urdf;
@@ -19,7 +19,7 @@ struct Args {
     #[arg(long, default_value_os_t = shared_arm_urdf())]
     urdf: PathBuf,
     /// Voxel size in metres.
-    #[arg(long, default_value_t = 0.0025)]
+    #[arg(long, default_value_t = 0.001)]
     cell: f64,
     /// Output JSON.
     #[arg(long, default_value = "src/arm4_geometry.json")]
@@ -36,7 +36,21 @@ fn main() -> ExitCode {
             println!("{name}: {} triangles -> {} boxes", geometry.shapes().len(), boxes.boxes.len());
             fitted.insert(name.clone(), boxes);
         }
-        write_json(&args.out, &fitted)?;
+        // One box per line: compact, and diffs stay readable.
+        let links: Vec<String> = fitted
+            .iter()
+            .map(|(name, f)| {
+                let boxes: Vec<String> = f.boxes.iter().map(|b| format!("    {}", serde_json::json!(b))).collect();
+                format!(
+                    "  {}: {{\"origin\": {}, \"cell\": {}, \"boxes\": [\n{}\n  ]}}",
+                    serde_json::json!(name),
+                    serde_json::json!(f.origin),
+                    f.cell,
+                    boxes.join(",\n")
+                )
+            })
+            .collect();
+        write_bytes(&args.out, format!("{{\n{}\n}}\n", links.join(",\n")).as_bytes())?;
         println!("wrote {}", args.out.display());
         Ok(())
     })

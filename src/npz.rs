@@ -126,7 +126,7 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
         if npy.order() != npyz::Order::C {
             return Err(Error::data(path, format!("\"{key}\" is stored in Fortran order; save it C-contiguous")));
         }
-        let descr = npy.dtype().descr();
+        let descr = npy.dtype().descr().trim_matches('\'').to_string();
         let data = match descr.as_str() {
             "|u1" | "<u1" => ArrayData::U8(npy.into_vec().map_err(bad)?),
             "<f4" => ArrayData::F32(npy.into_vec().map_err(bad)?),
