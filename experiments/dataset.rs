@@ -5,13 +5,10 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::time::Instant;
 
 use clap::Parser;
-use selfmodel::atomic_file::write_json;
-use selfmodel::cli::{git_revision, run_main, RobotArgs};
-use selfmodel::dataset::{progress_bar, read_angles, Dataset, DatasetConfig};
-use selfmodel::preview::{depth_to_gray, save_png, tile_grid};
+use selfmodel::cli::{run_main, RobotArgs};
+use selfmodel::dataset::{build_and_save, read_angles, DatasetConfig};
 use selfmodel::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
@@ -98,40 +95,9 @@ fn main() -> ExitCode {
             return Err(selfmodel::Error::Config("--samples cannot be combined with --angles".into()));
         }
 
-        let bar = progress_bar(cfg.samples as u64, "render");
-        let start = Instant::now();
-        let data = match given {
-            Some(rows) => Dataset::render(&robot, &cfg, rows, Some(&bar))?,
-            None => Dataset::generate(&robot, &cfg, Some(&bar))?,
-        };
-        let render_s = start.elapsed().as_secs_f64();
-        bar.finish_and_clear();
-
-        let write_start = Instant::now();
-        data.save(&args.out)?;
-        let write_s = write_start.elapsed().as_secs_f64();
-
-        let names: Vec<String> = robot.chain.movable_joints().map(|j| j.name.clone()).collect();
-        let stats = data.stats(&names);
-        let side = |ext: &str| args.out.with_extension(ext);
-        let record = serde_json::json!({
-            "stats": stats,
-            "robot": args.robot.label(),
-            "shapes": robot.shape_count(),
-            "render_seconds": render_s,
-            "write_seconds": write_s,
-            "images_per_second": data.len() as f64 / render_s,
-            "threads": rayon::current_num_threads(),
-            "git_revision": git_revision(),
-        });
-        write_json(&side("stats.json"), &record)?;
-        write_json(&side("config.json"), &cfg)?;
-        let picks: Vec<usize> = (0..8.min(data.len())).map(|k| k * data.len() / 8.min(data.len())).collect();
-        let mut tiles: Vec<Vec<u8>> = picks.iter().map(|&i| data.image(i).to_vec()).collect();
-        let range = stats.depth_m.as_ref().map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
-        tiles.extend(picks.iter().map(|&i| depth_to_gray(data.depth_map(i), range)));
-        save_png(&side("preview.png"), &tile_grid(&tiles, data.width, data.height, picks.len()))?;
-
+        let (data, report) = build_and_save(&robot, &args.robot.label(), &cfg, given, &args.out, true)?;
+        let stats = &report.stats;
+        let (render_s, write_s) = (report.render_seconds, report.write_seconds);
         println!(
             "dataset: {} samples ({} train, {} test) of {} ({} shapes), {}x{} px, focal {:.4} px",
             data.len(), data.n_train, data.len() - data.n_train, args.robot.label(), robot.shape_count(), data.width, data.height, data.focal

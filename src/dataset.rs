@@ -18,7 +18,10 @@ use std::path::Path;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
+use crate::atomic_file::write_json;
 use crate::camera::Camera;
+use crate::cli::git_revision;
+use crate::preview::{depth_to_gray, save_png, tile_grid};
 use crate::error::{Error, Result};
 use crate::npz::{read_npz, write_npz, Array, ArrayData};
 use crate::ray_caster::{RayCaster, RenderOptions};
@@ -401,4 +404,65 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
         }
     }
     Ok(rows)
+}
+
+/// What [`build_and_save`] did.
+#[derive(Clone, Debug, Serialize)]
+pub struct BuildReport {
+    pub stats: DatasetStats,
+    pub robot: String,
+    pub shapes: usize,
+    pub render_seconds: f64,
+    pub write_seconds: f64,
+    pub images_per_second: f64,
+    pub threads: usize,
+    pub git_revision: String,
+}
+
+/// Sample (or take `angles`), render, and write `out` (.npz) with `.stats.json`,
+/// `.config.json` and `.preview.png` beside it. `progress`: show a progress bar.
+pub fn build_and_save(
+    robot: &Robot,
+    robot_label: &str,
+    cfg: &DatasetConfig,
+    angles: Option<Vec<Vec<f64>>>,
+    out: &Path,
+    progress: bool,
+) -> Result<(Dataset, BuildReport)> {
+    cfg.validate()?;
+    let bar = progress.then(|| progress_bar(cfg.samples as u64, "render"));
+    let start = std::time::Instant::now();
+    let data = match angles {
+        Some(rows) => Dataset::render(robot, cfg, rows, bar.as_ref())?,
+        None => Dataset::generate(robot, cfg, bar.as_ref())?,
+    };
+    let render_seconds = start.elapsed().as_secs_f64();
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let write_start = std::time::Instant::now();
+    data.save(out)?;
+    let write_seconds = write_start.elapsed().as_secs_f64();
+
+    let names: Vec<String> = robot.chain.movable_joints().map(|j| j.name.clone()).collect();
+    let stats = data.stats(&names);
+    let report = BuildReport {
+        stats,
+        robot: robot_label.to_string(),
+        shapes: robot.shape_count(),
+        render_seconds,
+        write_seconds,
+        images_per_second: data.len() as f64 / render_seconds,
+        threads: rayon::current_num_threads(),
+        git_revision: git_revision(),
+    };
+    write_json(&out.with_extension("stats.json"), &report)?;
+    write_json(&out.with_extension("config.json"), cfg)?;
+    let shown = 8.min(data.len());
+    let picks: Vec<usize> = (0..shown).map(|k| k * data.len() / shown).collect();
+    let mut tiles: Vec<Vec<u8>> = picks.iter().map(|&i| data.image(i).to_vec()).collect();
+    let range = report.stats.depth_m.as_ref().map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
+    tiles.extend(picks.iter().map(|&i| depth_to_gray(data.depth_map(i), range)));
+    save_png(&out.with_extension("preview.png"), &tile_grid(&tiles, data.width, data.height, shown))?;
+    Ok((data, report))
 }

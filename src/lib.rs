@@ -12,6 +12,7 @@ pub mod cli;
 pub mod dataset;
 pub mod device;
 pub mod error;
+pub mod experiments;
 pub mod kinematics;
 pub mod mesh_fidelity;
 pub mod metrics;

@@ -1,0 +1,46 @@
+//! Run every registered experiment on one preset: `cargo run --release --bin reproduce`.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::Parser;
+use selfmodel::cli::run_main;
+use selfmodel::experiments::EXPERIMENTS;
+
+/// Reproduce everything: each experiment of the registry in turn, into its default folder.
+#[derive(Parser)]
+#[command(version, about)]
+struct Args {
+    /// paper (the papers' settings) or quick (tiny, seconds).
+    #[arg(long, default_value = "paper")]
+    preset: String,
+    /// Write under this folder instead of the repository's data/ and reports/.
+    #[arg(long)]
+    root: Option<PathBuf>,
+    /// Run only these experiments (names as in --list).
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// List the experiments and exit.
+    #[arg(long)]
+    list: bool,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    run_main(|| {
+        if args.list {
+            for e in EXPERIMENTS {
+                println!("{:<16} {}", e.name, e.about);
+            }
+            return Ok(());
+        }
+        let root = args.root.clone().unwrap_or_else(|| PathBuf::from("."));
+        for e in EXPERIMENTS.iter().filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name)) {
+            let start = Instant::now();
+            let summary = (e.run)(&args.preset, &root.join(e.default_dir))?;
+            println!("{:<16} {:>7.1} s  {summary}", e.name, start.elapsed().as_secs_f64());
+        }
+        Ok(())
+    })
+}

@@ -1,0 +1,58 @@
+//! Helpers shared by the integration tests (`mod common;`).
+#![allow(dead_code)]
+
+use nalgebra::{Isometry3, Point3};
+use selfmodel::bvh::Bvh;
+use selfmodel::kinematics::KinematicChain;
+use selfmodel::robot::Robot;
+use selfmodel::shape::Shape;
+
+/// A robot of one fixed link holding `shapes`.
+pub fn static_robot(shapes: Vec<Shape>) -> Robot {
+    Robot {
+        name: "static".into(),
+        chain: KinematicChain::new(vec!["body".into()], vec![], Isometry3::identity(), None).unwrap(),
+        geometry: vec![Bvh::new(shapes)],
+    }
+}
+
+/// The 12 triangles of an axis-aligned cube of half size `h` at the origin.
+pub fn cube_triangles(h: f64) -> Vec<[Point3<f64>; 3]> {
+    let v = |x: f64, y: f64, z: f64| Point3::new(x * h, y * h, z * h);
+    let quads = [
+        [v(-1., -1., -1.), v(1., -1., -1.), v(1., 1., -1.), v(-1., 1., -1.)],
+        [v(-1., -1., 1.), v(1., -1., 1.), v(1., 1., 1.), v(-1., 1., 1.)],
+        [v(-1., -1., -1.), v(1., -1., -1.), v(1., -1., 1.), v(-1., -1., 1.)],
+        [v(-1., 1., -1.), v(1., 1., -1.), v(1., 1., 1.), v(-1., 1., 1.)],
+        [v(-1., -1., -1.), v(-1., 1., -1.), v(-1., 1., 1.), v(-1., -1., 1.)],
+        [v(1., -1., -1.), v(1., 1., -1.), v(1., 1., 1.), v(1., -1., 1.)],
+    ];
+    quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect()
+}
+
+/// An ASCII STL of a cube of half size `h`.
+pub fn cube_stl_ascii(h: f64) -> String {
+    let mut s = String::from("solid cube\n");
+    for t in cube_triangles(h) {
+        s += "facet normal 0 0 0\nouter loop\n";
+        for p in t {
+            s += &format!("vertex {} {} {}\n", p.x, p.y, p.z);
+        }
+        s += "endloop\nendfacet\n";
+    }
+    s + "endsolid cube\n"
+}
+
+/// A binary STL of a cube of half size `h`.
+pub fn cube_stl_binary(h: f64) -> Vec<u8> {
+    let tris: Vec<stl_io::Triangle> = cube_triangles(h)
+        .iter()
+        .map(|t| stl_io::Triangle {
+            normal: stl_io::Normal::new([0.0, 0.0, 0.0]),
+            vertices: t.map(|p| stl_io::Vertex::new([p.x as f32, p.y as f32, p.z as f32])),
+        })
+        .collect();
+    let mut out = Vec::new();
+    stl_io::write_stl(&mut out, tris.iter()).unwrap();
+    out
+}
