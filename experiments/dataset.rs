@@ -7,13 +7,13 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::{run_main, RobotArgs};
+use selfmodel::cli::{run_main, RobotArgs, Triple};
 use selfmodel::dataset::{build_and_save, read_angles, DatasetConfig};
 use selfmodel::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// Named preset: paper (2,000 Lorenz samples, 1,600 train) or quick (40, 32 train).
     #[arg(long, default_value = "paper")]
@@ -39,11 +39,11 @@ struct Args {
     #[command(flatten)]
     robot: RobotArgs,
     /// Camera position, metres.
-    #[arg(long, value_delimiter = ',', num_args = 3, value_name = "X,Y,Z", allow_negative_numbers = true)]
-    eye: Option<Vec<f64>>,
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    eye: Option<Triple>,
     /// Point the camera looks at.
-    #[arg(long, value_delimiter = ',', num_args = 3, value_name = "X,Y,Z", allow_negative_numbers = true)]
-    target: Option<Vec<f64>>,
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    target: Option<Triple>,
     /// Vertical field of view, degrees.
     #[arg(long)]
     fov: Option<f64>,
@@ -78,11 +78,11 @@ fn main() -> ExitCode {
         }
         cfg.grid_step_deg = args.grid_step.unwrap_or(cfg.grid_step_deg);
         cfg.seed = args.seed.unwrap_or(cfg.seed);
-        if let Some(e) = &args.eye {
-            cfg.camera.eye = [e[0], e[1], e[2]];
+        if let Some(e) = args.eye {
+            cfg.camera.eye = e.0;
         }
-        if let Some(t) = &args.target {
-            cfg.camera.target = [t[0], t[1], t[2]];
+        if let Some(t) = args.target {
+            cfg.camera.target = t.0;
         }
         cfg.camera.fov_deg = args.fov.unwrap_or(cfg.camera.fov_deg);
         if let Some(s) = args.size {

@@ -13,7 +13,7 @@ use selfmodel::urdf_loader::load_urdf;
 
 /// Fit the built-in arm4's box geometry to the mesh robot (needs ../shared/robots).
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// The papers' URDF with its STL meshes.
     #[arg(long, default_value_os_t = shared_arm_urdf())]

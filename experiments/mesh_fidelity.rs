@@ -11,7 +11,7 @@ use selfmodel::mesh_fidelity::{run, FidelityConfig};
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// paper (100 poses) or quick (5 poses).
     #[arg(long, default_value = "paper")]

@@ -10,7 +10,7 @@ use selfmodel::experiments::EXPERIMENTS;
 
 /// Reproduce everything: each experiment of the registry in turn, into its default folder.
 #[derive(Parser)]
-#[command(version, about)]
+#[command(version)]
 struct Args {
     /// paper (the papers' settings) or quick (tiny, seconds).
     #[arg(long, default_value = "paper")]

@@ -20,6 +20,30 @@ pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
     }
 }
 
+/// Three numbers on the command line: `x,y,z`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Triple(pub [f64; 3]);
+
+impl std::str::FromStr for Triple {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|p| p.trim().parse::<f64>().map_err(|_| format!("\"{p}\" is not a number")))
+            .collect::<std::result::Result<_, _>>()?;
+        match v[..] {
+            [a, b, c] if v.iter().all(|x| x.is_finite()) => Ok(Triple([a, b, c])),
+            _ => Err(format!("expected three finite numbers x,y,z, got \"{s}\"")),
+        }
+    }
+}
+
+impl std::fmt::Display for Triple {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{},{},{}", self.0[0], self.0[1], self.0[2])
+    }
+}
+
 /// Built-in robots.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum BuiltinRobot {
@@ -36,12 +60,12 @@ pub struct RobotArgs {
     /// Load the robot from a URDF instead (meshes: STL; `package://` resolved next to it).
     #[arg(long, value_name = "PATH")]
     pub urdf: Option<PathBuf>,
-    /// Scene position of a URDF's root link, metres: x,y,z.
-    #[arg(long, value_name = "X,Y,Z", value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0])]
-    pub base_xyz: Vec<f64>,
-    /// Scene orientation of a URDF's root link, radians: roll,pitch,yaw.
-    #[arg(long, value_name = "R,P,Y", value_delimiter = ',', num_args = 3, default_values_t = [0.0, 0.0, 0.0], allow_negative_numbers = true)]
-    pub base_rpy: Vec<f64>,
+    /// Scene position of a URDF's root link, metres.
+    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true)]
+    pub base_xyz: Triple,
+    /// Scene orientation of a URDF's root link, radians (fixed-axis roll, pitch, yaw).
+    #[arg(long, value_name = "R,P,Y", default_value = "0,0,0", allow_hyphen_values = true)]
+    pub base_rpy: Triple,
     /// Place a URDF as the papers' scene places arm4: base at [0,0,-0.108], yaw -pi/2.
     #[arg(long, conflicts_with_all = ["base_xyz", "base_rpy"])]
     pub arm4_scene: bool,
@@ -53,10 +77,7 @@ impl RobotArgs {
         if self.arm4_scene {
             return crate::arm4::scene_base();
         }
-        pose_from_xyz_rpy(
-            [self.base_xyz[0], self.base_xyz[1], self.base_xyz[2]],
-            [self.base_rpy[0], self.base_rpy[1], self.base_rpy[2]],
-        )
+        pose_from_xyz_rpy(self.base_xyz.0, self.base_rpy.0)
     }
 
     /// Load the chosen robot.
