@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::{run_main, RobotArgs, Triple};
-use selfmodel::dataset::{build_and_save, read_angles, DatasetConfig};
+use selfmodel::cli::{RobotArgs, Triple, run_main};
+use selfmodel::dataset::{DatasetConfig, build_and_save, read_angles};
 use selfmodel::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
@@ -92,28 +92,49 @@ fn main() -> ExitCode {
         cfg.render.ground_artifact = args.ground_artifact;
         cfg.validate()?;
         if given.as_ref().is_some_and(|rows| rows.len() != cfg.samples) {
-            return Err(selfmodel::Error::Config("--samples cannot be combined with --angles".into()));
+            return Err(selfmodel::Error::Config(
+                "--samples cannot be combined with --angles".into(),
+            ));
         }
 
-        let (data, report) = build_and_save(&robot, &args.robot.label(), &cfg, given, &args.out, true)?;
+        let (data, report) =
+            build_and_save(&robot, &args.robot.label(), &cfg, given, &args.out, true)?;
         let stats = &report.stats;
         let (render_s, write_s) = (report.render_seconds, report.write_seconds);
         println!(
             "dataset: {} samples ({} train, {} test) of {} ({} shapes), {}x{} px, focal {:.4} px",
-            data.len(), data.n_train, data.len() - data.n_train, args.robot.label(), robot.shape_count(), data.width, data.height, data.focal
+            data.len(),
+            data.n_train,
+            data.len() - data.n_train,
+            args.robot.label(),
+            robot.shape_count(),
+            data.width,
+            data.height,
+            data.focal
         );
         println!(
             "render: {:.3} s ({:.0} images/s on {} threads); write: {:.3} s",
-            render_s, data.len() as f64 / render_s, rayon::current_num_threads(), write_s
+            render_s,
+            data.len() as f64 / render_s,
+            rayon::current_num_threads(),
+            write_s
         );
         println!(
             "occupancy: mean {:.2}% min {:.2}% max {:.2}%",
-            100.0 * stats.occupancy.mean, 100.0 * stats.occupancy.min, 100.0 * stats.occupancy.max
+            100.0 * stats.occupancy.mean,
+            100.0 * stats.occupancy.min,
+            100.0 * stats.occupancy.max
         );
         for j in &stats.joints {
-            println!("  {:<10} {:>8.2} .. {:>7.2} deg, mean {:>7.2}, std {:>6.2}", j.name, j.degrees.min, j.degrees.max, j.degrees.mean, j.degrees.std);
+            println!(
+                "  {:<10} {:>8.2} .. {:>7.2} deg, mean {:>7.2}, std {:>6.2}",
+                j.name, j.degrees.min, j.degrees.max, j.degrees.mean, j.degrees.std
+            );
         }
-        println!("wrote {} (+ .stats.json, .config.json, .preview.png)", args.out.display());
+        println!(
+            "wrote {} (+ .stats.json, .config.json, .preview.png)",
+            args.out.display()
+        );
         Ok(())
     })
 }

@@ -33,14 +33,22 @@ fn main() -> ExitCode {
         let mut fitted = std::collections::BTreeMap::new();
         for (name, geometry) in robot.chain.links.iter().zip(&robot.geometry) {
             let boxes = fit_boxes(geometry.shapes(), args.cell);
-            println!("{name}: {} triangles -> {} boxes", geometry.shapes().len(), boxes.boxes.len());
+            println!(
+                "{name}: {} triangles -> {} boxes",
+                geometry.shapes().len(),
+                boxes.boxes.len()
+            );
             fitted.insert(name.clone(), boxes);
         }
         // One box per line: compact, and diffs stay readable.
         let links: Vec<String> = fitted
             .iter()
             .map(|(name, f)| {
-                let boxes: Vec<String> = f.boxes.iter().map(|b| format!("    {}", serde_json::json!(b))).collect();
+                let boxes: Vec<String> = f
+                    .boxes
+                    .iter()
+                    .map(|b| format!("    {}", serde_json::json!(b)))
+                    .collect();
                 format!(
                     "  {}: {{\"origin\": {}, \"cell\": {}, \"boxes\": [\n{}\n  ]}}",
                     serde_json::json!(name),
@@ -50,7 +58,10 @@ fn main() -> ExitCode {
                 )
             })
             .collect();
-        write_bytes(&args.out, format!("{{\n{}\n}}\n", links.join(",\n")).as_bytes())?;
+        write_bytes(
+            &args.out,
+            format!("{{\n{}\n}}\n", links.join(",\n")).as_bytes(),
+        )?;
         println!("wrote {}", args.out.display());
         Ok(())
     })

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::mesh_fidelity::{run, FidelityConfig};
+use selfmodel::mesh_fidelity::{FidelityConfig, run};
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]
@@ -40,7 +40,9 @@ fn main() -> ExitCode {
             cfg.urdf = u.clone();
         }
         if cfg.poses == 0 {
-            return Err(selfmodel::Error::Config("--poses must be at least 1".into()));
+            return Err(selfmodel::Error::Config(
+                "--poses must be at least 1".into(),
+            ));
         }
         let rows = run(&cfg, args.pybullet.as_deref(), &args.out)?;
         for r in &rows {
@@ -49,7 +51,10 @@ fn main() -> ExitCode {
                 r.ours, r.reference, r.row_shift_px, r.mean_iou, r.median_iou, r.min_iou, r.poses
             );
         }
-        println!("wrote {}/results.csv, results.md, angles.csv", args.out.display());
+        println!(
+            "wrote {}/results.csv, results.md, angles.csv",
+            args.out.display()
+        );
         Ok(())
     })
 }

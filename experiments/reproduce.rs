@@ -36,10 +36,17 @@ fn main() -> ExitCode {
             return Ok(());
         }
         let root = args.root.clone().unwrap_or_else(|| PathBuf::from("."));
-        for e in EXPERIMENTS.iter().filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name)) {
+        for e in EXPERIMENTS
+            .iter()
+            .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))
+        {
             let start = Instant::now();
             let summary = (e.run)(&args.preset, &root.join(e.default_dir))?;
-            println!("{:<16} {:>7.1} s  {summary}", e.name, start.elapsed().as_secs_f64());
+            println!(
+                "{:<16} {:>7.1} s  {summary}",
+                e.name,
+                start.elapsed().as_secs_f64()
+            );
         }
         Ok(())
     })

@@ -62,13 +62,20 @@ impl Camera {
     pub fn validate(&self) -> Result<()> {
         let fwd = Vector3::from(self.target) - Vector3::from(self.eye);
         if self.width == 0 || self.height == 0 {
-            return Err(Error::Config("camera width and height must be positive".into()));
+            return Err(Error::Config(
+                "camera width and height must be positive".into(),
+            ));
         }
         if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
-            return Err(Error::Config(format!("camera fov {} must be in (0, 180) degrees", self.fov_deg)));
+            return Err(Error::Config(format!(
+                "camera fov {} must be in (0, 180) degrees",
+                self.fov_deg
+            )));
         }
         if fwd.norm() < 1e-12 || fwd.cross(&Vector3::from(self.up)).norm() < 1e-12 {
-            return Err(Error::Config("camera eye, target and up must span a frame".into()));
+            return Err(Error::Config(
+                "camera eye, target and up must span a frame".into(),
+            ));
         }
         Ok(())
     }

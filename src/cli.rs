@@ -29,7 +29,11 @@ impl std::str::FromStr for Triple {
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         let v: Vec<f64> = s
             .split(',')
-            .map(|p| p.trim().parse::<f64>().map_err(|_| format!("\"{p}\" is not a number")))
+            .map(|p| {
+                p.trim()
+                    .parse::<f64>()
+                    .map_err(|_| format!("\"{p}\" is not a number"))
+            })
             .collect::<std::result::Result<_, _>>()?;
         match v[..] {
             [a, b, c] if v.iter().all(|x| x.is_finite()) => Ok(Triple([a, b, c])),
@@ -61,10 +65,20 @@ pub struct RobotArgs {
     #[arg(long, value_name = "PATH")]
     pub urdf: Option<PathBuf>,
     /// Scene position of a URDF's root link, metres.
-    #[arg(long, value_name = "X,Y,Z", default_value = "0,0,0", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
     pub base_xyz: Triple,
     /// Scene orientation of a URDF's root link, radians (fixed-axis roll, pitch, yaw).
-    #[arg(long, value_name = "R,P,Y", default_value = "0,0,0", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "R,P,Y",
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
     pub base_rpy: Triple,
     /// Place a URDF as the papers' scene places arm4: base at [0,0,-0.108], yaw -pi/2.
     #[arg(long, conflicts_with_all = ["base_xyz", "base_rpy"])]

@@ -21,12 +21,12 @@ use serde::{Deserialize, Serialize};
 use crate::atomic_file::write_json;
 use crate::camera::Camera;
 use crate::cli::git_revision;
-use crate::preview::{depth_to_gray, save_png, tile_grid};
 use crate::error::{Error, Result};
-use crate::npz::{read_npz, write_npz, Array, ArrayData};
+use crate::npz::{Array, ArrayData, read_npz, write_npz};
+use crate::preview::{depth_to_gray, save_png, tile_grid};
 use crate::ray_caster::{RayCaster, RenderOptions};
 use crate::robot::Robot;
-use crate::trajectory::{babbling, grid, lorenz, SamplerKind};
+use crate::trajectory::{SamplerKind, babbling, grid, lorenz};
 
 /// How a dataset is made.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -76,14 +76,18 @@ impl DatasetConfig {
         match name {
             "paper" => Ok(Self::paper()),
             "quick" => Ok(Self::quick()),
-            other => Err(Error::Config(format!("unknown preset \"{other}\" (choose paper or quick)"))),
+            other => Err(Error::Config(format!(
+                "unknown preset \"{other}\" (choose paper or quick)"
+            ))),
         }
     }
 
     /// Reject impossible settings.
     pub fn validate(&self) -> Result<()> {
         if self.samples == 0 {
-            return Err(Error::Config("the dataset needs at least 1 sample (--samples)".into()));
+            return Err(Error::Config(
+                "the dataset needs at least 1 sample (--samples)".into(),
+            ));
         }
         if self.train > self.samples {
             return Err(Error::Config(format!(
@@ -138,10 +142,19 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 
 impl Dataset {
     /// Render `angles` (user units, one row per sample) with `cfg`'s camera and options.
-    pub fn render(robot: &Robot, cfg: &DatasetConfig, angles: Vec<Vec<f64>>, progress: Option<&ProgressBar>) -> Result<Self> {
+    pub fn render(
+        robot: &Robot,
+        cfg: &DatasetConfig,
+        angles: Vec<Vec<f64>>,
+        progress: Option<&ProgressBar>,
+    ) -> Result<Self> {
         cfg.validate()?;
         if angles.len() != cfg.samples {
-            return Err(Error::Config(format!("{} joint vectors for {} samples", angles.len(), cfg.samples)));
+            return Err(Error::Config(format!(
+                "{} joint vectors for {} samples",
+                angles.len(),
+                cfg.samples
+            )));
         }
         let caster = RayCaster::new(robot, cfg.camera.clone(), cfg.render.clone());
         let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
@@ -168,7 +181,11 @@ impl Dataset {
     }
 
     /// Sample joint vectors with the config's sampler and render them.
-    pub fn generate(robot: &Robot, cfg: &DatasetConfig, progress: Option<&ProgressBar>) -> Result<Self> {
+    pub fn generate(
+        robot: &Robot,
+        cfg: &DatasetConfig,
+        progress: Option<&ProgressBar>,
+    ) -> Result<Self> {
         cfg.validate()?;
         let angles = sample_angles(robot, cfg)?;
         Self::render(robot, cfg, angles, progress)
@@ -212,7 +229,10 @@ impl Dataset {
         let focal = Array::scalar(self.focal);
         let poses = Array::f64(&[n, 4, 4], self.poses.concat());
         let depth = Array::f32(&[n, h, w], self.depth.clone());
-        let n_train = Array { shape: vec![], data: ArrayData::I64(vec![self.n_train as i64]) };
+        let n_train = Array {
+            shape: vec![],
+            data: ArrayData::I64(vec![self.n_train as i64]),
+        };
         write_npz(
             path,
             &[
@@ -230,7 +250,11 @@ impl Dataset {
     pub fn load(path: &Path) -> Result<Self> {
         let mut arrays = read_npz(path)?;
         let bad = |msg: String| Error::data(path, msg);
-        let mut take = |key: &str| arrays.remove(key).ok_or_else(|| bad(format!("missing key \"{key}\"")));
+        let mut take = |key: &str| {
+            arrays
+                .remove(key)
+                .ok_or_else(|| bad(format!("missing key \"{key}\"")))
+        };
         let images = take("images")?;
         let angles = take("angles")?;
         let focal = take("focal")?;
@@ -239,26 +263,43 @@ impl Dataset {
         let n_train = arrays.remove("n_train");
 
         let [n, h, w] = images.shape[..] else {
-            return Err(bad(format!("\"images\" must have shape (N, H, W), found {:?}", images.shape)));
+            return Err(bad(format!(
+                "\"images\" must have shape (N, H, W), found {:?}",
+                images.shape
+            )));
         };
         if n == 0 {
             return Err(bad("the dataset has zero samples".into()));
         }
         let ArrayData::U8(images) = images.data else {
-            return Err(bad(format!("\"images\" must be uint8, found {}", images.dtype_name())));
+            return Err(bad(format!(
+                "\"images\" must be uint8, found {}",
+                images.dtype_name()
+            )));
         };
         let [na, dof] = angles.shape[..] else {
-            return Err(bad(format!("\"angles\" must have shape (N, DOF), found {:?}", angles.shape)));
+            return Err(bad(format!(
+                "\"angles\" must have shape (N, DOF), found {:?}",
+                angles.shape
+            )));
         };
         if na != n {
-            return Err(bad(format!("\"angles\" has {na} rows but \"images\" has {n}")));
+            return Err(bad(format!(
+                "\"angles\" has {na} rows but \"images\" has {n}"
+            )));
         }
         if !matches!(angles.data, ArrayData::F64(_) | ArrayData::F32(_)) {
-            return Err(bad(format!("\"angles\" must be float, found {}", angles.dtype_name())));
+            return Err(bad(format!(
+                "\"angles\" must be float, found {}",
+                angles.dtype_name()
+            )));
         }
         let flat = angles.to_f64();
         if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
-            return Err(bad(format!("\"angles\" row {} is NaN or infinite", i / dof)));
+            return Err(bad(format!(
+                "\"angles\" row {} is NaN or infinite",
+                i / dof
+            )));
         }
         let angles: Vec<Vec<f64>> = flat.chunks(dof).map(<[f64]>::to_vec).collect();
         let focal = match focal.to_f64()[..] {
@@ -267,19 +308,37 @@ impl Dataset {
         };
         let pose_list: Vec<[f64; 16]> = match poses.shape[..] {
             [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
-            [np, 4, 4] if np == n => poses.to_f64().chunks(16).map(|c| std::array::from_fn(|i| c[i])).collect(),
-            _ => return Err(bad(format!("\"poses\" must have shape (N, 4, 4) or (4, 4), found {:?}", poses.shape))),
+            [np, 4, 4] if np == n => poses
+                .to_f64()
+                .chunks(16)
+                .map(|c| std::array::from_fn(|i| c[i]))
+                .collect(),
+            _ => {
+                return Err(bad(format!(
+                    "\"poses\" must have shape (N, 4, 4) or (4, 4), found {:?}",
+                    poses.shape
+                )));
+            }
         };
         let depth = match depth {
             None => vec![0.0; n * h * w],
             Some(d) => {
                 if d.shape != [n, h, w] {
-                    return Err(bad(format!("\"depth\" must have shape {:?}, found {:?}", [n, h, w], d.shape)));
+                    return Err(bad(format!(
+                        "\"depth\" must have shape {:?}, found {:?}",
+                        [n, h, w],
+                        d.shape
+                    )));
                 }
                 match d.data {
                     ArrayData::F32(v) => v,
                     ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
-                    _ => return Err(bad(format!("\"depth\" must be float32, found {}", d.dtype_name()))),
+                    _ => {
+                        return Err(bad(format!(
+                            "\"depth\" must be float32, found {}",
+                            d.dtype_name()
+                        )));
+                    }
                 }
             }
         };
@@ -290,14 +349,26 @@ impl Dataset {
                 _ => return Err(bad(format!("\"n_train\" must be one integer in 0..={n}"))),
             },
         };
-        Ok(Dataset { angles, images, depth, width: w, height: h, focal, poses: pose_list, n_train })
+        Ok(Dataset {
+            angles,
+            images,
+            depth,
+            width: w,
+            height: h,
+            focal,
+            poses: pose_list,
+            n_train,
+        })
     }
 
     /// Summary statistics (the stats JSON beside a dataset).
     pub fn stats(&self, joint_names: &[String]) -> DatasetStats {
         let n = self.len();
         let occ: Vec<f64> = (0..n)
-            .map(|i| self.image(i).iter().filter(|&&v| v >= 128).count() as f64 / (self.width * self.height) as f64)
+            .map(|i| {
+                self.image(i).iter().filter(|&&v| v >= 128).count() as f64
+                    / (self.width * self.height) as f64
+            })
             .collect();
         let summary = |v: &[f64]| {
             let mean = v.iter().sum::<f64>() / v.len() as f64;
@@ -312,10 +383,21 @@ impl Dataset {
         let joints = (0..self.dof())
             .map(|j| {
                 let col: Vec<f64> = self.angles.iter().map(|q| q[j]).collect();
-                JointStats { name: joint_names.get(j).cloned().unwrap_or_else(|| format!("joint{j}")), degrees: summary(&col) }
+                JointStats {
+                    name: joint_names
+                        .get(j)
+                        .cloned()
+                        .unwrap_or_else(|| format!("joint{j}")),
+                    degrees: summary(&col),
+                }
             })
             .collect();
-        let hits: Vec<f64> = self.depth.iter().filter(|&&d| d > 0.0).map(|&d| d as f64).collect();
+        let hits: Vec<f64> = self
+            .depth
+            .iter()
+            .filter(|&&d| d > 0.0)
+            .map(|&d| d as f64)
+            .collect();
         DatasetStats {
             samples: n,
             train: self.n_train,
@@ -325,7 +407,11 @@ impl Dataset {
             focal_px: self.focal,
             occupancy: summary(&occ),
             joints,
-            depth_m: if hits.is_empty() { None } else { Some(summary(&hits)) },
+            depth_m: if hits.is_empty() {
+                None
+            } else {
+                Some(summary(&hits))
+            },
         }
     }
 }
@@ -368,9 +454,14 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
     let bad = |msg: String| Error::data(path, msg);
     let rows: Vec<Vec<f64>> = if path.extension().is_some_and(|e| e == "npz") {
         let mut arrays = read_npz(path)?;
-        let a = arrays.remove("angles").ok_or_else(|| bad("missing key \"angles\"".into()))?;
+        let a = arrays
+            .remove("angles")
+            .ok_or_else(|| bad("missing key \"angles\"".into()))?;
         let [_, cols] = a.shape[..] else {
-            return Err(bad(format!("\"angles\" must have shape (N, {dof}), found {:?}", a.shape)));
+            return Err(bad(format!(
+                "\"angles\" must have shape (N, {dof}), found {:?}",
+                a.shape
+            )));
         };
         if cols == 0 {
             return Err(bad("\"angles\" has no columns".into()));
@@ -378,16 +469,27 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
         a.to_f64().chunks(cols).map(<[f64]>::to_vec).collect()
     } else {
         let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
-        let mut reader = csv::ReaderBuilder::new().has_headers(false).trim(csv::Trim::All).comment(Some(b'#')).from_reader(file);
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .trim(csv::Trim::All)
+            .comment(Some(b'#'))
+            .from_reader(file);
         let mut rows = Vec::new();
         for (i, rec) in reader.records().enumerate() {
             let rec = rec.map_err(|e| bad(format!("line {}: {e}", i + 1)))?;
-            let parsed: std::result::Result<Vec<f64>, _> = rec.iter().map(str::parse::<f64>).collect();
+            let parsed: std::result::Result<Vec<f64>, _> =
+                rec.iter().map(str::parse::<f64>).collect();
             match parsed {
                 Ok(v) => rows.push(v),
                 // A header line is allowed as the first line only.
                 Err(_) if i == 0 => continue,
-                Err(_) => return Err(bad(format!("line {}: not a list of numbers: \"{}\"", i + 1, rec.iter().collect::<Vec<_>>().join(",")))),
+                Err(_) => {
+                    return Err(bad(format!(
+                        "line {}: not a list of numbers: \"{}\"",
+                        i + 1,
+                        rec.iter().collect::<Vec<_>>().join(",")
+                    )));
+                }
             }
         }
         rows
@@ -397,7 +499,11 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
     }
     for (i, r) in rows.iter().enumerate() {
         if r.len() != dof {
-            return Err(bad(format!("row {} has {} values, the robot has {dof} joints", i + 1, r.len())));
+            return Err(bad(format!(
+                "row {} has {} values, the robot has {dof} joints",
+                i + 1,
+                r.len()
+            )));
         }
         if r.iter().any(|v| !v.is_finite()) {
             return Err(bad(format!("row {} has a NaN or infinite angle", i + 1)));
@@ -444,7 +550,11 @@ pub fn build_and_save(
     data.save(out)?;
     let write_seconds = write_start.elapsed().as_secs_f64();
 
-    let names: Vec<String> = robot.chain.movable_joints().map(|j| j.name.clone()).collect();
+    let names: Vec<String> = robot
+        .chain
+        .movable_joints()
+        .map(|j| j.name.clone())
+        .collect();
     let stats = data.stats(&names);
     let report = BuildReport {
         stats,
@@ -461,8 +571,19 @@ pub fn build_and_save(
     let shown = 8.min(data.len());
     let picks: Vec<usize> = (0..shown).map(|k| k * data.len() / shown).collect();
     let mut tiles: Vec<Vec<u8>> = picks.iter().map(|&i| data.image(i).to_vec()).collect();
-    let range = report.stats.depth_m.as_ref().map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
-    tiles.extend(picks.iter().map(|&i| depth_to_gray(data.depth_map(i), range)));
-    save_png(&out.with_extension("preview.png"), &tile_grid(&tiles, data.width, data.height, shown))?;
+    let range = report
+        .stats
+        .depth_m
+        .as_ref()
+        .map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
+    tiles.extend(
+        picks
+            .iter()
+            .map(|&i| depth_to_gray(data.depth_map(i), range)),
+    );
+    save_png(
+        &out.with_extension("preview.png"),
+        &tile_grid(&tiles, data.width, data.height, shown),
+    )?;
     Ok((data, report))
 }

@@ -8,7 +8,9 @@ use burn::tensor::Device;
 use crate::error::{Error, Result};
 
 /// The `--device` choices. Only those compiled in can be selected.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum DeviceChoice {
     /// burn's pure-Rust `flex` CPU backend (default feature `flex`).

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::dataset::{build_and_save, DatasetConfig};
+use crate::dataset::{DatasetConfig, build_and_save};
 use crate::error::Result;
 use crate::mesh_fidelity::{self, FidelityConfig};
 
@@ -23,7 +23,8 @@ pub struct Experiment {
 fn run_dataset(preset: &str, dir: &Path) -> Result<String> {
     let cfg = DatasetConfig::preset(preset)?;
     let robot = crate::arm4::arm4();
-    let (data, report) = build_and_save(&robot, "arm4", &cfg, None, &dir.join("dataset.npz"), false)?;
+    let (data, report) =
+        build_and_save(&robot, "arm4", &cfg, None, &dir.join("dataset.npz"), false)?;
     Ok(format!(
         "{} samples rendered in {:.3} s, mean occupancy {:.2}%",
         data.len(),
@@ -34,7 +35,10 @@ fn run_dataset(preset: &str, dir: &Path) -> Result<String> {
 
 fn run_mesh_fidelity(preset: &str, dir: &Path) -> Result<String> {
     let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, None, dir)?;
-    Ok(format!("arm4 vs mesh robot: mean IoU {:.4} over {} poses", rows[0].mean_iou, rows[0].poses))
+    Ok(format!(
+        "arm4 vs mesh robot: mean IoU {:.4} over {} poses",
+        rows[0].mean_iou, rows[0].poses
+    ))
 }
 
 /// Every experiment, in the order `reproduce` runs them.

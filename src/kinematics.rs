@@ -66,7 +66,8 @@ impl Joint {
 
 /// Sampling range of rotational joints the robot gives no limits for (continuous joints):
 /// +-90 degrees, the workspace of both self-modeling papers.
-pub const DEFAULT_ROTATIONAL_RANGE: [f64; 2] = [-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2];
+pub const DEFAULT_ROTATIONAL_RANGE: [f64; 2] =
+    [-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2];
 
 /// A tree of links connected by joints, placed in the scene by `base`.
 #[derive(Clone, Debug)]
@@ -103,7 +104,10 @@ impl KinematicChain {
         let mut parent_joint = vec![None; n];
         for (j, joint) in joints.iter().enumerate() {
             if joint.parent >= n || joint.child >= n {
-                return Err(Error::Config(format!("joint \"{}\": link index out of range", joint.name)));
+                return Err(Error::Config(format!(
+                    "joint \"{}\": link index out of range",
+                    joint.name
+                )));
             }
             if parent_joint[joint.child].replace(j).is_some() {
                 return Err(Error::Config(format!(
@@ -117,7 +121,11 @@ impl KinematicChain {
             return Err(Error::Config(format!(
                 "the links must form one tree, found {} roots: {}",
                 roots.len(),
-                roots.iter().map(|&r| links[r].as_str()).collect::<Vec<_>>().join(", ")
+                roots
+                    .iter()
+                    .map(|&r| links[r].as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )));
         }
         // Breadth-first from the root; reorder links so the root is 0.
@@ -155,7 +163,9 @@ impl KinematicChain {
             })
             .collect();
         // The joint vector keeps the order the joints were given in (the URDF's order).
-        let mut dofs: Vec<usize> = (0..joints.len()).filter(|&j| joints[j].kind.is_movable()).collect();
+        let mut dofs: Vec<usize> = (0..joints.len())
+            .filter(|&j| joints[j].kind.is_movable())
+            .collect();
         dofs.sort_by_key(|&j| order_joints[j]);
         let mut value_index = vec![None; joints.len()];
         for (k, &j) in dofs.iter().enumerate() {
@@ -203,7 +213,13 @@ impl KinematicChain {
     pub fn joint_ranges_user(&self) -> Vec<[f64; 2]> {
         self.movable_joints()
             .zip(self.joint_ranges())
-            .map(|(j, r)| if j.kind.is_rotational() { r.map(f64::to_degrees) } else { r })
+            .map(|(j, r)| {
+                if j.kind.is_rotational() {
+                    r.map(f64::to_degrees)
+                } else {
+                    r
+                }
+            })
             .collect()
     }
 
@@ -211,7 +227,13 @@ impl KinematicChain {
     pub fn to_si(&self, q: &[f64]) -> Vec<f64> {
         self.movable_joints()
             .zip(q)
-            .map(|(j, &v)| if j.kind.is_rotational() { v.to_radians() } else { v })
+            .map(|(j, &v)| {
+                if j.kind.is_rotational() {
+                    v.to_radians()
+                } else {
+                    v
+                }
+            })
             .collect()
     }
 
@@ -219,13 +241,23 @@ impl KinematicChain {
     pub fn from_si(&self, q: &[f64]) -> Vec<f64> {
         self.movable_joints()
             .zip(q)
-            .map(|(j, &v)| if j.kind.is_rotational() { v.to_degrees() } else { v })
+            .map(|(j, &v)| {
+                if j.kind.is_rotational() {
+                    v.to_degrees()
+                } else {
+                    v
+                }
+            })
             .collect()
     }
 
     /// World pose of every link for joint values `q` (SI, length [`Self::dof`]).
     pub fn link_frames(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
-        assert_eq!(q.len(), self.dof(), "joint vector length must equal the robot's DOF");
+        assert_eq!(
+            q.len(),
+            self.dof(),
+            "joint vector length must equal the robot's DOF"
+        );
         let mut frames = vec![self.base; self.links.len()];
         for (joint, index) in self.joints.iter().zip(&self.value_index) {
             let value = index.map_or(0.0, |k| q[k]);

@@ -35,16 +35,28 @@ pub struct FidelityConfig {
 
 impl FidelityConfig {
     pub fn paper() -> Self {
-        FidelityConfig { preset: "paper".into(), poses: 100, seed: 7, urdf: shared_arm_urdf(), camera: Camera::paper() }
+        FidelityConfig {
+            preset: "paper".into(),
+            poses: 100,
+            seed: 7,
+            urdf: shared_arm_urdf(),
+            camera: Camera::paper(),
+        }
     }
     pub fn quick() -> Self {
-        FidelityConfig { preset: "quick".into(), poses: 5, ..Self::paper() }
+        FidelityConfig {
+            preset: "quick".into(),
+            poses: 5,
+            ..Self::paper()
+        }
     }
     pub fn preset(name: &str) -> Result<Self> {
         match name {
             "paper" => Ok(Self::paper()),
             "quick" => Ok(Self::quick()),
-            other => Err(Error::Config(format!("unknown preset \"{other}\" (choose paper or quick)"))),
+            other => Err(Error::Config(format!(
+                "unknown preset \"{other}\" (choose paper or quick)"
+            ))),
         }
     }
 }
@@ -72,22 +84,45 @@ pub fn iou_between(a: &Robot, b: &Robot, camera: &Camera, angles: &[Vec<f64>]) -
     let qb: Vec<Vec<f64>> = angles.iter().map(|q| b.chain.to_si(q)).collect();
     let fa = ra.render_batch(&qa, None);
     let fb = rb.render_batch(&qb, None);
-    fa.iter().zip(&fb).map(|(x, y)| silhouette_iou(&x.silhouette, &y.silhouette)).collect()
+    fa.iter()
+        .zip(&fb)
+        .map(|(x, y)| silhouette_iou(&x.silhouette, &y.silhouette))
+        .collect()
 }
 
 /// Per-pose IoU of our render of `robot` against given images, shifted by `row_shift` rows.
-pub fn iou_against(robot: &Robot, camera: &Camera, reference: &Dataset, row_shift: isize) -> Vec<f64> {
+pub fn iou_against(
+    robot: &Robot,
+    camera: &Camera,
+    reference: &Dataset,
+    row_shift: isize,
+) -> Vec<f64> {
     let caster = RayCaster::new(robot, camera.clone(), RenderOptions::default());
-    let q: Vec<Vec<f64>> = reference.angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    let q: Vec<Vec<f64>> = reference
+        .angles
+        .iter()
+        .map(|q| robot.chain.to_si(q))
+        .collect();
     caster
         .render_batch(&q, None)
         .iter()
         .enumerate()
-        .map(|(i, f)| silhouette_iou(&f.silhouette, &shift_rows(reference.image(i), reference.width, row_shift)))
+        .map(|(i, f)| {
+            silhouette_iou(
+                &f.silhouette,
+                &shift_rows(reference.image(i), reference.width, row_shift),
+            )
+        })
         .collect()
 }
 
-fn row(ours: &str, reference: &str, ious: &[f64], shift: isize, cfg: &FidelityConfig) -> FidelityRow {
+fn row(
+    ours: &str,
+    reference: &str,
+    ious: &[f64],
+    shift: isize,
+    cfg: &FidelityConfig,
+) -> FidelityRow {
     let mut s = ious.to_vec();
     s.sort_by(f64::total_cmp);
     FidelityRow {
@@ -118,15 +153,37 @@ pub fn run(cfg: &FidelityConfig, pybullet: Option<&Path>, out: &Path) -> Result<
     let boxes = arm4();
     let ranges = boxes.chain.joint_ranges_user();
     let angles = babbling(cfg.poses, &ranges, cfg.seed);
-    let mut rows = vec![row("arm4 (fitted boxes)", "mesh robot (our ray caster)", &iou_between(&boxes, &mesh, &cfg.camera, &angles), 0, cfg)];
+    let mut rows = vec![row(
+        "arm4 (fitted boxes)",
+        "mesh robot (our ray caster)",
+        &iou_between(&boxes, &mesh, &cfg.camera, &angles),
+        0,
+        cfg,
+    )];
     if let Some(path) = pybullet {
         let reference = Dataset::load(path)?;
         if reference.dof() != mesh.dof() {
-            return Err(Error::data(path, format!("angles have {} columns, the robot has {}", reference.dof(), mesh.dof())));
+            return Err(Error::data(
+                path,
+                format!(
+                    "angles have {} columns, the robot has {}",
+                    reference.dof(),
+                    mesh.dof()
+                ),
+            ));
         }
-        for (name, robot) in [("mesh robot (our ray caster)", &mesh), ("arm4 (fitted boxes)", &boxes)] {
+        for (name, robot) in [
+            ("mesh robot (our ray caster)", &mesh),
+            ("arm4 (fitted boxes)", &boxes),
+        ] {
             for shift in [0, PYBULLET_ROW_SHIFT] {
-                rows.push(row(name, "PyBullet TinyRenderer", &iou_against(robot, &cfg.camera, &reference, shift), shift, cfg));
+                rows.push(row(
+                    name,
+                    "PyBullet TinyRenderer",
+                    &iou_against(robot, &cfg.camera, &reference, shift),
+                    shift,
+                    cfg,
+                ));
             }
         }
     }
@@ -144,7 +201,12 @@ pub fn run(cfg: &FidelityConfig, pybullet: Option<&Path>, out: &Path) -> Result<
     write_json(&out.join("config.json"), cfg)?;
     let mut text = String::from("# joint angles in degrees, one pose per row\n");
     for q in &angles {
-        text += &(q.iter().map(|v| format!("{v:.6}")).collect::<Vec<_>>().join(",") + "\n");
+        text += &(q
+            .iter()
+            .map(|v| format!("{v:.6}"))
+            .collect::<Vec<_>>()
+            .join(",")
+            + "\n");
     }
     crate::atomic_file::write_bytes(&out.join("angles.csv"), text.as_bytes())?;
     Ok(rows)

@@ -10,7 +10,11 @@ pub fn silhouette_iou(a: &[u8], b: &[u8]) -> f64 {
         inter += (x && y) as usize;
         union += (x || y) as usize;
     }
-    if union == 0 { 1.0 } else { inter as f64 / union as f64 }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
 }
 
 /// Shift an image by `rows` rows (positive: down), filling with zeros; used to compare with

@@ -31,17 +31,29 @@ pub struct Array {
 
 impl Array {
     pub fn u8(shape: &[usize], data: Vec<u8>) -> Self {
-        Array { shape: shape.to_vec(), data: ArrayData::U8(data) }
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::U8(data),
+        }
     }
     pub fn f32(shape: &[usize], data: Vec<f32>) -> Self {
-        Array { shape: shape.to_vec(), data: ArrayData::F32(data) }
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::F32(data),
+        }
     }
     pub fn f64(shape: &[usize], data: Vec<f64>) -> Self {
-        Array { shape: shape.to_vec(), data: ArrayData::F64(data) }
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::F64(data),
+        }
     }
     /// A 0-d array holding one number.
     pub fn scalar(v: f64) -> Self {
-        Array { shape: vec![], data: ArrayData::F64(vec![v]) }
+        Array {
+            shape: vec![],
+            data: ArrayData::F64(vec![v]),
+        }
     }
 
     /// NumPy's name of the element type.
@@ -68,7 +80,11 @@ impl Array {
 fn encode<T: npyz::AutoSerialize + Copy>(shape: &[usize], data: &[T]) -> std::io::Result<Vec<u8>> {
     let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
     let mut buf = Vec::with_capacity(data.len() * std::mem::size_of::<T>() + 128);
-    let mut w = npyz::WriteOptions::new().default_dtype().shape(&shape).writer(&mut buf).begin_nd()?;
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&shape)
+        .writer(&mut buf)
+        .begin_nd()?;
     w.extend(data.iter().copied())?;
     w.finish()?;
     Ok(buf)
@@ -87,10 +103,22 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
         for (name, array) in arrays {
             let n: usize = array.shape.iter().product();
             let bytes = match &array.data {
-                ArrayData::U8(v) => { assert_eq!(v.len(), n); encode(&array.shape, v) }
-                ArrayData::F32(v) => { assert_eq!(v.len(), n); encode(&array.shape, v) }
-                ArrayData::F64(v) => { assert_eq!(v.len(), n); encode(&array.shape, v) }
-                ArrayData::I64(v) => { assert_eq!(v.len(), n); encode(&array.shape, v) }
+                ArrayData::U8(v) => {
+                    assert_eq!(v.len(), n);
+                    encode(&array.shape, v)
+                }
+                ArrayData::F32(v) => {
+                    assert_eq!(v.len(), n);
+                    encode(&array.shape, v)
+                }
+                ArrayData::F64(v) => {
+                    assert_eq!(v.len(), n);
+                    encode(&array.shape, v)
+                }
+                ArrayData::I64(v) => {
+                    assert_eq!(v.len(), n);
+                    encode(&array.shape, v)
+                }
             }
             .map_err(io)?;
             zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;
@@ -120,11 +148,16 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
         member
             .read_to_end(&mut bytes)
             .map_err(|e| Error::data(path, format!("corrupt .npz member \"{name}\": {e}")))?;
-        let bad = |e: std::io::Error| Error::data(path, format!("\"{key}\" is not a valid .npy array: {e}"));
+        let bad = |e: std::io::Error| {
+            Error::data(path, format!("\"{key}\" is not a valid .npy array: {e}"))
+        };
         let npy = npyz::NpyFile::new(&bytes[..]).map_err(bad)?;
         let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
         if npy.order() != npyz::Order::C {
-            return Err(Error::data(path, format!("\"{key}\" is stored in Fortran order; save it C-contiguous")));
+            return Err(Error::data(
+                path,
+                format!("\"{key}\" is stored in Fortran order; save it C-contiguous"),
+            ));
         }
         let descr = npy.dtype().descr().trim_matches('\'').to_string();
         let data = match descr.as_str() {
@@ -132,11 +165,19 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
             "<f4" => ArrayData::F32(npy.into_vec().map_err(bad)?),
             "<f8" => ArrayData::F64(npy.into_vec().map_err(bad)?),
             "<i8" => ArrayData::I64(npy.into_vec().map_err(bad)?),
-            "<i4" => ArrayData::I64(npy.into_vec::<i32>().map_err(bad)?.into_iter().map(i64::from).collect()),
+            "<i4" => ArrayData::I64(
+                npy.into_vec::<i32>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i64::from)
+                    .collect(),
+            ),
             other => {
                 return Err(Error::data(
                     path,
-                    format!("\"{key}\" has dtype {other}; expected uint8, float32, float64, int32 or int64"),
+                    format!(
+                        "\"{key}\" has dtype {other}; expected uint8, float32, float64, int32 or int64"
+                    ),
                 ));
             }
         };

@@ -18,10 +18,17 @@ pub fn tile_grid(tiles: &[Vec<u8>], width: usize, height: usize, cols: usize) ->
         Luma([96]),
     );
     for (i, tile) in tiles.iter().enumerate() {
-        let (ox, oy) = (gap + (i % cols) * (width + gap), gap + (i / cols) * (height + gap));
+        let (ox, oy) = (
+            gap + (i % cols) * (width + gap),
+            gap + (i / cols) * (height + gap),
+        );
         for y in 0..height {
             for x in 0..width {
-                img.put_pixel((ox + x) as u32, (oy + y) as u32, Luma([tile[y * width + x]]));
+                img.put_pixel(
+                    (ox + x) as u32,
+                    (oy + y) as u32,
+                    Luma([tile[y * width + x]]),
+                );
             }
         }
     }
@@ -34,14 +41,23 @@ pub fn depth_to_gray(depth: &[f32], range: (f32, f32)) -> Vec<u8> {
     let span = (far - near).max(1e-6);
     depth
         .iter()
-        .map(|&d| if d <= 0.0 { 0 } else { (255.0 - 200.0 * ((d - near) / span).clamp(0.0, 1.0)) as u8 })
+        .map(|&d| {
+            if d <= 0.0 {
+                0
+            } else {
+                (255.0 - 200.0 * ((d - near) / span).clamp(0.0, 1.0)) as u8
+            }
+        })
         .collect()
 }
 
 /// Encode a gray image as PNG and write it atomically.
 pub fn save_png(path: &Path, img: &GrayImage) -> Result<()> {
     let mut bytes = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut bytes), image::ImageFormat::Png)
-        .map_err(|e| Error::data(path, format!("cannot encode PNG: {e}")))?;
+    img.write_to(
+        &mut std::io::Cursor::new(&mut bytes),
+        image::ImageFormat::Png,
+    )
+    .map_err(|e| Error::data(path, format!("cannot encode PNG: {e}")))?;
     write_bytes(path, &bytes)
 }

@@ -33,7 +33,11 @@ impl FittedBoxes {
                 let lo = Vector3::new(b[0] as f64, b[1] as f64, b[2] as f64) * self.cell;
                 let size = Vector3::new(b[3] as f64, b[4] as f64, b[5] as f64) * self.cell;
                 Shape::Cuboid {
-                    pose: Isometry3::translation(o.x + lo.x + size.x / 2.0, o.y + lo.y + size.y / 2.0, o.z + lo.z + size.z / 2.0),
+                    pose: Isometry3::translation(
+                        o.x + lo.x + size.x / 2.0,
+                        o.y + lo.y + size.y / 2.0,
+                        o.z + lo.z + size.z / 2.0,
+                    ),
                     half: size / 2.0,
                 }
             })
@@ -57,14 +61,27 @@ impl Grid {
 pub fn fit_boxes(shapes: &[Shape], cell: f64) -> FittedBoxes {
     let tris: Vec<[Point3<f64>; 3]> = shapes
         .iter()
-        .filter_map(|s| if let Shape::Triangle(v) = s { Some(*v) } else { None })
+        .filter_map(|s| {
+            if let Shape::Triangle(v) = s {
+                Some(*v)
+            } else {
+                None
+            }
+        })
         .collect();
-    let bounds = tris.iter().fold(Aabb::empty(), |b, t| t.iter().fold(b, |b, p| b.grow(p)));
+    let bounds = tris
+        .iter()
+        .fold(Aabb::empty(), |b, t| t.iter().fold(b, |b, p| b.grow(p)));
     if bounds.is_empty() {
-        return FittedBoxes { origin: [0.0; 3], cell, boxes: vec![] };
+        return FittedBoxes {
+            origin: [0.0; 3],
+            cell,
+            boxes: vec![],
+        };
     }
     let origin = bounds.min - Vector3::repeat(cell);
-    let n: [usize; 3] = std::array::from_fn(|a| ((bounds.max[a] - origin[a]) / cell).ceil() as usize + 1);
+    let n: [usize; 3] =
+        std::array::from_fn(|a| ((bounds.max[a] - origin[a]) / cell).ceil() as usize + 1);
     let mut votes = vec![0u8; n[0] * n[1] * n[2]];
     for axis in 0..3 {
         parity_fill(&tris, origin, cell, n, axis, &mut votes);
@@ -82,7 +99,14 @@ pub fn fit_boxes(shapes: &[Shape], cell: f64) -> FittedBoxes {
 
 /// For lines along `axis` through every column of cell centres, add a vote to each cell centre
 /// that has an odd number of surface crossings before it.
-fn parity_fill(tris: &[[Point3<f64>; 3]], origin: Point3<f64>, cell: f64, n: [usize; 3], axis: usize, votes: &mut [u8]) {
+fn parity_fill(
+    tris: &[[Point3<f64>; 3]],
+    origin: Point3<f64>,
+    cell: f64,
+    n: [usize; 3],
+    axis: usize,
+    votes: &mut [u8],
+) {
     let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
     // A tiny offset keeps the lines off vertices and edges that sit on round coordinates.
     let jitter = [1.37e-7, 2.71e-7];
@@ -97,7 +121,8 @@ fn parity_fill(tris: &[[Point3<f64>; 3]], origin: Point3<f64>, cell: f64, n: [us
         // Column centres inside the triangle's 2D bounds.
         let range = |lo: f64, hi: f64, a: usize| {
             let first = ((lo - origin[a]) / cell - 0.5).ceil().max(0.0) as usize;
-            let last = (((hi - origin[a]) / cell - 0.5).floor() + 1.0).clamp(0.0, n[a] as f64) as usize;
+            let last =
+                (((hi - origin[a]) / cell - 0.5).floor() + 1.0).clamp(0.0, n[a] as f64) as usize;
             first..last
         };
         for j in range(lo_b, hi_b, b) {
@@ -167,7 +192,9 @@ fn merge_boxes(grid: &Grid) -> Vec<[u32; 6]> {
                     nj += 1;
                 }
                 let mut nk = 1;
-                while k + nk < n[2] && (j..j + nj).all(|y| (i..i + ni).all(|x| free(&used, x, y, k + nk))) {
+                while k + nk < n[2]
+                    && (j..j + nj).all(|y| (i..i + ni).all(|x| free(&used, x, y, k + nk)))
+                {
                     nk += 1;
                 }
                 for z in k..k + nk {

@@ -73,14 +73,26 @@ impl<'a> RayCaster<'a> {
     }
 
     /// Pixel rectangle (rows, columns, inclusive) that can see the link's geometry.
-    fn screen_rect(&self, geometry: &Bvh, pose: &Isometry3<f64>) -> Option<([usize; 2], [usize; 2])> {
+    fn screen_rect(
+        &self,
+        geometry: &Bvh,
+        pose: &Isometry3<f64>,
+    ) -> Option<([usize; 2], [usize; 2])> {
         let (w, h) = (self.camera.width, self.camera.height);
-        let corners = geometry.bounds().corners().map(|c| self.camera.project(&(pose * c)));
+        let corners = geometry
+            .bounds()
+            .corners()
+            .map(|c| self.camera.project(&(pose * c)));
         if corners.iter().any(Option::is_none) {
             // Part of the box is behind the eye: test the whole image.
             return Some(([0, h - 1], [0, w - 1]));
         }
-        let (mut r0, mut r1, mut c0, mut c1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut r0, mut r1, mut c0, mut c1) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for (r, c, _) in corners.into_iter().flatten() {
             r0 = r0.min(r);
             r1 = r1.max(r);
@@ -89,7 +101,8 @@ impl<'a> RayCaster<'a> {
         }
         // Pixel centres are at integer coordinates.
         let (r0, r1, c0, c1) = (r0.ceil(), r1.floor(), c0.ceil(), c1.floor());
-        if r1 < 0.0 || c1 < 0.0 || r0 > (h - 1) as f64 || c0 > (w - 1) as f64 || r0 > r1 || c0 > c1 {
+        if r1 < 0.0 || c1 < 0.0 || r0 > (h - 1) as f64 || c0 > (w - 1) as f64 || r0 > r1 || c0 > c1
+        {
             return None;
         }
         let clamp = |v: f64, n: usize| v.clamp(0.0, (n - 1) as f64) as usize;
@@ -110,7 +123,10 @@ impl<'a> RayCaster<'a> {
             };
             for r in rows[0]..=rows[1] {
                 for c in cols[0]..=cols[1] {
-                    let ray = self.camera.ray_with_basis(r as f64, c as f64, &basis).to_local(pose);
+                    let ray = self
+                        .camera
+                        .ray_with_basis(r as f64, c as f64, &basis)
+                        .to_local(pose);
                     let d = &mut depth[r * w + c];
                     if let Some(t) = geometry.closest_hit(&ray, *d) {
                         *d = t;
@@ -156,7 +172,10 @@ impl<'a> RayCaster<'a> {
     /// Depth buffer (infinity = empty) to a frame, adding the ground artefact if asked.
     fn finish(&self, depth: Vec<f64>, basis: &(Vector3<f64>, Vector3<f64>, Vector3<f64>)) -> Frame {
         let (w, h) = (self.camera.width, self.camera.height);
-        let mut silhouette: Vec<u8> = depth.iter().map(|d| if d.is_finite() { 255 } else { 0 }).collect();
+        let mut silhouette: Vec<u8> = depth
+            .iter()
+            .map(|d| if d.is_finite() { 255 } else { 0 })
+            .collect();
         if self.options.ground_artifact {
             for r in 0..h {
                 let ray: Ray = self.camera.ray_with_basis(r as f64, 0.0, basis);
@@ -174,7 +193,10 @@ impl<'a> RayCaster<'a> {
             width: w,
             height: h,
             silhouette,
-            depth: depth.iter().map(|&d| if d.is_finite() { d as f32 } else { 0.0 }).collect(),
+            depth: depth
+                .iter()
+                .map(|&d| if d.is_finite() { d as f32 } else { 0.0 })
+                .collect(),
         }
     }
 }

@@ -10,7 +10,8 @@ pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     write_atomic(path, |w| {
         let mut csv = csv::Writer::from_writer(w);
         for r in rows {
-            csv.serialize(r).map_err(|e| Error::data(path, format!("cannot write CSV: {e}")))?;
+            csv.serialize(r)
+                .map_err(|e| Error::data(path, format!("cannot write CSV: {e}")))?;
         }
         csv.flush().map_err(|e| Error::io(path, e))
     })
@@ -18,20 +19,27 @@ pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
 
 /// A Markdown table of a CSV file (numbers with more than 4 decimals are rounded to 4).
 pub fn markdown_from_csv(path: &Path) -> Result<String> {
-    let mut reader = csv::Reader::from_path(path).map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
+    let mut reader = csv::Reader::from_path(path)
+        .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| Error::data(path, format!("bad CSV header: {e}")))?
         .iter()
         .map(str::to_string)
         .collect();
-    let mut out = format!("| {} |\n|{}\n", header.join(" | "), "---|".repeat(header.len()));
+    let mut out = format!(
+        "| {} |\n|{}\n",
+        header.join(" | "),
+        "---|".repeat(header.len())
+    );
     for rec in reader.records() {
         let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
         let cells: Vec<String> = rec
             .iter()
             .map(|c| match c.parse::<f64>() {
-                Ok(v) if c.contains('.') && c.split('.').nth(1).is_some_and(|d| d.len() > 4) => format!("{v:.4}"),
+                Ok(v) if c.contains('.') && c.split('.').nth(1).is_some_and(|d| d.len() > 4) => {
+                    format!("{v:.4}")
+                }
                 _ => c.to_string(),
             })
             .collect();

@@ -42,6 +42,8 @@ impl Robot {
             .iter()
             .zip(&self.geometry)
             .filter(|(_, g)| !g.is_empty())
-            .fold(Aabb::empty(), |b, (f, g)| b.union(&g.bounds().transformed(f)))
+            .fold(Aabb::empty(), |b, (f, g)| {
+                b.union(&g.bounds().transformed(f))
+            })
     }
 }

@@ -26,7 +26,11 @@ pub fn load_stl(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Resu
     for t in triangles {
         let t = t.map_err(bad)?;
         let v = t.vertices.map(|v| {
-            let p = Point3::new(v[0] as f64 * scale.x, v[1] as f64 * scale.y, v[2] as f64 * scale.z);
+            let p = Point3::new(
+                v[0] as f64 * scale.x,
+                v[1] as f64 * scale.y,
+                v[2] as f64 * scale.z,
+            );
             pose * p
         });
         if v.iter().any(|p| !p.coords.iter().all(|c| c.is_finite())) {

@@ -40,7 +40,8 @@ pub fn lorenz_trajectory(n: usize, dt: f64, scale: f64) -> Vec<[f64; 3]> {
             s[0] * s[1] - LORENZ_BETA * s[2],
         ]
     };
-    let add = |s: [f64; 3], k: [f64; 3], h: f64| [s[0] + h * k[0], s[1] + h * k[1], s[2] + h * k[2]];
+    let add =
+        |s: [f64; 3], k: [f64; 3], h: f64| [s[0] + h * k[0], s[1] + h * k[1], s[2] + h * k[2]];
     let mut s = [1.0, 1.0, 1.0];
     (0..n)
         .map(|_| {
@@ -48,7 +49,9 @@ pub fn lorenz_trajectory(n: usize, dt: f64, scale: f64) -> Vec<[f64; 3]> {
             let k2 = f(add(s, k1, dt / 2.0));
             let k3 = f(add(s, k2, dt / 2.0));
             let k4 = f(add(s, k3, dt));
-            s = std::array::from_fn(|i| s[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]));
+            s = std::array::from_fn(|i| {
+                s[i] + dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            });
             s.map(|v| (scale * v).tanh())
         })
         .collect()
@@ -83,7 +86,12 @@ pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
 pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
     let mut rng = StdRng::seed_from_u64(seed);
     (0..n)
-        .map(|_| ranges.iter().map(|r| rng.random_range(r[0]..=r[1])).collect())
+        .map(|_| {
+            ranges
+                .iter()
+                .map(|r| rng.random_range(r[0]..=r[1]))
+                .collect()
+        })
         .collect()
 }
 
@@ -92,7 +100,9 @@ pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
 /// without replacement (seeded) and kept in grid order.
 pub fn grid(n: usize, ranges: &[[f64; 2]], step: f64, seed: u64) -> Result<Vec<Vec<f64>>> {
     if !(step > 0.0) {
-        return Err(Error::Config(format!("grid step must be positive, got {step}")));
+        return Err(Error::Config(format!(
+            "grid step must be positive, got {step}"
+        )));
     }
     let axes: Vec<Vec<f64>> = ranges
         .iter()

@@ -34,14 +34,18 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
         element,
         msg,
     };
-    let urdf = urdf_rs::read_from_string(&text).map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;
+    let urdf = urdf_rs::read_from_string(&text)
+        .map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;
     if urdf.links.is_empty() {
         return Err(urdf_err("robot".into(), "no <link> elements".into()));
     }
     let link_names: Vec<String> = urdf.links.iter().map(|l| l.name.clone()).collect();
     let find_link = |joint: &str, name: &str| {
         link_names.iter().position(|l| l == name).ok_or_else(|| {
-            urdf_err(format!("joint \"{joint}\""), format!("refers to unknown link \"{name}\""))
+            urdf_err(
+                format!("joint \"{joint}\""),
+                format!("refers to unknown link \"{name}\""),
+            )
         })
     };
 
@@ -56,7 +60,9 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
             ref other => {
                 return Err(urdf_err(
                     element,
-                    format!("unsupported joint type {other:?} (supported: revolute, continuous, prismatic, fixed)"),
+                    format!(
+                        "unsupported joint type {other:?} (supported: revolute, continuous, prismatic, fixed)"
+                    ),
                 ));
             }
         };
@@ -92,7 +98,11 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut geometry = Vec::with_capacity(chain.links.len());
     for name in &chain.links {
-        let link = urdf.links.iter().find(|l| &l.name == name).expect("link from this URDF");
+        let link = urdf
+            .links
+            .iter()
+            .find(|l| &l.name == name)
+            .expect("link from this URDF");
         let mut shapes = Vec::new();
         for v in &link.visual {
             let pose = pose_from_xyz_rpy(v.origin.xyz.0, v.origin.rpy.0);
@@ -115,15 +125,23 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
                     let file = resolve_mesh_path(dir, filename);
                     let ext = file.extension().map(|e| e.to_string_lossy().to_lowercase());
                     if ext.as_deref() != Some("stl") {
-                        return Err(urdf_err(element, format!("mesh \"{filename}\": only STL meshes are supported")));
+                        return Err(urdf_err(
+                            element,
+                            format!("mesh \"{filename}\": only STL meshes are supported"),
+                        ));
                     }
                     if !file.is_file() {
                         return Err(urdf_err(
                             element,
-                            format!("mesh \"{filename}\" not found (looked for {})", file.display()),
+                            format!(
+                                "mesh \"{filename}\" not found (looked for {})",
+                                file.display()
+                            ),
                         ));
                     }
-                    let scale = scale.as_ref().map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0));
+                    let scale = scale
+                        .as_ref()
+                        .map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0));
                     shapes.extend(load_stl(&file, scale, &pose)?);
                 }
                 urdf_rs::Geometry::Capsule { .. } => {
@@ -154,5 +172,9 @@ pub fn resolve_mesh_path(dir: &Path, filename: &str) -> PathBuf {
     }
     let plain = filename.strip_prefix("file://").unwrap_or(filename);
     let p = Path::new(plain);
-    if p.is_absolute() { p.to_path_buf() } else { dir.join(p) }
+    if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        dir.join(p)
+    }
 }

@@ -11,7 +11,10 @@ const BINARIES: &[&str] = &[
 ];
 
 fn dataset(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_dataset")).args(args).output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_dataset"))
+        .args(args)
+        .output()
+        .unwrap()
 }
 
 /// The run failed with exactly one line on stderr that contains every needle, and left no file.
@@ -24,8 +27,14 @@ fn assert_clean_failure(out: &Output, needles: &[&str], dir: &Path) {
     for n in needles {
         assert!(lines[0].contains(n), "expected \"{n}\" in: {err}");
     }
-    let left: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name()).collect();
-    assert!(left.iter().all(|n| n.to_string_lossy().ends_with(".csv")), "files left behind: {left:?}");
+    let left: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        left.iter().all(|n| n.to_string_lossy().ends_with(".csv")),
+        "files left behind: {left:?}"
+    );
 }
 
 #[test]
@@ -42,7 +51,11 @@ fn dataset_quick_writes_all_files() {
     let dir = tempfile::tempdir().unwrap();
     let npz = dir.path().join("q.npz");
     let out = dataset(&["--preset", "quick", "--out", npz.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     for f in ["q.npz", "q.stats.json", "q.config.json", "q.preview.png"] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
@@ -67,7 +80,12 @@ fn bad_inputs_fail_cleanly() {
     let out = dataset(&["--samples", "100", "--train", "200", "--out", out_arg]);
     assert_clean_failure(&out, &["impossible split"], d);
 
-    let out = dataset(&["--urdf", d.join("nope.urdf").to_str().unwrap(), "--out", out_arg]);
+    let out = dataset(&[
+        "--urdf",
+        d.join("nope.urdf").to_str().unwrap(),
+        "--out",
+        out_arg,
+    ]);
     assert_clean_failure(&out, &["nope.urdf", "No such file"], d);
 
     let out = dataset(&["--preset", "huge", "--out", out_arg]);
@@ -80,8 +98,17 @@ fn render_recorded_poses_from_csv() {
     let csv = dir.path().join("poses.csv");
     std::fs::write(&csv, "j0,j1,j2,j3\n0,0,0,0\n30,-20,45,10\n-60,10,-30,80\n").unwrap();
     let npz = dir.path().join("poses.npz");
-    let out = dataset(&["--angles", csv.to_str().unwrap(), "--out", npz.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = dataset(&[
+        "--angles",
+        csv.to_str().unwrap(),
+        "--out",
+        npz.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let d = selfmodel::dataset::Dataset::load(&npz).unwrap();
     assert_eq!(d.angles[1], vec![30.0, -20.0, 45.0, 10.0]);
     assert_ne!(d.image(0), d.image(1));

@@ -2,10 +2,10 @@
 
 use std::path::{Path, PathBuf};
 
-use selfmodel::arm4::arm4;
-use selfmodel::dataset::{read_angles, Dataset, DatasetConfig};
-use selfmodel::npz::{read_npz, write_npz, Array};
 use selfmodel::Error;
+use selfmodel::arm4::arm4;
+use selfmodel::dataset::{Dataset, DatasetConfig, read_angles};
+use selfmodel::npz::{Array, read_npz, write_npz};
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data/fixtures/papers_format.npz")
@@ -22,7 +22,10 @@ fn npz_round_trip_keeps_every_array() {
     assert_eq!(data, back);
     let raw = read_npz(&path).unwrap();
     let keys: Vec<&str> = raw.keys().map(String::as_str).collect();
-    assert_eq!(keys, ["angles", "depth", "focal", "images", "n_train", "poses"]);
+    assert_eq!(
+        keys,
+        ["angles", "depth", "focal", "images", "n_train", "poses"]
+    );
     assert_eq!(raw["images"].shape, [40, 100, 100]);
     assert_eq!(raw["images"].dtype_name(), "uint8");
     assert_eq!(raw["angles"].dtype_name(), "float64");
@@ -53,7 +56,12 @@ fn dataset_is_deterministic_and_silhouettes_are_binary() {
     assert_eq!(a, b);
     assert!(a.images.iter().all(|&v| v == 0 || v == 255));
     // Depth is set exactly where the silhouette is.
-    assert!(a.images.iter().zip(&a.depth).all(|(&s, &d)| (s == 255) == (d > 0.0)));
+    assert!(
+        a.images
+            .iter()
+            .zip(&a.depth)
+            .all(|(&s, &d)| (s == 255) == (d > 0.0))
+    );
     let stats = a.stats(&[]);
     assert!(stats.occupancy.min > 0.01 && stats.occupancy.max < 0.2);
 }
@@ -62,10 +70,16 @@ fn expect_data_error(path: &Path, needle: &str) {
     match Dataset::load(path) {
         Err(e @ (Error::Data { .. } | Error::Io { .. })) => {
             let msg = e.to_string();
-            assert!(msg.contains(&path.display().to_string()), "error does not name the file: {msg}");
+            assert!(
+                msg.contains(&path.display().to_string()),
+                "error does not name the file: {msg}"
+            );
             assert!(msg.contains(needle), "expected \"{needle}\" in: {msg}");
         }
-        other => panic!("expected a data error for {}, got {other:?}", path.display()),
+        other => panic!(
+            "expected a data error for {}, got {other:?}",
+            path.display()
+        ),
     }
 }
 
@@ -89,19 +103,68 @@ fn bad_dataset_files_are_clear_errors() {
     let angles = || Array::f64(&[2, 4], vec![0.0; 8]);
     let focal = || Array::scalar(130.0);
     let poses = || Array::f64(&[4, 4], vec![0.0; 16]);
-    let p = write(d, "nokey.npz", &[("images", images()), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "nokey.npz",
+        &[("images", images()), ("focal", focal()), ("poses", poses())],
+    );
     expect_data_error(&p, "missing key \"angles\"");
-    let p = write(d, "dtype.npz", &[("images", Array::f32(&[2, 4, 4], vec![0.0; 32])), ("angles", angles()), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "dtype.npz",
+        &[
+            ("images", Array::f32(&[2, 4, 4], vec![0.0; 32])),
+            ("angles", angles()),
+            ("focal", focal()),
+            ("poses", poses()),
+        ],
+    );
     expect_data_error(&p, "\"images\" must be uint8");
-    let p = write(d, "shape.npz", &[("images", Array::u8(&[32], vec![0; 32])), ("angles", angles()), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "shape.npz",
+        &[
+            ("images", Array::u8(&[32], vec![0; 32])),
+            ("angles", angles()),
+            ("focal", focal()),
+            ("poses", poses()),
+        ],
+    );
     expect_data_error(&p, "shape (N, H, W)");
-    let p = write(d, "rows.npz", &[("images", images()), ("angles", Array::f64(&[3, 4], vec![0.0; 12])), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "rows.npz",
+        &[
+            ("images", images()),
+            ("angles", Array::f64(&[3, 4], vec![0.0; 12])),
+            ("focal", focal()),
+            ("poses", poses()),
+        ],
+    );
     expect_data_error(&p, "has 3 rows");
     let mut nan = vec![0.0; 8];
     nan[5] = f64::NAN;
-    let p = write(d, "nan.npz", &[("images", images()), ("angles", Array::f64(&[2, 4], nan)), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "nan.npz",
+        &[
+            ("images", images()),
+            ("angles", Array::f64(&[2, 4], nan)),
+            ("focal", focal()),
+            ("poses", poses()),
+        ],
+    );
     expect_data_error(&p, "row 1 is NaN or infinite");
-    let p = write(d, "empty.npz", &[("images", Array::u8(&[0, 4, 4], vec![])), ("angles", Array::f64(&[0, 4], vec![])), ("focal", focal()), ("poses", poses())]);
+    let p = write(
+        d,
+        "empty.npz",
+        &[
+            ("images", Array::u8(&[0, 4, 4], vec![])),
+            ("angles", Array::f64(&[0, 4], vec![])),
+            ("focal", focal()),
+            ("poses", poses()),
+        ],
+    );
     expect_data_error(&p, "zero samples");
 }
 
@@ -110,10 +173,14 @@ fn impossible_configs_are_refused() {
     let robot = arm4();
     let mut cfg = DatasetConfig::quick();
     cfg.samples = 0;
-    assert!(matches!(Dataset::generate(&robot, &cfg, None), Err(Error::Config(m)) if m.contains("at least 1 sample")));
+    assert!(
+        matches!(Dataset::generate(&robot, &cfg, None), Err(Error::Config(m)) if m.contains("at least 1 sample"))
+    );
     let mut cfg = DatasetConfig::quick();
     cfg.train = 41;
-    assert!(matches!(Dataset::generate(&robot, &cfg, None), Err(Error::Config(m)) if m.contains("impossible split")));
+    assert!(
+        matches!(Dataset::generate(&robot, &cfg, None), Err(Error::Config(m)) if m.contains("impossible split"))
+    );
 }
 
 #[test]
@@ -121,15 +188,38 @@ fn angle_files_are_checked() {
     let dir = tempfile::tempdir().unwrap();
     let csv = dir.path().join("a.csv");
     std::fs::write(&csv, "j0,j1,j2,j3\n1,2,3,4\n5,6,7,8\n").unwrap();
-    assert_eq!(read_angles(&csv, 4).unwrap(), vec![vec![1.0, 2.0, 3.0, 4.0], vec![5.0, 6.0, 7.0, 8.0]]);
+    assert_eq!(
+        read_angles(&csv, 4).unwrap(),
+        vec![vec![1.0, 2.0, 3.0, 4.0], vec![5.0, 6.0, 7.0, 8.0]]
+    );
     std::fs::write(&csv, "1,2,3,4\n5,NaN,7,8\n").unwrap();
-    assert!(read_angles(&csv, 4).unwrap_err().to_string().contains("row 2 has a NaN"));
+    assert!(
+        read_angles(&csv, 4)
+            .unwrap_err()
+            .to_string()
+            .contains("row 2 has a NaN")
+    );
     std::fs::write(&csv, "1,2,3\n").unwrap();
-    assert!(read_angles(&csv, 4).unwrap_err().to_string().contains("row 1 has 3 values"));
+    assert!(
+        read_angles(&csv, 4)
+            .unwrap_err()
+            .to_string()
+            .contains("row 1 has 3 values")
+    );
     std::fs::write(&csv, "j0,j1,j2,j3\n").unwrap();
-    assert!(read_angles(&csv, 4).unwrap_err().to_string().contains("zero samples"));
+    assert!(
+        read_angles(&csv, 4)
+            .unwrap_err()
+            .to_string()
+            .contains("zero samples")
+    );
     std::fs::write(&csv, "1,2,3,4\nx,y,z,w\n").unwrap();
-    assert!(read_angles(&csv, 4).unwrap_err().to_string().contains("line 2"));
+    assert!(
+        read_angles(&csv, 4)
+            .unwrap_err()
+            .to_string()
+            .contains("line 2")
+    );
     // The papers' npz works as an angle file.
     assert_eq!(read_angles(&fixture(), 4).unwrap().len(), 3);
 }

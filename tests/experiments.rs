@@ -11,9 +11,14 @@ fn every_experiment_runs_on_its_quick_preset() {
             continue;
         }
         let dir = root.path().join(e.default_dir);
-        let summary = (e.run)("quick", &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
+        let summary =
+            (e.run)("quick", &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
         assert!(!summary.is_empty());
-        assert!(std::fs::read_dir(&dir).unwrap().count() > 0, "{} wrote nothing", e.name);
+        assert!(
+            std::fs::read_dir(&dir).unwrap().count() > 0,
+            "{} wrote nothing",
+            e.name
+        );
     }
 }
 
@@ -24,8 +29,17 @@ fn arm4_matches_the_mesh_robot_closely() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let rows = selfmodel::mesh_fidelity::run(&selfmodel::mesh_fidelity::FidelityConfig::quick(), None, dir.path()).unwrap();
-    assert!(rows[0].mean_iou > 0.97, "arm4 vs mesh IoU {}", rows[0].mean_iou);
+    let rows = selfmodel::mesh_fidelity::run(
+        &selfmodel::mesh_fidelity::FidelityConfig::quick(),
+        None,
+        dir.path(),
+    )
+    .unwrap();
+    assert!(
+        rows[0].mean_iou > 0.97,
+        "arm4 vs mesh IoU {}",
+        rows[0].mean_iou
+    );
     let csv = std::fs::read_to_string(dir.path().join("results.csv")).unwrap();
     assert!(csv.starts_with("ours,reference,poses,mean_iou"));
     assert!(dir.path().join("results.md").is_file());

@@ -18,9 +18,15 @@ fn arm4_joint_positions_and_axes_at_zero() {
         ([0.174, 0.0, 0.142], None),
     ];
     for (i, ((p, axis), (want_p, want_axis))) in joints.iter().zip(expect).enumerate() {
-        assert!(close(*p, want_p, 1.5e-3), "joint {i} at {p:?}, expected {want_p:?}");
+        assert!(
+            close(*p, want_p, 1.5e-3),
+            "joint {i} at {p:?}, expected {want_p:?}"
+        );
         if let Some(a) = want_axis {
-            assert!((axis - Vector3::from(a)).norm() < 1e-9, "joint {i} axis {axis:?}");
+            assert!(
+                (axis - Vector3::from(a)).norm() < 1e-9,
+                "joint {i} axis {axis:?}"
+            );
         }
     }
     let tip = c.end_effector(&[0.0; 4]);
@@ -38,14 +44,19 @@ fn joints_move_the_tip_as_their_axes_say() {
     for j in 0..3 {
         let mut q = [0.0; 4];
         q[j] = 0.5;
-        assert!((c.end_effector(&q) - zero).norm() > 1e-3, "joint {j} does not move the tip");
+        assert!(
+            (c.end_effector(&q) - zero).norm() > 1e-3,
+            "joint {j} does not move the tip"
+        );
     }
 }
 
 #[test]
 fn batch_equals_single_pose() {
     let c = chain();
-    let qs: Vec<Vec<f64>> = (0..20).map(|i| (0..4).map(|j| ((i * 7 + j * 3) as f64).sin()).collect()).collect();
+    let qs: Vec<Vec<f64>> = (0..20)
+        .map(|i| (0..4).map(|j| ((i * 7 + j * 3) as f64).sin()).collect())
+        .collect();
     let batch = c.end_effector_batch(&qs);
     let frames = c.link_frames_batch(&qs);
     for (i, q) in qs.iter().enumerate() {

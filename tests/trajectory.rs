@@ -7,7 +7,11 @@ fn lorenz_first_sample_matches_the_paper() {
     let q = lorenz(3, &[[-90.0, 90.0]; 4]).unwrap();
     let want = [2.2778, 2.8339, 2.0153, 1.9446];
     for (a, b) in q[0].iter().zip(want) {
-        assert!((a - b).abs() < 5e-5, "first sample {:?}, expected {want:?}", q[0]);
+        assert!(
+            (a - b).abs() < 5e-5,
+            "first sample {:?}, expected {want:?}",
+            q[0]
+        );
     }
     // Smooth: consecutive samples differ by far less than the range.
     let q = lorenz(2000, &[[-90.0, 90.0]; 4]).unwrap();
@@ -30,9 +34,15 @@ fn babbling_is_seeded_and_within_range() {
     let a = babbling(500, &r, 3);
     assert_eq!(a, babbling(500, &r, 3));
     assert_ne!(a, babbling(500, &r, 4));
-    assert!(a.iter().all(|q| q[0].abs() <= 90.0 && (-10.0..=20.0).contains(&q[1])));
+    assert!(
+        a.iter()
+            .all(|q| q[0].abs() <= 90.0 && (-10.0..=20.0).contains(&q[1]))
+    );
     let mean: f64 = a.iter().map(|q| q[0]).sum::<f64>() / 500.0;
-    assert!(mean.abs() < 10.0, "uniform samples should centre near 0, got {mean}");
+    assert!(
+        mean.abs() < 10.0,
+        "uniform samples should centre near 0, got {mean}"
+    );
 }
 
 #[test]

@@ -6,11 +6,11 @@ use std::path::Path;
 
 use common::{cube_stl_ascii, cube_stl_binary};
 use nalgebra::Isometry3;
+use selfmodel::Error;
 use selfmodel::camera::Camera;
 use selfmodel::kinematics::JointKind;
 use selfmodel::ray_caster::{RayCaster, RenderOptions};
 use selfmodel::urdf_loader::{load_urdf, resolve_mesh_path};
-use selfmodel::Error;
 
 fn robot_xml(joint_type: &str, mesh: &str) -> String {
     format!(
@@ -47,13 +47,28 @@ fn package(dir: &Path, joint_type: &str, mesh: &str, ascii: bool) -> std::path::
 fn loads_joints_limits_and_all_geometry_kinds() {
     for ascii in [true, false] {
         let dir = tempfile::tempdir().unwrap();
-        let urdf = package(dir.path(), "revolute", "package://pkg/meshes/cube.stl", ascii);
+        let urdf = package(
+            dir.path(),
+            "revolute",
+            "package://pkg/meshes/cube.stl",
+            ascii,
+        );
         let robot = load_urdf(&urdf, Isometry3::identity()).unwrap();
         assert_eq!(robot.dof(), 2);
         let kinds: Vec<JointKind> = robot.chain.joints.iter().map(|j| j.kind).collect();
-        assert_eq!(kinds, [JointKind::Revolute, JointKind::Prismatic, JointKind::Fixed]);
+        assert_eq!(
+            kinds,
+            [JointKind::Revolute, JointKind::Prismatic, JointKind::Fixed]
+        );
         assert_eq!(robot.chain.joint_ranges(), vec![[-1.0, 1.0], [0.0, 0.1]]);
-        assert_eq!(robot.geometry.iter().map(|g| g.shapes().len()).collect::<Vec<_>>(), [1, 1, 1, 12]);
+        assert_eq!(
+            robot
+                .geometry
+                .iter()
+                .map(|g| g.shapes().len())
+                .collect::<Vec<_>>(),
+            [1, 1, 1, 12]
+        );
         // The tip is the deepest link (tool) and follows the prismatic joint.
         let a = robot.end_effector(&[0.0, 0.0]);
         let b = robot.end_effector(&[0.0, 0.1]);
@@ -69,17 +84,32 @@ fn loads_joints_limits_and_all_geometry_kinds() {
 #[test]
 fn mesh_paths_resolve() {
     let dir = Path::new("/robots/pkg/urdf");
-    assert_eq!(resolve_mesh_path(dir, "package://pkg/meshes/a.stl"), Path::new("/robots/pkg/meshes/a.stl"));
+    assert_eq!(
+        resolve_mesh_path(dir, "package://pkg/meshes/a.stl"),
+        Path::new("/robots/pkg/meshes/a.stl")
+    );
     // Unknown package name: the conventional layout NAME/urdf/robot.urdf.
-    assert_eq!(resolve_mesh_path(dir, "package://other/meshes/a.stl"), Path::new("/robots/pkg/meshes/a.stl"));
-    assert_eq!(resolve_mesh_path(dir, "../meshes/a.stl"), Path::new("/robots/pkg/urdf/../meshes/a.stl"));
-    assert_eq!(resolve_mesh_path(dir, "file:///m/a.stl"), Path::new("/m/a.stl"));
+    assert_eq!(
+        resolve_mesh_path(dir, "package://other/meshes/a.stl"),
+        Path::new("/robots/pkg/meshes/a.stl")
+    );
+    assert_eq!(
+        resolve_mesh_path(dir, "../meshes/a.stl"),
+        Path::new("/robots/pkg/urdf/../meshes/a.stl")
+    );
+    assert_eq!(
+        resolve_mesh_path(dir, "file:///m/a.stl"),
+        Path::new("/m/a.stl")
+    );
 }
 
 fn expect_urdf_error(urdf: &Path, needles: &[&str]) {
     let err = load_urdf(urdf, Isometry3::identity()).unwrap_err();
     let msg = err.to_string();
-    assert!(msg.contains(&urdf.display().to_string()) || matches!(err, Error::Mesh { .. }), "file not named: {msg}");
+    assert!(
+        msg.contains(&urdf.display().to_string()) || matches!(err, Error::Mesh { .. }),
+        "file not named: {msg}"
+    );
     for n in needles {
         assert!(msg.contains(n), "expected \"{n}\" in: {msg}");
     }
@@ -88,28 +118,62 @@ fn expect_urdf_error(urdf: &Path, needles: &[&str]) {
 #[test]
 fn bad_urdfs_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
-    let urdf = package(dir.path(), "floating", "package://pkg/meshes/cube.stl", true);
+    let urdf = package(
+        dir.path(),
+        "floating",
+        "package://pkg/meshes/cube.stl",
+        true,
+    );
     expect_urdf_error(&urdf, &["joint \"j0\"", "unsupported joint type"]);
 
-    let urdf = package(dir.path(), "revolute", "package://pkg/meshes/missing.stl", true);
+    let urdf = package(
+        dir.path(),
+        "revolute",
+        "package://pkg/meshes/missing.stl",
+        true,
+    );
     expect_urdf_error(&urdf, &["link \"tool\"", "missing.stl", "not found"]);
 
-    let urdf = package(dir.path(), "revolute", "package://pkg/meshes/cube.dae", true);
+    let urdf = package(
+        dir.path(),
+        "revolute",
+        "package://pkg/meshes/cube.dae",
+        true,
+    );
     expect_urdf_error(&urdf, &["only STL"]);
 
     std::fs::write(&urdf, "<robot name='x'><link name='a'></robot>").unwrap();
     expect_urdf_error(&urdf, &["not a valid URDF"]);
 
-    std::fs::write(&urdf, robot_xml("revolute", "package://pkg/meshes/cube.stl").replace("<parent link=\"arm\"/>", "<parent link=\"nope\"/>")).unwrap();
+    std::fs::write(
+        &urdf,
+        robot_xml("revolute", "package://pkg/meshes/cube.stl")
+            .replace("<parent link=\"arm\"/>", "<parent link=\"nope\"/>"),
+    )
+    .unwrap();
     expect_urdf_error(&urdf, &["joint \"j1\"", "unknown link \"nope\""]);
 
     let missing = dir.path().join("none.urdf");
     expect_urdf_error(&missing, &["No such file"]);
 
     // A corrupt STL names the mesh file.
-    let urdf = package(dir.path(), "revolute", "package://pkg/meshes/cube.stl", true);
+    let urdf = package(
+        dir.path(),
+        "revolute",
+        "package://pkg/meshes/cube.stl",
+        true,
+    );
     let stl = dir.path().join("pkg/meshes/cube.stl");
-    std::fs::write(&stl, b"solid x\nfacet normal 0 0 0\nouter loop\nvertex 1 2\n").unwrap();
-    let msg = load_urdf(&urdf, Isometry3::identity()).unwrap_err().to_string();
-    assert!(msg.contains("cube.stl") && msg.contains("not a valid STL"), "{msg}");
+    std::fs::write(
+        &stl,
+        b"solid x\nfacet normal 0 0 0\nouter loop\nvertex 1 2\n",
+    )
+    .unwrap();
+    let msg = load_urdf(&urdf, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        msg.contains("cube.stl") && msg.contains("not a valid STL"),
+        "{msg}"
+    );
 }

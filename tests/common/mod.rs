@@ -11,7 +11,8 @@ use selfmodel::shape::Shape;
 pub fn static_robot(shapes: Vec<Shape>) -> Robot {
     Robot {
         name: "static".into(),
-        chain: KinematicChain::new(vec!["body".into()], vec![], Isometry3::identity(), None).unwrap(),
+        chain: KinematicChain::new(vec!["body".into()], vec![], Isometry3::identity(), None)
+            .unwrap(),
         geometry: vec![Bvh::new(shapes)],
     }
 }
@@ -20,14 +21,47 @@ pub fn static_robot(shapes: Vec<Shape>) -> Robot {
 pub fn cube_triangles(h: f64) -> Vec<[Point3<f64>; 3]> {
     let v = |x: f64, y: f64, z: f64| Point3::new(x * h, y * h, z * h);
     let quads = [
-        [v(-1., -1., -1.), v(1., -1., -1.), v(1., 1., -1.), v(-1., 1., -1.)],
-        [v(-1., -1., 1.), v(1., -1., 1.), v(1., 1., 1.), v(-1., 1., 1.)],
-        [v(-1., -1., -1.), v(1., -1., -1.), v(1., -1., 1.), v(-1., -1., 1.)],
-        [v(-1., 1., -1.), v(1., 1., -1.), v(1., 1., 1.), v(-1., 1., 1.)],
-        [v(-1., -1., -1.), v(-1., 1., -1.), v(-1., 1., 1.), v(-1., -1., 1.)],
-        [v(1., -1., -1.), v(1., 1., -1.), v(1., 1., 1.), v(1., -1., 1.)],
+        [
+            v(-1., -1., -1.),
+            v(1., -1., -1.),
+            v(1., 1., -1.),
+            v(-1., 1., -1.),
+        ],
+        [
+            v(-1., -1., 1.),
+            v(1., -1., 1.),
+            v(1., 1., 1.),
+            v(-1., 1., 1.),
+        ],
+        [
+            v(-1., -1., -1.),
+            v(1., -1., -1.),
+            v(1., -1., 1.),
+            v(-1., -1., 1.),
+        ],
+        [
+            v(-1., 1., -1.),
+            v(1., 1., -1.),
+            v(1., 1., 1.),
+            v(-1., 1., 1.),
+        ],
+        [
+            v(-1., -1., -1.),
+            v(-1., 1., -1.),
+            v(-1., 1., 1.),
+            v(-1., -1., 1.),
+        ],
+        [
+            v(1., -1., -1.),
+            v(1., 1., -1.),
+            v(1., 1., 1.),
+            v(1., -1., 1.),
+        ],
     ];
-    quads.iter().flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]).collect()
+    quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect()
 }
 
 /// An ASCII STL of a cube of half size `h`.
