@@ -9,6 +9,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::{RobotArgs, Triple, run_main};
 use selfmodel::dataset::{DatasetConfig, build_and_save, read_angles};
+use selfmodel::preset::Preset;
 use selfmodel::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).

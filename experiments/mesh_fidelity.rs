@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::mesh_fidelity::{FidelityConfig, run};
+use selfmodel::preset::Preset;
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]

@@ -23,6 +23,7 @@ use crate::camera::Camera;
 use crate::cli::git_revision;
 use crate::error::{Error, Result};
 use crate::npz::{Array, ArrayData, read_npz, write_npz};
+use crate::preset::Preset;
 use crate::preview::{depth_to_gray, save_png, tile_grid};
 use crate::ray_caster::{RayCaster, RenderOptions};
 use crate::robot::Robot;
@@ -46,9 +47,9 @@ pub struct DatasetConfig {
     pub render: RenderOptions,
 }
 
-impl DatasetConfig {
+impl Preset for DatasetConfig {
     /// The paper's dataset: 2,000 Lorenz samples, 1,600 train and 400 test.
-    pub fn paper() -> Self {
+    fn paper() -> Self {
         DatasetConfig {
             preset: "paper".into(),
             samples: 2000,
@@ -62,7 +63,7 @@ impl DatasetConfig {
     }
 
     /// Tiny, for tests: 40 samples, 32 train.
-    pub fn quick() -> Self {
+    fn quick() -> Self {
         DatasetConfig {
             preset: "quick".into(),
             samples: 40,
@@ -70,18 +71,9 @@ impl DatasetConfig {
             ..Self::paper()
         }
     }
+}
 
-    /// Look a preset up by name.
-    pub fn preset(name: &str) -> Result<Self> {
-        match name {
-            "paper" => Ok(Self::paper()),
-            "quick" => Ok(Self::quick()),
-            other => Err(Error::Config(format!(
-                "unknown preset \"{other}\" (choose paper or quick)"
-            ))),
-        }
-    }
-
+impl DatasetConfig {
     /// Reject impossible settings.
     pub fn validate(&self) -> Result<()> {
         if self.samples == 0 {

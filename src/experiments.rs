@@ -7,6 +7,7 @@ use std::path::Path;
 use crate::dataset::{DatasetConfig, build_and_save};
 use crate::error::Result;
 use crate::mesh_fidelity::{self, FidelityConfig};
+use crate::preset::Preset;
 
 /// One experiment.
 pub struct Experiment {

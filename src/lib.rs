@@ -17,6 +17,7 @@ pub mod kinematics;
 pub mod mesh_fidelity;
 pub mod metrics;
 pub mod npz;
+pub mod preset;
 pub mod preview;
 pub mod primitive_fit;
 pub mod ray_caster;

@@ -12,6 +12,7 @@ use crate::cli::{git_revision, shared_arm_urdf};
 use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::metrics::{shift_rows, silhouette_iou};
+use crate::preset::Preset;
 use crate::ray_caster::{RayCaster, RenderOptions};
 use crate::report::{write_csv, write_markdown_report};
 use crate::robot::Robot;
@@ -33,8 +34,8 @@ pub struct FidelityConfig {
     pub camera: Camera,
 }
 
-impl FidelityConfig {
-    pub fn paper() -> Self {
+impl Preset for FidelityConfig {
+    fn paper() -> Self {
         FidelityConfig {
             preset: "paper".into(),
             poses: 100,
@@ -43,20 +44,11 @@ impl FidelityConfig {
             camera: Camera::paper(),
         }
     }
-    pub fn quick() -> Self {
+    fn quick() -> Self {
         FidelityConfig {
             preset: "quick".into(),
             poses: 5,
             ..Self::paper()
-        }
-    }
-    pub fn preset(name: &str) -> Result<Self> {
-        match name {
-            "paper" => Ok(Self::paper()),
-            "quick" => Ok(Self::quick()),
-            other => Err(Error::Config(format!(
-                "unknown preset \"{other}\" (choose paper or quick)"
-            ))),
         }
     }
 }

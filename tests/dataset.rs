@@ -6,6 +6,7 @@ use selfmodel::Error;
 use selfmodel::arm4::arm4;
 use selfmodel::dataset::{Dataset, DatasetConfig, read_angles};
 use selfmodel::npz::{Array, read_npz, write_npz};
+use selfmodel::preset::Preset;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data/fixtures/papers_format.npz")
@@ -222,4 +223,24 @@ fn angle_files_are_checked() {
     );
     // The papers' npz works as an angle file.
     assert_eq!(read_angles(&fixture(), 4).unwrap().len(), 3);
+}
+
+#[test]
+fn a_failed_write_leaves_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let target = dir.path().join("out.npz");
+    let result = selfmodel::atomic_file::write_atomic(&target, |w| {
+        std::io::Write::write_all(w, b"half of a file").unwrap();
+        Err(Error::Config("interrupted".into()))
+    });
+    assert!(result.is_err());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "partial or temporary file left"
+    );
+    // An existing result survives a failed rewrite untouched.
+    std::fs::write(&target, b"old").unwrap();
+    let _ = selfmodel::atomic_file::write_atomic(&target, |_| Err(Error::Config("no".into())));
+    assert_eq!(std::fs::read(&target).unwrap(), b"old");
 }

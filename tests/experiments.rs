@@ -1,6 +1,7 @@
 //! Smoke test driven by the registry: every experiment runs on its quick preset.
 
 use selfmodel::experiments::EXPERIMENTS;
+use selfmodel::preset::Preset;
 
 #[test]
 fn every_experiment_runs_on_its_quick_preset() {
