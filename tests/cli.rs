@@ -1,5 +1,7 @@
 //! The binaries at the edge: --help, one-line errors with a non-zero exit, no partial files.
 
+mod common;
+
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -48,7 +50,7 @@ fn every_binary_has_help() {
 
 #[test]
 fn dataset_quick_writes_all_files() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let npz = dir.path().join("q.npz");
     let out = dataset(&["--preset", "quick", "--out", npz.to_str().unwrap()]);
     assert!(
@@ -64,7 +66,7 @@ fn dataset_quick_writes_all_files() {
 
 #[test]
 fn bad_inputs_fail_cleanly() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let d = dir.path();
     let npz = d.join("out.npz");
     let out_arg = npz.to_str().unwrap();
@@ -94,7 +96,7 @@ fn bad_inputs_fail_cleanly() {
 
 #[test]
 fn render_recorded_poses_from_csv() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let csv = dir.path().join("poses.csv");
     std::fs::write(&csv, "j0,j1,j2,j3\n0,0,0,0\n30,-20,45,10\n-60,10,-30,80\n").unwrap();
     let npz = dir.path().join("poses.npz");

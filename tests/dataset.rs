@@ -1,5 +1,7 @@
 //! Datasets: npz round trip, the papers' file layout, and every bad input.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use selfmodel::Error;
@@ -14,7 +16,7 @@ fn fixture() -> PathBuf {
 
 #[test]
 fn npz_round_trip_keeps_every_array() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let robot = arm4();
     let data = Dataset::generate(&robot, &DatasetConfig::quick(), None).unwrap();
     let path = dir.path().join("d.npz");
@@ -93,7 +95,7 @@ fn write(dir: &Path, name: &str, arrays: &[(&str, Array)]) -> PathBuf {
 
 #[test]
 fn bad_dataset_files_are_clear_errors() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let d = dir.path();
     expect_data_error(&d.join("missing.npz"), "No such file");
     let corrupt = d.join("corrupt.npz");
@@ -186,7 +188,7 @@ fn impossible_configs_are_refused() {
 
 #[test]
 fn angle_files_are_checked() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let csv = dir.path().join("a.csv");
     std::fs::write(&csv, "j0,j1,j2,j3\n1,2,3,4\n5,6,7,8\n").unwrap();
     assert_eq!(
@@ -227,7 +229,7 @@ fn angle_files_are_checked() {
 
 #[test]
 fn a_failed_write_leaves_no_file() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let target = dir.path().join("out.npz");
     let result = selfmodel::atomic_file::write_atomic(&target, |w| {
         std::io::Write::write_all(w, b"half of a file").unwrap();

@@ -1,11 +1,13 @@
 //! Smoke test driven by the registry: every experiment runs on its quick preset.
 
+mod common;
+
 use selfmodel::experiments::EXPERIMENTS;
 use selfmodel::preset::Preset;
 
 #[test]
 fn every_experiment_runs_on_its_quick_preset() {
-    let root = tempfile::tempdir().unwrap();
+    let root = common::tempdir();
     for e in EXPERIMENTS {
         if e.name == "mesh_fidelity" && !selfmodel::cli::shared_arm_urdf().exists() {
             eprintln!("skipped mesh_fidelity: the shared meshes are not beside the repository");
@@ -29,7 +31,7 @@ fn arm4_matches_the_mesh_robot_closely() {
         eprintln!("skipped: the shared meshes are not beside the repository");
         return;
     }
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let rows = selfmodel::mesh_fidelity::run(
         &selfmodel::mesh_fidelity::FidelityConfig::quick(),
         None,

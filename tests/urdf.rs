@@ -46,7 +46,7 @@ fn package(dir: &Path, joint_type: &str, mesh: &str, ascii: bool) -> std::path::
 #[test]
 fn loads_joints_limits_and_all_geometry_kinds() {
     for ascii in [true, false] {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = common::tempdir();
         let urdf = package(
             dir.path(),
             "revolute",
@@ -117,7 +117,7 @@ fn expect_urdf_error(urdf: &Path, needles: &[&str]) {
 
 #[test]
 fn bad_urdfs_are_clear_errors() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = common::tempdir();
     let urdf = package(
         dir.path(),
         "floating",

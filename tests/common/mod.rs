@@ -90,3 +90,36 @@ pub fn cube_stl_binary(h: f64) -> Vec<u8> {
     stl_io::write_stl(&mut out, tris.iter()).unwrap();
     out
 }
+
+/// A fresh folder under the system temp dir, removed when dropped. (Not the `tempfile` crate:
+/// a dev-dependency would change shared dependencies' features and make `cargo run` rebuild
+/// burn after `cargo test`.)
+pub struct TempDir(std::path::PathBuf);
+
+impl TempDir {
+    pub fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+pub fn tempdir() -> TempDir {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
+    let dir = std::env::temp_dir().join(format!(
+        "selfmodel-test-{}-{}-{nanos}",
+        std::process::id(),
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    TempDir(dir)
+}
