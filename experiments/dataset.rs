@@ -91,7 +91,6 @@ fn main() -> ExitCode {
             cfg.camera.height = s;
         }
         cfg.render.ground_artifact = args.ground_artifact;
-        cfg.validate()?;
         if given.as_ref().is_some_and(|rows| rows.len() != cfg.samples) {
             return Err(selfmodel::Error::Config(
                 "--samples cannot be combined with --angles".into(),

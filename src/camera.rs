@@ -102,39 +102,29 @@ impl Camera {
         Point3::from(self.eye)
     }
 
-    /// Ray through pixel (row, column); its direction has forward component 1.
-    pub fn ray(&self, row: f64, col: f64) -> Ray {
+    /// Everything a per-pixel loop needs, computed once.
+    pub fn frame(&self) -> CameraFrame {
         let (fwd, right, up) = self.basis();
-        self.ray_with_basis(row, col, &(fwd, right, up))
+        let (cx, cy) = self.principal_point();
+        CameraFrame {
+            eye: self.eye_point(),
+            fwd,
+            right,
+            up,
+            focal: self.focal_px(),
+            cx,
+            cy,
+        }
     }
 
-    /// [`Camera::ray`] with a precomputed [`Camera::basis`].
-    #[inline]
-    pub fn ray_with_basis(
-        &self,
-        row: f64,
-        col: f64,
-        (fwd, right, up): &(Vector3<f64>, Vector3<f64>, Vector3<f64>),
-    ) -> Ray {
-        let f = self.focal_px();
-        let (cx, cy) = self.principal_point();
-        Ray {
-            origin: self.eye_point(),
-            dir: fwd + right * ((col - cx) / f) - up * ((row - cy) / f),
-        }
+    /// Ray through pixel (row, column); its direction has forward component 1.
+    pub fn ray(&self, row: f64, col: f64) -> Ray {
+        self.frame().ray(row, col)
     }
 
     /// Project a world point: (row, column, depth along the camera axis). `None` behind the eye.
     pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64, f64)> {
-        let (fwd, right, up) = self.basis();
-        let v = p - self.eye_point();
-        let z = v.dot(&fwd);
-        if z <= 1e-9 {
-            return None;
-        }
-        let f = self.focal_px();
-        let (cx, cy) = self.principal_point();
-        Some((cy - f * v.dot(&up) / z, cx + f * v.dot(&right) / z, z))
+        self.frame().project(p)
     }
 
     /// Camera-to-world matrix in the NeRF/OpenGL convention (columns right, up, backward, eye),
@@ -148,5 +138,47 @@ impl Camera {
             right.z, up.z, -fwd.z, e.z, //
             0.0, 0.0, 0.0, 1.0,
         )
+    }
+}
+
+/// A camera's eye, unit axes, focal length and principal point, precomputed for the
+/// per-pixel loops of the renderer ([`Camera::frame`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraFrame {
+    pub eye: Point3<f64>,
+    pub fwd: Vector3<f64>,
+    pub right: Vector3<f64>,
+    pub up: Vector3<f64>,
+    /// Focal length (px).
+    pub focal: f64,
+    /// Principal point: column `cx`, row `cy`.
+    pub cx: f64,
+    pub cy: f64,
+}
+
+impl CameraFrame {
+    /// Ray through pixel (row, column); its direction has forward component 1.
+    #[inline]
+    pub fn ray(&self, row: f64, col: f64) -> Ray {
+        Ray {
+            origin: self.eye,
+            dir: self.fwd + self.right * ((col - self.cx) / self.focal)
+                - self.up * ((row - self.cy) / self.focal),
+        }
+    }
+
+    /// Project a world point: (row, column, depth along the camera axis). `None` behind the eye.
+    #[inline]
+    pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64, f64)> {
+        let v = p - self.eye;
+        let z = v.dot(&self.fwd);
+        if z <= 1e-9 {
+            return None;
+        }
+        Some((
+            self.cy - self.focal * v.dot(&self.up) / z,
+            self.cx + self.focal * v.dot(&self.right) / z,
+            z,
+        ))
     }
 }

@@ -178,7 +178,7 @@ impl Dataset {
         cfg: &DatasetConfig,
         progress: Option<&ProgressBar>,
     ) -> Result<Self> {
-        cfg.validate()?;
+        // `render` validates the config.
         let angles = sample_angles(robot, cfg)?;
         Self::render(robot, cfg, angles, progress)
     }
@@ -527,7 +527,6 @@ pub fn build_and_save(
     out: &Path,
     progress: bool,
 ) -> Result<(Dataset, BuildReport)> {
-    cfg.validate()?;
     let bar = progress.then(|| progress_bar(cfg.samples as u64, "render"));
     let start = std::time::Instant::now();
     let data = match angles {

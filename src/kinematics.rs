@@ -196,11 +196,6 @@ impl KinematicChain {
         self.dofs.iter().map(|&j| &self.joints[j])
     }
 
-    /// Index of a link by name.
-    pub fn link_index(&self, name: &str) -> Option<usize> {
-        self.links.iter().position(|l| l == name)
-    }
-
     /// Sampling range of each joint value (SI): the stated limits, else
     /// [`DEFAULT_ROTATIONAL_RANGE`] for continuous joints.
     pub fn joint_ranges(&self) -> Vec<[f64; 2]> {

@@ -56,6 +56,20 @@ impl Array {
         }
     }
 
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        match &self.data {
+            ArrayData::U8(v) => v.len(),
+            ArrayData::F32(v) => v.len(),
+            ArrayData::F64(v) => v.len(),
+            ArrayData::I64(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
     /// NumPy's name of the element type.
     pub fn dtype_name(&self) -> &'static str {
         match self.data {
@@ -101,24 +115,16 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
             .compression_level(Some(1))
             .large_file(true);
         for (name, array) in arrays {
-            let n: usize = array.shape.iter().product();
+            assert_eq!(
+                array.len(),
+                array.shape.iter().product::<usize>(),
+                "array \"{name}\": data length does not match its shape"
+            );
             let bytes = match &array.data {
-                ArrayData::U8(v) => {
-                    assert_eq!(v.len(), n);
-                    encode(&array.shape, v)
-                }
-                ArrayData::F32(v) => {
-                    assert_eq!(v.len(), n);
-                    encode(&array.shape, v)
-                }
-                ArrayData::F64(v) => {
-                    assert_eq!(v.len(), n);
-                    encode(&array.shape, v)
-                }
-                ArrayData::I64(v) => {
-                    assert_eq!(v.len(), n);
-                    encode(&array.shape, v)
-                }
+                ArrayData::U8(v) => encode(&array.shape, v),
+                ArrayData::F32(v) => encode(&array.shape, v),
+                ArrayData::F64(v) => encode(&array.shape, v),
+                ArrayData::I64(v) => encode(&array.shape, v),
             }
             .map_err(io)?;
             zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;

@@ -11,14 +11,13 @@
 //! camera axis, 0 where empty, row-major.
 
 use indicatif::ProgressBar;
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::Isometry3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::bvh::Bvh;
-use crate::camera::Camera;
+use crate::camera::{Camera, CameraFrame};
 use crate::robot::Robot;
-use crate::shape::Ray;
 
 /// Height of the light ground plane of the paper's PyBullet scene (m).
 pub const PAPER_GROUND_Z: f64 = -0.109;
@@ -67,14 +66,15 @@ impl<'a> RayCaster<'a> {
         }
     }
 
-    fn blank(&self) -> (Vec<f64>, usize, usize) {
-        let (w, h) = (self.camera.width, self.camera.height);
-        (vec![f64::INFINITY; w * h], w, h)
+    /// An empty depth buffer (infinity = nothing hit).
+    fn blank(&self) -> Vec<f64> {
+        vec![f64::INFINITY; self.camera.width * self.camera.height]
     }
 
     /// Pixel rectangle (rows, columns, inclusive) that can see the link's geometry.
     fn screen_rect(
         &self,
+        cam: &CameraFrame,
         geometry: &Bvh,
         pose: &Isometry3<f64>,
     ) -> Option<([usize; 2], [usize; 2])> {
@@ -82,7 +82,7 @@ impl<'a> RayCaster<'a> {
         let corners = geometry
             .bounds()
             .corners()
-            .map(|c| self.camera.project(&(pose * c)));
+            .map(|c| cam.project(&(pose * c)));
         if corners.iter().any(Option::is_none) {
             // Part of the box is behind the eye: test the whole image.
             return Some(([0, h - 1], [0, w - 1]));
@@ -112,21 +112,19 @@ impl<'a> RayCaster<'a> {
     /// Render joint values `q` (SI units) with the fast path.
     pub fn render(&self, q: &[f64]) -> Frame {
         let frames = self.robot.link_frames(q);
-        let basis = self.camera.basis();
-        let (mut depth, w, _) = self.blank();
+        let cam = self.camera.frame();
+        let w = self.camera.width;
+        let mut depth = self.blank();
         for (geometry, pose) in self.robot.geometry.iter().zip(&frames) {
             if geometry.is_empty() {
                 continue;
             }
-            let Some((rows, cols)) = self.screen_rect(geometry, pose) else {
+            let Some((rows, cols)) = self.screen_rect(&cam, geometry, pose) else {
                 continue;
             };
             for r in rows[0]..=rows[1] {
                 for c in cols[0]..=cols[1] {
-                    let ray = self
-                        .camera
-                        .ray_with_basis(r as f64, c as f64, &basis)
-                        .to_local(pose);
+                    let ray = cam.ray(r as f64, c as f64).to_local(pose);
                     let d = &mut depth[r * w + c];
                     if let Some(t) = geometry.closest_hit(&ray, *d) {
                         *d = t;
@@ -134,17 +132,18 @@ impl<'a> RayCaster<'a> {
                 }
             }
         }
-        self.finish(depth, &basis)
+        self.finish(depth, &cam)
     }
 
     /// Render joint values `q` (SI units) by brute force: the slow reference.
     pub fn render_reference(&self, q: &[f64]) -> Frame {
         let frames = self.robot.link_frames(q);
-        let basis = self.camera.basis();
-        let (mut depth, w, h) = self.blank();
+        let cam = self.camera.frame();
+        let (w, h) = (self.camera.width, self.camera.height);
+        let mut depth = self.blank();
         for r in 0..h {
             for c in 0..w {
-                let world = self.camera.ray_with_basis(r as f64, c as f64, &basis);
+                let world = cam.ray(r as f64, c as f64);
                 for (geometry, pose) in self.robot.geometry.iter().zip(&frames) {
                     let d = &mut depth[r * w + c];
                     if let Some(t) = geometry.closest_hit_brute_force(&world.to_local(pose), *d) {
@@ -153,7 +152,7 @@ impl<'a> RayCaster<'a> {
                 }
             }
         }
-        self.finish(depth, &basis)
+        self.finish(depth, &cam)
     }
 
     /// Render many joint vectors (SI) in parallel, ticking `progress` once per image.
@@ -170,20 +169,17 @@ impl<'a> RayCaster<'a> {
     }
 
     /// Depth buffer (infinity = empty) to a frame, adding the ground artefact if asked.
-    fn finish(&self, depth: Vec<f64>, basis: &(Vector3<f64>, Vector3<f64>, Vector3<f64>)) -> Frame {
+    fn finish(&self, depth: Vec<f64>, cam: &CameraFrame) -> Frame {
         let (w, h) = (self.camera.width, self.camera.height);
         let mut silhouette: Vec<u8> = depth
             .iter()
             .map(|d| if d.is_finite() { 255 } else { 0 })
             .collect();
-        if self.options.ground_artifact {
+        // From an eye above the ground plane, every ray that goes down meets it.
+        if self.options.ground_artifact && cam.eye.z > PAPER_GROUND_Z {
             for r in 0..h {
-                let ray: Ray = self.camera.ray_with_basis(r as f64, 0.0, basis);
-                // The ground is hit where the ray goes down towards z = PAPER_GROUND_Z.
-                let below = ray.origin.z > PAPER_GROUND_Z;
                 for c in 0..w {
-                    let dz = self.camera.ray_with_basis(r as f64, c as f64, basis).dir.z;
-                    if below && dz < 0.0 {
+                    if cam.ray(r as f64, c as f64).dir.z < 0.0 {
                         silhouette[r * w + c] = 255;
                     }
                 }

@@ -4,7 +4,6 @@ use nalgebra::{Isometry3, Point3};
 
 use crate::bvh::Bvh;
 use crate::kinematics::KinematicChain;
-use crate::shape::Aabb;
 
 /// A robot the simulator can move and render.
 #[derive(Clone, Debug)]
@@ -34,16 +33,5 @@ impl Robot {
     /// Total number of shapes (triangles and primitives) over all links.
     pub fn shape_count(&self) -> usize {
         self.geometry.iter().map(|g| g.shapes().len()).sum()
-    }
-
-    /// World bounding box of the whole robot at joint values `q`.
-    pub fn world_bounds(&self, q: &[f64]) -> Aabb {
-        self.link_frames(q)
-            .iter()
-            .zip(&self.geometry)
-            .filter(|(_, g)| !g.is_empty())
-            .fold(Aabb::empty(), |b, (f, g)| {
-                b.union(&g.bounds().transformed(f))
-            })
     }
 }
