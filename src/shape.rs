@@ -83,13 +83,7 @@ impl Aabb {
 
     /// The axis-aligned box holding this box after the rigid transform `pose`.
     pub fn transformed(&self, pose: &Isometry3<f64>) -> Aabb {
-        Aabb::from_points(
-            self.corners()
-                .iter()
-                .map(|c| pose * c)
-                .collect::<Vec<_>>()
-                .iter(),
-        )
+        Aabb::from_points(self.corners().map(|c| pose * c).iter())
     }
 
     /// Slab test: the entry `t` of the ray into the box if it enters before `t_max`.
