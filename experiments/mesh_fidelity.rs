@@ -23,8 +23,9 @@ struct Args {
     /// The papers' URDF with its meshes (default: ../shared/robots/4dof_1st/urdf/4dof_1st.urdf).
     #[arg(long)]
     urdf: Option<PathBuf>,
-    /// PyBullet renders of this run's poses (`angles.csv` in the output folder), made by
-    /// scripts/pybullet_render.py; compared with our renders of the same angles.
+    /// PyBullet renders (made by scripts/pybullet_render.py from `angles.csv` in the output
+    /// folder), compared with our renders of the same angles [paper preset: data/pybullet.npz
+    /// when it exists].
     #[arg(long, value_name = "NPZ")]
     pybullet: Option<PathBuf>,
     /// Output folder.
@@ -45,7 +46,16 @@ fn main() -> ExitCode {
                 "--poses must be at least 1".into(),
             ));
         }
-        let rows = run(&cfg, args.pybullet.as_deref(), &args.out)?;
+        if let Some(p) = &args.pybullet {
+            if !p.is_file() {
+                return Err(selfmodel::Error::Config(format!(
+                    "{}: no PyBullet renders there; make them with scripts/pybullet_render.py",
+                    p.display()
+                )));
+            }
+            cfg.pybullet = Some(p.clone());
+        }
+        let rows = run(&cfg, &args.out)?;
         for r in &rows {
             println!(
                 "{:<28} vs {:<28} shift {:>1} px: mean IoU {:.4} (median {:.4}, min {:.4}) over {} poses",

@@ -35,7 +35,7 @@ fn run_dataset(preset: &str, dir: &Path) -> Result<String> {
 }
 
 fn run_mesh_fidelity(preset: &str, dir: &Path) -> Result<String> {
-    let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, None, dir)?;
+    let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, dir)?;
     Ok(format!(
         "arm4 vs mesh robot: mean IoU {:.4} over {} poses",
         rows[0].mean_iou, rows[0].poses

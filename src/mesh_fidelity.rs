@@ -31,6 +31,9 @@ pub struct FidelityConfig {
     pub seed: u64,
     /// The papers' URDF with its STL meshes.
     pub urdf: PathBuf,
+    /// PyBullet renders (images and angles, from `scripts/pybullet_render.py`) to compare
+    /// against as well, when the file exists. Paper preset: `data/pybullet.npz`.
+    pub pybullet: Option<PathBuf>,
     pub camera: Camera,
 }
 
@@ -41,6 +44,7 @@ impl Preset for FidelityConfig {
             poses: 100,
             seed: 7,
             urdf: shared_arm_urdf(),
+            pybullet: Some(Path::new(env!("CARGO_MANIFEST_DIR")).join("data/pybullet.npz")),
             camera: Camera::paper(),
         }
     }
@@ -48,6 +52,7 @@ impl Preset for FidelityConfig {
         FidelityConfig {
             preset: "quick".into(),
             poses: 5,
+            pybullet: None,
             ..Self::paper()
         }
     }
@@ -132,9 +137,9 @@ fn row(
 }
 
 /// Run the comparison and write `results.csv`, `results.md`, `config.json` and `angles.csv`
-/// (the poses, for `scripts/pybullet_render.py`) to `out`. `pybullet`: an npz of PyBullet
-/// renders (images and angles) to compare against as well.
-pub fn run(cfg: &FidelityConfig, pybullet: Option<&Path>, out: &Path) -> Result<Vec<FidelityRow>> {
+/// (the poses, for `scripts/pybullet_render.py`) to `out`. The PyBullet rows are added when
+/// `cfg.pybullet` names a file that exists.
+pub fn run(cfg: &FidelityConfig, out: &Path) -> Result<Vec<FidelityRow>> {
     if !cfg.urdf.is_file() {
         return Err(Error::Config(format!(
             "{}: the papers' URDF is not there; point --urdf at 4dof_1st.urdf (shared/robots/4dof_1st)",
@@ -152,7 +157,7 @@ pub fn run(cfg: &FidelityConfig, pybullet: Option<&Path>, out: &Path) -> Result<
         0,
         cfg,
     )];
-    if let Some(path) = pybullet {
+    if let Some(path) = cfg.pybullet.as_deref().filter(|p| p.is_file()) {
         let reference = Dataset::load(path)?;
         if reference.dof() != mesh.dof() {
             return Err(Error::data(

@@ -34,7 +34,6 @@ fn arm4_matches_the_mesh_robot_closely() {
     let dir = common::tempdir();
     let rows = selfmodel::mesh_fidelity::run(
         &selfmodel::mesh_fidelity::FidelityConfig::quick(),
-        None,
         dir.path(),
     )
     .unwrap();
