@@ -41,7 +41,8 @@ fn main() -> ExitCode {
             .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))
         {
             let start = Instant::now();
-            let summary = (e.run)(&args.preset, &root.join(e.default_dir))?;
+            let opts = selfmodel::experiments::RunOptions::preset(&args.preset);
+            let summary = (e.run)(&opts, &root.join(e.default_dir))?;
             println!(
                 "{:<16} {:>7.1} s  {summary}",
                 e.name,

@@ -129,3 +129,62 @@ pub fn git_revision() -> String {
         .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
         .unwrap_or_else(|| "unknown".into())
 }
+
+/// The arguments every experiment binary shares.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ExperimentArgs {
+    /// paper (the papers' settings), short (the paper's data and models, training cut to fit
+    /// ~10 minutes of a 2-core CPU for all of table1) or quick (tiny, seconds).
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Output folder [default: the experiment's folder under reports/].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Where to train and run the models.
+    #[arg(long, value_enum, default_value_t = crate::device::DeviceChoice::Cpu)]
+    pub device: crate::device::DeviceChoice,
+    /// Train and test on the paper-compatible dataset (its silhouettes include the ground
+    /// plane below the horizon, as the paper's did), to compare with the paper's numbers.
+    #[arg(long)]
+    pub paper_compatible: bool,
+    /// Continue from the checkpoints in the output folder.
+    #[arg(long)]
+    pub resume: bool,
+    /// Train for this many steps instead of the preset's (the results say so).
+    #[arg(long)]
+    pub steps: Option<usize>,
+}
+
+impl ExperimentArgs {
+    /// Run the registry's experiment `name` with these arguments and print its summary.
+    pub fn run(&self, name: &str, default_preset: &str) -> Result<()> {
+        let e = crate::experiments::find(name)?;
+        let preset = self.preset.clone().unwrap_or_else(|| default_preset.to_string());
+        if !e.presets.contains(&preset.as_str()) {
+            return Err(crate::Error::Config(format!(
+                "{name} has no preset \"{preset}\" (choose {})",
+                e.presets.join(", ")
+            )));
+        }
+        if self.steps == Some(0) {
+            return Err(crate::Error::Config("--steps must be at least 1".into()));
+        }
+        let opts = crate::experiments::RunOptions {
+            preset,
+            device: self.device,
+            paper_compatible: self.paper_compatible,
+            resume: self.resume,
+            steps: self.steps,
+        };
+        let dir = self.out.clone().unwrap_or_else(|| PathBuf::from(e.default_dir));
+        let start = std::time::Instant::now();
+        let summary = (e.run)(&opts, &dir)?;
+        println!("{summary}");
+        println!(
+            "{name}: {:.1} s; wrote {}/results.csv (+ results.md, figures)",
+            start.elapsed().as_secs_f64(),
+            dir.display()
+        );
+        Ok(())
+    }
+}

@@ -33,6 +33,9 @@ pub enum Error {
     /// A `--device` that was not compiled in or cannot start.
     #[error("{0}")]
     Device(String),
+    /// Training that cannot go on (a loss that became NaN or infinite).
+    #[error("{0}")]
+    Training(String),
 }
 
 /// The library's result type.

@@ -1,13 +1,59 @@
 //! The one registry of experiments: it drives the smoke tests (`tests/experiments.rs`, every
 //! entry on its `quick` preset), the reproduce-everything command (`reproduce`) and the
-//! reports. Each binary in `experiments/` parses its arguments and calls the same function.
+//! reports, and `table1` (every entry marked `in_table1` contributes its rows). Each binary in
+//! `experiments/` parses its arguments and calls the same function.
 
 use std::path::Path;
+
+use crate::ablations::{Ablation, run_ablation};
+use crate::decoder_experiment::{DECODER_PRESETS, DecoderRunConfig};
+use crate::device::DeviceChoice;
+use crate::model_result::ModelResult;
+use crate::report::{write_csv, write_markdown_report};
 
 use crate::dataset::{DatasetConfig, build_and_save};
 use crate::error::Result;
 use crate::mesh_fidelity::{self, FidelityConfig};
 use crate::preset::Preset;
+
+/// How to run an experiment: the preset and the switches every experiment understands.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub preset: String,
+    pub device: DeviceChoice,
+    /// Train and test on the paper-compatible dataset (the ground-plane artefact).
+    pub paper_compatible: bool,
+    /// Continue from the checkpoints in the output folder.
+    pub resume: bool,
+    /// Override the training steps (a shortened run says so in its results).
+    pub steps: Option<usize>,
+}
+
+impl RunOptions {
+    /// A preset with the defaults: CPU, clean dataset, fresh run.
+    pub fn preset(preset: &str) -> Self {
+        RunOptions {
+            preset: preset.into(),
+            device: DeviceChoice::Cpu,
+            paper_compatible: false,
+            resume: false,
+            steps: None,
+        }
+    }
+
+    /// Apply the switches to a decoder config.
+    pub fn apply(&self, cfg: DecoderRunConfig) -> DecoderRunConfig {
+        let mut cfg = cfg.paper_compatible(self.paper_compatible);
+        if let Some(steps) = self.steps
+            && steps != cfg.train.steps
+        {
+            let msg = format!("{steps} steps instead of the preset's {}", cfg.train.steps);
+            cfg.note = if cfg.note.is_empty() { msg } else { format!("{}; {msg}", cfg.note) };
+            cfg.train.steps = steps;
+        }
+        cfg
+    }
+}
 
 /// One experiment.
 pub struct Experiment {
@@ -17,12 +63,17 @@ pub struct Experiment {
     pub about: &'static str,
     /// Where `reproduce` writes it, relative to the repository root.
     pub default_dir: &'static str,
-    /// Run a preset (`paper`, `quick`) with defaults into a folder; returns a one-line summary.
-    pub run: fn(preset: &str, dir: &Path) -> Result<String>,
+    /// The presets it understands (`paper` and `quick` always).
+    pub presets: &'static [&'static str],
+    /// Whether it trains self-models whose rows belong in Table I.
+    pub in_table1: bool,
+    /// Run into a folder; returns a one-line summary.
+    pub run: fn(opts: &RunOptions, dir: &Path) -> Result<String>,
 }
 
-fn run_dataset(preset: &str, dir: &Path) -> Result<String> {
-    let cfg = DatasetConfig::preset(preset)?;
+fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut cfg = DatasetConfig::preset(if opts.preset == "short" { "paper" } else { &opts.preset })?;
+    cfg.render.ground_artifact = opts.paper_compatible;
     let robot = crate::arm4::arm4();
     let (data, report) =
         build_and_save(&robot, "arm4", &cfg, None, &dir.join("dataset.npz"), false)?;
@@ -34,12 +85,92 @@ fn run_dataset(preset: &str, dir: &Path) -> Result<String> {
     ))
 }
 
-fn run_mesh_fidelity(preset: &str, dir: &Path) -> Result<String> {
+fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let preset = if opts.preset == "short" { "quick" } else { &opts.preset };
     let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, dir)?;
     Ok(format!(
         "arm4 vs mesh robot: mean IoU {:.4} over {} poses",
         rows[0].mean_iou, rows[0].poses
     ))
+}
+
+/// Write `rows` as `dir/results.csv` and `results.md`.
+pub fn write_rows(dir: &Path, rows: &[ModelResult], title: &str, note: &str) -> Result<()> {
+    let csv = dir.join("results.csv");
+    write_csv(&csv, rows)?;
+    write_markdown_report(&csv, title, note)
+}
+
+fn summary(rows: &[ModelResult]) -> String {
+    rows.iter()
+        .map(|r| {
+            format!(
+                "{}: PSNR {:.2} dB (first 100) / {:.2} dB (test), IoU {:.3}, {:.0} img/s at batch 1",
+                r.model, r.psnr_db_first100, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// NeuroKin (the code's architecture) and NeuroKin-64 (the paper text's), one row each.
+pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut rows = Vec::new();
+    for (sub, cfg) in [
+        ("neurokin", DecoderRunConfig::neurokin(&opts.preset)?),
+        ("neurokin64", DecoderRunConfig::neurokin64(&opts.preset)?),
+    ] {
+        let cfg = opts.apply(cfg);
+        rows.push(crate::decoder_experiment::run(&cfg, &dir.join(sub), opts.device, opts.resume)?.result);
+    }
+    write_rows(
+        dir,
+        &rows,
+        "NeuroKin: the notebook's architecture and the paper text's",
+        "One row per architecture; each folder holds its config, curve and figures. `paper_*` columns are the paper's published figures (its FPS was training throughput).",
+    )?;
+    Ok(summary(&rows))
+}
+
+/// ResNeuroKin-D with the simulator's metric depth.
+pub fn run_resneurokin_d(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = opts.apply(DecoderRunConfig::resneurokin_d(&opts.preset)?);
+    let out = crate::decoder_experiment::run(&cfg, dir, opts.device, opts.resume)?;
+    Ok(summary(std::slice::from_ref(&out.result)))
+}
+
+fn ablation(a: Ablation, opts: &RunOptions, dir: &Path) -> Result<String> {
+    let base = opts.apply(DecoderRunConfig::neurokin(&opts.preset)?);
+    let rows = run_ablation(a, &base, dir, opts.device, opts.resume)?;
+    Ok(summary(&rows))
+}
+
+fn run_ablation_noise(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Noise, opts, dir)
+}
+fn run_ablation_depth(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Depth, opts, dir)
+}
+fn run_ablation_latent(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Latent, opts, dir)
+}
+fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::DataScale, opts, dir)
+}
+
+fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let rows = crate::table1::run(opts, dir)?;
+    Ok(summary(&rows))
+}
+
+/// Look an experiment up by name.
+pub fn find(name: &str) -> Result<&'static Experiment> {
+    EXPERIMENTS.iter().find(|e| e.name == name).ok_or_else(|| {
+        crate::Error::Config(format!(
+            "no experiment named \"{name}\" (known: {})",
+            EXPERIMENTS.iter().map(|e| e.name).collect::<Vec<_>>().join(", ")
+        ))
+    })
 }
 
 /// Every experiment, in the order `reproduce` runs them.
@@ -48,12 +179,72 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "dataset",
         about: "the papers' 2,000-sample Lorenz dataset of the 4-DOF arm (silhouettes, depth, angles)",
         default_dir: "data",
+        presets: &["paper", "quick"],
+        in_table1: false,
         run: run_dataset,
     },
     Experiment {
         name: "mesh_fidelity",
         about: "silhouette IoU of the built-in arm4 against the mesh robot (and PyBullet)",
         default_dir: "reports/mesh_fidelity",
+        presets: &["paper", "quick"],
+        in_table1: false,
         run: run_mesh_fidelity,
+    },
+    Experiment {
+        name: "neurokin",
+        about: "NeuroKin, the direct joint-angle-to-silhouette decoder (code's and text's architectures)",
+        default_dir: "reports/neurokin",
+        presets: DECODER_PRESETS,
+        in_table1: true,
+        run: run_neurokin,
+    },
+    Experiment {
+        name: "resneurokin_d",
+        about: "ResNeuroKin-D: residual decoder with a metric depth head",
+        default_dir: "reports/resneurokin_d",
+        presets: DECODER_PRESETS,
+        in_table1: true,
+        run: run_resneurokin_d,
+    },
+    Experiment {
+        name: "ablation_noise",
+        about: "NeuroKin ablation: input noise sigma 0 vs 0.01",
+        default_dir: "reports/ablation_noise",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        run: run_ablation_noise,
+    },
+    Experiment {
+        name: "ablation_depth",
+        about: "NeuroKin ablation: 2, 4 and 6 transposed convolutions",
+        default_dir: "reports/ablation_depth",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        run: run_ablation_depth,
+    },
+    Experiment {
+        name: "ablation_latent",
+        about: "NeuroKin ablation: latent width 256, 512, 1024, 2048",
+        default_dir: "reports/ablation_latent",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        run: run_ablation_latent,
+    },
+    Experiment {
+        name: "ablation_data_scale",
+        about: "NeuroKin ablation: 400, 2,000 and 12,000 samples",
+        default_dir: "reports/ablation_data_scale",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        run: run_ablation_data_scale,
+    },
+    Experiment {
+        name: "table1",
+        about: "Table I: every self-model on the same dataset, quality against speed, Pareto plot",
+        default_dir: "reports/table1",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        run: run_table1,
     },
 ];

@@ -4,28 +4,41 @@
 //! self-models of a robot arm and learned inverse kinematics. This crate holds the library;
 //! `experiments/` holds one thin binary per experiment. See `ARCHITECTURE.md`.
 
+pub mod ablations;
 pub mod arm4;
 pub mod atomic_file;
 pub mod bvh;
 pub mod camera;
 pub mod cli;
 pub mod dataset;
+pub mod decoder_bench;
+pub mod decoder_experiment;
 pub mod device;
 pub mod error;
+pub mod evaluation;
 pub mod experiments;
+pub mod figures;
+pub mod inference_speed;
 pub mod kinematics;
+pub mod losses;
 pub mod mesh_fidelity;
 pub mod metrics;
+pub mod model_result;
+pub mod neurokin;
 pub mod npz;
 pub mod preset;
 pub mod preview;
 pub mod primitive_fit;
 pub mod ray_caster;
 pub mod report;
+pub mod resneurokin_d;
 pub mod robot;
 pub mod shape;
 pub mod stl_mesh;
+pub mod table1;
+pub mod training;
 pub mod trajectory;
+pub mod upconv;
 pub mod urdf_loader;
 
 pub use error::{Error, Result};

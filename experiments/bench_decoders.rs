@@ -1,0 +1,67 @@
+//! Inference and training images/s of both NeuroKin architectures, beside PyTorch's.
+//!
+//! `cargo run --release --bin bench_decoders -- --torch /tmp/torchref/bin/python`
+
+use std::path::PathBuf;
+use std::process::{Command, ExitCode};
+
+use clap::Parser;
+use selfmodel::cli::run_main;
+use selfmodel::decoder_bench::{attach_torch, run};
+use selfmodel::device::{DeviceChoice, select};
+
+/// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
+/// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
+#[derive(Parser)]
+#[command(version)]
+struct Args {
+    #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
+    device: DeviceChoice,
+    /// A Python with torch installed: runs ../shared/bench/torch_reference.py too.
+    #[arg(long)]
+    torch: Option<PathBuf>,
+    /// The PyTorch reference script.
+    #[arg(long, default_value = "../shared/bench/torch_reference.py")]
+    torch_script: PathBuf,
+    /// Tiny models, for a smoke test.
+    #[arg(long)]
+    quick: bool,
+    /// Write the table here as CSV.
+    #[arg(long, default_value = "reports/bench_decoders/results.csv")]
+    out: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    run_main(|| {
+        let device = select(args.device)?;
+        let mut rows = run(&device, args.quick)?;
+        if let Some(py) = &args.torch {
+            let out = Command::new(py)
+                .arg(&args.torch_script)
+                .args(["--threads", &rayon::current_num_threads().to_string()])
+                .output()
+                .map_err(|e| selfmodel::Error::io(py, e))?;
+            if !out.status.success() {
+                return Err(selfmodel::Error::Config(format!(
+                    "{} failed: {}",
+                    args.torch_script.display(),
+                    String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("")
+                )));
+            }
+            attach_torch(&mut rows, &String::from_utf8_lossy(&out.stdout));
+        }
+        println!("{:<11} {:<22} {:>10} {:>10} {:>8}", "model", "figure", "selfmodel", "pytorch", "ratio");
+        for r in &rows {
+            let (t, ratio) = match r.torch {
+                Some(t) => (format!("{t:.1}"), format!("{:.2}x", r.ours / t)),
+                None => ("-".into(), "-".into()),
+            };
+            println!("{:<11} {:<22} {:>10.1} {:>10} {:>8}", r.model, r.figure, r.ours, t, ratio);
+        }
+        if let Some(dir) = args.out.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
+        }
+        selfmodel::report::write_csv(&args.out, &rows)
+    })
+}

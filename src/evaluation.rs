@@ -1,0 +1,107 @@
+//! Quality of a self-model's predictions on held-out poses (self-modeling paper, Section V).
+//!
+//! - PSNR as the paper computes it: per image `-10 log10(MSE + 1e-8)` on images in [0, 1],
+//!   averaged over images; reported on the paper's subset (the first 100 test images, which
+//!   is all NeuroKin and ResNeuroKin-D were scored on) and on the whole test set.
+//! - IoU of the silhouettes thresholded at 0.5 (PSNR on mostly-empty images flatters every
+//!   model; IoU says whether the arm is where it should be).
+//! - Depth error in millimetres, mean absolute over the pixels where the true silhouette is
+//!   the robot.
+
+/// Predictions for a set of images, on the host.
+#[derive(Clone, Debug)]
+pub struct Predictions {
+    /// `[n, H * W]` silhouette probabilities in [0, 1], row-major.
+    pub silhouettes: Vec<f32>,
+    /// `[n, H * W]` depth in metres, when the model predicts it.
+    pub depth: Option<Vec<f32>>,
+    pub pixels: usize,
+}
+
+/// Per-image and mean quality figures.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Quality {
+    /// Mean PSNR over the first `paper_subset` test images (dB).
+    pub psnr_db_paper_subset: f64,
+    /// Mean PSNR over the whole test set (dB).
+    pub psnr_db_test: f64,
+    /// Mean silhouette IoU over the whole test set.
+    pub iou_test: f64,
+    /// Mean absolute depth error on robot pixels (mm).
+    pub depth_mae_mm: Option<f64>,
+    pub paper_subset: usize,
+    pub test_images: usize,
+    /// Per-image PSNR (dB) and IoU, in test order.
+    #[serde(skip)]
+    pub per_image_psnr: Vec<f64>,
+    #[serde(skip)]
+    pub per_image_iou: Vec<f64>,
+}
+
+/// The paper's PSNR of one image: `-10 log10(MSE + 1e-8)`, both in [0, 1].
+pub fn psnr_db(pred: &[f32], truth: &[f32]) -> f64 {
+    let mse = pred
+        .iter()
+        .zip(truth)
+        .map(|(&p, &t)| ((p - t) as f64).powi(2))
+        .sum::<f64>()
+        / pred.len() as f64;
+    -10.0 * (mse + 1e-8).log10()
+}
+
+/// IoU of two silhouettes thresholded at 0.5; two empty silhouettes have IoU 1.
+pub fn iou(pred: &[f32], truth: &[f32]) -> f64 {
+    let (mut inter, mut union) = (0usize, 0usize);
+    for (&p, &t) in pred.iter().zip(truth) {
+        let (p, t) = (p >= 0.5, t >= 0.5);
+        inter += (p && t) as usize;
+        union += (p || t) as usize;
+    }
+    if union == 0 {
+        1.0
+    } else {
+        inter as f64 / union as f64
+    }
+}
+
+/// Score predictions against the true silhouettes (`[n, H * W]` in [0, 1]) and depth.
+pub fn score(
+    pred: &Predictions,
+    truth: &[f32],
+    truth_depth: Option<&[f32]>,
+    paper_subset: usize,
+) -> Quality {
+    let px = pred.pixels;
+    let n = truth.len() / px;
+    let per_image_psnr: Vec<f64> = (0..n)
+        .map(|i| psnr_db(&pred.silhouettes[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px]))
+        .collect();
+    let per_image_iou: Vec<f64> = (0..n)
+        .map(|i| iou(&pred.silhouettes[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px]))
+        .collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    let subset = paper_subset.min(n);
+    let depth_mae_mm = match (&pred.depth, truth_depth) {
+        (Some(d), Some(t)) => {
+            let (mut sum, mut count) = (0.0f64, 0usize);
+            for ((&p, &g), &s) in d.iter().zip(t).zip(truth) {
+                if s >= 0.5 {
+                    sum += (p - g).abs() as f64;
+                    count += 1;
+                }
+            }
+            Some(1000.0 * sum / count.max(1) as f64)
+        }
+        _ => None,
+    };
+    Quality {
+        psnr_db_paper_subset: mean(&per_image_psnr[..subset]),
+        psnr_db_test: mean(&per_image_psnr),
+        iou_test: mean(&per_image_iou),
+        depth_mae_mm,
+        paper_subset: subset,
+        test_images: n,
+        per_image_psnr,
+        per_image_iou,
+    }
+}

@@ -1,0 +1,57 @@
+//! Table I of the self-modeling paper: every self-model in the zoo trained on the same
+//! dataset, one row each, and the speed-quality Pareto plot.
+//!
+//! The zoo is the registry: every experiment marked `in_table1` runs into `dir/<name>/` and
+//! its `results.csv` rows are gathered, so a new self-model (FFKSM, K-3DGS) appears here by
+//! registering itself, with no edit to this file.
+
+use std::path::Path;
+
+use crate::error::Result;
+use crate::experiments::{EXPERIMENTS, RunOptions, write_rows};
+use crate::figures::{ParetoPoint, pareto_plot};
+use crate::model_result::{ModelResult, read_results};
+
+/// Run the zoo on `opts` into `dir` and write the table and the Pareto plot.
+pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
+    let mut rows = Vec::new();
+    for e in EXPERIMENTS.iter().filter(|e| e.in_table1) {
+        let sub = dir.join(e.name);
+        eprintln!("table1: {} ({} preset)", e.name, opts.preset);
+        (e.run)(opts, &sub)?;
+        rows.extend(read_results(&sub.join("results.csv"))?);
+    }
+    write_rows(
+        dir,
+        &rows,
+        "Table I: self-models of the 4-DOF arm, quality against speed",
+        &format!(
+            "All models trained and tested on the same dataset ({} preset). PSNR as the paper computes it (per image, then averaged) on the first 100 test images and on the whole test set; IoU of silhouettes thresholded at 0.5. Inference speed: median of synchronised timed calls after warm-up, at batch 1 (latency) and batch 256. `train_img_per_s` is training throughput, which is what the paper's \"FPS\" column measured; the paper's figures (`paper_*`) were taken on an NVIDIA T4 and are shown for reference only. Each model's folder holds its config, training curve and qualitative figure.",
+            opts.preset
+        ),
+    )?;
+    let mut points: Vec<ParetoPoint> = rows
+        .iter()
+        .map(|r| ParetoPoint {
+            label: r.model.clone(),
+            fps: r.infer_b1_img_per_s,
+            quality: r.psnr_db_test,
+            reference: false,
+        })
+        .collect();
+    points.extend(rows.iter().filter_map(|r| {
+        Some(ParetoPoint {
+            label: format!("paper: {}", r.model),
+            fps: r.paper_fps?,
+            quality: r.paper_psnr_db?,
+            reference: true,
+        })
+    }));
+    pareto_plot(
+        &dir.join("pareto.png"),
+        "Self-models: quality against inference speed",
+        "PSNR on the test set (dB)",
+        &points,
+    )?;
+    Ok(rows)
+}

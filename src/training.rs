@@ -1,0 +1,407 @@
+//! The training loop every self-model shares: seeded, Adam, global gradient-norm clipping, a
+//! progress bar with loss and ETA, checkpoints (model, optimizer state and progress) every N
+//! steps, `--resume` from the last checkpoint, and a clean stop when the loss stops being
+//! finite (the last good checkpoint is kept).
+//!
+//! Batches are drawn epoch by epoch from a permutation seeded by `(seed, epoch)`, and input
+//! noise by `(seed, step)`, so a resumed run sees the same batches as an uninterrupted one.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, Normal};
+
+use crate::atomic_file::write_json;
+use crate::error::{Error, Result};
+
+/// Optimisation settings shared by every model.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrainConfig {
+    /// Optimiser steps (batches).
+    pub steps: usize,
+    /// Images per batch (the last batch of an epoch may be smaller, as in PyTorch's
+    /// `DataLoader` without `drop_last`).
+    pub batch: usize,
+    /// Adam learning rate (betas 0.9, 0.999, eps 1e-8: PyTorch's defaults).
+    pub learning_rate: f64,
+    /// Clip the global gradient norm to this value (PyTorch's `clip_grad_norm_`); none if
+    /// absent.
+    pub grad_clip_norm: Option<f32>,
+    /// Standard deviation of Gaussian noise added to the input joint angles (their units,
+    /// degrees for the decoders) at every step.
+    pub input_noise: f64,
+    pub seed: u64,
+    /// Save a checkpoint every this many steps (and at the end); 0 disables checkpoints.
+    pub checkpoint_every: usize,
+}
+
+impl TrainConfig {
+    /// Epochs the schedule covers for a training set of `n` samples.
+    pub fn epochs(&self, n: usize) -> f64 {
+        self.steps as f64 / n.div_ceil(self.batch).max(1) as f64
+    }
+
+    /// Steps for `epochs` passes over `n` samples, the last batch of each epoch partial.
+    pub fn steps_for_epochs(epochs: usize, n: usize, batch: usize) -> usize {
+        epochs * n.div_ceil(batch)
+    }
+}
+
+/// The training data on the device: inputs `[n, dof]` and any targets `[n, ...]`.
+#[derive(Clone, Debug)]
+pub struct TrainSet {
+    pub inputs: Tensor<2>,
+    /// Image-like targets, each `[n, channels, H, W]` (silhouettes, depth, ...).
+    pub targets: Vec<Tensor<4>>,
+}
+
+impl TrainSet {
+    pub fn len(&self) -> usize {
+        self.inputs.dims()[0]
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// One batch: noisy inputs and the matching targets.
+pub struct Batch {
+    pub inputs: Tensor<2>,
+    pub targets: Vec<Tensor<4>>,
+}
+
+/// Progress saved with a checkpoint, and the training curve of a finished run.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+pub struct TrainLog {
+    /// Steps completed.
+    pub step: usize,
+    /// `(step, loss)` every `log_every` steps.
+    pub curve: Vec<(usize, f64)>,
+    /// Seconds spent in forward, backward and optimiser steps (checkpoint I/O excluded).
+    pub train_seconds: f64,
+    /// Images pushed through training.
+    pub images: usize,
+    /// Whether this run continued from a checkpoint.
+    pub resumed_from: Option<usize>,
+}
+
+impl TrainLog {
+    /// Training throughput: images per second through forward, backward and the step.
+    pub fn images_per_second(&self) -> f64 {
+        self.images as f64 / self.train_seconds.max(1e-9)
+    }
+}
+
+/// Where checkpoints go, and whether to continue from one.
+#[derive(Clone, Debug)]
+pub struct CheckpointPlan {
+    pub dir: PathBuf,
+    pub resume: bool,
+    /// Anything that must match for a resume to be valid (model and training config as JSON).
+    pub fingerprint: serde_json::Value,
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+struct CheckpointState {
+    fingerprint: serde_json::Value,
+    log: TrainLog,
+}
+
+impl CheckpointPlan {
+    fn model_path(&self) -> PathBuf {
+        self.dir.join("model.bpk")
+    }
+    fn optim_path(&self) -> PathBuf {
+        self.dir.join("optimizer.bpk")
+    }
+    fn state_path(&self) -> PathBuf {
+        self.dir.join("state.json")
+    }
+
+    /// Write model, optimizer and progress; each file is written to a temporary name and
+    /// renamed, the progress file last, so a crash never leaves a checkpoint that claims more
+    /// than it holds.
+    fn save<M: Module>(&self, model: &M, optim: &ModuleOptimizer, log: &TrainLog) -> Result<()> {
+        std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
+        let record_err = |p: &Path, e: burn::store::RecordError| {
+            Error::data(p, format!("cannot write checkpoint: {e:?}"))
+        };
+        for (path, write) in [
+            (
+                self.model_path(),
+                Box::new(|tmp: &Path| model.clone().save_file(tmp))
+                    as Box<dyn Fn(&Path) -> std::result::Result<(), burn::store::RecordError>>,
+            ),
+            (self.optim_path(), Box::new(|tmp: &Path| optim.save(tmp))),
+        ] {
+            let tmp = path.with_extension("bpk.tmp");
+            write(&tmp).map_err(|e| record_err(&path, e))?;
+            std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
+        }
+        write_json(
+            &self.state_path(),
+            &CheckpointState {
+                fingerprint: self.fingerprint.clone(),
+                log: log.clone(),
+            },
+        )
+    }
+
+    /// Load a checkpoint if `resume` is set and one exists.
+    fn load<M: Module>(
+        &self,
+        model: M,
+        optim: ModuleOptimizer,
+    ) -> Result<(M, ModuleOptimizer, Option<TrainLog>)> {
+        if !self.resume || !self.state_path().exists() {
+            return Ok((model, optim, None));
+        }
+        let path = self.state_path();
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let state: CheckpointState = serde_json::from_str(&text)
+            .map_err(|e| Error::data(&path, format!("bad checkpoint state: {e}")))?;
+        if state.fingerprint != self.fingerprint {
+            return Err(Error::Config(format!(
+                "the checkpoint in {} was made with a different configuration; drop --resume or delete that folder",
+                self.dir.display()
+            )));
+        }
+        let model = model.try_load_file(self.model_path()).map_err(|e| {
+            Error::data(self.model_path(), format!("cannot load checkpoint: {e:?}"))
+        })?;
+        let optim = optim.load(self.optim_path()).map_err(|e| {
+            Error::data(self.optim_path(), format!("cannot load checkpoint: {e:?}"))
+        })?;
+        Ok((model, optim, Some(state.log)))
+    }
+}
+
+/// Scale all gradients so their global L2 norm is at most `max_norm` (PyTorch's
+/// `clip_grad_norm_`). Returns the norm before clipping.
+pub fn clip_global_norm<M: Module>(model: &M, grads: &mut GradientsParams, max_norm: f32) -> f32 {
+    struct SquaredNorm<'a> {
+        grads: &'a GradientsParams,
+        sum: Option<Tensor<1>>,
+    }
+    impl ModuleVisitor for SquaredNorm<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if let Some(g) = self.grads.get::<D>(param.id) {
+                let s = g.square().sum();
+                self.sum = Some(match self.sum.take() {
+                    Some(acc) => acc + s,
+                    None => s,
+                });
+            }
+        }
+    }
+    struct Scale<'a> {
+        grads: &'a mut GradientsParams,
+        scale: f32,
+        ids: Vec<ParamId>,
+    }
+    impl ModuleVisitor for Scale<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if self.ids.contains(&param.id) {
+                return;
+            }
+            if let Some(g) = self.grads.remove::<D>(param.id) {
+                self.grads.register(param.id, g.mul_scalar(self.scale));
+                self.ids.push(param.id);
+            }
+        }
+    }
+    let mut v = SquaredNorm { grads, sum: None };
+    model.visit(&mut v);
+    let Some(sum) = v.sum else { return 0.0 };
+    let norm = sum.into_scalar::<f32>().sqrt();
+    if norm.is_finite() && norm > max_norm {
+        let mut s = Scale {
+            grads,
+            scale: max_norm / (norm + 1e-6),
+            ids: Vec::new(),
+        };
+        model.visit(&mut s);
+    }
+    norm
+}
+
+/// Draws batches: epoch permutations seeded by `(seed, epoch)`, noise by `(seed, step)`.
+pub struct Batcher<'a> {
+    data: &'a TrainSet,
+    batch: usize,
+    seed: u64,
+    noise: f64,
+}
+
+impl<'a> Batcher<'a> {
+    pub fn new(data: &'a TrainSet, cfg: &TrainConfig) -> Self {
+        Batcher {
+            data,
+            batch: cfg.batch.min(data.len()).max(1),
+            seed: cfg.seed,
+            noise: cfg.input_noise,
+        }
+    }
+
+    fn steps_per_epoch(&self) -> usize {
+        self.data.len().div_ceil(self.batch)
+    }
+
+    /// The indices of batch `step` (0-based).
+    pub fn indices(&self, step: usize) -> Vec<usize> {
+        let spe = self.steps_per_epoch();
+        let (epoch, k) = (step / spe, step % spe);
+        let mut perm: Vec<usize> = (0..self.data.len()).collect();
+        let mut rng = StdRng::seed_from_u64(self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        perm.shuffle(&mut rng);
+        let end = ((k + 1) * self.batch).min(perm.len());
+        perm[k * self.batch..end].to_vec()
+    }
+
+    /// Batch `step` on the data's device.
+    pub fn batch(&self, step: usize) -> Batch {
+        let idx = self.indices(step);
+        let device = self.data.inputs.device();
+        let n = idx.len();
+        let index = Tensor::<1, burn::tensor::Int>::from_data(
+            TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<_>>(), [n]),
+            &device,
+        );
+        let mut inputs = self.data.inputs.clone().select(0, index.clone());
+        if self.noise > 0.0 {
+            let dof = inputs.dims()[1];
+            let mut rng =
+                StdRng::seed_from_u64(self.seed.wrapping_add(1) ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+            let normal = Normal::new(0.0, self.noise).expect("noise sigma is finite");
+            let noise: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng) as f32).collect();
+            inputs = inputs + Tensor::from_data(TensorData::new(noise, [n, dof]), &device);
+        }
+        let targets = self
+            .data
+            .targets
+            .iter()
+            .map(|t| t.clone().select(0, index.clone()))
+            .collect();
+        Batch { inputs, targets }
+    }
+}
+
+/// Train `model` on `data` (both on an autodiff device) with `loss(model, batch)`.
+///
+/// Returns the trained model and its log. With a [`CheckpointPlan`], saves every
+/// `cfg.checkpoint_every` steps and at the end, and resumes when asked. A non-finite loss
+/// stops the run with [`Error::Training`], keeping the last good checkpoint.
+pub fn train<M, L>(
+    mut model: M,
+    data: &TrainSet,
+    cfg: &TrainConfig,
+    checkpoint: Option<&CheckpointPlan>,
+    label: &str,
+    loss: L,
+) -> Result<(M, TrainLog)>
+where
+    M: Module,
+    L: Fn(&M, &Batch) -> Tensor<1>,
+{
+    if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
+        return Err(Error::Config(format!(
+            "{label}: nothing to train (samples {}, steps {}, batch {})",
+            data.len(),
+            cfg.steps,
+            cfg.batch
+        )));
+    }
+    let mut optim = AdamConfig::new().init();
+    let mut log = TrainLog::default();
+    if let Some(plan) = checkpoint {
+        let (m, o, resumed) = plan.load(model, optim)?;
+        model = m;
+        optim = o;
+        if let Some(l) = resumed {
+            log = l;
+            log.resumed_from = Some(log.step);
+        }
+    }
+    let batcher = Batcher::new(data, cfg);
+    let log_every = (cfg.steps / 200).max(1);
+    let bar = indicatif::ProgressBar::new(cfg.steps as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} [{bar:30}] {pos}/{len} steps {per_sec} {msg} ETA {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(label.to_string());
+    bar.set_position(log.step as u64);
+    bar.reset_eta();
+    let mut window = (0.0f64, 0usize);
+    while log.step < cfg.steps {
+        let step = log.step;
+        let t0 = Instant::now();
+        let batch = batcher.batch(step);
+        let n = batch.inputs.dims()[0];
+        let l = loss(&model, &batch);
+        let value = l.clone().into_scalar::<f32>() as f64;
+        if !value.is_finite() {
+            bar.abandon();
+            let kept = match checkpoint {
+                Some(plan) if plan.state_path().exists() => format!(
+                    "the last good checkpoint is in {}",
+                    plan.dir.display()
+                ),
+                _ => "no checkpoint was saved".to_string(),
+            };
+            return Err(Error::Training(format!(
+                "{label}: the loss became {value} at step {}; {kept}; lower the learning rate or check the data",
+                step + 1
+            )));
+        }
+        let mut grads = GradientsParams::from_grads(l.backward(), &model);
+        if let Some(max) = cfg.grad_clip_norm {
+            clip_global_norm(&model, &mut grads, max);
+        }
+        model = optim.step(cfg.learning_rate, model, grads);
+        log.train_seconds += t0.elapsed().as_secs_f64();
+        log.images += n;
+        log.step += 1;
+        window.0 += value;
+        window.1 += 1;
+        if log.step % log_every == 0 || log.step == cfg.steps {
+            let mean = window.0 / window.1 as f64;
+            log.curve.push((log.step, mean));
+            bar.set_message(format!("loss {mean:.4}"));
+            window = (0.0, 0);
+        }
+        bar.inc(1);
+        if let Some(plan) = checkpoint
+            && cfg.checkpoint_every > 0
+            && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps)
+        {
+            plan.save(&model, &optim, &log)?;
+        }
+    }
+    bar.finish();
+    Ok((model, log))
+}
+
+/// The training device: an autodiff device over `device`, seeded.
+pub fn autodiff_device(device: &Device, seed: u64) -> Device {
+    let tdev = device.clone().autodiff();
+    tdev.seed(seed);
+    tdev
+}
+
+/// Trainable parameters, as PyTorch counts them: burn's `num_params` minus the running
+/// statistics (mean and variance) of the given BatchNorm layers.
+pub fn trainable_params<M: Module>(model: &M, batch_norms: &[&burn::nn::BatchNorm]) -> usize {
+    let running: usize = batch_norms.iter().map(|b| 2 * b.gamma.dims()[0]).sum();
+    model.num_params() - running
+}

@@ -1,0 +1,125 @@
+//! The shared training loop: resume reproduces an uninterrupted run, a NaN loss stops cleanly
+//! keeping the last checkpoint, and gradient clipping bounds the global norm.
+
+mod common;
+
+use std::cell::Cell;
+
+use burn::nn::{Linear, LinearConfig};
+use burn::optim::GradientsParams;
+use burn::tensor::{Device, Distribution, Tensor};
+use selfmodel::losses::{bce, bce_with_logits, mse};
+use selfmodel::training::{CheckpointPlan, TrainConfig, TrainSet, autodiff_device, clip_global_norm, train};
+
+fn cfg(steps: usize) -> TrainConfig {
+    TrainConfig {
+        steps,
+        batch: 8,
+        learning_rate: 1e-2,
+        grad_clip_norm: Some(1.0),
+        input_noise: 0.01,
+        seed: 7,
+        checkpoint_every: 5,
+    }
+}
+
+/// 40 samples of y = sum(x) as a 1x1 "image".
+fn data(dev: &Device) -> TrainSet {
+    let x = Tensor::<2>::random([40, 4], Distribution::Uniform(-1.0, 1.0), dev);
+    let y = x.clone().sum_dim(1).reshape([40, 1, 1, 1]);
+    TrainSet { inputs: x, targets: vec![y] }
+}
+
+fn loss(m: &Linear, b: &selfmodel::training::Batch) -> Tensor<1> {
+    let n = b.inputs.dims()[0];
+    mse(m.forward(b.inputs.clone()).reshape([n, 1, 1, 1]), b.targets[0].clone())
+}
+
+fn weights(m: &Linear) -> Vec<f32> {
+    m.weight.val().into_data().try_into_vec::<f32>().unwrap()
+}
+
+#[test]
+fn resuming_reproduces_an_uninterrupted_run() {
+    let dev = autodiff_device(&Device::flex(), 3);
+    let set = data(&dev);
+    dev.seed(11);
+    let init = LinearConfig::new(4, 1).init(&dev);
+    let dir = common::tempdir();
+    let plan = |resume| CheckpointPlan {
+        dir: dir.path().join("ckpt"),
+        resume,
+        fingerprint: serde_json::json!({"test": 1}),
+    };
+    let (full, log_full) = train(init.clone(), &set, &cfg(20), None, "full", loss).unwrap();
+    // Train 10 steps with checkpoints, then resume to 20.
+    let (_, first) = train(init.clone(), &set, &cfg(10), Some(&plan(false)), "first", loss).unwrap();
+    assert_eq!(first.step, 10);
+    let mut resumed_cfg = cfg(20);
+    resumed_cfg.checkpoint_every = 5;
+    // The fingerprint guards against resuming a different configuration.
+    let fresh = LinearConfig::new(4, 1).init(&dev);
+    let (resumed, log) = train(fresh, &set, &resumed_cfg, Some(&plan(true)), "resume", loss).unwrap();
+    assert_eq!(log.resumed_from, Some(10));
+    assert_eq!(log.step, 20);
+    let (a, b) = (weights(&full), weights(&resumed));
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() < 1e-6, "{a:?} vs {b:?}");
+    }
+    assert!(log_full.curve.last().unwrap().1 < log_full.curve[0].1, "loss fell");
+    let bad = CheckpointPlan { fingerprint: serde_json::json!({"test": 2}), ..plan(true) };
+    let err = train(init, &set, &cfg(20), Some(&bad), "bad", loss).unwrap_err().to_string();
+    assert!(err.contains("different configuration"), "{err}");
+}
+
+#[test]
+fn a_nan_loss_stops_and_keeps_the_last_checkpoint() {
+    let dev = autodiff_device(&Device::flex(), 3);
+    let set = data(&dev);
+    let model = LinearConfig::new(4, 1).init(&dev);
+    let dir = common::tempdir();
+    let plan = CheckpointPlan {
+        dir: dir.path().join("ckpt"),
+        resume: false,
+        fingerprint: serde_json::json!({}),
+    };
+    let calls = Cell::new(0);
+    let err = train(model, &set, &cfg(20), Some(&plan), "nan", |m, b| {
+        calls.set(calls.get() + 1);
+        let l = loss(m, b);
+        if calls.get() == 8 { l.mul_scalar(f32::NAN) } else { l }
+    })
+    .unwrap_err();
+    let msg = err.to_string();
+    assert!(matches!(err, selfmodel::Error::Training(_)), "{msg}");
+    assert!(msg.contains("step 8") && msg.contains("last good checkpoint"), "{msg}");
+    let state = std::fs::read_to_string(dir.path().join("ckpt/state.json")).unwrap();
+    assert!(state.contains("\"step\": 5") || state.contains("\"step\":5"), "{state}");
+}
+
+#[test]
+fn clipping_bounds_the_global_gradient_norm() {
+    let dev = autodiff_device(&Device::flex(), 1);
+    let m = LinearConfig::new(16, 16).init(&dev);
+    let x = Tensor::<2>::random([8, 16], Distribution::Normal(0.0, 100.0), &dev);
+    let l = m.forward(x).square().mean();
+    let mut grads = GradientsParams::from_grads(l.backward(), &m);
+    let before = clip_global_norm(&m, &mut grads, 0.5);
+    assert!(before > 0.5, "the test needs a large gradient, got {before}");
+    let after = clip_global_norm(&m, &mut grads, 1e9);
+    assert!((after - 0.5).abs() < 1e-3, "norm after clipping {after}");
+}
+
+#[test]
+fn bce_from_logits_matches_bce_of_probabilities() {
+    let dev = Device::flex();
+    let z = Tensor::<2>::random([4, 50], Distribution::Normal(0.0, 3.0), &dev);
+    let y = Tensor::<2>::random([4, 50], Distribution::Bernoulli(0.3), &dev);
+    let a = bce_with_logits(z.clone(), y.clone()).into_scalar::<f32>();
+    let b = bce(burn::tensor::activation::sigmoid(z), y).into_scalar::<f32>();
+    assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+    // Saturated logits stay finite.
+    let z = Tensor::<2>::from_floats([[-200.0, 200.0]], &dev);
+    let y = Tensor::<2>::from_floats([[1.0, 0.0]], &dev);
+    assert!(bce_with_logits(z, y).into_scalar::<f32>().is_finite());
+}
