@@ -46,18 +46,27 @@ fn main() -> ExitCode {
                 return Err(selfmodel::Error::Config(format!(
                     "{} failed: {}",
                     args.torch_script.display(),
-                    String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("")
+                    String::from_utf8_lossy(&out.stderr)
+                        .lines()
+                        .last()
+                        .unwrap_or("")
                 )));
             }
             attach_torch(&mut rows, &String::from_utf8_lossy(&out.stdout));
         }
-        println!("{:<11} {:<22} {:>10} {:>10} {:>8}", "model", "figure", "selfmodel", "pytorch", "ratio");
+        println!(
+            "{:<11} {:<22} {:>10} {:>10} {:>8}",
+            "model", "figure", "selfmodel", "pytorch", "ratio"
+        );
         for r in &rows {
             let (t, ratio) = match r.torch {
                 Some(t) => (format!("{t:.1}"), format!("{:.2}x", r.ours / t)),
                 None => ("-".into(), "-".into()),
             };
-            println!("{:<11} {:<22} {:>10.1} {:>10} {:>8}", r.model, r.figure, r.ours, t, ratio);
+            println!(
+                "{:<11} {:<22} {:>10.1} {:>10} {:>8}",
+                r.model, r.figure, r.ours, t, ratio
+            );
         }
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;

@@ -65,7 +65,10 @@ impl Ablation {
 
     /// The settings, for a preset (`quick` scales the data-size ablation down).
     pub fn settings(self, preset: &str) -> Vec<Setting> {
-        let s = |label: String, p: Option<f64>, f: Option<f64>, apply: Box<dyn Fn(&mut DecoderRunConfig)>| Setting {
+        let s = |label: String,
+                 p: Option<f64>,
+                 f: Option<f64>,
+                 apply: Box<dyn Fn(&mut DecoderRunConfig)>| Setting {
             label,
             apply,
             paper_psnr_db: p,
@@ -83,33 +86,42 @@ impl Ablation {
                     )
                 })
                 .collect(),
-            Ablation::Depth => [(2, Some(19.87), Some(12000.0)), (4, Some(21.88), Some(7400.0)), (6, Some(22.14), Some(4200.0))]
-                .into_iter()
-                .map(|(layers, p, f)| {
-                    s(
-                        format!("{layers} layers"),
-                        p,
-                        f,
-                        Box::new(move |c: &mut DecoderRunConfig| {
-                            neurokin_mut(c).upsampling_layers = layers
-                        }),
-                    )
-                })
-                .collect(),
+            Ablation::Depth => [
+                (2, Some(19.87), Some(12000.0)),
+                (4, Some(21.88), Some(7400.0)),
+                (6, Some(22.14), Some(4200.0)),
+            ]
+            .into_iter()
+            .map(|(layers, p, f)| {
+                s(
+                    format!("{layers} layers"),
+                    p,
+                    f,
+                    Box::new(move |c: &mut DecoderRunConfig| {
+                        neurokin_mut(c).upsampling_layers = layers
+                    }),
+                )
+            })
+            .collect(),
             Ablation::Latent => {
                 let quick = preset == "quick";
-                [(256, None), (512, Some(20.12)), (1024, Some(21.88)), (2048, Some(21.95))]
-                    .into_iter()
-                    .map(|(latent, p)| {
-                        let l = if quick { latent / 16 } else { latent };
-                        s(
-                            format!("latent {l}"),
-                            p,
-                            None,
-                            Box::new(move |c: &mut DecoderRunConfig| neurokin_mut(c).latent = l),
-                        )
-                    })
-                    .collect()
+                [
+                    (256, None),
+                    (512, Some(20.12)),
+                    (1024, Some(21.88)),
+                    (2048, Some(21.95)),
+                ]
+                .into_iter()
+                .map(|(latent, p)| {
+                    let l = if quick { latent / 16 } else { latent };
+                    s(
+                        format!("latent {l}"),
+                        p,
+                        None,
+                        Box::new(move |c: &mut DecoderRunConfig| neurokin_mut(c).latent = l),
+                    )
+                })
+                .collect()
             }
             Ablation::DataScale => {
                 let (sizes, test): (Vec<(usize, Option<f64>)>, usize) = if preset == "quick" {
@@ -162,7 +174,13 @@ pub fn run_ablation(
         let slug: String = setting
             .label
             .chars()
-            .map(|c| if c.is_ascii_alphanumeric() || c == '.' { c } else { '_' })
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
             .collect();
         let out = run(&cfg, &dir.join(slug), device, resume)?;
         curves.push((setting.label.clone(), out.log.curve.clone()));

@@ -159,7 +159,10 @@ impl ExperimentArgs {
     /// Run the registry's experiment `name` with these arguments and print its summary.
     pub fn run(&self, name: &str, default_preset: &str) -> Result<()> {
         let e = crate::experiments::find(name)?;
-        let preset = self.preset.clone().unwrap_or_else(|| default_preset.to_string());
+        let preset = self
+            .preset
+            .clone()
+            .unwrap_or_else(|| default_preset.to_string());
         if !e.presets.contains(&preset.as_str()) {
             return Err(crate::Error::Config(format!(
                 "{name} has no preset \"{preset}\" (choose {})",
@@ -176,7 +179,10 @@ impl ExperimentArgs {
             resume: self.resume,
             steps: self.steps,
         };
-        let dir = self.out.clone().unwrap_or_else(|| PathBuf::from(e.default_dir));
+        let dir = self
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(e.default_dir));
         let start = std::time::Instant::now();
         let summary = (e.run)(&opts, &dir)?;
         println!("{summary}");

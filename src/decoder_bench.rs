@@ -25,13 +25,23 @@ pub struct BenchRow {
 }
 
 /// Median seconds of `repeats` training steps after `warmup`.
-fn train_rate(cfg: &NeuroKinConfig, batch: usize, device: &Device, warmup: usize, repeats: usize) -> Result<f64> {
+fn train_rate(
+    cfg: &NeuroKinConfig,
+    batch: usize,
+    device: &Device,
+    warmup: usize,
+    repeats: usize,
+) -> Result<f64> {
     let tdev = autodiff_device(device, 0);
     let mut model = cfg.init(&tdev)?;
     let mut optim = AdamConfig::new().init();
     let native = cfg.native_size();
     let q = Tensor::<2>::random([batch, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev);
-    let y = Tensor::<4>::random([batch, 1, native[0], native[1]], Distribution::Bernoulli(0.1), &tdev);
+    let y = Tensor::<4>::random(
+        [batch, 1, native[0], native[1]],
+        Distribution::Bernoulli(0.1),
+        &tdev,
+    );
     let mut times = Vec::new();
     for i in 0..warmup + repeats {
         let t = Instant::now();
@@ -53,15 +63,34 @@ fn train_rate(cfg: &NeuroKinConfig, batch: usize, device: &Device, warmup: usize
 
 /// Measure both NeuroKin architectures on `device`.
 pub fn run(device: &Device, quick: bool) -> Result<Vec<BenchRow>> {
-    let speed = if quick { SpeedConfig::quick() } else { SpeedConfig::paper() };
+    let speed = if quick {
+        SpeedConfig::quick()
+    } else {
+        SpeedConfig::paper()
+    };
     let mut rows = Vec::new();
     for (name, cfg, batch) in [
         ("neurokin", NeuroKinConfig::paper(), 32),
         ("neurokin64", NeuroKinConfig::text64(), 128),
     ] {
-        let cfg = if quick { NeuroKinConfig { image: [32, 32], ..NeuroKinConfig::quick() } } else { cfg };
+        let cfg = if quick {
+            NeuroKinConfig {
+                image: [32, 32],
+                ..NeuroKinConfig::quick()
+            }
+        } else {
+            cfg
+        };
         let model = cfg.init(device)?;
-        for t in measure(|q| model.predict(q), cfg.dof, device, &SpeedConfig { batches: vec![1, 256], ..speed.clone() }) {
+        for t in measure(
+            |q| model.predict(q),
+            cfg.dof,
+            device,
+            &SpeedConfig {
+                batches: vec![1, 256],
+                ..speed.clone()
+            },
+        ) {
             rows.push(BenchRow {
                 model: name.into(),
                 figure: format!("infer_b{}_img_per_s", t.batch),
@@ -86,7 +115,9 @@ pub fn attach_torch(rows: &mut [BenchRow], torch_output: &str) {
         let parts: Vec<&str> = line.split_whitespace().collect();
         if let [model, figure, value] = parts[..]
             && let Ok(v) = value.parse::<f64>()
-            && let Some(r) = rows.iter_mut().find(|r| r.model == model && r.figure == figure)
+            && let Some(r) = rows
+                .iter_mut()
+                .find(|r| r.model == model && r.figure == figure)
         {
             r.torch = Some(v);
         }

@@ -8,7 +8,6 @@
 
 use std::ops::Range;
 use std::path::Path;
-use std::time::Instant;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -238,7 +237,10 @@ impl DecoderRunConfig {
         let mut cfg = Self::neurokin(preset)?;
         cfg.name = "NeuroKin-64 (paper text)".into();
         let mut model = NeuroKinConfig::text64();
-        model.image = [cfg.data.dataset.camera.height, cfg.data.dataset.camera.width];
+        model.image = [
+            cfg.data.dataset.camera.height,
+            cfg.data.dataset.camera.width,
+        ];
         if preset == "quick" {
             model.latent = 64;
             model.seed_channels = 32;
@@ -311,8 +313,14 @@ fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, Vec<f32>) {
     (sil, depth)
 }
 
-/// Upload samples `range`: angles `[n, dof]` (degrees), silhouettes and depth `[n, 1, H, W]`.
-fn device_set(data: &Dataset, range: &Range<usize>, device: &Device) -> TrainSet {
+/// Upload samples `range` with their host targets (from [`host_targets`]): angles
+/// `[n, dof]` (degrees), silhouettes and depth `[n, 1, H, W]`.
+fn device_set(
+    data: &Dataset,
+    range: &Range<usize>,
+    (sil, depth): (Vec<f32>, Vec<f32>),
+    device: &Device,
+) -> TrainSet {
     let n = range.len();
     let dof = data.dof();
     let (h, w) = (data.height, data.width);
@@ -320,7 +328,6 @@ fn device_set(data: &Dataset, range: &Range<usize>, device: &Device) -> TrainSet
         .clone()
         .flat_map(|i| data.angles[i].iter().map(|&a| a as f32))
         .collect();
-    let (sil, depth) = host_targets(data, range);
     TrainSet {
         inputs: Tensor::from_data(TensorData::new(angles, [n, dof]), device),
         targets: vec![
@@ -379,8 +386,19 @@ pub fn run(
         )));
     }
     let tdev = autodiff_device(&device, cfg.train.seed);
-    let train_set = device_set(&data, &train_range, &tdev);
-    let test_set = device_set(&data, &test_range, &device);
+    let train_set = device_set(
+        &data,
+        &train_range,
+        host_targets(&data, &train_range),
+        &tdev,
+    );
+    let (truth, truth_depth) = host_targets(&data, &test_range);
+    let test_set = device_set(
+        &data,
+        &test_range,
+        (truth.clone(), truth_depth.clone()),
+        &device,
+    );
     let plan = CheckpointPlan {
         dir: dir.join("checkpoint"),
         resume,
@@ -388,7 +406,6 @@ pub fn run(
     };
     let label = cfg.name.clone();
     let pixels = data.height * data.width;
-    let t_start = Instant::now();
     let (params, log, predictions, timings) = match &cfg.model {
         DecoderModel::NeuroKin(mc) => {
             let model = mc.init(&tdev)?;
@@ -399,18 +416,29 @@ pub fn run(
                 train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
             }
             let loss_kind = cfg.loss;
-            let (model, log) = train(model, &train_set, &cfg.train, Some(&plan), &label, |m, b| {
-                let z = m.forward(b.inputs.clone());
-                match loss_kind {
-                    DecoderLoss::Mse => {
-                        mse(burn::tensor::activation::sigmoid(z), b.targets[0].clone())
+            let (model, log) = train(
+                model,
+                &train_set,
+                &cfg.train,
+                Some(&plan),
+                &label,
+                |m, b| {
+                    let z = m.forward(b.inputs.clone());
+                    match loss_kind {
+                        DecoderLoss::Mse => {
+                            mse(burn::tensor::activation::sigmoid(z), b.targets[0].clone())
+                        }
+                        _ => bce_with_logits(z, b.targets[0].clone()),
                     }
-                    _ => bce_with_logits(z, b.targets[0].clone()),
-                }
-            })?;
+                },
+            )?;
             let model = model.valid();
-            let predictions =
-                predict_all(|q| (model.predict(q), None), &test_set, cfg.eval_batch, pixels);
+            let predictions = predict_all(
+                |q| (model.predict(q), None),
+                &test_set,
+                cfg.eval_batch,
+                pixels,
+            );
             let timings = measure(|q| model.predict(q), mc.dof, &device, &cfg.speed);
             (params, log, predictions, timings)
         }
@@ -421,12 +449,19 @@ pub fn run(
                 DecoderLoss::BceDiceDepth { depth_weight } => depth_weight,
                 _ => 0.0,
             };
-            let (model, log) = train(model, &train_set, &cfg.train, Some(&plan), &label, |m, b| {
-                let (s, d) = m.forward(b.inputs.clone());
-                let y = b.targets[0].clone();
-                let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
-                sil + l1_masked(d, b.targets[1].clone(), y_mask(&b.targets[0])).mul_scalar(w)
-            })?;
+            let (model, log) = train(
+                model,
+                &train_set,
+                &cfg.train,
+                Some(&plan),
+                &label,
+                |m, b| {
+                    let (s, d) = m.forward(b.inputs.clone());
+                    let y = b.targets[0].clone();
+                    let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
+                    sil + l1_masked(d, b.targets[1].clone(), y_mask(&b.targets[0])).mul_scalar(w)
+                },
+            )?;
             let model = model.valid();
             let predictions = predict_all(
                 |q| {
@@ -441,12 +476,18 @@ pub fn run(
             (params, log, predictions, timings)
         }
     };
-    let _ = t_start;
-    let (truth, truth_depth) = host_targets(&data, &test_range);
     let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
-    let t1 = timing(1).unwrap_or(Timing { batch: 1, median_s: f64::NAN, repeats: 0 });
-    let tb = timings.iter().max_by_key(|t| t.batch).cloned().unwrap_or(t1.clone());
+    let t1 = timing(1).unwrap_or(Timing {
+        batch: 1,
+        median_s: f64::NAN,
+        repeats: 0,
+    });
+    let tb = timings
+        .iter()
+        .max_by_key(|t| t.batch)
+        .cloned()
+        .unwrap_or(t1.clone());
     let result = ModelResult {
         model: cfg.name.clone(),
         dataset: cfg.data.label().into(),
@@ -462,7 +503,9 @@ pub fn run(
         psnr_db_first100: quality.psnr_db_paper_subset,
         psnr_db_test: quality.psnr_db_test,
         iou_test: quality.iou_test,
-        depth_mae_mm: quality.depth_mae_mm.filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
+        depth_mae_mm: quality
+            .depth_mae_mm
+            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
         infer_b1_img_per_s: t1.images_per_second(),
         latency_b1_ms: 1000.0 * t1.median_s,
         infer_b256_img_per_s: tb.images_per_second(),
@@ -479,7 +522,6 @@ pub fn run(
         &truth,
         &truth_depth,
         &predictions,
-        &quality,
         [data.height, data.width],
     )?;
     Ok(DecoderOutcome {
@@ -489,20 +531,38 @@ pub fn run(
     })
 }
 
-fn write_report(dir: &Path, cfg: &DecoderRunConfig, row: &ModelResult, log: &TrainLog) -> Result<()> {
+fn write_report(
+    dir: &Path,
+    cfg: &DecoderRunConfig,
+    row: &ModelResult,
+    log: &TrainLog,
+) -> Result<()> {
     let csv_path = dir.join("results.csv");
     write_csv(&csv_path, std::slice::from_ref(row))?;
     write_markdown_report(
         &csv_path,
-        &format!("{} ({} preset, {} dataset)", cfg.name, cfg.preset, cfg.data.label()),
+        &format!(
+            "{} ({} preset, {} dataset)",
+            cfg.name,
+            cfg.preset,
+            cfg.data.label()
+        ),
         &format!(
             "{} steps of batch {} ({:.1} epochs); PSNR per image as the paper computes it, on the first {} test images and on all {}; IoU at threshold 0.5. `paper_*` columns are the paper's published figures, for reference (its FPS was training throughput). Config: `config.json`.{}",
             row.train_steps,
             row.batch,
             cfg.train.epochs(row.train_samples),
             cfg.paper_subset,
-            cfg.data.test.as_ref().map(|r| r.len()).unwrap_or(cfg.data.dataset.samples - cfg.data.dataset.train),
-            if row.note.is_empty() { String::new() } else { format!(" Note: {}", row.note) }
+            cfg.data
+                .test
+                .as_ref()
+                .map(|r| r.len())
+                .unwrap_or(cfg.data.dataset.samples - cfg.data.dataset.train),
+            if row.note.is_empty() {
+                String::new()
+            } else {
+                format!(" Note: {}", row.note)
+            }
         ),
     )?;
     #[derive(serde::Serialize)]
@@ -510,7 +570,11 @@ fn write_report(dir: &Path, cfg: &DecoderRunConfig, row: &ModelResult, log: &Tra
         step: usize,
         loss: f64,
     }
-    let rows: Vec<CurveRow> = log.curve.iter().map(|&(step, loss)| CurveRow { step, loss }).collect();
+    let rows: Vec<CurveRow> = log
+        .curve
+        .iter()
+        .map(|&(step, loss)| CurveRow { step, loss })
+        .collect();
     write_csv(&dir.join("curve.csv"), &rows)?;
     training_curves(
         &dir.join("training_curve.png"),
@@ -525,7 +589,6 @@ fn qualitative_figure(
     truth: &[f32],
     truth_depth: &[f32],
     pred: &Predictions,
-    _quality: &Quality,
     size: [usize; 2],
 ) -> Result<()> {
     let px = size[0] * size[1];
@@ -535,7 +598,10 @@ fn qualitative_figure(
         &v[i * px..(i + 1) * px]
     }
     let gt: Vec<&[f32]> = picks.iter().map(|&i| img(truth, i, px)).collect();
-    let pr: Vec<&[f32]> = picks.iter().map(|&i| img(&pred.silhouettes, i, px)).collect();
+    let pr: Vec<&[f32]> = picks
+        .iter()
+        .map(|&i| img(&pred.silhouettes, i, px))
+        .collect();
     let err: Vec<Vec<f32>> = gt
         .iter()
         .zip(&pr)
@@ -547,8 +613,14 @@ fn qualitative_figure(
         let lo = robot.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = robot.iter().copied().fold(0.0, f32::max);
         let range = if lo.is_finite() { [lo, hi] } else { [0.5, 1.5] };
-        rows.push(GridRow::Depth(picks.iter().map(|&i| img(truth_depth, i, px)).collect(), range));
-        rows.push(GridRow::Depth(picks.iter().map(|&i| img(d, i, px)).collect(), range));
+        rows.push(GridRow::Depth(
+            picks.iter().map(|&i| img(truth_depth, i, px)).collect(),
+            range,
+        ));
+        rows.push(GridRow::Depth(
+            picks.iter().map(|&i| img(d, i, px)).collect(),
+            range,
+        ));
     }
     image_grid(path, &rows, size[1], size[0], 2)
 }

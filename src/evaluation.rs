@@ -51,17 +51,7 @@ pub fn psnr_db(pred: &[f32], truth: &[f32]) -> f64 {
 
 /// IoU of two silhouettes thresholded at 0.5; two empty silhouettes have IoU 1.
 pub fn iou(pred: &[f32], truth: &[f32]) -> f64 {
-    let (mut inter, mut union) = (0usize, 0usize);
-    for (&p, &t) in pred.iter().zip(truth) {
-        let (p, t) = (p >= 0.5, t >= 0.5);
-        inter += (p && t) as usize;
-        union += (p || t) as usize;
-    }
-    if union == 0 {
-        1.0
-    } else {
-        inter as f64 / union as f64
-    }
+    crate::metrics::iou_where(pred, truth, |v| v >= 0.5)
 }
 
 /// Score predictions against the true silhouettes (`[n, H * W]` in [0, 1]) and depth.
@@ -74,10 +64,20 @@ pub fn score(
     let px = pred.pixels;
     let n = truth.len() / px;
     let per_image_psnr: Vec<f64> = (0..n)
-        .map(|i| psnr_db(&pred.silhouettes[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px]))
+        .map(|i| {
+            psnr_db(
+                &pred.silhouettes[i * px..(i + 1) * px],
+                &truth[i * px..(i + 1) * px],
+            )
+        })
         .collect();
     let per_image_iou: Vec<f64> = (0..n)
-        .map(|i| iou(&pred.silhouettes[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px]))
+        .map(|i| {
+            iou(
+                &pred.silhouettes[i * px..(i + 1) * px],
+                &truth[i * px..(i + 1) * px],
+            )
+        })
         .collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let subset = paper_subset.min(n);

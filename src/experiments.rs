@@ -48,7 +48,11 @@ impl RunOptions {
             && steps != cfg.train.steps
         {
             let msg = format!("{steps} steps instead of the preset's {}", cfg.train.steps);
-            cfg.note = if cfg.note.is_empty() { msg } else { format!("{}; {msg}", cfg.note) };
+            cfg.note = if cfg.note.is_empty() {
+                msg
+            } else {
+                format!("{}; {msg}", cfg.note)
+            };
             cfg.train.steps = steps;
         }
         cfg
@@ -72,7 +76,11 @@ pub struct Experiment {
 }
 
 fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let mut cfg = DatasetConfig::preset(if opts.preset == "short" { "paper" } else { &opts.preset })?;
+    let mut cfg = DatasetConfig::preset(if opts.preset == "short" {
+        "paper"
+    } else {
+        &opts.preset
+    })?;
     cfg.render.ground_artifact = opts.paper_compatible;
     let robot = crate::arm4::arm4();
     let (data, report) =
@@ -86,7 +94,11 @@ fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
 }
 
 fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let preset = if opts.preset == "short" { "quick" } else { &opts.preset };
+    let preset = if opts.preset == "short" {
+        "quick"
+    } else {
+        &opts.preset
+    };
     let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, dir)?;
     Ok(format!(
         "arm4 vs mesh robot: mean IoU {:.4} over {} poses",
@@ -121,7 +133,9 @@ pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
         ("neurokin64", DecoderRunConfig::neurokin64(&opts.preset)?),
     ] {
         let cfg = opts.apply(cfg);
-        rows.push(crate::decoder_experiment::run(&cfg, &dir.join(sub), opts.device, opts.resume)?.result);
+        rows.push(
+            crate::decoder_experiment::run(&cfg, &dir.join(sub), opts.device, opts.resume)?.result,
+        );
     }
     write_rows(
         dir,
@@ -168,7 +182,11 @@ pub fn find(name: &str) -> Result<&'static Experiment> {
     EXPERIMENTS.iter().find(|e| e.name == name).ok_or_else(|| {
         crate::Error::Config(format!(
             "no experiment named \"{name}\" (known: {})",
-            EXPERIMENTS.iter().map(|e| e.name).collect::<Vec<_>>().join(", ")
+            EXPERIMENTS
+                .iter()
+                .map(|e| e.name)
+                .collect::<Vec<_>>()
+                .join(", ")
         ))
     })
 }

@@ -7,6 +7,7 @@
 use std::path::Path;
 use std::sync::Once;
 
+use image::ImageEncoder;
 use plotters::prelude::*;
 
 use crate::atomic_file::write_bytes;
@@ -32,10 +33,27 @@ fn save_rgb(path: &Path, buf: &[u8], w: u32, h: u32) -> Result<()> {
     write_bytes(path, &png)
 }
 
-use image::ImageEncoder;
-
 fn draw_err(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::data(path, format!("cannot draw figure: {e}"))
+}
+
+/// The series legend every chart draws.
+fn draw_legend<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    path: &Path,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    X: plotters::coord::ranged1d::Ranged,
+    Y: plotters::coord::ranged1d::Ranged,
+{
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font((FONT, 13))
+        .draw()
+        .map_err(|e| draw_err(path, e))
 }
 
 /// One point of the Pareto plot.
@@ -58,10 +76,20 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
-        let fps_min = points.iter().map(|p| p.fps).fold(f64::INFINITY, f64::min).min(1.0);
+        let fps_min = points
+            .iter()
+            .map(|p| p.fps)
+            .fold(f64::INFINITY, f64::min)
+            .min(1.0);
         let fps_max = points.iter().map(|p| p.fps).fold(1.0, f64::max).max(2000.0);
-        let q_min = points.iter().map(|p| p.quality).fold(f64::INFINITY, f64::min);
-        let q_max = points.iter().map(|p| p.quality).fold(f64::NEG_INFINITY, f64::max);
+        let q_min = points
+            .iter()
+            .map(|p| p.quality)
+            .fold(f64::INFINITY, f64::min);
+        let q_max = points
+            .iter()
+            .map(|p| p.quality)
+            .fold(f64::NEG_INFINITY, f64::max);
         let pad = ((q_max - q_min) * 0.15).max(0.5 * q_max.abs().max(1e-3) * 0.02);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 22))
@@ -89,7 +117,11 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
             .label("1,000 FPS (1 kHz control loop)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         for p in points {
-            let color = if p.reference { BLACK.mix(0.6) } else { BLUE.mix(1.0) };
+            let color = if p.reference {
+                BLACK.mix(0.6)
+            } else {
+                BLUE.mix(1.0)
+            };
             let style = if p.reference {
                 color.stroke_width(2)
             } else {
@@ -106,20 +138,18 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
                 )))
                 .map_err(|e| draw_err(path, e))?;
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font((FONT, 13))
-            .draw()
-            .map_err(|e| draw_err(path, e))?;
+        draw_legend(&mut chart, path)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
 }
 
 /// Training loss against step, one line per run (log-y).
-pub fn training_curves(path: &Path, title: &str, runs: &[(String, Vec<(usize, f64)>)]) -> Result<()> {
+pub fn training_curves(
+    path: &Path,
+    title: &str,
+    runs: &[(String, Vec<(usize, f64)>)],
+) -> Result<()> {
     register_font();
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -154,15 +184,11 @@ pub fn training_curves(path: &Path, title: &str, runs: &[(String, Vec<(usize, f6
                 ))
                 .map_err(|e| draw_err(path, e))?
                 .label(label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font((FONT, 13))
-            .draw()
-            .map_err(|e| draw_err(path, e))?;
+        draw_legend(&mut chart, path)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
@@ -173,7 +199,11 @@ fn error_color(e: f32) -> [u8; 3] {
     let e = e.clamp(0.0, 1.0);
     if e < 0.5 {
         let t = e * 2.0;
-        [(255.0 * t) as u8, (255.0 * t) as u8, (255.0 * (1.0 - t)) as u8]
+        [
+            (255.0 * t) as u8,
+            (255.0 * t) as u8,
+            (255.0 * (1.0 - t)) as u8,
+        ]
     } else {
         let t = (e - 0.5) * 2.0;
         [255, (255.0 * (1.0 - t)) as u8, 0]
@@ -191,7 +221,13 @@ pub enum GridRow<'a> {
 }
 
 /// A grid of images (rows of equal length), each pixel drawn `scale` times, 2 px gaps.
-pub fn image_grid(path: &Path, rows: &[GridRow], width: usize, height: usize, scale: usize) -> Result<()> {
+pub fn image_grid(
+    path: &Path,
+    rows: &[GridRow],
+    width: usize,
+    height: usize,
+    scale: usize,
+) -> Result<()> {
     let cols = rows
         .iter()
         .map(|r| match r {
@@ -226,7 +262,9 @@ pub fn image_grid(path: &Path, rows: &[GridRow], width: usize, height: usize, sc
             };
             for y in 0..height {
                 for x in 0..width {
-                    let Some(px) = color(y * width + x) else { continue };
+                    let Some(px) = color(y * width + x) else {
+                        continue;
+                    };
                     for dy in 0..scale {
                         for dx in 0..scale {
                             img.put_pixel(

@@ -72,8 +72,7 @@ where
             }
             let start = Instant::now();
             let mut times = Vec::new();
-            while times.len() < cfg.min_repeats || start.elapsed().as_secs_f64() < cfg.min_seconds
-            {
+            while times.len() < cfg.min_repeats || start.elapsed().as_secs_f64() < cfg.min_seconds {
                 let t = Instant::now();
                 call();
                 times.push(t.elapsed().as_secs_f64());

@@ -26,7 +26,12 @@ pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> 
 pub fn soft_dice<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
     let inter = (p.clone() * y.clone()).sum();
     let total = p.sum() + y.sum();
-    inter.mul_scalar(2.0).add_scalar(1.0).div(total.add_scalar(1.0)).neg().add_scalar(1.0)
+    inter
+        .mul_scalar(2.0)
+        .add_scalar(1.0)
+        .div(total.add_scalar(1.0))
+        .neg()
+        .add_scalar(1.0)
 }
 
 /// Mean squared error.

@@ -3,10 +3,16 @@
 /// Intersection over union of two silhouettes thresholded at half of `max`
 /// (`a`, `b`: same length, row-major). Two empty silhouettes have IoU 1.
 pub fn silhouette_iou(a: &[u8], b: &[u8]) -> f64 {
+    iou_where(a, b, |v| v >= 128)
+}
+
+/// Intersection over union of two images where `on(pixel)` marks foreground (same length,
+/// row-major). Two empty silhouettes have IoU 1.
+pub fn iou_where<T: Copy>(a: &[T], b: &[T], on: impl Fn(T) -> bool) -> f64 {
     assert_eq!(a.len(), b.len(), "silhouettes must have the same size");
     let (mut inter, mut union) = (0usize, 0usize);
     for (&x, &y) in a.iter().zip(b) {
-        let (x, y) = (x >= 128, y >= 128);
+        let (x, y) = (on(x), on(y));
         inter += (x && y) as usize;
         union += (x || y) as usize;
     }

@@ -211,7 +211,8 @@ impl ResNeuroKinD {
             x = relu(self.norms[i].forward(up.forward(x)));
             x = self.blocks[i + 1].forward(x);
         }
-        let silhouette = resize_bilinear(sigmoid(self.silhouette_head.forward(x.clone())), self.image);
+        let silhouette =
+            resize_bilinear(sigmoid(self.silhouette_head.forward(x.clone())), self.image);
         let depth = resize_bilinear(relu(self.depth_head.forward(x)), self.image);
         (silhouette, depth)
     }

@@ -114,6 +114,16 @@ struct CheckpointState {
     log: TrainLog,
 }
 
+/// Write a burnpack file to a temporary name, then rename it into place.
+fn save_renamed(
+    path: &Path,
+    write: impl FnOnce(&Path) -> std::result::Result<(), burn::store::RecordError>,
+) -> Result<()> {
+    let tmp = path.with_extension("bpk.tmp");
+    write(&tmp).map_err(|e| Error::data(path, format!("cannot write checkpoint: {e:?}")))?;
+    std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+}
+
 impl CheckpointPlan {
     fn model_path(&self) -> PathBuf {
         self.dir.join("model.bpk")
@@ -130,21 +140,8 @@ impl CheckpointPlan {
     /// than it holds.
     fn save<M: Module>(&self, model: &M, optim: &ModuleOptimizer, log: &TrainLog) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        let record_err = |p: &Path, e: burn::store::RecordError| {
-            Error::data(p, format!("cannot write checkpoint: {e:?}"))
-        };
-        for (path, write) in [
-            (
-                self.model_path(),
-                Box::new(|tmp: &Path| model.clone().save_file(tmp))
-                    as Box<dyn Fn(&Path) -> std::result::Result<(), burn::store::RecordError>>,
-            ),
-            (self.optim_path(), Box::new(|tmp: &Path| optim.save(tmp))),
-        ] {
-            let tmp = path.with_extension("bpk.tmp");
-            write(&tmp).map_err(|e| record_err(&path, e))?;
-            std::fs::rename(&tmp, &path).map_err(|e| Error::io(&path, e))?;
-        }
+        save_renamed(&self.model_path(), |tmp| model.clone().save_file(tmp))?;
+        save_renamed(&self.optim_path(), |tmp| optim.save(tmp))?;
         write_json(
             &self.state_path(),
             &CheckpointState {
@@ -259,7 +256,8 @@ impl<'a> Batcher<'a> {
         let spe = self.steps_per_epoch();
         let (epoch, k) = (step / spe, step % spe);
         let mut perm: Vec<usize> = (0..self.data.len()).collect();
-        let mut rng = StdRng::seed_from_u64(self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut rng =
+            StdRng::seed_from_u64(self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
         perm.shuffle(&mut rng);
         let end = ((k + 1) * self.batch).min(perm.len());
         perm[k * self.batch..end].to_vec()
@@ -277,10 +275,13 @@ impl<'a> Batcher<'a> {
         let mut inputs = self.data.inputs.clone().select(0, index.clone());
         if self.noise > 0.0 {
             let dof = inputs.dims()[1];
-            let mut rng =
-                StdRng::seed_from_u64(self.seed.wrapping_add(1) ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
+            let mut rng = StdRng::seed_from_u64(
+                self.seed.wrapping_add(1) ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
+            );
             let normal = Normal::new(0.0, self.noise).expect("noise sigma is finite");
-            let noise: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng) as f32).collect();
+            let noise: Vec<f32> = (0..n * dof)
+                .map(|_| normal.sample(&mut rng) as f32)
+                .collect();
             inputs = inputs + Tensor::from_data(TensorData::new(noise, [n, dof]), &device);
         }
         let targets = self
@@ -353,10 +354,9 @@ where
         if !value.is_finite() {
             bar.abandon();
             let kept = match checkpoint {
-                Some(plan) if plan.state_path().exists() => format!(
-                    "the last good checkpoint is in {}",
-                    plan.dir.display()
-                ),
+                Some(plan) if plan.state_path().exists() => {
+                    format!("the last good checkpoint is in {}", plan.dir.display())
+                }
                 _ => "no checkpoint was saved".to_string(),
             };
             return Err(Error::Training(format!(

@@ -14,10 +14,25 @@ use selfmodel::resneurokin_d::ResNeuroKinDConfig;
 #[test]
 fn parameter_counts_match_the_notebooks() {
     let dev = Device::flex();
-    assert_eq!(NeuroKinConfig::paper().init(&dev).unwrap().trainable_params(), 5_189_857);
-    assert_eq!(NeuroKinConfig::text64().init(&dev).unwrap().trainable_params(), 2_800_385);
     assert_eq!(
-        ResNeuroKinDConfig::paper().init(&dev).unwrap().trainable_params(),
+        NeuroKinConfig::paper()
+            .init(&dev)
+            .unwrap()
+            .trainable_params(),
+        5_189_857
+    );
+    assert_eq!(
+        NeuroKinConfig::text64()
+            .init(&dev)
+            .unwrap()
+            .trainable_params(),
+        2_800_385
+    );
+    assert_eq!(
+        ResNeuroKinDConfig::paper()
+            .init(&dev)
+            .unwrap()
+            .trainable_params(),
         78_971_714
     );
 }
@@ -32,7 +47,10 @@ fn output_shapes_are_the_image_size() {
     assert_eq!(nk64.forward(q.clone()).dims(), [2, 1, 64, 64]);
     assert_eq!(nk64.predict(q).dims(), [2, 1, 100, 100]);
     for layers in [2, 6] {
-        let cfg = NeuroKinConfig { upsampling_layers: layers, ..NeuroKinConfig::quick() };
+        let cfg = NeuroKinConfig {
+            upsampling_layers: layers,
+            ..NeuroKinConfig::quick()
+        };
         let m = cfg.init(&dev).unwrap();
         let q = burn::tensor::Tensor::<2>::zeros([1, 4], &dev);
         assert_eq!(m.predict(q).dims(), [1, 1, 32, 32], "{layers} layers");
@@ -79,7 +97,14 @@ fn tiny_neurokin_beats_a_constant_predictor() {
         q.iou_test,
         q.psnr_db_test
     );
-    for f in ["results.csv", "results.md", "config.json", "curve.csv", "qualitative.png", "training_curve.png"] {
+    for f in [
+        "results.csv",
+        "results.md",
+        "config.json",
+        "curve.csv",
+        "qualitative.png",
+        "training_curve.png",
+    ] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
 }
@@ -112,5 +137,8 @@ fn tiny_resneurokin_d_learns_silhouette_and_metric_depth() {
     }
     let zero_mm = 1000.0 * sum / n as f64;
     let mae = out.quality.depth_mae_mm.unwrap();
-    assert!(mae < 0.97 * zero_mm, "depth error {mae:.0} mm vs {zero_mm:.0} mm for zero");
+    assert!(
+        mae < 0.97 * zero_mm,
+        "depth error {mae:.0} mm vs {zero_mm:.0} mm for zero"
+    );
 }

@@ -15,8 +15,7 @@ fn every_experiment_runs_on_its_quick_preset() {
         }
         let dir = root.path().join(e.default_dir);
         let opts = selfmodel::experiments::RunOptions::preset("quick");
-        let summary =
-            (e.run)(&opts, &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
+        let summary = (e.run)(&opts, &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
         assert!(!summary.is_empty());
         assert!(
             std::fs::read_dir(&dir).unwrap().count() > 0,

@@ -9,7 +9,9 @@ use burn::nn::{Linear, LinearConfig};
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
 use selfmodel::losses::{bce, bce_with_logits, mse};
-use selfmodel::training::{CheckpointPlan, TrainConfig, TrainSet, autodiff_device, clip_global_norm, train};
+use selfmodel::training::{
+    CheckpointPlan, TrainConfig, TrainSet, autodiff_device, clip_global_norm, train,
+};
 
 fn cfg(steps: usize) -> TrainConfig {
     TrainConfig {
@@ -27,12 +29,18 @@ fn cfg(steps: usize) -> TrainConfig {
 fn data(dev: &Device) -> TrainSet {
     let x = Tensor::<2>::random([40, 4], Distribution::Uniform(-1.0, 1.0), dev);
     let y = x.clone().sum_dim(1).reshape([40, 1, 1, 1]);
-    TrainSet { inputs: x, targets: vec![y] }
+    TrainSet {
+        inputs: x,
+        targets: vec![y],
+    }
 }
 
 fn loss(m: &Linear, b: &selfmodel::training::Batch) -> Tensor<1> {
     let n = b.inputs.dims()[0];
-    mse(m.forward(b.inputs.clone()).reshape([n, 1, 1, 1]), b.targets[0].clone())
+    mse(
+        m.forward(b.inputs.clone()).reshape([n, 1, 1, 1]),
+        b.targets[0].clone(),
+    )
 }
 
 fn weights(m: &Linear) -> Vec<f32> {
@@ -53,22 +61,39 @@ fn resuming_reproduces_an_uninterrupted_run() {
     };
     let (full, log_full) = train(init.clone(), &set, &cfg(20), None, "full", loss).unwrap();
     // Train 10 steps with checkpoints, then resume to 20.
-    let (_, first) = train(init.clone(), &set, &cfg(10), Some(&plan(false)), "first", loss).unwrap();
+    let (_, first) = train(
+        init.clone(),
+        &set,
+        &cfg(10),
+        Some(&plan(false)),
+        "first",
+        loss,
+    )
+    .unwrap();
     assert_eq!(first.step, 10);
     let mut resumed_cfg = cfg(20);
     resumed_cfg.checkpoint_every = 5;
     // The fingerprint guards against resuming a different configuration.
     let fresh = LinearConfig::new(4, 1).init(&dev);
-    let (resumed, log) = train(fresh, &set, &resumed_cfg, Some(&plan(true)), "resume", loss).unwrap();
+    let (resumed, log) =
+        train(fresh, &set, &resumed_cfg, Some(&plan(true)), "resume", loss).unwrap();
     assert_eq!(log.resumed_from, Some(10));
     assert_eq!(log.step, 20);
     let (a, b) = (weights(&full), weights(&resumed));
     for (x, y) in a.iter().zip(&b) {
         assert!((x - y).abs() < 1e-6, "{a:?} vs {b:?}");
     }
-    assert!(log_full.curve.last().unwrap().1 < log_full.curve[0].1, "loss fell");
-    let bad = CheckpointPlan { fingerprint: serde_json::json!({"test": 2}), ..plan(true) };
-    let err = train(init, &set, &cfg(20), Some(&bad), "bad", loss).unwrap_err().to_string();
+    assert!(
+        log_full.curve.last().unwrap().1 < log_full.curve[0].1,
+        "loss fell"
+    );
+    let bad = CheckpointPlan {
+        fingerprint: serde_json::json!({"test": 2}),
+        ..plan(true)
+    };
+    let err = train(init, &set, &cfg(20), Some(&bad), "bad", loss)
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("different configuration"), "{err}");
 }
 
@@ -87,14 +112,24 @@ fn a_nan_loss_stops_and_keeps_the_last_checkpoint() {
     let err = train(model, &set, &cfg(20), Some(&plan), "nan", |m, b| {
         calls.set(calls.get() + 1);
         let l = loss(m, b);
-        if calls.get() == 8 { l.mul_scalar(f32::NAN) } else { l }
+        if calls.get() == 8 {
+            l.mul_scalar(f32::NAN)
+        } else {
+            l
+        }
     })
     .unwrap_err();
     let msg = err.to_string();
     assert!(matches!(err, selfmodel::Error::Training(_)), "{msg}");
-    assert!(msg.contains("step 8") && msg.contains("last good checkpoint"), "{msg}");
+    assert!(
+        msg.contains("step 8") && msg.contains("last good checkpoint"),
+        "{msg}"
+    );
     let state = std::fs::read_to_string(dir.path().join("ckpt/state.json")).unwrap();
-    assert!(state.contains("\"step\": 5") || state.contains("\"step\":5"), "{state}");
+    assert!(
+        state.contains("\"step\": 5") || state.contains("\"step\":5"),
+        "{state}"
+    );
 }
 
 #[test]
@@ -105,7 +140,10 @@ fn clipping_bounds_the_global_gradient_norm() {
     let l = m.forward(x).square().mean();
     let mut grads = GradientsParams::from_grads(l.backward(), &m);
     let before = clip_global_norm(&m, &mut grads, 0.5);
-    assert!(before > 0.5, "the test needs a large gradient, got {before}");
+    assert!(
+        before > 0.5,
+        "the test needs a large gradient, got {before}"
+    );
     let after = clip_global_norm(&m, &mut grads, 1e9);
     assert!((after - 0.5).abs() < 1e-3, "norm after clipping {after}");
 }
