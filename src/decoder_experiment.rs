@@ -376,6 +376,8 @@ pub fn run(
 ) -> Result<DecoderOutcome> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
+    // Read the revision now: a run that spans commits is the code it started with.
+    let git_revision = crate::cli::git_revision();
     let device = crate::device::select(device_choice)?;
     let (data, train_range, test_range) = cfg.data.load()?;
     let image = cfg.model.image();
@@ -493,7 +495,7 @@ pub fn run(
         dataset: cfg.data.label().into(),
         preset: cfg.preset.clone(),
         device: device_choice.to_string(),
-        git_revision: crate::cli::git_revision(),
+        git_revision,
         parameters: params,
         train_samples: train_range.len(),
         train_steps: log.step,
