@@ -33,15 +33,18 @@ fn train_rate(
     repeats: usize,
 ) -> Result<f64> {
     let tdev = autodiff_device(device, 0);
-    let mut model = cfg.init(&tdev)?;
+    let mut model = cfg.init(&tdev, 0)?;
     let mut optim = AdamConfig::new().init();
     let native = cfg.native_size();
-    let q = Tensor::<2>::random([batch, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev);
-    let y = Tensor::<4>::random(
-        [batch, 1, native[0], native[1]],
-        Distribution::Bernoulli(0.1),
-        &tdev,
-    );
+    let (q, y) = crate::device::with_seed(&tdev, 1, || {
+        let q = Tensor::<2>::random([batch, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev);
+        let y = Tensor::<4>::random(
+            [batch, 1, native[0], native[1]],
+            Distribution::Bernoulli(0.1),
+            &tdev,
+        );
+        (q, y)
+    });
     let mut times = Vec::new();
     for i in 0..warmup + repeats {
         let t = Instant::now();
@@ -81,7 +84,7 @@ pub fn run(device: &Device, quick: bool) -> Result<Vec<BenchRow>> {
         } else {
             cfg
         };
-        let model = cfg.init(device)?;
+        let model = cfg.init(device, 0)?;
         for t in measure(
             |q| model.predict(q),
             cfg.dof,

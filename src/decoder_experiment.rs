@@ -410,7 +410,7 @@ pub fn run(
     let pixels = data.height * data.width;
     let (params, log, predictions, timings) = match &cfg.model {
         DecoderModel::NeuroKin(mc) => {
-            let model = mc.init(&tdev)?;
+            let model = mc.init(&tdev, cfg.train.seed)?;
             let params = model.trainable_params();
             let native = mc.native_size();
             let mut train_set = train_set;
@@ -445,7 +445,7 @@ pub fn run(
             (params, log, predictions, timings)
         }
         DecoderModel::ResNeuroKinD(mc) => {
-            let model = mc.init(&tdev)?;
+            let model = mc.init(&tdev, cfg.train.seed)?;
             let params = model.trainable_params();
             let w = match cfg.loss {
                 DecoderLoss::BceDiceDepth { depth_weight } => depth_weight,

@@ -80,3 +80,36 @@ pub fn select(choice: DeviceChoice) -> Result<Device> {
         }
     }
 }
+
+/// Serialises seeding and drawing from the backend's random generator, which is global to
+/// the backend (one per process), not to a device value.
+static RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Seed `device`'s random generator and run `draw` while no other thread can draw from it:
+/// every random tensor the library makes is drawn through here or [`seeded`].
+pub fn with_seed<T>(device: &Device, seed: u64, draw: impl FnOnce() -> T) -> T {
+    let _only_us = RNG.lock().unwrap_or_else(|e| e.into_inner());
+    device.seed(seed);
+    draw()
+}
+
+/// Build a module with `build` and draw all its parameters under [`with_seed`], so the same
+/// seed gives the same model whatever else the process is doing (tests run in parallel
+/// threads). burn initialises parameters lazily, on first use, so every parameter is
+/// touched here before the generator is released.
+pub fn seeded<M: burn::module::Module>(device: &Device, seed: u64, build: impl FnOnce() -> M) -> M {
+    struct Touch;
+    impl burn::module::ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(
+            &mut self,
+            param: &burn::module::Param<burn::tensor::Tensor<D>>,
+        ) {
+            let _ = param.val();
+        }
+    }
+    with_seed(device, seed, || {
+        let module = build();
+        module.visit(&mut Touch);
+        module
+    })
+}

@@ -61,7 +61,9 @@ where
     cfg.batches
         .iter()
         .map(|&batch| {
-            let q = Tensor::<2>::random([batch, dof], Distribution::Uniform(-90.0, 90.0), device);
+            let q = crate::device::with_seed(device, batch as u64, || {
+                Tensor::<2>::random([batch, dof], Distribution::Uniform(-90.0, 90.0), device)
+            });
             let call = || {
                 let y = forward(q.clone());
                 let _ = device.sync();

@@ -10,6 +10,8 @@ pub mod atomic_file;
 pub mod bvh;
 pub mod camera;
 pub mod cli;
+pub mod conv_extension;
+pub mod conv_gemm;
 pub mod dataset;
 pub mod decoder_bench;
 pub mod decoder_experiment;

@@ -28,6 +28,7 @@ use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
 
+use crate::conv_extension::conv2d_layer;
 use crate::error::{Error, Result};
 use crate::preset::Preset;
 use crate::upconv::{UpConv, UpConvConfig};
@@ -147,9 +148,14 @@ impl NeuroKinConfig {
         chans
     }
 
-    /// Build the model on a device.
-    pub fn init(&self, device: &Device) -> Result<NeuroKin> {
+    /// Build the model on a device, its parameters drawn from the generator seeded with
+    /// `seed` (see [`crate::device::seeded`]).
+    pub fn init(&self, device: &Device, seed: u64) -> Result<NeuroKin> {
         self.validate()?;
+        Ok(crate::device::seeded(device, seed, || self.build(device)))
+    }
+
+    fn build(&self, device: &Device) -> NeuroKin {
         let mut widths = vec![self.dof];
         widths.extend(&self.encoder_hidden);
         widths.push(self.latent);
@@ -184,7 +190,7 @@ impl NeuroKinConfig {
             ],
             NeuroKinArch::Text64 => vec![Conv2dConfig::new([cin, 1], [1, 1]).init(device)],
         };
-        Ok(NeuroKin {
+        NeuroKin {
             encoder,
             seed,
             ups,
@@ -193,7 +199,7 @@ impl NeuroKinConfig {
             seed_channels: self.seed_channels,
             arch: self.arch,
             image: self.image,
-        })
+        }
     }
 }
 
@@ -254,10 +260,10 @@ impl NeuroKin {
         match self.arch {
             NeuroKinArch::Code => {
                 x = resize_bilinear(x, self.image);
-                x = relu(self.head[0].forward(x));
-                self.head[1].forward(x)
+                x = relu(conv2d_layer(&self.head[0], x));
+                conv2d_layer(&self.head[1], x)
             }
-            NeuroKinArch::Text64 => self.head[0].forward(x),
+            NeuroKinArch::Text64 => conv2d_layer(&self.head[0], x),
         }
     }
 

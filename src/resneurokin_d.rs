@@ -19,6 +19,7 @@ use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d
 use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
 
+use crate::conv_extension::conv2d_layer;
 use crate::error::{Error, Result};
 use crate::neurokin::resize_bilinear;
 use crate::preset::Preset;
@@ -86,8 +87,8 @@ impl ResidualBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = relu(self.bn1.forward(self.conv1.forward(x.clone())));
-        let y = self.bn2.forward(self.conv2.forward(y));
+        let y = relu(self.bn1.forward(conv2d_layer(&self.conv1, x.clone())));
+        let y = self.bn2.forward(conv2d_layer(&self.conv2, y));
         relu(y + x)
     }
 }
@@ -110,9 +111,9 @@ impl Head {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let x = relu(self.convs[0].forward(x));
-        let x = relu(self.convs[1].forward(x));
-        self.convs[2].forward(x)
+        let x = relu(conv2d_layer(&self.convs[0], x));
+        let x = relu(conv2d_layer(&self.convs[1], x));
+        conv2d_layer(&self.convs[2], x)
     }
 }
 
@@ -126,9 +127,14 @@ impl ResNeuroKinDConfig {
         Ok(())
     }
 
-    /// Build the model on a device.
-    pub fn init(&self, device: &Device) -> Result<ResNeuroKinD> {
+    /// Build the model on a device, its parameters drawn from the generator seeded with
+    /// `seed` (see [`crate::device::seeded`]).
+    pub fn init(&self, device: &Device, seed: u64) -> Result<ResNeuroKinD> {
         self.validate()?;
+        Ok(crate::device::seeded(device, seed, || self.build(device)))
+    }
+
+    fn build(&self, device: &Device) -> ResNeuroKinD {
         let mut widths = vec![self.dof];
         widths.extend(&self.encoder);
         let encoder = widths
@@ -146,7 +152,7 @@ impl ResNeuroKinDConfig {
             blocks.push(ResidualBlock::new(w[1], device));
         }
         let c_last = *self.channels.last().unwrap();
-        Ok(ResNeuroKinD {
+        ResNeuroKinD {
             encoder,
             seed,
             blocks,
@@ -156,7 +162,7 @@ impl ResNeuroKinDConfig {
             depth_head: Head::new(c_last, self.head, device),
             seed_channels: c0,
             image: self.image,
-        })
+        }
     }
 }
 

@@ -395,7 +395,7 @@ where
 /// The training device: an autodiff device over `device`, seeded.
 pub fn autodiff_device(device: &Device, seed: u64) -> Device {
     let tdev = device.clone().autodiff();
-    tdev.seed(seed);
+    crate::device::with_seed(&tdev, seed, || ());
     tdev
 }
 

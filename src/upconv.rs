@@ -4,15 +4,16 @@
 //! initialisation (uniform in +-1/sqrt(out_channels * k * k) for weight and bias), so the
 //! decoders of the self-modeling paper can be checked against its notebooks.
 //!
-//! The layer exists (rather than burn's `ConvTranspose2d`) to own the decoders' hot spot: it is
-//! where a faster CPU kernel plugs in. Measured on the 2-core CPU (flex), the obvious
-//! rewrites in tensor ops are *slower* than burn's GEMM + col2im `conv_transpose2d`: the
-//! sub-pixel form (one 2x2 convolution with 4x the output channels, phases interleaved) took
-//! 2-4x longer forward and 1.1-3.7x longer forward+backward; stride 1 as a flipped-kernel
-//! convolution 2.2x longer forward. So [`UpConv::forward`] calls `conv_transpose2d`.
+//! The layer exists (rather than burn's `ConvTranspose2d`) to own the decoders' hot spot. Its
+//! forward pass is burn's GEMM + col2im `conv_transpose2d`; on flex its weight gradient runs on
+//! [`crate::conv_gemm`] through [`crate::conv_extension`], because burn's default weight
+//! gradient (a convolution with the activations as its kernel) was the slow part. Measured on
+//! the 2-core CPU (flex), rewrites of the layer in tensor ops were *slower*: the sub-pixel
+//! form (one 2x2 convolution with 4x the output channels, phases interleaved) took 2-4x longer
+//! forward and 1.1-3.7x longer forward+backward; stride 1 as a flipped-kernel convolution 2.2x
+//! longer forward.
 
 use burn::module::{Module, Param};
-use burn::tensor::module::conv_transpose2d;
 use burn::tensor::ops::ConvTransposeOptions;
 use burn::tensor::{Device, Distribution, Tensor};
 
@@ -83,7 +84,7 @@ impl UpConv {
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let s = self.stride;
         let p = self.padding;
-        conv_transpose2d(
+        crate::conv_extension::conv_transpose2d(
             x,
             self.weight.val(),
             Some(self.bias.val()),

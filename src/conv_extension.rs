@@ -1,0 +1,337 @@
+//! Convolutions whose weight gradient runs on our own CPU kernel: a burn backend extension.
+//!
+//! On the flex backend, [`conv2d`] and [`conv_transpose2d`] compute the forward pass and the
+//! input gradient with flex's own kernels, and the weight gradient with
+//! [`crate::conv_gemm::weight_grad`] (im2col + GEMM) instead of burn-backend's default, which
+//! runs a convolution with the activations as its kernel and took most of a NeuroKin training
+//! step. On every other device (wgpu, ndarray) they are burn's `conv2d` and
+//! `conv_transpose2d`, unchanged.
+//!
+//! The extension: a backend trait [`ConvWeightGradOps`] routed through burn's `Dispatch` by
+//! `#[backend_extension]`; its flex implementation calls the kernel; its `Autodiff`
+//! implementation is the hand-written backward pass (burn's own, with the weight gradient
+//! swapped). The tests compare both functions' gradients with burn's ops.
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::{Autodiff, NodeId};
+use burn::backend::flex::FlexTensor;
+use burn::backend::ops::ModuleOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{
+    Backend, DType, Dispatch, DispatchDevice, Flex, TensorMetadata, backend_extension,
+};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn::tensor::{Tensor, TensorData};
+
+use crate::conv_gemm::{ConvGeometry, weight_grad};
+
+/// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
+#[backend_extension(Flex, Autodiff)]
+pub trait ConvWeightGradOps: Backend {
+    /// `conv2d` without bias; its backward pass uses [`Self::conv2d_weight_grad`].
+    fn conv2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv2d(x, weight, None, options)
+    }
+
+    /// `conv_transpose2d` without bias; its backward pass uses
+    /// [`Self::conv_transpose2d_weight_grad`].
+    fn conv_transpose2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d(x, weight, None, options)
+    }
+
+    /// Gradient of `conv2d`'s weight, `[c_out, c_in, kh, kw]`.
+    fn conv2d_weight_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv2d_weight_backward(x, weight, output_grad, options)
+    }
+
+    /// Gradient of `conv_transpose2d`'s weight, `[c_in, c_out, kh, kw]`.
+    fn conv_transpose2d_weight_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d_weight_backward(x, weight, output_grad, options)
+    }
+}
+
+/// `(data, [batch, channels, h, w])` of a contiguous f32 flex tensor.
+fn f32_nchw(t: &FlexTensor) -> (FlexTensor, [usize; 4]) {
+    let dims = t.shape().dims::<4>();
+    (t.to_contiguous(), dims)
+}
+
+fn flex_tensor(values: Vec<f32>, dims: [usize; 4]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, dims))
+}
+
+impl ConvWeightGradOps for Flex {
+    fn conv2d_weight_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups) || options.is_asymmetric()
+        {
+            return Self::conv2d_weight_backward(x, weight, output_grad, options);
+        }
+        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
+        let (go, [_, c_out, _, _]) = f32_nchw(&output_grad);
+        let wd = weight.shape().dims::<4>();
+        let g = ConvGeometry {
+            batch,
+            c_in,
+            input: [h, w],
+            c_out,
+            kernel: [wd[2], wd[3]],
+            stride: options.stride,
+            padding: options.padding_begin(),
+        };
+        let dw = weight_grad(x.storage::<f32>(), go.storage::<f32>(), &g);
+        flex_tensor(dw, wd)
+    }
+
+    fn conv_transpose2d_weight_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups) {
+            return Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
+        }
+        // The convolution that reads `output_grad` with the layer's kernel, stride and padding
+        // lands on `x`'s grid: its weight gradient, with `x` as the output gradient, is ours.
+        let (x, [_, c_in, _, _]) = f32_nchw(&x);
+        let (go, [batch, c_out, oh, ow]) = f32_nchw(&output_grad);
+        let wd = weight.shape().dims::<4>();
+        let g = ConvGeometry {
+            batch,
+            c_in: c_out,
+            input: [oh, ow],
+            c_out: c_in,
+            kernel: [wd[2], wd[3]],
+            stride: options.stride,
+            padding: options.padding,
+        };
+        let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
+        flex_tensor(dw, wd)
+    }
+}
+
+fn kernel_supports(dtype: DType, dilation: &[usize; 2], groups: usize) -> bool {
+    dtype == DType::F32 && *dilation == [1, 1] && groups == 1
+}
+
+impl<B: Backend + ConvWeightGradOps, C: CheckpointStrategy> ConvWeightGradOps for Autodiff<B, C> {
+    fn conv2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct Conv2dFast;
+
+        impl<B: Backend + ConvWeightGradOps> Backward<B, 2> for Conv2dFast {
+            type State = (NodeId, NodeId, ConvOptions<2>);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_weight] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (x_state, weight_state, options) = ops.state;
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+                let weight =
+                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
+                if let Some(node) = node_x {
+                    let g = B::conv2d_x_backward(
+                        x.clone(),
+                        weight.clone(),
+                        grad.clone(),
+                        options.clone(),
+                    );
+                    grads.register::<B>(node.id, g);
+                }
+                if let Some(node) = node_weight {
+                    grads.register::<B>(node.id, B::conv2d_weight_grad(x, weight, grad, options));
+                }
+            }
+        }
+
+        match Conv2dFast
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let x_state = prep.checkpoint(&x);
+                let weight_state = prep.checkpoint(&weight);
+                prep.finish(
+                    (x_state, weight_state, options.clone()),
+                    B::conv2d(x.into_primitive(), weight.into_primitive(), None, options),
+                )
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv2d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                None,
+                options,
+            )),
+        }
+    }
+
+    fn conv_transpose2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ConvTranspose2dFast;
+
+        impl<B: Backend + ConvWeightGradOps> Backward<B, 2> for ConvTranspose2dFast {
+            type State = (NodeId, NodeId, ConvTransposeOptions<2>);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_weight] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (x_state, weight_state, options) = ops.state;
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+                let weight =
+                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
+                if let Some(node) = node_x {
+                    let g = B::conv_transpose2d_x_backward(
+                        weight.clone(),
+                        grad.clone(),
+                        options.clone(),
+                    );
+                    grads.register::<B>(node.id, g);
+                }
+                if let Some(node) = node_weight {
+                    let g = B::conv_transpose2d_weight_grad(x, weight, grad, options);
+                    grads.register::<B>(node.id, g);
+                }
+            }
+        }
+
+        match ConvTranspose2dFast
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let x_state = prep.checkpoint(&x);
+                let weight_state = prep.checkpoint(&weight);
+                prep.finish(
+                    (x_state, weight_state, options.clone()),
+                    B::conv_transpose2d(x.into_primitive(), weight.into_primitive(), None, options),
+                )
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                None,
+                options,
+            )),
+        }
+    }
+}
+
+/// Whether `x` lives on the flex backend (with or without autodiff).
+fn on_flex(x: &Tensor<4>) -> bool {
+    matches!(
+        x.device().without_autodiff().as_dispatch(),
+        DispatchDevice::Flex(_)
+    )
+}
+
+/// `[c_out]` -> broadcast over `[batch, c_out, H, W]`.
+fn add_bias(y: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
+    match bias {
+        Some(b) => {
+            let c = b.dims()[0];
+            y + b.reshape([1, c, 1, 1])
+        }
+        None => y,
+    }
+}
+
+/// burn's `conv2d`, with the weight gradient on our kernel when `x` is on flex.
+pub fn conv2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvOptions<2>,
+) -> Tensor<4> {
+    if !on_flex(&x) {
+        return burn::tensor::module::conv2d(x, weight, bias, options);
+    }
+    let y = <Dispatch as ConvWeightGradOps>::conv2d_fast(
+        x.into_dispatch(),
+        weight.into_dispatch(),
+        options,
+    );
+    add_bias(Tensor::from_dispatch(y), bias)
+}
+
+/// burn's `conv_transpose2d`, with the weight gradient on our kernel when `x` is on flex.
+pub fn conv_transpose2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvTransposeOptions<2>,
+) -> Tensor<4> {
+    if !on_flex(&x) {
+        return burn::tensor::module::conv_transpose2d(x, weight, bias, options);
+    }
+    let y = <Dispatch as ConvWeightGradOps>::conv_transpose2d_fast(
+        x.into_dispatch(),
+        weight.into_dispatch(),
+        options,
+    );
+    add_bias(Tensor::from_dispatch(y), bias)
+}
+
+/// A burn `Conv2d` layer's forward pass through [`conv2d`] (its own `forward` for `Same`
+/// padding, which may be asymmetric).
+pub fn conv2d_layer(layer: &burn::nn::conv::Conv2d, x: Tensor<4>) -> Tensor<4> {
+    use burn::nn::PaddingConfig2d;
+    let padding = match layer.padding {
+        PaddingConfig2d::Valid => [(0, 0), (0, 0)],
+        PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
+        PaddingConfig2d::Same => return layer.forward(x),
+    };
+    let options =
+        ConvOptions::new_with_padding(layer.stride, padding, layer.dilation, layer.groups);
+    conv2d(
+        x,
+        layer.weight.val(),
+        layer.bias.as_ref().map(|b| b.val()),
+        options,
+    )
+}

@@ -1,0 +1,198 @@
+//! The weight gradient of a 2-D convolution on the CPU, by im2col and one GEMM per image,
+//! with a direct six-loop reference beside it.
+//!
+//! burn-backend's default `conv2d_weight_backward` (which the flex backend uses) computes the
+//! weight gradient as a convolution whose kernel is the activations: at NeuroKin's 100x100
+//! head that is most of a training step. Here, per image `n`,
+//!
+//! `dW[o, (c, kh, kw)] += G_n[o, p] · col_n[(c, kh, kw), p]^T`, with `p` the output pixel,
+//!
+//! one `O x P x CKK` GEMM on an im2col buffer of one image (so memory stays `CKK x P` floats per
+//! worker). Images are split into a fixed number of chunks whatever the thread count, each
+//! chunk sums its images in order, and the chunk sums are added in order: the result does not
+//! depend on the scheduling.
+//!
+//! The same kernel gives a transposed convolution's weight gradient: for `y = conv_t(x, w)`
+//! with stride `s` and padding `p`, `dW_t[c, o, kh, kw] = Σ x[n, c, i, j] · dy[n, o, i·s − p +
+//! kh, j·s − p + kw]`, which is [`weight_grad`] with the convolution input `dy` and the output
+//! gradient `x` (see [`crate::conv_extension`]).
+//!
+//! All tensors are row-major NCHW `f32` slices; groups 1, dilation 1.
+
+use rayon::prelude::*;
+
+/// Shapes and hyper-parameters of a convolution `y = conv(x, w)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConvGeometry {
+    pub batch: usize,
+    pub c_in: usize,
+    /// Input height and width.
+    pub input: [usize; 2],
+    pub c_out: usize,
+    pub kernel: [usize; 2],
+    pub stride: [usize; 2],
+    /// Zero padding on each side (symmetric).
+    pub padding: [usize; 2],
+}
+
+impl ConvGeometry {
+    /// Output height and width, `(in + 2p − k) / s + 1`.
+    pub fn output(&self) -> [usize; 2] {
+        [0, 1].map(|d| (self.input[d] + 2 * self.padding[d] - self.kernel[d]) / self.stride[d] + 1)
+    }
+
+    /// Rows of the im2col matrix: `c_in · kh · kw`.
+    fn patch(&self) -> usize {
+        self.c_in * self.kernel[0] * self.kernel[1]
+    }
+
+    fn check(&self, x: &[f32], grad_out: &[f32]) {
+        let [oh, ow] = self.output();
+        assert_eq!(
+            x.len(),
+            self.batch * self.c_in * self.input[0] * self.input[1]
+        );
+        assert_eq!(grad_out.len(), self.batch * self.c_out * oh * ow);
+    }
+}
+
+/// Images per chunk: at most `CHUNKS` chunks, whatever the number of threads.
+const CHUNKS: usize = 8;
+
+/// `dW` of shape `[c_out, c_in, kh, kw]`, from the input `x` `[batch, c_in, H, W]` and the
+/// output gradient `grad_out` `[batch, c_out, Ho, Wo]`.
+pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    g.check(x, grad_out);
+    let [oh, ow] = g.output();
+    let pixels = oh * ow;
+    let patch = g.patch();
+    let image_in = g.c_in * g.input[0] * g.input[1];
+    let image_out = g.c_out * pixels;
+    let per_chunk = g.batch.div_ceil(CHUNKS).max(1);
+    let chunk_sums: Vec<Vec<f32>> = (0..g.batch.div_ceil(per_chunk))
+        .into_par_iter()
+        .map(|chunk| {
+            let mut dw = vec![0f32; g.c_out * patch];
+            let mut col = vec![0f32; patch * pixels];
+            let images = chunk * per_chunk..((chunk + 1) * per_chunk).min(g.batch);
+            for n in images {
+                im2col(&x[n * image_in..(n + 1) * image_in], g, &mut col);
+                let go = &grad_out[n * image_out..(n + 1) * image_out];
+                // dw[O x CKK] += go[O x P] · col^T[P x CKK]
+                // SAFETY: the three buffers hold exactly the m x k, k x n and m x n elements
+                // the strides address (checked by the lengths above), and do not alias.
+                unsafe {
+                    gemm::gemm(
+                        g.c_out,
+                        patch,
+                        pixels,
+                        dw.as_mut_ptr(),
+                        1,
+                        patch as isize,
+                        true,
+                        go.as_ptr(),
+                        1,
+                        pixels as isize,
+                        col.as_ptr(),
+                        pixels as isize,
+                        1,
+                        1.0,
+                        1.0,
+                        false,
+                        false,
+                        false,
+                        gemm::Parallelism::None,
+                    );
+                }
+            }
+            dw
+        })
+        .collect();
+    let mut total = vec![0f32; g.c_out * patch];
+    for part in chunk_sums {
+        for (t, v) in total.iter_mut().zip(part) {
+            *t += v;
+        }
+    }
+    total
+}
+
+/// One image `[c_in, H, W]` to `col[(c, kh, kw), (oy, ox)]`, zeros where the patch leaves the
+/// image.
+fn im2col(x: &[f32], g: &ConvGeometry, col: &mut [f32]) {
+    let [h, w] = g.input;
+    let [oh, ow] = g.output();
+    let [kh, kw] = g.kernel;
+    let [sy, sx] = g.stride;
+    let [py, px] = g.padding;
+    for c in 0..g.c_in {
+        let plane = &x[c * h * w..(c + 1) * h * w];
+        for ky in 0..kh {
+            for kx in 0..kw {
+                let row = &mut col[((c * kh + ky) * kw + kx) * oh * ow..][..oh * ow];
+                for oy in 0..oh {
+                    let out = &mut row[oy * ow..(oy + 1) * ow];
+                    let iy = (oy * sy + ky) as isize - py as isize;
+                    if iy < 0 || iy >= h as isize {
+                        out.fill(0.0);
+                        continue;
+                    }
+                    let src = &plane[iy as usize * w..(iy as usize + 1) * w];
+                    if sx == 1 {
+                        // ix = ox + kx − px: one shifted copy with zeros at the borders.
+                        let shift = kx as isize - px as isize;
+                        let lo = (-shift).clamp(0, ow as isize) as usize;
+                        let hi = (w as isize - shift).clamp(lo as isize, ow as isize) as usize;
+                        out[..lo].fill(0.0);
+                        out[hi..].fill(0.0);
+                        let start = (lo as isize + shift) as usize;
+                        out[lo..hi].copy_from_slice(&src[start..start + hi - lo]);
+                    } else {
+                        for (ox, o) in out.iter_mut().enumerate() {
+                            let ix = (ox * sx + kx) as isize - px as isize;
+                            *o = if ix < 0 || ix >= w as isize {
+                                0.0
+                            } else {
+                                src[ix as usize]
+                            };
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The slow reference: the definition, summed in `f64`.
+pub fn weight_grad_reference(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    g.check(x, grad_out);
+    let [h, w] = g.input;
+    let [oh, ow] = g.output();
+    let [kh, kw] = g.kernel;
+    let mut dw = vec![0f32; g.c_out * g.patch()];
+    for o in 0..g.c_out {
+        for c in 0..g.c_in {
+            for ky in 0..kh {
+                for kx in 0..kw {
+                    let mut s = 0f64;
+                    for n in 0..g.batch {
+                        for oy in 0..oh {
+                            for ox in 0..ow {
+                                let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
+                                let ix = (ox * g.stride[1] + kx) as isize - g.padding[1] as isize;
+                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= w as isize {
+                                    continue;
+                                }
+                                let xv = x[((n * g.c_in + c) * h + iy as usize) * w + ix as usize];
+                                let gv = grad_out[((n * g.c_out + o) * oh + oy) * ow + ox];
+                                s += xv as f64 * gv as f64;
+                            }
+                        }
+                    }
+                    dw[((o * g.c_in + c) * kh + ky) * kw + kx] = s as f32;
+                }
+            }
+        }
+    }
+    dw
+}

@@ -1,0 +1,127 @@
+//! The convolution weight-gradient kernel against its direct reference, and the backend
+//! extension's convolutions against burn's own: values and every gradient.
+
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
+use selfmodel::conv_extension::{conv_transpose2d, conv2d};
+use selfmodel::conv_gemm::{ConvGeometry, weight_grad, weight_grad_reference};
+
+fn values(n: usize, seed: u32) -> Vec<f32> {
+    // A cheap deterministic sequence in [-1, 1).
+    (0..n)
+        .map(|i| {
+            let v = (i as u32)
+                .wrapping_mul(2_654_435_761)
+                .wrapping_add(seed.wrapping_mul(97));
+            (v >> 8) as f32 / (1 << 23) as f32 - 1.0
+        })
+        .collect()
+}
+
+#[test]
+fn weight_grad_matches_the_reference() {
+    let cases = [
+        // batch, c_in, input, c_out, kernel, stride, padding
+        (3, 4, [9, 7], 5, [3, 3], [1, 1], [1, 1]),
+        (17, 2, [6, 6], 3, [4, 4], [2, 2], [1, 1]),
+        (2, 3, [8, 5], 2, [1, 1], [1, 1], [0, 0]),
+        (4, 2, [5, 5], 3, [3, 3], [1, 1], [2, 2]),
+        (1, 1, [7, 9], 2, [3, 2], [2, 3], [0, 1]),
+    ];
+    for (batch, c_in, input, c_out, kernel, stride, padding) in cases {
+        let g = ConvGeometry {
+            batch,
+            c_in,
+            input,
+            c_out,
+            kernel,
+            stride,
+            padding,
+        };
+        let [oh, ow] = g.output();
+        let x = values(batch * c_in * input[0] * input[1], 1);
+        let go = values(batch * c_out * oh * ow, 2);
+        let fast = weight_grad(&x, &go, &g);
+        let slow = weight_grad_reference(&x, &go, &g);
+        let worst = fast
+            .iter()
+            .zip(&slow)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        assert!(worst < 1e-4, "{g:?}: max difference {worst}");
+    }
+}
+
+/// Value and gradients (input, weight, bias) of `f(x, w, b)` under a fixed upstream gradient.
+fn value_and_grads(
+    f: impl Fn(Tensor<4>, Tensor<4>, Tensor<1>) -> Tensor<4>,
+    x: &Tensor<4>,
+    w: &Tensor<4>,
+    b: &Tensor<1>,
+) -> [TensorData; 4] {
+    let x = x.clone().require_grad();
+    let w = w.clone().require_grad();
+    let b = b.clone().require_grad();
+    let y = f(x.clone(), w.clone(), b.clone());
+    // A non-uniform upstream gradient: sum(y * y) / 2 has gradient y.
+    let grads = (y.clone() * y.clone()).sum().div_scalar(2.0).backward();
+    [
+        y.into_data(),
+        x.grad(&grads).unwrap().into_data(),
+        w.grad(&grads).unwrap().into_data(),
+        b.grad(&grads).unwrap().into_data(),
+    ]
+}
+
+fn assert_close(ours: [TensorData; 4], burns: [TensorData; 4], what: &str) {
+    for (name, (a, b)) in ["output", "input grad", "weight grad", "bias grad"]
+        .iter()
+        .zip(ours.iter().zip(&burns))
+    {
+        println!("{what}: {name}");
+        a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-4, 1e-4));
+    }
+}
+
+#[test]
+fn conv2d_gradients_match_burn() {
+    let dev = Device::flex().autodiff();
+    for (k, s, p) in [(3, 1, 1), (1, 1, 0), (3, 2, 1)] {
+        let x = Tensor::<4>::random([5, 3, 11, 9], Distribution::Default, &dev);
+        let w = Tensor::<4>::random([4, 3, k, k], Distribution::Default, &dev);
+        let b = Tensor::<1>::random([4], Distribution::Default, &dev);
+        let options = ConvOptions::new([s, s], [p, p], [1, 1], 1);
+        let ours = value_and_grads(|x, w, b| conv2d(x, w, Some(b), options.clone()), &x, &w, &b);
+        let burns = value_and_grads(
+            |x, w, b| burn::tensor::module::conv2d(x, w, Some(b), options.clone()),
+            &x,
+            &w,
+            &b,
+        );
+        assert_close(ours, burns, &format!("conv2d k{k} s{s} p{p}"));
+    }
+}
+
+#[test]
+fn conv_transpose2d_gradients_match_burn() {
+    let dev = Device::flex().autodiff();
+    for (k, s, p) in [(4, 2, 1), (3, 1, 2), (3, 2, 0)] {
+        let x = Tensor::<4>::random([5, 4, 6, 7], Distribution::Default, &dev);
+        let w = Tensor::<4>::random([4, 3, k, k], Distribution::Default, &dev);
+        let b = Tensor::<1>::random([3], Distribution::Default, &dev);
+        let options = ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1);
+        let ours = value_and_grads(
+            |x, w, b| conv_transpose2d(x, w, Some(b), options.clone()),
+            &x,
+            &w,
+            &b,
+        );
+        let burns = value_and_grads(
+            |x, w, b| burn::tensor::module::conv_transpose2d(x, w, Some(b), options.clone()),
+            &x,
+            &w,
+            &b,
+        );
+        assert_close(ours, burns, &format!("conv_transpose2d k{k} s{s} p{p}"));
+    }
+}
