@@ -15,7 +15,7 @@
 //! The same kernel gives a transposed convolution's weight gradient: for `y = conv_t(x, w)`
 //! with stride `s` and padding `p`, `dW_t[c, o, kh, kw] = Σ x[n, c, i, j] · dy[n, o, i·s − p +
 //! kh, j·s − p + kw]`, which is [`weight_grad`] with the convolution input `dy` and the output
-//! gradient `x` (see [`crate::conv_extension`]).
+//! gradient `x` (see [`crate::cpu_extension`]).
 //!
 //! All tensors are row-major NCHW `f32` slices; groups 1, dilation 1.
 

@@ -24,11 +24,9 @@ use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
 use burn::tensor::activation::{relu, sigmoid};
-use burn::tensor::module::interpolate;
-use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
 use burn::tensor::{Device, Tensor};
 
-use crate::conv_extension::conv2d_layer;
+use crate::cpu_extension::conv2d_layer;
 use crate::error::{Error, Result};
 use crate::preset::Preset;
 use crate::upconv::{UpConv, UpConvConfig};
@@ -225,9 +223,7 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
     if [h, w] == size {
         return x;
     }
-    let mut opts = InterpolateOptions::new(InterpolateMode::Bilinear).with_output_size(size);
-    opts.align_corners = false;
-    interpolate(x, opts)
+    crate::cpu_extension::resize_bilinear(x, size)
 }
 
 impl NeuroKin {

@@ -19,7 +19,7 @@ use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d
 use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
 
-use crate::conv_extension::conv2d_layer;
+use crate::cpu_extension::conv2d_layer;
 use crate::error::{Error, Result};
 use crate::neurokin::resize_bilinear;
 use crate::preset::Preset;

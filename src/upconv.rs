@@ -6,7 +6,7 @@
 //!
 //! The layer exists (rather than burn's `ConvTranspose2d`) to own the decoders' hot spot. Its
 //! forward pass is burn's GEMM + col2im `conv_transpose2d`; on flex its weight gradient runs on
-//! [`crate::conv_gemm`] through [`crate::conv_extension`], because burn's default weight
+//! [`crate::conv_gemm`] through [`crate::cpu_extension`], because burn's default weight
 //! gradient (a convolution with the activations as its kernel) was the slow part. Measured on
 //! the 2-core CPU (flex), rewrites of the layer in tensor ops were *slower*: the sub-pixel
 //! form (one 2x2 convolution with 4x the output channels, phases interleaved) took 2-4x longer
@@ -84,7 +84,7 @@ impl UpConv {
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         let s = self.stride;
         let p = self.padding;
-        crate::conv_extension::conv_transpose2d(
+        crate::cpu_extension::conv_transpose2d(
             x,
             self.weight.val(),
             Some(self.bias.val()),

@@ -1,21 +1,23 @@
-//! Convolutions whose weight gradient runs on our own CPU kernel: a burn backend extension.
+//! Our CPU kernels inside burn's autodiff graph: a burn backend extension.
 //!
-//! On the flex backend, [`conv2d`] and [`conv_transpose2d`] compute the forward pass and the
-//! input gradient with flex's own kernels, and the weight gradient with
-//! [`crate::conv_gemm::weight_grad`] (im2col + GEMM) instead of burn-backend's default, which
-//! runs a convolution with the activations as its kernel and took most of a NeuroKin training
-//! step. On every other device (wgpu, ndarray) they are burn's `conv2d` and
-//! `conv_transpose2d`, unchanged.
+//! On the flex backend:
+//! - [`conv2d`] and [`conv_transpose2d`] compute the forward pass and the input gradient with
+//!   flex's own kernels, and the weight gradient with [`crate::conv_gemm::weight_grad`]
+//!   (im2col + GEMM) instead of burn-backend's default, which runs a convolution with the
+//!   activations as its kernel and took most of a NeuroKin training step;
+//! - [`resize_bilinear`] runs forward and backward on [`crate::bilinear_resize`].
 //!
-//! The extension: a backend trait [`ConvWeightGradOps`] routed through burn's `Dispatch` by
-//! `#[backend_extension]`; its flex implementation calls the kernel; its `Autodiff`
-//! implementation is the hand-written backward pass (burn's own, with the weight gradient
-//! swapped). The tests compare both functions' gradients with burn's ops.
+//! On every other device (wgpu, ndarray) they are burn's own ops, unchanged.
+//!
+//! The extension: a backend trait [`CpuKernelOps`] routed through burn's `Dispatch` by
+//! `#[backend_extension]`; its flex implementation calls the kernels; its `Autodiff`
+//! implementation holds the hand-written backward passes (burn's own for the convolutions, with
+//! the weight gradient swapped). The tests compare values and gradients with burn's ops.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
-use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind, unary};
 use burn::backend::autodiff::{Autodiff, NodeId};
 use burn::backend::flex::FlexTensor;
 use burn::backend::ops::ModuleOps;
@@ -23,14 +25,15 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{
     Backend, DType, Dispatch, DispatchDevice, Flex, TensorMetadata, backend_extension,
 };
-use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, InterpolateOptions};
+use burn::tensor::{Shape, Tensor, TensorData};
 
+use crate::bilinear_resize;
 use crate::conv_gemm::{ConvGeometry, weight_grad};
 
 /// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
 #[backend_extension(Flex, Autodiff)]
-pub trait ConvWeightGradOps: Backend {
+pub trait CpuKernelOps: Backend {
     /// `conv2d` without bias; its backward pass uses [`Self::conv2d_weight_grad`].
     fn conv2d_fast(
         x: FloatTensor<Self>,
@@ -69,6 +72,29 @@ pub trait ConvWeightGradOps: Backend {
     ) -> FloatTensor<Self> {
         Self::conv_transpose2d_weight_backward(x, weight, output_grad, options)
     }
+
+    /// Bilinear resize of `[batch, channels, h, w]` to `size`, align_corners false; its
+    /// backward pass uses [`Self::resize_bilinear_backward`].
+    fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
+        Self::interpolate(x, size, bilinear_options())
+    }
+
+    /// Gradient of [`Self::resize_bilinear_fast`] for an input of shape `input`.
+    fn resize_bilinear_backward(grad: FloatTensor<Self>, input: [usize; 4]) -> FloatTensor<Self> {
+        let [_, _, oh, ow] = grad.shape().dims::<4>();
+        let x = Self::float_zeros(
+            Shape::new(input),
+            &grad.device(),
+            burn::tensor::FloatDType::F32,
+        );
+        Self::interpolate_backward(x, grad, [oh, ow], bilinear_options())
+    }
+}
+
+fn bilinear_options() -> InterpolateOptions {
+    let mut options = InterpolateOptions::new(InterpolateMode::Bilinear);
+    options.align_corners = false;
+    options
 }
 
 /// `(data, [batch, channels, h, w])` of a contiguous f32 flex tensor.
@@ -81,7 +107,7 @@ fn flex_tensor(values: Vec<f32>, dims: [usize; 4]) -> FlexTensor {
     FlexTensor::from_data(TensorData::new(values, dims))
 }
 
-impl ConvWeightGradOps for Flex {
+impl CpuKernelOps for Flex {
     fn conv2d_weight_grad(
         x: FlexTensor,
         weight: FlexTensor,
@@ -134,13 +160,34 @@ impl ConvWeightGradOps for Flex {
         let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
         flex_tensor(dw, wd)
     }
+
+    fn resize_bilinear_fast(x: FlexTensor, size: [usize; 2]) -> FlexTensor {
+        if x.dtype() != DType::F32 {
+            return Self::interpolate(x, size, bilinear_options());
+        }
+        let (x, [n, c, h, w]) = f32_nchw(&x);
+        let y = bilinear_resize::resize(x.storage::<f32>(), n * c, [h, w], size);
+        flex_tensor(y, [n, c, size[0], size[1]])
+    }
+
+    fn resize_bilinear_backward(grad: FlexTensor, input: [usize; 4]) -> FlexTensor {
+        if grad.dtype() != DType::F32 {
+            let [_, _, oh, ow] = grad.shape().dims::<4>();
+            let x = FlexTensor::zeros(Shape::new(input), DType::F32);
+            return Self::interpolate_backward(x, grad, [oh, ow], bilinear_options());
+        }
+        let (g, [n, c, oh, ow]) = f32_nchw(&grad);
+        let [_, _, h, w] = input;
+        let dx = bilinear_resize::resize_backward(g.storage::<f32>(), n * c, [h, w], [oh, ow]);
+        flex_tensor(dx, input)
+    }
 }
 
 fn kernel_supports(dtype: DType, dilation: &[usize; 2], groups: usize) -> bool {
     dtype == DType::F32 && *dilation == [1, 1] && groups == 1
 }
 
-impl<B: Backend + ConvWeightGradOps, C: CheckpointStrategy> ConvWeightGradOps for Autodiff<B, C> {
+impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff<B, C> {
     fn conv2d_fast(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -149,7 +196,7 @@ impl<B: Backend + ConvWeightGradOps, C: CheckpointStrategy> ConvWeightGradOps fo
         #[derive(Debug)]
         struct Conv2dFast;
 
-        impl<B: Backend + ConvWeightGradOps> Backward<B, 2> for Conv2dFast {
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for Conv2dFast {
             type State = (NodeId, NodeId, ConvOptions<2>);
 
             fn backward(
@@ -209,7 +256,7 @@ impl<B: Backend + ConvWeightGradOps, C: CheckpointStrategy> ConvWeightGradOps fo
         #[derive(Debug)]
         struct ConvTranspose2dFast;
 
-        impl<B: Backend + ConvWeightGradOps> Backward<B, 2> for ConvTranspose2dFast {
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for ConvTranspose2dFast {
             type State = (NodeId, NodeId, ConvTransposeOptions<2>);
 
             fn backward(
@@ -260,6 +307,41 @@ impl<B: Backend + ConvWeightGradOps, C: CheckpointStrategy> ConvWeightGradOps fo
             )),
         }
     }
+
+    fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ResizeBilinear;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 1> for ResizeBilinear {
+            type State = [usize; 4];
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 1>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
+                let input = ops.state;
+                unary::<B, _>(ops.parents, ops.node, grads, |grad| {
+                    B::resize_bilinear_backward(grad, input)
+                });
+            }
+        }
+
+        let input = x.shape().dims::<4>();
+        match ResizeBilinear
+            .prepare::<C>([x.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                prep.finish(input, B::resize_bilinear_fast(x.into_primitive(), size))
+            }
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::resize_bilinear_fast(x.into_primitive(), size))
+            }
+        }
+    }
 }
 
 /// Whether `x` lives on the flex backend (with or without autodiff).
@@ -291,11 +373,8 @@ pub fn conv2d(
     if !on_flex(&x) {
         return burn::tensor::module::conv2d(x, weight, bias, options);
     }
-    let y = <Dispatch as ConvWeightGradOps>::conv2d_fast(
-        x.into_dispatch(),
-        weight.into_dispatch(),
-        options,
-    );
+    let y =
+        <Dispatch as CpuKernelOps>::conv2d_fast(x.into_dispatch(), weight.into_dispatch(), options);
     add_bias(Tensor::from_dispatch(y), bias)
 }
 
@@ -309,7 +388,7 @@ pub fn conv_transpose2d(
     if !on_flex(&x) {
         return burn::tensor::module::conv_transpose2d(x, weight, bias, options);
     }
-    let y = <Dispatch as ConvWeightGradOps>::conv_transpose2d_fast(
+    let y = <Dispatch as CpuKernelOps>::conv_transpose2d_fast(
         x.into_dispatch(),
         weight.into_dispatch(),
         options,
@@ -334,4 +413,16 @@ pub fn conv2d_layer(layer: &burn::nn::conv::Conv2d, x: Tensor<4>) -> Tensor<4> {
         layer.bias.as_ref().map(|b| b.val()),
         options,
     )
+}
+
+/// Bilinear resize of `[batch, channels, h, w]` to `size` (align_corners false, PyTorch's
+/// `F.interpolate(..., mode="bilinear")`), on our kernel when `x` is on flex.
+pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
+    if !on_flex(&x) {
+        let mut options = bilinear_options();
+        options.output_size = Some(size);
+        return burn::tensor::module::interpolate(x, options);
+    }
+    let y = <Dispatch as CpuKernelOps>::resize_bilinear_fast(x.into_dispatch(), size);
+    Tensor::from_dispatch(y)
 }

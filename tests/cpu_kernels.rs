@@ -1,10 +1,11 @@
-//! The convolution weight-gradient kernel against its direct reference, and the backend
-//! extension's convolutions against burn's own: values and every gradient.
+//! Our CPU kernels: the convolution weight gradient against its direct reference, and the
+//! backend extension's convolutions and bilinear resize against burn's own ops, values and
+//! every gradient.
 
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
-use selfmodel::conv_extension::{conv_transpose2d, conv2d};
 use selfmodel::conv_gemm::{ConvGeometry, weight_grad, weight_grad_reference};
+use selfmodel::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
 
 fn values(n: usize, seed: u32) -> Vec<f32> {
     // A cheap deterministic sequence in [-1, 1).
@@ -123,5 +124,32 @@ fn conv_transpose2d_gradients_match_burn() {
             &b,
         );
         assert_close(ours, burns, &format!("conv_transpose2d k{k} s{s} p{p}"));
+    }
+}
+
+#[test]
+fn resize_bilinear_and_its_gradient_match_burn() {
+    let dev = Device::flex().autodiff();
+    for (input, output) in [([30, 30], [100, 100]), ([7, 9], [5, 13]), ([1, 4], [3, 4])] {
+        let x = Tensor::<4>::random([3, 2, input[0], input[1]], Distribution::Default, &dev);
+        let run = |resize: &dyn Fn(Tensor<4>) -> Tensor<4>| {
+            let x = x.clone().require_grad();
+            let y = resize(x.clone());
+            let grads = (y.clone() * y.clone()).sum().div_scalar(2.0).backward();
+            [y.into_data(), x.grad(&grads).unwrap().into_data()]
+        };
+        let ours = run(&|x| resize_bilinear(x, output));
+        let burns = run(&|x| {
+            let mut options = burn::tensor::ops::InterpolateOptions::new(
+                burn::tensor::ops::InterpolateMode::Bilinear,
+            )
+            .with_output_size(output);
+            options.align_corners = false;
+            burn::tensor::module::interpolate(x, options)
+        });
+        for (name, (a, b)) in ["output", "input grad"].iter().zip(ours.iter().zip(&burns)) {
+            println!("resize {input:?} -> {output:?}: {name}");
+            a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-4, 1e-5));
+        }
     }
 }

@@ -1,0 +1,110 @@
+//! Bilinear resize of NCHW planes (PyTorch's `F.interpolate(mode="bilinear",
+//! align_corners=False)`), forward and backward, separable, on the CPU.
+//!
+//! NeuroKin resizes its 30x30 features to 100x100 before the head. flex's kernel computes the
+//! source coordinates in `f64` with `floor` per output pixel; here the taps are computed once per
+//! call and the resize runs in two passes, along rows (a gather of two taps) and then along
+//! columns (two whole rows blended, which vectorises). The backward pass runs the same two
+//! passes transposed. Planes run in parallel; each plane's sums are in a fixed order, so the
+//! result does not depend on the scheduling. The reference is burn's `interpolate` (see the
+//! tests).
+
+use rayon::prelude::*;
+
+/// The two source indices and the weight of the second, for each output coordinate.
+#[derive(Clone, Debug)]
+struct Taps {
+    lo: Vec<usize>,
+    hi: Vec<usize>,
+    frac: Vec<f32>,
+}
+
+impl Taps {
+    /// `src = max((dst + 0.5) · in / out − 0.5, 0)`, `lo = floor(src)`, `hi = min(lo + 1, in − 1)`.
+    fn new(input: usize, output: usize) -> Self {
+        let scale = input as f32 / output as f32;
+        let mut taps = Taps {
+            lo: Vec::with_capacity(output),
+            hi: Vec::with_capacity(output),
+            frac: Vec::with_capacity(output),
+        };
+        for d in 0..output {
+            let src = ((d as f32 + 0.5) * scale - 0.5).max(0.0);
+            let lo = (src as usize).min(input - 1);
+            taps.lo.push(lo);
+            taps.hi.push((lo + 1).min(input - 1));
+            taps.frac.push(src - lo as f32);
+        }
+        taps
+    }
+}
+
+/// `x` `[planes, h, w]` -> `[planes, out_h, out_w]`.
+pub fn resize(x: &[f32], planes: usize, input: [usize; 2], output: [usize; 2]) -> Vec<f32> {
+    let [h, w] = input;
+    let [oh, ow] = output;
+    assert_eq!(x.len(), planes * h * w);
+    let (ty, tx) = (Taps::new(h, oh), Taps::new(w, ow));
+    let mut out = vec![0f32; planes * oh * ow];
+    out.par_chunks_mut(oh * ow)
+        .zip(x.par_chunks(h * w))
+        .for_each(|(out, x)| {
+            // Rows: [h, w] -> [h, ow].
+            let mut rows = vec![0f32; h * ow];
+            for (row, src) in rows.chunks_exact_mut(ow).zip(x.chunks_exact(w)) {
+                for (o, r) in row.iter_mut().enumerate() {
+                    let f = tx.frac[o];
+                    *r = src[tx.lo[o]] * (1.0 - f) + src[tx.hi[o]] * f;
+                }
+            }
+            // Columns: [h, ow] -> [oh, ow].
+            for (oy, dst) in out.chunks_exact_mut(ow).enumerate() {
+                let f = ty.frac[oy];
+                let a = &rows[ty.lo[oy] * ow..][..ow];
+                let b = &rows[ty.hi[oy] * ow..][..ow];
+                for ((d, &a), &b) in dst.iter_mut().zip(a).zip(b) {
+                    *d = a * (1.0 - f) + b * f;
+                }
+            }
+        });
+    out
+}
+
+/// The gradient of [`resize`] with respect to its input: `grad` `[planes, out_h, out_w]` ->
+/// `[planes, h, w]`.
+pub fn resize_backward(
+    grad: &[f32],
+    planes: usize,
+    input: [usize; 2],
+    output: [usize; 2],
+) -> Vec<f32> {
+    let [h, w] = input;
+    let [oh, ow] = output;
+    assert_eq!(grad.len(), planes * oh * ow);
+    let (ty, tx) = (Taps::new(h, oh), Taps::new(w, ow));
+    let mut out = vec![0f32; planes * h * w];
+    out.par_chunks_mut(h * w)
+        .zip(grad.par_chunks(oh * ow))
+        .for_each(|(dx, g)| {
+            // Columns, transposed: [oh, ow] -> [h, ow].
+            let mut rows = vec![0f32; h * ow];
+            for (oy, src) in g.chunks_exact(ow).enumerate() {
+                let f = ty.frac[oy];
+                for (r, &v) in rows[ty.lo[oy] * ow..][..ow].iter_mut().zip(src) {
+                    *r += v * (1.0 - f);
+                }
+                for (r, &v) in rows[ty.hi[oy] * ow..][..ow].iter_mut().zip(src) {
+                    *r += v * f;
+                }
+            }
+            // Rows, transposed: [h, ow] -> [h, w].
+            for (dst, row) in dx.chunks_exact_mut(w).zip(rows.chunks_exact(ow)) {
+                for (o, &v) in row.iter().enumerate() {
+                    let f = tx.frac[o];
+                    dst[tx.lo[o]] += v * (1.0 - f);
+                    dst[tx.hi[o]] += v * f;
+                }
+            }
+        });
+    out
+}
