@@ -41,7 +41,9 @@ fn main() -> ExitCode {
             .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))
         {
             let start = Instant::now();
-            let opts = selfmodel::experiments::RunOptions::preset(&args.preset);
+            let mut opts = selfmodel::experiments::RunOptions::preset(&args.preset);
+            // table1 gathers the rows the decoders' own experiments just wrote.
+            opts.reuse_root = Some(root.clone());
             let summary = (e.run)(&opts, &root.join(e.default_dir))?;
             println!(
                 "{:<16} {:>7.1} s  {summary}",

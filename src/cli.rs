@@ -178,6 +178,7 @@ impl ExperimentArgs {
             paper_compatible: self.paper_compatible,
             resume: self.resume,
             steps: self.steps,
+            reuse_root: None,
         };
         let dir = self
             .out

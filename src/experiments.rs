@@ -27,6 +27,10 @@ pub struct RunOptions {
     pub resume: bool,
     /// Override the training steps (a shortened run says so in its results).
     pub steps: Option<usize>,
+    /// Where experiments may already have written their results (`reproduce`'s root): `table1`
+    /// gathers rows found there, of the same preset, dataset and steps, instead of training
+    /// the same models a second time.
+    pub reuse_root: Option<std::path::PathBuf>,
 }
 
 impl RunOptions {
@@ -38,6 +42,7 @@ impl RunOptions {
             paper_compatible: false,
             resume: false,
             steps: None,
+            reuse_root: None,
         }
     }
 

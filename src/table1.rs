@@ -3,7 +3,8 @@
 //!
 //! The zoo is the registry: every experiment marked `in_table1` runs into `dir/<name>/` and
 //! its `results.csv` rows are gathered, so a new self-model (FFKSM, K-3DGS) appears here by
-//! registering itself, with no edit to this file.
+//! registering itself, with no edit to this file. Under `reproduce`, rows the experiments
+//! have just written into their own folders are gathered instead of trained again.
 
 use std::path::Path;
 
@@ -16,6 +17,17 @@ use crate::model_result::{ModelResult, read_results};
 pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
     let mut rows = Vec::new();
     for e in EXPERIMENTS.iter().filter(|e| e.in_table1) {
+        if let Some(found) = reusable_rows(opts, e.default_dir)? {
+            eprintln!(
+                "table1: {} ({} preset): {} rows reused from {}",
+                e.name,
+                opts.preset,
+                found.len(),
+                e.default_dir
+            );
+            rows.extend(found);
+            continue;
+        }
         let sub = dir.join(e.name);
         eprintln!("table1: {} ({} preset)", e.name, opts.preset);
         (e.run)(opts, &sub)?;
@@ -54,4 +66,28 @@ pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
         &points,
     )?;
     Ok(rows)
+}
+
+/// The rows under `opts.reuse_root/default_dir/results.csv`, if that file exists and every row
+/// has this run's preset, dataset and (with `--steps`) step count.
+fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<ModelResult>>> {
+    let Some(root) = &opts.reuse_root else {
+        return Ok(None);
+    };
+    let path = root.join(default_dir).join("results.csv");
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let rows = read_results(&path)?;
+    let dataset = if opts.paper_compatible {
+        "paper_compatible"
+    } else {
+        "clean"
+    };
+    let matches = |r: &ModelResult| {
+        r.preset == opts.preset
+            && r.dataset == dataset
+            && opts.steps.is_none_or(|s| r.train_steps == s)
+    };
+    Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
 }

@@ -1,4 +1,5 @@
-//! Smoke test driven by the registry: every experiment runs on its quick preset.
+//! Smoke test driven by the registry: every experiment runs on its quick preset, as
+//! `reproduce` runs them (table1 gathers the rows the decoders have just written).
 
 mod common;
 
@@ -14,7 +15,8 @@ fn every_experiment_runs_on_its_quick_preset() {
             continue;
         }
         let dir = root.path().join(e.default_dir);
-        let opts = selfmodel::experiments::RunOptions::preset("quick");
+        let mut opts = selfmodel::experiments::RunOptions::preset("quick");
+        opts.reuse_root = Some(root.path().to_path_buf());
         let summary = (e.run)(&opts, &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
         assert!(!summary.is_empty());
         assert!(
@@ -22,6 +24,21 @@ fn every_experiment_runs_on_its_quick_preset() {
             "{} wrote nothing",
             e.name
         );
+    }
+    // table1 reused every in-table1 experiment's rows instead of training them again.
+    let table1 = root.path().join("reports/table1");
+    let rows = selfmodel::model_result::read_results(&table1.join("results.csv")).unwrap();
+    let expected: usize = EXPERIMENTS
+        .iter()
+        .filter(|e| e.in_table1)
+        .map(|e| {
+            let csv = root.path().join(e.default_dir).join("results.csv");
+            selfmodel::model_result::read_results(&csv).unwrap().len()
+        })
+        .sum();
+    assert_eq!(rows.len(), expected);
+    for e in EXPERIMENTS.iter().filter(|e| e.in_table1) {
+        assert!(!table1.join(e.name).exists(), "table1 trained {} again", e.name);
     }
 }
 
