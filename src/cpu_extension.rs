@@ -29,7 +29,7 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, Inte
 use burn::tensor::{Shape, Tensor, TensorData};
 
 use crate::bilinear_resize;
-use crate::conv_gemm::{ConvGeometry, weight_grad};
+use crate::conv_gemm::{self, ConvGeometry, weight_grad};
 
 /// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
 #[backend_extension(Flex, Autodiff)]
@@ -108,6 +108,29 @@ fn flex_tensor(values: Vec<f32>, dims: [usize; 4]) -> FlexTensor {
 }
 
 impl CpuKernelOps for Flex {
+    fn conv2d_fast(x: FlexTensor, weight: FlexTensor, options: ConvOptions<2>) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.is_asymmetric()
+        {
+            return Self::conv2d(x, weight, None, options);
+        }
+        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
+        let (weight, [c_out, _, kh, kw]) = f32_nchw(&weight);
+        let g = ConvGeometry {
+            batch,
+            c_in,
+            input: [h, w],
+            c_out,
+            kernel: [kh, kw],
+            stride: options.stride,
+            padding: options.padding_begin(),
+        };
+        let y = conv_gemm::forward(x.storage::<f32>(), weight.storage::<f32>(), &g);
+        let [oh, ow] = g.output();
+        flex_tensor(y, [batch, c_out, oh, ow])
+    }
+
     fn conv2d_weight_grad(
         x: FlexTensor,
         weight: FlexTensor,
@@ -231,13 +254,12 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
                 let weight_state = prep.checkpoint(&weight);
                 prep.finish(
                     (x_state, weight_state, options.clone()),
-                    B::conv2d(x.into_primitive(), weight.into_primitive(), None, options),
+                    B::conv2d_fast(x.into_primitive(), weight.into_primitive(), options),
                 )
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv2d(
+            OpsKind::UnTracked(prep) => prep.finish(B::conv2d_fast(
                 x.into_primitive(),
                 weight.into_primitive(),
-                None,
                 options,
             )),
         }
@@ -267,11 +289,7 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
                 let weight =
                     checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
                 if let Some(node) = node_x {
-                    let g = B::conv_transpose2d_x_backward(
-                        weight.clone(),
-                        grad.clone(),
-                        options.clone(),
-                    );
+                    let g = conv_transpose2d_x_grad::<B>(weight.clone(), grad.clone(), &options);
                     grads.register::<B>(node.id, g);
                 }
                 if let Some(node) = node_weight {
@@ -341,9 +359,9 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
 
 /// The input gradient of a convolution. With stride 1 and symmetric padding `p` it is the
 /// forward convolution of the output gradient with the kernel flipped in space and its
-/// channel axes swapped, padded by `k − 1 − p` (flex's im2col + GEMM forward kernel, faster than
-/// the transposed convolution burn's default uses); otherwise burn's default.
-fn conv2d_x_grad<B: Backend>(
+/// channel axes swapped, padded by `k − 1 − p` (our im2col + GEMM forward kernel, faster than the
+/// transposed convolution burn's default uses); otherwise burn's default.
+fn conv2d_x_grad<B: Backend + CpuKernelOps>(
     x: FloatTensor<B>,
     weight: FloatTensor<B>,
     grad: FloatTensor<B>,
@@ -362,7 +380,22 @@ fn conv2d_x_grad<B: Backend>(
     }
     let flipped = B::float_flip(B::float_swap_dims(weight, 0, 1), &[2, 3]);
     let options = ConvOptions::new([1, 1], [kh - 1 - ph, kw - 1 - pw], [1, 1], 1);
-    B::conv2d(grad, flipped, None, options)
+    B::conv2d_fast(grad, flipped, options)
+}
+
+/// The input gradient of a transposed convolution: the forward convolution of the output
+/// gradient with the same kernel, stride and padding (burn's default does the same through
+/// `conv2d`; here through [`CpuKernelOps::conv2d_fast`]).
+fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
+    weight: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    options: &ConvTransposeOptions<2>,
+) -> FloatTensor<B> {
+    if options.padding_out != [0, 0] || options.dilation != [1, 1] || options.groups != 1 {
+        return B::conv_transpose2d_x_backward(weight, grad, options.clone());
+    }
+    let conv = ConvOptions::new(options.stride, options.padding, [1, 1], 1);
+    B::conv2d_fast(grad, weight, conv)
 }
 
 /// Whether `x` lives on the flex backend (with or without autodiff).

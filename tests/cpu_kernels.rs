@@ -1,10 +1,12 @@
-//! Our CPU kernels: the convolution weight gradient against its direct reference, and the
-//! backend extension's convolutions and bilinear resize against burn's own ops, values and
-//! every gradient.
+//! Our CPU kernels: the convolution forward pass and weight gradient against their direct
+//! references, and the backend extension's convolutions and bilinear resize against burn's
+//! own ops, values and every gradient.
 
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
-use selfmodel::conv_gemm::{ConvGeometry, weight_grad, weight_grad_reference};
+use selfmodel::conv_gemm::{
+    ConvGeometry, forward, forward_reference, weight_grad, weight_grad_reference,
+};
 use selfmodel::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
 
 fn values(n: usize, seed: u32) -> Vec<f32> {
@@ -20,7 +22,7 @@ fn values(n: usize, seed: u32) -> Vec<f32> {
 }
 
 #[test]
-fn weight_grad_matches_the_reference() {
+fn forward_and_weight_grad_match_their_references() {
     let cases = [
         // batch, c_in, input, c_out, kernel, stride, padding
         (3, 4, [9, 7], 5, [3, 3], [1, 1], [1, 1]),
@@ -42,14 +44,18 @@ fn weight_grad_matches_the_reference() {
         let [oh, ow] = g.output();
         let x = values(batch * c_in * input[0] * input[1], 1);
         let go = values(batch * c_out * oh * ow, 2);
-        let fast = weight_grad(&x, &go, &g);
-        let slow = weight_grad_reference(&x, &go, &g);
-        let worst = fast
-            .iter()
-            .zip(&slow)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0f32, f32::max);
-        assert!(worst < 1e-4, "{g:?}: max difference {worst}");
+        let worst = |fast: Vec<f32>, slow: Vec<f32>| {
+            assert_eq!(fast.len(), slow.len());
+            fast.iter()
+                .zip(&slow)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0f32, f32::max)
+        };
+        let dw = worst(weight_grad(&x, &go, &g), weight_grad_reference(&x, &go, &g));
+        assert!(dw < 1e-4, "{g:?}: weight gradient max difference {dw}");
+        let w = values(c_out * c_in * kernel[0] * kernel[1], 3);
+        let y = worst(forward(&x, &w, &g), forward_reference(&x, &w, &g));
+        assert!(y < 1e-4, "{g:?}: forward max difference {y}");
     }
 }
 

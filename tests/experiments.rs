@@ -38,7 +38,11 @@ fn every_experiment_runs_on_its_quick_preset() {
         .sum();
     assert_eq!(rows.len(), expected);
     for e in EXPERIMENTS.iter().filter(|e| e.in_table1) {
-        assert!(!table1.join(e.name).exists(), "table1 trained {} again", e.name);
+        assert!(
+            !table1.join(e.name).exists(),
+            "table1 trained {} again",
+            e.name
+        );
     }
 }
 
