@@ -21,6 +21,9 @@
 //! kh, j·s − p + kw]`, which is [`weight_grad`] with the convolution input `dy` and the output
 //! gradient `x` (see [`crate::cpu_extension`]).
 //!
+//! A transposed convolution's forward pass is the adjoint of a convolution: `col_n = Wᵀ · x_n`,
+//! then col2im (the adjoint of im2col) scatters the columns into the output ([`transpose`]).
+//!
 //! All tensors are row-major NCHW `f32` slices; groups 1, dilation 1.
 
 use rayon::prelude::*;
@@ -206,6 +209,131 @@ pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
         }
     }
     total
+}
+
+/// The transposed convolution of `x` `[batch, c_out, Ho, Wo]` with `w` `[c_out, c_in, kh, kw]`
+/// (PyTorch's `ConvTranspose2d` layout, `[in, out, k, k]` of the layer), no bias: the adjoint
+/// of the convolution `g` (whose input is this function's output, `[batch, c_in, H, W]`).
+/// Images run in parallel.
+pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    let [oh, ow] = g.output();
+    let pixels = oh * ow;
+    let patch = g.patch();
+    let image_out = g.c_in * g.input[0] * g.input[1];
+    assert_eq!(x.len(), g.batch * g.c_out * pixels);
+    assert_eq!(w.len(), g.c_out * patch);
+    let parallelism = if g.batch < rayon::current_num_threads() {
+        gemm::Parallelism::Rayon(0)
+    } else {
+        gemm::Parallelism::None
+    };
+    let mut y = vec![0f32; g.batch * image_out];
+    y.par_chunks_mut(image_out).enumerate().for_each_init(
+        || vec![0f32; patch * pixels],
+        |col, (n, out)| {
+            let xn = &x[n * g.c_out * pixels..(n + 1) * g.c_out * pixels];
+            // col[CKK x P] = wᵀ[CKK x O] · x_n[O x P]
+            // SAFETY: `w`, `xn` and `col` hold exactly the elements the strides address
+            // (checked above and by construction), and do not alias.
+            unsafe {
+                gemm::gemm(
+                    patch,
+                    pixels,
+                    g.c_out,
+                    col.as_mut_ptr(),
+                    1,
+                    pixels as isize,
+                    false,
+                    w.as_ptr(),
+                    patch as isize,
+                    1,
+                    xn.as_ptr(),
+                    1,
+                    pixels as isize,
+                    0.0,
+                    1.0,
+                    false,
+                    false,
+                    false,
+                    parallelism,
+                );
+            }
+            col2im(col, g, out);
+        },
+    );
+    y
+}
+
+/// The slow reference of [`transpose`]: the definition, summed in `f64`.
+pub fn transpose_reference(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    let [h, wd] = g.input;
+    let [oh, ow] = g.output();
+    let [kh, kw] = g.kernel;
+    let mut y = vec![0f64; g.batch * g.c_in * h * wd];
+    for n in 0..g.batch {
+        for o in 0..g.c_out {
+            for oy in 0..oh {
+                for ox in 0..ow {
+                    let xv = x[((n * g.c_out + o) * oh + oy) * ow + ox] as f64;
+                    for c in 0..g.c_in {
+                        for ky in 0..kh {
+                            for kx in 0..kw {
+                                let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
+                                let ix = (ox * g.stride[1] + kx) as isize - g.padding[1] as isize;
+                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= wd as isize {
+                                    continue;
+                                }
+                                let wv = w[((o * g.c_in + c) * kh + ky) * kw + kx] as f64;
+                                y[((n * g.c_in + c) * h + iy as usize) * wd + ix as usize] +=
+                                    xv * wv;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    y.into_iter().map(|v| v as f32).collect()
+}
+
+/// The adjoint of [`im2col`]: add `col[(c, kh, kw), (oy, ox)]` into the image `[c_in, H, W]`
+/// (overwritten).
+fn col2im(col: &[f32], g: &ConvGeometry, image: &mut [f32]) {
+    let [h, w] = g.input;
+    let [oh, ow] = g.output();
+    let [kh, kw] = g.kernel;
+    let [sy, sx] = g.stride;
+    let [py, px] = g.padding;
+    image.fill(0.0);
+    for c in 0..g.c_in {
+        let plane = &mut image[c * h * w..(c + 1) * h * w];
+        for ky in 0..kh {
+            for kx in 0..kw {
+                let row = &col[((c * kh + ky) * kw + kx) * oh * ow..][..oh * ow];
+                // ox range whose ix = ox·sx + kx − px lies in [0, w).
+                let lo = px.saturating_sub(kx).div_ceil(sx);
+                let hi = ((w + px).saturating_sub(kx)).div_ceil(sx).min(ow);
+                for oy in 0..oh {
+                    let iy = (oy * sy + ky) as isize - py as isize;
+                    if iy < 0 || iy >= h as isize || lo >= hi {
+                        continue;
+                    }
+                    let dst = &mut plane[iy as usize * w..(iy as usize + 1) * w];
+                    let src = &row[oy * ow..(oy + 1) * ow];
+                    let ix0 = lo * sx + kx - px;
+                    if sx == 1 {
+                        for (d, &v) in dst[ix0..ix0 + hi - lo].iter_mut().zip(&src[lo..hi]) {
+                            *d += v;
+                        }
+                    } else {
+                        for (i, &v) in src[lo..hi].iter().enumerate() {
+                            dst[ix0 + i * sx] += v;
+                        }
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// One image `[c_in, H, W]` to `col[(c, kh, kw), (oy, ox)]`, zeros where the patch leaves the

@@ -131,6 +131,38 @@ impl CpuKernelOps for Flex {
         flex_tensor(y, [batch, c_out, oh, ow])
     }
 
+    fn conv_transpose2d_fast(
+        x: FlexTensor,
+        weight: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.padding_out != [0, 0]
+        {
+            return Self::conv_transpose2d(x, weight, None, options);
+        }
+        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
+        let (weight, [_, c_out, kh, kw]) = f32_nchw(&weight);
+        let [s, p] = [options.stride, options.padding];
+        let out = [
+            (h - 1) * s[0] + kh - 2 * p[0],
+            (w - 1) * s[1] + kw - 2 * p[1],
+        ];
+        // The convolution whose adjoint this is reads the output and lands on `x`'s grid.
+        let g = ConvGeometry {
+            batch,
+            c_in: c_out,
+            input: out,
+            c_out: c_in,
+            kernel: [kh, kw],
+            stride: s,
+            padding: p,
+        };
+        let y = conv_gemm::transpose(x.storage::<f32>(), weight.storage::<f32>(), &g);
+        flex_tensor(y, [batch, c_out, out[0], out[1]])
+    }
+
     fn conv2d_weight_grad(
         x: FlexTensor,
         weight: FlexTensor,
@@ -309,13 +341,12 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
                 let weight_state = prep.checkpoint(&weight);
                 prep.finish(
                     (x_state, weight_state, options.clone()),
-                    B::conv_transpose2d(x.into_primitive(), weight.into_primitive(), None, options),
+                    B::conv_transpose2d_fast(x.into_primitive(), weight.into_primitive(), options),
                 )
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d(
+            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d_fast(
                 x.into_primitive(),
                 weight.into_primitive(),
-                None,
                 options,
             )),
         }

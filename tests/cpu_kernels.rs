@@ -1,11 +1,12 @@
-//! Our CPU kernels: the convolution forward pass and weight gradient against their direct
+//! Our CPU kernels: the convolution, its transpose and its weight gradient against their direct
 //! references, and the backend extension's convolutions and bilinear resize against burn's
 //! own ops, values and every gradient.
 
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
 use selfmodel::conv_gemm::{
-    ConvGeometry, forward, forward_reference, weight_grad, weight_grad_reference,
+    ConvGeometry, forward, forward_reference, transpose, transpose_reference, weight_grad,
+    weight_grad_reference,
 };
 use selfmodel::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
 
@@ -22,7 +23,7 @@ fn values(n: usize, seed: u32) -> Vec<f32> {
 }
 
 #[test]
-fn forward_and_weight_grad_match_their_references() {
+fn kernels_match_their_references() {
     let cases = [
         // batch, c_in, input, c_out, kernel, stride, padding
         (3, 4, [9, 7], 5, [3, 3], [1, 1], [1, 1]),
@@ -56,6 +57,8 @@ fn forward_and_weight_grad_match_their_references() {
         let w = values(c_out * c_in * kernel[0] * kernel[1], 3);
         let y = worst(forward(&x, &w, &g), forward_reference(&x, &w, &g));
         assert!(y < 1e-4, "{g:?}: forward max difference {y}");
+        let t = worst(transpose(&go, &w, &g), transpose_reference(&go, &w, &g));
+        assert!(t < 1e-4, "{g:?}: transposed convolution max difference {t}");
     }
 }
 
