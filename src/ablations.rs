@@ -16,8 +16,8 @@ use std::path::Path;
 use crate::decoder_experiment::{DecoderModel, DecoderRunConfig, run};
 use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
-use crate::figures::{ParetoPoint, pareto_plot, training_curves};
-use crate::model_result::{ModelResult, PaperReference};
+use crate::figures::{pareto_plot, training_curves};
+use crate::model_result::{ModelResult, PaperReference, pareto_points};
 use crate::report::{write_csv, write_markdown_report};
 
 /// Which ablation.
@@ -197,23 +197,7 @@ pub fn run_ablation(
         "Each row is a full NeuroKin run with one setting changed (config in its folder). `paper_psnr_db` / `paper_fps` are the figures the paper printed for that setting, for reference; the paper published no code for its ablations, so ours are the first measured numbers. PSNR as the paper computes it; IoU at threshold 0.5.",
     )?;
     training_curves(&dir.join("training_curves.png"), ablation.title(), &curves)?;
-    let mut points: Vec<ParetoPoint> = rows
-        .iter()
-        .map(|r| ParetoPoint {
-            label: r.model.replace("NeuroKin ", ""),
-            fps: r.infer_b1_img_per_s,
-            quality: r.psnr_db_test,
-            reference: false,
-        })
-        .collect();
-    points.extend(rows.iter().filter_map(|r| {
-        Some(ParetoPoint {
-            label: format!("paper: {}", r.model.replace("NeuroKin ", "")),
-            fps: r.paper_fps?,
-            quality: r.paper_psnr_db?,
-            reference: true,
-        })
-    }));
+    let points = pareto_points(&rows, |m| m.replace("NeuroKin ", ""));
     pareto_plot(
         &dir.join("pareto.png"),
         ablation.title(),

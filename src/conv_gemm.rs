@@ -43,6 +43,48 @@ pub struct ConvGeometry {
 }
 
 impl ConvGeometry {
+    /// The convolution of `x` `[batch, c_in, H, W]` with a weight `[c_out, c_in, kh, kw]`.
+    pub fn conv(
+        x: [usize; 4],
+        weight: [usize; 4],
+        stride: [usize; 2],
+        padding: [usize; 2],
+    ) -> Self {
+        let [batch, c_in, h, w] = x;
+        let [c_out, _, kh, kw] = weight;
+        ConvGeometry {
+            batch,
+            c_in,
+            input: [h, w],
+            c_out,
+            kernel: [kh, kw],
+            stride,
+            padding,
+        }
+    }
+
+    /// The convolution whose adjoint is the transposed convolution of `x` `[batch, c, h, w]`
+    /// with a weight `[c, c_out, kh, kw]` (PyTorch's layout) onto an `output` grid: it reads
+    /// that grid with the same kernel, stride and padding and lands on `x`'s.
+    pub fn transposed(
+        x: [usize; 4],
+        weight: [usize; 4],
+        output: [usize; 2],
+        stride: [usize; 2],
+        padding: [usize; 2],
+    ) -> Self {
+        let [c, c_out, kh, kw] = weight;
+        ConvGeometry {
+            batch: x[0],
+            c_in: c_out,
+            input: output,
+            c_out: c,
+            kernel: [kh, kw],
+            stride,
+            padding,
+        }
+    }
+
     /// Output height and width, `(in + 2p − k) / s + 1`.
     pub fn output(&self) -> [usize; 2] {
         [0, 1].map(|d| (self.input[d] + 2 * self.padding[d] - self.kernel[d]) / self.stride[d] + 1)
@@ -117,39 +159,6 @@ pub fn forward(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
                 }
             },
         );
-    y
-}
-
-/// The slow reference of [`forward`]: the definition, summed in `f64`.
-pub fn forward_reference(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
-    let [h, wd] = g.input;
-    let [oh, ow] = g.output();
-    let [kh, kw] = g.kernel;
-    let mut y = vec![0f32; g.batch * g.c_out * oh * ow];
-    for n in 0..g.batch {
-        for o in 0..g.c_out {
-            for oy in 0..oh {
-                for ox in 0..ow {
-                    let mut s = 0f64;
-                    for c in 0..g.c_in {
-                        for ky in 0..kh {
-                            for kx in 0..kw {
-                                let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
-                                let ix = (ox * g.stride[1] + kx) as isize - g.padding[1] as isize;
-                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= wd as isize {
-                                    continue;
-                                }
-                                let xv = x[((n * g.c_in + c) * h + iy as usize) * wd + ix as usize];
-                                let wv = w[((o * g.c_in + c) * kh + ky) * kw + kx];
-                                s += xv as f64 * wv as f64;
-                            }
-                        }
-                    }
-                    y[((n * g.c_out + o) * oh + oy) * ow + ox] = s as f32;
-                }
-            }
-        }
-    }
     y
 }
 
@@ -264,38 +273,6 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
     y
 }
 
-/// The slow reference of [`transpose`]: the definition, summed in `f64`.
-pub fn transpose_reference(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
-    let [h, wd] = g.input;
-    let [oh, ow] = g.output();
-    let [kh, kw] = g.kernel;
-    let mut y = vec![0f64; g.batch * g.c_in * h * wd];
-    for n in 0..g.batch {
-        for o in 0..g.c_out {
-            for oy in 0..oh {
-                for ox in 0..ow {
-                    let xv = x[((n * g.c_out + o) * oh + oy) * ow + ox] as f64;
-                    for c in 0..g.c_in {
-                        for ky in 0..kh {
-                            for kx in 0..kw {
-                                let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
-                                let ix = (ox * g.stride[1] + kx) as isize - g.padding[1] as isize;
-                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= wd as isize {
-                                    continue;
-                                }
-                                let wv = w[((o * g.c_in + c) * kh + ky) * kw + kx] as f64;
-                                y[((n * g.c_in + c) * h + iy as usize) * wd + ix as usize] +=
-                                    xv * wv;
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
-    y.into_iter().map(|v| v as f32).collect()
-}
-
 /// The adjoint of [`im2col`]: add `col[(c, kh, kw), (oy, ox)]` into the image `[c_in, H, W]`
 /// (overwritten).
 fn col2im(col: &[f32], g: &ConvGeometry, image: &mut [f32]) {
@@ -382,36 +359,64 @@ fn im2col(x: &[f32], g: &ConvGeometry, col: &mut [f32]) {
     }
 }
 
-/// The slow reference: the definition, summed in `f64`.
-pub fn weight_grad_reference(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
-    g.check(x, grad_out);
+/// Every tap of the convolution `g`: `visit(x_index, y_index, w_index)` for each input element
+/// `x[n, c, iy, ix]` that output `y[n, o, oy, ox]` reads through weight `w[o, c, ky, kx]`. The
+/// three references below are this one definition, read three ways.
+fn taps(g: &ConvGeometry, mut visit: impl FnMut(usize, usize, usize)) {
     let [h, w] = g.input;
     let [oh, ow] = g.output();
     let [kh, kw] = g.kernel;
-    let mut dw = vec![0f32; g.c_out * g.patch()];
-    for o in 0..g.c_out {
-        for c in 0..g.c_in {
-            for ky in 0..kh {
-                for kx in 0..kw {
-                    let mut s = 0f64;
-                    for n in 0..g.batch {
+    for n in 0..g.batch {
+        for o in 0..g.c_out {
+            for c in 0..g.c_in {
+                for ky in 0..kh {
+                    for kx in 0..kw {
+                        let wi = ((o * g.c_in + c) * kh + ky) * kw + kx;
                         for oy in 0..oh {
+                            let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
+                            if iy < 0 || iy >= h as isize {
+                                continue;
+                            }
                             for ox in 0..ow {
-                                let iy = (oy * g.stride[0] + ky) as isize - g.padding[0] as isize;
                                 let ix = (ox * g.stride[1] + kx) as isize - g.padding[1] as isize;
-                                if iy < 0 || ix < 0 || iy >= h as isize || ix >= w as isize {
+                                if ix < 0 || ix >= w as isize {
                                     continue;
                                 }
-                                let xv = x[((n * g.c_in + c) * h + iy as usize) * w + ix as usize];
-                                let gv = grad_out[((n * g.c_out + o) * oh + oy) * ow + ox];
-                                s += xv as f64 * gv as f64;
+                                let xi = ((n * g.c_in + c) * h + iy as usize) * w + ix as usize;
+                                let yi = ((n * g.c_out + o) * oh + oy) * ow + ox;
+                                visit(xi, yi, wi);
                             }
                         }
                     }
-                    dw[((o * g.c_in + c) * kh + ky) * kw + kx] = s as f32;
                 }
             }
         }
     }
-    dw
+}
+
+fn to_f32(v: Vec<f64>) -> Vec<f32> {
+    v.into_iter().map(|v| v as f32).collect()
+}
+
+/// The slow reference of [`forward`]: the definition, summed in `f64`.
+pub fn forward_reference(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    let [oh, ow] = g.output();
+    let mut y = vec![0f64; g.batch * g.c_out * oh * ow];
+    taps(g, |xi, yi, wi| y[yi] += x[xi] as f64 * w[wi] as f64);
+    to_f32(y)
+}
+
+/// The slow reference of [`transpose`]: the definition, summed in `f64`.
+pub fn transpose_reference(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    let mut y = vec![0f64; g.batch * g.c_in * g.input[0] * g.input[1]];
+    taps(g, |yi, xi, wi| y[yi] += x[xi] as f64 * w[wi] as f64);
+    to_f32(y)
+}
+
+/// The slow reference of [`weight_grad`]: the definition, summed in `f64`.
+pub fn weight_grad_reference(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    g.check(x, grad_out);
+    let mut dw = vec![0f64; g.c_out * g.patch()];
+    taps(g, |xi, yi, wi| dw[wi] += x[xi] as f64 * grad_out[yi] as f64);
+    to_f32(dw)
 }

@@ -115,20 +115,12 @@ impl CpuKernelOps for Flex {
         {
             return Self::conv2d(x, weight, None, options);
         }
-        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
-        let (weight, [c_out, _, kh, kw]) = f32_nchw(&weight);
-        let g = ConvGeometry {
-            batch,
-            c_in,
-            input: [h, w],
-            c_out,
-            kernel: [kh, kw],
-            stride: options.stride,
-            padding: options.padding_begin(),
-        };
+        let (x, xd) = f32_nchw(&x);
+        let (weight, wd) = f32_nchw(&weight);
+        let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
         let y = conv_gemm::forward(x.storage::<f32>(), weight.storage::<f32>(), &g);
         let [oh, ow] = g.output();
-        flex_tensor(y, [batch, c_out, oh, ow])
+        flex_tensor(y, [xd[0], wd[0], oh, ow])
     }
 
     fn conv_transpose2d_fast(
@@ -142,23 +134,14 @@ impl CpuKernelOps for Flex {
         {
             return Self::conv_transpose2d(x, weight, None, options);
         }
-        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
-        let (weight, [_, c_out, kh, kw]) = f32_nchw(&weight);
+        let (x, xd @ [batch, _, h, w]) = f32_nchw(&x);
+        let (weight, wd @ [_, c_out, kh, kw]) = f32_nchw(&weight);
         let [s, p] = [options.stride, options.padding];
         let out = [
             (h - 1) * s[0] + kh - 2 * p[0],
             (w - 1) * s[1] + kw - 2 * p[1],
         ];
-        // The convolution whose adjoint this is reads the output and lands on `x`'s grid.
-        let g = ConvGeometry {
-            batch,
-            c_in: c_out,
-            input: out,
-            c_out: c_in,
-            kernel: [kh, kw],
-            stride: s,
-            padding: p,
-        };
+        let g = ConvGeometry::transposed(xd, wd, out, s, p);
         let y = conv_gemm::transpose(x.storage::<f32>(), weight.storage::<f32>(), &g);
         flex_tensor(y, [batch, c_out, out[0], out[1]])
     }
@@ -173,18 +156,10 @@ impl CpuKernelOps for Flex {
         {
             return Self::conv2d_weight_backward(x, weight, output_grad, options);
         }
-        let (x, [batch, c_in, h, w]) = f32_nchw(&x);
-        let (go, [_, c_out, _, _]) = f32_nchw(&output_grad);
+        let (x, xd) = f32_nchw(&x);
+        let (go, _) = f32_nchw(&output_grad);
         let wd = weight.shape().dims::<4>();
-        let g = ConvGeometry {
-            batch,
-            c_in,
-            input: [h, w],
-            c_out,
-            kernel: [wd[2], wd[3]],
-            stride: options.stride,
-            padding: options.padding_begin(),
-        };
+        let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
         let dw = weight_grad(x.storage::<f32>(), go.storage::<f32>(), &g);
         flex_tensor(dw, wd)
     }
@@ -198,20 +173,12 @@ impl CpuKernelOps for Flex {
         if !kernel_supports(x.dtype(), &options.dilation, options.groups) {
             return Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
         }
-        // The convolution that reads `output_grad` with the layer's kernel, stride and padding
-        // lands on `x`'s grid: its weight gradient, with `x` as the output gradient, is ours.
-        let (x, [_, c_in, _, _]) = f32_nchw(&x);
-        let (go, [batch, c_out, oh, ow]) = f32_nchw(&output_grad);
+        // The transposed convolution is the adjoint of `g`; `g`'s weight gradient with `x` as
+        // the output gradient is ours.
+        let (x, xd) = f32_nchw(&x);
+        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
         let wd = weight.shape().dims::<4>();
-        let g = ConvGeometry {
-            batch,
-            c_in: c_out,
-            input: [oh, ow],
-            c_out: c_in,
-            kernel: [wd[2], wd[3]],
-            stride: options.stride,
-            padding: options.padding,
-        };
+        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
         let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
         flex_tensor(dw, wd)
     }

@@ -86,3 +86,27 @@ pub fn read_results(path: &std::path::Path) -> crate::Result<Vec<ModelResult>> {
         .map(|r| r.map_err(|e| crate::Error::data(path, format!("bad results row: {e}"))))
         .collect()
 }
+
+/// The points of a Pareto plot: each row's test PSNR against its batch-1 inference speed, and
+/// beside it the paper's figures for that row (as references) where the paper printed them.
+pub fn pareto_points(
+    rows: &[ModelResult],
+    label: impl Fn(&str) -> String,
+) -> Vec<crate::figures::ParetoPoint> {
+    use crate::figures::ParetoPoint;
+    let ours = rows.iter().map(|r| ParetoPoint {
+        label: label(&r.model),
+        fps: r.infer_b1_img_per_s,
+        quality: r.psnr_db_test,
+        reference: false,
+    });
+    let paper = rows.iter().filter_map(|r| {
+        Some(ParetoPoint {
+            label: format!("paper: {}", label(&r.model)),
+            fps: r.paper_fps?,
+            quality: r.paper_psnr_db?,
+            reference: true,
+        })
+    });
+    ours.chain(paper).collect()
+}

@@ -10,8 +10,8 @@ use std::path::Path;
 
 use crate::error::Result;
 use crate::experiments::{EXPERIMENTS, RunOptions, write_rows};
-use crate::figures::{ParetoPoint, pareto_plot};
-use crate::model_result::{ModelResult, read_results};
+use crate::figures::pareto_plot;
+use crate::model_result::{ModelResult, pareto_points, read_results};
 
 /// Run the zoo on `opts` into `dir` and write the table and the Pareto plot.
 pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
@@ -42,23 +42,7 @@ pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
             opts.preset
         ),
     )?;
-    let mut points: Vec<ParetoPoint> = rows
-        .iter()
-        .map(|r| ParetoPoint {
-            label: r.model.clone(),
-            fps: r.infer_b1_img_per_s,
-            quality: r.psnr_db_test,
-            reference: false,
-        })
-        .collect();
-    points.extend(rows.iter().filter_map(|r| {
-        Some(ParetoPoint {
-            label: format!("paper: {}", r.model),
-            fps: r.paper_fps?,
-            quality: r.paper_psnr_db?,
-            reference: true,
-        })
-    }));
+    let points = pareto_points(&rows, |m| m.to_string());
     pareto_plot(
         &dir.join("pareto.png"),
         "Self-models: quality against inference speed",
