@@ -20,6 +20,22 @@ pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
     }
 }
 
+/// The whole `main` of an experiment binary: its `--help` text is the registry's description,
+/// its options [`ExperimentArgs`], its default preset `default_preset`.
+pub fn experiment_main(name: &'static str, default_preset: &str) -> ExitCode {
+    use clap::{Args, Command, FromArgMatches};
+    let about = crate::experiments::find(name).map_or("", |e| e.about);
+    // After `augment_args`, which would set the about of `ExperimentArgs` itself.
+    let command = ExperimentArgs::augment_args(Command::new(name))
+        .about(about)
+        .version(env!("CARGO_PKG_VERSION"));
+    let args = match ExperimentArgs::from_arg_matches(&command.get_matches()) {
+        Ok(args) => args,
+        Err(e) => e.exit(),
+    };
+    run_main(|| args.run(name, default_preset))
+}
+
 /// Three numbers on the command line: `x,y,z`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Triple(pub [f64; 3]);
