@@ -210,76 +210,95 @@ fn model_preset(preset: &str) -> &str {
 }
 
 impl DecoderRunConfig {
-    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
-    /// N(0, 0.01) noise on the angles in degrees.
-    pub fn neurokin(preset: &str) -> Result<Self> {
+    /// What every decoder run shares: the preset's data and speed settings, the notebook's
+    /// training protocol, PSNR also on the paper's first 100 test images.
+    fn decoder(
+        preset: &str,
+        name: &str,
+        model: DecoderModel,
+        loss: DecoderLoss,
+        eval_batch: usize,
+        reference: PaperReference,
+    ) -> Result<Self> {
         let (data, speed) = preset_parts(preset)?;
-        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
-        model.image = [data.dataset.camera.height, data.dataset.camera.width];
-        let cfg = DecoderRunConfig {
-            name: "NeuroKin".into(),
+        Ok(DecoderRunConfig {
+            name: name.into(),
             preset: preset.into(),
-            model: DecoderModel::NeuroKin(model),
-            loss: DecoderLoss::Bce,
+            model,
+            loss,
             train: code_train(preset),
             data,
             paper_subset: 100,
-            eval_batch: 256,
+            eval_batch,
             speed,
-            reference: PaperReference::neurokin(),
+            reference,
             note: String::new(),
-        };
+        })
+    }
+
+    /// The image size of a preset's camera, `[height, width]`.
+    fn image(preset: &str) -> Result<[usize; 2]> {
+        let camera = &preset_parts(preset)?.0.dataset.camera;
+        Ok([camera.height, camera.width])
+    }
+
+    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
+    /// N(0, 0.01) noise on the angles in degrees.
+    pub fn neurokin(preset: &str) -> Result<Self> {
+        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
+        model.image = Self::image(preset)?;
+        let cfg = Self::decoder(
+            preset,
+            "NeuroKin",
+            DecoderModel::NeuroKin(model),
+            DecoderLoss::Bce,
+            256,
+            PaperReference::neurokin(),
+        )?;
         Ok(shorten(cfg, 800, 32))
     }
 
     /// The paper text's NeuroKin: 64x64 output, MSE, batch 128, 50 epochs.
     pub fn neurokin64(preset: &str) -> Result<Self> {
-        let mut cfg = Self::neurokin(preset)?;
-        cfg.name = "NeuroKin-64 (paper text)".into();
+        let quick = preset == "quick";
         let mut model = NeuroKinConfig::text64();
-        model.image = [
-            cfg.data.dataset.camera.height,
-            cfg.data.dataset.camera.width,
-        ];
-        if preset == "quick" {
+        model.image = Self::image(preset)?;
+        if quick {
             model.latent = 64;
             model.seed_channels = 32;
             model.upsampling_layers = 3;
         }
-        cfg.model = DecoderModel::NeuroKin(model);
-        cfg.loss = DecoderLoss::Mse;
-        let n = cfg.data.dataset.train;
-        cfg.train.batch = if preset == "quick" { 32 } else { 128 };
+        let mut cfg = Self::decoder(
+            preset,
+            "NeuroKin-64 (paper text)",
+            DecoderModel::NeuroKin(model),
+            DecoderLoss::Mse,
+            256,
+            PaperReference::neurokin(),
+        )?;
+        cfg.train.batch = if quick { 32 } else { 128 };
         cfg.train.steps = TrainConfig::steps_for_epochs(
-            if preset == "quick" { 30 } else { 50 },
-            n,
+            if quick { 30 } else { 50 },
+            cfg.data.dataset.train,
             cfg.train.batch,
         );
         cfg.train.grad_clip_norm = None;
-        cfg.reference = PaperReference::neurokin();
-        cfg.note.clear();
         let steps = cfg.train.steps / 4;
         Ok(shorten(cfg, steps, 128))
     }
 
     /// ResNeuroKin-D as the notebook trained it, with the simulator's metric depth.
     pub fn resneurokin_d(preset: &str) -> Result<Self> {
-        let (data, speed) = preset_parts(preset)?;
         let mut model = ResNeuroKinDConfig::preset(model_preset(preset))?;
-        model.image = [data.dataset.camera.height, data.dataset.camera.width];
-        let cfg = DecoderRunConfig {
-            name: "ResNeuroKin-D".into(),
-            preset: preset.into(),
-            model: DecoderModel::ResNeuroKinD(model),
-            loss: DecoderLoss::BceDiceDepth { depth_weight: 0.1 },
-            train: code_train(preset),
-            data,
-            paper_subset: 100,
-            eval_batch: 64,
-            speed,
-            reference: PaperReference::resneurokin_d(),
-            note: String::new(),
-        };
+        model.image = Self::image(preset)?;
+        let cfg = Self::decoder(
+            preset,
+            "ResNeuroKin-D",
+            DecoderModel::ResNeuroKinD(model),
+            DecoderLoss::BceDiceDepth { depth_weight: 0.1 },
+            64,
+            PaperReference::resneurokin_d(),
+        )?;
         Ok(shorten(cfg, 30, 16))
     }
 
