@@ -527,6 +527,9 @@ pub fn run(
         depth_mae_mm: quality
             .depth_mae_mm
             .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
+        depth_constant_mae_mm: quality
+            .depth_constant_mae_mm
+            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
         infer_b1_img_per_s: t1.images_per_second(),
         latency_b1_ms: 1000.0 * t1.median_s,
         infer_b256_img_per_s: tb.images_per_second(),
@@ -604,7 +607,8 @@ fn write_report(
     )
 }
 
-/// Six test poses spread over the test set: ground truth, prediction, error (and depth).
+/// Six test poses spread over the test set: ground truth, prediction, error (and true depth,
+/// and predicted depth where the predicted silhouette is the robot).
 fn qualitative_figure(
     path: &Path,
     truth: &[f32],
@@ -628,8 +632,24 @@ fn qualitative_figure(
         .zip(&pr)
         .map(|(g, p)| g.iter().zip(p.iter()).map(|(a, b)| (a - b).abs()).collect())
         .collect();
+    // The depth head is trained on robot pixels only: show it where the predicted silhouette
+    // says robot, background elsewhere.
+    let masked_depth: Vec<Vec<f32>> = match &pred.depth {
+        Some(d) => picks
+            .iter()
+            .map(|&i| {
+                let sil = img(&pred.silhouettes, i, px);
+                img(d, i, px)
+                    .iter()
+                    .zip(sil)
+                    .map(|(&d, &s)| if s >= 0.5 { d } else { 0.0 })
+                    .collect()
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     let mut rows = vec![GridRow::Grey(gt), GridRow::Grey(pr), GridRow::Error(err)];
-    if let Some(d) = &pred.depth {
+    if pred.depth.is_some() {
         let robot: Vec<f32> = truth_depth.iter().copied().filter(|&v| v > 0.0).collect();
         let lo = robot.iter().copied().fold(f32::INFINITY, f32::min);
         let hi = robot.iter().copied().fold(0.0, f32::max);
@@ -639,7 +659,7 @@ fn qualitative_figure(
             range,
         ));
         rows.push(GridRow::Depth(
-            picks.iter().map(|&i| img(d, i, px)).collect(),
+            masked_depth.iter().map(|v| v.as_slice()).collect(),
             range,
         ));
     }

@@ -6,7 +6,9 @@
 //! - IoU of the silhouettes thresholded at 0.5 (PSNR on mostly-empty images flatters every
 //!   model; IoU says whether the arm is where it should be).
 //! - Depth error in millimetres, mean absolute over the pixels where the true silhouette is
-//!   the robot.
+//!   the robot, beside the error of the best constant depth (the median of the true robot-pixel
+//!   depths of the test set, which minimises the mean absolute error of any constant): a depth
+//!   head is useful only if it beats that.
 
 /// Predictions for a set of images, on the host.
 #[derive(Clone, Debug)]
@@ -29,6 +31,9 @@ pub struct Quality {
     pub iou_test: f64,
     /// Mean absolute depth error on robot pixels (mm).
     pub depth_mae_mm: Option<f64>,
+    /// The same error of the best constant depth: the median true depth of the test set's
+    /// robot pixels (mm).
+    pub depth_constant_mae_mm: Option<f64>,
     pub paper_subset: usize,
     pub test_images: usize,
     /// Per-image PSNR (dB) and IoU, in test order.
@@ -81,27 +86,47 @@ pub fn score(
         .collect();
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let subset = paper_subset.min(n);
-    let depth_mae_mm = match (&pred.depth, truth_depth) {
+    let (depth_mae_mm, depth_constant_mae_mm) = match (&pred.depth, truth_depth) {
         (Some(d), Some(t)) => {
-            let (mut sum, mut count) = (0.0f64, 0usize);
-            for ((&p, &g), &s) in d.iter().zip(t).zip(truth) {
-                if s >= 0.5 {
-                    sum += (p - g).abs() as f64;
-                    count += 1;
-                }
-            }
-            Some(1000.0 * sum / count.max(1) as f64)
+            let robot = |v: &[f32]| -> Vec<f32> {
+                v.iter()
+                    .zip(truth)
+                    .filter(|&(_, &s)| s >= 0.5)
+                    .map(|(&v, _)| v)
+                    .collect()
+            };
+            let (pred_robot, true_robot) = (robot(d), robot(t));
+            let mae_mm = |errors: &mut dyn Iterator<Item = f32>| {
+                1000.0 * errors.map(|e| e.abs() as f64).sum::<f64>()
+                    / true_robot.len().max(1) as f64
+            };
+            let median = median(&true_robot);
+            (
+                Some(mae_mm(&mut pred_robot.iter().zip(&true_robot).map(|(p, g)| p - g))),
+                Some(mae_mm(&mut true_robot.iter().map(|g| g - median))),
+            )
         }
-        _ => None,
+        _ => (None, None),
     };
     Quality {
         psnr_db_paper_subset: mean(&per_image_psnr[..subset]),
         psnr_db_test: mean(&per_image_psnr),
         iou_test: mean(&per_image_iou),
         depth_mae_mm,
+        depth_constant_mae_mm,
         paper_subset: subset,
         test_images: n,
         per_image_psnr,
         per_image_iou,
     }
+}
+
+/// The median of `v` (0 when empty).
+fn median(v: &[f32]) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mut sorted = v.to_vec();
+    sorted.sort_by(f32::total_cmp);
+    sorted[sorted.len() / 2]
 }

@@ -54,6 +54,9 @@ pub struct ModelResult {
     pub psnr_db_test: f64,
     pub iou_test: f64,
     pub depth_mae_mm: Option<f64>,
+    /// The best constant depth's error on the same pixels, for reference.
+    #[serde(default)]
+    pub depth_constant_mae_mm: Option<f64>,
     pub infer_b1_img_per_s: f64,
     pub latency_b1_ms: f64,
     pub infer_b256_img_per_s: f64,

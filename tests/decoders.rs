@@ -6,7 +6,7 @@ mod common;
 use burn::tensor::Device;
 use selfmodel::decoder_experiment::{DecoderRunConfig, run};
 use selfmodel::device::DeviceChoice;
-use selfmodel::evaluation::{iou, psnr_db};
+use selfmodel::evaluation::{Predictions, iou, psnr_db, score};
 use selfmodel::neurokin::NeuroKinConfig;
 use selfmodel::preset::Preset;
 use selfmodel::resneurokin_d::ResNeuroKinDConfig;
@@ -169,4 +169,22 @@ fn same_seed_same_model_while_another_thread_builds_models() {
     })
     .into_iter()
     .for_each(|again| assert_eq!(again, reference, "seed 5 gave another model"));
+}
+
+#[test]
+fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
+    // Four pixels, three of them robot at 1, 2 and 6 m; the background pixel's depth must not
+    // count, whatever the prediction there.
+    let truth = [1.0, 1.0, 1.0, 0.0];
+    let truth_depth = [1.0, 2.0, 6.0, 0.0];
+    let pred = Predictions {
+        silhouettes: truth.to_vec(),
+        depth: Some(vec![1.5, 2.0, 5.0, 9.0]),
+        pixels: 4,
+    };
+    let q = score(&pred, &truth, Some(&truth_depth), 1);
+    // |1.5-1| + 0 + |5-6| = 1.5 m over 3 pixels.
+    assert!((q.depth_mae_mm.unwrap() - 500.0).abs() < 1e-3);
+    // The median, 2 m: (1 + 0 + 4) / 3 m.
+    assert!((q.depth_constant_mae_mm.unwrap() - 5000.0 / 3.0).abs() < 1e-3);
 }
