@@ -73,6 +73,18 @@ pub trait CpuKernelOps: Backend {
         Self::conv_transpose2d_weight_backward(x, weight, output_grad, options)
     }
 
+    /// Both gradients of `conv_transpose2d`, `(input, weight)`, when both are needed.
+    fn conv_transpose2d_grads(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let dx = conv_transpose2d_x_grad::<Self>(weight.clone(), output_grad.clone(), &options);
+        let dw = Self::conv_transpose2d_weight_grad(x, weight, output_grad, options);
+        (dx, dw)
+    }
+
     /// Bilinear resize of `[batch, channels, h, w]` to `size`, align_corners false; its
     /// backward pass uses [`Self::resize_bilinear_backward`].
     fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
@@ -183,6 +195,37 @@ impl CpuKernelOps for Flex {
         flex_tensor(dw, wd)
     }
 
+    fn conv_transpose2d_grads(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> (FlexTensor, FlexTensor) {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.padding_out != [0, 0]
+        {
+            let dx = Self::conv_transpose2d_x_backward(
+                weight.clone(),
+                output_grad.clone(),
+                options.clone(),
+            );
+            let dw = Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
+            return (dx, dw);
+        }
+        let (x, xd) = f32_nchw(&x);
+        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
+        let (weight, wd) = f32_nchw(&weight);
+        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
+        let (dx, dw) = conv_gemm::transpose_backward(
+            x.storage::<f32>(),
+            weight.storage::<f32>(),
+            go.storage::<f32>(),
+            &g,
+        );
+        (flex_tensor(dx, xd), flex_tensor(dw, wd))
+    }
+
     fn resize_bilinear_fast(x: FlexTensor, size: [usize; 2]) -> FlexTensor {
         if x.dtype() != DType::F32 {
             return Self::interpolate(x, size, bilinear_options());
@@ -287,13 +330,21 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
                 let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
                 let weight =
                     checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
-                if let Some(node) = node_x {
-                    let g = conv_transpose2d_x_grad::<B>(weight.clone(), grad.clone(), &options);
-                    grads.register::<B>(node.id, g);
-                }
-                if let Some(node) = node_weight {
-                    let g = B::conv_transpose2d_weight_grad(x, weight, grad, options);
-                    grads.register::<B>(node.id, g);
+                match (node_x, node_weight) {
+                    (Some(nx), Some(nw)) => {
+                        let (dx, dw) = B::conv_transpose2d_grads(x, weight, grad, options);
+                        grads.register::<B>(nx.id, dx);
+                        grads.register::<B>(nw.id, dw);
+                    }
+                    (Some(node), None) => {
+                        let g = conv_transpose2d_x_grad::<B>(weight, grad, &options);
+                        grads.register::<B>(node.id, g);
+                    }
+                    (None, Some(node)) => {
+                        let g = B::conv_transpose2d_weight_grad(x, weight, grad, options);
+                        grads.register::<B>(node.id, g);
+                    }
+                    (None, None) => {}
                 }
             }
         }

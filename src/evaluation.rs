@@ -102,7 +102,9 @@ pub fn score(
             };
             let median = median(&true_robot);
             (
-                Some(mae_mm(&mut pred_robot.iter().zip(&true_robot).map(|(p, g)| p - g))),
+                Some(mae_mm(
+                    &mut pred_robot.iter().zip(&true_robot).map(|(p, g)| p - g),
+                )),
                 Some(mae_mm(&mut true_robot.iter().map(|g| g - median))),
             )
         }

@@ -5,8 +5,8 @@
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
 use selfmodel::conv_gemm::{
-    ConvGeometry, forward, forward_reference, transpose, transpose_reference, weight_grad,
-    weight_grad_reference,
+    ConvGeometry, forward, forward_reference, transpose, transpose_backward, transpose_reference,
+    weight_grad, weight_grad_reference,
 };
 use selfmodel::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
 
@@ -59,6 +59,16 @@ fn kernels_match_their_references() {
         assert!(y < 1e-4, "{g:?}: forward max difference {y}");
         let t = worst(transpose(&go, &w, &g), transpose_reference(&go, &w, &g));
         assert!(t < 1e-4, "{g:?}: transposed convolution max difference {t}");
+        // The transposed convolution of `go` (its input) back onto `x`'s grid, with `x` as its
+        // output gradient: input gradient `forward(x, w)`, weight gradient
+        // `weight_grad(x, go)`.
+        let (dx, dw) = transpose_backward(&go, &w, &x, &g);
+        let dx = worst(dx, forward_reference(&x, &w, &g));
+        let dw = worst(dw, weight_grad_reference(&x, &go, &g));
+        assert!(
+            dx < 1e-4 && dw < 1e-4,
+            "{g:?}: transposed backward {dx} {dw}"
+        );
     }
 }
 
