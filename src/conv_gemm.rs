@@ -335,22 +335,31 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
     } else {
         gemm::Parallelism::None
     };
+    // With few pixels, gemm's output rows (pixels) fill its 64-row microkernel poorly: write
+    // `col` column-major (one pixel's patch contiguous) and transpose it for col2im. 2.4x faster
+    // for NeuroKin-64's 4x4 layer (measured), the same elsewhere.
+    let column_major = pixels < 64;
     let mut y = vec![0f32; g.batch * image_out];
     y.par_chunks_mut(image_out).enumerate().for_each_init(
-        || vec![0f32; patch * pixels],
-        |col, (n, out)| {
+        || (vec![0f32; patch * pixels], vec![0f32; patch * pixels]),
+        |(col, scratch), (n, out)| {
             let xn = &x[n * g.c_out * pixels..(n + 1) * g.c_out * pixels];
+            let (dst, dst_cs, dst_rs) = if column_major {
+                (&mut *scratch, patch as isize, 1)
+            } else {
+                (&mut *col, 1, pixels as isize)
+            };
             // col[CKK x P] = wᵀ[CKK x O] · x_n[O x P]
-            // SAFETY: `w`, `xn` and `col` hold exactly the elements the strides address
+            // SAFETY: `w`, `xn` and `dst` hold exactly the elements the strides address
             // (checked above and by construction), and do not alias.
             unsafe {
                 gemm::gemm(
                     patch,
                     pixels,
                     g.c_out,
-                    col.as_mut_ptr(),
-                    1,
-                    pixels as isize,
+                    dst.as_mut_ptr(),
+                    dst_cs,
+                    dst_rs,
                     false,
                     w.as_ptr(),
                     patch as isize,
@@ -365,6 +374,13 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
                     false,
                     parallelism,
                 );
+            }
+            if column_major {
+                for (p, patch_of_p) in scratch.chunks(patch).enumerate() {
+                    for (j, &v) in patch_of_p.iter().enumerate() {
+                        col[j * pixels + p] = v;
+                    }
+                }
             }
             col2im(col, g, out);
         },

@@ -31,6 +31,9 @@ fn kernels_match_their_references() {
         (2, 3, [8, 5], 2, [1, 1], [1, 1], [0, 0]),
         (4, 2, [5, 5], 3, [3, 3], [1, 1], [2, 2]),
         (1, 1, [7, 9], 2, [3, 2], [2, 3], [0, 1]),
+        // 64 output pixels or more (the GEMMs' other layout).
+        (2, 3, [18, 18], 4, [4, 4], [2, 2], [1, 1]),
+        (3, 2, [10, 9], 3, [3, 3], [1, 1], [1, 1]),
     ];
     for (batch, c_in, input, c_out, kernel, stride, padding) in cases {
         let g = ConvGeometry {
