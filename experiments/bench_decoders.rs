@@ -8,7 +8,7 @@ use std::process::{Command, ExitCode};
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::decoder_bench::{attach_torch, run};
-use selfmodel::device::{DeviceChoice, select};
+use selfmodel::device::DeviceChoice;
 
 /// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
 /// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
@@ -34,8 +34,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     run_main(|| {
-        let device = select(args.device)?;
-        let mut rows = run(&device, args.quick)?;
+        let mut rows = run(args.device, args.quick)?;
         if let Some(py) = &args.torch {
             let out = Command::new(py)
                 .arg(&args.torch_script)

@@ -8,6 +8,7 @@ use std::time::Instant;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
 
+use crate::device::DeviceChoice;
 use crate::error::Result;
 use crate::inference_speed::{SpeedConfig, measure};
 use crate::losses::{bce_with_logits, mse};
@@ -22,6 +23,27 @@ pub struct BenchRow {
     pub figure: String,
     pub ours: f64,
     pub torch: Option<f64>,
+    /// `ours / torch`: above 1 is faster than PyTorch.
+    pub ratio: Option<f64>,
+    /// `paper` (the paper's models and batches) or `quick`.
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+impl BenchRow {
+    fn new(model: &str, figure: String, ours: f64, quick: bool, device: DeviceChoice) -> Self {
+        BenchRow {
+            model: model.into(),
+            figure,
+            ours,
+            torch: None,
+            ratio: None,
+            preset: if quick { "quick" } else { "paper" }.into(),
+            device: device.to_string(),
+            git_revision: crate::cli::git_revision(),
+        }
+    }
 }
 
 /// Median seconds of `repeats` training steps after `warmup`.
@@ -64,8 +86,9 @@ fn train_rate(
     Ok(batch as f64 / times[times.len() / 2])
 }
 
-/// Measure both NeuroKin architectures on `device`.
-pub fn run(device: &Device, quick: bool) -> Result<Vec<BenchRow>> {
+/// Measure both NeuroKin architectures on `choice`.
+pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
+    let device = &crate::device::select(choice)?;
     let speed = if quick {
         SpeedConfig::quick()
     } else {
@@ -94,20 +117,22 @@ pub fn run(device: &Device, quick: bool) -> Result<Vec<BenchRow>> {
                 ..speed.clone()
             },
         ) {
-            rows.push(BenchRow {
-                model: name.into(),
-                figure: format!("infer_b{}_img_per_s", t.batch),
-                ours: t.images_per_second(),
-                torch: None,
-            });
+            rows.push(BenchRow::new(
+                name,
+                format!("infer_b{}_img_per_s", t.batch),
+                t.images_per_second(),
+                quick,
+                choice,
+            ));
         }
         let (w, r) = if quick { (1, 2) } else { (3, 10) };
-        rows.push(BenchRow {
-            model: name.into(),
-            figure: format!("train_b{batch}_img_per_s"),
-            ours: train_rate(&cfg, batch, device, w, r)?,
-            torch: None,
-        });
+        rows.push(BenchRow::new(
+            name,
+            format!("train_b{batch}_img_per_s"),
+            train_rate(&cfg, batch, device, w, r)?,
+            quick,
+            choice,
+        ));
     }
     Ok(rows)
 }
@@ -123,6 +148,7 @@ pub fn attach_torch(rows: &mut [BenchRow], torch_output: &str) {
                 .find(|r| r.model == model && r.figure == figure)
         {
             r.torch = Some(v);
+            r.ratio = Some(r.ours / v);
         }
     }
 }

@@ -188,3 +188,33 @@ fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
     // The median, 2 m: (1 + 0 + 4) / 3 m.
     assert!((q.depth_constant_mae_mm.unwrap() - 5000.0 / 3.0).abs() < 1e-3);
 }
+
+#[test]
+fn bench_decoders_quick_measures_every_figure_and_reads_torch_lines() {
+    use selfmodel::decoder_bench::{attach_torch, run};
+    let mut rows = run(selfmodel::device::DeviceChoice::Cpu, true).unwrap();
+    // Two models, each: batch 1, batch 256 and training.
+    assert_eq!(rows.len(), 6);
+    assert!(rows.iter().all(|r| r.ours.is_finite() && r.ours > 0.0));
+    assert!(
+        rows.iter()
+            .all(|r| r.preset == "quick" && r.device == "cpu")
+    );
+    let first = (rows[0].model.clone(), rows[0].figure.clone(), rows[0].ours);
+    attach_torch(
+        &mut rows,
+        &format!(
+            "torch 2.9, 2 threads\n{} {} {}\n",
+            first.0,
+            first.1,
+            first.2 / 2.0
+        ),
+    );
+    assert_eq!(rows[0].torch, Some(first.2 / 2.0));
+    assert!((rows[0].ratio.unwrap() - 2.0).abs() < 1e-9);
+    assert!(
+        rows[1..]
+            .iter()
+            .all(|r| r.torch.is_none() && r.ratio.is_none())
+    );
+}
