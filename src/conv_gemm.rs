@@ -1,5 +1,5 @@
-//! 2-D convolution on the CPU by im2col and one GEMM per image: the forward pass and the
-//! weight gradient, each with a direct loop reference beside it.
+//! 2-D convolution on the CPU by im2col and one GEMM per image: the forward pass, the
+//! transposed convolution and the weight gradient, each with a direct loop reference beside it.
 //!
 //! The forward pass, `y_n[o, p] = W[o, (c, kh, kw)] · col_n[(c, kh, kw), p]`, reads and writes
 //! NCHW directly. flex's own forward kernel transposes to NHWC and builds its columns a few
@@ -9,20 +9,24 @@
 //! weight gradient as a convolution whose kernel is the activations: at NeuroKin's 100x100
 //! head that is most of a training step. Here, per image `n`,
 //!
-//! `dW[o, (c, kh, kw)] += G_n[o, p] · col_n[(c, kh, kw), p]^T`, with `p` the output pixel,
+//! `dWᵀ[(c, kh, kw), o] += col_n[(c, kh, kw), p] · G_n[o, p]ᵀ`, with `p` the output pixel,
 //!
-//! one `O x P x CKK` GEMM on an im2col buffer of one image (so memory stays `CKK x P` floats per
-//! worker). Images are split into a fixed number of chunks whatever the thread count, each
-//! chunk sums its images in order, and the chunk sums are added in order: the result does not
-//! depend on the scheduling.
+//! one `CKK x P x O` GEMM on an im2col buffer of one image (so memory stays `CKK x P` floats per
+//! worker), transposed to `dW` once at the end. Images are split into a fixed number of chunks
+//! whatever the thread count, each chunk sums its images in order, and the chunk sums are added
+//! in order: the result does not depend on the scheduling.
 //!
 //! The same kernel gives a transposed convolution's weight gradient: for `y = conv_t(x, w)`
 //! with stride `s` and padding `p`, `dW_t[c, o, kh, kw] = Σ x[n, c, i, j] · dy[n, o, i·s − p +
 //! kh, j·s − p + kw]`, which is [`weight_grad`] with the convolution input `dy` and the output
-//! gradient `x` (see [`crate::cpu_extension`]).
+//! gradient `x` (see [`crate::cpu_extension`]). Its input gradient is the forward convolution of
+//! `dy`; [`transpose_backward`] computes both from one im2col of `dy`.
 //!
 //! A transposed convolution's forward pass is the adjoint of a convolution: `col_n = Wᵀ · x_n`,
 //! then col2im (the adjoint of im2col) scatters the columns into the output ([`transpose`]).
+//!
+//! Every GEMM goes through one checked call, [`matmul`], whose operand layouts are chosen so
+//! that gemm packs contiguous memory (see there).
 //!
 //! All tensors are row-major NCHW `f32` slices; groups 1, dilation 1.
 
@@ -120,6 +124,101 @@ impl ConvGeometry {
     }
 }
 
+/// Where a matrix's elements lie in a slice: element `(i, j)` at
+/// `i * row_stride + j * col_stride`. Only row-major and column-major matrices and their
+/// transposes can be made, so no two elements share a place.
+#[derive(Clone, Copy, Debug)]
+struct Layout {
+    rows: usize,
+    cols: usize,
+    row_stride: usize,
+    col_stride: usize,
+}
+
+impl Layout {
+    fn row_major(rows: usize, cols: usize) -> Self {
+        Layout {
+            rows,
+            cols,
+            row_stride: cols,
+            col_stride: 1,
+        }
+    }
+
+    fn column_major(rows: usize, cols: usize) -> Self {
+        Layout {
+            rows,
+            cols,
+            row_stride: 1,
+            col_stride: rows,
+        }
+    }
+
+    /// The transpose, over the same elements.
+    fn t(self) -> Self {
+        Layout {
+            rows: self.cols,
+            cols: self.rows,
+            row_stride: self.col_stride,
+            col_stride: self.row_stride,
+        }
+    }
+
+    /// Elements a slice must hold.
+    fn span(&self) -> usize {
+        if self.rows == 0 || self.cols == 0 {
+            0
+        } else {
+            (self.rows - 1) * self.row_stride + (self.cols - 1) * self.col_stride + 1
+        }
+    }
+}
+
+/// `dst = lhs · rhs`, or `dst += lhs · rhs` with `accumulate`: the one call into gemm, with
+/// every shape and length checked. gemm copies `lhs` (after its own choice of orientation)
+/// into panels, fast when the panel runs along contiguous elements and one float at a time
+/// when not: the layouts the callers pass are chosen for that (measured).
+fn matmul(
+    (dst, d): (&mut [f32], Layout),
+    (lhs, l): (&[f32], Layout),
+    (rhs, r): (&[f32], Layout),
+    accumulate: bool,
+    parallelism: gemm::Parallelism,
+) {
+    assert!(
+        d.rows == l.rows && d.cols == r.cols && l.cols == r.rows,
+        "{d:?} {l:?} {r:?}"
+    );
+    assert!(d.span() <= dst.len() && l.span() <= lhs.len() && r.span() <= rhs.len());
+    let stride = |s: usize| s as isize;
+    // SAFETY: every element the layouts address lies inside its slice (asserted above); the
+    // layouts of `dst` never address one element twice; `dst` is borrowed mutably, so it
+    // aliases neither input.
+    unsafe {
+        gemm::gemm(
+            d.rows,
+            d.cols,
+            l.cols,
+            dst.as_mut_ptr(),
+            stride(d.col_stride),
+            stride(d.row_stride),
+            accumulate,
+            lhs.as_ptr(),
+            stride(l.col_stride),
+            stride(l.row_stride),
+            rhs.as_ptr(),
+            stride(r.col_stride),
+            stride(r.row_stride),
+            if accumulate { 1.0 } else { 0.0 },
+            1.0,
+            false,
+            false,
+            false,
+            parallelism,
+        );
+    }
+}
+
 /// `out[O x P] = w[O x CKK] · col[CKK x P]` for one image.
 fn gemm_weights_by_columns(
     out: &mut [f32],
@@ -130,33 +229,13 @@ fn gemm_weights_by_columns(
 ) {
     let [oh, ow] = g.output();
     let (pixels, patch) = (oh * ow, g.patch());
-    assert!(out.len() == g.c_out * pixels && w.len() == g.c_out * patch);
-    assert!(col.len() == patch * pixels);
-    // SAFETY: `w`, `col` and `out` hold exactly the m x k, k x n and m x n elements the
-    // strides address (asserted above), and `out` aliases neither input.
-    unsafe {
-        gemm::gemm(
-            g.c_out,
-            pixels,
-            patch,
-            out.as_mut_ptr(),
-            1,
-            pixels as isize,
-            false,
-            w.as_ptr(),
-            1,
-            patch as isize,
-            col.as_ptr(),
-            1,
-            pixels as isize,
-            0.0,
-            1.0,
-            false,
-            false,
-            false,
-            parallelism,
-        );
-    }
+    matmul(
+        (out, Layout::row_major(g.c_out, pixels)),
+        (w, Layout::row_major(g.c_out, patch)),
+        (col, Layout::row_major(patch, pixels)),
+        false,
+        parallelism,
+    );
 }
 
 /// `dwᵀ[CKK x O] += col[CKK x P] · go[O x P]ᵀ` for one image. The transposed gradient keeps
@@ -165,32 +244,22 @@ fn gemm_weights_by_columns(
 fn gemm_accumulate_weight_grad_t(dwt: &mut [f32], go: &[f32], col: &[f32], g: &ConvGeometry) {
     let [oh, ow] = g.output();
     let (pixels, patch) = (oh * ow, g.patch());
-    assert!(dwt.len() == g.c_out * patch && go.len() == g.c_out * pixels);
-    assert!(col.len() == patch * pixels);
-    // SAFETY: the three buffers hold exactly the m x k, k x n and m x n elements the strides
-    // address (asserted above), and `dwt` aliases neither input.
-    unsafe {
-        gemm::gemm(
-            patch,
-            g.c_out,
-            pixels,
-            dwt.as_mut_ptr(),
-            1,
-            g.c_out as isize,
-            true,
-            col.as_ptr(),
-            1,
-            pixels as isize,
-            go.as_ptr(),
-            pixels as isize,
-            1,
-            1.0,
-            1.0,
-            false,
-            false,
-            false,
-            gemm::Parallelism::None,
-        );
+    matmul(
+        (dwt, Layout::row_major(patch, g.c_out)),
+        (col, Layout::row_major(patch, pixels)),
+        (go, Layout::row_major(g.c_out, pixels).t()),
+        true,
+        gemm::Parallelism::None,
+    );
+}
+
+/// `dst` `[cols, rows]` = the transpose of the row-major `src` `[rows, cols]`.
+fn transpose_into(src: &[f32], rows: usize, cols: usize, dst: &mut [f32]) {
+    assert!(src.len() == rows * cols && dst.len() == rows * cols);
+    for (i, row) in src.chunks(cols).enumerate() {
+        for (j, &v) in row.iter().enumerate() {
+            dst[j * rows + i] = v;
+        }
     }
 }
 
@@ -204,11 +273,7 @@ fn weight_grad_from_chunks(chunk_sums: Vec<Vec<f32>>, g: &ConvGeometry) -> Vec<f
         }
     }
     let mut dw = vec![0f32; g.c_out * patch];
-    for (j, row) in total.chunks(g.c_out).enumerate() {
-        for (o, &v) in row.iter().enumerate() {
-            dw[o * patch + j] = v;
-        }
-    }
+    transpose_into(&total, patch, g.c_out, &mut dw);
     dw
 }
 
@@ -344,43 +409,17 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
         || (vec![0f32; patch * pixels], vec![0f32; patch * pixels]),
         |(col, scratch), (n, out)| {
             let xn = &x[n * g.c_out * pixels..(n + 1) * g.c_out * pixels];
-            let (dst, dst_cs, dst_rs) = if column_major {
-                (&mut *scratch, patch as isize, 1)
-            } else {
-                (&mut *col, 1, pixels as isize)
-            };
             // col[CKK x P] = wᵀ[CKK x O] · x_n[O x P]
-            // SAFETY: `w`, `xn` and `dst` hold exactly the elements the strides address
-            // (checked above and by construction), and do not alias.
-            unsafe {
-                gemm::gemm(
-                    patch,
-                    pixels,
-                    g.c_out,
-                    dst.as_mut_ptr(),
-                    dst_cs,
-                    dst_rs,
-                    false,
-                    w.as_ptr(),
-                    patch as isize,
-                    1,
-                    xn.as_ptr(),
-                    1,
-                    pixels as isize,
-                    0.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
-                    parallelism,
-                );
-            }
+            let (dst, layout) = if column_major {
+                (&mut *scratch, Layout::column_major(patch, pixels))
+            } else {
+                (&mut *col, Layout::row_major(patch, pixels))
+            };
+            let w_t = Layout::row_major(g.c_out, patch).t();
+            let x_n = Layout::row_major(g.c_out, pixels);
+            matmul((dst, layout), (w, w_t), (xn, x_n), false, parallelism);
             if column_major {
-                for (p, patch_of_p) in scratch.chunks(patch).enumerate() {
-                    for (j, &v) in patch_of_p.iter().enumerate() {
-                        col[j * pixels + p] = v;
-                    }
-                }
+                transpose_into(scratch, pixels, patch, col);
             }
             col2im(col, g, out);
         },

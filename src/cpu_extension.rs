@@ -1,18 +1,18 @@
 //! Our CPU kernels inside burn's autodiff graph: a burn backend extension.
 //!
 //! On the flex backend:
-//! - [`conv2d`] and [`conv_transpose2d`] compute the forward pass and the input gradient with
-//!   flex's own kernels, and the weight gradient with [`crate::conv_gemm::weight_grad`]
-//!   (im2col + GEMM) instead of burn-backend's default, which runs a convolution with the
-//!   activations as its kernel and took most of a NeuroKin training step;
+//! - [`conv2d`] and [`conv_transpose2d`] run forward and backward on [`crate::conv_gemm`]
+//!   (im2col + GEMM): the forward passes, the input gradients (as forward convolutions) and
+//!   the weight gradients, instead of burn-backend's defaults, whose weight gradient runs a
+//!   convolution with the activations as its kernel and took most of a NeuroKin training step;
 //! - [`resize_bilinear`] runs forward and backward on [`crate::bilinear_resize`].
 //!
 //! On every other device (wgpu, ndarray) they are burn's own ops, unchanged.
 //!
 //! The extension: a backend trait [`CpuKernelOps`] routed through burn's `Dispatch` by
 //! `#[backend_extension]`; its flex implementation calls the kernels; its `Autodiff`
-//! implementation holds the hand-written backward passes (burn's own for the convolutions, with
-//! the weight gradient swapped). The tests compare values and gradients with burn's ops.
+//! implementation holds the hand-written backward passes. The tests compare values and
+//! gradients with burn's ops.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
