@@ -169,6 +169,10 @@ pub struct ExperimentArgs {
     /// Train for this many steps instead of the preset's (the results say so).
     #[arg(long)]
     pub steps: Option<usize>,
+    /// table1 only: gather the rows the experiments wrote into their own folders under
+    /// reports/ (same preset, dataset and steps) instead of training those models again.
+    #[arg(long)]
+    pub reuse: bool,
 }
 
 impl ExperimentArgs {
@@ -185,6 +189,11 @@ impl ExperimentArgs {
                 e.presets.join(", ")
             )));
         }
+        if self.reuse && name != "table1" {
+            return Err(crate::Error::Config(format!(
+                "--reuse applies to table1 only, not {name}"
+            )));
+        }
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
@@ -194,7 +203,7 @@ impl ExperimentArgs {
             paper_compatible: self.paper_compatible,
             resume: self.resume,
             steps: self.steps,
-            reuse_root: None,
+            reuse_root: self.reuse.then(|| PathBuf::from(".")),
         };
         let dir = self
             .out

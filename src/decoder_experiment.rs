@@ -152,6 +152,9 @@ pub struct DecoderRunConfig {
     pub reference: PaperReference,
     /// Said in the results row (a shortened run, ...).
     pub note: String,
+    /// `--steps N` when it changed the preset's step count.
+    #[serde(default)]
+    pub steps_override: Option<usize>,
 }
 
 /// The presets of the decoder experiments: `paper`, `quick`, and `short` (the paper's data
@@ -233,6 +236,7 @@ impl DecoderRunConfig {
             speed,
             reference,
             note: String::new(),
+            steps_override: None,
         })
     }
 
@@ -538,6 +542,7 @@ pub fn run(
         paper_latency_ms: None,
         paper_train_time_s: None,
         note: cfg.note.clone(),
+        steps_override: cfg.steps_override,
     }
     .with_reference(&cfg.reference);
     write_report(dir, cfg, &result, &log)?;

@@ -59,6 +59,7 @@ impl RunOptions {
                 format!("{}; {msg}", cfg.note)
             };
             cfg.train.steps = steps;
+            cfg.steps_override = Some(steps);
         }
         cfg
     }

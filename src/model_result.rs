@@ -67,6 +67,10 @@ pub struct ModelResult {
     pub paper_train_time_s: Option<f64>,
     /// Anything a reader must know (a shortened run, a different protocol).
     pub note: String,
+    /// `--steps N` when the run changed its preset's step count (then not a `preset` run in
+    /// full: `table1 --reuse` takes it only for the same `--steps`).
+    #[serde(default)]
+    pub steps_override: Option<usize>,
 }
 
 impl ModelResult {

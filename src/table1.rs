@@ -3,8 +3,9 @@
 //!
 //! The zoo is the registry: every experiment marked `in_table1` runs into `dir/<name>/` and
 //! its `results.csv` rows are gathered, so a new self-model (FFKSM, K-3DGS) appears here by
-//! registering itself, with no edit to this file. Under `reproduce`, rows the experiments
-//! have just written into their own folders are gathered instead of trained again.
+//! registering itself, with no edit to this file. Under `reproduce` and with `table1 --reuse`,
+//! rows the experiments have written into their own folders under `reports/` (same preset,
+//! dataset and steps) are gathered instead of trained again.
 
 use std::path::Path;
 
@@ -53,7 +54,8 @@ pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
 }
 
 /// The rows under `opts.reuse_root/default_dir/results.csv`, if that file exists and every row
-/// has this run's preset, dataset and (with `--steps`) step count.
+/// has this run's preset, dataset and step count (`--steps N`: N steps; none: the preset's,
+/// so a shortened run is never taken for a full one).
 fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<ModelResult>>> {
     let Some(root) = &opts.reuse_root else {
         return Ok(None);
@@ -71,7 +73,10 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
     let matches = |r: &ModelResult| {
         r.preset == opts.preset
             && r.dataset == dataset
-            && opts.steps.is_none_or(|s| r.train_steps == s)
+            && match opts.steps {
+                Some(s) => r.train_steps == s,
+                None => r.steps_override.is_none(),
+            }
     };
     Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
 }

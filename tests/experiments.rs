@@ -44,6 +44,20 @@ fn every_experiment_runs_on_its_quick_preset() {
             e.name
         );
     }
+
+    // A shortened run (`--steps`) is never taken for the preset's: table1 trains that model.
+    let neurokin = selfmodel::experiments::find("neurokin").unwrap();
+    let mut short = selfmodel::experiments::RunOptions::preset("quick");
+    short.steps = Some(3);
+    (neurokin.run)(&short, &root.path().join(neurokin.default_dir)).unwrap();
+    let table1_exp = selfmodel::experiments::find("table1").unwrap();
+    let mut opts = selfmodel::experiments::RunOptions::preset("quick");
+    opts.reuse_root = Some(root.path().to_path_buf());
+    (table1_exp.run)(&opts, &table1).unwrap();
+    assert!(
+        table1.join("neurokin").join("results.csv").is_file(),
+        "table1 took a 3-step run for the quick preset's"
+    );
 }
 
 #[test]
