@@ -142,6 +142,11 @@ impl Ablation {
                                 c.data.dataset.train = max;
                                 c.data.train_samples = Some(size * 4 / 5);
                                 c.data.test = Some(max..max + test);
+                                c.note = format!(
+                                    "tested on samples {max}..{} of one {}-sample trajectory, the same for every size (not the standard split's last 400 of 2,000)",
+                                    max + test,
+                                    max + test
+                                );
                             }),
                         )
                     })
