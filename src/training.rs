@@ -381,6 +381,21 @@ where
             window = (0.0, 0);
         }
         bar.inc(1);
+        // Without a terminal (a run in the background, CI) the bar is hidden: a line every 5%.
+        if bar.is_hidden() && (log.step % (cfg.steps / 20).max(1) == 0 || log.step == cfg.steps) {
+            let last = log.curve.last().map_or(f64::NAN, |c| c.1);
+            eprintln!(
+                "{label}: step {}/{}, loss {last:.4}, {:.2} s/step, ETA {}",
+                log.step,
+                cfg.steps,
+                log.train_seconds
+                    / log
+                        .step
+                        .saturating_sub(log.resumed_from.unwrap_or(0))
+                        .max(1) as f64,
+                indicatif::HumanDuration(bar.eta())
+            );
+        }
         if let Some(plan) = checkpoint
             && cfg.checkpoint_every > 0
             && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps)
