@@ -388,11 +388,7 @@ where
                 "{label}: step {}/{}, loss {last:.4}, {:.2} s/step, ETA {}",
                 log.step,
                 cfg.steps,
-                log.train_seconds
-                    / log
-                        .step
-                        .saturating_sub(log.resumed_from.unwrap_or(0))
-                        .max(1) as f64,
+                log.train_seconds / log.step as f64,
                 indicatif::HumanDuration(bar.eta())
             );
         }
