@@ -33,6 +33,8 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // The revision the run starts from, before it writes anything.
+    selfmodel::cli::git_revision();
     run_main(|| {
         let mut rows = run(args.device, args.quick)?;
         if let Some(py) = &args.torch {

@@ -61,6 +61,8 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // The revision the run starts from, before it writes anything.
+    selfmodel::cli::git_revision();
     run_main(|| {
         let robot = args.robot.load()?;
         let mut cfg = DatasetConfig::preset(&args.preset)?;

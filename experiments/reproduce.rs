@@ -28,6 +28,8 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // The revision the run starts from, before it writes anything.
+    selfmodel::cli::git_revision();
     run_main(|| {
         if args.list {
             for e in EXPERIMENTS {

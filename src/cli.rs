@@ -33,6 +33,8 @@ pub fn experiment_main(name: &'static str, default_preset: &str) -> ExitCode {
         Ok(args) => args,
         Err(e) => e.exit(),
     };
+    // Before anything is written.
+    git_revision();
     run_main(|| args.run(name, default_preset))
 }
 
@@ -134,16 +136,23 @@ pub fn shared_arm_urdf() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/robots/4dof_1st/urdf/4dof_1st.urdf")
 }
 
-/// `git describe --always --dirty` of the working tree, or "unknown".
+/// `git describe --always --dirty` of the working tree when this process first asked, or
+/// "unknown": the code a run started from. Read once, so the files a run writes (its own
+/// `config.json` over a committed report) never mark it dirty; binaries ask at start.
 pub fn git_revision() -> String {
-    std::process::Command::new("git")
-        .args(["describe", "--always", "--dirty", "--abbrev=10"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .ok()
-        .filter(|o| o.status.success())
-        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-        .unwrap_or_else(|| "unknown".into())
+    static REVISION: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    REVISION
+        .get_or_init(|| {
+            std::process::Command::new("git")
+                .args(["describe", "--always", "--dirty", "--abbrev=10"])
+                .current_dir(env!("CARGO_MANIFEST_DIR"))
+                .output()
+                .ok()
+                .filter(|o| o.status.success())
+                .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+                .unwrap_or_else(|| "unknown".into())
+        })
+        .clone()
 }
 
 /// The arguments every experiment binary shares.
