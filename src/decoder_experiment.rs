@@ -159,7 +159,7 @@ pub struct DecoderRunConfig {
 
 /// The presets of the decoder experiments: `paper`, `quick`, and `short` (the paper's data
 /// and models with training cut so the whole of `table1` fits well within 10 minutes of a
-/// 2-core CPU, 247 s measured; each row says so in its note).
+/// 2-core CPU, 175 s measured at 390a332; each row says so in its note).
 pub const DECODER_PRESETS: &[&str] = &["paper", "short", "quick"];
 
 fn code_train(preset: &str) -> TrainConfig {
