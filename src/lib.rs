@@ -29,6 +29,7 @@ pub mod metrics;
 pub mod model_result;
 pub mod neurokin;
 pub mod npz;
+pub mod positional_encoding;
 pub mod preset;
 pub mod preview;
 pub mod primitive_fit;
@@ -43,6 +44,7 @@ pub mod training;
 pub mod trajectory;
 pub mod upconv;
 pub mod urdf_loader;
+pub mod virtual_frame;
 
 pub use error::{Error, Result};
 

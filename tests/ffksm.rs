@@ -1,0 +1,95 @@
+//! FFKSM's building blocks against their slow references: the positional encoding and the
+//! virtual frame.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use selfmodel::positional_encoding::{encode, encode_reference, encoded_width};
+use selfmodel::virtual_frame::{VirtualFrame, to_virtual, to_virtual_reference};
+
+fn values(n: usize, seed: u32, scale: f64) -> Vec<f64> {
+    (0..n)
+        .map(|i| {
+            let v = (i as u32)
+                .wrapping_mul(2_654_435_761)
+                .wrapping_add(seed.wrapping_mul(97));
+            scale * ((v >> 8) as f64 / (1 << 23) as f64 - 1.0)
+        })
+        .collect()
+}
+
+fn tensor(v: &[f64], dims: [usize; 2], dev: &Device) -> Tensor<2> {
+    let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    Tensor::from_data(TensorData::new(v, dims), dev)
+}
+
+#[test]
+fn positional_encoding_widths_and_values_match_the_reference() {
+    // The reimplementation's L = 5 (point 33, joints 22) and the original's L = 10 (63, 42).
+    assert_eq!(
+        [5, 10].map(|l| [encoded_width(3, l), encoded_width(2, l)]),
+        [[33, 22], [63, 42]]
+    );
+    let dev = Device::flex();
+    for (d, bands) in [(3, 5), (2, 5), (3, 10)] {
+        let n = 7;
+        let x = values(n * d, d as u32, 1.5);
+        let ours = encode(tensor(&x, [n, d], &dev), bands);
+        assert_eq!(ours.dims(), [n, encoded_width(d, bands)]);
+        let ours = ours.into_data().to_vec::<f32>().unwrap();
+        let reference: Vec<f64> = x
+            .chunks(d)
+            .flat_map(|p| encode_reference(p, bands))
+            .collect();
+        let worst = ours
+            .iter()
+            .zip(&reference)
+            .map(|(&a, &b)| (a as f64 - b).abs())
+            .fold(0.0, f64::max);
+        // 2^9 x in f32 loses ~1e-4 of phase at |x| = 1.5.
+        assert!(worst < 2e-3, "d {d}, L {bands}: max difference {worst}");
+    }
+}
+
+#[test]
+fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
+    let dev = Device::flex();
+    let n = 9;
+    let p = values(n * 3, 1, 0.4);
+    let a = values(n * 2, 2, 3.0);
+    let a0: Vec<f64> = a.iter().step_by(2).copied().collect();
+    let a1: Vec<f64> = a.iter().skip(1).step_by(2).copied().collect();
+    let angles = |v: &[f64]| {
+        Tensor::<1>::from_data(
+            v.iter().map(|&x| x as f32).collect::<Vec<_>>().as_slice(),
+            &dev,
+        )
+    };
+    for frame in [VirtualFrame::Reimplementation, VirtualFrame::Original] {
+        let ours = to_virtual(frame, tensor(&p, [n, 3], &dev), angles(&a0), angles(&a1))
+            .into_data()
+            .to_vec::<f32>()
+            .unwrap();
+        for i in 0..n {
+            let r =
+                to_virtual_reference(frame, [p[3 * i], p[3 * i + 1], p[3 * i + 2]], a0[i], a1[i]);
+            for k in 0..3 {
+                assert!(
+                    (ours[3 * i + k] as f64 - r[k]).abs() < 1e-5,
+                    "{frame:?} point {i}: {:?} vs {r:?}",
+                    &ours[3 * i..3 * i + 3]
+                );
+            }
+        }
+    }
+    // The reimplementation's frame undoes p = Ry(a1) Rz(a0) v: a point fixed in the frame of
+    // the first two joints has the same virtual coordinates whatever those joints are.
+    let v = [0.1, -0.05, 0.2];
+    for (a0, a1) in [(0.0, 0.0), (0.7, -0.4), (-2.0, 1.3)] {
+        let rz = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), a0);
+        let ry = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::y_axis(), a1);
+        let world = ry * (rz * nalgebra::Vector3::from(v));
+        let back = to_virtual_reference(VirtualFrame::Reimplementation, world.into(), a0, a1);
+        for k in 0..3 {
+            assert!((back[k] - v[k]).abs() < 1e-12);
+        }
+    }
+}
