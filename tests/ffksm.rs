@@ -34,7 +34,7 @@ fn positional_encoding_widths_and_values_match_the_reference() {
         let x = values(n * d, d as u32, 1.5);
         let ours = encode(tensor(&x, [n, d], &dev), bands);
         assert_eq!(ours.dims(), [n, encoded_width(d, bands)]);
-        let ours = ours.into_data().to_vec::<f32>().unwrap();
+        let ours = ours.into_data().try_to_vec::<f32>().unwrap();
         let reference: Vec<f64> = x
             .chunks(d)
             .flat_map(|p| encode_reference(p, bands))
@@ -66,7 +66,7 @@ fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
     for frame in [VirtualFrame::Reimplementation, VirtualFrame::Original] {
         let ours = to_virtual(frame, tensor(&p, [n, 3], &dev), angles(&a0), angles(&a1))
             .into_data()
-            .to_vec::<f32>()
+            .try_to_vec::<f32>()
             .unwrap();
         for i in 0..n {
             let r =
