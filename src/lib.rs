@@ -29,6 +29,7 @@ pub mod metrics;
 pub mod model_result;
 pub mod neurokin;
 pub mod npz;
+pub mod occupancy_field;
 pub mod positional_encoding;
 pub mod preset;
 pub mod preview;

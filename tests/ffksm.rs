@@ -93,3 +93,50 @@ fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
         }
     }
 }
+
+#[test]
+fn occupancy_field_parameter_counts_match_both_implementations() {
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    let dev = Device::flex();
+    let paper = OccupancyFieldConfig::paper().init(&dev, 0).unwrap();
+    let original = OccupancyFieldConfig::original().init(&dev, 0).unwrap();
+    use burn::module::Module;
+    assert_eq!(paper.num_params(), 93_922);
+    assert_eq!(original.num_params(), 83_810);
+}
+
+#[test]
+fn every_joint_and_coordinate_reaches_the_occupancy_output() {
+    // The reimplementation lost two joints to a slicing bug for 2,000 steps: each of the four
+    // angles and three coordinates must change the output and receive a gradient.
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    let dev = Device::flex().autodiff();
+    for cfg in [
+        OccupancyFieldConfig::paper(),
+        OccupancyFieldConfig::original(),
+    ] {
+        let field = cfg.init(&dev, 3).unwrap();
+        let n = 16;
+        let points = tensor(&values(n * 3, 5, 0.3), [n, 3], &dev).require_grad();
+        let angles = tensor(&values(n * 4, 6, 1.2), [n, 4], &dev).require_grad();
+        let out = field.forward(points.clone(), angles.clone());
+        assert_eq!(out.dims(), [n, 2]);
+        let grads = out.sum().backward();
+        for (name, g, width) in [
+            ("angle", angles.grad(&grads).unwrap(), 4),
+            ("coordinate", points.grad(&grads).unwrap(), 3),
+        ] {
+            let g = g.into_data().try_to_vec::<f32>().unwrap();
+            for k in 0..width {
+                let norm: f32 = g.iter().skip(k).step_by(width).map(|v| v * v).sum();
+                assert!(
+                    norm > 1e-12,
+                    "{:?}: {name} {k} gets no gradient",
+                    cfg.virtual_frame
+                );
+            }
+        }
+    }
+}
