@@ -35,6 +35,7 @@ pub mod preset;
 pub mod preview;
 pub mod primitive_fit;
 pub mod ray_caster;
+pub mod ray_marcher;
 pub mod report;
 pub mod resneurokin_d;
 pub mod robot;
