@@ -86,3 +86,53 @@ pub fn composite_reference(raw: &[(f64, f64)]) -> f64 {
         .map(|&(d, v)| (1.0 - (-d.max(0.0)).exp()) * v)
         .sum()
 }
+
+/// Expected depth `[rays]` (m) from the raw output `[rays * samples, 2]` and the sample depths
+/// `[rays * samples]`: `Σ w_k t_k / Σ w_k` with `w_k = (1 − exp(−ReLU(density_k))) ·
+/// ReLU(visibility_k)`, 0 where no sample weighs anything.
+pub fn expected_depth(raw: Tensor<2>, depths: &[f64], samples: usize) -> Tensor<1> {
+    let n = raw.dims()[0];
+    assert_eq!(n, depths.len());
+    let rays = n / samples;
+    let density = raw.clone().slice([0..n, 0..1]).reshape([rays, samples]);
+    let visibility = relu(raw.slice([0..n, 1..2]).reshape([rays, samples]));
+    let weights = relu(density).neg().exp().neg().add_scalar(1.0) * visibility;
+    let t: Vec<f32> = depths.iter().map(|&t| t as f32).collect();
+    let t = Tensor::<2>::from_data(TensorData::new(t, [rays, samples]), &weights.device());
+    let total = weights.clone().sum_dim(1);
+    let weighted = (weights * t).sum_dim(1);
+    (weighted / total.clone().add_scalar(1e-8)).reshape([rays])
+}
+
+/// Render `pixels` (row-major indices) of `camera` through `field` for joint angles
+/// `[4]` (radians), marching `chunk` rays at a time (memory stays `chunk * samples` points):
+/// `(silhouette [rays], expected depth [rays], network evaluations)`.
+pub fn render_dense(
+    field: &crate::occupancy_field::OccupancyField,
+    (camera, angles): (&Camera, [f64; 4]),
+    pixels: &[usize],
+    march: &MarchConfig,
+    jitter: Option<u64>,
+    chunk: usize,
+    device: &Device,
+) -> (Tensor<1>, Tensor<1>, usize) {
+    let mut silhouettes = Vec::new();
+    let mut depths_out = Vec::new();
+    let mut evaluations = 0;
+    for (i, part) in pixels.chunks(chunk.max(1)).enumerate() {
+        let depths = march.depths(part.len(), jitter.map(|s| s.wrapping_add(i as u64)));
+        let points = sample_points(camera, part, &depths, device);
+        let n = depths.len();
+        let a: Vec<f32> = (0..n).flat_map(|_| angles.map(|v| v as f32)).collect();
+        let a = Tensor::<2>::from_data(TensorData::new(a, [n, 4]), device);
+        let raw = field.forward(points, a);
+        evaluations += n;
+        silhouettes.push(composite(raw.clone(), march.samples));
+        depths_out.push(expected_depth(raw, &depths, march.samples));
+    }
+    (
+        Tensor::cat(silhouettes, 0),
+        Tensor::cat(depths_out, 0),
+        evaluations,
+    )
+}

@@ -181,3 +181,41 @@ fn ray_marching_samples_and_composites_as_the_paper_defines() {
         assert!((ours[r] as f64 - composite_reference(&ray)).abs() < 1e-5);
     }
 }
+
+#[test]
+fn dense_rendering_is_the_same_in_chunks_and_counts_its_evaluations() {
+    use selfmodel::camera::Camera;
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    use selfmodel::ray_marcher::{MarchConfig, expected_depth, render_dense};
+    let dev = Device::flex();
+    let field = OccupancyFieldConfig::quick().init(&dev, 1).unwrap();
+    let cam = Camera::paper();
+    let march = MarchConfig {
+        samples: 8,
+        ..MarchConfig::paper()
+    };
+    let pixels: Vec<usize> = (0..37).map(|i| i * 211 % 10_000).collect();
+    let angles = [0.3, -0.2, 0.5, 0.1];
+    let render = |chunk| render_dense(&field, (&cam, angles), &pixels, &march, None, chunk, &dev);
+    let (whole, whole_depth, evals) = render(1000);
+    let (parts, parts_depth, _) = render(5);
+    assert_eq!(evals, 37 * 8);
+    assert_eq!(whole.dims(), [37]);
+    let close = |a: Tensor<1>, b: Tensor<1>| {
+        let (a, b) = (
+            a.into_data().try_to_vec::<f32>().unwrap(),
+            b.into_data().try_to_vec::<f32>().unwrap(),
+        );
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-5)
+    };
+    assert!(close(whole, parts));
+    assert!(close(whole_depth, parts_depth));
+    // Expected depth of one ray whose only weight sits at the second sample: that sample's depth.
+    let raw = tensor(&[-1.0, 1.0, 50.0, 1.0, -1.0, 1.0], [3, 2], &dev);
+    let d = expected_depth(raw, &[0.7, 0.9, 1.1], 3)
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    assert!((d[0] - 0.9).abs() < 1e-5, "{d:?}");
+}
