@@ -323,21 +323,65 @@ pub fn forward(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
 /// `dW` of shape `[c_out, c_in, kh, kw]`, from the input `x` `[batch, c_in, H, W]` and the
 /// output gradient `grad_out` `[batch, c_out, Ho, Wo]`.
 pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
+    weight_grad_chunks(x, grad_out, g, None)
+}
+
+/// Both gradients of the transposed convolution [`transpose`]`(x, w, g)` from its output
+/// gradient `grad_out` `[batch, c_in, H, W]` (the input of the convolution `g`): the input
+/// gradient `dx = forward(grad_out, w)` `[batch, c_out, Ho, Wo]` and the weight gradient
+/// `dw = weight_grad(grad_out, x)` `[c_out, c_in, kh, kw]`. Both multiply the same im2col
+/// matrix of `grad_out`, built once per image here instead of twice.
+pub fn transpose_backward(
+    x: &[f32],
+    w: &[f32],
+    grad_out: &[f32],
+    g: &ConvGeometry,
+) -> (Vec<f32>, Vec<f32>) {
+    let mut dx = vec![0f32; x.len()];
+    let dw = weight_grad_chunks(grad_out, x, g, Some((w, &mut dx)));
+    (dx, dw)
+}
+
+/// [`weight_grad`] of the convolution `g` over a fixed number of image chunks (each sums its
+/// images in order, the chunk sums are added in order: the result does not depend on the
+/// scheduling). With `forward_into = Some((w, y))` it also writes `y = forward(x, w)` from the
+/// same im2col matrices ([`transpose_backward`]).
+fn weight_grad_chunks(
+    x: &[f32],
+    grad_out: &[f32],
+    g: &ConvGeometry,
+    forward_into: Option<(&[f32], &mut [f32])>,
+) -> Vec<f32> {
     g.check(x, grad_out);
     let [oh, ow] = g.output();
-    let pixels = oh * ow;
     let patch = g.patch();
     let image_in = g.c_in * g.input[0] * g.input[1];
-    let image_out = g.c_out * pixels;
+    let image_out = g.c_out * oh * ow;
     let per_chunk = g.batch.div_ceil(CHUNKS).max(1);
-    let chunk_sums: Vec<Vec<f32>> = (0..g.batch.div_ceil(per_chunk))
+    let chunks = g.batch.div_ceil(per_chunk);
+    let (w, outputs): (Option<&[f32]>, Vec<Option<&mut [f32]>>) = match forward_into {
+        Some((w, y)) => {
+            assert_eq!(y.len(), grad_out.len());
+            (
+                Some(w),
+                y.chunks_mut(per_chunk * image_out).map(Some).collect(),
+            )
+        }
+        None => (None, (0..chunks).map(|_| None).collect()),
+    };
+    let chunk_sums: Vec<Vec<f32>> = outputs
         .into_par_iter()
-        .map(|chunk| {
+        .enumerate()
+        .map(|(chunk, mut y_chunk)| {
             let mut dwt = vec![0f32; g.c_out * patch];
             let mut buffer = vec![0f32; g.columns_len()];
-            let images = chunk * per_chunk..((chunk + 1) * per_chunk).min(g.batch);
-            for n in images {
+            let first = chunk * per_chunk;
+            for n in first..(first + per_chunk).min(g.batch) {
                 let col = columns(&x[n * image_in..(n + 1) * image_in], g, &mut buffer);
+                if let (Some(w), Some(y)) = (w, y_chunk.as_deref_mut()) {
+                    let y_n = &mut y[(n - first) * image_out..(n - first + 1) * image_out];
+                    gemm_weights_by_columns(y_n, w, col, g, gemm::Parallelism::None);
+                }
                 let go = &grad_out[n * image_out..(n + 1) * image_out];
                 gemm_accumulate_weight_grad_t(&mut dwt, go, col, g);
             }
@@ -345,43 +389,6 @@ pub fn weight_grad(x: &[f32], grad_out: &[f32], g: &ConvGeometry) -> Vec<f32> {
         })
         .collect();
     weight_grad_from_chunks(chunk_sums, g)
-}
-
-/// Both gradients of the transposed convolution [`transpose`]`(x, w, g)` from its output
-/// gradient `grad_out` `[batch, c_in, H, W]` (the input of the convolution `g`): the input
-/// gradient `dx = forward(grad_out, w)` `[batch, c_out, Ho, Wo]` and the weight gradient
-/// `dw = weight_grad(grad_out, x)` `[c_out, c_in, kh, kw]`. Both multiply the same im2col
-/// matrix of `grad_out`, built once per image here instead of twice. Chunked as
-/// [`weight_grad`], so `dw` does not depend on the scheduling.
-pub fn transpose_backward(
-    x: &[f32],
-    w: &[f32],
-    grad_out: &[f32],
-    g: &ConvGeometry,
-) -> (Vec<f32>, Vec<f32>) {
-    g.check(grad_out, x);
-    let [oh, ow] = g.output();
-    let image_dx = g.c_out * oh * ow;
-    let image_go = g.c_in * g.input[0] * g.input[1];
-    let per_chunk = g.batch.div_ceil(CHUNKS).max(1);
-    let mut dx = vec![0f32; g.batch * image_dx];
-    let chunk_sums: Vec<Vec<f32>> = dx
-        .par_chunks_mut(per_chunk * image_dx)
-        .enumerate()
-        .map(|(chunk, dx_chunk)| {
-            let mut dwt = vec![0f32; g.c_out * g.patch()];
-            let mut buffer = vec![0f32; g.columns_len()];
-            for (i, dx_n) in dx_chunk.chunks_mut(image_dx).enumerate() {
-                let n = chunk * per_chunk + i;
-                let col = columns(&grad_out[n * image_go..(n + 1) * image_go], g, &mut buffer);
-                gemm_weights_by_columns(dx_n, w, col, g, gemm::Parallelism::None);
-                let x_n = &x[n * image_dx..(n + 1) * image_dx];
-                gemm_accumulate_weight_grad_t(&mut dwt, x_n, col, g);
-            }
-            dwt
-        })
-        .collect();
-    (dx, weight_grad_from_chunks(chunk_sums, g))
 }
 
 /// The transposed convolution of `x` `[batch, c_out, Ho, Wo]` with `w` `[c_out, c_in, kh, kw]`

@@ -96,17 +96,15 @@ pub fn score(
                     .collect()
             };
             let (pred_robot, true_robot) = (robot(d), robot(t));
-            let mae_mm = |errors: &mut dyn Iterator<Item = f32>| {
-                1000.0 * errors.map(|e| e.abs() as f64).sum::<f64>()
-                    / true_robot.len().max(1) as f64
-            };
+            let mae_mm = |abs_errors: f64| 1000.0 * abs_errors / true_robot.len().max(1) as f64;
+            let model: f64 = pred_robot
+                .iter()
+                .zip(&true_robot)
+                .map(|(p, g)| (p - g).abs() as f64)
+                .sum();
             let median = median(&true_robot);
-            (
-                Some(mae_mm(
-                    &mut pred_robot.iter().zip(&true_robot).map(|(p, g)| p - g),
-                )),
-                Some(mae_mm(&mut true_robot.iter().map(|g| g - median))),
-            )
+            let constant: f64 = true_robot.iter().map(|g| (g - median).abs() as f64).sum();
+            (Some(mae_mm(model)), Some(mae_mm(constant)))
         }
         _ => (None, None),
     };

@@ -154,8 +154,9 @@ impl OccupancyField {
         let last = self.predictive.len() - 1;
         for (i, layer) in self.predictive.iter().enumerate() {
             x = layer.forward(x);
-            let before_output = i + 1 == last;
-            if i < last && (!before_output || self.relu_before_output) {
+            let is_output = i == last;
+            let feeds_output = i + 1 == last;
+            if !is_output && (self.relu_before_output || !feeds_output) {
                 x = relu(x);
             }
         }

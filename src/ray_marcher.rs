@@ -69,15 +69,22 @@ pub fn sample_points(
     Tensor::from_data(TensorData::new(points, [depths.len(), 3]), device)
 }
 
-/// Pixels `[rays]` from the field's raw output `[rays * samples, 2]` (density, visibility),
-/// ray-major: `Σ_k (1 − exp(−ReLU(density_k))) · visibility_k`.
-pub fn composite(raw: Tensor<2>, samples: usize) -> Tensor<1> {
+/// The raw output `[rays * samples, 2]` (ray-major) as per-sample opacity
+/// `1 − exp(−ReLU(density))` and visibility, each `[rays, samples]`.
+fn opacity_and_visibility(raw: Tensor<2>, samples: usize) -> (Tensor<2>, Tensor<2>) {
     let n = raw.dims()[0];
     let rays = n / samples;
     let density = raw.clone().slice([0..n, 0..1]).reshape([rays, samples]);
     let visibility = raw.slice([0..n, 1..2]).reshape([rays, samples]);
-    let alpha = relu(density).neg().exp().neg().add_scalar(1.0);
-    (alpha * visibility).sum_dim(1).reshape([rays])
+    (relu(density).neg().exp().neg().add_scalar(1.0), visibility)
+}
+
+/// Pixels `[rays]` from the field's raw output `[rays * samples, 2]` (density, visibility),
+/// ray-major: `Σ_k (1 − exp(−ReLU(density_k))) · visibility_k`.
+pub fn composite(raw: Tensor<2>, samples: usize) -> Tensor<1> {
+    let (opacity, visibility) = opacity_and_visibility(raw, samples);
+    let rays = opacity.dims()[0];
+    (opacity * visibility).sum_dim(1).reshape([rays])
 }
 
 /// The slow reference of [`composite`] for one ray's `(density, visibility)` samples.
@@ -91,17 +98,15 @@ pub fn composite_reference(raw: &[(f64, f64)]) -> f64 {
 /// `[rays * samples]`: `Σ w_k t_k / Σ w_k` with `w_k = (1 − exp(−ReLU(density_k))) ·
 /// ReLU(visibility_k)`, 0 where no sample weighs anything.
 pub fn expected_depth(raw: Tensor<2>, depths: &[f64], samples: usize) -> Tensor<1> {
-    let n = raw.dims()[0];
-    assert_eq!(n, depths.len());
-    let rays = n / samples;
-    let density = raw.clone().slice([0..n, 0..1]).reshape([rays, samples]);
-    let visibility = relu(raw.slice([0..n, 1..2]).reshape([rays, samples]));
-    let weights = relu(density).neg().exp().neg().add_scalar(1.0) * visibility;
+    assert_eq!(raw.dims()[0], depths.len());
+    let (opacity, visibility) = opacity_and_visibility(raw, samples);
+    let rays = opacity.dims()[0];
+    let weights = opacity * relu(visibility);
     let t: Vec<f32> = depths.iter().map(|&t| t as f32).collect();
     let t = Tensor::<2>::from_data(TensorData::new(t, [rays, samples]), &weights.device());
     let total = weights.clone().sum_dim(1);
     let weighted = (weights * t).sum_dim(1);
-    (weighted / total.clone().add_scalar(1e-8)).reshape([rays])
+    (weighted / total.add_scalar(1e-8)).reshape([rays])
 }
 
 /// Render `pixels` (row-major indices) of `camera` through `field` for joint angles
