@@ -326,7 +326,7 @@ pub struct DecoderOutcome {
 }
 
 /// The test set as host arrays: silhouettes in [0, 1] and depth, `[n, H * W]`.
-fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, Vec<f32>) {
+pub(crate) fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, Vec<f32>) {
     let mut sil = Vec::new();
     let mut depth = Vec::new();
     for i in range.clone() {
@@ -338,7 +338,7 @@ fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, Vec<f32>) {
 
 /// Upload samples `range` with their host targets (from [`host_targets`]): angles
 /// `[n, dof]` (degrees), silhouettes and depth `[n, 1, H, W]`.
-fn device_set(
+pub(crate) fn device_set(
     data: &Dataset,
     range: &Range<usize>,
     (sil, depth): (Vec<f32>, Vec<f32>),
@@ -614,7 +614,7 @@ fn write_report(
 
 /// Six test poses spread over the test set: ground truth, prediction, error (and true depth,
 /// and predicted depth where the predicted silhouette is the robot).
-fn qualitative_figure(
+pub(crate) fn qualitative_figure(
     path: &Path,
     truth: &[f32],
     truth_depth: &[f32],

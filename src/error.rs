@@ -36,6 +36,10 @@ pub enum Error {
     /// Training that cannot go on (a loss that became NaN or infinite).
     #[error("{0}")]
     Training(String),
+    /// Training that collapsed to a trivial solution (FFKSM's all-black image) at `step`;
+    /// the caller may restart with a fresh model.
+    #[error("training collapsed to an all-black image at step {step}")]
+    Collapsed { step: usize },
 }
 
 /// The library's result type.

@@ -5,6 +5,7 @@
 //! `experiments/` holds one thin binary per experiment. See `ARCHITECTURE.md`.
 
 pub mod ablations;
+pub mod accelerated_marcher;
 pub mod arm4;
 pub mod atomic_file;
 pub mod bilinear_resize;
@@ -20,6 +21,7 @@ pub mod device;
 pub mod error;
 pub mod evaluation;
 pub mod experiments;
+pub mod ffksm;
 pub mod figures;
 pub mod inference_speed;
 pub mod kinematics;
@@ -29,6 +31,7 @@ pub mod metrics;
 pub mod model_result;
 pub mod neurokin;
 pub mod npz;
+pub mod occupancy_grid;
 pub mod occupancy_field;
 pub mod positional_encoding;
 pub mod preset;

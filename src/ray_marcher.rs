@@ -14,6 +14,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
 use crate::camera::Camera;
+use crate::occupancy_field::OccupancyField;
 
 /// Where along each ray to sample.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -109,12 +110,39 @@ pub fn expected_depth(raw: Tensor<2>, depths: &[f64], samples: usize) -> Tensor<
     (weighted / total.add_scalar(1e-8)).reshape([rays])
 }
 
+/// The field's raw output `[rays * samples, 2]` at `depths` along the rays of `pixels`, all
+/// in one pose `angles` (radians).
+fn march_chunk(
+    field: &OccupancyField,
+    (camera, angles): (&Camera, [f64; 4]),
+    pixels: &[usize],
+    depths: &[f64],
+    device: &Device,
+) -> Tensor<2> {
+    let points = sample_points(camera, pixels, depths, device);
+    field.forward_pose(points, angles.map(|v| v as f32))
+}
+
+/// The silhouette `[rays]` of `pixels` in one graph (for training: gradients reach the
+/// field), with stratified depths drawn from `jitter`.
+pub fn render_silhouette(
+    field: &OccupancyField,
+    view: (&Camera, [f64; 4]),
+    pixels: &[usize],
+    march: &MarchConfig,
+    jitter: Option<u64>,
+    device: &Device,
+) -> Tensor<1> {
+    let depths = march.depths(pixels.len(), jitter);
+    composite(march_chunk(field, view, pixels, &depths, device), march.samples)
+}
+
 /// Render `pixels` (row-major indices) of `camera` through `field` for joint angles
 /// `[4]` (radians), marching `chunk` rays at a time (memory stays `chunk * samples` points):
 /// `(silhouette [rays], expected depth [rays], network evaluations)`.
 pub fn render_dense(
-    field: &crate::occupancy_field::OccupancyField,
-    (camera, angles): (&Camera, [f64; 4]),
+    field: &OccupancyField,
+    view: (&Camera, [f64; 4]),
     pixels: &[usize],
     march: &MarchConfig,
     jitter: Option<u64>,
@@ -126,12 +154,8 @@ pub fn render_dense(
     let mut evaluations = 0;
     for (i, part) in pixels.chunks(chunk.max(1)).enumerate() {
         let depths = march.depths(part.len(), jitter.map(|s| s.wrapping_add(i as u64)));
-        let points = sample_points(camera, part, &depths, device);
-        let n = depths.len();
-        let a: Vec<f32> = (0..n).flat_map(|_| angles.map(|v| v as f32)).collect();
-        let a = Tensor::<2>::from_data(TensorData::new(a, [n, 4]), device);
-        let raw = field.forward(points, a);
-        evaluations += n;
+        let raw = march_chunk(field, view, part, &depths, device);
+        evaluations += depths.len();
         silhouettes.push(composite(raw.clone(), march.samples));
         depths_out.push(expected_depth(raw, &depths, march.samples));
     }

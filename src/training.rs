@@ -75,6 +75,9 @@ impl TrainSet {
 pub struct Batch {
     pub inputs: Tensor<2>,
     pub targets: Vec<Tensor<4>>,
+    /// The step (0-based) this batch is drawn for: for schedules (curricula) and per-step
+    /// random draws that must be the same after a resume.
+    pub step: usize,
 }
 
 /// Progress saved with a checkpoint, and the training curve of a finished run.
@@ -290,7 +293,11 @@ impl<'a> Batcher<'a> {
             .iter()
             .map(|t| t.clone().select(0, index.clone()))
             .collect();
-        Batch { inputs, targets }
+        Batch {
+            inputs,
+            targets,
+            step,
+        }
     }
 }
 
@@ -300,7 +307,7 @@ impl<'a> Batcher<'a> {
 /// `cfg.checkpoint_every` steps and at the end, and resumes when asked. A non-finite loss
 /// stops the run with [`Error::Training`], keeping the last good checkpoint.
 pub fn train<M, L>(
-    mut model: M,
+    model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
     checkpoint: Option<&CheckpointPlan>,
@@ -310,6 +317,25 @@ pub fn train<M, L>(
 where
     M: Module,
     L: Fn(&M, &Batch) -> Tensor<1>,
+{
+    train_watched(model, data, cfg, checkpoint, label, loss, |_, _| Ok(()))
+}
+
+/// [`train`] with a watcher called after every step with the model and the steps done; an
+/// error from it stops training and is returned (FFKSM's restart on collapse uses this).
+pub fn train_watched<M, L, W>(
+    mut model: M,
+    data: &TrainSet,
+    cfg: &TrainConfig,
+    checkpoint: Option<&CheckpointPlan>,
+    label: &str,
+    loss: L,
+    mut watch: W,
+) -> Result<(M, TrainLog)>
+where
+    M: Module,
+    L: Fn(&M, &Batch) -> Tensor<1>,
+    W: FnMut(&M, usize) -> Result<()>,
 {
     if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
         return Err(Error::Config(format!(
@@ -391,6 +417,10 @@ where
                 log.train_seconds / log.step as f64,
                 indicatif::HumanDuration(bar.eta())
             );
+        }
+        if let Err(e) = watch(&model, log.step) {
+            bar.abandon();
+            return Err(e);
         }
         if let Some(plan) = checkpoint
             && cfg.checkpoint_every > 0
