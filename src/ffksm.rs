@@ -261,6 +261,8 @@ pub struct RendererRow {
     /// Mean network evaluations per image (the accelerated marcher's include its grid).
     pub evaluations_per_image: f64,
     pub grid_evaluations_per_image: f64,
+    /// Mean fraction of grid cells occupied (1 for dense marching, which has no grid).
+    pub grid_occupancy: f64,
     /// Dense evaluations per image divided by this renderer's.
     pub fewer_evaluations: f64,
     pub img_per_s: f64,
@@ -299,6 +301,7 @@ struct Rendered {
     predictions: Predictions,
     evaluations: Vec<usize>,
     grid_evaluations: Vec<usize>,
+    grid_occupancy: Vec<f64>,
     seconds: Vec<f64>,
 }
 
@@ -339,6 +342,7 @@ fn render_all(
         },
         evaluations: Vec::new(),
         grid_evaluations: Vec::new(),
+        grid_occupancy: Vec::new(),
         seconds: Vec::new(),
     };
     let bar = crate::dataset::progress_bar(angles_deg.len() as u64, label);
@@ -346,18 +350,19 @@ fn render_all(
         let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
         let view = (camera, radians(&a32));
         let t0 = Instant::now();
-        let (sil, depth, evals, grid) = if accelerated {
+        let (sil, depth, evals, grid, occupancy) = if accelerated {
             let img = render_accelerated(field, view, &cfg.march, &cfg.accelerated, device);
             (
                 img.silhouette,
                 img.depth,
                 img.evaluations,
                 img.grid_evaluations,
+                img.grid_occupancy,
             )
         } else {
             let (s, d, e) = render_dense(field, view, &all, &cfg.march, None, cfg.chunk_rays, device);
             let host = |t: Tensor<1>| t.into_data().try_into_vec::<f32>().expect("float");
-            (host(s), host(d), e, 0)
+            (host(s), host(d), e, 0, 1.0)
         };
         out.seconds.push(t0.elapsed().as_secs_f64());
         out.predictions.silhouettes.extend(sil);
@@ -366,6 +371,7 @@ fn render_all(
         }
         out.evaluations.push(evals);
         out.grid_evaluations.push(grid);
+        out.grid_occupancy.push(occupancy);
         bar.inc(1);
     }
     bar.finish_and_clear();
@@ -575,6 +581,7 @@ pub fn run(
         evaluations_per_image: r.mean_evaluations(),
         grid_evaluations_per_image: r.grid_evaluations.iter().sum::<usize>() as f64
             / r.grid_evaluations.len().max(1) as f64,
+        grid_occupancy: r.grid_occupancy.iter().sum::<f64>() / r.grid_occupancy.len().max(1) as f64,
         fewer_evaluations: dense_evals / r.mean_evaluations().max(1.0),
         img_per_s: r.images_per_second(),
         psnr_db_test: q.psnr_db_test,

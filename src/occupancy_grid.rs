@@ -36,12 +36,12 @@ pub struct GridConfig {
 }
 
 impl GridConfig {
-    /// 4 x 4 pixels x 4 samples, threshold -1 on the raw density, dilation 1.
+    /// 4 x 4 pixels x 4 samples, threshold 0 on the raw density, dilation 1.
     pub fn paper() -> Self {
         GridConfig {
             block: 4,
             depth_cell: 4,
-            density_threshold: -1.0,
+            density_threshold: 0.0,
             dilation: 1,
             chunk: 1 << 16,
         }

@@ -219,3 +219,144 @@ fn dense_rendering_is_the_same_in_chunks_and_counts_its_evaluations() {
         .unwrap();
     assert!((d[0] - 0.9).abs() < 1e-5, "{d:?}");
 }
+
+#[test]
+fn the_one_pose_fast_path_is_the_general_forward() {
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    let dev = Device::flex();
+    let n = 11;
+    let points = tensor(&values(n * 3, 4, 0.4), [n, 3], &dev);
+    let pose = [0.4f32, -0.9, 1.3, -0.2];
+    let repeated: Vec<f64> = (0..n).flat_map(|_| pose.map(|v| v as f64)).collect();
+    for cfg in [
+        OccupancyFieldConfig::paper(),
+        OccupancyFieldConfig::original(),
+    ] {
+        let field = cfg.init(&dev, 2).unwrap();
+        let general = field
+            .forward(points.clone(), tensor(&repeated, [n, 4], &dev))
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let fast = field
+            .forward_pose(points.clone(), pose)
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let worst = general
+            .iter()
+            .zip(&fast)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 1e-5, "{:?}: differs by {worst}", cfg.virtual_frame);
+    }
+}
+
+#[test]
+fn the_accelerated_marcher_with_every_cell_occupied_is_dense_marching() {
+    use selfmodel::accelerated_marcher::{AcceleratedConfig, render_accelerated};
+    use selfmodel::camera::Camera;
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    use selfmodel::ray_marcher::{MarchConfig, render_dense};
+    let dev = Device::flex();
+    let field = OccupancyFieldConfig::quick().init(&dev, 5).unwrap();
+    let cam = Camera {
+        width: 20,
+        height: 14,
+        ..Camera::paper()
+    };
+    let march = MarchConfig {
+        samples: 12,
+        ..MarchConfig::paper()
+    };
+    let angles = [0.2, 0.4, -0.3, 0.8];
+    let mut cfg = AcceleratedConfig::paper();
+    cfg.grid.density_threshold = f32::NEG_INFINITY;
+    cfg.grid.block = 3;
+    cfg.termination = None;
+    let fast = render_accelerated(&field, (&cam, angles), &march, &cfg, &dev);
+    let all: Vec<usize> = (0..cam.width * cam.height).collect();
+    let (sil, depth, evals) = render_dense(&field, (&cam, angles), &all, &march, None, 64, &dev);
+    assert_eq!(fast.evaluations, evals + fast.grid_evaluations);
+    assert_eq!(fast.grid_occupancy, 1.0);
+    for (name, dense, ours) in [
+        ("silhouette", sil, &fast.silhouette),
+        ("depth", depth, &fast.depth),
+    ] {
+        let dense = dense.into_data().try_to_vec::<f32>().unwrap();
+        let worst = dense
+            .iter()
+            .zip(ours)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(worst < 1e-4, "{name} differs by {worst}");
+    }
+}
+
+#[test]
+fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations() {
+    use selfmodel::device::DeviceChoice;
+    use selfmodel::evaluation::psnr_db;
+    use selfmodel::ffksm::{FfksmConfig, centre_crop};
+    // The curriculum's crop: the central pixels, row by row.
+    assert_eq!(centre_crop(4, 6, 2), vec![8, 9, 14, 15]);
+    let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
+    cfg.novel_views_deg = vec![30.0];
+    let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
+    let out = selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    // A constant black image on the same test images.
+    let (data, _, test) = cfg.data.load().unwrap();
+    let test = test.start..test.start + cfg.test_images.unwrap();
+    let px = data.width * data.height;
+    let black: f64 = test
+        .clone()
+        .map(|i| {
+            let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
+            psnr_db(&vec![0.0; px], &truth)
+        })
+        .sum::<f64>()
+        / test.len() as f64;
+    let [dense, fast] = [&out.renderers[0], &out.renderers[1]];
+    assert!(
+        dense.psnr_db_test > black + 1.0 && dense.iou_test > 0.2,
+        "trained {:.2} dB (IoU {:.3}) against black {black:.2} dB",
+        dense.psnr_db_test,
+        dense.iou_test
+    );
+    assert!(
+        (fast.psnr_db_test - dense.psnr_db_test).abs() <= 0.1,
+        "accelerated {:.3} dB, dense {:.3} dB",
+        fast.psnr_db_test,
+        dense.psnr_db_test
+    );
+    assert!(fast.fewer_evaluations > 2.0, "only {:.2}x fewer", fast.fewer_evaluations);
+    assert_eq!(out.novel_views.len(), 2);
+    for f in ["results.csv", "renderers.csv", "novel_views.csv", "qualitative.png", "novel_views.png", "training_curve.png", "config.json"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_field_that_renders_black_is_restarted_then_given_up_on() {
+    use selfmodel::device::DeviceChoice;
+    use selfmodel::ffksm::FfksmConfig;
+    let mut cfg = FfksmConfig::original("quick").unwrap();
+    // Every density starts far below zero: ReLU gives no gradient and the image stays black.
+    cfg.field.output_bias = -50.0;
+    cfg.train.steps = 40;
+    if let Some(r) = cfg.restart.as_mut() {
+        r.every = 10;
+        r.until = 20;
+        r.max_restarts = 2;
+    }
+    let dir = std::env::temp_dir().join(format!("selfmodel-collapse-{}", std::process::id()));
+    let err = selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false)
+        .err()
+        .expect("a black field must not train");
+    let msg = err.to_string();
+    assert!(msg.contains("collapsed to an all-black image 3 times"), "{msg}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
