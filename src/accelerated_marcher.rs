@@ -141,3 +141,71 @@ pub fn render_accelerated(
 fn chunks(n: usize, size: usize) -> impl Iterator<Item = (usize, usize)> {
     (0..n.div_ceil(size)).map(move |i| (i * size, ((i + 1) * size).min(n)))
 }
+
+/// The silhouette `[rays]` of `pixels` with gradients, for training, marching only the
+/// samples in occupied cells of a grid probed from `probe` (the same field without autodiff),
+/// at stratified depths drawn from `jitter`; and the network evaluations it took (grid
+/// included).
+///
+/// With the grid's threshold at 0 this gives dense marching's gradients: a sample whose raw
+/// density is negative adds nothing to the pixel (its opacity `1 − exp(−ReLU(σ))` is 0) and
+/// gets no gradient through the ReLU, in dense marching too. The two differ only where a
+/// probe misses positive density inside a cell (the dilation is there for that). Falls back
+/// to dense marching when no cell is occupied (a loss must reach the parameters).
+pub fn render_silhouette_skipping(
+    field: &OccupancyField,
+    probe: &OccupancyField,
+    (camera, angles): (&Camera, [f64; 4]),
+    pixels: &[usize],
+    march: &MarchConfig,
+    grid: &GridConfig,
+    jitter: Option<u64>,
+    device: &Device,
+) -> (burn::tensor::Tensor<1>, usize) {
+    use burn::tensor::{IndexingUpdateOp, Int, Tensor};
+    let probe_device = probe_device(probe, device);
+    let occupancy = FrustumGrid::build(probe, (camera, angles), march, grid, &probe_device);
+    let depths = march.depths(pixels.len(), jitter);
+    let w = camera.width;
+    let (mut rays, mut kept_depths, mut owner) = (Vec::new(), Vec::new(), Vec::new());
+    for (i, &t) in depths.iter().enumerate() {
+        let (r, k) = (i / march.samples, i % march.samples);
+        let px = pixels[r];
+        if occupancy.contains(px / w, px % w, k) {
+            rays.push(px);
+            kept_depths.push(t);
+            owner.push(r as i64);
+        }
+    }
+    if rays.is_empty() {
+        let pred = crate::ray_marcher::render_silhouette(
+            field,
+            (camera, angles),
+            pixels,
+            march,
+            jitter,
+            device,
+        );
+        return (pred, depths.len() + occupancy.evaluations);
+    }
+    let points = sample_points(camera, &rays, &kept_depths, device);
+    let raw = field.forward_pose(points, angles.map(|v| v as f32));
+    let m = rays.len();
+    let density = raw.clone().slice([0..m, 0..1]).reshape([m]);
+    let visibility = raw.slice([0..m, 1..2]).reshape([m]);
+    let alpha = burn::tensor::activation::relu(density).neg().exp().neg().add_scalar(1.0);
+    let index = Tensor::<1, Int>::from_data(TensorData::new(owner, [m]), device);
+    let pred = Tensor::<1>::zeros([pixels.len()], device).select_assign(
+        0,
+        index,
+        alpha * visibility,
+        IndexingUpdateOp::Add,
+    );
+    (pred, m + occupancy.evaluations)
+}
+
+/// The device `probe`'s parameters live on (the inner device of an autodiff `device`).
+fn probe_device(probe: &OccupancyField, device: &Device) -> Device {
+    use burn::module::Module;
+    probe.devices().into_iter().next().unwrap_or_else(|| device.clone())
+}

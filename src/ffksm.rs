@@ -23,7 +23,7 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::accelerated_marcher::{AcceleratedConfig, render_accelerated};
+use crate::accelerated_marcher::{AcceleratedConfig, render_accelerated, render_silhouette_skipping};
 use crate::atomic_file::write_json;
 use crate::camera::Camera;
 use crate::dataset::Dataset;
@@ -55,6 +55,18 @@ pub struct CollapseRestart {
     pub max_restarts: usize,
 }
 
+/// How training renders its rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainMarcher {
+    /// Every sample of every ray (the paper's: 640,000 evaluations per 100x100 image).
+    #[default]
+    Dense,
+    /// Only samples in occupied cells of the per-pose grid (`accelerated.grid`), rebuilt
+    /// from the current model at every step (beyond the paper).
+    Skipping,
+}
+
 /// Everything that defines one FFKSM run.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FfksmConfig {
@@ -67,6 +79,8 @@ pub struct FfksmConfig {
     /// Steps, learning rate, seed, checkpoints (batch 1: one image per step).
     pub train: TrainConfig,
     pub curriculum: Curriculum,
+    #[serde(default)]
+    pub train_marcher: TrainMarcher,
     /// MSE weight of robot pixels (1: the code's plain MSE; the text's 5).
     pub robot_weight: f64,
     pub restart: Option<CollapseRestart>,
@@ -154,6 +168,7 @@ impl FfksmConfig {
                 steps: if quick { 50 } else { 500 },
                 crop: if quick { 16 } else { 50 },
             },
+            train_marcher: TrainMarcher::Dense,
             robot_weight: 1.0,
             restart: None,
             data,
@@ -199,6 +214,16 @@ impl FfksmConfig {
             max_restarts: 5,
         });
         cfg.reference = PaperReference::ffksm_original();
+        Ok(cfg)
+    }
+
+    /// The reimplementation trained with empty-space skipping (beyond the paper): the same
+    /// model, data and schedule, each step marching only the samples in occupied cells of a
+    /// grid probed from the current model.
+    pub fn skipping(preset: &str) -> Result<Self> {
+        let mut cfg = Self::reimplementation(preset)?;
+        cfg.name = "FFKSM (trained with skipping)".into();
+        cfg.train_marcher = TrainMarcher::Skipping;
         Ok(cfg)
     }
 
@@ -403,7 +428,12 @@ fn fingerprint(cfg: &FfksmConfig) -> serde_json::Value {
     if let Some(t) = train.as_object_mut() {
         t.remove("steps");
     }
-    serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": cfg.data})
+    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": cfg.data});
+    // Only when it is not the default, so checkpoints from before the option still resume.
+    if cfg.train_marcher != TrainMarcher::Dense {
+        print["train_marcher"] = serde_json::json!(cfg.train_marcher);
+    }
+    print
 }
 
 /// Train the field, restarting with a fresh model on collapse when the config asks for it.
@@ -414,7 +444,7 @@ fn train_field(
     dir: &Path,
     resume: bool,
     device: &Device,
-) -> Result<(OccupancyField, TrainLog, usize)> {
+) -> Result<(OccupancyField, TrainLog, usize, f64)> {
     let tdev = autodiff_device(device, cfg.train.seed);
     let train_set = device_set(data, train_range, host_targets(data, train_range), &tdev);
     let camera = cfg.data.dataset.camera.clone();
@@ -428,6 +458,9 @@ fn train_field(
         fingerprint: fingerprint(cfg),
     };
     let mut restarts = 0;
+    // Network evaluations and steps in this process (a resumed run counts its own).
+    let train_evaluations = std::cell::Cell::new(0usize);
+    let train_steps = std::cell::Cell::new(0usize);
     loop {
         let seed = cfg.train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(&tdev, seed)?;
@@ -437,14 +470,28 @@ fn train_field(
             let pixels = if b.step < cfg.curriculum.steps { &crop } else { &all };
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            let pred = render_silhouette(
-                m,
-                (&camera, radians(&a)),
-                pixels,
-                &cfg.march,
-                Some(jitter),
-                &b.inputs.device(),
-            );
+            let view = (&camera, radians(&a));
+            let pred = match cfg.train_marcher {
+                TrainMarcher::Dense => {
+                    train_evaluations.set(train_evaluations.get() + pixels.len() * cfg.march.samples);
+                    render_silhouette(m, view, pixels, &cfg.march, Some(jitter), &b.inputs.device())
+                }
+                TrainMarcher::Skipping => {
+                    let (pred, evaluations) = render_silhouette_skipping(
+                        m,
+                        &m.valid(),
+                        view,
+                        pixels,
+                        &cfg.march,
+                        &cfg.accelerated.grid,
+                        Some(jitter),
+                        &b.inputs.device(),
+                    );
+                    train_evaluations.set(train_evaluations.get() + evaluations);
+                    pred
+                }
+            };
+            train_steps.set(train_steps.get() + 1);
             weighted_mse(pred, &t, cfg.robot_weight)
         };
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
@@ -475,7 +522,10 @@ fn train_field(
             format!("{} (restart {restarts})", cfg.name)
         };
         match train_watched(field, &train_set, &cfg.train, Some(&plan), &label, loss, watch) {
-            Ok((field, log)) => return Ok((field.valid(), log, restarts)),
+            Ok((field, log)) => {
+                let per_step = train_evaluations.get() as f64 / train_steps.get().max(1) as f64;
+                return Ok((field.valid(), log, restarts, per_step));
+            }
             Err(Error::Collapsed { step }) => {
                 let max = cfg.restart.as_ref().map_or(0, |r| r.max_restarts);
                 eprintln!("{label}: all-black image at step {step}; restarting with a fresh model");
@@ -513,7 +563,7 @@ pub fn run(
     };
     let camera = cfg.data.dataset.camera.clone();
     let pixels = camera.width * camera.height;
-    let (field, log, restarts) = train_field(cfg, &data, &train_range, dir, resume, &device)?;
+    let (field, log, restarts, train_evals) = train_field(cfg, &data, &train_range, dir, resume, &device)?;
     let params = field.num_params();
 
     // The training camera, both renderers.
@@ -553,9 +603,14 @@ pub fn run(
             paper_train_time_s: None,
             note: {
                 let mut n = vec![format!(
-                    "{:.0} network evaluations per image; tested on {} images",
+                    "{:.0} network evaluations per image; tested on {} images; trained with {} marching, {:.0} evaluations per step",
                     r.mean_evaluations(),
-                    q.test_images
+                    q.test_images,
+                    match cfg.train_marcher {
+                        TrainMarcher::Dense => "dense",
+                        TrainMarcher::Skipping => "skipping",
+                    },
+                    train_evals
                 )];
                 if restarts > 0 {
                     n.push(format!("{restarts} restarts after collapse"));
