@@ -191,6 +191,11 @@ impl KinematicChain {
         self.dofs.len()
     }
 
+    /// The index in the joint vector of joint `j` (of [`Self::joints`]); `None` when fixed.
+    pub fn value_index(&self, j: usize) -> Option<usize> {
+        self.value_index[j]
+    }
+
     /// The movable joints, in joint-vector order.
     pub fn movable_joints(&self) -> impl Iterator<Item = &Joint> {
         self.dofs.iter().map(|&j| &self.joints[j])

@@ -45,6 +45,7 @@ pub mod robot;
 pub mod shape;
 pub mod stl_mesh;
 pub mod table1;
+pub mod tensor_kinematics;
 pub mod training;
 pub mod trajectory;
 pub mod upconv;
