@@ -23,6 +23,7 @@ pub mod evaluation;
 pub mod experiments;
 pub mod ffksm;
 pub mod figures;
+pub mod gaussian_splatting;
 pub mod inference_speed;
 pub mod kinematics;
 pub mod losses;

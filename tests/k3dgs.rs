@@ -32,3 +32,89 @@ fn tensor_forward_kinematics_matches_the_foundations_for_every_link() {
         }
     }
 }
+
+/// `n` Gaussians in front of the paper's camera (around the origin), deterministic.
+fn scene(n: usize, dev: &Device) -> (Tensor<3>, Tensor<1>, Tensor<1>) {
+    let v = |i: usize, k: u32| (((i as u32).wrapping_mul(2_654_435_761).wrapping_add(k * 40503)) >> 8) as f32 / (1 << 24) as f32;
+    let means: Vec<f32> = (0..n)
+        .flat_map(|i| [0.3 * (v(i, 1) - 0.5), 0.5 * (v(i, 2) - 0.5), 0.5 * (v(i, 3) - 0.5)])
+        .collect();
+    let scales: Vec<f32> = (0..n).map(|i| 0.005 + 0.02 * v(i, 4)).collect();
+    let opacity: Vec<f32> = (0..n).map(|i| 0.2 + 0.7 * v(i, 5)).collect();
+    (
+        Tensor::from_data(TensorData::new(means, [1, n, 3]), dev),
+        Tensor::from_data(TensorData::new(scales, [n]), dev),
+        Tensor::from_data(TensorData::new(opacity, [n]), dev),
+    )
+}
+
+#[test]
+fn a_gaussian_lands_on_the_pixel_where_the_simulator_draws_its_point() {
+    use selfmodel::camera::Camera;
+    use selfmodel::gaussian_splatting::project_isotropic;
+    use selfmodel::ray_caster::RayCaster;
+    let dev = Device::flex();
+    let robot = selfmodel::arm4::arm4();
+    let camera = Camera::paper();
+    let q = robot.chain.to_si(&[20.0, -30.0, 40.0, 10.0]);
+    let frame = RayCaster::new(&robot, camera.clone(), Default::default()).render(&q);
+    // Points the simulator drew: the eye plus depth along the ray of robot pixels.
+    let picks: Vec<usize> = (0..camera.width * camera.height)
+        .filter(|&p| frame.depth[p] > 0.0)
+        .step_by(37)
+        .take(20)
+        .collect();
+    assert!(picks.len() >= 10);
+    let cf = camera.frame();
+    let points: Vec<f32> = picks
+        .iter()
+        .flat_map(|&p| {
+            let ray = cf.ray((p / camera.width) as f64, (p % camera.width) as f64);
+            let x = ray.origin + ray.dir * frame.depth[p] as f64;
+            [x.x as f32, x.y as f32, x.z as f32]
+        })
+        .collect();
+    let n = picks.len();
+    let g = project_isotropic(
+        Tensor::from_data(TensorData::new(points, [1, n, 3]), &dev),
+        Tensor::ones([n], &dev).mul_scalar(0.01),
+        Tensor::ones([n], &dev),
+        &camera,
+    );
+    let rows = g.row.into_data().try_to_vec::<f32>().unwrap();
+    let cols = g.col.into_data().try_to_vec::<f32>().unwrap();
+    let depth = g.depth.into_data().try_to_vec::<f32>().unwrap();
+    for (k, &p) in picks.iter().enumerate() {
+        let (r, c) = ((p / camera.width) as f32, (p % camera.width) as f32);
+        assert!((rows[k] - r).abs() < 1e-3 && (cols[k] - c).abs() < 1e-3, "pixel {p}: ({}, {})", rows[k], cols[k]);
+        assert!((depth[k] - frame.depth[p]).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn culled_splatting_matches_the_dense_reference() {
+    use selfmodel::camera::Camera;
+    use selfmodel::gaussian_splatting::{Compositing, project_isotropic, render_culled, render_dense};
+    let dev = Device::flex();
+    let camera = Camera { width: 40, height: 30, ..Camera::paper() };
+    let (means, scales, opacity) = scene(60, &dev);
+    let g = project_isotropic(means, scales, opacity, &camera);
+    let worst = |a: Tensor<2>, b: Tensor<2>| {
+        let (a, b) = (a.into_data().try_to_vec::<f32>().unwrap(), b.into_data().try_to_vec::<f32>().unwrap());
+        a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f32::max)
+    };
+    for mode in [Compositing::Alpha, Compositing::SigmoidSum { temperature: 10.0 }] {
+        let (ds, dd) = render_dense(&g, 30, 40, mode);
+        // Wide enough that every dropped footprint is below exp(-18).
+        let (cs, cd) = render_culled(&g, 30, 40, mode, 6.0);
+        assert!(worst(ds.clone(), cs) < 1e-4, "{mode:?} silhouette");
+        // Depth where something is drawn (elsewhere it is a ratio of vanishing weights).
+        let drawn: Vec<f32> = render_dense(&g, 30, 40, Compositing::Alpha).0.into_data().try_to_vec::<f32>().unwrap();
+        let (dd, cd) = (dd.into_data().try_to_vec::<f32>().unwrap(), cd.into_data().try_to_vec::<f32>().unwrap());
+        let depth_worst = drawn.iter().zip(dd.iter().zip(&cd)).filter(|(s, _)| **s > 0.05).map(|(_, (a, b))| (a - b).abs()).fold(0.0, f32::max);
+        assert!(depth_worst < 1e-3, "{mode:?} depth differs by {depth_worst}");
+        // At 3 sigma a dropped footprint weighs at most exp(-4.5) of its opacity.
+        let (cs, _) = render_culled(&g, 30, 40, mode, 3.0);
+        assert!(worst(ds, cs) < 0.1, "{mode:?} silhouette at 3 sigma");
+    }
+}
