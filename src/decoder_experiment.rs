@@ -387,6 +387,7 @@ where
         silhouettes: sil,
         depth,
         pixels,
+        depth_pixels: crate::evaluation::DepthPixels::TrueRobot,
     }
 }
 

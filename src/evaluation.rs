@@ -6,7 +6,7 @@
 //! - IoU of the silhouettes thresholded at 0.5 (PSNR on mostly-empty images flatters every
 //!   model; IoU says whether the arm is where it should be).
 //! - Depth error in millimetres, mean absolute over the pixels where the true silhouette is
-//!   the robot, beside the error of the best constant depth (the median of the true robot-pixel
+//!   the robot (for renderers, where the prediction is the robot too: [`DepthPixels`]), beside the error of the best constant depth (the median of the true robot-pixel
 //!   depths of the test set, which minimises the mean absolute error of any constant): a depth
 //!   head is useful only if it beats that.
 
@@ -18,6 +18,21 @@ pub struct Predictions {
     /// `[n, H * W]` depth in metres, when the model predicts it.
     pub depth: Option<Vec<f32>>,
     pub pixels: usize,
+    /// Which pixels the depth error counts.
+    pub depth_pixels: DepthPixels,
+}
+
+/// The pixels a depth error is measured on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthPixels {
+    /// Every pixel the true silhouette calls robot: for depth heads, which predict everywhere.
+    #[default]
+    TrueRobot,
+    /// Pixels both the true and the predicted silhouette call robot: for renderers (FFKSM,
+    /// K-3DGS) whose depth exists only where they draw something; a missed pixel is a
+    /// silhouette error (IoU), not a depth error of the whole camera distance.
+    Drawn,
 }
 
 /// Per-image and mean quality figures.
@@ -88,10 +103,15 @@ pub fn score(
     let subset = paper_subset.min(n);
     let (depth_mae_mm, depth_constant_mae_mm) = match (&pred.depth, truth_depth) {
         (Some(d), Some(t)) => {
+            let counted: Vec<bool> = truth
+                .iter()
+                .zip(&pred.silhouettes)
+                .map(|(&t, &p)| t >= 0.5 && (pred.depth_pixels == DepthPixels::TrueRobot || p >= 0.5))
+                .collect();
             let robot = |v: &[f32]| -> Vec<f32> {
                 v.iter()
-                    .zip(truth)
-                    .filter(|&(_, &s)| s >= 0.5)
+                    .zip(&counted)
+                    .filter(|&(_, &c)| c)
                     .map(|(&v, _)| v)
                     .collect()
             };

@@ -364,6 +364,7 @@ fn render_all(
             silhouettes: Vec::new(),
             depth: Some(Vec::new()),
             pixels,
+            depth_pixels: crate::evaluation::DepthPixels::Drawn,
         },
         evaluations: Vec::new(),
         grid_evaluations: Vec::new(),

@@ -25,6 +25,8 @@ pub mod ffksm;
 pub mod figures;
 pub mod gaussian_splatting;
 pub mod inference_speed;
+pub mod k3dgs;
+pub mod kinematic_gaussians;
 pub mod kinematics;
 pub mod losses;
 pub mod mesh_fidelity;

@@ -324,18 +324,55 @@ where
 /// [`train`] with a watcher called after every step with the model and the steps done; an
 /// error from it stops training and is returned (FFKSM's restart on collapse uses this).
 pub fn train_watched<M, L, W>(
+    model: M,
+    data: &TrainSet,
+    cfg: &TrainConfig,
+    checkpoint: Option<&CheckpointPlan>,
+    label: &str,
+    loss: L,
+    watch: W,
+) -> Result<(M, TrainLog)>
+where
+    M: Module,
+    L: Fn(&M, &Batch) -> Tensor<1>,
+    W: FnMut(&M, usize) -> Result<()>,
+{
+    struct Watcher<W>(W);
+    impl<M, W: FnMut(&M, usize) -> Result<()>> TrainHooks<M> for Watcher<W> {
+        fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
+            (self.0)(&model, step)?;
+            Ok((model, false))
+        }
+    }
+    train_with_hooks(model, data, cfg, checkpoint, label, loss, &mut Watcher(watch))
+}
+
+/// What a model may do during training besides descending the loss.
+pub trait TrainHooks<M> {
+    /// Sees each step's gradients before the optimiser applies them.
+    fn gradients(&mut self, _model: &M, _grads: &GradientsParams, _step: usize) {}
+    /// After each step (`step` = steps done): may replace the model (K-3DGS densifies and
+    /// prunes its Gaussians) and returns whether the optimiser state must start afresh (it
+    /// must when parameters changed shape). An error stops training and is returned.
+    fn after_step(&mut self, model: M, _step: usize) -> Result<(M, bool)> {
+        Ok((model, false))
+    }
+}
+
+/// [`train`] with [`TrainHooks`].
+pub fn train_with_hooks<M, L, H>(
     mut model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
     checkpoint: Option<&CheckpointPlan>,
     label: &str,
     loss: L,
-    mut watch: W,
+    hooks: &mut H,
 ) -> Result<(M, TrainLog)>
 where
     M: Module,
     L: Fn(&M, &Batch) -> Tensor<1>,
-    W: FnMut(&M, usize) -> Result<()>,
+    H: TrainHooks<M>,
 {
     if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
         return Err(Error::Config(format!(
@@ -394,6 +431,7 @@ where
         if let Some(max) = cfg.grad_clip_norm {
             clip_global_norm(&model, &mut grads, max);
         }
+        hooks.gradients(&model, &grads, step);
         model = optim.step(cfg.learning_rate, model, grads);
         log.train_seconds += t0.elapsed().as_secs_f64();
         log.images += n;
@@ -418,9 +456,17 @@ where
                 indicatif::HumanDuration(bar.eta())
             );
         }
-        if let Err(e) = watch(&model, log.step) {
-            bar.abandon();
-            return Err(e);
+        match hooks.after_step(model, log.step) {
+            Ok((m, reset)) => {
+                model = m;
+                if reset {
+                    optim = AdamConfig::new().init();
+                }
+            }
+            Err(e) => {
+                bar.abandon();
+                return Err(e);
+            }
         }
         if let Some(plan) = checkpoint
             && cfg.checkpoint_every > 0

@@ -181,12 +181,21 @@ fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
         silhouettes: truth.to_vec(),
         depth: Some(vec![1.5, 2.0, 5.0, 9.0]),
         pixels: 4,
+        depth_pixels: Default::default(),
     };
     let q = score(&pred, &truth, Some(&truth_depth), 1);
     // |1.5-1| + 0 + |5-6| = 1.5 m over 3 pixels.
     assert!((q.depth_mae_mm.unwrap() - 500.0).abs() < 1e-3);
     // The median, 2 m: (1 + 0 + 4) / 3 m.
     assert!((q.depth_constant_mae_mm.unwrap() - 5000.0 / 3.0).abs() < 1e-3);
+    // A renderer that misses the third pixel: its depth error counts the pixels it drew.
+    let drawn = Predictions {
+        silhouettes: vec![1.0, 0.9, 0.1, 0.0],
+        depth_pixels: selfmodel::evaluation::DepthPixels::Drawn,
+        ..pred
+    };
+    let q = score(&drawn, &truth, Some(&truth_depth), 1);
+    assert!((q.depth_mae_mm.unwrap() - 250.0).abs() < 1e-3);
 }
 
 #[test]
