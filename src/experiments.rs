@@ -230,6 +230,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     for (sub, cfg) in [
         ("isotropic", K3dgsConfig::isotropic(&opts.preset)?),
         ("isotropic_alpha", K3dgsConfig::isotropic_alpha(&opts.preset)?),
+        ("anisotropic", K3dgsConfig::anisotropic(&opts.preset)?),
     ] {
         let out = crate::k3dgs::run(&opts.apply_k3dgs(cfg), &dir.join(sub), opts.device)?;
         rows.push(out.result);

@@ -100,6 +100,63 @@ pub fn project_isotropic(
     }
 }
 
+/// Variance (px²) added to every projected footprint of an anisotropic Gaussian, so none is
+/// thinner than about a pixel (3DGS's low-pass filter).
+const LOW_PASS_PX2: f64 = 0.3;
+
+/// Project anisotropic Gaussians: centres `[B, N, 3]` (world, m), axes `[B, N, 3, 3]` (world;
+/// column `k` is the Gaussian's `k`-th principal axis times its standard deviation, so the
+/// covariance is `A Aᵀ`) and opacities `[N]`. The 2-D covariance is `J W A Aᵀ Wᵀ Jᵀ` (the
+/// paper's equation 4) with `W` the camera rotation and `J` the Jacobian of (row, column) with
+/// respect to camera coordinates at the centre, plus [`LOW_PASS_PX2`].
+pub fn project_anisotropic(
+    means: Tensor<3>,
+    axes: Tensor<4>,
+    opacity: Tensor<1>,
+    camera: &Camera,
+) -> ImageGaussians {
+    let [b, n, _] = means.dims();
+    let [x, y, z] = camera_coordinates(means, camera);
+    let focal = camera.focal_px();
+    let (cx, cy) = camera.principal_point();
+    let z = z.clamp_min(1e-3);
+    let col = (x.clone() / z.clone()).mul_scalar(focal).add_scalar(cx);
+    let row = (y.clone() / z.clone()).mul_scalar(-focal).add_scalar(cy);
+    // Axes in camera coordinates: W A, [B, N, 3, 3].
+    let f = camera.frame();
+    let device = axes.device();
+    let w: Vec<f32> = [f.right, f.up, f.fwd]
+        .iter()
+        .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
+        .collect();
+    let w = Tensor::<4>::from_data(TensorData::new(w, [1, 1, 3, 3]), &device);
+    let cam_axes = w.repeat_dim(0, b).repeat_dim(1, n).matmul(axes);
+    // Rows of J: d row / d(x, y, z) = (0, −f/z, f y/z²); d col = (f/z, 0, −f x/z²).
+    let axis_row = |i: usize| cam_axes.clone().slice([0..b, 0..n, i..i + 1, 0..3]).reshape([b, n, 3]);
+    let (ax, ay, az) = (axis_row(0), axis_row(1), axis_row(2));
+    let inv_z = z.clone().recip().mul_scalar(focal).reshape([b, n, 1]);
+    let y_z2 = (y / z.clone().square()).mul_scalar(focal).reshape([b, n, 1]);
+    let x_z2 = (x / z.clone().square()).mul_scalar(focal).reshape([b, n, 1]);
+    // Image-space axes: J (W A), one row for image rows and one for columns, [B, N, 3] each.
+    let u_row = ay.neg() * inv_z.clone() + az.clone() * y_z2;
+    let u_col = ax * inv_z - az * x_z2;
+    let srr = u_row.clone().square().sum_dim(2).reshape([b, n]).add_scalar(LOW_PASS_PX2);
+    let scc = u_col.clone().square().sum_dim(2).reshape([b, n]).add_scalar(LOW_PASS_PX2);
+    let src = (u_row * u_col).sum_dim(2).reshape([b, n]);
+    let det = srr.clone() * scc.clone() - src.clone().square();
+    let half_trace = (srr.clone() + scc.clone()).mul_scalar(0.5);
+    let spread = ((srr.clone() - scc.clone()).square().mul_scalar(0.25) + src.clone().square()).sqrt();
+    let sigma_px = (half_trace + spread).sqrt();
+    ImageGaussians {
+        row,
+        col,
+        depth: z,
+        conic: [scc / det.clone(), src.neg() / det.clone(), srr / det],
+        opacity: opacity.reshape([1, n]).repeat_dim(0, b),
+        sigma_px,
+    }
+}
+
 /// Row and column coordinates `[P]` of every pixel, row-major.
 fn pixel_grid(height: usize, width: usize, device: &burn::tensor::Device) -> (Tensor<1>, Tensor<1>) {
     let rows: Vec<f32> = (0..height * width).map(|p| (p / width) as f32).collect();

@@ -15,9 +15,9 @@
 
 use std::path::Path;
 
-use burn::module::{Module, Param};
+use burn::module::Module;
 use burn::optim::GradientsParams;
-use burn::tensor::{Int, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 
 use crate::atomic_file::write_json;
 use crate::decoder_experiment::{DataSpec, device_set, host_targets, qualitative_figure};
@@ -167,6 +167,23 @@ impl K3dgsConfig {
         Ok(cfg)
     }
 
+    /// Anisotropic Gaussians with alpha compositing, half the isotropic count (300 at the
+    /// start, at most 500).
+    pub fn anisotropic(preset: &str) -> Result<Self> {
+        let mut cfg = Self::isotropic_alpha(preset)?;
+        cfg.name = "K-3DGS (anisotropic, alpha)".into();
+        let quick = preset == "quick";
+        cfg.init = crate::kinematic_gaussians::GaussianInit::anisotropic();
+        if quick {
+            for (_, n) in &mut cfg.init.per_link {
+                *n /= 5;
+            }
+        }
+        cfg.densification.max_gaussians = if quick { 100 } else { 500 };
+        cfg.densification.min_gaussians = if quick { 20 } else { 100 };
+        Ok(cfg)
+    }
+
     pub fn paper_compatible(mut self, on: bool) -> Self {
         self.data.dataset.render.ground_artifact = on;
         self
@@ -223,12 +240,8 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
         if !densify && !prune {
             return Ok((model, false));
         }
-        let host1 = |t: Tensor<1>| t.into_data().try_into_vec::<f32>().expect("float");
-        let pos = model.positions.val().into_data().try_into_vec::<f32>().expect("float");
-        let scales = host1(model.log_scales.val());
-        let opacity = host1(model.opacity_logits.val());
-        let links: Vec<i64> = model.links.clone().into_data().iter::<i64>().collect();
-        let n = links.len();
+        let opacity = model.opacity_logits.val().into_data().try_into_vec::<f32>().expect("float");
+        let n = model.len();
         let mut keep: Vec<usize> = (0..n).collect();
         if densify && self.steps > 0 && self.grad_sum.len() == n {
             let mut ranked: Vec<(f64, usize)> = self
@@ -257,19 +270,8 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
         if keep.len() == n && keep.iter().enumerate().all(|(k, &i)| k == i) {
             return Ok((model, false));
         }
-        let device = model.positions.val().device();
+        let rebuilt = model.select(&keep);
         let m = keep.len();
-        let gather3: Vec<f32> = keep.iter().flat_map(|&i| pos[3 * i..3 * i + 3].to_vec()).collect();
-        let gather = |v: &[f32]| keep.iter().map(|&i| v[i]).collect::<Vec<f32>>();
-        let rebuilt = KinematicGaussians {
-            positions: Param::from_tensor(Tensor::from_data(TensorData::new(gather3, [m, 3]), &device)),
-            log_scales: Param::from_tensor(Tensor::from_data(TensorData::new(gather(&scales), [m]), &device)),
-            opacity_logits: Param::from_tensor(Tensor::from_data(TensorData::new(gather(&opacity), [m]), &device)),
-            links: Tensor::<1, Int>::from_data(
-                TensorData::new(keep.iter().map(|&i| links[i]).collect::<Vec<_>>(), [m]),
-                &device,
-            ),
-        };
         self.counts.push((step, m));
         self.grad_sum = vec![0.0; m];
         self.steps = 0;
@@ -312,7 +314,10 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     let tdev = autodiff_device(&device, cfg.train.seed);
     let train_set = device_set(&data, &train_range, host_targets(&data, &train_range), &tdev);
     let (links, positions) = cfg.init.positions(&robot, cfg.train.seed)?;
-    let model = KinematicGaussians::new(&links, &positions, cfg.init.scale, cfg.init.opacity, &tdev);
+    let long_axis: Vec<usize> = (0..robot.chain.links.len())
+        .map(|l| GaussianInit::long_axis(&robot, l))
+        .collect();
+    let model = KinematicGaussians::new(&links, &positions, &cfg.init, &long_axis, &tdev);
     let mut hooks = Densifier {
         cfg: &cfg.densification,
         grad_sum: Vec::new(),

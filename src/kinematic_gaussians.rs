@@ -30,6 +30,35 @@ pub struct GaussianInit {
     pub scale: f64,
     /// Initial opacity in (0, 1).
     pub opacity: f64,
+    /// Full covariances instead of spheres (beyond the paper).
+    #[serde(default)]
+    pub anisotropic: Option<Anisotropic>,
+}
+
+/// How anisotropic Gaussians are shaped, started and kept stable (see the module docs).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Anisotropic {
+    /// Initial standard deviations along the link's long axis and across it (m).
+    pub along: f64,
+    pub across: f64,
+    /// Every standard deviation stays within these bounds (m).
+    pub min_scale: f64,
+    pub max_scale: f64,
+    /// Rotations move this much slower than the other parameters (their learning rate is
+    /// this fraction of the optimiser's).
+    pub rotation_rate: f64,
+}
+
+impl Anisotropic {
+    pub fn paper() -> Self {
+        Anisotropic {
+            along: 0.03,
+            across: 0.012,
+            min_scale: 0.002,
+            max_scale: 0.1,
+            rotation_rate: 0.1,
+        }
+    }
 }
 
 impl GaussianInit {
@@ -41,7 +70,18 @@ impl GaussianInit {
                 .to_vec(),
             scale: 0.025,
             opacity: 0.5,
+            anisotropic: None,
         }
+    }
+
+    /// Anisotropic Gaussians, half the paper's count (300) on the same links.
+    pub fn anisotropic() -> Self {
+        let mut g = Self::paper();
+        for (_, n) in &mut g.per_link {
+            *n /= 2;
+        }
+        g.anisotropic = Some(Anisotropic::paper());
+        g
     }
 
     /// A fifth of the paper's, for tests.
@@ -51,6 +91,13 @@ impl GaussianInit {
             *n /= 5;
         }
         g
+    }
+
+    /// The link frame's axis (0, 1, 2 for x, y, z) along which link `l`'s geometry is longest.
+    pub fn long_axis(robot: &Robot, l: usize) -> usize {
+        let b = robot.geometry[l].bounds();
+        let e = [0, 1, 2].map(|k| b.max[k] - b.min[k]);
+        (0..3).max_by(|&i, &j| e[i].total_cmp(&e[j])).unwrap_or(0)
     }
 
     /// The Gaussians' link indices and initial link-frame positions, drawn from `seed`.
@@ -91,12 +138,18 @@ impl GaussianInit {
 pub struct KinematicGaussians {
     /// `[N, 3]` positions in their links' frames (m).
     pub positions: Param<Tensor<2>>,
-    /// `[N]` natural log of the standard deviation (m).
-    pub log_scales: Param<Tensor<1>>,
+    /// Isotropic: `[N, 1]` natural log of the standard deviation (m). Anisotropic: `[N, 3]`
+    /// logits of the three standard deviations within their bounds.
+    pub scales: Param<Tensor<2>>,
+    /// Anisotropic only: `[N, 4]` quaternions (w, x, y, z) of the principal axes in the link
+    /// frame, divided by the rotation rate (normalised in the forward pass).
+    pub rotations: Option<Param<Tensor<2>>>,
     /// `[N]` opacity logits.
     pub opacity_logits: Param<Tensor<1>>,
     /// `[N]` the link each Gaussian belongs to.
     pub links: Tensor<1, Int>,
+    #[module(skip)]
+    pub anisotropic: Option<Anisotropic>,
 }
 
 fn logit(p: f64) -> f32 {
@@ -104,28 +157,113 @@ fn logit(p: f64) -> f32 {
 }
 
 impl KinematicGaussians {
-    /// Gaussians on `links` at link-frame `positions`, all with the same scale and opacity.
+    /// Gaussians on `links` at link-frame `positions` with the initial shape of `init`;
+    /// anisotropic ones point their long axis along `long_axis[link]`.
     pub fn new(
         links: &[usize],
         positions: &[[f32; 3]],
-        scale: f64,
-        opacity: f64,
+        init: &GaussianInit,
+        long_axis: &[usize],
         device: &Device,
     ) -> Self {
         let n = links.len();
         let pos: Vec<f32> = positions.iter().flatten().copied().collect();
+        let (scales, rotations) = match &init.anisotropic {
+            None => (vec![init.scale.ln() as f32; n], None),
+            Some(a) => {
+                let raw = |s: f64| logit(((s - a.min_scale) / (a.max_scale - a.min_scale)).clamp(1e-4, 1.0 - 1e-4));
+                let scales: Vec<f32> = (0..n).flat_map(|_| [raw(a.along), raw(a.across), raw(a.across)]).collect();
+                // The quaternion turning x onto the link's long axis.
+                let h = std::f64::consts::FRAC_1_SQRT_2;
+                let q: Vec<f32> = links
+                    .iter()
+                    .flat_map(|&l| match long_axis.get(l).copied().unwrap_or(0) {
+                        1 => [h, 0.0, 0.0, h],  // +90 deg about z: x -> y
+                        2 => [h, 0.0, -h, 0.0], // -90 deg about y: x -> z
+                        _ => [1.0, 0.0, 0.0, 0.0],
+                    })
+                    .map(|v| (v / a.rotation_rate) as f32)
+                    .collect();
+                (scales, Some(q))
+            }
+        };
+        let k = scales.len() / n.max(1);
         KinematicGaussians {
             positions: Param::from_tensor(Tensor::from_data(TensorData::new(pos, [n, 3]), device)),
-            log_scales: Param::from_tensor(
-                Tensor::ones([n], device).mul_scalar(scale.ln() as f32),
-            ),
+            scales: Param::from_tensor(Tensor::from_data(TensorData::new(scales, [n, k.max(1)]), device)),
+            rotations: rotations.map(|q| Param::from_tensor(Tensor::from_data(TensorData::new(q, [n, 4]), device))),
             opacity_logits: Param::from_tensor(
-                Tensor::ones([n], device).mul_scalar(logit(opacity)),
+                Tensor::ones([n], device).mul_scalar(logit(init.opacity)),
             ),
             links: Tensor::from_data(
                 TensorData::new(links.iter().map(|&l| l as i64).collect::<Vec<_>>(), [n]),
                 device,
             ),
+            anisotropic: init.anisotropic.clone(),
+        }
+    }
+
+    /// The Gaussians `keep` (indices, repeats allowed: a repeat is a clone), as fresh
+    /// parameters: densification and pruning.
+    pub fn select(&self, keep: &[usize]) -> Self {
+        let device = self.positions.val().device();
+        let m = keep.len();
+        let rows = |t: Tensor<2>| -> Param<Tensor<2>> {
+            let [_, k] = t.dims();
+            let v = t.into_data().try_into_vec::<f32>().expect("float");
+            let out: Vec<f32> = keep.iter().flat_map(|&i| v[i * k..(i + 1) * k].to_vec()).collect();
+            Param::from_tensor(Tensor::from_data(TensorData::new(out, [m, k]), &device))
+        };
+        let opacity = self.opacity_logits.val().into_data().try_into_vec::<f32>().expect("float");
+        let links: Vec<i64> = self.links.clone().into_data().iter::<i64>().collect();
+        KinematicGaussians {
+            positions: rows(self.positions.val()),
+            scales: rows(self.scales.val()),
+            rotations: self.rotations.as_ref().map(|r| rows(r.val())),
+            opacity_logits: Param::from_tensor(Tensor::from_data(
+                TensorData::new(keep.iter().map(|&i| opacity[i]).collect::<Vec<_>>(), [m]),
+                &device,
+            )),
+            links: Tensor::from_data(
+                TensorData::new(keep.iter().map(|&i| links[i]).collect::<Vec<_>>(), [m]),
+                &device,
+            ),
+            anisotropic: self.anisotropic.clone(),
+        }
+    }
+
+    /// `[N, 3, 3]` rotation matrices of the normalised quaternions `[N, 4]` (w, x, y, z).
+    fn rotation_matrices(q: Tensor<2>) -> Tensor<3> {
+        let [n, _] = q.dims();
+        let norm = q.clone().square().sum_dim(1).sqrt().clamp_min(1e-8);
+        let q = q / norm;
+        let c = |i: usize| q.clone().slice([0..n, i..i + 1]).reshape([n]);
+        let (w, x, y, z) = (c(0), c(1), c(2), c(3));
+        let two = |a: Tensor<1>, b: Tensor<1>| (a * b).mul_scalar(2.0);
+        let one_minus = |a: Tensor<1>, b: Tensor<1>| {
+            (a.clone() * a + b.clone() * b).mul_scalar(-2.0).add_scalar(1.0)
+        };
+        let m = [
+            one_minus(y.clone(), z.clone()),
+            two(x.clone(), y.clone()) - two(w.clone(), z.clone()),
+            two(x.clone(), z.clone()) + two(w.clone(), y.clone()),
+            two(x.clone(), y.clone()) + two(w.clone(), z.clone()),
+            one_minus(x.clone(), z.clone()),
+            two(y.clone(), z.clone()) - two(w.clone(), x.clone()),
+            two(x.clone(), z.clone()) - two(w.clone(), y.clone()),
+            two(y.clone(), z.clone()) + two(w.clone(), x.clone()),
+            one_minus(x, y),
+        ];
+        Tensor::stack::<2>(m.to_vec(), 1).reshape([n, 3, 3])
+    }
+
+    /// Standard deviations: `[N, 1]` (isotropic) or `[N, 3]` (anisotropic, bounded), metres.
+    pub fn standard_deviations(&self) -> Tensor<2> {
+        match &self.anisotropic {
+            None => self.scales.val().exp(),
+            Some(a) => burn::tensor::activation::sigmoid(self.scales.val())
+                .mul_scalar(a.max_scale - a.min_scale)
+                .add_scalar(a.min_scale),
         }
     }
 
@@ -151,12 +289,20 @@ impl KinematicGaussians {
     /// The Gaussians projected for joint values `q` `[B, dof]` (radians).
     pub fn project(&self, chain: &TensorChain, q: Tensor<2>, camera: &Camera) -> ImageGaussians {
         let (r, t) = chain.link_frames(q);
-        project_isotropic(
-            self.world_means(r, t),
-            self.log_scales.val().exp(),
-            burn::tensor::activation::sigmoid(self.opacity_logits.val()),
-            camera,
-        )
+        let opacity = burn::tensor::activation::sigmoid(self.opacity_logits.val());
+        let n = self.len();
+        let sd = self.standard_deviations();
+        match (&self.anisotropic, &self.rotations) {
+            (Some(a), Some(rot)) => {
+                let [b, _, _, _] = r.dims();
+                let local = Self::rotation_matrices(rot.val().mul_scalar(a.rotation_rate))
+                    * sd.reshape([n, 1, 3]); // columns scaled: R S
+                let link_r = r.clone().select(1, self.links.clone()); // [B, N, 3, 3]
+                let axes = link_r.matmul(local.reshape([1, n, 3, 3]).repeat_dim(0, b));
+                crate::gaussian_splatting::project_anisotropic(self.world_means(r, t), axes, opacity, camera)
+            }
+            _ => project_isotropic(self.world_means(r, t), sd.reshape([n]), opacity, camera),
+        }
     }
 
     /// Silhouettes and depth `[B, H * W]` for joint values `q` `[B, dof]` (radians), culled

@@ -118,3 +118,67 @@ fn culled_splatting_matches_the_dense_reference() {
         assert!(worst(ds, cs) < 0.1, "{mode:?} silhouette at 3 sigma");
     }
 }
+
+#[test]
+fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
+    use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector3};
+    use selfmodel::camera::Camera;
+    use selfmodel::gaussian_splatting::project_anisotropic;
+    let dev = Device::flex();
+    let camera = Camera::paper().orbited(25.0);
+    let centres = [[0.05, -0.1, 0.2], [-0.12, 0.08, -0.05], [0.0, 0.0, 0.0]];
+    let axes: Vec<Matrix3<f64>> = (0..3)
+        .map(|i| Matrix3::from_fn(|r, c| 0.01 * (((i * 9 + r * 3 + c) * 7 % 11) as f64 - 5.0) / 5.0 + if r == c { 0.02 } else { 0.0 }))
+        .collect();
+    let means: Vec<f32> = centres.iter().flatten().map(|&v| v as f32).collect();
+    let a: Vec<f32> = axes.iter().flat_map(|m| (0..9).map(move |k| m[(k / 3, k % 3)] as f32)).collect();
+    let g = project_anisotropic(
+        Tensor::from_data(TensorData::new(means, [1, 3, 3]), &dev),
+        Tensor::from_data(TensorData::new(a, [1, 3, 3, 3]), &dev),
+        Tensor::ones([3], &dev),
+        &camera,
+    );
+    let conic: Vec<Vec<f32>> = g.conic.iter().map(|t| t.clone().into_data().try_to_vec::<f32>().unwrap()).collect();
+    let f = camera.frame();
+    let w = Matrix3::from_rows(&[f.right.transpose(), f.up.transpose(), f.fwd.transpose()]);
+    for (i, c) in centres.iter().enumerate() {
+        let p = w * (Vector3::from(*c) - f.eye.coords);
+        let (x, y, z) = (p.x, p.y, p.z);
+        let j = Matrix2x3::new(0.0, -f.focal / z, f.focal * y / (z * z), f.focal / z, 0.0, -f.focal * x / (z * z));
+        let sigma = j * w * axes[i] * axes[i].transpose() * w.transpose() * j.transpose() + Matrix2::identity() * 0.3;
+        let inv = sigma.try_inverse().unwrap();
+        for (k, (r, cc)) in [(0, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+            let ours = conic[k][i] as f64;
+            assert!((ours - inv[(r, cc)]).abs() <= 1e-3 * inv[(r, cc)].abs().max(1e-3), "Gaussian {i} conic {k}: {ours} vs {}", inv[(r, cc)]);
+        }
+    }
+}
+
+#[test]
+fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
+    use selfmodel::device::DeviceChoice;
+    use selfmodel::evaluation::psnr_db;
+    use selfmodel::k3dgs::K3dgsConfig;
+    let cfg = K3dgsConfig::isotropic_alpha("quick").unwrap();
+    let dir = std::env::temp_dir().join(format!("selfmodel-k3dgs-{}", std::process::id()));
+    let out = selfmodel::k3dgs::run(&cfg, &dir, DeviceChoice::Cpu).unwrap();
+    let (data, _, test) = cfg.data.load().unwrap();
+    let px = data.width * data.height;
+    let black: f64 = test
+        .clone()
+        .map(|i| {
+            let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
+            psnr_db(&vec![0.0; px], &truth)
+        })
+        .sum::<f64>()
+        / test.len() as f64;
+    let r = &out.result;
+    assert!(r.psnr_db_test > black + 3.0 && r.iou_test > 0.6, "{:.2} dB (IoU {:.3}) against black {black:.2} dB", r.psnr_db_test, r.iou_test);
+    let d = &cfg.densification;
+    assert!(out.counts.len() > 2, "the set never changed: {:?}", out.counts);
+    assert!(out.counts.iter().skip(1).all(|&(_, n)| n >= d.min_gaussians && n <= d.max_gaussians), "{:?}", out.counts);
+    for f in ["results.csv", "render_speed.csv", "gaussians.png", "qualitative.png", "training_curve.png"] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
