@@ -9,6 +9,19 @@
 //! are split 50/50 between the fixed base and the shoulder link `L1`, which turns with joint 0
 //! (a choice of ours). Initial positions are drawn uniformly inside each link's geometry
 //! bounds (seeded), so they start spread along the link's extent.
+//!
+//! Anisotropic Gaussians (beyond the paper, whose attempt collapsed) carry a rotation (a
+//! quaternion, normalised in the forward pass) and three standard deviations. What makes them
+//! train, measured on the paper preset (3,000 steps, alpha compositing, 300 Gaussians growing
+//! to at most 500, against 600 growing to 1,000 isotropic ones at 21.73 dB, IoU 0.854):
+//! - start each one elongated along its link's long axis (the longest side of the link's
+//!   geometry bounds), so the optimiser refines a sensible shape instead of discovering it;
+//! - start it as thick as the links: 0.04 m along and 0.02 m across gave 22.56 dB, IoU 0.877;
+//!   0.03 and 0.012 m (needles much thinner than the 5-9 cm links) only 21.35 dB, IoU 0.842;
+//! - bound every standard deviation to [0.002, 0.1] m through a sigmoid, so no Gaussian can
+//!   blow up over the image or shrink to nothing (the degenerate configurations the paper saw);
+//! - turn rotations ten times slower than everything else (the quaternion is stored divided by
+//!   0.1): at the full rate the same run reached 21.00 dB instead of 21.35 dB.
 
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Int, Tensor, TensorData};
@@ -52,8 +65,8 @@ pub struct Anisotropic {
 impl Anisotropic {
     pub fn paper() -> Self {
         Anisotropic {
-            along: 0.03,
-            across: 0.012,
+            along: 0.04,
+            across: 0.02,
             min_scale: 0.002,
             max_scale: 0.1,
             rotation_rate: 0.1,
