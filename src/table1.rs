@@ -5,7 +5,8 @@
 //! its `results.csv` rows are gathered, so a new self-model (FFKSM, K-3DGS) appears here by
 //! registering itself, with no edit to this file. Under `reproduce` and with `table1 --reuse`,
 //! rows the experiments have written into their own folders under `reports/` (same preset,
-//! dataset and steps) are gathered instead of trained again.
+//! dataset and steps) are gathered instead of trained again, from the experiment's
+//! `results.csv` or, while it is still running, from those of the models it has finished.
 
 use std::path::Path;
 
@@ -55,16 +56,13 @@ pub fn run(opts: &RunOptions, dir: &Path) -> Result<Vec<ModelResult>> {
 
 /// The rows under `opts.reuse_root/default_dir/results.csv`, if that file exists and every row
 /// has this run's preset, dataset and step count (`--steps N`: N steps; none: the preset's,
-/// so a shortened run is never taken for a full one).
+/// so a shortened run is never taken for a full one). Without that file (an experiment of
+/// several models still running, FFKSM's paper preset), the matching rows of its models'
+/// own `default_dir/*/results.csv`, if any: Table I then holds the models that are done.
 fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<ModelResult>>> {
     let Some(root) = &opts.reuse_root else {
         return Ok(None);
     };
-    let path = root.join(default_dir).join("results.csv");
-    if !path.is_file() {
-        return Ok(None);
-    }
-    let rows = read_results(&path)?;
     let dataset = if opts.paper_compatible {
         "paper_compatible"
     } else {
@@ -78,5 +76,26 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
                 None => r.steps_override.is_none(),
             }
     };
-    Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
+    let dir = root.join(default_dir);
+    let path = dir.join("results.csv");
+    if path.is_file() {
+        let rows = read_results(&path)?;
+        return Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows));
+    }
+    let mut subdirs: Vec<std::path::PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries.filter_map(|e| e.ok().map(|e| e.path())).collect(),
+        Err(_) => return Ok(None),
+    };
+    subdirs.sort();
+    let mut rows = Vec::new();
+    for sub in subdirs {
+        let path = sub.join("results.csv");
+        if path.is_file() {
+            let found = read_results(&path)?;
+            if !found.is_empty() && found.iter().all(matches) {
+                rows.extend(found);
+            }
+        }
+    }
+    Ok((!rows.is_empty()).then_some(rows))
 }

@@ -58,6 +58,19 @@ fn every_experiment_runs_on_its_quick_preset() {
         table1.join("neurokin").join("results.csv").is_file(),
         "table1 took a 3-step run for the quick preset's"
     );
+
+    // An experiment of several models still running (no combined results.csv yet): table1
+    // gathers the rows of the models it has finished instead of training it.
+    let ffksm = root.path().join("reports/ffksm");
+    std::fs::remove_file(ffksm.join("results.csv")).unwrap();
+    std::fs::remove_dir_all(ffksm.join("ffksm_original")).unwrap();
+    let table1 = root.path().join("reports/table1_partial");
+    (table1_exp.run)(&opts, &table1).unwrap();
+    assert!(!table1.join("ffksm").exists(), "table1 trained ffksm again");
+    let rows = selfmodel::model_result::read_results(&table1.join("results.csv")).unwrap();
+    let ffksm_rows: Vec<&str> = rows.iter().filter(|r| r.model.starts_with("FFKSM")).map(|r| r.model.as_str()).collect();
+    assert_eq!(ffksm_rows.len(), 4, "{ffksm_rows:?}");
+    assert!(ffksm_rows.iter().all(|m| !m.contains("original")));
 }
 
 #[test]
