@@ -459,9 +459,19 @@ fn train_field(
         fingerprint: fingerprint(cfg),
     };
     let mut restarts = 0;
-    // Network evaluations and steps in this process (a resumed run counts its own).
-    let train_evaluations = std::cell::Cell::new(0usize);
-    let train_steps = std::cell::Cell::new(0usize);
+    // Network evaluations and steps of training, kept beside the checkpoint so a resumed run
+    // reports them for all its steps (`[evaluations, steps]`).
+    let counts_path = plan.dir.join("evaluations.json");
+    let earlier: [usize; 2] = if resume {
+        std::fs::read_to_string(&counts_path)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+            .unwrap_or([0, 0])
+    } else {
+        [0, 0]
+    };
+    let train_evaluations = std::cell::Cell::new(earlier[0]);
+    let train_steps = std::cell::Cell::new(earlier[1]);
     loop {
         let seed = cfg.train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(&tdev, seed)?;
@@ -524,7 +534,11 @@ fn train_field(
         };
         match train_watched(field, &train_set, &cfg.train, Some(&plan), &label, loss, watch) {
             Ok((field, log)) => {
-                let per_step = train_evaluations.get() as f64 / train_steps.get().max(1) as f64;
+                let counts = [train_evaluations.get(), train_steps.get()];
+                if plan.dir.is_dir() {
+                    write_json(&counts_path, &counts)?;
+                }
+                let per_step = counts[0] as f64 / counts[1].max(1) as f64;
                 return Ok((field.valid(), log, restarts, per_step));
             }
             Err(Error::Collapsed { step }) => {
@@ -540,6 +554,8 @@ fn train_field(
                 restarts += 1;
                 // The checkpoint holds the collapsed model: start the next try from scratch.
                 let _ = std::fs::remove_dir_all(&plan.dir);
+                train_evaluations.set(0);
+                train_steps.set(0);
             }
             Err(e) => return Err(e),
         }
