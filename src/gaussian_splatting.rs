@@ -212,33 +212,46 @@ pub fn render_dense(
 /// Gaussian's centre (a square box), grouped by pixel and front to back within a pixel:
 /// flat Gaussian indices `b N + n`, flat pixel indices `b P + p`.
 fn culled_pairs(g: &ImageGaussians, height: usize, width: usize, cull_sigmas: f64) -> (Vec<i64>, Vec<i64>) {
+    use rayon::prelude::*;
     let [b, n] = g.row.dims();
     let host = |t: &Tensor<2>| t.clone().into_data().try_into_vec::<f32>().expect("float");
     let (row, col, depth, sigma) = (host(&g.row), host(&g.col), host(&g.depth), host(&g.sigma_px));
     let p = height * width;
-    let mut pairs: Vec<(usize, f32, usize)> = Vec::new(); // (flat pixel, depth, flat Gaussian)
-    for i in 0..b * n {
-        let r = cull_sigmas as f32 * sigma[i];
-        if !r.is_finite() {
-            continue;
-        }
-        let (r0, r1) = ((row[i] - r).ceil().max(0.0), (row[i] + r).floor().min(height as f32 - 1.0));
-        let (c0, c1) = ((col[i] - r).ceil().max(0.0), (col[i] + r).floor().min(width as f32 - 1.0));
-        if r0 > r1 || c0 > c1 {
-            continue;
-        }
-        let image = i / n;
-        for pr in r0 as usize..=r1 as usize {
-            for pc in c0 as usize..=c1 as usize {
-                pairs.push((image * p + pr * width + pc, depth[i], i));
+    // One image per task; pixel indices are image-major, so the images' lists concatenate in
+    // order.
+    let per_image: Vec<Vec<(usize, f32, usize)>> = (0..b)
+        .into_par_iter()
+        .map(|image| {
+            let mut pairs = Vec::new(); // (flat pixel, depth, flat Gaussian)
+            for i in image * n..(image + 1) * n {
+                let r = cull_sigmas as f32 * sigma[i];
+                if !r.is_finite() {
+                    continue;
+                }
+                let (r0, r1) = ((row[i] - r).ceil().max(0.0), (row[i] + r).floor().min(height as f32 - 1.0));
+                let (c0, c1) = ((col[i] - r).ceil().max(0.0), (col[i] + r).floor().min(width as f32 - 1.0));
+                if r0 > r1 || c0 > c1 {
+                    continue;
+                }
+                for pr in r0 as usize..=r1 as usize {
+                    for pc in c0 as usize..=c1 as usize {
+                        pairs.push((image * p + pr * width + pc, depth[i], i));
+                    }
+                }
             }
+            pairs.sort_unstable_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+            pairs
+        })
+        .collect();
+    let total: usize = per_image.iter().map(Vec::len).sum();
+    let (mut gaussians, mut pixels) = (Vec::with_capacity(total), Vec::with_capacity(total));
+    for pairs in per_image {
+        for (px, _, gi) in pairs {
+            gaussians.push(gi as i64);
+            pixels.push(px as i64);
         }
     }
-    pairs.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
-    (
-        pairs.iter().map(|q| q.2 as i64).collect(),
-        pairs.iter().map(|q| q.0 as i64).collect(),
-    )
+    (gaussians, pixels)
 }
 
 /// Silhouette and depth `[B, H * W]` from only the pairs within `cull_sigmas` standard
