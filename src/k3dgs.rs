@@ -147,7 +147,7 @@ impl K3dgsConfig {
             robot_weight: 5.0,
             cull_sigmas: 3.0,
             data,
-            paper_subset: 400,
+            paper_subset: 100,
             speed,
             reference: PaperReference::k3dgs(),
             note: if preset == "short" {
