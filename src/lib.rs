@@ -18,6 +18,7 @@ pub mod dataset;
 pub mod decoder_bench;
 pub mod decoder_experiment;
 pub mod device;
+pub mod dh_robot;
 pub mod error;
 pub mod evaluation;
 pub mod experiments;
