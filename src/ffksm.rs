@@ -346,14 +346,14 @@ impl Rendered {
     }
 }
 
-/// Render every pose of `angles_deg` (`[n][4]`, degrees) from `camera`, densely or with the
-/// accelerated marcher.
+/// Render every pose of `angles_deg` (`[n][4]`, degrees) from `camera`, densely (`None`) or
+/// with the accelerated marcher.
 fn render_all(
     field: &OccupancyField,
     camera: &Camera,
     angles_deg: &[Vec<f64>],
     cfg: &FfksmConfig,
-    accelerated: bool,
+    accelerated: Option<&AcceleratedConfig>,
     device: &Device,
     label: &str,
 ) -> Rendered {
@@ -376,8 +376,8 @@ fn render_all(
         let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
         let view = (camera, radians(&a32));
         let t0 = Instant::now();
-        let (sil, depth, evals, grid, occupancy) = if accelerated {
-            let img = render_accelerated(field, view, &cfg.march, &cfg.accelerated, device);
+        let (sil, depth, evals, grid, occupancy) = if let Some(acc) = accelerated {
+            let img = render_accelerated(field, view, &cfg.march, acc, device);
             (
                 img.silhouette,
                 img.depth,
@@ -586,8 +586,15 @@ pub fn run(
     // The training camera, both renderers.
     let test_angles: Vec<Vec<f64>> = test_range.clone().map(|i| data.angles[i].clone()).collect();
     let (truth, truth_depth) = host_targets(&data, &test_range);
-    let dense = render_all(&field, &camera, &test_angles, cfg, false, &device, "dense marching");
-    let fast = render_all(&field, &camera, &test_angles, cfg, true, &device, "accelerated marching");
+    let dense = render_all(&field, &camera, &test_angles, cfg, None, &device, "dense marching");
+    let fast = render_all(&field, &camera, &test_angles, cfg, Some(&cfg.accelerated), &device, "accelerated marching");
+    // What early termination adds to the grid: the same marcher without it.
+    let no_termination = AcceleratedConfig {
+        termination: None,
+        ..cfg.accelerated.clone()
+    };
+    let skipping_only = render_all(&field, &camera, &test_angles, cfg, Some(&no_termination), &device, "skipping only");
+    let skipping_q = score(&skipping_only.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     let dense_q = score(&dense.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     let fast_q = score(&fast.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     let dataset_label = cfg.data.label().to_string();
@@ -671,6 +678,7 @@ pub fn run(
     let renderers = vec![
         renderer_row("dense marching", &dense, &dense_q),
         renderer_row("accelerated", &fast, &fast_q),
+        renderer_row("accelerated without early termination", &skipping_only, &skipping_q),
     ];
 
     // Novel views: the simulator's images from orbited cameras, the accelerated marcher.
@@ -699,7 +707,7 @@ pub fn run(
             &spec.camera,
             &test_angles,
             cfg,
-            true,
+            Some(&cfg.accelerated),
             &device,
             &format!("novel view {yaw} deg"),
         );
