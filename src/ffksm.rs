@@ -506,6 +506,13 @@ fn train_field(
             weighted_mse(pred, &t, cfg.robot_weight)
         };
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
+            // The counts go beside each checkpoint (saved right after this), so a run stopped
+            // and resumed still reports all its steps.
+            let every = cfg.train.checkpoint_every;
+            if every > 0 && (step % every == 0 || step == cfg.train.steps) {
+                std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
+                write_json(&counts_path, &[train_evaluations.get(), train_steps.get()])?;
+            }
             let Some(r) = &cfg.restart else { return Ok(()) };
             if step > r.until || step % r.every.max(1) != 0 {
                 return Ok(());
