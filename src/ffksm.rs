@@ -545,7 +545,15 @@ fn train_field(
                 if plan.dir.is_dir() {
                     write_json(&counts_path, &counts)?;
                 }
-                let per_step = counts[0] as f64 / counts[1].max(1) as f64;
+                let per_step = match cfg.train_marcher {
+                    // Known exactly, however many processes the run took.
+                    TrainMarcher::Dense => {
+                        let cropped = log.step.min(cfg.curriculum.steps) * crop.len();
+                        let full = log.step.saturating_sub(cfg.curriculum.steps) * all.len();
+                        ((cropped + full) * cfg.march.samples) as f64 / log.step.max(1) as f64
+                    }
+                    TrainMarcher::Skipping => counts[0] as f64 / counts[1].max(1) as f64,
+                };
                 return Ok((field.valid(), log, restarts, per_step));
             }
             Err(Error::Collapsed { step }) => {
