@@ -247,7 +247,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     write_markdown_report(
         &path,
         "K-3DGS: culled against dense splatting",
-        "Images/s, median of synchronised timed calls after warm-up. Dense evaluates every (Gaussian, pixel) pair (timed at batch 1 and 8); culled only pairs within 3 standard deviations.",
+        "Images/s, median of synchronised timed calls after warm-up. Dense evaluates every (Gaussian, pixel) pair (one timed call per batch size, 8 images at a time); culled only pairs within 3 standard deviations.",
     )?;
     Ok(summary(&rows))
 }

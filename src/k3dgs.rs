@@ -364,12 +364,13 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     // Speed: culled and dense splatting.
     let mut speed = Vec::new();
-    // Dense splatting is the slow reference: timed at batch 1 and 8, with fewer repeats.
+    // Dense splatting is the slow reference: the same batches, one warm-up and one timed call
+    // each (a batch of 256 takes tens of seconds).
     let dense_speed = SpeedConfig {
         warmup: 1,
-        min_repeats: 2,
+        min_repeats: 1,
         min_seconds: 0.0,
-        batches: vec![1, 8],
+        batches: cfg.speed.batches.clone(),
     };
     for (label, cull, speed_cfg) in [
         ("culled", Some(cfg.cull_sigmas), &cfg.speed),
