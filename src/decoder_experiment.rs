@@ -18,7 +18,7 @@ use crate::dataset::{Dataset, DatasetConfig};
 use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
 use crate::evaluation::{Predictions, Quality, score};
-use crate::figures::{GridRow, image_grid, training_curves};
+use crate::figures::{GridRow, image_grid};
 use crate::inference_speed::{SpeedConfig, Timing, measure};
 use crate::losses::{bce, bce_with_logits, l1_masked, mse, soft_dice};
 use crate::model_result::{ModelResult, PaperReference};
@@ -595,22 +595,7 @@ fn write_report(
             }
         ),
     )?;
-    #[derive(serde::Serialize)]
-    struct CurveRow {
-        step: usize,
-        loss: f64,
-    }
-    let rows: Vec<CurveRow> = log
-        .curve
-        .iter()
-        .map(|&(step, loss)| CurveRow { step, loss })
-        .collect();
-    write_csv(&dir.join("curve.csv"), &rows)?;
-    training_curves(
-        &dir.join("training_curve.png"),
-        &format!("{}: training loss", cfg.name),
-        &[(cfg.name.clone(), log.curve.clone())],
-    )
+    crate::report::write_training_curve(dir, &cfg.name, log)
 }
 
 /// Six test poses spread over the test set: ground truth, prediction, error (and true depth,

@@ -31,7 +31,7 @@ use crate::decoder_experiment::{DataSpec, device_set, host_targets, qualitative_
 use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
 use crate::evaluation::{Predictions, Quality, iou, psnr_db, score};
-use crate::figures::{GridRow, image_grid, training_curves};
+use crate::figures::{GridRow, image_grid};
 use crate::model_result::{ModelResult, PaperReference};
 use crate::occupancy_field::{OccupancyField, OccupancyFieldConfig};
 use crate::preset::Preset;
@@ -794,22 +794,7 @@ fn write_reports(
         &format!("{}: views it was never trained on", cfg.name),
         "The training camera orbited about the world z axis; the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
     )?;
-    #[derive(serde::Serialize)]
-    struct CurveRow {
-        step: usize,
-        loss: f64,
-    }
-    let curve: Vec<CurveRow> = log
-        .curve
-        .iter()
-        .map(|&(step, loss)| CurveRow { step, loss })
-        .collect();
-    write_csv(&dir.join("curve.csv"), &curve)?;
-    training_curves(
-        &dir.join("training_curve.png"),
-        &format!("{}: training loss", cfg.name),
-        &[(cfg.name.clone(), log.curve.clone())],
-    )
+    crate::report::write_training_curve(dir, &cfg.name, log)
 }
 
 /// For each novel view, a row of truths then a row of predictions (six poses).

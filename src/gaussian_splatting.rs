@@ -50,26 +50,35 @@ pub struct ImageGaussians {
     pub sigma_px: Tensor<2>,
 }
 
-/// Camera coordinates `[B, N]` each (x right, y up, z forward; m) of world points
-/// `[B, N, 3]`.
-fn camera_coordinates(means: Tensor<3>, camera: &Camera) -> [Tensor<2>; 3] {
-    let [b, n, _] = means.dims();
+/// The camera rotation `W` `[3, 3]`: rows right, up, forward (world to camera).
+fn camera_rotation(camera: &Camera, device: &burn::tensor::Device) -> Tensor<2> {
     let f = camera.frame();
-    let device = means.device();
-    // Rows right, up, forward: camera coordinates = W (p − eye).
     let w: Vec<f32> = [f.right, f.up, f.fwd]
         .iter()
         .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
         .collect();
-    let w = Tensor::<2>::from_data(TensorData::new(w, [3, 3]), &device);
+    Tensor::from_data(TensorData::new(w, [3, 3]), device)
+}
+
+/// The centres of world points `[B, N, 3]` in the camera: camera coordinates `[x, y, z]`
+/// (x right, y up, z forward, m; z clamped to at least 1 mm), and image row and column (px),
+/// each `[B, N]`.
+fn project_centres(means: Tensor<3>, camera: &Camera) -> ([Tensor<2>; 3], Tensor<2>, Tensor<2>) {
+    let [b, n, _] = means.dims();
+    let f = camera.frame();
+    let device = means.device();
     let eye = Tensor::<1>::from_data(
         TensorData::new(vec![f.eye.x as f32, f.eye.y as f32, f.eye.z as f32], [3]),
         &device,
     );
     let rel = means - eye.reshape([1, 1, 3]);
-    let cam = rel.reshape([b * n, 3]).matmul(w.transpose());
-    let col = |i: usize| cam.clone().slice([0..b * n, i..i + 1]).reshape([b, n]);
-    [col(0), col(1), col(2)]
+    let cam = rel.reshape([b * n, 3]).matmul(camera_rotation(camera, &device).transpose());
+    let coord = |i: usize| cam.clone().slice([0..b * n, i..i + 1]).reshape([b, n]);
+    let (x, y, z) = (coord(0), coord(1), coord(2).clamp_min(1e-3));
+    let (cx, cy) = camera.principal_point();
+    let col = (x.clone() / z.clone()).mul_scalar(f.focal).add_scalar(cx);
+    let row = (y.clone() / z.clone()).mul_scalar(-f.focal).add_scalar(cy);
+    ([x, y, z], row, col)
 }
 
 /// Project isotropic Gaussians: centres `[B, N, 3]` (world, m), scales `[N]` (standard
@@ -82,13 +91,8 @@ pub fn project_isotropic(
     camera: &Camera,
 ) -> ImageGaussians {
     let [b, n, _] = means.dims();
-    let [x, y, z] = camera_coordinates(means, camera);
-    let focal = camera.focal_px();
-    let (cx, cy) = camera.principal_point();
-    let z = z.clamp_min(1e-3);
-    let col = (x / z.clone()).mul_scalar(focal).add_scalar(cx);
-    let row = (y / z.clone()).mul_scalar(-focal).add_scalar(cy);
-    let sigma = (scales.reshape([1, n]) / z.clone()).mul_scalar(focal);
+    let ([_, _, z], row, col) = project_centres(means, camera);
+    let sigma = (scales.reshape([1, n]) / z.clone()).mul_scalar(camera.focal_px());
     let inv = sigma.clone().square().recip();
     ImageGaussians {
         row,
@@ -116,20 +120,10 @@ pub fn project_anisotropic(
     camera: &Camera,
 ) -> ImageGaussians {
     let [b, n, _] = means.dims();
-    let [x, y, z] = camera_coordinates(means, camera);
+    let ([x, y, z], row, col) = project_centres(means, camera);
     let focal = camera.focal_px();
-    let (cx, cy) = camera.principal_point();
-    let z = z.clamp_min(1e-3);
-    let col = (x.clone() / z.clone()).mul_scalar(focal).add_scalar(cx);
-    let row = (y.clone() / z.clone()).mul_scalar(-focal).add_scalar(cy);
     // Axes in camera coordinates: W A, [B, N, 3, 3].
-    let f = camera.frame();
-    let device = axes.device();
-    let w: Vec<f32> = [f.right, f.up, f.fwd]
-        .iter()
-        .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
-        .collect();
-    let w = Tensor::<4>::from_data(TensorData::new(w, [1, 1, 3, 3]), &device);
+    let w = camera_rotation(camera, &axes.device()).reshape([1, 1, 3, 3]);
     let cam_axes = w.repeat_dim(0, b).repeat_dim(1, n).matmul(axes);
     // Rows of J: d row / d(x, y, z) = (0, −f/z, f y/z²); d col = (f/z, 0, −f x/z²).
     let axis_row = |i: usize| cam_axes.clone().slice([0..b, 0..n, i..i + 1, 0..3]).reshape([b, n, 3]);

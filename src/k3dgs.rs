@@ -24,7 +24,6 @@ use crate::decoder_experiment::{DataSpec, device_set, host_targets, qualitative_
 use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
 use crate::evaluation::{Predictions, score};
-use crate::figures::training_curves;
 use crate::gaussian_splatting::Compositing;
 use crate::inference_speed::{SpeedConfig, measure};
 use crate::kinematic_gaussians::{GaussianInit, KinematicGaussians};
@@ -471,18 +470,7 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
         &format!("{}: culled against dense splatting", cfg.name),
         "Images/s of the trained model, median of synchronised timed calls after warm-up; dense splatting evaluates every (Gaussian, pixel) pair, culled only those within `cull_sigmas` standard deviations.",
     )?;
-    #[derive(serde::Serialize)]
-    struct CurveRow {
-        step: usize,
-        loss: f64,
-    }
-    let curve: Vec<CurveRow> = log.curve.iter().map(|&(step, loss)| CurveRow { step, loss }).collect();
-    write_csv(&dir.join("curve.csv"), &curve)?;
-    training_curves(
-        &dir.join("training_curve.png"),
-        &format!("{}: training loss", cfg.name),
-        &[(cfg.name.clone(), log.curve.clone())],
-    )?;
+    crate::report::write_training_curve(dir, &cfg.name, &log)?;
     qualitative_figure(&dir.join("qualitative.png"), &truth, &truth_depth, &predictions, [camera.height, camera.width])?;
     gaussians_figure(&dir.join("gaussians.png"), &model, &chain, &data, &test_range, &camera)?;
     Ok(K3dgsOutcome {

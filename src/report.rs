@@ -57,3 +57,23 @@ pub fn write_markdown_report(csv_path: &Path, title: &str, note: &str) -> Result
     );
     write_bytes(&csv_path.with_extension("md"), text.as_bytes())
 }
+
+/// A run's training curve: `dir/curve.csv` (step, loss) and `dir/training_curve.png`.
+pub fn write_training_curve(dir: &Path, name: &str, log: &crate::training::TrainLog) -> Result<()> {
+    #[derive(serde::Serialize)]
+    struct CurveRow {
+        step: usize,
+        loss: f64,
+    }
+    let rows: Vec<CurveRow> = log
+        .curve
+        .iter()
+        .map(|&(step, loss)| CurveRow { step, loss })
+        .collect();
+    write_csv(&dir.join("curve.csv"), &rows)?;
+    crate::figures::training_curves(
+        &dir.join("training_curve.png"),
+        &format!("{name}: training loss"),
+        &[(name.to_string(), log.curve.clone())],
+    )
+}

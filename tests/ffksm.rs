@@ -1,6 +1,8 @@
 //! FFKSM's building blocks against their slow references: the positional encoding and the
 //! virtual frame.
 
+mod common;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use selfmodel::positional_encoding::{encode, encode_reference, encoded_width};
 use selfmodel::virtual_frame::{VirtualFrame, to_virtual, to_virtual_reference};
@@ -298,7 +300,6 @@ fn the_accelerated_marcher_with_every_cell_occupied_is_dense_marching() {
 #[test]
 fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations() {
     use selfmodel::device::DeviceChoice;
-    use selfmodel::evaluation::psnr_db;
     use selfmodel::ffksm::{FfksmConfig, centre_crop};
     // The curriculum's crop: the central pixels, row by row.
     assert_eq!(centre_crop(4, 6, 2), vec![8, 9, 14, 15]);
@@ -307,17 +308,7 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
     let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
     let out = selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
     // A constant black image on the same test images.
-    let (data, _, test) = cfg.data.load().unwrap();
-    let test = test.start..test.start + cfg.test_images.unwrap();
-    let px = data.width * data.height;
-    let black: f64 = test
-        .clone()
-        .map(|i| {
-            let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
-            psnr_db(&vec![0.0; px], &truth)
-        })
-        .sum::<f64>()
-        / test.len() as f64;
+    let black = common::black_psnr(&cfg.data, cfg.test_images);
     let [dense, fast] = [&out.renderers[0], &out.renderers[1]];
     assert!(
         dense.psnr_db_test > black + 1.0 && dense.iou_test > 0.2,

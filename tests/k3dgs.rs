@@ -1,6 +1,8 @@
 //! K-3DGS's building blocks against their references: tensor forward kinematics against the
 //! foundation's.
 
+mod common;
+
 use burn::tensor::{Device, Tensor, TensorData};
 use selfmodel::tensor_kinematics::TensorChain;
 
@@ -157,21 +159,11 @@ fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
 #[test]
 fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     use selfmodel::device::DeviceChoice;
-    use selfmodel::evaluation::psnr_db;
     use selfmodel::k3dgs::K3dgsConfig;
     let cfg = K3dgsConfig::isotropic_alpha("quick").unwrap();
     let dir = std::env::temp_dir().join(format!("selfmodel-k3dgs-{}", std::process::id()));
     let out = selfmodel::k3dgs::run(&cfg, &dir, DeviceChoice::Cpu).unwrap();
-    let (data, _, test) = cfg.data.load().unwrap();
-    let px = data.width * data.height;
-    let black: f64 = test
-        .clone()
-        .map(|i| {
-            let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
-            psnr_db(&vec![0.0; px], &truth)
-        })
-        .sum::<f64>()
-        / test.len() as f64;
+    let black = common::black_psnr(&cfg.data, None);
     let r = &out.result;
     assert!(r.psnr_db_test > black + 3.0 && r.iou_test > 0.6, "{:.2} dB (IoU {:.3}) against black {black:.2} dB", r.psnr_db_test, r.iou_test);
     let d = &cfg.densification;

@@ -123,3 +123,18 @@ pub fn tempdir() -> TempDir {
     std::fs::create_dir_all(&dir).unwrap();
     TempDir(dir)
 }
+
+/// Mean PSNR (dB) of an all-black prediction on the first `n` test images of `spec` (all
+/// when `None`): the constant predictor a trained self-model must beat.
+pub fn black_psnr(spec: &selfmodel::decoder_experiment::DataSpec, n: Option<usize>) -> f64 {
+    let (data, _, test) = spec.load().unwrap();
+    let test = test.start..test.start + n.unwrap_or(test.len()).min(test.len());
+    let px = data.width * data.height;
+    test.clone()
+        .map(|i| {
+            let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
+            selfmodel::evaluation::psnr_db(&vec![0.0; px], &truth)
+        })
+        .sum::<f64>()
+        / test.len() as f64
+}
