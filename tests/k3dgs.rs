@@ -1,5 +1,6 @@
-//! K-3DGS's building blocks against their references: tensor forward kinematics against the
-//! foundation's.
+//! K-3DGS against its references: tensor forward kinematics against the foundation's,
+//! projection against the simulator's camera, culled splatting against dense splatting, the
+//! anisotropic projection against its formula in f64, and a tiny trained model.
 
 mod common;
 
