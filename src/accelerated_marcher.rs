@@ -120,8 +120,7 @@ pub fn render_accelerated(
         }
         evaluations += rays.len();
         active.retain(|&p| {
-            cursor[p] < kept[p].len()
-                && cfg.termination.is_none_or(|eps| transmittance[p] >= eps)
+            cursor[p] < kept[p].len() && cfg.termination.is_none_or(|eps| transmittance[p] >= eps)
         });
     }
     AcceleratedImage {
@@ -193,7 +192,11 @@ pub fn render_silhouette_skipping(
     let m = rays.len();
     let density = raw.clone().slice([0..m, 0..1]).reshape([m]);
     let visibility = raw.slice([0..m, 1..2]).reshape([m]);
-    let alpha = burn::tensor::activation::relu(density).neg().exp().neg().add_scalar(1.0);
+    let alpha = burn::tensor::activation::relu(density)
+        .neg()
+        .exp()
+        .neg()
+        .add_scalar(1.0);
     let index = Tensor::<1, Int>::from_data(TensorData::new(owner, [m]), device);
     let pred = Tensor::<1>::zeros([pixels.len()], device).select_assign(
         0,
@@ -207,5 +210,9 @@ pub fn render_silhouette_skipping(
 /// The device `probe`'s parameters live on (the inner device of an autodiff `device`).
 fn probe_device(probe: &OccupancyField, device: &Device) -> Device {
     use burn::module::Module;
-    probe.devices().into_iter().next().unwrap_or_else(|| device.clone())
+    probe
+        .devices()
+        .into_iter()
+        .next()
+        .unwrap_or_else(|| device.clone())
 }

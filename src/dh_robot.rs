@@ -26,12 +26,36 @@ pub struct DhJoint {
 pub fn ur5_parameters() -> [DhJoint; 6] {
     use std::f64::consts::FRAC_PI_2;
     [
-        DhJoint { d: 0.089159, a: 0.0, alpha: FRAC_PI_2 },
-        DhJoint { d: 0.0, a: -0.425, alpha: 0.0 },
-        DhJoint { d: 0.0, a: -0.39225, alpha: 0.0 },
-        DhJoint { d: 0.10915, a: 0.0, alpha: FRAC_PI_2 },
-        DhJoint { d: 0.09465, a: 0.0, alpha: -FRAC_PI_2 },
-        DhJoint { d: 0.0823, a: 0.0, alpha: 0.0 },
+        DhJoint {
+            d: 0.089159,
+            a: 0.0,
+            alpha: FRAC_PI_2,
+        },
+        DhJoint {
+            d: 0.0,
+            a: -0.425,
+            alpha: 0.0,
+        },
+        DhJoint {
+            d: 0.0,
+            a: -0.39225,
+            alpha: 0.0,
+        },
+        DhJoint {
+            d: 0.10915,
+            a: 0.0,
+            alpha: FRAC_PI_2,
+        },
+        DhJoint {
+            d: 0.09465,
+            a: 0.0,
+            alpha: -FRAC_PI_2,
+        },
+        DhJoint {
+            d: 0.0823,
+            a: 0.0,
+            alpha: 0.0,
+        },
     ]
 }
 
@@ -95,12 +119,11 @@ mod tests {
     fn reference(q: &[f64]) -> Vector3<f64> {
         let mut t = Isometry3::identity();
         for (j, &qi) in ur5_parameters().iter().zip(q) {
-            t = t
-                * Isometry3::from_parts(
+            t =
+                t * Isometry3::from_parts(
                     Translation3::identity(),
                     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), qi),
-                )
-                * fixed_part(j);
+                ) * fixed_part(j);
         }
         t.translation.vector
     }
@@ -115,7 +138,9 @@ mod tests {
             assert!((home[k] - expected[k]).abs() < 1e-9, "{home:?}");
         }
         for i in 0..20 {
-            let q: Vec<f64> = (0..6).map(|k| ((i * 5 + k * 3) % 13) as f64 * 0.45 - 2.7).collect();
+            let q: Vec<f64> = (0..6)
+                .map(|k| ((i * 5 + k * 3) % 13) as f64 * 0.45 - 2.7)
+                .collect();
             let ours = chain.end_effector(&q);
             let r = reference(&q);
             assert!((ours.coords - r).norm() < 1e-12, "pose {i}");

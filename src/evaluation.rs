@@ -106,7 +106,9 @@ pub fn score(
             let counted: Vec<bool> = truth
                 .iter()
                 .zip(&pred.silhouettes)
-                .map(|(&t, &p)| t >= 0.5 && (pred.depth_pixels == DepthPixels::TrueRobot || p >= 0.5))
+                .map(|(&t, &p)| {
+                    t >= 0.5 && (pred.depth_pixels == DepthPixels::TrueRobot || p >= 0.5)
+                })
                 .collect();
             let robot = |v: &[f32]| -> Vec<f32> {
                 v.iter()

@@ -7,9 +7,9 @@ use std::path::Path;
 
 use crate::ablations::{Ablation, run_ablation};
 use crate::decoder_experiment::{DECODER_PRESETS, DecoderRunConfig};
+use crate::device::DeviceChoice;
 use crate::ffksm::{FFKSM_PRESETS, FfksmConfig};
 use crate::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
-use crate::device::DeviceChoice;
 use crate::model_result::ModelResult;
 use crate::report::{write_csv, write_markdown_report};
 
@@ -190,7 +190,12 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
         ("ffksm_original", FfksmConfig::original(&opts.preset)?),
         ("ffksm_skipping", FfksmConfig::skipping(&opts.preset)?),
     ] {
-        let out = crate::ffksm::run(&opts.apply_ffksm(cfg), &dir.join(sub), opts.device, opts.resume)?;
+        let out = crate::ffksm::run(
+            &opts.apply_ffksm(cfg),
+            &dir.join(sub),
+            opts.device,
+            opts.resume,
+        )?;
         rows.extend(out.rows);
         renderers.extend(out.renderers);
         novel.extend(out.novel_views);
@@ -202,22 +207,27 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
         "One row per model and renderer (the same trained model renders both ways); `FFKSM (trained with skipping)` is the reimplementation trained on the samples of occupied grid cells only (beyond the paper); each folder holds its config, curve, figures, `renderers.csv` and `novel_views.csv`. `paper_*` columns are the paper's figures for reference: 17.35 dB at 5.22 FPS on a T4 for the reimplementation (its code logged 16.35 dB), about 23.4 dB for the original authors' model with 12,000 samples and far longer training.",
     )?;
     let path = dir.join("renderers.csv");
-    write_csv(&path, &renderers)?;
-    write_markdown_report(
+    crate::report::write_table(
         &path,
+        &renderers,
         "FFKSM: dense marching against the accelerated marcher",
         "Same models, same test images. `fewer_evaluations`: dense marching's network evaluations per image over this renderer's (grid probes included); `psnr_db_vs_dense`: the two renderers' images compared directly. Images/s: median per image after a warm-up image, batch 1.",
     )?;
     let path = dir.join("novel_views.csv");
-    write_csv(&path, &novel)?;
-    write_markdown_report(
+    crate::report::write_table(
         &path,
+        &novel,
         "FFKSM: views it was never trained on",
         "Cameras orbited about the world z axis, against the simulator's images from there; `view_blind_*` offers the training camera's true silhouette as the prediction (the best a 2-D decoder can do).",
     )?;
     let summary: Vec<String> = rows
         .iter()
-        .map(|r| format!("{}: PSNR {:.2} dB, IoU {:.3}, {:.2} img/s", r.model, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s))
+        .map(|r| {
+            format!(
+                "{}: PSNR {:.2} dB, IoU {:.3}, {:.2} img/s",
+                r.model, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
+            )
+        })
         .collect();
     Ok(summary.join("; "))
 }
@@ -229,7 +239,10 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut speed = Vec::new();
     for (sub, cfg) in [
         ("isotropic", K3dgsConfig::isotropic(&opts.preset)?),
-        ("isotropic_alpha", K3dgsConfig::isotropic_alpha(&opts.preset)?),
+        (
+            "isotropic_alpha",
+            K3dgsConfig::isotropic_alpha(&opts.preset)?,
+        ),
         ("anisotropic", K3dgsConfig::anisotropic(&opts.preset)?),
     ] {
         let out = crate::k3dgs::run(&opts.apply_k3dgs(cfg), &dir.join(sub), opts.device)?;
@@ -243,9 +256,9 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
         "One row per model; each folder holds its config, curve, `qualitative.png`, `gaussians.png` (centres over the true silhouette) and `render_speed.csv`. PSNR over all test images (the paper's 17.01 dB was over all 400). `paper_*` columns: the paper's figures on a T4, for reference.",
     )?;
     let path = dir.join("render_speed.csv");
-    write_csv(&path, &speed)?;
-    write_markdown_report(
+    crate::report::write_table(
         &path,
+        &speed,
         "K-3DGS: culled against dense splatting",
         "Images/s, median of synchronised timed calls after warm-up. Dense evaluates every (Gaussian, pixel) pair (one timed call per batch size, 8 images at a time); culled only pairs within 3 standard deviations.",
     )?;

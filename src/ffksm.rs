@@ -23,7 +23,9 @@ use std::time::Instant;
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::accelerated_marcher::{AcceleratedConfig, render_accelerated, render_silhouette_skipping};
+use crate::accelerated_marcher::{
+    AcceleratedConfig, render_accelerated, render_silhouette_skipping,
+};
 use crate::atomic_file::write_json;
 use crate::camera::Camera;
 use crate::dataset::Dataset;
@@ -36,7 +38,7 @@ use crate::model_result::{ModelResult, PaperReference};
 use crate::occupancy_field::{OccupancyField, OccupancyFieldConfig};
 use crate::preset::Preset;
 use crate::ray_marcher::{MarchConfig, render_dense, render_silhouette};
-use crate::report::{write_csv, write_markdown_report};
+use crate::report::write_table;
 use crate::training::{CheckpointPlan, TrainConfig, TrainLog, autodiff_device, train_watched};
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
@@ -386,7 +388,8 @@ fn render_all(
                 img.grid_occupancy,
             )
         } else {
-            let (s, d, e) = render_dense(field, view, &all, &cfg.march, None, cfg.chunk_rays, device);
+            let (s, d, e) =
+                render_dense(field, view, &all, &cfg.march, None, cfg.chunk_rays, device);
             let host = |t: Tensor<1>| t.into_data().try_into_vec::<f32>().expect("float");
             (host(s), host(d), e, 0, 1.0)
         };
@@ -408,7 +411,12 @@ fn render_all(
 fn mean_psnr(a: &[f32], b: &[f32], pixels: usize) -> f64 {
     let n = a.len() / pixels.max(1);
     (0..n)
-        .map(|i| psnr_db(&a[i * pixels..(i + 1) * pixels], &b[i * pixels..(i + 1) * pixels]))
+        .map(|i| {
+            psnr_db(
+                &a[i * pixels..(i + 1) * pixels],
+                &b[i * pixels..(i + 1) * pixels],
+            )
+        })
         .sum::<f64>()
         / n.max(1) as f64
 }
@@ -416,7 +424,12 @@ fn mean_psnr(a: &[f32], b: &[f32], pixels: usize) -> f64 {
 fn mean_iou(a: &[f32], b: &[f32], pixels: usize) -> f64 {
     let n = a.len() / pixels.max(1);
     (0..n)
-        .map(|i| iou(&a[i * pixels..(i + 1) * pixels], &b[i * pixels..(i + 1) * pixels]))
+        .map(|i| {
+            iou(
+                &a[i * pixels..(i + 1) * pixels],
+                &b[i * pixels..(i + 1) * pixels],
+            )
+        })
         .sum::<f64>()
         / n.max(1) as f64
 }
@@ -476,16 +489,37 @@ fn train_field(
         let seed = cfg.train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(&tdev, seed)?;
         let loss = |m: &OccupancyField, b: &crate::training::Batch| {
-            let a = b.inputs.clone().into_data().try_into_vec::<f32>().expect("float");
-            let truth = b.targets[0].clone().into_data().try_into_vec::<f32>().expect("float");
-            let pixels = if b.step < cfg.curriculum.steps { &crop } else { &all };
+            let a = b
+                .inputs
+                .clone()
+                .into_data()
+                .try_into_vec::<f32>()
+                .expect("float");
+            let truth = b.targets[0]
+                .clone()
+                .into_data()
+                .try_into_vec::<f32>()
+                .expect("float");
+            let pixels = if b.step < cfg.curriculum.steps {
+                &crop
+            } else {
+                &all
+            };
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             let view = (&camera, radians(&a));
             let pred = match cfg.train_marcher {
                 TrainMarcher::Dense => {
-                    train_evaluations.set(train_evaluations.get() + pixels.len() * cfg.march.samples);
-                    render_silhouette(m, view, pixels, &cfg.march, Some(jitter), &b.inputs.device())
+                    train_evaluations
+                        .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
+                    render_silhouette(
+                        m,
+                        view,
+                        pixels,
+                        &cfg.march,
+                        Some(jitter),
+                        &b.inputs.device(),
+                    )
                 }
                 TrainMarcher::Skipping => {
                     let (pred, evaluations) = render_silhouette_skipping(
@@ -539,7 +573,15 @@ fn train_field(
         } else {
             format!("{} (restart {restarts})", cfg.name)
         };
-        match train_watched(field, &train_set, &cfg.train, Some(&plan), &label, loss, watch) {
+        match train_watched(
+            field,
+            &train_set,
+            &cfg.train,
+            Some(&plan),
+            &label,
+            loss,
+            watch,
+        ) {
             Ok((field, log)) => {
                 let counts = [train_evaluations.get(), train_steps.get()];
                 if plan.dir.is_dir() {
@@ -595,23 +637,63 @@ pub fn run(
     };
     let camera = cfg.data.dataset.camera.clone();
     let pixels = camera.width * camera.height;
-    let (field, log, restarts, train_evals) = train_field(cfg, &data, &train_range, dir, resume, &device)?;
+    let (field, log, restarts, train_evals) =
+        train_field(cfg, &data, &train_range, dir, resume, &device)?;
     let params = field.num_params();
 
     // The training camera, both renderers.
     let test_angles: Vec<Vec<f64>> = test_range.clone().map(|i| data.angles[i].clone()).collect();
     let (truth, truth_depth) = host_targets(&data, &test_range);
-    let dense = render_all(&field, &camera, &test_angles, cfg, None, &device, "dense marching");
-    let fast = render_all(&field, &camera, &test_angles, cfg, Some(&cfg.accelerated), &device, "accelerated marching");
+    let dense = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        None,
+        &device,
+        "dense marching",
+    );
+    let fast = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        Some(&cfg.accelerated),
+        &device,
+        "accelerated marching",
+    );
     // What early termination adds to the grid: the same marcher without it.
     let no_termination = AcceleratedConfig {
         termination: None,
         ..cfg.accelerated.clone()
     };
-    let skipping_only = render_all(&field, &camera, &test_angles, cfg, Some(&no_termination), &device, "skipping only");
-    let skipping_q = score(&skipping_only.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-    let dense_q = score(&dense.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-    let fast_q = score(&fast.predictions, &truth, Some(&truth_depth), cfg.paper_subset);
+    let skipping_only = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        Some(&no_termination),
+        &device,
+        "skipping only",
+    );
+    let skipping_q = score(
+        &skipping_only.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    let dense_q = score(
+        &dense.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    let fast_q = score(
+        &fast.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
     let dataset_label = cfg.data.label().to_string();
     let row = |renderer: &str, r: &Rendered, q: &Quality| -> ModelResult {
         let ips = r.images_per_second();
@@ -693,7 +775,11 @@ pub fn run(
     let renderers = vec![
         renderer_row("dense marching", &dense, &dense_q),
         renderer_row("accelerated", &fast, &fast_q),
-        renderer_row("accelerated without early termination", &skipping_only, &skipping_q),
+        renderer_row(
+            "accelerated without early termination",
+            &skipping_only,
+            &skipping_q,
+        ),
     ];
 
     // Novel views: the simulator's images from orbited cameras, the accelerated marcher.
@@ -752,7 +838,11 @@ pub fn run(
         &dense.predictions,
         [camera.height, camera.width],
     )?;
-    novel_view_figure(&dir.join("novel_views.png"), &novel_images, [camera.height, camera.width])?;
+    novel_view_figure(
+        &dir.join("novel_views.png"),
+        &novel_images,
+        [camera.height, camera.width],
+    )?;
     Ok(FfksmOutcome {
         rows,
         renderers,
@@ -771,26 +861,34 @@ fn write_reports(
     log: &TrainLog,
 ) -> Result<()> {
     let csv = dir.join("results.csv");
-    write_csv(&csv, rows)?;
-    write_markdown_report(
+    write_table(
         &csv,
-        &format!("{} ({} preset, {} dataset)", cfg.name, cfg.preset, cfg.data.label()),
+        rows,
+        &format!(
+            "{} ({} preset, {} dataset)",
+            cfg.name,
+            cfg.preset,
+            cfg.data.label()
+        ),
         &format!(
             "One trained model, two renderers: dense marching ({} samples per ray, the paper's) and the accelerated marcher (per-pose occupancy grid and early ray termination; `renderers.csv`). {} steps of one image; PSNR per image as the paper computes it, IoU at threshold 0.5, depth as the expected ray depth against the simulator's on robot pixels. `paper_*` columns are the paper's figures, for reference (a Tesla T4). Config: `config.json`.",
             cfg.march.samples, log.step
         ),
     )?;
     let path = dir.join("renderers.csv");
-    write_csv(&path, renderers)?;
-    write_markdown_report(
+    write_table(
         &path,
-        &format!("{}: dense marching against the accelerated marcher", cfg.name),
+        renderers,
+        &format!(
+            "{}: dense marching against the accelerated marcher",
+            cfg.name
+        ),
         "Same model, same test images. `fewer_evaluations` is dense marching's network evaluations per image over this renderer's (the grid's probes included); `psnr_db_vs_dense` compares the two renderers' images directly. Images/s: median time per image after one warm-up image, batch 1, this machine.",
     )?;
     let path = dir.join("novel_views.csv");
-    write_csv(&path, novel)?;
-    write_markdown_report(
+    write_table(
         &path,
+        novel,
         &format!("{}: views it was never trained on", cfg.name),
         "The training camera orbited about the world z axis; the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
     )?;
@@ -804,8 +902,15 @@ fn novel_view_figure(path: &Path, views: &[(Vec<f32>, Vec<f32>)], size: [usize; 
     for (truth, pred) in views {
         let n = truth.len() / px;
         let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
-        rows.push(GridRow::Grey(picks.iter().map(|&i| &truth[i * px..(i + 1) * px]).collect()));
-        rows.push(GridRow::Grey(picks.iter().map(|&i| &pred[i * px..(i + 1) * px]).collect()));
+        rows.push(GridRow::Grey(
+            picks
+                .iter()
+                .map(|&i| &truth[i * px..(i + 1) * px])
+                .collect(),
+        ));
+        rows.push(GridRow::Grey(
+            picks.iter().map(|&i| &pred[i * px..(i + 1) * px]).collect(),
+        ));
     }
     if rows.is_empty() {
         return Ok(());

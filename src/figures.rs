@@ -299,15 +299,24 @@ pub fn points_over_images(
         for y in 0..height * scale {
             for x in 0..width * scale {
                 let g = (im[(y / scale) * width + x / scale].clamp(0.0, 1.0) * 180.0) as u8;
-                img.put_pixel((gap + c * cw + x) as u32, (gap + y) as u32, image::Rgb([g, g, g]));
+                img.put_pixel(
+                    (gap + c * cw + x) as u32,
+                    (gap + y) as u32,
+                    image::Rgb([g, g, g]),
+                );
             }
         }
         for &(r, col) in points.get(c).map(|v| v.as_slice()).unwrap_or(&[]) {
             let (py, px) = ((r + 0.5) * scale as f32, (col + 0.5) * scale as f32);
-            if py < 0.0 || px < 0.0 || py >= (height * scale) as f32 || px >= (width * scale) as f32 {
+            if py < 0.0 || px < 0.0 || py >= (height * scale) as f32 || px >= (width * scale) as f32
+            {
                 continue;
             }
-            img.put_pixel((gap + c * cw + px as usize) as u32, (gap + py as usize) as u32, image::Rgb([40, 220, 60]));
+            img.put_pixel(
+                (gap + c * cw + px as usize) as u32,
+                (gap + py as usize) as u32,
+                image::Rgb([40, 220, 60]),
+            );
         }
     }
     save_rgb(path, img.as_raw(), w as u32, h as u32)

@@ -72,7 +72,9 @@ fn project_centres(means: Tensor<3>, camera: &Camera) -> ([Tensor<2>; 3], Tensor
         &device,
     );
     let rel = means - eye.reshape([1, 1, 3]);
-    let cam = rel.reshape([b * n, 3]).matmul(camera_rotation(camera, &device).transpose());
+    let cam = rel
+        .reshape([b * n, 3])
+        .matmul(camera_rotation(camera, &device).transpose());
     let coord = |i: usize| cam.clone().slice([0..b * n, i..i + 1]).reshape([b, n]);
     let (x, y, z) = (coord(0), coord(1), coord(2).clamp_min(1e-3));
     let (cx, cy) = camera.principal_point();
@@ -126,20 +128,40 @@ pub fn project_anisotropic(
     let w = camera_rotation(camera, &axes.device()).reshape([1, 1, 3, 3]);
     let cam_axes = w.repeat_dim(0, b).repeat_dim(1, n).matmul(axes);
     // Rows of J: d row / d(x, y, z) = (0, −f/z, f y/z²); d col = (f/z, 0, −f x/z²).
-    let axis_row = |i: usize| cam_axes.clone().slice([0..b, 0..n, i..i + 1, 0..3]).reshape([b, n, 3]);
+    let axis_row = |i: usize| {
+        cam_axes
+            .clone()
+            .slice([0..b, 0..n, i..i + 1, 0..3])
+            .reshape([b, n, 3])
+    };
     let (ax, ay, az) = (axis_row(0), axis_row(1), axis_row(2));
     let inv_z = z.clone().recip().mul_scalar(focal).reshape([b, n, 1]);
-    let y_z2 = (y / z.clone().square()).mul_scalar(focal).reshape([b, n, 1]);
-    let x_z2 = (x / z.clone().square()).mul_scalar(focal).reshape([b, n, 1]);
+    let y_z2 = (y / z.clone().square())
+        .mul_scalar(focal)
+        .reshape([b, n, 1]);
+    let x_z2 = (x / z.clone().square())
+        .mul_scalar(focal)
+        .reshape([b, n, 1]);
     // Image-space axes: J (W A), one row for image rows and one for columns, [B, N, 3] each.
     let u_row = ay.neg() * inv_z.clone() + az.clone() * y_z2;
     let u_col = ax * inv_z - az * x_z2;
-    let srr = u_row.clone().square().sum_dim(2).reshape([b, n]).add_scalar(LOW_PASS_PX2);
-    let scc = u_col.clone().square().sum_dim(2).reshape([b, n]).add_scalar(LOW_PASS_PX2);
+    let srr = u_row
+        .clone()
+        .square()
+        .sum_dim(2)
+        .reshape([b, n])
+        .add_scalar(LOW_PASS_PX2);
+    let scc = u_col
+        .clone()
+        .square()
+        .sum_dim(2)
+        .reshape([b, n])
+        .add_scalar(LOW_PASS_PX2);
     let src = (u_row * u_col).sum_dim(2).reshape([b, n]);
     let det = srr.clone() * scc.clone() - src.clone().square();
     let half_trace = (srr.clone() + scc.clone()).mul_scalar(0.5);
-    let spread = ((srr.clone() - scc.clone()).square().mul_scalar(0.25) + src.clone().square()).sqrt();
+    let spread =
+        ((srr.clone() - scc.clone()).square().mul_scalar(0.25) + src.clone().square()).sqrt();
     let sigma_px = (half_trace + spread).sqrt();
     ImageGaussians {
         row,
@@ -152,7 +174,11 @@ pub fn project_anisotropic(
 }
 
 /// Row and column coordinates `[P]` of every pixel, row-major.
-fn pixel_grid(height: usize, width: usize, device: &burn::tensor::Device) -> (Tensor<1>, Tensor<1>) {
+fn pixel_grid(
+    height: usize,
+    width: usize,
+    device: &burn::tensor::Device,
+) -> (Tensor<1>, Tensor<1>) {
     let rows: Vec<f32> = (0..height * width).map(|p| (p / width) as f32).collect();
     let cols: Vec<f32> = (0..height * width).map(|p| (p % width) as f32).collect();
     let n = height * width;
@@ -198,18 +224,29 @@ pub fn render_dense(
     let before = log_t.clone().cumsum(1) - log_t; // exclusive: the Gaussians in front
     let w = alpha * before.exp();
     let z = sorted(&g.depth);
-    let depth = (w.clone() * z).sum_dim(1).reshape([b, p]) / w.sum_dim(1).reshape([b, p]).add_scalar(1e-8);
+    let depth =
+        (w.clone() * z).sum_dim(1).reshape([b, p]) / w.sum_dim(1).reshape([b, p]).add_scalar(1e-8);
     (sil, depth)
 }
 
 /// The (image, Gaussian, pixel) pairs within `cull_sigmas` standard deviations of each
 /// Gaussian's centre (a square box), grouped by pixel and front to back within a pixel:
 /// flat Gaussian indices `b N + n`, flat pixel indices `b P + p`.
-fn culled_pairs(g: &ImageGaussians, height: usize, width: usize, cull_sigmas: f64) -> (Vec<i64>, Vec<i64>) {
+fn culled_pairs(
+    g: &ImageGaussians,
+    height: usize,
+    width: usize,
+    cull_sigmas: f64,
+) -> (Vec<i64>, Vec<i64>) {
     use rayon::prelude::*;
     let [b, n] = g.row.dims();
     let host = |t: &Tensor<2>| t.clone().into_data().try_into_vec::<f32>().expect("float");
-    let (row, col, depth, sigma) = (host(&g.row), host(&g.col), host(&g.depth), host(&g.sigma_px));
+    let (row, col, depth, sigma) = (
+        host(&g.row),
+        host(&g.col),
+        host(&g.depth),
+        host(&g.sigma_px),
+    );
     let p = height * width;
     // One image per task; pixel indices are image-major, so the images' lists concatenate in
     // order.
@@ -222,8 +259,14 @@ fn culled_pairs(g: &ImageGaussians, height: usize, width: usize, cull_sigmas: f6
                 if !r.is_finite() {
                     continue;
                 }
-                let (r0, r1) = ((row[i] - r).ceil().max(0.0), (row[i] + r).floor().min(height as f32 - 1.0));
-                let (c0, c1) = ((col[i] - r).ceil().max(0.0), (col[i] + r).floor().min(width as f32 - 1.0));
+                let (r0, r1) = (
+                    (row[i] - r).ceil().max(0.0),
+                    (row[i] + r).floor().min(height as f32 - 1.0),
+                );
+                let (c0, c1) = (
+                    (col[i] - r).ceil().max(0.0),
+                    (col[i] + r).floor().min(width as f32 - 1.0),
+                );
                 if r0 > r1 || c0 > c1 {
                     continue;
                 }
@@ -322,5 +365,8 @@ pub fn render_culled(
     let z = per_pair(&g.depth);
     let wz = zero().select_assign(0, pi.clone(), w.clone() * z, Add);
     let ws = zero().select_assign(0, pi, w, Add);
-    (sil.reshape([b, p]), (wz / ws.add_scalar(1e-8)).reshape([b, p]))
+    (
+        sil.reshape([b, p]),
+        (wz / ws.add_scalar(1e-8)).reshape([b, p]),
+    )
 }

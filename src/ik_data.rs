@@ -151,7 +151,11 @@ impl DistanceErrors {
 }
 
 /// Distances (m) between `targets` and the end positions `chain` reaches with `joints`.
-pub fn reach_errors(chain: &KinematicChain, targets: &[Point3<f64>], joints: &[Vec<f64>]) -> Vec<f64> {
+pub fn reach_errors(
+    chain: &KinematicChain,
+    targets: &[Point3<f64>],
+    joints: &[Vec<f64>],
+) -> Vec<f64> {
     let reached = chain.end_effector_batch(joints);
     targets
         .iter()

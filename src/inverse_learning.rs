@@ -48,7 +48,10 @@ impl FitConfig {
 
 /// Normalised positions `[n, 3]` of `positions`.
 fn position_tensor(data: &IkData, positions: &[Point3<f64>], device: &Device) -> Tensor<2> {
-    let v: Vec<f32> = positions.iter().flat_map(|p| data.normalise_position(p)).collect();
+    let v: Vec<f32> = positions
+        .iter()
+        .flat_map(|p| data.normalise_position(p))
+        .collect();
     Tensor::from_data(TensorData::new(v, [positions.len(), 3]), device)
 }
 
@@ -64,10 +67,16 @@ pub fn fit(
 ) -> Result<Mlp> {
     let n = positions.len();
     let dof = joints.first().map_or(0, Vec::len);
-    let targets: Vec<f32> = joints.iter().flat_map(|q| data.normalise_joints(q)).collect();
+    let targets: Vec<f32> = joints
+        .iter()
+        .flat_map(|q| data.normalise_joints(q))
+        .collect();
     let set = TrainSet {
         inputs: position_tensor(data, positions, device),
-        targets: vec![Tensor::from_data(TensorData::new(targets, [n, dof, 1, 1]), device)],
+        targets: vec![Tensor::from_data(
+            TensorData::new(targets, [n, dof, 1, 1]),
+            device,
+        )],
     };
     let train_cfg = TrainConfig {
         steps: TrainConfig::steps_for_epochs(cfg.epochs, n, cfg.batch),
@@ -80,13 +89,21 @@ pub fn fit(
     };
     let (model, _) = train(model, &set, &train_cfg, None, label, |m: &Mlp, b| {
         let [bn, d, _, _] = b.targets[0].dims();
-        (m.forward(b.inputs.clone()) - b.targets[0].clone().reshape([bn, d])).square().mean()
+        (m.forward(b.inputs.clone()) - b.targets[0].clone().reshape([bn, d]))
+            .square()
+            .mean()
     })?;
     Ok(model)
 }
 
 /// Joints (radians) the model answers for `positions`, in batches of `batch`.
-pub fn predict(model: &Mlp, data: &IkData, positions: &[Point3<f64>], batch: usize, device: &Device) -> Vec<Vec<f64>> {
+pub fn predict(
+    model: &Mlp,
+    data: &IkData,
+    positions: &[Point3<f64>],
+    batch: usize,
+    device: &Device,
+) -> Vec<Vec<f64>> {
     let mut out = Vec::with_capacity(positions.len());
     for part in positions.chunks(batch.max(1)) {
         let q = model.forward(position_tensor(data, part, device));
@@ -100,18 +117,40 @@ pub fn predict(model: &Mlp, data: &IkData, positions: &[Point3<f64>], batch: usi
 }
 
 /// Distance errors of `model` on the test targets.
-pub fn test_errors(model: &Mlp, chain: &KinematicChain, data: &IkData, batch: usize, device: &Device) -> (DistanceErrors, Vec<Vec<f64>>) {
+pub fn test_errors(
+    model: &Mlp,
+    chain: &KinematicChain,
+    data: &IkData,
+    batch: usize,
+    device: &Device,
+) -> (DistanceErrors, Vec<Vec<f64>>) {
     let targets = &data.positions[data.test()];
     let joints = predict(model, data, targets, batch, device);
-    (DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)), joints)
+    (
+        DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)),
+        joints,
+    )
 }
 
 /// Direct regression learning: fit (position -> joints) on the random training data.
-pub fn drl(data: &IkData, model_cfg: &InverseModelConfig, fit_cfg: &FitConfig, device: &Device) -> Result<Mlp> {
+pub fn drl(
+    data: &IkData,
+    model_cfg: &InverseModelConfig,
+    fit_cfg: &FitConfig,
+    device: &Device,
+) -> Result<Mlp> {
     let tdev = autodiff_device(device, fit_cfg.seed);
     let model = model_cfg.init(&tdev, fit_cfg.seed)?;
     let train = data.train();
-    let model = fit(model, data, &data.positions[train.clone()], &data.joints[train], fit_cfg, "DRL", &tdev)?;
+    let model = fit(
+        model,
+        data,
+        &data.positions[train.clone()],
+        &data.joints[train],
+        fit_cfg,
+        "DRL",
+        &tdev,
+    )?;
     Ok(model.valid())
 }
 
@@ -151,23 +190,39 @@ pub fn emssl(
     let mut model = model_cfg.init(&tdev, fit_cfg.seed)?;
     let desired = &data.positions[data.train()];
     let mut curve = Vec::new();
+    // The answers for the desired positions: the first sampling pass, and after each
+    // iteration both its agreement check and the next iteration's sampling.
+    let mut joints = predict(
+        &model.valid(),
+        data,
+        desired,
+        fit_cfg.inference_batch,
+        device,
+    );
     for iteration in 1..=cfg.max_iterations {
         let t0 = std::time::Instant::now();
-        // Sampling: batched inference, then the forward model.
-        let valid = model.valid();
-        let joints = predict(&valid, data, desired, fit_cfg.inference_batch, device);
+        // Sampling: the batched inference above, then the forward model.
         let reached = chain.end_effector_batch(&joints);
         // Training on the self-generated pairs (reached -> joints).
         let fit_iter = FitConfig {
             seed: fit_cfg.seed.wrapping_add(iteration as u64),
             ..fit_cfg.clone()
         };
-        model = fit(model, data, &reached, &joints, &fit_iter, &format!("EMSSL iteration {iteration}"), &tdev)?;
+        model = fit(
+            model,
+            data,
+            &reached,
+            &joints,
+            &fit_iter,
+            &format!("EMSSL iteration {iteration}"),
+            &tdev,
+        )?;
         let valid = model.valid();
         let (test, _) = test_errors(&valid, chain, data, fit_cfg.inference_batch, device);
         // Agreement of the answers for desired and reached positions.
         let a = predict(&valid, data, desired, fit_cfg.inference_batch, device);
         let b = predict(&valid, data, &reached, fit_cfg.inference_batch, device);
+        joints = a.clone();
         let span = data.range[1] - data.range[0];
         let disagreement = a
             .iter()
@@ -175,7 +230,13 @@ pub fn emssl(
             .flat_map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).abs() / span))
             .sum::<f64>()
             / (a.len() * a.first().map_or(1, Vec::len)).max(1) as f64;
-        let train_reach_cm = 100.0 * desired.iter().zip(&reached).map(|(d, r)| (d - r).norm()).sum::<f64>() / desired.len().max(1) as f64;
+        let train_reach_cm = 100.0
+            * desired
+                .iter()
+                .zip(&reached)
+                .map(|(d, r)| (d - r).norm())
+                .sum::<f64>()
+            / desired.len().max(1) as f64;
         curve.push(EmsslIteration {
             iteration,
             test_mean_cm: test.mean_cm,

@@ -38,7 +38,9 @@ impl InverseModelConfig {
 
     pub fn init(&self, device: &Device, seed: u64) -> Result<Mlp> {
         if self.inputs == 0 || self.outputs == 0 || self.hidden.contains(&0) {
-            return Err(Error::Config(format!("MLP: layer widths must be positive ({self:?})")));
+            return Err(Error::Config(format!(
+                "MLP: layer widths must be positive ({self:?})"
+            )));
         }
         let mut widths = vec![self.inputs];
         widths.extend(&self.hidden);

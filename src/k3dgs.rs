@@ -28,7 +28,7 @@ use crate::gaussian_splatting::Compositing;
 use crate::inference_speed::{SpeedConfig, measure};
 use crate::kinematic_gaussians::{GaussianInit, KinematicGaussians};
 use crate::model_result::{ModelResult, PaperReference};
-use crate::report::{write_csv, write_markdown_report};
+use crate::report::write_table;
 use crate::tensor_kinematics::TensorChain;
 use crate::training::{TrainConfig, TrainHooks, TrainLog, autodiff_device, train_with_hooks};
 
@@ -52,7 +52,10 @@ pub struct Densification {
 #[serde(rename_all = "snake_case")]
 pub enum K3dgsCompositing {
     /// The reimplementation's `sigmoid(T (Σ α − 0.5))`, `T` from `start` to `end`.
-    SigmoidSum { start: f64, end: f64 },
+    SigmoidSum {
+        start: f64,
+        end: f64,
+    },
     Alpha,
 }
 
@@ -152,7 +155,11 @@ impl K3dgsConfig {
             paper_subset: 100,
             speed,
             // A dense batch of 256 takes about a minute: timed in the paper preset only.
-            dense_batches: if preset == "paper" { vec![1, 256] } else { vec![1, 8] },
+            dense_batches: if preset == "paper" {
+                vec![1, 256]
+            } else {
+                vec![1, 8]
+            },
             reference: PaperReference::k3dgs(),
             note: if preset == "short" {
                 "short preset: 600 steps instead of 3,000 (CPU time budget)".into()
@@ -237,14 +244,23 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
         self.steps += 1;
     }
 
-    fn after_step(&mut self, model: KinematicGaussians, step: usize) -> Result<(KinematicGaussians, bool)> {
+    fn after_step(
+        &mut self,
+        model: KinematicGaussians,
+        step: usize,
+    ) -> Result<(KinematicGaussians, bool)> {
         let c = self.cfg;
         let densify = step % c.every.max(1) == 0 && step <= c.until;
         let prune = step % c.prune_every.max(1) == 0;
         if !densify && !prune {
             return Ok((model, false));
         }
-        let opacity = model.opacity_logits.val().into_data().try_into_vec::<f32>().expect("float");
+        let opacity = model
+            .opacity_logits
+            .val()
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("float");
         let n = model.len();
         let mut keep: Vec<usize> = (0..n).collect();
         if densify && self.steps > 0 && self.grad_sum.len() == n {
@@ -316,7 +332,12 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     let camera = cfg.data.dataset.camera.clone();
     let (data, train_range, test_range) = cfg.data.load()?;
     let tdev = autodiff_device(&device, cfg.train.seed);
-    let train_set = device_set(&data, &train_range, host_targets(&data, &train_range), &tdev);
+    let train_set = device_set(
+        &data,
+        &train_range,
+        host_targets(&data, &train_range),
+        &tdev,
+    );
     let (links, positions) = cfg.init.positions(&robot, cfg.train.seed)?;
     let long_axis: Vec<usize> = (0..robot.chain.links.len())
         .map(|l| GaussianInit::long_axis(&robot, l))
@@ -337,7 +358,13 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
         &cfg.name,
         |m: &KinematicGaussians, b| {
             let q = b.inputs.clone().mul_scalar(std::f64::consts::PI / 180.0);
-            let (sil, _) = m.render(&chain, q, &camera, cfg.mode_at(b.step), Some(cfg.cull_sigmas));
+            let (sil, _) = m.render(
+                &chain,
+                q,
+                &camera,
+                cfg.mode_at(b.step),
+                Some(cfg.cull_sigmas),
+            );
             let y = b.targets[0].clone().reshape([1, pixels]);
             let w = y.clone().mul_scalar(cfg.robot_weight - 1.0).add_scalar(1.0);
             ((sil - y).square() * w).mean()
@@ -348,13 +375,22 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     let counts = hooks.counts;
     // Test set: culled splatting, in batches.
     let (truth, truth_depth) = host_targets(&data, &test_range);
-    let test_set = device_set(&data, &test_range, (truth.clone(), truth_depth.clone()), &device);
+    let test_set = device_set(
+        &data,
+        &test_range,
+        (truth.clone(), truth_depth.clone()),
+        &device,
+    );
     let mode = cfg.final_mode();
     let mut sil = Vec::new();
     let mut depth = Vec::new();
     let n = test_set.len();
     for start in (0..n).step_by(32) {
-        let q = test_set.inputs.clone().slice([start..(start + 32).min(n)]).mul_scalar(std::f64::consts::PI / 180.0);
+        let q = test_set
+            .inputs
+            .clone()
+            .slice([start..(start + 32).min(n)])
+            .mul_scalar(std::f64::consts::PI / 180.0);
         let (s, d) = model.render(&chain, q, &camera, mode, Some(cfg.cull_sigmas));
         sil.extend(s.into_data().try_into_vec::<f32>().expect("float"));
         depth.extend(d.into_data().try_into_vec::<f32>().expect("float"));
@@ -388,7 +424,9 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
                     .step_by(if cull.is_some() { b } else { 8 })
                     .map(|s| {
                         let e = (s + if cull.is_some() { b } else { 8 }).min(b);
-                        model.render(&chain, q.clone().slice([s..e]), &camera, mode, cull).0
+                        model
+                            .render(&chain, q.clone().slice([s..e]), &camera, mode, cull)
+                            .0
                     })
                     .collect();
                 Tensor::cat(parts, 0).reshape([b, 1, camera.height, camera.width])
@@ -457,22 +495,40 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     }
     .with_reference(&cfg.reference);
     let csv = dir.join("results.csv");
-    write_csv(&csv, std::slice::from_ref(&result))?;
-    write_markdown_report(
+    write_table(
         &csv,
-        &format!("{} ({} preset, {} dataset)", cfg.name, cfg.preset, cfg.data.label()),
+        std::slice::from_ref(&result),
+        &format!(
+            "{} ({} preset, {} dataset)",
+            cfg.name,
+            cfg.preset,
+            cfg.data.label()
+        ),
         "PSNR per image over all test images (the paper's K-3DGS figure was over all 400), IoU at 0.5, depth by front-to-back compositing against the simulator's on robot pixels. Inference: culled splatting (`render_speed.csv` has dense beside it). `paper_*`: the paper's figures on a T4, for reference. Config: `config.json`.",
     )?;
     let path = dir.join("render_speed.csv");
-    write_csv(&path, &speed)?;
-    write_markdown_report(
+    write_table(
         &path,
+        &speed,
         &format!("{}: culled against dense splatting", cfg.name),
         "Images/s of the trained model, median of synchronised timed calls after warm-up; dense splatting evaluates every (Gaussian, pixel) pair, culled only those within `cull_sigmas` standard deviations.",
     )?;
     crate::report::write_training_curve(dir, &cfg.name, &log)?;
-    qualitative_figure(&dir.join("qualitative.png"), &truth, &truth_depth, &predictions, [camera.height, camera.width])?;
-    gaussians_figure(&dir.join("gaussians.png"), &model, &chain, &data, &test_range, &camera)?;
+    qualitative_figure(
+        &dir.join("qualitative.png"),
+        &truth,
+        &truth_depth,
+        &predictions,
+        [camera.height, camera.width],
+    )?;
+    gaussians_figure(
+        &dir.join("gaussians.png"),
+        &model,
+        &chain,
+        &data,
+        &test_range,
+        &camera,
+    )?;
     Ok(K3dgsOutcome {
         result,
         speed,
@@ -491,7 +547,9 @@ fn gaussians_figure(
     camera: &crate::camera::Camera,
 ) -> Result<()> {
     let n = test.len();
-    let picks: Vec<usize> = (0..6.min(n)).map(|k| test.start + k * n / 6.min(n).max(1)).collect();
+    let picks: Vec<usize> = (0..6.min(n))
+        .map(|k| test.start + k * n / 6.min(n).max(1))
+        .collect();
     let device = model.positions.val().device();
     let q: Vec<f32> = picks
         .iter()

@@ -30,7 +30,9 @@ use rand::{RngExt, SeedableRng};
 
 use crate::camera::Camera;
 use crate::error::{Error, Result};
-use crate::gaussian_splatting::{Compositing, ImageGaussians, project_isotropic, render_culled, render_dense};
+use crate::gaussian_splatting::{
+    Compositing, ImageGaussians, project_isotropic, render_culled, render_dense,
+};
 use crate::robot::Robot;
 use crate::tensor_kinematics::TensorChain;
 
@@ -78,9 +80,15 @@ impl GaussianInit {
     /// The paper's 600 on `arm4` (see the module documentation for `L1`).
     pub fn paper() -> Self {
         GaussianInit {
-            per_link: [("base", 50), ("L1", 50), ("L2", 200), ("L3", 200), ("L4", 100)]
-                .map(|(l, n)| (l.to_string(), n))
-                .to_vec(),
+            per_link: [
+                ("base", 50),
+                ("L1", 50),
+                ("L2", 200),
+                ("L3", 200),
+                ("L4", 100),
+            ]
+            .map(|(l, n)| (l.to_string(), n))
+            .to_vec(),
             scale: 0.025,
             opacity: 0.5,
             anisotropic: None,
@@ -184,8 +192,12 @@ impl KinematicGaussians {
         let (scales, rotations) = match &init.anisotropic {
             None => (vec![init.scale.ln() as f32; n], None),
             Some(a) => {
-                let raw = |s: f64| logit(((s - a.min_scale) / (a.max_scale - a.min_scale)).clamp(1e-4, 1.0 - 1e-4));
-                let scales: Vec<f32> = (0..n).flat_map(|_| [raw(a.along), raw(a.across), raw(a.across)]).collect();
+                let raw = |s: f64| {
+                    logit(((s - a.min_scale) / (a.max_scale - a.min_scale)).clamp(1e-4, 1.0 - 1e-4))
+                };
+                let scales: Vec<f32> = (0..n)
+                    .flat_map(|_| [raw(a.along), raw(a.across), raw(a.across)])
+                    .collect();
                 // The quaternion turning x onto the link's long axis.
                 let h = std::f64::consts::FRAC_1_SQRT_2;
                 let q: Vec<f32> = links
@@ -203,8 +215,12 @@ impl KinematicGaussians {
         let k = scales.len() / n.max(1);
         KinematicGaussians {
             positions: Param::from_tensor(Tensor::from_data(TensorData::new(pos, [n, 3]), device)),
-            scales: Param::from_tensor(Tensor::from_data(TensorData::new(scales, [n, k.max(1)]), device)),
-            rotations: rotations.map(|q| Param::from_tensor(Tensor::from_data(TensorData::new(q, [n, 4]), device))),
+            scales: Param::from_tensor(Tensor::from_data(
+                TensorData::new(scales, [n, k.max(1)]),
+                device,
+            )),
+            rotations: rotations
+                .map(|q| Param::from_tensor(Tensor::from_data(TensorData::new(q, [n, 4]), device))),
             opacity_logits: Param::from_tensor(
                 Tensor::ones([n], device).mul_scalar(logit(init.opacity)),
             ),
@@ -224,10 +240,18 @@ impl KinematicGaussians {
         let rows = |t: Tensor<2>| -> Param<Tensor<2>> {
             let [_, k] = t.dims();
             let v = t.into_data().try_into_vec::<f32>().expect("float");
-            let out: Vec<f32> = keep.iter().flat_map(|&i| v[i * k..(i + 1) * k].to_vec()).collect();
+            let out: Vec<f32> = keep
+                .iter()
+                .flat_map(|&i| v[i * k..(i + 1) * k].to_vec())
+                .collect();
             Param::from_tensor(Tensor::from_data(TensorData::new(out, [m, k]), &device))
         };
-        let opacity = self.opacity_logits.val().into_data().try_into_vec::<f32>().expect("float");
+        let opacity = self
+            .opacity_logits
+            .val()
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("float");
         let links: Vec<i64> = self.links.clone().into_data().iter::<i64>().collect();
         KinematicGaussians {
             positions: rows(self.positions.val()),
@@ -254,7 +278,9 @@ impl KinematicGaussians {
         let (w, x, y, z) = (c(0), c(1), c(2), c(3));
         let two = |a: Tensor<1>, b: Tensor<1>| (a * b).mul_scalar(2.0);
         let one_minus = |a: Tensor<1>, b: Tensor<1>| {
-            (a.clone() * a + b.clone() * b).mul_scalar(-2.0).add_scalar(1.0)
+            (a.clone() * a + b.clone() * b)
+                .mul_scalar(-2.0)
+                .add_scalar(1.0)
         };
         let m = [
             one_minus(y.clone(), z.clone()),
@@ -312,7 +338,12 @@ impl KinematicGaussians {
                     * sd.reshape([n, 1, 3]); // columns scaled: R S
                 let link_r = r.clone().select(1, self.links.clone()); // [B, N, 3, 3]
                 let axes = link_r.matmul(local.reshape([1, n, 3, 3]).repeat_dim(0, b));
-                crate::gaussian_splatting::project_anisotropic(self.world_means(r, t), axes, opacity, camera)
+                crate::gaussian_splatting::project_anisotropic(
+                    self.world_means(r, t),
+                    axes,
+                    opacity,
+                    camera,
+                )
             }
             _ => project_isotropic(self.world_means(r, t), sd.reshape([n]), opacity, camera),
         }

@@ -134,7 +134,10 @@ pub fn render_silhouette(
     device: &Device,
 ) -> Tensor<1> {
     let depths = march.depths(pixels.len(), jitter);
-    composite(march_chunk(field, view, pixels, &depths, device), march.samples)
+    composite(
+        march_chunk(field, view, pixels, &depths, device),
+        march.samples,
+    )
 }
 
 /// Render `pixels` (row-major indices) of `camera` through `field` for joint angles

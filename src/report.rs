@@ -77,3 +77,14 @@ pub fn write_training_curve(dir: &Path, name: &str, log: &crate::training::Train
         &[(name.to_string(), log.curve.clone())],
     )
 }
+
+/// Write `rows` as CSV at `path` and the Markdown table generated from it beside it.
+pub fn write_table<T: serde::Serialize>(
+    path: &Path,
+    rows: &[T],
+    title: &str,
+    note: &str,
+) -> Result<()> {
+    write_csv(path, rows)?;
+    write_markdown_report(path, title, note)
+}

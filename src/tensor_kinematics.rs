@@ -82,11 +82,13 @@ impl TensorChain {
     /// `[B, links, 3]` (metres) for joint values `q` `[B, dof]` (SI).
     pub fn link_frames(&self, q: Tensor<2>) -> (Tensor<4>, Tensor<3>) {
         let [b, dof] = q.dims();
-        assert_eq!(dof, self.dof, "joint vector length must equal the robot's DOF");
+        assert_eq!(
+            dof, self.dof,
+            "joint vector length must equal the robot's DOF"
+        );
         let device = q.device();
         let matrix = |m: [f32; 9]| -> Tensor<3> {
-            Tensor::<3>::from_data(TensorData::new(m.to_vec(), [1, 3, 3]), &device)
-                .repeat_dim(0, b)
+            Tensor::<3>::from_data(TensorData::new(m.to_vec(), [1, 3, 3]), &device).repeat_dim(0, b)
         };
         let vector = |v: [f32; 3]| -> Tensor<2> {
             Tensor::<2>::from_data(TensorData::new(v.to_vec(), [1, 3]), &device).repeat_dim(0, b)

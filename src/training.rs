@@ -344,7 +344,15 @@ where
             Ok((model, false))
         }
     }
-    train_with_hooks(model, data, cfg, checkpoint, label, loss, &mut Watcher(watch))
+    train_with_hooks(
+        model,
+        data,
+        cfg,
+        checkpoint,
+        label,
+        loss,
+        &mut Watcher(watch),
+    )
 }
 
 /// What a model may do during training besides descending the loss.

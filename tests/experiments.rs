@@ -68,7 +68,11 @@ fn every_experiment_runs_on_its_quick_preset() {
     (table1_exp.run)(&opts, &table1).unwrap();
     assert!(!table1.join("ffksm").exists(), "table1 trained ffksm again");
     let rows = selfmodel::model_result::read_results(&table1.join("results.csv")).unwrap();
-    let ffksm_rows: Vec<&str> = rows.iter().filter(|r| r.model.starts_with("FFKSM")).map(|r| r.model.as_str()).collect();
+    let ffksm_rows: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.model.starts_with("FFKSM"))
+        .map(|r| r.model.as_str())
+        .collect();
     assert_eq!(ffksm_rows.len(), 4, "{ffksm_rows:?}");
     assert!(ffksm_rows.iter().all(|m| !m.contains("original")));
 }

@@ -322,9 +322,21 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
         fast.psnr_db_test,
         dense.psnr_db_test
     );
-    assert!(fast.fewer_evaluations > 2.0, "only {:.2}x fewer", fast.fewer_evaluations);
+    assert!(
+        fast.fewer_evaluations > 2.0,
+        "only {:.2}x fewer",
+        fast.fewer_evaluations
+    );
     assert_eq!(out.novel_views.len(), 2);
-    for f in ["results.csv", "renderers.csv", "novel_views.csv", "qualitative.png", "novel_views.png", "training_curve.png", "config.json"] {
+    for f in [
+        "results.csv",
+        "renderers.csv",
+        "novel_views.csv",
+        "qualitative.png",
+        "novel_views.png",
+        "training_curve.png",
+        "config.json",
+    ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
     let _ = std::fs::remove_dir_all(&dir);
@@ -348,6 +360,9 @@ fn a_field_that_renders_black_is_restarted_then_given_up_on() {
         .err()
         .expect("a black field must not train");
     let msg = err.to_string();
-    assert!(msg.contains("collapsed to an all-black image 3 times"), "{msg}");
+    assert!(
+        msg.contains("collapsed to an all-black image 3 times"),
+        "{msg}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

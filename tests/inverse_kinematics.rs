@@ -5,7 +5,12 @@ use selfmodel::ik_data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
 #[test]
 fn ik_data_is_seeded_split_and_normalised_both_ways() {
     let robot = selfmodel::dh_robot::ur5([-1.0, 1.0]);
-    let cfg = IkDataConfig { samples: 500, train: 350, range_deg: 90.0, seed: 3 };
+    let cfg = IkDataConfig {
+        samples: 500,
+        train: 350,
+        range_deg: 90.0,
+        seed: 3,
+    };
     let a = IkData::generate(&robot.chain, &cfg).unwrap();
     let b = IkData::generate(&robot.chain, &cfg).unwrap();
     assert_eq!(a.joints, b.joints);
@@ -14,7 +19,11 @@ fn ik_data_is_seeded_split_and_normalised_both_ways() {
     assert!(a.joints.iter().flatten().all(|&q| (-r..=r).contains(&q)));
     // Normalised training positions lie in [0, 1]; joints round-trip.
     for (q, p) in a.joints.iter().zip(&a.positions).take(350) {
-        assert!(a.normalise_position(p).iter().all(|&v| (-1e-6..=1.0 + 1e-6).contains(&v)));
+        assert!(
+            a.normalise_position(p)
+                .iter()
+                .all(|&v| (-1e-6..=1.0 + 1e-6).contains(&v))
+        );
         let back = a.joints_from_normalised(&a.normalise_joints(q));
         assert!(back.iter().zip(q).all(|(x, y)| (x - y).abs() < 1e-5));
     }
