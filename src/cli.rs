@@ -71,6 +71,25 @@ impl std::fmt::Display for Triple {
 pub enum BuiltinRobot {
     /// The papers' 4-DOF arm with the project's fitted box geometry.
     Arm4,
+    /// The UR5 from its standard DH parameters, joints in +-90 degrees (kinematics only, no
+    /// geometry: the arm of the inverse-kinematics experiments).
+    Ur5,
+}
+
+impl BuiltinRobot {
+    pub fn load(self) -> Robot {
+        match self {
+            BuiltinRobot::Arm4 => crate::arm4::arm4(),
+            BuiltinRobot::Ur5 => crate::dh_robot::ur5(crate::kinematics::DEFAULT_ROTATIONAL_RANGE),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BuiltinRobot::Arm4 => "arm4",
+            BuiltinRobot::Ur5 => "ur5",
+        }
+    }
 }
 
 /// `--robot` / `--urdf` options.
@@ -116,9 +135,7 @@ impl RobotArgs {
     pub fn load(&self) -> Result<Robot> {
         match &self.urdf {
             Some(path) => load_urdf(path, self.base()),
-            None => Ok(match self.robot {
-                BuiltinRobot::Arm4 => crate::arm4::arm4(),
-            }),
+            None => Ok(self.robot.load()),
         }
     }
 
@@ -126,7 +143,7 @@ impl RobotArgs {
     pub fn label(&self) -> String {
         match &self.urdf {
             Some(p) => p.display().to_string(),
-            None => "arm4".into(),
+            None => self.robot.name().into(),
         }
     }
 }
@@ -178,6 +195,13 @@ pub struct ExperimentArgs {
     /// Train for this many steps instead of the preset's (the results say so).
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Inverse-kinematics experiments (emssl_*) only: the arm [default: ur5].
+    #[arg(long, value_enum)]
+    pub robot: Option<BuiltinRobot>,
+    /// Inverse-kinematics experiments only: load the arm from a URDF instead (its root link at
+    /// the origin; the end effector is the origin of the last link of its longest chain).
+    #[arg(long, value_name = "PATH", conflicts_with = "robot")]
+    pub urdf: Option<PathBuf>,
     /// table1 only: gather the rows the experiments wrote into their own folders under
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]
@@ -203,6 +227,11 @@ impl ExperimentArgs {
                 "--reuse applies to table1 only, not {name}"
             )));
         }
+        if (self.robot.is_some() || self.urdf.is_some()) && !e.takes_robot {
+            return Err(crate::Error::Config(format!(
+                "--robot and --urdf apply to the inverse-kinematics experiments only, not {name}"
+            )));
+        }
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
@@ -213,6 +242,8 @@ impl ExperimentArgs {
             resume: self.resume,
             steps: self.steps,
             reuse_root: self.reuse.then(|| PathBuf::from(".")),
+            robot: self.robot,
+            urdf: self.urdf.clone(),
         };
         let dir = self
             .out

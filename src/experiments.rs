@@ -9,6 +9,7 @@ use crate::ablations::{Ablation, run_ablation};
 use crate::decoder_experiment::{DECODER_PRESETS, DecoderRunConfig};
 use crate::device::DeviceChoice;
 use crate::ffksm::{FFKSM_PRESETS, FfksmConfig};
+use crate::ik_comparison::{IK_PRESETS, IkComparisonConfig};
 use crate::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
 use crate::model_result::ModelResult;
 use crate::report::{write_csv, write_markdown_report};
@@ -33,6 +34,9 @@ pub struct RunOptions {
     /// gathers rows found there, of the same preset, dataset and steps, instead of training
     /// the same models a second time.
     pub reuse_root: Option<std::path::PathBuf>,
+    /// The arm of the inverse-kinematics experiments: a built-in one or a URDF (default ur5).
+    pub robot: Option<crate::cli::BuiltinRobot>,
+    pub urdf: Option<std::path::PathBuf>,
 }
 
 impl RunOptions {
@@ -45,6 +49,22 @@ impl RunOptions {
             resume: false,
             steps: None,
             reuse_root: None,
+            robot: None,
+            urdf: None,
+        }
+    }
+
+    /// The arm of the inverse-kinematics experiments and its name for reports.
+    pub fn ik_robot(&self) -> Result<(crate::robot::Robot, String)> {
+        match (&self.urdf, self.robot) {
+            (Some(path), _) => Ok((
+                crate::urdf_loader::load_urdf(path, nalgebra::Isometry3::identity())?,
+                path.display().to_string(),
+            )),
+            (None, robot) => {
+                let r = robot.unwrap_or(crate::cli::BuiltinRobot::Ur5);
+                Ok((r.load(), r.name().to_string()))
+            }
         }
     }
 
@@ -96,6 +116,8 @@ pub struct Experiment {
     pub presets: &'static [&'static str],
     /// Whether it trains self-models whose rows belong in Table I.
     pub in_table1: bool,
+    /// Whether it accepts `--robot` / `--urdf` (the inverse-kinematics experiments).
+    pub takes_robot: bool,
     /// Run into a folder; returns a one-line summary.
     pub run: fn(opts: &RunOptions, dir: &Path) -> Result<String>,
 }
@@ -284,6 +306,32 @@ fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
     ablation(Ablation::DataScale, opts, dir)
 }
 
+/// Table II of the EMSSL paper: every inverse-kinematics method in both joint ranges.
+pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = IkComparisonConfig::preset(&opts.preset)?;
+    let (robot, name) = opts.ik_robot()?;
+    let rows = crate::ik_comparison::run(&cfg, &robot, &name, dir, opts.device)?;
+    Ok(rows
+        .iter()
+        .map(|r| {
+            format!(
+                "+-{:.0} {}: {:.2} cm mean, {:.2} median, {:.0}/s",
+                r.range_deg, r.method, r.mean_cm, r.median_cm, r.solutions_per_s
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; "))
+}
+
+/// Figure 6 of the EMSSL paper: EMSSL's test error against iteration, stopping off.
+pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let base = IkComparisonConfig::preset(&opts.preset)?;
+    let iterations = if opts.preset == "quick" { 8 } else { 40 };
+    let cfg = crate::emssl_learning_curve::config(&base, iterations);
+    let (robot, name) = opts.ik_robot()?;
+    crate::emssl_learning_curve::run(&cfg, &base.emssl, &robot, &name, dir, opts.device)
+}
+
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
     let rows = crate::table1::run(opts, dir)?;
     Ok(summary(&rows))
@@ -311,6 +359,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "data",
         presets: &["paper", "quick"],
         in_table1: false,
+        takes_robot: false,
         run: run_dataset,
     },
     Experiment {
@@ -319,6 +368,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/mesh_fidelity",
         presets: &["paper", "quick"],
         in_table1: false,
+        takes_robot: false,
         run: run_mesh_fidelity,
     },
     Experiment {
@@ -327,6 +377,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/neurokin",
         presets: DECODER_PRESETS,
         in_table1: true,
+        takes_robot: false,
         run: run_neurokin,
     },
     Experiment {
@@ -335,6 +386,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/resneurokin_d",
         presets: DECODER_PRESETS,
         in_table1: true,
+        takes_robot: false,
         run: run_resneurokin_d,
     },
     Experiment {
@@ -343,6 +395,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ffksm",
         presets: FFKSM_PRESETS,
         in_table1: true,
+        takes_robot: false,
         run: run_ffksm,
     },
     Experiment {
@@ -351,6 +404,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/k3dgs",
         presets: K3DGS_PRESETS,
         in_table1: true,
+        takes_robot: false,
         run: run_k3dgs,
     },
     Experiment {
@@ -359,6 +413,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ablation_noise",
         presets: DECODER_PRESETS,
         in_table1: false,
+        takes_robot: false,
         run: run_ablation_noise,
     },
     Experiment {
@@ -367,6 +422,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ablation_depth",
         presets: DECODER_PRESETS,
         in_table1: false,
+        takes_robot: false,
         run: run_ablation_depth,
     },
     Experiment {
@@ -375,6 +431,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ablation_latent",
         presets: DECODER_PRESETS,
         in_table1: false,
+        takes_robot: false,
         run: run_ablation_latent,
     },
     Experiment {
@@ -383,7 +440,26 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ablation_data_scale",
         presets: DECODER_PRESETS,
         in_table1: false,
+        takes_robot: false,
         run: run_ablation_data_scale,
+    },
+    Experiment {
+        name: "emssl_table2",
+        about: "EMSSL paper Table II: learned inverse kinematics (EMSSL, DRL, DSL, CGAN) and a numerical solver, two joint ranges",
+        default_dir: "reports/emssl_table2",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_table2,
+    },
+    Experiment {
+        name: "emssl_learning_curve",
+        about: "EMSSL paper Figure 6: EMSSL's test error against iteration (stopping off), two joint ranges",
+        default_dir: "reports/emssl_learning_curve",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_learning_curve,
     },
     Experiment {
         name: "table1",
@@ -391,6 +467,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/table1",
         presets: DECODER_PRESETS,
         in_table1: false,
+        takes_robot: false,
         run: run_table1,
     },
 ];

@@ -150,6 +150,17 @@ pub fn training_curves(
     title: &str,
     runs: &[(String, Vec<(usize, f64)>)],
 ) -> Result<()> {
+    curves(path, title, "step", "training loss (log)", runs)
+}
+
+/// Lines of positive values against a count (steps, iterations), one per run, log-y.
+pub fn curves(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(usize, f64)>)],
+) -> Result<()> {
     register_font();
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -170,8 +181,8 @@ pub fn training_curves(
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
-            .x_desc("step")
-            .y_desc("training loss (log)")
+            .x_desc(x_desc)
+            .y_desc(y_desc)
             .label_style((FONT, 14))
             .draw()
             .map_err(|e| draw_err(path, e))?;

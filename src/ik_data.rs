@@ -105,6 +105,12 @@ impl IkData {
         [0, 1, 2].map(|k| ((p[k] - lo[k]) / (hi[k] - lo[k]).max(1e-9)) as f32)
     }
 
+    /// The inverse of [`IkData::normalise_position`].
+    pub fn position_from_normalised(&self, v: &[f32]) -> Point3<f64> {
+        let [lo, hi] = self.position_bounds;
+        Point3::from([0, 1, 2].map(|k| lo[k] + v[k] as f64 * (hi[k] - lo[k])))
+    }
+
     /// A joint vector normalised to [0, 1] over the joint range.
     pub fn normalise_joints(&self, q: &[f64]) -> Vec<f32> {
         let [lo, hi] = self.range;

@@ -21,7 +21,12 @@ use crate::error::Result;
 use crate::ik_data::{DistanceErrors, IkData, reach_errors};
 use crate::inverse_model::{InverseModelConfig, Mlp};
 use crate::kinematics::KinematicChain;
-use crate::training::{TrainConfig, TrainSet, autodiff_device, train};
+use burn::optim::{AdamConfig, ModuleOptimizer};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, Normal};
+
+use crate::training::{Batch, TrainConfig, TrainSet, autodiff_device, train_continuing};
 
 /// Optimisation of one fit.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -55,31 +60,45 @@ fn position_tensor(data: &IkData, positions: &[Point3<f64>], device: &Device) ->
     Tensor::from_data(TensorData::new(v, [positions.len(), 3]), device)
 }
 
-/// Train `model` to map `positions` to `joints` (radians) for `cfg.epochs` epochs.
-pub fn fit(
-    model: Mlp,
-    data: &IkData,
-    positions: &[Point3<f64>],
-    joints: &[Vec<f64>],
-    cfg: &FitConfig,
-    label: &str,
+/// The mean squared error between the model's outputs and the batch's targets.
+pub fn mse(model: &Mlp, batch: &Batch) -> Tensor<1> {
+    let [n, d, _, _] = batch.targets[0].dims();
+    (model.forward(batch.inputs.clone()) - batch.targets[0].clone().reshape([n, d]))
+        .square()
+        .mean()
+}
+
+/// Rows of `width` values as a training set: `inputs` `[n, in_width]`, `targets`
+/// `[n, out_width, 1, 1]` (the shared loop's layout).
+pub fn row_set(
+    inputs: Vec<f32>,
+    in_width: usize,
+    targets: Vec<f32>,
+    out_width: usize,
     device: &Device,
-) -> Result<Mlp> {
-    let n = positions.len();
-    let dof = joints.first().map_or(0, Vec::len);
-    let targets: Vec<f32> = joints
-        .iter()
-        .flat_map(|q| data.normalise_joints(q))
-        .collect();
-    let set = TrainSet {
-        inputs: position_tensor(data, positions, device),
+) -> TrainSet {
+    let n = inputs.len() / in_width.max(1);
+    TrainSet {
+        inputs: Tensor::from_data(TensorData::new(inputs, [n, in_width]), device),
         targets: vec![Tensor::from_data(
-            TensorData::new(targets, [n, dof, 1, 1]),
+            TensorData::new(targets, [n, out_width, 1, 1]),
             device,
         )],
-    };
+    }
+}
+
+/// Train `model` on `set` with `loss` for `cfg.epochs` epochs, continuing from the optimiser
+/// state `optim`, returned with the model.
+pub fn fit_set(
+    model: Mlp,
+    optim: ModuleOptimizer,
+    set: &TrainSet,
+    cfg: &FitConfig,
+    label: &str,
+    loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
+) -> Result<(Mlp, ModuleOptimizer)> {
     let train_cfg = TrainConfig {
-        steps: TrainConfig::steps_for_epochs(cfg.epochs, n, cfg.batch),
+        steps: TrainConfig::steps_for_epochs(cfg.epochs, set.len(), cfg.batch),
         batch: cfg.batch,
         learning_rate: cfg.learning_rate,
         grad_clip_norm: None,
@@ -87,13 +106,44 @@ pub fn fit(
         seed: cfg.seed,
         checkpoint_every: 0,
     };
-    let (model, _) = train(model, &set, &train_cfg, None, label, |m: &Mlp, b| {
-        let [bn, d, _, _] = b.targets[0].dims();
-        (m.forward(b.inputs.clone()) - b.targets[0].clone().reshape([bn, d]))
-            .square()
-            .mean()
-    })?;
-    Ok(model)
+    struct NoHooks;
+    impl crate::training::TrainHooks<Mlp> for NoHooks {}
+    let (model, optim, _) = train_continuing(
+        model,
+        optim,
+        set,
+        &train_cfg,
+        None,
+        label,
+        loss,
+        &mut NoHooks,
+    )?;
+    Ok((model, optim))
+}
+
+/// Train `model` to map `positions` to `joints` (radians), normalised, by mean squared error.
+#[allow(clippy::too_many_arguments)]
+pub fn fit(
+    model: Mlp,
+    optim: ModuleOptimizer,
+    data: &IkData,
+    positions: &[Point3<f64>],
+    joints: &[Vec<f64>],
+    cfg: &FitConfig,
+    label: &str,
+    device: &Device,
+) -> Result<(Mlp, ModuleOptimizer)> {
+    let dof = joints.first().map_or(0, Vec::len);
+    let inputs: Vec<f32> = positions
+        .iter()
+        .flat_map(|p| data.normalise_position(p))
+        .collect();
+    let targets: Vec<f32> = joints
+        .iter()
+        .flat_map(|q| data.normalise_joints(q))
+        .collect();
+    let set = row_set(inputs, 3, targets, dof, device);
+    fit_set(model, optim, &set, cfg, label, mse)
 }
 
 /// Joints (radians) the model answers for `positions`, in batches of `batch`.
@@ -142,8 +192,9 @@ pub fn drl(
     let tdev = autodiff_device(device, fit_cfg.seed);
     let model = model_cfg.init(&tdev, fit_cfg.seed)?;
     let train = data.train();
-    let model = fit(
+    let (model, _) = fit(
         model,
+        AdamConfig::new().init(),
         data,
         &data.positions[train.clone()],
         &data.joints[train],
@@ -154,30 +205,105 @@ pub fn drl(
     Ok(model.valid())
 }
 
-/// EMSSL's stopping rule and iteration cap.
+/// EMSSL's schedule and stopping rule.
+///
+/// Algorithm 1 as printed starts from a random network and has no exploration. A random
+/// network answers nearly the same joints for every target (its sigmoid outputs sit near 0.5),
+/// so the first reached positions form a cloud a few millimetres wide around one point, and a
+/// model fit to it is close to a constant, which is itself a fixed point of the algorithm
+/// (measured on the UR5 at +-90 degrees: the paper's network stayed at 85 cm for 30
+/// iterations). So, as goal babbling does (Rolf and Steil), Gaussian noise is added to the
+/// answers before the forward model in the early iterations and decays geometrically; the
+/// pairs stay exact (the joints tried and where they went). The learning rate decays too, and
+/// one Adam optimiser serves the whole run.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EmsslConfig {
     pub max_iterations: usize,
-    /// Stop when the mean absolute difference of the normalised joints answered for the
-    /// desired positions and for the positions reached falls below this.
+    /// Stop when the disagreement (see [`EmsslIteration::disagreement`]) falls below this
+    /// (the paper's rule) ...
     pub agreement: f64,
+    /// ... or when the reach error on the desired training positions
+    /// ([`EmsslIteration::train_reach_cm`]) has not reached a new minimum for this many
+    /// iterations.
+    pub patience: usize,
+    /// Exploration noise: standard deviation in normalised joint units ([0, 1] is the whole
+    /// range) in iteration 1.
+    pub exploration: f64,
+    /// The noise and the learning rate are multiplied by these after each iteration.
+    pub exploration_decay: f64,
+    pub learning_rate_decay: f64,
+}
+
+impl EmsslConfig {
+    /// Up to 200 iterations (the paper's Table I); noise 0.2 decaying by 0.9, learning rate
+    /// decaying by 0.9 per iteration (ours); stop at agreement 0.002 or after 10 iterations
+    /// without a new best reach error on the training goals.
+    pub fn paper() -> Self {
+        EmsslConfig {
+            max_iterations: 200,
+            agreement: 0.002,
+            patience: 10,
+            exploration: 0.2,
+            exploration_decay: 0.9,
+            learning_rate_decay: 0.9,
+        }
+    }
 }
 
 /// One EMSSL iteration, for the learning curve (Figure 6).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct EmsslIteration {
     pub iteration: usize,
-    pub test_mean_cm: f64,
-    pub test_median_cm: f64,
-    /// Mean distance (cm) between the desired training positions and those reached.
+    /// Exploration noise and learning rate used in this iteration.
+    pub exploration: f64,
+    pub learning_rate: f64,
+    /// Test distance errors after this iteration (evaluation only; never used to stop).
+    pub test: DistanceErrors,
+    /// Mean distance (cm) between the desired training positions and where the model's
+    /// answers for them (without noise) take the arm.
     pub train_reach_cm: f64,
-    /// Mean absolute difference of the normalised joints for desired and reached positions.
+    /// Mean absolute difference (normalised joints) between the model's answers for the
+    /// desired positions and its answers for the positions those answers reach: zero when
+    /// the model is consistent with the arm (the paper's stopping rule).
     pub disagreement: f64,
-    pub seconds: f64,
+    /// Seconds of the sampling phase (batched inference, noise, forward model) and of training.
+    pub sampling_seconds: f64,
+    pub training_seconds: f64,
+}
+
+/// Perturb normalised `joints` (radians) with Gaussian noise of `sigma` (normalised units),
+/// clamped to the range.
+fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64) {
+    if sigma <= 0.0 {
+        return;
+    }
+    let noise = Normal::new(0.0, sigma).expect("finite sigma");
+    let mut rng = StdRng::seed_from_u64(seed);
+    let [lo, hi] = range;
+    for v in joints.iter_mut().flatten() {
+        let u = (*v - lo) / (hi - lo) + noise.sample(&mut rng);
+        *v = lo + u.clamp(0.0, 1.0) * (hi - lo);
+    }
+}
+
+/// Mean absolute difference of two joint sets in normalised units.
+fn disagreement(a: &[Vec<f64>], b: &[Vec<f64>], range: [f64; 2]) -> f64 {
+    let span = range[1] - range[0];
+    let n = a.iter().map(Vec::len).sum::<usize>().max(1);
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).abs() / span))
+        .sum::<f64>()
+        / n as f64
 }
 
 /// Embodied self-supervised learning (Algorithm 1) of an inverse model of `chain`, the forward
-/// model, on the desired training positions of `data`.
+/// model, on the desired training positions of `data`. Returns the model of the iteration with
+/// the lowest reach error on the desired training positions (self-supervised: the forward
+/// model and the goals, no test data) and the curve.
+///
+/// The disagreement alone cannot pick the model: a network that answers nearly the same
+/// joints everywhere agrees with itself perfectly.
 pub fn emssl(
     chain: &KinematicChain,
     data: &IkData,
@@ -188,66 +314,98 @@ pub fn emssl(
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
     let tdev = autodiff_device(device, fit_cfg.seed);
     let mut model = model_cfg.init(&tdev, fit_cfg.seed)?;
+    let mut optim = AdamConfig::new().init();
     let desired = &data.positions[data.train()];
-    let mut curve = Vec::new();
+    let mut curve: Vec<EmsslIteration> = Vec::new();
+    let mut best: Option<(f64, Mlp)> = None;
+    let mut since_best = 0;
     // The answers for the desired positions: the first sampling pass, and after each
     // iteration both its agreement check and the next iteration's sampling.
-    let mut joints = predict(
+    let t0 = std::time::Instant::now();
+    let mut answers = predict(
         &model.valid(),
         data,
         desired,
         fit_cfg.inference_batch,
         device,
     );
+    let mut inference_seconds = t0.elapsed().as_secs_f64();
     for iteration in 1..=cfg.max_iterations {
+        let decay = |rate: f64| rate.powi(iteration as i32 - 1);
+        let sigma = cfg.exploration * decay(cfg.exploration_decay);
+        let learning_rate = fit_cfg.learning_rate * decay(cfg.learning_rate_decay);
+        // Sampling: the batched inference (done at the end of the last iteration), the
+        // exploration noise, then the forward model.
         let t0 = std::time::Instant::now();
-        // Sampling: the batched inference above, then the forward model.
-        let reached = chain.end_effector_batch(&joints);
-        // Training on the self-generated pairs (reached -> joints).
+        let mut tried = answers.clone();
+        explore(
+            &mut tried,
+            data.range,
+            sigma,
+            fit_cfg.seed ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        let reached = chain.end_effector_batch(&tried);
+        let sampling_seconds = inference_seconds + t0.elapsed().as_secs_f64();
+        // Training on the self-generated pairs (reached -> joints tried).
+        let t0 = std::time::Instant::now();
         let fit_iter = FitConfig {
             seed: fit_cfg.seed.wrapping_add(iteration as u64),
+            learning_rate,
             ..fit_cfg.clone()
         };
-        model = fit(
+        (model, optim) = fit(
             model,
+            optim,
             data,
             &reached,
-            &joints,
+            &tried,
             &fit_iter,
             &format!("EMSSL iteration {iteration}"),
             &tdev,
         )?;
+        let training_seconds = t0.elapsed().as_secs_f64();
         let valid = model.valid();
-        let (test, _) = test_errors(&valid, chain, data, fit_cfg.inference_batch, device);
-        // Agreement of the answers for desired and reached positions.
-        let a = predict(&valid, data, desired, fit_cfg.inference_batch, device);
-        let b = predict(&valid, data, &reached, fit_cfg.inference_batch, device);
-        joints = a.clone();
-        let span = data.range[1] - data.range[0];
-        let disagreement = a
-            .iter()
-            .zip(&b)
-            .flat_map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).abs() / span))
-            .sum::<f64>()
-            / (a.len() * a.first().map_or(1, Vec::len)).max(1) as f64;
+        // The next sampling pass's inference, and the agreement check on it.
+        let t0 = std::time::Instant::now();
+        answers = predict(&valid, data, desired, fit_cfg.inference_batch, device);
+        inference_seconds = t0.elapsed().as_secs_f64();
+        let clean_reached = chain.end_effector_batch(&answers);
+        let back = predict(
+            &valid,
+            data,
+            &clean_reached,
+            fit_cfg.inference_batch,
+            device,
+        );
+        let disagreement = disagreement(&answers, &back, data.range);
         let train_reach_cm = 100.0
             * desired
                 .iter()
-                .zip(&reached)
+                .zip(&clean_reached)
                 .map(|(d, r)| (d - r).norm())
                 .sum::<f64>()
             / desired.len().max(1) as f64;
+        let (test, _) = test_errors(&valid, chain, data, fit_cfg.inference_batch, device);
         curve.push(EmsslIteration {
             iteration,
-            test_mean_cm: test.mean_cm,
-            test_median_cm: test.median_cm,
+            exploration: sigma,
+            learning_rate,
+            test,
             train_reach_cm,
             disagreement,
-            seconds: t0.elapsed().as_secs_f64(),
+            sampling_seconds,
+            training_seconds,
         });
-        if disagreement < cfg.agreement {
+        if best.as_ref().is_none_or(|(d, _)| train_reach_cm < *d) {
+            best = Some((train_reach_cm, valid));
+            since_best = 0;
+        } else {
+            since_best += 1;
+        }
+        if disagreement < cfg.agreement || since_best >= cfg.patience {
             break;
         }
     }
-    Ok((model.valid(), curve))
+    let model = best.map_or_else(|| model.valid(), |(_, m)| m);
+    Ok((model, curve))
 }

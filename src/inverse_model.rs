@@ -1,6 +1,9 @@
 //! The inverse kinematic model of the EMSSL paper (Table I): an MLP from a normalised end
 //! position `[n, 3]` to normalised joints `[n, dof]` in [0, 1] (see [`crate::ik_data`]):
 //! 3 -> 1024 -> 512 -> 256 -> 128 -> dof, ReLU on the hidden layers, sigmoid on the output.
+//! The same MLP, with other widths and a linear output where asked, is the learned forward
+//! model of distal supervised learning and the generator and discriminator of the conditional
+//! GAN.
 
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
@@ -15,6 +18,13 @@ pub struct InverseModelConfig {
     pub inputs: usize,
     pub hidden: Vec<usize>,
     pub outputs: usize,
+    /// Sigmoid on the output (the inverse model's normalised joints); linear otherwise.
+    #[serde(default = "yes")]
+    pub sigmoid_output: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 impl InverseModelConfig {
@@ -24,6 +34,7 @@ impl InverseModelConfig {
             inputs: 3,
             hidden: vec![1024, 512, 256, 128],
             outputs: dof,
+            sigmoid_output: true,
         }
     }
 
@@ -33,6 +44,7 @@ impl InverseModelConfig {
             inputs: 3,
             hidden: vec![128, 64],
             outputs: dof,
+            sigmoid_output: true,
         }
     }
 
@@ -50,18 +62,21 @@ impl InverseModelConfig {
                 .windows(2)
                 .map(|w| LinearConfig::new(w[0], w[1]).init(device))
                 .collect(),
+            sigmoid_output: self.sigmoid_output,
         }))
     }
 }
 
-/// Linear layers with ReLU between them and a sigmoid on the output.
+/// Linear layers with ReLU between them and, where configured, a sigmoid on the output.
 #[derive(Module, Debug)]
 pub struct Mlp {
     layers: Vec<Linear>,
+    #[module(skip)]
+    sigmoid_output: bool,
 }
 
 impl Mlp {
-    /// Outputs in (0, 1) `[n, outputs]` for inputs `[n, inputs]`.
+    /// Outputs `[n, outputs]` (in (0, 1) with the sigmoid) for inputs `[n, inputs]`.
     pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
         let last = self.layers.len() - 1;
         let mut x = x;
@@ -71,6 +86,6 @@ impl Mlp {
                 x = relu(x);
             }
         }
-        sigmoid(x)
+        if self.sigmoid_output { sigmoid(x) } else { x }
     }
 }

@@ -283,6 +283,36 @@ impl KinematicChain {
         self.link_frames(q)[self.tip_link] * self.tip_offset
     }
 
+    /// The end effector's position Jacobian `[3, dof]` (m per SI unit) at `q`, analytic:
+    /// column k is `axis_k x (p_tip - o_k)` for a rotational joint and `axis_k` for a
+    /// prismatic one, zero for a joint that does not move the tip.
+    pub fn position_jacobian(&self, q: &[f64]) -> nalgebra::Matrix3xX<f64> {
+        let frames = self.link_frames(q);
+        let tip = frames[self.tip_link] * self.tip_offset;
+        // Joints on the path from the root to the tip link.
+        let mut moves_tip = vec![false; self.joints.len()];
+        let mut link = self.tip_link;
+        while let Some(j) = self.joints.iter().position(|j| j.child == link) {
+            moves_tip[j] = true;
+            link = self.joints[j].parent;
+        }
+        let mut jac = nalgebra::Matrix3xX::zeros(self.dof());
+        for (j, joint) in self.joints.iter().enumerate() {
+            let (Some(k), true) = (self.value_index[j], moves_tip[j]) else {
+                continue;
+            };
+            let f = frames[joint.parent] * joint.origin;
+            let axis = f * joint.axis.into_inner();
+            let column = if joint.kind.is_rotational() {
+                axis.cross(&(tip - f * Point3::origin()))
+            } else {
+                axis
+            };
+            jac.set_column(k, &column);
+        }
+        jac
+    }
+
     /// Link frames for a batch of joint vectors (rows of `qs`, SI), in parallel.
     pub fn link_frames_batch(&self, qs: &[Vec<f64>]) -> Vec<Vec<Isometry3<f64>>> {
         qs.par_iter().map(|q| self.link_frames(q)).collect()

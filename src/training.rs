@@ -367,9 +367,23 @@ pub trait TrainHooks<M> {
     }
 }
 
+/// The training progress bar: steps, rate, the caller's message and ETA.
+pub fn progress_bar(steps: usize, label: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(steps as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{prefix} [{bar:30}] {pos}/{len} steps {per_sec} {msg} ETA {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(label.to_string());
+    bar
+}
+
 /// [`train`] with [`TrainHooks`].
 pub fn train_with_hooks<M, L, H>(
-    mut model: M,
+    model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
     checkpoint: Option<&CheckpointPlan>,
@@ -377,6 +391,31 @@ pub fn train_with_hooks<M, L, H>(
     loss: L,
     hooks: &mut H,
 ) -> Result<(M, TrainLog)>
+where
+    M: Module,
+    L: Fn(&M, &Batch) -> Tensor<1>,
+    H: TrainHooks<M>,
+{
+    let optim = AdamConfig::new().init();
+    let (model, _, log) =
+        train_continuing(model, optim, data, cfg, checkpoint, label, loss, hooks)?;
+    Ok((model, log))
+}
+
+/// [`train_with_hooks`] from a given optimiser state, returned with the model: a learner
+/// that trains one model on a sequence of datasets (EMSSL's iterations) keeps Adam's moments
+/// across them, as one optimiser created before the loop does in PyTorch.
+#[allow(clippy::too_many_arguments)]
+pub fn train_continuing<M, L, H>(
+    mut model: M,
+    mut optim: ModuleOptimizer,
+    data: &TrainSet,
+    cfg: &TrainConfig,
+    checkpoint: Option<&CheckpointPlan>,
+    label: &str,
+    loss: L,
+    hooks: &mut H,
+) -> Result<(M, ModuleOptimizer, TrainLog)>
 where
     M: Module,
     L: Fn(&M, &Batch) -> Tensor<1>,
@@ -390,7 +429,6 @@ where
             cfg.batch
         )));
     }
-    let mut optim = AdamConfig::new().init();
     let mut log = TrainLog::default();
     if let Some(plan) = checkpoint {
         let (m, o, resumed) = plan.load(model, optim)?;
@@ -403,15 +441,7 @@ where
     }
     let batcher = Batcher::new(data, cfg);
     let log_every = (cfg.steps / 200).max(1);
-    let bar = indicatif::ProgressBar::new(cfg.steps as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} [{bar:30}] {pos}/{len} steps {per_sec} {msg} ETA {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    bar.set_prefix(label.to_string());
+    let bar = progress_bar(cfg.steps, label);
     bar.set_position(log.step as u64);
     bar.reset_eta();
     let mut window = (0.0f64, 0usize);
@@ -484,7 +514,7 @@ where
         }
     }
     bar.finish();
-    Ok((model, log))
+    Ok((model, optim, log))
 }
 
 /// The training device: an autodiff device over `device`, seeded.

@@ -1,0 +1,97 @@
+//! Figure 6 of the EMSSL paper: EMSSL's test error against iteration. The same settings as
+//! Table II's EMSSL ([`crate::ik_comparison::IkComparisonConfig`]) but with the stopping rule
+//! off, so the whole curve shows for a fixed number of iterations; the iteration where the
+//! rule would have stopped is reported beside it.
+
+use std::path::Path;
+
+use crate::atomic_file::write_json;
+use crate::device::DeviceChoice;
+use crate::error::{Error, Result};
+use crate::ik_comparison::{CurveRow, IkComparisonConfig, write_curves};
+use crate::ik_data::IkData;
+use crate::inverse_learning::{EmsslConfig, EmsslIteration, emssl};
+use crate::robot::Robot;
+
+/// Table II's config with `iterations` EMSSL iterations and no stopping.
+pub fn config(base: &IkComparisonConfig, iterations: usize) -> IkComparisonConfig {
+    IkComparisonConfig {
+        emssl: EmsslConfig {
+            max_iterations: iterations,
+            agreement: 0.0,
+            patience: usize::MAX,
+            ..base.emssl.clone()
+        },
+        ..base.clone()
+    }
+}
+
+/// The iteration at which `rule`'s stopping test would have fired on `curve`, if it did.
+pub fn stop_iteration(curve: &[EmsslIteration], rule: &EmsslConfig) -> Option<usize> {
+    let mut best = f64::INFINITY;
+    let mut since = 0;
+    for c in curve {
+        if c.train_reach_cm < best {
+            best = c.train_reach_cm;
+            since = 0;
+        } else {
+            since += 1;
+        }
+        if c.disagreement < rule.agreement || since >= rule.patience {
+            return Some(c.iteration);
+        }
+    }
+    None
+}
+
+/// Run the curve for every range of `cfg` (stopping off); `rule` is the stopping rule to
+/// report. Writes `results.csv` (+ Markdown), `learning_curve.png` and `config.json`.
+pub fn run(
+    cfg: &IkComparisonConfig,
+    rule: &EmsslConfig,
+    robot: &Robot,
+    robot_name: &str,
+    dir: &Path,
+    device_choice: DeviceChoice,
+) -> Result<String> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join("config.json"), cfg)?;
+    let device = crate::device::select(device_choice)?;
+    let mut rows = Vec::new();
+    let mut summary = Vec::new();
+    for &r in &cfg.ranges_deg {
+        let data = IkData::generate(&robot.chain, &cfg.data(r))?;
+        let model_cfg = cfg.model(robot.dof());
+        let (_, curve) = emssl(
+            &robot.chain,
+            &data,
+            &model_cfg,
+            &cfg.fit,
+            &cfg.emssl,
+            &device,
+        )?;
+        let last = curve.last().map_or(f64::NAN, |c| c.test.mean_cm);
+        let best = curve
+            .iter()
+            .map(|c| c.test.mean_cm)
+            .fold(f64::INFINITY, f64::min);
+        summary.push(format!(
+            "+-{r:.0} deg: {:.2} cm after {} iterations (best {best:.2}; the stopping rule fires at {})",
+            last,
+            curve.len(),
+            stop_iteration(&curve, rule).map_or("none".to_string(), |i| i.to_string())
+        ));
+        rows.extend(
+            curve
+                .iter()
+                .map(|c| CurveRow::new(robot_name, r, &cfg.preset, c)),
+        );
+    }
+    write_curves(
+        dir,
+        "results.csv",
+        "Figure 6: EMSSL test error against iteration",
+        &rows,
+    )?;
+    Ok(summary.join("; "))
+}
