@@ -238,6 +238,8 @@ pub struct Batcher<'a> {
     batch: usize,
     seed: u64,
     noise: f64,
+    /// The permutation of the epoch last asked for (drawn once per epoch, not per batch).
+    epoch_order: std::cell::RefCell<Option<(usize, Vec<usize>)>>,
 }
 
 impl<'a> Batcher<'a> {
@@ -247,6 +249,7 @@ impl<'a> Batcher<'a> {
             batch: cfg.batch.min(data.len()).max(1),
             seed: cfg.seed,
             noise: cfg.input_noise,
+            epoch_order: std::cell::RefCell::new(None),
         }
     }
 
@@ -258,10 +261,16 @@ impl<'a> Batcher<'a> {
     pub fn indices(&self, step: usize) -> Vec<usize> {
         let spe = self.steps_per_epoch();
         let (epoch, k) = (step / spe, step % spe);
-        let mut perm: Vec<usize> = (0..self.data.len()).collect();
-        let mut rng =
-            StdRng::seed_from_u64(self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        perm.shuffle(&mut rng);
+        let mut cached = self.epoch_order.borrow_mut();
+        if cached.as_ref().is_none_or(|(e, _)| *e != epoch) {
+            let mut perm: Vec<usize> = (0..self.data.len()).collect();
+            let mut rng = StdRng::seed_from_u64(
+                self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            perm.shuffle(&mut rng);
+            *cached = Some((epoch, perm));
+        }
+        let perm = &cached.as_ref().expect("just drawn").1;
         let end = ((k + 1) * self.batch).min(perm.len());
         perm[k * self.batch..end].to_vec()
     }
