@@ -20,11 +20,11 @@ use rand_distr::{Distribution, Normal};
 
 use crate::error::Result;
 use crate::ik_data::IkData;
-use crate::inverse_learning::row_set;
+use crate::inverse_learning::{FitConfig, row_set};
 use crate::inverse_model::{InverseModelConfig, Mlp};
 use crate::kinematics::KinematicChain;
 use crate::losses::bce_with_logits;
-use crate::training::{Batcher, TrainConfig, autodiff_device};
+use crate::training::{Batcher, autodiff_device};
 
 /// The two networks and their training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -35,12 +35,10 @@ pub struct GanConfig {
     pub generator_hidden: Vec<usize>,
     /// Hidden widths of the discriminator (3 + dof -> hidden -> 1 logit).
     pub discriminator_hidden: Vec<usize>,
-    pub epochs: usize,
-    pub batch: usize,
-    pub learning_rate: f64,
+    /// Epochs, batch, learning rate (both networks) and seed.
+    pub fit: FitConfig,
     /// Samples per target for the best-of-k column.
     pub best_of: usize,
-    pub seed: u64,
 }
 
 /// Rows of standard-normal noise `[n, width]`, seeded.
@@ -59,7 +57,7 @@ pub struct Generator {
 
 /// Train the conditional GAN on the random training pairs of `data`.
 pub fn train_gan(data: &IkData, cfg: &GanConfig, device: &Device) -> Result<Generator> {
-    let tdev = autodiff_device(device, cfg.seed);
+    let tdev = autodiff_device(device, cfg.fit.seed);
     let dof = data.joints[0].len();
     let train = data.train();
     let positions: Vec<f32> = data.positions[train.clone()]
@@ -77,25 +75,17 @@ pub fn train_gan(data: &IkData, cfg: &GanConfig, device: &Device) -> Result<Gene
         outputs: dof,
         sigmoid_output: true,
     }
-    .init(&tdev, cfg.seed)?;
+    .init(&tdev, cfg.fit.seed)?;
     let mut discriminator = InverseModelConfig {
         inputs: 3 + dof,
         hidden: cfg.discriminator_hidden.clone(),
         outputs: 1,
         sigmoid_output: false,
     }
-    .init(&tdev, cfg.seed ^ 0xD15C)?;
+    .init(&tdev, cfg.fit.seed ^ 0xD15C)?;
     let mut g_optim = AdamConfig::new().with_beta_1(0.5).init();
     let mut d_optim = AdamConfig::new().with_beta_1(0.5).init();
-    let train_cfg = TrainConfig {
-        steps: TrainConfig::steps_for_epochs(cfg.epochs, set.len(), cfg.batch),
-        batch: cfg.batch,
-        learning_rate: cfg.learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: cfg.seed,
-        checkpoint_every: 0,
-    };
+    let train_cfg = cfg.fit.train_config(set.len());
     let batcher = Batcher::new(&set, &train_cfg);
     let bar = crate::training::progress_bar(train_cfg.steps, "CGAN");
     for step in 0..train_cfg.steps {
@@ -106,7 +96,7 @@ pub fn train_gan(data: &IkData, cfg: &GanConfig, device: &Device) -> Result<Gene
         let ones = Tensor::<2>::ones([n, 1], &tdev);
         let zeros = Tensor::<2>::zeros([n, 1], &tdev);
         // The discriminator: real pairs against generated ones (the generator detached).
-        let z = noise(n, cfg.noise, cfg.seed ^ (2 * step as u64 + 1), &tdev);
+        let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 1), &tdev);
         let fake = generator
             .forward(Tensor::cat(vec![p.clone(), z], 1))
             .detach();
@@ -118,13 +108,13 @@ pub fn train_gan(data: &IkData, cfg: &GanConfig, device: &Device) -> Result<Gene
             zeros,
         );
         let grads = GradientsParams::from_grads(d_loss.backward(), &discriminator);
-        discriminator = d_optim.step(cfg.learning_rate, discriminator, grads);
+        discriminator = d_optim.step(cfg.fit.learning_rate, discriminator, grads);
         // The generator: make the discriminator call its pairs real (non-saturating loss).
-        let z = noise(n, cfg.noise, cfg.seed ^ (2 * step as u64 + 2), &tdev);
+        let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 2), &tdev);
         let fake = generator.forward(Tensor::cat(vec![p.clone(), z], 1));
         let g_loss = bce_with_logits(discriminator.forward(Tensor::cat(vec![p, fake], 1)), ones);
         let grads = GradientsParams::from_grads(g_loss.backward(), &generator);
-        generator = g_optim.step(cfg.learning_rate, generator, grads);
+        generator = g_optim.step(cfg.fit.learning_rate, generator, grads);
         bar.inc(1);
     }
     bar.finish();
@@ -162,6 +152,7 @@ impl Generator {
     }
 
     /// For each position, the one of `k` samples whose forward kinematics lands closest.
+    #[allow(clippy::too_many_arguments)]
     pub fn best_of(
         &self,
         chain: &KinematicChain,

@@ -306,8 +306,30 @@ fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
     ablation(Ablation::DataScale, opts, dir)
 }
 
+/// The inverse-kinematics experiments train no self-model: the dataset, step and resume
+/// switches do not apply to them, and say so rather than being ignored.
+fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
+    let given: Vec<&str> = [
+        (opts.paper_compatible, "--paper-compatible"),
+        (opts.resume, "--resume"),
+        (opts.steps.is_some(), "--steps"),
+    ]
+    .into_iter()
+    .filter_map(|(on, flag)| on.then_some(flag))
+    .collect();
+    if given.is_empty() {
+        Ok(())
+    } else {
+        Err(crate::Error::Config(format!(
+            "{} does not apply to {name} (its presets set the iterations and epochs)",
+            given.join(", ")
+        )))
+    }
+}
+
 /// Table II of the EMSSL paper: every inverse-kinematics method in both joint ranges.
 pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_table2")?;
     let cfg = IkComparisonConfig::preset(&opts.preset)?;
     let (robot, name) = opts.ik_robot()?;
     let rows = crate::ik_comparison::run(&cfg, &robot, &name, dir, opts.device)?;
@@ -325,6 +347,7 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
 
 /// Figure 6 of the EMSSL paper: EMSSL's test error against iteration, stopping off.
 pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_learning_curve")?;
     let base = IkComparisonConfig::preset(&opts.preset)?;
     let iterations = if opts.preset == "quick" { 8 } else { 40 };
     let cfg = crate::emssl_learning_curve::config(&base, iterations);

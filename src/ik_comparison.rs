@@ -78,11 +78,12 @@ impl Preset for IkComparisonConfig {
                 noise: 3,
                 generator_hidden: vec![1024, 512, 256, 128],
                 discriminator_hidden: vec![512, 256, 128],
-                epochs: 20,
-                batch: 128,
-                learning_rate: 2e-4,
+                fit: FitConfig {
+                    epochs: 20,
+                    learning_rate: 2e-4,
+                    ..FitConfig::paper()
+                },
                 best_of: 10,
-                seed: 0,
             },
             dls: DlsConfig::standard(),
             refine: DlsConfig::standard(),
@@ -116,8 +117,11 @@ impl Preset for IkComparisonConfig {
             gan: GanConfig {
                 generator_hidden: vec![128, 64],
                 discriminator_hidden: vec![128, 64],
-                epochs: 10,
-                batch: 64,
+                fit: FitConfig {
+                    epochs: 10,
+                    batch: 64,
+                    ..p.gan.fit.clone()
+                },
                 best_of: 5,
                 ..p.gan.clone()
             },
@@ -329,14 +333,14 @@ pub fn run_range(
     let t = Instant::now();
     let generator = train_gan(&data, &cfg.gan, &device)?;
     let train_s = t.elapsed().as_secs_f64();
-    let seed = cfg.gan.seed ^ 0x5EED;
+    let seed = cfg.gan.fit.seed ^ 0x5EED;
     let solve_s = timed(&mut || joints = generator.sample(&data, targets, batch, seed, &device));
     add(
         "CGAN",
         &joints,
         train_s,
         solve_s,
-        format!("{} epochs, one sample", cfg.gan.epochs),
+        format!("{} epochs, one sample", cfg.gan.fit.epochs),
     )?;
     let k = cfg.gan.best_of;
     let solve_s = timed(&mut || {

@@ -49,6 +49,20 @@ impl FitConfig {
             seed: 0,
         }
     }
+
+    /// The shared loop's config for `cfg.epochs` epochs over `samples` (no clipping, no input
+    /// noise, no checkpoints).
+    pub fn train_config(&self, samples: usize) -> TrainConfig {
+        TrainConfig {
+            steps: TrainConfig::steps_for_epochs(self.epochs, samples, self.batch),
+            batch: self.batch,
+            learning_rate: self.learning_rate,
+            grad_clip_norm: None,
+            input_noise: 0.0,
+            seed: self.seed,
+            checkpoint_every: 0,
+        }
+    }
 }
 
 /// Normalised positions `[n, 3]` of `positions`.
@@ -97,15 +111,7 @@ pub fn fit_set(
     label: &str,
     loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
 ) -> Result<(Mlp, ModuleOptimizer)> {
-    let train_cfg = TrainConfig {
-        steps: TrainConfig::steps_for_epochs(cfg.epochs, set.len(), cfg.batch),
-        batch: cfg.batch,
-        learning_rate: cfg.learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: cfg.seed,
-        checkpoint_every: 0,
-    };
+    let train_cfg = cfg.train_config(set.len());
     struct NoHooks;
     impl crate::training::TrainHooks<Mlp> for NoHooks {}
     let (model, optim, _) = train_continuing(

@@ -10,6 +10,8 @@ const BINARIES: &[&str] = &[
     env!("CARGO_BIN_EXE_mesh_fidelity"),
     env!("CARGO_BIN_EXE_reproduce"),
     env!("CARGO_BIN_EXE_fit_arm4_geometry"),
+    env!("CARGO_BIN_EXE_emssl_table2"),
+    env!("CARGO_BIN_EXE_emssl_learning_curve"),
 ];
 
 fn dataset(args: &[&str]) -> Output {
@@ -92,6 +94,31 @@ fn bad_inputs_fail_cleanly() {
 
     let out = dataset(&["--preset", "huge", "--out", out_arg]);
     assert_clean_failure(&out, &["unknown preset \"huge\""], d);
+}
+
+#[test]
+fn switches_that_do_not_apply_fail_cleanly() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let out_dir = d.join("out");
+    let run = |bin: &str, args: &[&str]| {
+        Command::new(bin)
+            .args(args)
+            .args(["--out", out_dir.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let out = run(env!("CARGO_BIN_EXE_emssl_table2"), &["--steps", "5"]);
+    assert_clean_failure(&out, &["--steps", "emssl_table2"], d);
+    let out = run(env!("CARGO_BIN_EXE_emssl_learning_curve"), &["--resume"]);
+    assert_clean_failure(&out, &["--resume", "emssl_learning_curve"], d);
+    let out = run(env!("CARGO_BIN_EXE_k3dgs"), &["--robot", "ur5"]);
+    assert_clean_failure(&out, &["--robot", "not k3dgs"], d);
+    let out = run(
+        env!("CARGO_BIN_EXE_emssl_table2"),
+        &["--urdf", d.join("nope.urdf").to_str().unwrap()],
+    );
+    assert_clean_failure(&out, &["nope.urdf"], d);
 }
 
 #[test]

@@ -238,11 +238,13 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
             noise: 3,
             generator_hidden: vec![256, 128],
             discriminator_hidden: vec![256, 128],
-            epochs: 50,
-            batch: 64,
-            learning_rate: 1e-3,
+            fit: FitConfig {
+                epochs: 50,
+                batch: 64,
+                learning_rate: 1e-3,
+                ..FitConfig::paper()
+            },
             best_of: 5,
-            seed: 0,
         },
         &device,
     )
