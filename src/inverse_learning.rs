@@ -237,6 +237,9 @@ pub struct EmsslConfig {
     pub exploration: f64,
     /// The noise and the learning rate are multiplied by these after each iteration.
     pub exploration_decay: f64,
+    /// The noise never falls below this.
+    #[serde(default)]
+    pub exploration_floor: f64,
     pub learning_rate_decay: f64,
 }
 
@@ -251,6 +254,7 @@ impl EmsslConfig {
             patience: 10,
             exploration: 0.2,
             exploration_decay: 0.9,
+            exploration_floor: 0.0,
             learning_rate_decay: 0.9,
         }
     }
@@ -338,7 +342,7 @@ pub fn emssl(
     let mut inference_seconds = t0.elapsed().as_secs_f64();
     for iteration in 1..=cfg.max_iterations {
         let decay = |rate: f64| rate.powi(iteration as i32 - 1);
-        let sigma = cfg.exploration * decay(cfg.exploration_decay);
+        let sigma = (cfg.exploration * decay(cfg.exploration_decay)).max(cfg.exploration_floor);
         let learning_rate = fit_cfg.learning_rate * decay(cfg.learning_rate_decay);
         // Sampling: the batched inference (done at the end of the last iteration), the
         // exploration noise, then the forward model.
