@@ -395,11 +395,17 @@ pub fn run_range(
         ),
     )?;
 
-    // The numerical solver from the home pose, and from EMSSL's answers.
+    // The numerical solver from the home pose, and from EMSSL's answers (whose training and
+    // inference count towards the refined answers).
     let home = vec![vec![0.0; robot.dof()]; targets.len()];
-    for (method, starts, dls, extra_s) in [
-        ("DLS from home", &home, &cfg.dls, 0.0),
-        ("EMSSL + DLS", &emssl_joints, &cfg.refine, solve_s),
+    for (method, starts, dls, (before_train_s, before_solve_s)) in [
+        ("DLS from home", &home, &cfg.dls, (0.0, 0.0)),
+        (
+            "EMSSL + DLS",
+            &emssl_joints,
+            &cfg.refine,
+            (train_s, solve_s),
+        ),
     ] {
         let mut solutions = Vec::new();
         let s = timed(&mut || solutions = solve_batch(&robot.chain, targets, starts, &ranges, dls));
@@ -413,8 +419,8 @@ pub fn run_range(
         add(
             method,
             &joints,
-            if extra_s > 0.0 { train_s } else { 0.0 },
-            s + extra_s,
+            before_train_s,
+            s + before_solve_s,
             format!(
                 "{:.1}% within {} mm, {mean_iterations:.1} iterations on average (cap {})",
                 100.0 * converged as f64 / targets.len().max(1) as f64,
