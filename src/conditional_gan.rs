@@ -60,15 +60,13 @@ pub fn train_gan(data: &IkData, cfg: &GanConfig, device: &Device) -> Result<Gene
     let tdev = autodiff_device(device, cfg.fit.seed);
     let dof = data.joints[0].len();
     let train = data.train();
-    let positions: Vec<f32> = data.positions[train.clone()]
-        .iter()
-        .flat_map(|p| data.normalise_position(p))
-        .collect();
-    let joints: Vec<f32> = data.joints[train]
-        .iter()
-        .flat_map(|q| data.normalise_joints(q))
-        .collect();
-    let set = row_set(positions, 3, joints, dof, &tdev);
+    let set = row_set(
+        data.position_rows(&data.positions[train.clone()]),
+        3,
+        data.joint_rows(&data.joints[train]),
+        dof,
+        &tdev,
+    );
     let mut generator = InverseModelConfig {
         inputs: 3 + cfg.noise,
         hidden: cfg.generator_hidden.clone(),
@@ -137,11 +135,7 @@ impl Generator {
         let mut out = Vec::with_capacity(positions.len());
         for (c, part) in positions.chunks(batch.max(1)).enumerate() {
             let n = part.len();
-            let p: Vec<f32> = part
-                .iter()
-                .flat_map(|p| data.normalise_position(p))
-                .collect();
-            let p = Tensor::from_data(TensorData::new(p, [n, 3]), device);
+            let p = Tensor::from_data(TensorData::new(data.position_rows(part), [n, 3]), device);
             let z = noise(n, self.noise, seed ^ ((c as u64) << 20), device);
             let q = self.model.forward(Tensor::cat(vec![p, z], 1));
             let [_, dof] = q.dims();

@@ -44,18 +44,7 @@ pub fn dsl(
     let tdev = autodiff_device(device, fit_cfg.seed);
     let dof = data.joints[0].len();
     let train = data.train();
-    let normalised_positions = |r: std::ops::Range<usize>| -> Vec<f32> {
-        data.positions[r]
-            .iter()
-            .flat_map(|p| data.normalise_position(p))
-            .collect()
-    };
-    let normalised_joints = |r: std::ops::Range<usize>| -> Vec<f32> {
-        data.joints[r]
-            .iter()
-            .flat_map(|q| data.normalise_joints(q))
-            .collect()
-    };
+    let positions = data.position_rows(&data.positions[train.clone()]);
     // Phase 1: the forward model on (joints -> position) of the random data.
     let forward_cfg = InverseModelConfig {
         inputs: dof,
@@ -64,9 +53,9 @@ pub fn dsl(
         sigmoid_output: false,
     };
     let set = row_set(
-        normalised_joints(train.clone()),
+        data.joint_rows(&data.joints[train]),
         dof,
-        normalised_positions(train.clone()),
+        positions.clone(),
         3,
         &tdev,
     );
@@ -85,7 +74,6 @@ pub fn dsl(
     // Phase 2: the inverse model through the frozen forward model: inputs and targets are the
     // desired positions.
     let frozen = forward.no_grad();
-    let positions = normalised_positions(train);
     let set = row_set(positions.clone(), 3, positions, 3, &tdev);
     let (inverse, _) = fit_set(
         model_cfg.init(&tdev, fit_cfg.seed)?,
@@ -116,10 +104,7 @@ fn forward_test_error(forward: &Mlp, data: &IkData, device: &Device) -> f64 {
     use burn::tensor::{Tensor, TensorData};
     let test = data.test();
     let dof = data.joints[0].len();
-    let joints: Vec<f32> = data.joints[test.clone()]
-        .iter()
-        .flat_map(|q| data.normalise_joints(q))
-        .collect();
+    let joints = data.joint_rows(&data.joints[test.clone()]);
     let n = test.len();
     let out = forward
         .forward(Tensor::from_data(TensorData::new(joints, [n, dof]), device))

@@ -10,7 +10,7 @@ use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
 use crate::ik_comparison::{CurveRow, IkComparisonConfig, write_curves};
 use crate::ik_data::IkData;
-use crate::inverse_learning::{EmsslConfig, EmsslIteration, emssl};
+use crate::inverse_learning::{EmsslConfig, EmsslIteration, StopRule, emssl};
 use crate::robot::Robot;
 
 /// Table II's config with `iterations` EMSSL iterations and no stopping.
@@ -28,20 +28,11 @@ pub fn config(base: &IkComparisonConfig, iterations: usize) -> IkComparisonConfi
 
 /// The iteration at which `rule`'s stopping test would have fired on `curve`, if it did.
 pub fn stop_iteration(curve: &[EmsslIteration], rule: &EmsslConfig) -> Option<usize> {
-    let mut best = f64::INFINITY;
-    let mut since = 0;
-    for c in curve {
-        if c.train_reach_cm < best {
-            best = c.train_reach_cm;
-            since = 0;
-        } else {
-            since += 1;
-        }
-        if c.disagreement < rule.agreement || since >= rule.patience {
-            return Some(c.iteration);
-        }
-    }
-    None
+    let mut stop = StopRule::default();
+    curve
+        .iter()
+        .find(|c| stop.observe(c, rule).1)
+        .map(|c| c.iteration)
 }
 
 /// Run the curve for every range of `cfg` (stopping off); `rule` is the stopping rule to

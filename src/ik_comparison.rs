@@ -21,7 +21,7 @@ use crate::conditional_gan::{GanConfig, train_gan};
 use crate::device::DeviceChoice;
 use crate::distal_learning::{DistalConfig, dsl};
 use crate::error::{Error, Result};
-use crate::ik_data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
+use crate::ik_data::{DistanceErrors, IkData, IkDataConfig, distances};
 use crate::inverse_learning::{EmsslConfig, EmsslIteration, FitConfig, drl, emssl, predict};
 use crate::inverse_model::InverseModelConfig;
 use crate::numerical_ik::{DlsConfig, solve_batch};
@@ -191,15 +191,15 @@ fn paper_reference(method: &str, range_deg: f64) -> Option<f64> {
     Some(values[column])
 }
 
-/// Write answers as CSV: target x, y, z (m), joints q1.. (rad), reached x, y, z (m).
+/// Write answers as CSV: target x, y, z (m), joints q1.. (rad), reached x, y, z (m) (where the
+/// forward kinematics of the joints puts the end effector).
 pub fn write_predictions(
     path: &Path,
-    robot: &Robot,
     targets: &[Point3<f64>],
     joints: &[Vec<f64>],
+    reached: &[Point3<f64>],
 ) -> Result<()> {
-    let reached = robot.chain.end_effector_batch(joints);
-    let dof = robot.dof();
+    let dof = joints.first().map_or(0, Vec::len);
     write_atomic(path, |w| {
         let io = |e| Error::io(path, e);
         let qs: Vec<String> = (1..=dof).map(|k| format!("q{k}")).collect();
@@ -209,7 +209,7 @@ pub fn write_predictions(
             qs.join(",")
         )
         .map_err(io)?;
-        for ((t, q), r) in targets.iter().zip(joints).zip(&reached) {
+        for ((t, q), r) in targets.iter().zip(joints).zip(reached) {
             let q: Vec<String> = q.iter().map(|v| format!("{v:.9}")).collect();
             writeln!(
                 w,
@@ -263,13 +263,14 @@ pub fn run_range(
             .filter(|w| !w.is_empty())
             .collect::<Vec<_>>()
             .join("_");
+        let reached = robot.chain.end_effector_batch(joints);
         write_predictions(
             &pred_dir.join(format!("{file}.csv")),
-            robot,
             targets,
             joints,
+            &reached,
         )?;
-        let e = DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, joints));
+        let e = DistanceErrors::from_metres(&distances(targets, &reached));
         rows.push(IkRow {
             robot: robot_name.to_string(),
             range_deg,

@@ -117,6 +117,22 @@ impl IkData {
         q.iter().map(|&v| ((v - lo) / (hi - lo)) as f32).collect()
     }
 
+    /// `positions` normalised, row after row (`[n * 3]`, the networks' input layout).
+    pub fn position_rows(&self, positions: &[Point3<f64>]) -> Vec<f32> {
+        positions
+            .iter()
+            .flat_map(|p| self.normalise_position(p))
+            .collect()
+    }
+
+    /// `joints` normalised, row after row (`[n * dof]`).
+    pub fn joint_rows(&self, joints: &[Vec<f64>]) -> Vec<f32> {
+        joints
+            .iter()
+            .flat_map(|q| self.normalise_joints(q))
+            .collect()
+    }
+
     /// The inverse of [`IkData::normalise_joints`].
     pub fn joints_from_normalised(&self, q: &[f32]) -> Vec<f64> {
         let [lo, hi] = self.range;
@@ -162,10 +178,14 @@ pub fn reach_errors(
     targets: &[Point3<f64>],
     joints: &[Vec<f64>],
 ) -> Vec<f64> {
-    let reached = chain.end_effector_batch(joints);
+    distances(targets, &chain.end_effector_batch(joints))
+}
+
+/// Distances (m) between `targets` and the positions `reached`, pair by pair.
+pub fn distances(targets: &[Point3<f64>], reached: &[Point3<f64>]) -> Vec<f64> {
     targets
         .iter()
-        .zip(&reached)
+        .zip(reached)
         .map(|(t, r)| (t - r).norm())
         .collect()
 }

@@ -18,7 +18,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Point3;
 
 use crate::error::Result;
-use crate::ik_data::{DistanceErrors, IkData, reach_errors};
+use crate::ik_data::{DistanceErrors, IkData, distances, reach_errors};
 use crate::inverse_model::{InverseModelConfig, Mlp};
 use crate::kinematics::KinematicChain;
 use burn::optim::{AdamConfig, ModuleOptimizer};
@@ -67,11 +67,10 @@ impl FitConfig {
 
 /// Normalised positions `[n, 3]` of `positions`.
 fn position_tensor(data: &IkData, positions: &[Point3<f64>], device: &Device) -> Tensor<2> {
-    let v: Vec<f32> = positions
-        .iter()
-        .flat_map(|p| data.normalise_position(p))
-        .collect();
-    Tensor::from_data(TensorData::new(v, [positions.len(), 3]), device)
+    Tensor::from_data(
+        TensorData::new(data.position_rows(positions), [positions.len(), 3]),
+        device,
+    )
 }
 
 /// The mean squared error between the model's outputs and the batch's targets.
@@ -140,15 +139,13 @@ pub fn fit(
     device: &Device,
 ) -> Result<(Mlp, ModuleOptimizer)> {
     let dof = joints.first().map_or(0, Vec::len);
-    let inputs: Vec<f32> = positions
-        .iter()
-        .flat_map(|p| data.normalise_position(p))
-        .collect();
-    let targets: Vec<f32> = joints
-        .iter()
-        .flat_map(|q| data.normalise_joints(q))
-        .collect();
-    let set = row_set(inputs, 3, targets, dof, device);
+    let set = row_set(
+        data.position_rows(positions),
+        3,
+        data.joint_rows(joints),
+        dof,
+        device,
+    );
     fit_set(model, optim, &set, cfg, label, mse)
 }
 
@@ -281,8 +278,39 @@ pub struct EmsslIteration {
     pub training_seconds: f64,
 }
 
-/// Perturb normalised `joints` (radians) with Gaussian noise of `sigma` (normalised units),
-/// clamped to the range.
+/// EMSSL's stopping rule followed iteration by iteration: the agreement threshold, or
+/// `patience` iterations without a new minimum of the reach error on the training goals.
+pub struct StopRule {
+    best_reach_cm: f64,
+    since_best: usize,
+}
+
+impl Default for StopRule {
+    fn default() -> Self {
+        StopRule {
+            best_reach_cm: f64::INFINITY,
+            since_best: 0,
+        }
+    }
+}
+
+impl StopRule {
+    /// Take in one iteration: `(whether it is the best so far, whether the rule stops now)`.
+    pub fn observe(&mut self, it: &EmsslIteration, cfg: &EmsslConfig) -> (bool, bool) {
+        let improved = it.train_reach_cm < self.best_reach_cm;
+        if improved {
+            self.best_reach_cm = it.train_reach_cm;
+            self.since_best = 0;
+        } else {
+            self.since_best += 1;
+        }
+        let stop = it.disagreement < cfg.agreement || self.since_best >= cfg.patience;
+        (improved, stop)
+    }
+}
+
+/// Perturb `joints` (radians, within `range`) with Gaussian noise of standard deviation `sigma`
+/// in normalised units (1 = the whole range), clamped to the range.
 fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64) {
     if sigma <= 0.0 {
         return;
@@ -327,8 +355,8 @@ pub fn emssl(
     let mut optim = AdamConfig::new().init();
     let desired = &data.positions[data.train()];
     let mut curve: Vec<EmsslIteration> = Vec::new();
-    let mut best: Option<(f64, Mlp)> = None;
-    let mut since_best = 0;
+    let mut best: Option<Mlp> = None;
+    let mut rule = StopRule::default();
     // The answers for the desired positions: the first sampling pass, and after each
     // iteration both its agreement check and the next iteration's sampling.
     let t0 = std::time::Instant::now();
@@ -388,13 +416,8 @@ pub fn emssl(
             device,
         );
         let disagreement = disagreement(&answers, &back, data.range);
-        let train_reach_cm = 100.0
-            * desired
-                .iter()
-                .zip(&clean_reached)
-                .map(|(d, r)| (d - r).norm())
-                .sum::<f64>()
-            / desired.len().max(1) as f64;
+        let train_reach_cm =
+            DistanceErrors::from_metres(&distances(desired, &clean_reached)).mean_cm;
         let (test, _) = test_errors(&valid, chain, data, fit_cfg.inference_batch, device);
         curve.push(EmsslIteration {
             iteration,
@@ -406,16 +429,14 @@ pub fn emssl(
             sampling_seconds,
             training_seconds,
         });
-        if best.as_ref().is_none_or(|(d, _)| train_reach_cm < *d) {
-            best = Some((train_reach_cm, valid));
-            since_best = 0;
-        } else {
-            since_best += 1;
+        let (improved, stop) = rule.observe(curve.last().expect("just pushed"), cfg);
+        if improved {
+            best = Some(valid);
         }
-        if disagreement < cfg.agreement || since_best >= cfg.patience {
+        if stop {
             break;
         }
     }
-    let model = best.map_or_else(|| model.valid(), |(_, m)| m);
+    let model = best.unwrap_or_else(|| model.valid());
     Ok((model, curve))
 }

@@ -269,7 +269,8 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
     let path = dir.join("p.csv");
     let targets = &data.positions[data.test()];
     let joints = &data.joints[..targets.len()];
-    selfmodel::ik_comparison::write_predictions(&path, &robot, targets, joints).unwrap();
+    let reached = robot.chain.end_effector_batch(joints);
+    selfmodel::ik_comparison::write_predictions(&path, targets, joints, &reached).unwrap();
     let mut reader = csv::Reader::from_path(&path).unwrap();
     let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
     assert_eq!(header.len(), 3 + 6 + 3);
