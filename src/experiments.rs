@@ -355,6 +355,26 @@ pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String>
     crate::emssl_learning_curve::run(&cfg, &base.emssl, &robot, &name, dir, opts.device)
 }
 
+/// Table III and Figure 7 of the EMSSL paper: the sampling phase's time under each strategy.
+pub fn run_emssl_sampling_speed(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_sampling_speed")?;
+    let cfg = crate::sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
+    let (robot, name) = opts.ik_robot()?;
+    crate::sampling_speed::run(&cfg, &robot, &name, dir, opts.device)
+}
+
+/// Table IV of the EMSSL paper: adapting the inverse model to a changed arm, two approaches.
+pub fn run_emssl_adaptation(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_adaptation")?;
+    let cfg = crate::fast_adaptation::AdaptationConfig::preset(&opts.preset)?;
+    let robot = if opts.robot.is_some() || opts.urdf.is_some() {
+        Some(opts.ik_robot()?)
+    } else {
+        None
+    };
+    crate::fast_adaptation::run(&cfg, robot, dir, opts.device)
+}
+
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
     let rows = crate::table1::run(opts, dir)?;
     Ok(summary(&rows))
@@ -483,6 +503,24 @@ pub const EXPERIMENTS: &[Experiment] = &[
         in_table1: false,
         takes_robot: true,
         run: run_emssl_learning_curve,
+    },
+    Experiment {
+        name: "emssl_sampling_speed",
+        about: "EMSSL paper Table III and Figure 7: the sampling phase under batch inference and a parallel forward model, against the machine's peak",
+        default_dir: "reports/emssl_sampling_speed",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_sampling_speed,
+    },
+    Experiment {
+        name: "emssl_adaptation",
+        about: "EMSSL paper Table IV: fast adaptation to lengthened links (and a bent link) by learned link parameters or the changed arm itself, UR5 and arm4",
+        default_dir: "reports/emssl_adaptation",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_adaptation,
     },
     Experiment {
         name: "table1",

@@ -205,6 +205,77 @@ pub fn curves(
     save_rgb(path, &buf, w, h)
 }
 
+/// Lines of positive `(x, y)` points, one per run, both axes logarithmic (sweeps over batch
+/// sizes or thread counts), with a marker on every measured point.
+pub fn log_log_lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    register_font();
+    let (w, h) = (900u32, 500u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
+        let points = runs
+            .iter()
+            .flat_map(|(_, c)| c.iter())
+            .filter(|p| p.0 > 0.0 && p.1 > 0.0);
+        let range = |f: fn(&(f64, f64)) -> f64| {
+            let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
+            let hi = points.clone().map(f).fold(0.0, f64::max);
+            if lo.is_finite() && hi > 0.0 {
+                (lo, hi.max(lo * 1.01))
+            } else {
+                (1.0, 10.0)
+            }
+        };
+        let (x_lo, x_hi) = range(|p| p.0);
+        let (y_lo, y_hi) = range(|p| p.1);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (x_lo / 1.3..x_hi * 1.3).log_scale(),
+                (y_lo / 1.5..y_hi * 1.5).log_scale(),
+            )
+            .map_err(|e| draw_err(path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .label_style((FONT, 14))
+            .draw()
+            .map_err(|e| draw_err(path, e))?;
+        for (i, (label, curve)) in runs.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            let pts: Vec<(f64, f64)> = curve
+                .iter()
+                .copied()
+                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|e| draw_err(path, e))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                .map_err(|e| draw_err(path, e))?;
+        }
+        draw_legend(&mut chart, path)?;
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w, h)
+}
+
 /// Map an error in [0, 1] to blue (0) through yellow to red (1).
 fn error_color(e: f32) -> [u8; 3] {
     let e = e.clamp(0.0, 1.0);

@@ -238,6 +238,10 @@ pub struct EmsslConfig {
     #[serde(default)]
     pub exploration_floor: f64,
     pub learning_rate_decay: f64,
+    /// Also stop once the reach error on the training goals is at most this (cm): fast
+    /// adaptation's "back to where it was" rule. `None`: no such target.
+    #[serde(default)]
+    pub target_reach_cm: Option<f64>,
 }
 
 impl EmsslConfig {
@@ -253,6 +257,7 @@ impl EmsslConfig {
             exploration_decay: 0.9,
             exploration_floor: 0.0,
             learning_rate_decay: 0.9,
+            target_reach_cm: None,
         }
     }
 }
@@ -276,10 +281,15 @@ pub struct EmsslIteration {
     /// Seconds of the sampling phase (batched inference, noise, forward model) and of training.
     pub sampling_seconds: f64,
     pub training_seconds: f64,
+    /// Forward-model calls so far (the sampling pass and the noise-free reach check of every
+    /// iteration): with a real arm as the forward model, the moves it made.
+    #[serde(default)]
+    pub forward_calls: usize,
 }
 
 /// EMSSL's stopping rule followed iteration by iteration: the agreement threshold, or
-/// `patience` iterations without a new minimum of the reach error on the training goals.
+/// `patience` iterations without a new minimum of the reach error on the training goals, or
+/// that reach error at or below the target, where one is set.
 pub struct StopRule {
     best_reach_cm: f64,
     since_best: usize,
@@ -304,7 +314,9 @@ impl StopRule {
         } else {
             self.since_best += 1;
         }
-        let stop = it.disagreement < cfg.agreement || self.since_best >= cfg.patience;
+        let stop = it.disagreement < cfg.agreement
+            || self.since_best >= cfg.patience
+            || cfg.target_reach_cm.is_some_and(|t| it.train_reach_cm <= t);
         (improved, stop)
     }
 }
@@ -336,9 +348,9 @@ fn disagreement(a: &[Vec<f64>], b: &[Vec<f64>], range: [f64; 2]) -> f64 {
 }
 
 /// Embodied self-supervised learning (Algorithm 1) of an inverse model of `chain`, the forward
-/// model, on the desired training positions of `data`. Returns the model of the iteration with
-/// the lowest reach error on the desired training positions (self-supervised: the forward
-/// model and the goals, no test data) and the curve.
+/// model, on the desired training positions of `data`, from a fresh network. Returns the model
+/// of the iteration with the lowest reach error on the desired training positions
+/// (self-supervised: the forward model and the goals, no test data) and the curve.
 ///
 /// The disagreement alone cannot pick the model: a network that answers nearly the same
 /// joints everywhere agrees with itself perfectly.
@@ -351,7 +363,26 @@ pub fn emssl(
     device: &Device,
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
     let tdev = autodiff_device(device, fit_cfg.seed);
-    let mut model = model_cfg.init(&tdev, fit_cfg.seed)?;
+    let model = model_cfg.init(&tdev, fit_cfg.seed)?;
+    emssl_from(model, &tdev, chain, chain, data, fit_cfg, cfg, device)
+}
+
+/// EMSSL iterations from `model` (on the autodiff device `tdev`; a trained inference model
+/// comes back with `.train()`), with `forward` as the forward model, on the desired training
+/// positions of `data`. The test errors are those of `arm`, the arm the answers are for (the
+/// forward model itself, or the real arm when the forward model is a learned stand-in).
+#[allow(clippy::too_many_arguments)]
+pub fn emssl_from(
+    model: Mlp,
+    tdev: &Device,
+    forward: &KinematicChain,
+    arm: &KinematicChain,
+    data: &IkData,
+    fit_cfg: &FitConfig,
+    cfg: &EmsslConfig,
+    device: &Device,
+) -> Result<(Mlp, Vec<EmsslIteration>)> {
+    let mut model = model;
     let mut optim = AdamConfig::new().init();
     let desired = &data.positions[data.train()];
     let mut curve: Vec<EmsslIteration> = Vec::new();
@@ -382,7 +413,7 @@ pub fn emssl(
             sigma,
             fit_cfg.seed ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
         );
-        let reached = chain.end_effector_batch(&tried);
+        let reached = forward.end_effector_batch(&tried);
         let sampling_seconds = inference_seconds + t0.elapsed().as_secs_f64();
         // Training on the self-generated pairs (reached -> joints tried).
         let t0 = std::time::Instant::now();
@@ -399,7 +430,7 @@ pub fn emssl(
             &tried,
             &fit_iter,
             &format!("EMSSL iteration {iteration}"),
-            &tdev,
+            tdev,
         )?;
         let training_seconds = t0.elapsed().as_secs_f64();
         let valid = model.valid();
@@ -407,7 +438,7 @@ pub fn emssl(
         let t0 = std::time::Instant::now();
         answers = predict(&valid, data, desired, fit_cfg.inference_batch, device);
         inference_seconds = t0.elapsed().as_secs_f64();
-        let clean_reached = chain.end_effector_batch(&answers);
+        let clean_reached = forward.end_effector_batch(&answers);
         let back = predict(
             &valid,
             data,
@@ -418,7 +449,7 @@ pub fn emssl(
         let disagreement = disagreement(&answers, &back, data.range);
         let train_reach_cm =
             DistanceErrors::from_metres(&distances(desired, &clean_reached)).mean_cm;
-        let (test, _) = test_errors(&valid, chain, data, fit_cfg.inference_batch, device);
+        let (test, _) = test_errors(&valid, arm, data, fit_cfg.inference_batch, device);
         curve.push(EmsslIteration {
             iteration,
             exploration: sigma,
@@ -428,6 +459,7 @@ pub fn emssl(
             disagreement,
             sampling_seconds,
             training_seconds,
+            forward_calls: 2 * desired.len() * iteration,
         });
         let (improved, stop) = rule.observe(curve.last().expect("just pushed"), cfg);
         if improved {

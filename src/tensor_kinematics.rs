@@ -34,6 +34,8 @@ pub struct TensorChain {
     base: Isometry3<f64>,
     links: usize,
     dof: usize,
+    tip_link: usize,
+    tip_offset: [f32; 3],
 }
 
 fn rotation_rows(m: &Matrix3<f64>) -> [f32; 9] {
@@ -67,7 +69,27 @@ impl TensorChain {
             base: chain.base,
             links: chain.links.len(),
             dof: chain.dof(),
+            tip_link: chain.tip_link,
+            tip_offset: chain.tip_offset.coords.map(|v| v as f32).into(),
         }
+    }
+
+    /// Every joint's origin as rows: rotations `[J * 9]` (row-major) and translations
+    /// `[J * 3]` (metres), and the end-effector offset `[3]`: the constants
+    /// [`TensorChain::end_effector_with`] takes as tensors.
+    pub fn origin_rows(&self) -> (Vec<f32>, Vec<f32>, [f32; 3]) {
+        (
+            self.joints.iter().flat_map(|j| j.origin_rotation).collect(),
+            self.joints
+                .iter()
+                .flat_map(|j| j.origin_translation)
+                .collect(),
+            self.tip_offset,
+        )
+    }
+
+    pub fn joint_count(&self) -> usize {
+        self.joints.len()
     }
 
     pub fn links(&self) -> usize {
@@ -81,6 +103,40 @@ impl TensorChain {
     /// World poses of every link: rotations `[B, links, 3, 3]` and translations
     /// `[B, links, 3]` (metres) for joint values `q` `[B, dof]` (SI).
     pub fn link_frames(&self, q: Tensor<2>) -> (Tensor<4>, Tensor<3>) {
+        let device = q.device();
+        let (r, t, _) = self.origin_rows();
+        let n = self.joints.len();
+        let origin_r = Tensor::<3>::from_data(TensorData::new(r, [n, 3, 3]), &device);
+        let origin_t = Tensor::<2>::from_data(TensorData::new(t, [n, 3]), &device);
+        let (r, t) = self.frames_with(q, origin_r, origin_t);
+        (Tensor::stack(r, 1), Tensor::stack(t, 1))
+    }
+
+    /// End-effector positions `[B, 3]` (metres) for joint values `q` `[B, dof]` with the
+    /// joint origins and the end-effector offset given as tensors (learnable link parameters):
+    /// origin rotations `origin_r` `[J, 3, 3]`, translations `origin_t` `[J, 3]`, in the
+    /// order of [`TensorChain::origin_rows`], and the offset `tip` `[1, 3]`.
+    pub fn end_effector_with(
+        &self,
+        q: Tensor<2>,
+        origin_r: Tensor<3>,
+        origin_t: Tensor<2>,
+        tip: Tensor<2>,
+    ) -> Tensor<2> {
+        let [b, _] = q.dims();
+        let (mut r, mut t) = self.frames_with(q, origin_r, origin_t);
+        let r = r.swap_remove(self.tip_link);
+        let t = t.swap_remove(self.tip_link);
+        t + apply(r, tip.repeat_dim(0, b))
+    }
+
+    /// Every link's world rotation `[B, 3, 3]` and translation `[B, 3]`, link by link.
+    fn frames_with(
+        &self,
+        q: Tensor<2>,
+        origin_r: Tensor<3>,
+        origin_t: Tensor<2>,
+    ) -> (Vec<Tensor<3>>, Vec<Tensor<2>>) {
         let [b, dof] = q.dims();
         assert_eq!(
             dof, self.dof,
@@ -102,12 +158,17 @@ impl TensorChain {
             rotations[l] = Some(matrix(base_r));
             translations[l] = Some(vector(base_t));
         }
-        for joint in &self.joints {
+        for (i, joint) in self.joints.iter().enumerate() {
             let parent_r = rotations[joint.parent].clone().expect("parent first");
             let parent_t = translations[joint.parent].clone().expect("parent first");
+            let own_r = origin_r
+                .clone()
+                .slice([i..i + 1, 0..3, 0..3])
+                .repeat_dim(0, b);
+            let own_t = origin_t.clone().slice([i..i + 1, 0..3]).repeat_dim(0, b);
             // Joint frame in the world: parent · origin.
-            let frame_r = parent_r.clone().matmul(matrix(joint.origin_rotation));
-            let frame_t = parent_t + apply(parent_r, vector(joint.origin_translation));
+            let frame_r = parent_r.clone().matmul(own_r);
+            let frame_t = parent_t + apply(parent_r, own_t);
             let value = joint
                 .value
                 .map(|k| q.clone().slice([0..b, k..k + 1]).reshape([b, 1, 1]));
@@ -131,9 +192,10 @@ impl TensorChain {
             rotations[joint.child] = Some(child_r);
             translations[joint.child] = Some(child_t);
         }
-        let r: Vec<Tensor<3>> = rotations.into_iter().map(|r| r.expect("set")).collect();
-        let t: Vec<Tensor<2>> = translations.into_iter().map(|t| t.expect("set")).collect();
-        (Tensor::stack(r, 1), Tensor::stack(t, 1))
+        (
+            rotations.into_iter().map(|r| r.expect("set")).collect(),
+            translations.into_iter().map(|t| t.expect("set")).collect(),
+        )
     }
 }
 

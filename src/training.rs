@@ -118,7 +118,7 @@ struct CheckpointState {
 }
 
 /// Write a burnpack file to a temporary name, then rename it into place.
-fn save_renamed(
+pub(crate) fn save_renamed(
     path: &Path,
     write: impl FnOnce(&Path) -> std::result::Result<(), burn::store::RecordError>,
 ) -> Result<()> {
