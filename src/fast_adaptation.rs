@@ -303,7 +303,7 @@ fn changed_data(data: &IkData, changed: &KinematicChain) -> IkData {
 }
 
 /// Adapt one robot to every change with both approaches.
-fn adapt_robot(
+pub fn adapt_robot(
     cfg: &AdaptationConfig,
     robot: &Robot,
     robot_name: &str,

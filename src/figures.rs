@@ -217,48 +217,60 @@ pub fn log_log_lines(
     register_font();
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
+    // Plotted as log10 values on linear axes, labelled with the values themselves: every
+    // tick gets a label, not only the decades.
+    let logs: Vec<(String, Vec<(f64, f64)>)> = runs
+        .iter()
+        .map(|(l, c)| {
+            let pts = c
+                .iter()
+                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+                .map(|p| (p.0.log10(), p.1.log10()))
+                .collect();
+            (l.clone(), pts)
+        })
+        .collect();
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
-        let points = runs
-            .iter()
-            .flat_map(|(_, c)| c.iter())
-            .filter(|p| p.0 > 0.0 && p.1 > 0.0);
+        let points = logs.iter().flat_map(|(_, c)| c.iter());
         let range = |f: fn(&(f64, f64)) -> f64| {
             let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
-            let hi = points.clone().map(f).fold(0.0, f64::max);
-            if lo.is_finite() && hi > 0.0 {
-                (lo, hi.max(lo * 1.01))
+            let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
+            if lo.is_finite() && hi.is_finite() {
+                let pad = ((hi - lo) * 0.08).max(0.05);
+                (lo - pad, hi + pad)
             } else {
-                (1.0, 10.0)
+                (0.0, 1.0)
             }
         };
         let (x_lo, x_hi) = range(|p| p.0);
         let (y_lo, y_hi) = range(|p| p.1);
+        let value = |v: &f64| {
+            let x = 10f64.powf(*v);
+            let digits = (2 - x.log10().floor() as i32).max(0) as usize;
+            format!("{x:.digits$}")
+        };
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 20))
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(
-                (x_lo / 1.3..x_hi * 1.3).log_scale(),
-                (y_lo / 1.5..y_hi * 1.5).log_scale(),
-            )
+            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
             .x_desc(x_desc)
             .y_desc(y_desc)
+            .x_labels(10)
+            .y_labels(10)
+            .x_label_formatter(&value)
+            .y_label_formatter(&value)
             .label_style((FONT, 14))
             .draw()
             .map_err(|e| draw_err(path, e))?;
-        for (i, (label, curve)) in runs.iter().enumerate() {
+        for (i, (label, pts)) in logs.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
-            let pts: Vec<(f64, f64)> = curve
-                .iter()
-                .copied()
-                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
-                .collect();
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
                 .map_err(|e| draw_err(path, e))?
