@@ -202,6 +202,11 @@ pub struct ExperimentArgs {
     /// the origin; the end effector is the origin of the last link of its longest chain).
     #[arg(long, value_name = "PATH", conflicts_with = "robot")]
     pub urdf: Option<PathBuf>,
+    /// emssl_sampling_speed only: the forward model's per-call latencies to measure, instead
+    /// of the preset's: none, sleep:US (waiting on a real arm) or spin:US (a CPU-bound
+    /// simulator), comma-separated, e.g. `--latency none,spin:200`.
+    #[arg(long, value_delimiter = ',', value_name = "LATENCY")]
+    pub latency: Option<Vec<crate::sampling_pass::Latency>>,
     /// table1 only: gather the rows the experiments wrote into their own folders under
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]
@@ -232,6 +237,11 @@ impl ExperimentArgs {
                 "--robot and --urdf apply to the inverse-kinematics experiments only, not {name}"
             )));
         }
+        if self.latency.is_some() && name != "emssl_sampling_speed" {
+            return Err(crate::Error::Config(format!(
+                "--latency applies to emssl_sampling_speed only, not {name}"
+            )));
+        }
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
@@ -244,6 +254,7 @@ impl ExperimentArgs {
             reuse_root: self.reuse.then(|| PathBuf::from(".")),
             robot: self.robot,
             urdf: self.urdf.clone(),
+            latencies: self.latency.clone(),
         };
         let dir = self
             .out

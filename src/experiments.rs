@@ -37,6 +37,8 @@ pub struct RunOptions {
     /// The arm of the inverse-kinematics experiments: a built-in one or a URDF (default ur5).
     pub robot: Option<crate::cli::BuiltinRobot>,
     pub urdf: Option<std::path::PathBuf>,
+    /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
+    pub latencies: Option<Vec<crate::sampling_pass::Latency>>,
 }
 
 impl RunOptions {
@@ -51,6 +53,7 @@ impl RunOptions {
             reuse_root: None,
             robot: None,
             urdf: None,
+            latencies: None,
         }
     }
 
@@ -358,7 +361,10 @@ pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String>
 /// Table III and Figure 7 of the EMSSL paper: the sampling phase's time under each strategy.
 pub fn run_emssl_sampling_speed(opts: &RunOptions, dir: &Path) -> Result<String> {
     reject_self_model_switches(opts, "emssl_sampling_speed")?;
-    let cfg = crate::sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
+    let mut cfg = crate::sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
+    if let Some(l) = &opts.latencies {
+        cfg.latencies = l.clone();
+    }
     let (robot, name) = opts.ik_robot()?;
     crate::sampling_speed::run(&cfg, &robot, &name, dir, opts.device)
 }

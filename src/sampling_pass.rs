@@ -53,6 +53,26 @@ impl Latency {
     }
 }
 
+impl std::str::FromStr for Latency {
+    type Err = String;
+
+    /// `none`, `sleep:US` or `spin:US` (microseconds per call).
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let us = |v: &str| {
+            v.parse::<u64>()
+                .map_err(|_| format!("\"{s}\": the microseconds must be a whole number"))
+        };
+        match s.split_once(':') {
+            None if s == "none" => Ok(Latency::None),
+            Some(("sleep", v)) => Ok(Latency::Sleep { us: us(v)? }),
+            Some(("spin", v)) => Ok(Latency::Spin { us: us(v)? }),
+            _ => Err(format!(
+                "\"{s}\" is not a latency (none, sleep:US or spin:US)"
+            )),
+        }
+    }
+}
+
 /// The forward model the sampling phase calls: a kinematic chain and a per-call latency.
 #[derive(Clone, Copy, Debug)]
 pub struct ForwardModel<'a> {

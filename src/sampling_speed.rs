@@ -128,6 +128,9 @@ pub struct SpeedRow {
     /// The paper's Table III (6-core i7-8700 and a GPU; its forward model unnamed).
     pub paper_seconds: Option<f64>,
     pub repeats: usize,
+    /// Cores of the machine the row was measured on.
+    #[serde(default)]
+    pub cores: usize,
     pub git_revision: String,
     pub device: String,
     pub preset: String,
@@ -283,6 +286,7 @@ pub fn run(
             percent_of_nominal_peak: cpu.as_ref().map(|c| 100.0 * gflops / c.theoretical_gflops),
             paper_seconds: paper,
             repeats: cfg.repeats,
+            cores,
             git_revision: crate::cli::git_revision(),
             device: device_choice.to_string(),
             preset: cfg.preset.clone(),
@@ -412,6 +416,19 @@ fn write_reports(
             "This machine has {cores} cores; the sweep goes to twice that. Machine: {machine}."
         ),
     )?;
+    draw_figures(dir)
+}
+
+/// Figure 7 from the sweeps' CSV files in `dir`: `sampling_time_vs_batch.png` and
+/// `sampling_time_vs_threads.png`, one line per forward-model latency.
+pub fn draw_figures(dir: &Path) -> Result<()> {
+    let read = |file: &str| -> Result<Vec<SpeedRow>> {
+        let path = dir.join(file);
+        csv::Reader::from_path(&path)
+            .and_then(|mut r| r.deserialize().collect())
+            .map_err(|e| Error::data(&path, format!("cannot read the sweep: {e}")))
+    };
+    let (batch_rows, thread_rows) = (read("batch_sweep.csv")?, read("thread_sweep.csv")?);
     let lines = |rows: &[SpeedRow], x: fn(&SpeedRow) -> usize| {
         let mut labels: Vec<String> = rows.iter().map(|r| r.latency.clone()).collect();
         labels.dedup();
@@ -427,7 +444,13 @@ fn write_reports(
             })
             .collect::<Vec<_>>()
     };
-    let targets = table.first().map_or(0, |r| r.targets);
+    let targets = batch_rows.first().map_or(0, |r| r.targets);
+    // Rows written before the `cores` column were measured here.
+    let cores = thread_rows
+        .iter()
+        .map(|r| r.cores)
+        .find(|&c| c > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     crate::figures::log_log_lines(
         &dir.join("sampling_time_vs_batch.png"),
         &format!(
@@ -435,7 +458,7 @@ fn write_reports(
         ),
         "inference batch size",
         "seconds per sampling pass (log)",
-        &lines(batch_rows, |r| r.inference_batch),
+        &lines(&batch_rows, |r| r.inference_batch),
     )?;
     crate::figures::log_log_lines(
         &dir.join("sampling_time_vs_threads.png"),
@@ -444,7 +467,7 @@ fn write_reports(
         ),
         "forward-model threads",
         "seconds per sampling pass (log)",
-        &lines(thread_rows, |r| r.threads),
+        &lines(&thread_rows, |r| r.threads),
     )
 }
 

@@ -119,6 +119,18 @@ fn switches_that_do_not_apply_fail_cleanly() {
         &["--urdf", d.join("nope.urdf").to_str().unwrap()],
     );
     assert_clean_failure(&out, &["nope.urdf"], d);
+    let out = run(
+        env!("CARGO_BIN_EXE_emssl_adaptation"),
+        &["--latency", "spin:50"],
+    );
+    assert_clean_failure(&out, &["--latency", "emssl_adaptation"], d);
+    // A malformed value is clap's error: it names the value and what a latency looks like.
+    let out = run(
+        env!("CARGO_BIN_EXE_emssl_sampling_speed"),
+        &["--latency", "spin:x"],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("spin:x"));
 }
 
 #[test]
