@@ -192,6 +192,8 @@ fn paper_reference(change: &ArmChange) -> Option<(f64, f64, usize)> {
 /// The base model and what it reached on the unchanged arm, cached in `dir/base_<robot>/`.
 struct Base {
     file: PathBuf,
+    /// The base model for inference (its trainable copies are loaded from `file`).
+    model: Mlp,
     train_reach_cm: f64,
     test: DistanceErrors,
 }
@@ -274,6 +276,7 @@ fn base_model(
     );
     Ok(Base {
         file,
+        model,
         train_reach_cm,
         test,
     })
@@ -324,13 +327,12 @@ pub fn adapt_robot(
         "stop at reach error on the training goals <= {target:.3} cm ({} x the base model's {:.3} cm on the unchanged arm), or {} iterations without a new best, or {} iterations",
         cfg.target_factor, base.train_reach_cm, cfg.emssl.patience, cfg.emssl.max_iterations
     );
-    let frozen = load(&model_cfg, &base.file, &device, cfg.base.fit.seed)?;
     let mut rows = Vec::new();
     let mut curves = Vec::new();
     for change in &cfg.changes {
         let changed = change.apply(&robot.chain)?;
         let cdata = changed_data(&data, &changed);
-        let (before, _) = test_errors(&frozen, &changed, &cdata, batch, &device);
+        let (before, _) = test_errors(&base.model, &changed, &cdata, batch, &device);
         let test_joints = &data.joints[data.test()];
         // Approach 1: the link parameters from a small sample, then EMSSL on that model.
         let t0 = std::time::Instant::now();

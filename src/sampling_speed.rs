@@ -292,8 +292,12 @@ pub fn run(
             preset: cfg.preset.clone(),
         }
     };
-    let total =
-        cfg.latencies.len() * (4 + cfg.batch_sweep.len() + cfg.thread_sweep.len().max(2 * cores));
+    let thread_sweep: Vec<usize> = if cfg.thread_sweep.is_empty() {
+        (1..=2 * cores).collect()
+    } else {
+        cfg.thread_sweep.clone()
+    };
+    let total = cfg.latencies.len() * (4 + cfg.batch_sweep.len() + thread_sweep.len());
     let bar = crate::training::progress_bar(total, "sampling speed");
     let step = |what: String| {
         bar.set_message(what);
@@ -322,11 +326,6 @@ pub fn run(
     // Figure 7.
     let mut batch_rows = Vec::new();
     let mut thread_rows = Vec::new();
-    let thread_sweep: Vec<usize> = if cfg.thread_sweep.is_empty() {
-        (1..=2 * cores).collect()
-    } else {
-        cfg.thread_sweep.clone()
-    };
     for &latency in &cfg.latencies {
         for &b in &cfg.batch_sweep {
             let strategy = Strategy {
