@@ -437,6 +437,32 @@ pub fn adapt_robot(
     Ok((rows, curves))
 }
 
+/// The rows (and curve rows) already in `dir` for robots other than `running`, of the same
+/// preset: a run of one robot (`--robot arm4`) adds its rows to the others' instead of
+/// replacing the table. Each row keeps the revision it was written at. None when `dir` has
+/// no table yet.
+fn rows_of_other_robots(
+    dir: &Path,
+    running: &[&str],
+    preset: &str,
+) -> Result<(Vec<AdaptationRow>, Vec<AdaptationCurveRow>)> {
+    let (table, curve) = (dir.join("results.csv"), dir.join("adaptation_curve.csv"));
+    if !table.exists() || !curve.exists() {
+        return Ok((Vec::new(), Vec::new()));
+    }
+    let rows: Vec<AdaptationRow> = crate::report::read_csv(&table)?;
+    let kept: Vec<AdaptationRow> = rows
+        .into_iter()
+        .filter(|r| r.preset == preset && !running.contains(&r.robot.as_str()))
+        .collect();
+    let curves: Vec<AdaptationCurveRow> = crate::report::read_csv(&curve)?;
+    let curves = curves
+        .into_iter()
+        .filter(|c| kept.iter().any(|r| r.robot == c.robot))
+        .collect();
+    Ok((kept, curves))
+}
+
 /// Run Table IV for every robot; writes `results.csv` (+ Markdown), `adaptation_curve.csv`,
 /// `adaptation_<robot>.png`, `config.json` and the cached base models. `robot` replaces the
 /// config's robots when given.
@@ -462,8 +488,8 @@ pub fn run(
             })
             .collect::<Result<_>>()?,
     };
-    let mut rows = Vec::new();
-    let mut curves = Vec::new();
+    let names: Vec<&str> = robots.iter().map(|(_, n)| n.as_str()).collect();
+    let (mut rows, mut curves) = rows_of_other_robots(dir, &names, &cfg.preset)?;
     for (robot, name) in &robots {
         let (r, c) = adapt_robot(cfg, robot, name, dir, device)?;
         rows.extend(r);
@@ -505,6 +531,7 @@ pub fn run(
     }
     Ok(rows
         .iter()
+        .filter(|r| names.contains(&r.robot.as_str()))
         .map(|r| {
             format!(
                 "{} {} approach {}: {:.2} -> {:.2} cm, target {}",

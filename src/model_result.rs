@@ -86,12 +86,7 @@ impl ModelResult {
 
 /// Read rows written by [`crate::report::write_csv`].
 pub fn read_results(path: &std::path::Path) -> crate::Result<Vec<ModelResult>> {
-    let mut reader = csv::Reader::from_path(path)
-        .map_err(|e| crate::Error::data(path, format!("cannot read results: {e}")))?;
-    reader
-        .deserialize()
-        .map(|r| r.map_err(|e| crate::Error::data(path, format!("bad results row: {e}"))))
-        .collect()
+    crate::report::read_csv(path)
 }
 
 /// The points of a Pareto plot: each row's test PSNR against its batch-1 inference speed, and

@@ -17,6 +17,13 @@ pub fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<()> {
     })
 }
 
+/// Read rows written by [`write_csv`].
+pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>> {
+    csv::Reader::from_path(path)
+        .and_then(|mut r| r.deserialize().collect())
+        .map_err(|e| Error::data(path, format!("cannot read CSV rows: {e}")))
+}
+
 /// A Markdown table of a CSV file (numbers with more than 4 decimals are rounded to 4).
 pub fn markdown_from_csv(path: &Path) -> Result<String> {
     let mut reader = csv::Reader::from_path(path)

@@ -421,12 +421,7 @@ fn write_reports(
 /// Figure 7 from the sweeps' CSV files in `dir`: `sampling_time_vs_batch.png` and
 /// `sampling_time_vs_threads.png`, one line per forward-model latency.
 pub fn draw_figures(dir: &Path) -> Result<()> {
-    let read = |file: &str| -> Result<Vec<SpeedRow>> {
-        let path = dir.join(file);
-        csv::Reader::from_path(&path)
-            .and_then(|mut r| r.deserialize().collect())
-            .map_err(|e| Error::data(&path, format!("cannot read the sweep: {e}")))
-    };
+    let read = |file: &str| -> Result<Vec<SpeedRow>> { crate::report::read_csv(&dir.join(file)) };
     let (batch_rows, thread_rows) = (read("batch_sweep.csv")?, read("thread_sweep.csv")?);
     let lines = |rows: &[SpeedRow], x: fn(&SpeedRow) -> usize| {
         let mut labels: Vec<String> = rows.iter().map(|r| r.latency.clone()).collect();
