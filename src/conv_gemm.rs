@@ -128,7 +128,7 @@ impl ConvGeometry {
 /// `i * row_stride + j * col_stride`. Only row-major and column-major matrices and their
 /// transposes can be made, so no two elements share a place.
 #[derive(Clone, Copy, Debug)]
-struct Layout {
+pub(crate) struct Layout {
     rows: usize,
     cols: usize,
     row_stride: usize,
@@ -136,7 +136,7 @@ struct Layout {
 }
 
 impl Layout {
-    fn row_major(rows: usize, cols: usize) -> Self {
+    pub(crate) fn row_major(rows: usize, cols: usize) -> Self {
         Layout {
             rows,
             cols,
@@ -155,7 +155,7 @@ impl Layout {
     }
 
     /// The transpose, over the same elements.
-    fn t(self) -> Self {
+    pub(crate) fn t(self) -> Self {
         Layout {
             rows: self.cols,
             cols: self.rows,
@@ -178,7 +178,7 @@ impl Layout {
 /// every shape and length checked. gemm copies `lhs` (after its own choice of orientation)
 /// into panels, fast when the panel runs along contiguous elements and one float at a time
 /// when not: the layouts the callers pass are chosen for that (measured).
-fn matmul(
+pub(crate) fn matmul(
     (dst, d): (&mut [f32], Layout),
     (lhs, l): (&[f32], Layout),
     (rhs, r): (&[f32], Layout),

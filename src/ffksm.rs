@@ -33,13 +33,16 @@ use crate::decoder_experiment::{DataSpec, device_set, host_targets, qualitative_
 use crate::device::DeviceChoice;
 use crate::error::{Error, Result};
 use crate::evaluation::{Predictions, Quality, iou, psnr_db, score};
+use crate::field_gradients::dense_step;
 use crate::figures::{GridRow, image_grid};
 use crate::model_result::{ModelResult, PaperReference};
 use crate::occupancy_field::{OccupancyField, OccupancyFieldConfig};
 use crate::preset::Preset;
 use crate::ray_marcher::{MarchConfig, render_dense, render_silhouette};
 use crate::report::write_table;
-use crate::training::{CheckpointPlan, TrainConfig, TrainLog, autodiff_device, train_watched};
+use crate::training::{
+    CheckpointPlan, StepLoss, TrainConfig, TrainLog, autodiff_device, train_watched,
+};
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -69,6 +72,19 @@ pub enum TrainMarcher {
     Skipping,
 }
 
+/// How a dense training step's gradients are computed. Both give the same gradients
+/// (`tests/ffksm.rs` compares them); they differ in speed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DenseGradients {
+    /// The hand-written step of [`crate::field_gradients`] on the CPU backends (about 2x
+    /// burn's graph on 2 cores); burn's autodiff on a GPU.
+    #[default]
+    HandWrittenOnCpu,
+    /// burn's autodiff through the dense marcher everywhere (the reference).
+    Autodiff,
+}
+
 /// Everything that defines one FFKSM run.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FfksmConfig {
@@ -83,6 +99,10 @@ pub struct FfksmConfig {
     pub curriculum: Curriculum,
     #[serde(default)]
     pub train_marcher: TrainMarcher,
+    /// How dense steps are differentiated (not part of a checkpoint's fingerprint: both paths
+    /// compute the same gradients, so a run may resume on the other).
+    #[serde(default)]
+    pub dense_gradients: DenseGradients,
     /// MSE weight of robot pixels (1: the code's plain MSE; the text's 5).
     pub robot_weight: f64,
     pub restart: Option<CollapseRestart>,
@@ -171,6 +191,7 @@ impl FfksmConfig {
                 crop: if quick { 16 } else { 50 },
             },
             train_marcher: TrainMarcher::Dense,
+            dense_gradients: DenseGradients::default(),
             robot_weight: 1.0,
             restart: None,
             data,
@@ -257,7 +278,7 @@ fn radians(angles_deg: &[f32]) -> [f64; 4] {
 /// The weighted MSE of `pred` `[rays]` against `truth` (host, `[rays]` in [0, 1]):
 /// `mean(w (pred − truth)²)` with `w = robot_weight` on robot pixels, 1 elsewhere (the
 /// paper's equation 10).
-fn weighted_mse(pred: Tensor<1>, truth: &[f32], robot_weight: f64) -> Tensor<1> {
+pub fn weighted_mse(pred: Tensor<1>, truth: &[f32], robot_weight: f64) -> Tensor<1> {
     let device = pred.device();
     let n = truth.len();
     let weights: Vec<f32> = truth
@@ -458,6 +479,7 @@ fn train_field(
     dir: &Path,
     resume: bool,
     device: &Device,
+    hand_written: bool,
 ) -> Result<(OccupancyField, TrainLog, usize, f64)> {
     let tdev = autodiff_device(device, cfg.train.seed);
     let train_set = device_set(data, train_range, host_targets(data, train_range), &tdev);
@@ -509,6 +531,25 @@ fn train_field(
             let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             let view = (&camera, radians(&a));
             let pred = match cfg.train_marcher {
+                TrainMarcher::Dense if hand_written => {
+                    train_evaluations
+                        .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
+                    train_steps.set(train_steps.get() + 1);
+                    let step = dense_step(
+                        m,
+                        view,
+                        pixels,
+                        &t,
+                        cfg.robot_weight,
+                        &cfg.march,
+                        Some(jitter),
+                        device,
+                    );
+                    return StepLoss::Computed {
+                        value: step.loss,
+                        gradients: step.gradients,
+                    };
+                }
                 TrainMarcher::Dense => {
                     train_evaluations
                         .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
@@ -537,7 +578,7 @@ fn train_field(
                 }
             };
             train_steps.set(train_steps.get() + 1);
-            weighted_mse(pred, &t, cfg.robot_weight)
+            StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
         };
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
             // The counts go beside each checkpoint (saved right after this), so a run stopped
@@ -637,8 +678,10 @@ pub fn run(
     };
     let camera = cfg.data.dataset.camera.clone();
     let pixels = camera.width * camera.height;
+    let hand_written = cfg.dense_gradients == DenseGradients::HandWrittenOnCpu
+        && matches!(device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
     let (field, log, restarts, train_evals) =
-        train_field(cfg, &data, &train_range, dir, resume, &device)?;
+        train_field(cfg, &data, &train_range, dir, resume, &device, hand_written)?;
     let params = field.num_params();
 
     // The training camera, both renderers.
@@ -728,6 +771,7 @@ pub fn run(
                     r.mean_evaluations(),
                     q.test_images,
                     match cfg.train_marcher {
+                        TrainMarcher::Dense if hand_written => "dense (hand-written gradients)",
                         TrainMarcher::Dense => "dense",
                         TrainMarcher::Skipping => "skipping",
                     },

@@ -190,6 +190,12 @@ impl OccupancyField {
     /// `Mᵀ` `[3, 3]` for row vectors, where `M` takes world points into the virtual frame of
     /// `angles` (built from [`crate::virtual_frame::to_virtual_reference`] on the unit axes).
     fn rotation(&self, angles: [f32; 4], device: &Device) -> Tensor<2> {
+        let m = self.rotation_rows(angles);
+        Tensor::from_data(TensorData::new(m.to_vec(), [3, 3]), device)
+    }
+
+    /// [`OccupancyField::rotation`] on the host, row-major.
+    pub(crate) fn rotation_rows(&self, angles: [f32; 4]) -> [f32; 9] {
         let (a0, a1) = (angles[0] as f64, angles[1] as f64);
         let mut m = [0f32; 9];
         for (col, e) in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
@@ -202,19 +208,34 @@ impl OccupancyField {
                 m[3 * col + k] = *value as f32;
             }
         }
-        Tensor::from_data(TensorData::new(m.to_vec(), [3, 3]), device)
+        m
+    }
+
+    /// The layers: the coordinate encoder's two, the kinematic encoder's two, then the
+    /// predictive module's (the last one the output).
+    pub fn layers(&self) -> (&[Linear], &[Linear], &[Linear]) {
+        (&self.coordinates, &self.kinematics, &self.predictive)
+    }
+
+    /// Frequency bands of both positional encodings.
+    pub fn bands(&self) -> usize {
+        self.bands
+    }
+
+    /// Whether a ReLU follows predictive layer `i` (every layer but the output, and the one
+    /// feeding the output only when the architecture has a ReLU there).
+    pub fn relu_after(&self, i: usize) -> bool {
+        let last = self.predictive.len() - 1;
+        i != last && (self.relu_before_output || i + 1 != last)
     }
 
     /// The predictive module after its first layer's affine map `x` `[n, hidden]`.
     fn predictive_rest(&self, mut x: Tensor<2>) -> Tensor<2> {
-        let last = self.predictive.len() - 1;
         for (i, layer) in self.predictive.iter().enumerate() {
             if i > 0 {
                 x = layer.forward(x);
             }
-            let is_output = i == last;
-            let feeds_output = i + 1 == last;
-            if !is_output && (self.relu_before_output || !feeds_output) {
+            if self.relu_after(i) {
                 x = relu(x);
             }
         }

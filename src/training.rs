@@ -310,12 +310,48 @@ impl<'a> Batcher<'a> {
     }
 }
 
+/// What a training step's loss function returns: the loss as a graph for burn's autodiff to
+/// differentiate, or its value with gradients computed some other way (FFKSM's hand-written
+/// dense step, [`crate::field_gradients`]). A closure that returns a `Tensor<1>` needs no
+/// change: it converts.
+pub enum StepLoss {
+    Graph(Tensor<1>),
+    Computed {
+        value: f64,
+        gradients: GradientsParams,
+    },
+}
+
+impl From<Tensor<1>> for StepLoss {
+    fn from(loss: Tensor<1>) -> Self {
+        StepLoss::Graph(loss)
+    }
+}
+
+impl StepLoss {
+    /// The loss (synchronises the device for a graph).
+    fn value(&self) -> f64 {
+        match self {
+            StepLoss::Graph(l) => l.clone().into_scalar::<f32>() as f64,
+            StepLoss::Computed { value, .. } => *value,
+        }
+    }
+
+    /// The gradients of `model`'s parameters.
+    fn gradients<M: Module>(self, model: &M) -> GradientsParams {
+        match self {
+            StepLoss::Graph(l) => GradientsParams::from_grads(l.backward(), model),
+            StepLoss::Computed { gradients, .. } => gradients,
+        }
+    }
+}
+
 /// Train `model` on `data` (both on an autodiff device) with `loss(model, batch)`.
 ///
 /// Returns the trained model and its log. With a [`CheckpointPlan`], saves every
 /// `cfg.checkpoint_every` steps and at the end, and resumes when asked. A non-finite loss
 /// stops the run with [`Error::Training`], keeping the last good checkpoint.
-pub fn train<M, L>(
+pub fn train<M, L, S>(
     model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
@@ -325,14 +361,15 @@ pub fn train<M, L>(
 ) -> Result<(M, TrainLog)>
 where
     M: Module,
-    L: Fn(&M, &Batch) -> Tensor<1>,
+    L: Fn(&M, &Batch) -> S,
+    S: Into<StepLoss>,
 {
     train_watched(model, data, cfg, checkpoint, label, loss, |_, _| Ok(()))
 }
 
 /// [`train`] with a watcher called after every step with the model and the steps done; an
 /// error from it stops training and is returned (FFKSM's restart on collapse uses this).
-pub fn train_watched<M, L, W>(
+pub fn train_watched<M, L, S, W>(
     model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
@@ -343,7 +380,8 @@ pub fn train_watched<M, L, W>(
 ) -> Result<(M, TrainLog)>
 where
     M: Module,
-    L: Fn(&M, &Batch) -> Tensor<1>,
+    L: Fn(&M, &Batch) -> S,
+    S: Into<StepLoss>,
     W: FnMut(&M, usize) -> Result<()>,
 {
     struct Watcher<W>(W);
@@ -391,7 +429,7 @@ pub fn progress_bar(steps: usize, label: &str) -> indicatif::ProgressBar {
 }
 
 /// [`train`] with [`TrainHooks`].
-pub fn train_with_hooks<M, L, H>(
+pub fn train_with_hooks<M, L, S, H>(
     model: M,
     data: &TrainSet,
     cfg: &TrainConfig,
@@ -402,7 +440,8 @@ pub fn train_with_hooks<M, L, H>(
 ) -> Result<(M, TrainLog)>
 where
     M: Module,
-    L: Fn(&M, &Batch) -> Tensor<1>,
+    L: Fn(&M, &Batch) -> S,
+    S: Into<StepLoss>,
     H: TrainHooks<M>,
 {
     let optim = AdamConfig::new().init();
@@ -415,7 +454,7 @@ where
 /// that trains one model on a sequence of datasets (EMSSL's iterations) keeps Adam's moments
 /// across them, as one optimiser created before the loop does in PyTorch.
 #[allow(clippy::too_many_arguments)]
-pub fn train_continuing<M, L, H>(
+pub fn train_continuing<M, L, S, H>(
     mut model: M,
     mut optim: ModuleOptimizer,
     data: &TrainSet,
@@ -427,7 +466,8 @@ pub fn train_continuing<M, L, H>(
 ) -> Result<(M, ModuleOptimizer, TrainLog)>
 where
     M: Module,
-    L: Fn(&M, &Batch) -> Tensor<1>,
+    L: Fn(&M, &Batch) -> S,
+    S: Into<StepLoss>,
     H: TrainHooks<M>,
 {
     if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
@@ -459,8 +499,8 @@ where
         let t0 = Instant::now();
         let batch = batcher.batch(step);
         let n = batch.inputs.dims()[0];
-        let l = loss(&model, &batch);
-        let value = l.clone().into_scalar::<f32>() as f64;
+        let step_loss: StepLoss = loss(&model, &batch).into();
+        let value = step_loss.value();
         if !value.is_finite() {
             bar.abandon();
             let kept = match checkpoint {
@@ -474,7 +514,7 @@ where
                 step + 1
             )));
         }
-        let mut grads = GradientsParams::from_grads(l.backward(), &model);
+        let mut grads = step_loss.gradients(&model);
         if let Some(max) = cfg.grad_clip_norm {
             clip_global_norm(&model, &mut grads, max);
         }

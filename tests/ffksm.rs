@@ -366,3 +366,188 @@ fn a_field_that_renders_black_is_restarted_then_given_up_on() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The hand-written dense training step against burn's autodiff through the dense marcher and
+/// the weighted MSE: the same loss and the same gradient for every parameter, for both
+/// architectures (with and without the ReLU before the output, both virtual frames), on the
+/// curriculum's crop and with the robot-pixel weight; and the same numbers bit for bit on one
+/// thread as on all of them.
+#[test]
+fn the_hand_written_dense_step_matches_autodiff() {
+    use burn::optim::GradientsParams;
+    use selfmodel::ffksm::{FfksmConfig, weighted_mse};
+    use selfmodel::field_gradients::dense_step;
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    use selfmodel::ray_marcher::{MarchConfig, render_silhouette};
+
+    let cfg = FfksmConfig::reimplementation("quick").unwrap();
+    let camera = cfg.data.dataset.camera.clone();
+    let (h, w) = (camera.height, camera.width);
+    let pixels: Vec<usize> = (0..90)
+        .map(|i| (h / 4 + i / 9) * w + w / 3 + 2 * (i % 9))
+        .collect();
+    let truth: Vec<f32> = values(pixels.len(), 5, 1.0)
+        .iter()
+        .map(|v| if *v > 0.3 { 1.0 } else { v.abs() as f32 * 0.2 })
+        .collect();
+    let march = MarchConfig {
+        samples: 24,
+        ..MarchConfig::paper()
+    };
+    let original = OccupancyFieldConfig {
+        bands: 4,
+        ..OccupancyFieldConfig::original()
+    };
+    let small_original = OccupancyFieldConfig {
+        encoder_width: 24,
+        predictive_hidden: vec![20, 12],
+        ..original
+    };
+    let fields = [OccupancyFieldConfig::quick(), small_original];
+    for (f, field_cfg) in fields.iter().enumerate() {
+        let dev = Device::flex();
+        let tdev = dev.clone().autodiff();
+        let field = field_cfg.init(&tdev, 3 + f as u64).unwrap();
+        let angles = [0.3, -0.4, 0.7, 1.1];
+        for (robot_weight, jitter) in [(1.0, Some(11u64)), (5.0, None)] {
+            let reference = {
+                let pred =
+                    render_silhouette(&field, (&camera, angles), &pixels, &march, jitter, &tdev);
+                weighted_mse(pred, &truth, robot_weight)
+            };
+            let loss_ref = reference.clone().into_scalar::<f32>() as f64;
+            let grads_ref = GradientsParams::from_grads(reference.backward(), &field);
+            let fast = dense_step(
+                &field,
+                (&camera, angles),
+                &pixels,
+                &truth,
+                robot_weight,
+                &march,
+                jitter,
+                &dev,
+            );
+            assert!(
+                (fast.loss - loss_ref).abs() <= 1e-5 * loss_ref.abs().max(1e-6),
+                "field {f}: loss {} against autodiff's {loss_ref}",
+                fast.loss
+            );
+            let (coordinates, kinematics, predictive) = field.layers();
+            let host1 = |t: Tensor<1>| t.into_data().try_into_vec::<f32>().unwrap();
+            let host2 = |t: Tensor<2>| t.into_data().try_into_vec::<f32>().unwrap();
+            let mut checked = 0;
+            for (l, layer) in coordinates
+                .iter()
+                .chain(kinematics)
+                .chain(predictive)
+                .enumerate()
+            {
+                let pairs = [
+                    (
+                        host2(grads_ref.get::<2>(layer.weight.id).unwrap()),
+                        host2(fast.gradients.get::<2>(layer.weight.id).unwrap()),
+                    ),
+                    (
+                        host1(grads_ref.get::<1>(layer.bias.as_ref().unwrap().id).unwrap()),
+                        host1(
+                            fast.gradients
+                                .get::<1>(layer.bias.as_ref().unwrap().id)
+                                .unwrap(),
+                        ),
+                    ),
+                ];
+                for (want, got) in pairs {
+                    assert_eq!(want.len(), got.len());
+                    let scale = want.iter().fold(0f32, |m, v| m.max(v.abs()));
+                    assert!(scale > 0.0, "field {f}, layer {l}: no gradient to compare");
+                    let worst = want
+                        .iter()
+                        .zip(&got)
+                        .fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+                    assert!(
+                        worst <= 2e-4 * scale,
+                        "field {f}, layer {l}, weight {robot_weight}: gradients differ by {worst} (largest {scale})"
+                    );
+                    checked += 1;
+                }
+            }
+            assert_eq!(checked, 2 * (4 + predictive.len()));
+            // One thread gives the same bits as all of them.
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap();
+            let single = pool.install(|| {
+                dense_step(
+                    &field,
+                    (&camera, angles),
+                    &pixels,
+                    &truth,
+                    robot_weight,
+                    &march,
+                    jitter,
+                    &dev,
+                )
+            });
+            assert_eq!(single.loss.to_bits(), fast.loss.to_bits());
+            let w0 = coordinates[0].weight.id;
+            assert_eq!(
+                host2(single.gradients.get::<2>(w0).unwrap()),
+                host2(fast.gradients.get::<2>(w0).unwrap())
+            );
+        }
+    }
+}
+
+/// Training with the hand-written dense step follows training with burn's autodiff: the
+/// same data, seed and schedule give the same loss curve (to float rounding while rounding is
+/// all that separates them) and the same test PSNR.
+#[test]
+fn training_with_the_hand_written_step_follows_autodiff() {
+    use selfmodel::device::DeviceChoice;
+    use selfmodel::ffksm::{DenseGradients, FfksmConfig};
+    let mut outcomes = Vec::new();
+    for path in [DenseGradients::Autodiff, DenseGradients::HandWrittenOnCpu] {
+        let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
+        cfg.train.steps = 80;
+        cfg.train.checkpoint_every = 0;
+        cfg.test_images = Some(3);
+        cfg.novel_views_deg = vec![];
+        cfg.dense_gradients = path;
+        let dir =
+            std::env::temp_dir().join(format!("selfmodel-ffksm-{path:?}-{}", std::process::id()));
+        outcomes.push(selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    let (a, b) = (&outcomes[0], &outcomes[1]);
+    assert!(
+        b.rows[0].note.contains("hand-written"),
+        "{}",
+        b.rows[0].note
+    );
+    assert!(
+        !a.rows[0].note.contains("hand-written"),
+        "{}",
+        a.rows[0].note
+    );
+    assert_eq!(a.log.curve.len(), b.log.curve.len());
+    let first = a.log.curve[0].1;
+    let last = a.log.curve.last().unwrap().1;
+    assert!(
+        last < 0.8 * first,
+        "autodiff did not learn: {first} -> {last}"
+    );
+    // The same to float rounding for 30 steps (measured: within 1e-7); after that Adam, which
+    // divides by the gradients' running size, amplifies the rounding of near-zero components
+    // (1e-3 apart by step 64), so later steps are only required to stay close.
+    for ((step, la), (_, lb)) in a.log.curve.iter().zip(&b.log.curve) {
+        let limit = if *step <= 30 { 1e-6 } else { 2e-2 };
+        assert!(
+            (la - lb).abs() <= limit * la.abs(),
+            "step {step}: autodiff loss {la}, hand-written {lb}"
+        );
+    }
+    let (pa, pb) = (a.renderers[0].psnr_db_test, b.renderers[0].psnr_db_test);
+    assert!((pa - pb).abs() < 0.05, "test PSNR {pa} against {pb}");
+}
