@@ -347,12 +347,12 @@ fn relu_in_place(x: &mut [f32]) {
     }
 }
 
-/// Zero the gradient where the ReLU's output is 0 (its input was not positive).
+/// Zero the gradient where the ReLU's output is 0 (its input was not positive). A select,
+/// not a conditional store: the compiler vectorises it (the branchy form was a quarter of the
+/// original model's step, perf).
 fn mask_by_relu(grad: &mut [f32], activated: &[f32]) {
     for (g, a) in grad.iter_mut().zip(activated) {
-        if *a <= 0.0 {
-            *g = 0.0;
-        }
+        *g = if *a > 0.0 { *g } else { 0.0 };
     }
 }
 

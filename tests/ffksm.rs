@@ -551,3 +551,38 @@ fn training_with_the_hand_written_step_follows_autodiff() {
     let (pa, pb) = (a.renderers[0].psnr_db_test, b.renderers[0].psnr_db_test);
     assert!((pa - pb).abs() < 0.05, "test PSNR {pa} against {pb}");
 }
+
+/// The step benchmark: both paths of both architectures, the same loss on the same step, the
+/// reference's speedup 1, and the paper field's arithmetic counted from its layers.
+#[test]
+fn the_step_benchmark_times_both_paths_on_the_same_step() {
+    use selfmodel::device::DeviceChoice;
+    use selfmodel::ffksm_step_bench::{run, step_flop};
+    use selfmodel::occupancy_field::OccupancyFieldConfig;
+    use selfmodel::preset::Preset;
+    // Per point, forward: 33x128 + 128x128 (coordinate encoder), 128x128 (first layer's
+    // coordinate half), 128x128 + 128x32 + 32x2 = 57,536 multiply-adds; backward twice that
+    // less the first layer's input gradient (33x128): 110,848.
+    let field = OccupancyFieldConfig::paper()
+        .init(&Device::flex(), 0)
+        .unwrap();
+    assert_eq!(step_flop(&field, 1), 2.0 * (57_536.0 + 110_848.0));
+    let rows = run(DeviceChoice::Cpu, true, 1).unwrap();
+    assert_eq!(rows.len(), 4);
+    for pair in rows.chunks(2) {
+        let (a, h) = (&pair[0], &pair[1]);
+        assert_eq!(
+            (a.path.as_str(), h.path.as_str()),
+            ("autodiff", "hand-written")
+        );
+        assert_eq!(a.speedup, 1.0);
+        assert!(a.seconds_median > 0.0 && h.seconds_median > 0.0 && h.gflop > 0.0);
+        assert!(
+            (a.loss - h.loss).abs() <= 1e-5 * a.loss.abs(),
+            "{}: losses {} and {}",
+            a.model,
+            a.loss,
+            h.loss
+        );
+    }
+}
