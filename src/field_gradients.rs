@@ -31,6 +31,7 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::conv_gemm::{Layout, matmul};
 use crate::occupancy_field::OccupancyField;
+use crate::positional_encoding::{encode_into, encoded_width};
 use crate::ray_marcher::MarchConfig;
 
 /// Rays per block: 16 rays of 64 samples keep a block's activations (~3 MB for the paper's
@@ -246,19 +247,11 @@ impl HostField<'_> {
         let rays = n / samples;
         // Virtual frame and positional encoding:
         // [x, sin(2⁰x), cos(2⁰x), …] with each term a 3-vector.
-        let width = 3 * (1 + 2 * self.bands);
+        let width = encoded_width(3, self.bands);
         let m = &self.rotation;
         for (p, e) in points.chunks(3).zip(s.encoded.chunks_mut(width)) {
             let v = [0, 1, 2].map(|j| p[0] * m[j] + p[1] * m[3 + j] + p[2] * m[6 + j]);
-            e[..3].copy_from_slice(&v);
-            for k in 0..self.bands {
-                let f = (1u64 << k) as f32;
-                for j in 0..3 {
-                    let x = v[j] * f;
-                    e[3 + 6 * k + j] = x.sin();
-                    e[6 + 6 * k + j] = x.cos();
-                }
-            }
+            encode_into(&v, self.bands, e);
         }
         // Coordinate encoder.
         let [c0, c1] = &self.coordinates;
@@ -356,17 +349,6 @@ fn mask_by_relu(grad: &mut [f32], activated: &[f32]) {
     }
 }
 
-/// Encode one row `x` (the distal joints) as [`crate::positional_encoding::encode`] does.
-fn encode_row(x: &[f32], bands: usize) -> Vec<f32> {
-    let mut out = x.to_vec();
-    for k in 0..bands {
-        let f = (1u64 << k) as f32;
-        out.extend(x.iter().map(|v| (v * f).sin()));
-        out.extend(x.iter().map(|v| (v * f).cos()));
-    }
-    out
-}
-
 /// The loss and gradients of one dense training step: the rays of `pixels` (row-major indices
 /// into `camera`'s image) in the pose `angles` (radians), every sample of every ray marched, at
 /// depths stratified by `jitter` exactly as [`crate::ray_marcher::render_silhouette`] draws
@@ -389,7 +371,8 @@ pub fn dense_step(
     let bands = field.bands();
 
     // The kinematic encoder and the first layer's pose half, once for the pose.
-    let k_in = encode_row(&angles32[2..], bands);
+    let mut k_in = vec![0.0; encoded_width(2, bands)];
+    encode_into(&angles32[2..], bands, &mut k_in);
     let [k0, k1] = [
         HostLinear::of(&kinematics[0]),
         HostLinear::of(&kinematics[1]),

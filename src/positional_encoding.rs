@@ -35,3 +35,19 @@ pub fn encode_reference(x: &[f64], bands: usize) -> Vec<f64> {
     }
     out
 }
+
+/// [`encode`] of one `d`-vector `x` on the host, in `f32`, into `out` (`d (1 + 2 bands)`
+/// values): the layout the hand-written training step ([`crate::field_gradients`]) shares.
+pub fn encode_into(x: &[f32], bands: usize, out: &mut [f32]) {
+    let d = x.len();
+    assert_eq!(out.len(), encoded_width(d, bands));
+    out[..d].copy_from_slice(x);
+    for k in 0..bands {
+        let f = (1u64 << k) as f32;
+        for (j, v) in x.iter().enumerate() {
+            let (sin, cos) = (v * f).sin_cos();
+            out[d * (1 + 2 * k) + j] = sin;
+            out[d * (2 + 2 * k) + j] = cos;
+        }
+    }
+}

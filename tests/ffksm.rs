@@ -4,7 +4,7 @@
 mod common;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use selfmodel::positional_encoding::{encode, encode_reference, encoded_width};
+use selfmodel::positional_encoding::{encode, encode_into, encode_reference, encoded_width};
 use selfmodel::virtual_frame::{VirtualFrame, to_virtual, to_virtual_reference};
 
 fn values(n: usize, seed: u32, scale: f64) -> Vec<f64> {
@@ -48,6 +48,22 @@ fn positional_encoding_widths_and_values_match_the_reference() {
             .fold(0.0, f64::max);
         // 2^9 x in f32 loses ~1e-4 of phase at |x| = 1.5.
         assert!(worst < 2e-3, "d {d}, L {bands}: max difference {worst}");
+        // The host encoding of the hand-written training step: the same layout and values.
+        let width = encoded_width(d, bands);
+        let mut host = vec![0f32; n * width];
+        for (p, out) in x.chunks(d).zip(host.chunks_mut(width)) {
+            let p: Vec<f32> = p.iter().map(|&v| v as f32).collect();
+            encode_into(&p, bands, out);
+        }
+        let worst = host
+            .iter()
+            .zip(&reference)
+            .map(|(&a, &b)| (a as f64 - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 2e-3,
+            "host, d {d}, L {bands}: max difference {worst}"
+        );
     }
 }
 
@@ -418,16 +434,19 @@ fn the_hand_written_dense_step_matches_autodiff() {
             };
             let loss_ref = reference.clone().into_scalar::<f32>() as f64;
             let grads_ref = GradientsParams::from_grads(reference.backward(), &field);
-            let fast = dense_step(
-                &field,
-                (&camera, angles),
-                &pixels,
-                &truth,
-                robot_weight,
-                &march,
-                jitter,
-                &dev,
-            );
+            let step = || {
+                dense_step(
+                    &field,
+                    (&camera, angles),
+                    &pixels,
+                    &truth,
+                    robot_weight,
+                    &march,
+                    jitter,
+                    &dev,
+                )
+            };
+            let fast = step();
             assert!(
                 (fast.loss - loss_ref).abs() <= 1e-5 * loss_ref.abs().max(1e-6),
                 "field {f}: loss {} against autodiff's {loss_ref}",
@@ -478,18 +497,7 @@ fn the_hand_written_dense_step_matches_autodiff() {
                 .num_threads(1)
                 .build()
                 .unwrap();
-            let single = pool.install(|| {
-                dense_step(
-                    &field,
-                    (&camera, angles),
-                    &pixels,
-                    &truth,
-                    robot_weight,
-                    &march,
-                    jitter,
-                    &dev,
-                )
-            });
+            let single = pool.install(step);
             assert_eq!(single.loss.to_bits(), fast.loss.to_bits());
             let w0 = coordinates[0].weight.id;
             assert_eq!(
