@@ -11,8 +11,8 @@ use selfmodel::cli::run_main;
 use selfmodel::device::DeviceChoice;
 
 /// Time one dense FFKSM training step of a whole 100x100 image (640,000 network evaluations)
-/// through burn's autodiff (the reference) and through the hand-written step, alternating,
-/// one warm-up step each, then the median of the repeats; with the GFLOP/s of the step's
+/// through burn's autodiff (the reference) and through the hand-written step: for each, one
+/// warm-up step, then the median of the repeats, back to back; with the GFLOP/s of the step's
 /// matrix products.
 #[derive(Parser)]
 #[command(version)]
@@ -54,7 +54,7 @@ fn main() -> ExitCode {
             &rows,
             "One dense FFKSM training step: burn's autodiff against the hand-written step",
             &format!(
-                "A whole 100x100 image, 64 samples per ray (640,000 evaluations), forward, loss and backward to every parameter's gradient (no optimiser step). Median and fastest of {} steps per path after one warm-up step, the paths alternating; `gflop` counts the matrix products from the layer shapes; `speedup` is the autodiff median over this path's.",
+                "A whole 100x100 image, 64 samples per ray (640,000 evaluations), forward, loss and backward to every parameter's gradient (no optimiser step). Median and fastest of {} steps per path, back to back after one warm-up step; `gflop` counts the matrix products from the layer shapes; `speedup` is the autodiff median over this path's.",
                 args.repeats
             ),
         )
