@@ -77,8 +77,8 @@ pub enum TrainMarcher {
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum DenseGradients {
-    /// The hand-written step of [`crate::field_gradients`] on the CPU backends (about 2x
-    /// burn's graph on 2 cores); burn's autodiff on a GPU.
+    /// The hand-written step of [`crate::field_gradients`] on the CPU backends (2-3x
+    /// burn's graph on 2 cores, `bench_ffksm_step`); burn's autodiff on a GPU.
     #[default]
     HandWrittenOnCpu,
     /// burn's autodiff through the dense marcher everywhere (the reference).
@@ -530,37 +530,36 @@ fn train_field(
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             let view = (&camera, radians(&a));
-            let pred = match cfg.train_marcher {
-                TrainMarcher::Dense if hand_written => {
-                    train_evaluations
-                        .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
-                    train_steps.set(train_steps.get() + 1);
-                    let step = dense_step(
-                        m,
-                        view,
-                        pixels,
-                        &t,
-                        cfg.robot_weight,
-                        &cfg.march,
-                        Some(jitter),
-                        device,
-                    );
-                    return StepLoss::Computed {
-                        value: step.loss,
-                        gradients: step.gradients,
-                    };
-                }
+            train_steps.set(train_steps.get() + 1);
+            match cfg.train_marcher {
                 TrainMarcher::Dense => {
                     train_evaluations
                         .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
-                    render_silhouette(
+                    if hand_written {
+                        let step = dense_step(
+                            m,
+                            view,
+                            pixels,
+                            &t,
+                            cfg.robot_weight,
+                            &cfg.march,
+                            Some(jitter),
+                            device,
+                        );
+                        return StepLoss::Computed {
+                            value: step.loss,
+                            gradients: step.gradients,
+                        };
+                    }
+                    let pred = render_silhouette(
                         m,
                         view,
                         pixels,
                         &cfg.march,
                         Some(jitter),
                         &b.inputs.device(),
-                    )
+                    );
+                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
                 }
                 TrainMarcher::Skipping => {
                     let (pred, evaluations) = render_silhouette_skipping(
@@ -574,11 +573,9 @@ fn train_field(
                         &b.inputs.device(),
                     );
                     train_evaluations.set(train_evaluations.get() + evaluations);
-                    pred
+                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
                 }
-            };
-            train_steps.set(train_steps.get() + 1);
-            StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
+            }
         };
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
             // The counts go beside each checkpoint (saved right after this), so a run stopped
