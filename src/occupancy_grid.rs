@@ -11,8 +11,15 @@
 //! the ray through the block's centre at the middle of its depth range; a cell is occupied
 //! when the probe's raw density exceeds `density_threshold` (a negative threshold keeps cells
 //! near a surface, since the raw density is continuous and only its ReLU is zero), and the
-//! occupied set is then dilated by `dilation` cells in every direction so thin parts that
-//! miss a probe are still marched.
+//! occupied set is then dilated by `dilation` cells across the image, so thin parts that
+//! fall between two probe rays are still marched, and by `depth_dilation` cells along the
+//! rays.
+//!
+//! The paper preset dilates across the image only. On the densely trained reimplementation
+//! (20 test images, this session's sweep), a one-cell box in all three directions marched
+//! 66,767 evaluations per image (9.6x fewer than dense marching); without the dilation along
+//! the rays 48,321 (13.2x fewer) with the same PSNR (+0.029 dB against dense marching's, the
+//! box's +0.027 dB); without the dilation across the image the PSNR fell 0.55 dB.
 
 use burn::tensor::{Device, TensorData};
 
@@ -29,23 +36,33 @@ pub struct GridConfig {
     pub depth_cell: usize,
     /// A probe whose raw density exceeds this marks its cell occupied.
     pub density_threshold: f32,
-    /// Cells added around every occupied cell, in each of the three directions.
+    /// Cells added around every occupied cell across the image (rows and columns).
     pub dilation: usize,
+    /// Cells added around every occupied cell along the rays (absent in configs from before
+    /// the option: 1, the dilation those used in all three directions).
+    #[serde(default = "one")]
+    pub depth_dilation: usize,
     /// Probes evaluated per network call (memory bound).
     pub chunk: usize,
 }
 
 impl GridConfig {
-    /// 4 x 4 pixels x 4 samples, threshold 0 on the raw density, dilation 1.
+    /// 4 x 4 pixels x 4 samples, threshold 0 on the raw density, dilation of one cell
+    /// across the image and none along the rays.
     pub fn paper() -> Self {
         GridConfig {
             block: 4,
             depth_cell: 4,
             density_threshold: 0.0,
             dilation: 1,
+            depth_dilation: 0,
             chunk: 1 << 16,
         }
     }
+}
+
+fn one() -> usize {
+    1
 }
 
 /// Occupancy of the cells of one pose seen from one camera.
@@ -111,7 +128,7 @@ impl FrustumGrid {
             dims,
             block,
             depth_cell,
-            occupied: dilate(&seeds, dims, cfg.dilation),
+            occupied: dilate(&seeds, dims, [cfg.dilation, cfg.dilation, cfg.depth_dilation]),
             evaluations,
         }
     }
@@ -128,14 +145,16 @@ impl FrustumGrid {
     }
 }
 
-/// Grow the occupied set by `r` cells in each direction (a box dilation, separable).
-fn dilate(occupied: &[bool], dims: [usize; 3], r: usize) -> Vec<bool> {
-    if r == 0 {
-        return occupied.to_vec();
-    }
+/// Grow the occupied set by `radius[axis]` cells along each axis (rows, columns, depth): a
+/// box dilation, separable.
+fn dilate(occupied: &[bool], dims: [usize; 3], radius: [usize; 3]) -> Vec<bool> {
     let mut cur = occupied.to_vec();
     let strides = [dims[1] * dims[2], dims[2], 1];
     for axis in 0..3 {
+        let r = radius[axis];
+        if r == 0 {
+            continue;
+        }
         let mut next = cur.clone();
         for (idx, flag) in next.iter_mut().enumerate() {
             if *flag {
@@ -160,12 +179,17 @@ mod tests {
         let dims = [4, 5, 3];
         let mut seeds = vec![false; 60];
         seeds[(5 + 4) * 3] = true; // (1, 4, 0)
-        let grown = dilate(&seeds, dims, 1);
+        let grown = dilate(&seeds, dims, [1, 1, 1]);
         let on: Vec<[usize; 3]> = (0..60)
             .filter(|&i| grown[i])
             .map(|i| [i / 15, (i / 3) % 5, i % 3])
             .collect();
         assert_eq!(on.len(), 3 * 2 * 2);
         assert!(on.iter().all(|c| c[0] <= 2 && c[1] >= 3 && c[2] <= 1));
+        // Across the image only (the paper preset): the depth cell stays 0.
+        let flat = dilate(&seeds, dims, [1, 1, 0]);
+        let on: Vec<usize> = (0..60).filter(|&i| flat[i]).collect();
+        assert_eq!(on.len(), 3 * 2);
+        assert!(on.iter().all(|&i| i % 3 == 0));
     }
 }
