@@ -493,7 +493,17 @@ fn train_field(
         resume,
         fingerprint: fingerprint(cfg),
     };
-    let mut restarts = 0;
+    // Restarts after collapse so far, kept beside the checkpoint so a resumed run reports
+    // them (and initialises the same model).
+    let restarts_path = plan.dir.join("restarts.json");
+    let mut restarts: usize = if resume {
+        std::fs::read_to_string(&restarts_path)
+            .ok()
+            .and_then(|t| serde_json::from_str(&t).ok())
+            .unwrap_or(0)
+    } else {
+        0
+    };
     // Network evaluations and steps of training, kept beside the checkpoint so a resumed run
     // reports them for all its steps (`[evaluations, steps]`).
     let counts_path = plan.dir.join("evaluations.json");
@@ -649,6 +659,10 @@ fn train_field(
                 restarts += 1;
                 // The checkpoint holds the collapsed model: start the next try from scratch.
                 let _ = std::fs::remove_dir_all(&plan.dir);
+                if cfg.train.checkpoint_every > 0 {
+                    std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
+                    write_json(&restarts_path, &restarts)?;
+                }
                 train_evaluations.set(0);
                 train_steps.set(0);
             }

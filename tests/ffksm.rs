@@ -380,6 +380,9 @@ fn a_field_that_renders_black_is_restarted_then_given_up_on() {
         msg.contains("collapsed to an all-black image 3 times"),
         "{msg}"
     );
+    // The restarts are kept beside the checkpoint, so a resumed run reports them.
+    let kept = std::fs::read_to_string(dir.join("checkpoint/restarts.json")).unwrap();
+    assert_eq!(kept.trim(), "2");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
