@@ -16,7 +16,7 @@
 //! rays.
 //!
 //! The paper preset dilates across the image only. On the densely trained reimplementation
-//! (20 test images, this session's sweep), a one-cell box in all three directions marched
+//! (a sweep on 20 test images), a one-cell box in all three directions marched
 //! 66,767 evaluations per image (9.6x fewer than dense marching); without the dilation along
 //! the rays 48,321 (13.2x fewer) with the same PSNR (+0.029 dB against dense marching's, the
 //! box's +0.027 dB); without the dilation across the image the PSNR fell 0.55 dB.
