@@ -471,6 +471,11 @@ fn fingerprint(cfg: &FfksmConfig) -> serde_json::Value {
     print
 }
 
+/// A count a run keeps beside its checkpoint (JSON), if the file is there and reads.
+fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
 /// Train the field, restarting with a fresh model on collapse when the config asks for it.
 fn train_field(
     cfg: &FfksmConfig,
@@ -493,28 +498,20 @@ fn train_field(
         resume,
         fingerprint: fingerprint(cfg),
     };
-    // Restarts after collapse so far, kept beside the checkpoint so a resumed run reports
-    // them (and initialises the same model).
+    // Restarts after collapse so far, so a resumed run reports them (and initialises the same
+    // model).
     let restarts_path = plan.dir.join("restarts.json");
-    let mut restarts: usize = if resume {
-        std::fs::read_to_string(&restarts_path)
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok())
-            .unwrap_or(0)
-    } else {
-        0
-    };
-    // Network evaluations and steps of training, kept beside the checkpoint so a resumed run
-    // reports them for all its steps (`[evaluations, steps]`).
+    let mut restarts: usize = resume
+        .then(|| read_kept(&restarts_path))
+        .flatten()
+        .unwrap_or(0);
+    // Network evaluations and steps of training, so a resumed run reports them for all its
+    // steps (`[evaluations, steps]`).
     let counts_path = plan.dir.join("evaluations.json");
-    let earlier: [usize; 2] = if resume {
-        std::fs::read_to_string(&counts_path)
-            .ok()
-            .and_then(|t| serde_json::from_str(&t).ok())
-            .unwrap_or([0, 0])
-    } else {
-        [0, 0]
-    };
+    let earlier: [usize; 2] = resume
+        .then(|| read_kept(&counts_path))
+        .flatten()
+        .unwrap_or([0, 0]);
     let train_evaluations = std::cell::Cell::new(earlier[0]);
     let train_steps = std::cell::Cell::new(earlier[1]);
     loop {

@@ -128,7 +128,11 @@ impl FrustumGrid {
             dims,
             block,
             depth_cell,
-            occupied: dilate(&seeds, dims, [cfg.dilation, cfg.dilation, cfg.depth_dilation]),
+            occupied: dilate(
+                &seeds,
+                dims,
+                [cfg.dilation, cfg.dilation, cfg.depth_dilation],
+            ),
             evaluations,
         }
     }
