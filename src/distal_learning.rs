@@ -4,6 +4,11 @@
 //! minimising the distance between the learned forward model's output and the desired
 //! position. Its accuracy is bounded by the forward model's: the inverse model learns to
 //! satisfy the network, not the arm.
+//!
+//! With the fit's `converge` set, each phase trains until its validation error stops
+//! improving: the forward model's distance error on the validation joints, then the inverse
+//! model's distance error on the validation targets through the arm. Under the wrapped joint
+//! output the forward model reads (cos, sin) per joint, which the inverse model writes.
 
 use burn::module::Module;
 use burn::optim::AdamConfig;
@@ -11,9 +16,10 @@ use burn::tensor::Device;
 
 use crate::error::Result;
 use crate::ik_data::IkData;
-use crate::inverse_learning::{FitConfig, fit_set, mse, row_set};
+use crate::inverse_learning::{FitConfig, fit_converged, fit_set, mse, row_set, validation_cm};
 use crate::inverse_model::{InverseModelConfig, Mlp};
-use crate::training::autodiff_device;
+use crate::kinematics::KinematicChain;
+use crate::training::{Batch, ConvergenceLog, autodiff_device};
 
 /// The forward model network and how long each phase trains.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -31,10 +37,15 @@ pub struct DistalModels {
     /// Mean distance (cm) between the forward model's prediction and the true position on the
     /// test joints.
     pub forward_test_cm: f64,
+    /// The validation curves of the two phases, where they trained to convergence.
+    pub forward_log: Option<ConvergenceLog>,
+    pub inverse_log: Option<ConvergenceLog>,
 }
 
-/// Learn the forward model, then the inverse model through it.
+/// Learn the forward model, then the inverse model (`model_cfg`, whose output decides the
+/// joint encoding) through it.
 pub fn dsl(
+    chain: &KinematicChain,
     data: &IkData,
     model_cfg: &InverseModelConfig,
     fit_cfg: &FitConfig,
@@ -44,70 +55,117 @@ pub fn dsl(
     let tdev = autodiff_device(device, fit_cfg.seed);
     let dof = data.joints[0].len();
     let train = data.train();
+    let inverse = model_cfg.init(&tdev, fit_cfg.seed)?;
+    let output = inverse.joint_output();
     let positions = data.position_rows(&data.positions[train.clone()]);
     // Phase 1: the forward model on (joints -> position) of the random data.
     let forward_cfg = InverseModelConfig {
-        inputs: dof,
+        inputs: output.width(dof),
         hidden: cfg.forward_hidden.clone(),
         outputs: 3,
         sigmoid_output: false,
+        unit_pairs: false,
     };
     let set = row_set(
-        data.joint_rows(&data.joints[train]),
-        dof,
+        data.joint_rows_as(&data.joints[train], output),
+        output.width(dof),
         positions.clone(),
         3,
         &tdev,
     );
-    let (forward, _) = fit_set(
-        forward_cfg.init(&tdev, fit_cfg.seed ^ 0xF0)?,
-        AdamConfig::new().init(),
-        &set,
-        &FitConfig {
-            epochs: cfg.forward_epochs,
-            ..fit_cfg.clone()
-        },
-        "DSL forward model",
-        mse,
-    )?;
-    let forward_test_cm = forward_test_error(&forward.valid(), data, device);
+    let forward = forward_cfg.init(&tdev, fit_cfg.seed ^ 0xF0)?;
+    let (forward, forward_log) = match &fit_cfg.converge {
+        Some(conv) => {
+            let (m, log) = fit_converged(
+                forward,
+                &set,
+                fit_cfg,
+                conv,
+                "DSL forward model",
+                mse,
+                |m| forward_error_cm(m, data, data.validation(), output, device),
+            )?;
+            (m, Some(log))
+        }
+        None => {
+            let (m, _) = fit_set(
+                forward,
+                AdamConfig::new().init(),
+                &set,
+                &FitConfig {
+                    epochs: cfg.forward_epochs,
+                    ..fit_cfg.clone()
+                },
+                "DSL forward model",
+                mse,
+            )?;
+            (m, None)
+        }
+    };
+    let forward_test_cm = forward_error_cm(&forward.valid(), data, data.test(), output, device);
     // Phase 2: the inverse model through the frozen forward model: inputs and targets are the
     // desired positions.
     let frozen = forward.no_grad();
     let set = row_set(positions.clone(), 3, positions, 3, &tdev);
-    let (inverse, _) = fit_set(
-        model_cfg.init(&tdev, fit_cfg.seed)?,
-        AdamConfig::new().init(),
-        &set,
-        &FitConfig {
-            epochs: cfg.inverse_epochs,
-            ..fit_cfg.clone()
-        },
-        "DSL inverse model",
-        |m: &Mlp, b| {
-            let [n, d, _, _] = b.targets[0].dims();
-            (frozen.forward(m.forward(b.inputs.clone())) - b.targets[0].clone().reshape([n, d]))
-                .square()
-                .mean()
-        },
-    )?;
+    let through_forward = |m: &Mlp, b: &Batch| {
+        let [n, d, _, _] = b.targets[0].dims();
+        (frozen.forward(m.forward(b.inputs.clone())) - b.targets[0].clone().reshape([n, d]))
+            .square()
+            .mean()
+    };
+    let (inverse, inverse_log) = match &fit_cfg.converge {
+        Some(conv) => {
+            let (m, log) = fit_converged(
+                inverse,
+                &set,
+                fit_cfg,
+                conv,
+                "DSL inverse model",
+                through_forward,
+                |m| validation_cm(m, chain, data, fit_cfg.inference_batch, device),
+            )?;
+            (m, Some(log))
+        }
+        None => {
+            let (m, _) = fit_set(
+                inverse,
+                AdamConfig::new().init(),
+                &set,
+                &FitConfig {
+                    epochs: cfg.inverse_epochs,
+                    ..fit_cfg.clone()
+                },
+                "DSL inverse model",
+                through_forward,
+            )?;
+            (m, None)
+        }
+    };
     Ok(DistalModels {
         inverse: inverse.valid(),
         forward: frozen.valid(),
         forward_test_cm,
+        forward_log,
+        inverse_log,
     })
 }
 
-/// Mean distance (cm) between the forward model's predictions for the test joints and their
-/// true positions.
-fn forward_test_error(forward: &Mlp, data: &IkData, device: &Device) -> f64 {
+/// Mean distance (cm) between the forward model's predictions for the joints of the samples
+/// `range` (written under `output`) and their true positions.
+fn forward_error_cm(
+    forward: &Mlp,
+    data: &IkData,
+    range: std::ops::Range<usize>,
+    output: crate::ik_data::JointOutput,
+    device: &Device,
+) -> f64 {
     use burn::tensor::{Tensor, TensorData};
-    let test = data.test();
-    let dof = data.joints[0].len();
-    let joints = data.joint_rows(&data.joints[test.clone()]);
+    let test = range;
+    let width = output.width(data.joints[0].len());
+    let joints = data.joint_rows_as(&data.joints[test.clone()], output);
     let n = test.len();
     let out = forward
-        .forward(Tensor::from_data(TensorData::new(joints, [n, dof]), device))
+        .forward(Tensor::from_data(TensorData::new(joints, [n, width]), device))
         .into_data()
         .try_into_vec::<f32>()
         .expect("float");

@@ -348,6 +348,20 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
         .join("; "))
 }
 
+/// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
+pub fn run_emssl_study(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(
+        &RunOptions {
+            resume: false,
+            ..opts.clone()
+        },
+        "emssl_study",
+    )?;
+    let cfg = crate::emssl_study::StudyConfig::preset(&opts.preset)?;
+    let (robot, _) = opts.ik_robot()?;
+    crate::emssl_study::run(&cfg, &robot, dir, opts.device, opts.resume)
+}
+
 /// Figure 6 of the EMSSL paper: EMSSL's test error against iteration, stopping off.
 pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String> {
     reject_self_model_switches(opts, "emssl_learning_curve")?;
@@ -509,6 +523,15 @@ pub const EXPERIMENTS: &[Experiment] = &[
         in_table1: false,
         takes_robot: true,
         run: run_emssl_learning_curve,
+    },
+    Experiment {
+        name: "emssl_study",
+        about: "What limits EMSSL: learning-rate schedule, exploration noise, warm start, batch, epochs, data kept, wrapped output; one knob at a time, both ranges (--resume keeps finished rows)",
+        default_dir: "reports/emssl_study",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_study,
     },
     Experiment {
         name: "emssl_sampling_speed",

@@ -95,6 +95,7 @@ impl Preset for AdaptationConfig {
                 exploration_floor: 0.0,
                 learning_rate_decay: 0.9,
                 target_reach_cm: None,
+                ..EmsslConfig::paper()
             },
             target_factor: 1.1,
             calibration: CalibrationConfig::paper(),

@@ -138,16 +138,12 @@ impl IkComparisonConfig {
             train: self.train,
             range_deg,
             seed: self.data_seed,
+            validation: 0,
         }
     }
 
     pub fn model(&self, dof: usize) -> InverseModelConfig {
-        InverseModelConfig {
-            inputs: 3,
-            hidden: self.hidden.clone(),
-            outputs: dof,
-            sigmoid_output: true,
-        }
+        InverseModelConfig::inverse(self.hidden.clone(), dof, crate::ik_data::JointOutput::Sigmoid)
     }
 }
 
@@ -307,7 +303,8 @@ pub fn run_range(
 
     // Direct regression.
     let t = Instant::now();
-    let model = drl(
+    let (model, _) = drl(
+        &robot.chain,
         &data,
         &model_cfg,
         &FitConfig {
@@ -329,7 +326,7 @@ pub fn run_range(
 
     // Distal supervised learning.
     let t = Instant::now();
-    let distal = dsl(&data, &model_cfg, &cfg.fit, &cfg.dsl, &device)?;
+    let distal = dsl(&robot.chain, &data, &model_cfg, &cfg.fit, &cfg.dsl, &device)?;
     let train_s = t.elapsed().as_secs_f64();
     let solve_s = timed(&mut || joints = predict(&distal.inverse, &data, targets, batch, &device));
     add(
@@ -345,7 +342,13 @@ pub fn run_range(
 
     // Conditional GAN: one sample, and the best of k.
     let t = Instant::now();
-    let generator = train_gan(&data, &cfg.gan, &device)?;
+    let (generator, _) = train_gan(
+        &robot.chain,
+        &data,
+        &cfg.gan,
+        crate::ik_data::JointOutput::Sigmoid,
+        &device,
+    )?;
     let train_s = t.elapsed().as_secs_f64();
     let seed = cfg.gan.fit.seed ^ 0x5EED;
     let solve_s = timed(&mut || joints = generator.sample(&data, targets, batch, seed, &device));

@@ -5,7 +5,10 @@
 //! The paper: 100,000 joint vectors, 70,000 for training and 30,000 for testing, in two joint
 //! ranges ([-90, 90] and [-180, 180] degrees). Positions are normalised per axis to [0, 1] over
 //! the training positions' bounds; joints to [0, 1] over the joint range (the inverse model's
-//! sigmoid output).
+//! sigmoid output), or to (cos, sin) per joint ([`JointOutput::Wrapped`]).
+//!
+//! A validation split (beyond the paper) is carved from the end of the training samples:
+//! `train()` is what models fit, `validation()` what they stop on, `test()` is untouched.
 
 use nalgebra::Point3;
 use rand::rngs::StdRng;
@@ -22,6 +25,10 @@ pub struct IkDataConfig {
     /// Every joint is drawn from `[-range_deg, range_deg]` degrees.
     pub range_deg: f64,
     pub seed: u64,
+    /// The last `validation` of the `train` samples are held out for early stopping (0: none,
+    /// the paper's split).
+    #[serde(default)]
+    pub validation: usize,
 }
 
 impl IkDataConfig {
@@ -32,6 +39,7 @@ impl IkDataConfig {
             train: 70_000,
             range_deg,
             seed: 0,
+            validation: 0,
         }
     }
 
@@ -42,6 +50,40 @@ impl IkDataConfig {
             train: 2_000,
             range_deg,
             seed: 0,
+            validation: 0,
+        }
+    }
+}
+
+/// How a network writes joint angles.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum JointOutput {
+    /// One value per joint in [0, 1] over the joint range, behind a sigmoid (the paper's).
+    /// At +-180 degrees the two ends of the sigmoid are one pose.
+    #[default]
+    Sigmoid,
+    /// (cos, sin) per joint on the unit circle, decoded with atan2 (and clamped into the range
+    /// where it is not the whole circle): +179 and -179 degrees are neighbours.
+    Wrapped,
+}
+
+impl JointOutput {
+    /// Network outputs for `dof` joints.
+    pub fn width(self, dof: usize) -> usize {
+        match self {
+            JointOutput::Sigmoid => dof,
+            JointOutput::Wrapped => 2 * dof,
+        }
+    }
+
+    /// The suffix of a method's name in the tables: "" or " (wrapped)".
+    pub fn suffix(self) -> &'static str {
+        match self {
+            JointOutput::Sigmoid => "",
+            JointOutput::Wrapped => " (wrapped)",
         }
     }
 }
@@ -52,6 +94,8 @@ pub struct IkData {
     pub joints: Vec<Vec<f64>>,
     pub positions: Vec<Point3<f64>>,
     pub n_train: usize,
+    /// The last `n_validation` of the first `n_train` samples are the validation split.
+    pub n_validation: usize,
     /// Joint range (radians), the same for every joint.
     pub range: [f64; 2],
     /// Per-axis bounds of the training positions (m): the position normalisation.
@@ -66,6 +110,12 @@ impl IkData {
                 "IK data: train ({}) must be between 1 and samples - 1 ({})",
                 cfg.train,
                 cfg.samples.saturating_sub(1)
+            )));
+        }
+        if cfg.validation >= cfg.train {
+            return Err(Error::Config(format!(
+                "IK data: the validation split ({}) must be smaller than train ({})",
+                cfg.validation, cfg.train
             )));
         }
         let r = cfg.range_deg.to_radians();
@@ -86,13 +136,25 @@ impl IkData {
             joints,
             positions,
             n_train: cfg.train,
+            n_validation: cfg.validation,
             range: [-r, r],
             position_bounds: [lo, hi],
         })
     }
 
+    /// The samples models fit (the paper's training split less the validation split).
     pub fn train(&self) -> std::ops::Range<usize> {
-        0..self.n_train
+        0..self.n_train - self.n_validation
+    }
+
+    /// The held-out samples early stopping watches (empty without a validation split).
+    pub fn validation(&self) -> std::ops::Range<usize> {
+        self.n_train - self.n_validation..self.n_train
+    }
+
+    /// Whether the joint range is the whole circle (+-180 degrees): its ends are one pose.
+    pub fn full_circle(&self) -> bool {
+        self.range[1] - self.range[0] >= 2.0 * std::f64::consts::PI - 1e-9
     }
 
     pub fn test(&self) -> std::ops::Range<usize> {
@@ -137,6 +199,38 @@ impl IkData {
     pub fn joints_from_normalised(&self, q: &[f32]) -> Vec<f64> {
         let [lo, hi] = self.range;
         q.iter().map(|&v| lo + v as f64 * (hi - lo)).collect()
+    }
+
+    /// A joint vector as a network writes it under `output`.
+    pub fn encode_joints(&self, q: &[f64], output: JointOutput) -> Vec<f32> {
+        match output {
+            JointOutput::Sigmoid => self.normalise_joints(q),
+            JointOutput::Wrapped => q
+                .iter()
+                .flat_map(|&v| [v.cos() as f32, v.sin() as f32])
+                .collect(),
+        }
+    }
+
+    /// `joints` under `output`, row after row (`[n * output.width(dof)]`).
+    pub fn joint_rows_as(&self, joints: &[Vec<f64>], output: JointOutput) -> Vec<f32> {
+        joints
+            .iter()
+            .flat_map(|q| self.encode_joints(q, output))
+            .collect()
+    }
+
+    /// Joints (radians, inside the range) from a network's output under `output`.
+    pub fn decode_joints(&self, v: &[f32], output: JointOutput) -> Vec<f64> {
+        match output {
+            JointOutput::Sigmoid => self.joints_from_normalised(v),
+            JointOutput::Wrapped => {
+                let [lo, hi] = self.range;
+                v.chunks(2)
+                    .map(|cs| (cs[1] as f64).atan2(cs[0] as f64).clamp(lo, hi))
+                    .collect()
+            }
+        }
     }
 }
 

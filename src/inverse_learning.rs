@@ -18,7 +18,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Point3;
 
 use crate::error::Result;
-use crate::ik_data::{DistanceErrors, IkData, distances, reach_errors};
+use crate::ik_data::{DistanceErrors, IkData, JointOutput, distances, reach_errors};
 use crate::inverse_model::{InverseModelConfig, Mlp};
 use crate::kinematics::KinematicChain;
 use burn::optim::{AdamConfig, ModuleOptimizer};
@@ -26,7 +26,10 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::training::{Batch, TrainConfig, TrainSet, autodiff_device, train_continuing};
+use crate::training::{
+    Batch, Convergence, ConvergenceLog, Plateau, TrainConfig, TrainSet, autodiff_device,
+    train_continuing, train_to_convergence,
+};
 
 /// Optimisation of one fit.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -36,6 +39,10 @@ pub struct FitConfig {
     pub learning_rate: f64,
     pub inference_batch: usize,
     pub seed: u64,
+    /// Train until the validation error stops improving (`epochs` ignored) instead of a fixed
+    /// number of epochs; needs a validation split. EMSSL's iterations ignore it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub converge: Option<Convergence>,
 }
 
 impl FitConfig {
@@ -47,6 +54,7 @@ impl FitConfig {
             learning_rate: 1.5e-3,
             inference_batch: 512,
             seed: 0,
+            converge: None,
         }
     }
 
@@ -138,15 +146,63 @@ pub fn fit(
     label: &str,
     device: &Device,
 ) -> Result<(Mlp, ModuleOptimizer)> {
+    let set = joint_set(data, positions, joints, model.joint_output(), device);
+    fit_set(model, optim, &set, cfg, label, mse)
+}
+
+/// (position -> joints under `output`) pairs as a training set.
+pub fn joint_set(
+    data: &IkData,
+    positions: &[Point3<f64>],
+    joints: &[Vec<f64>],
+    output: JointOutput,
+    device: &Device,
+) -> TrainSet {
     let dof = joints.first().map_or(0, Vec::len);
-    let set = row_set(
+    row_set(
         data.position_rows(positions),
         3,
-        data.joint_rows(joints),
-        dof,
+        data.joint_rows_as(joints, output),
+        output.width(dof),
         device,
-    );
-    fit_set(model, optim, &set, cfg, label, mse)
+    )
+}
+
+/// Train `model` on `set` with `loss` until the validation error (`validate`, called with
+/// the inference model) stops improving, from a fresh optimiser.
+pub fn fit_converged(
+    model: Mlp,
+    set: &TrainSet,
+    cfg: &FitConfig,
+    conv: &Convergence,
+    label: &str,
+    loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
+    mut validate: impl FnMut(&Mlp) -> f64,
+) -> Result<(Mlp, ConvergenceLog)> {
+    train_to_convergence(
+        model,
+        AdamConfig::new().init(),
+        set,
+        &cfg.train_config(set.len()),
+        conv,
+        label,
+        loss,
+        |m: &Mlp| validate(&m.valid()),
+    )
+}
+
+/// Mean distance (cm) between the validation targets and where the model's answers take the
+/// arm: what every inverse model stops on.
+pub fn validation_cm(
+    model: &Mlp,
+    chain: &KinematicChain,
+    data: &IkData,
+    batch: usize,
+    device: &Device,
+) -> f64 {
+    let targets = &data.positions[data.validation()];
+    let joints = predict(model, data, targets, batch, device);
+    DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm
 }
 
 /// Joints (radians) the model answers for `positions`, in batches of `batch`.
@@ -159,12 +215,11 @@ pub fn predict(
 ) -> Vec<Vec<f64>> {
     let mut out = Vec::with_capacity(positions.len());
     for part in positions.chunks(batch.max(1)) {
+        let output = model.joint_output();
         let q = model.forward(position_tensor(data, part, device));
-        let [n, dof] = q.dims();
+        let [_, width] = q.dims();
         let v = q.into_data().try_into_vec::<f32>().expect("float");
-        for i in 0..n {
-            out.push(data.joints_from_normalised(&v[i * dof..(i + 1) * dof]));
-        }
+        out.extend(v.chunks(width).map(|r| data.decode_joints(r, output)));
     }
     out
 }
@@ -185,27 +240,38 @@ pub fn test_errors(
     )
 }
 
-/// Direct regression learning: fit (position -> joints) on the random training data.
+/// Direct regression learning: fit (position -> joints) on the random training data, for
+/// `fit_cfg.epochs` or, with `fit_cfg.converge`, until the validation error (distance through
+/// `chain`) stops improving. Returns the model and, when it trained to convergence, its log.
 pub fn drl(
+    chain: &KinematicChain,
     data: &IkData,
     model_cfg: &InverseModelConfig,
     fit_cfg: &FitConfig,
     device: &Device,
-) -> Result<Mlp> {
+) -> Result<(Mlp, Option<ConvergenceLog>)> {
     let tdev = autodiff_device(device, fit_cfg.seed);
     let model = model_cfg.init(&tdev, fit_cfg.seed)?;
     let train = data.train();
+    let (positions, joints) = (&data.positions[train.clone()], &data.joints[train]);
+    if let Some(conv) = &fit_cfg.converge {
+        let set = joint_set(data, positions, joints, model.joint_output(), &tdev);
+        let (model, log) = fit_converged(model, &set, fit_cfg, conv, "DRL", mse, |m| {
+            validation_cm(m, chain, data, fit_cfg.inference_batch, device)
+        })?;
+        return Ok((model.valid(), Some(log)));
+    }
     let (model, _) = fit(
         model,
         AdamConfig::new().init(),
         data,
-        &data.positions[train.clone()],
-        &data.joints[train],
+        positions,
+        joints,
         fit_cfg,
         "DRL",
         &tdev,
     )?;
-    Ok(model.valid())
+    Ok((model.valid(), None))
 }
 
 /// EMSSL's schedule and stopping rule.
@@ -219,15 +285,17 @@ pub fn drl(
 /// answers before the forward model in the early iterations and decays geometrically; the
 /// pairs stay exact (the joints tried and where they went). The learning rate decays too, and
 /// one Adam optimiser serves the whole run.
+///
+/// The fields after `target_reach_cm` are the knobs of the study in `reports/emssl_study`
+/// ([`crate::emssl_study`]); their defaults are the schedule above.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EmsslConfig {
     pub max_iterations: usize,
     /// Stop when the disagreement (see [`EmsslIteration::disagreement`]) falls below this
     /// (the paper's rule) ...
     pub agreement: f64,
-    /// ... or when the reach error on the desired training positions
-    /// ([`EmsslIteration::train_reach_cm`]) has not reached a new minimum for this many
-    /// iterations.
+    /// ... or when the selection error ([`EmsslIteration::selection_cm`]) has not reached a
+    /// new minimum for this many iterations.
     pub patience: usize,
     /// Exploration noise: standard deviation in normalised joint units ([0, 1] is the whole
     /// range) in iteration 1.
@@ -242,6 +310,36 @@ pub struct EmsslConfig {
     /// adaptation's "back to where it was" rule. `None`: no such target.
     #[serde(default)]
     pub target_reach_cm: Option<f64>,
+    /// Also reduce the learning rate on a plateau of the selection error: after `patience`
+    /// iterations without a new best, multiply it by `factor` (and again after as many more).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lr_plateau: Option<LrPlateau>,
+    /// Before the first iteration, fit the network this many epochs on motor babbling: as many
+    /// random joint vectors as there are goals, drawn from the range and tried on the forward
+    /// model (0: Algorithm 1's random network).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub warm_start_epochs: usize,
+    /// Train each iteration on the pairs of the last this many iterations (1: Algorithm 1, its
+    /// own pairs only).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub keep_iterations: usize,
+}
+
+fn one() -> usize {
+    1
+}
+fn is_one(v: &usize) -> bool {
+    *v == 1
+}
+fn is_zero(v: &usize) -> bool {
+    *v == 0
+}
+
+/// Reduce-on-plateau of EMSSL's learning rate, counted in iterations.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct LrPlateau {
+    pub patience: usize,
+    pub factor: f64,
 }
 
 impl EmsslConfig {
@@ -258,6 +356,9 @@ impl EmsslConfig {
             exploration_floor: 0.0,
             learning_rate_decay: 0.9,
             target_reach_cm: None,
+            lr_plateau: None,
+            warm_start_epochs: 0,
+            keep_iterations: 1,
         }
     }
 }
@@ -274,6 +375,9 @@ pub struct EmsslIteration {
     /// Mean distance (cm) between the desired training positions and where the model's
     /// answers for them (without noise) take the arm.
     pub train_reach_cm: f64,
+    /// The same on the held-out validation goals, where the data has a validation split.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validation_reach_cm: Option<f64>,
     /// Mean absolute difference (normalised joints) between the model's answers for the
     /// desired positions and its answers for the positions those answers reach: zero when
     /// the model is consistent with the arm (the paper's stopping rule).
@@ -287,9 +391,18 @@ pub struct EmsslIteration {
     pub forward_calls: usize,
 }
 
+impl EmsslIteration {
+    /// The error that picks the model and stops the run: the reach error on the validation
+    /// goals where there are some, on the training goals otherwise (both self-supervised:
+    /// goals and the forward model, no labels).
+    pub fn selection_cm(&self) -> f64 {
+        self.validation_reach_cm.unwrap_or(self.train_reach_cm)
+    }
+}
+
 /// EMSSL's stopping rule followed iteration by iteration: the agreement threshold, or
-/// `patience` iterations without a new minimum of the reach error on the training goals, or
-/// that reach error at or below the target, where one is set.
+/// `patience` iterations without a new minimum of the selection error, or the reach error on
+/// the training goals at or below the target, where one is set.
 pub struct StopRule {
     best_reach_cm: f64,
     since_best: usize,
@@ -307,9 +420,9 @@ impl Default for StopRule {
 impl StopRule {
     /// Take in one iteration: `(whether it is the best so far, whether the rule stops now)`.
     pub fn observe(&mut self, it: &EmsslIteration, cfg: &EmsslConfig) -> (bool, bool) {
-        let improved = it.train_reach_cm < self.best_reach_cm;
+        let improved = it.selection_cm() < self.best_reach_cm;
         if improved {
-            self.best_reach_cm = it.train_reach_cm;
+            self.best_reach_cm = it.selection_cm();
             self.since_best = 0;
         } else {
             self.since_best += 1;
@@ -322,8 +435,9 @@ impl StopRule {
 }
 
 /// Perturb `joints` (radians, within `range`) with Gaussian noise of standard deviation `sigma`
-/// in normalised units (1 = the whole range), clamped to the range.
-fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64) {
+/// in normalised units (1 = the whole range), clamped to the range, or wrapped around it when
+/// `wrap` (a whole-circle range under the wrapped output, where the ends are one pose).
+fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64, wrap: bool) {
     if sigma <= 0.0 {
         return;
     }
@@ -332,8 +446,26 @@ fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64) {
     let [lo, hi] = range;
     for v in joints.iter_mut().flatten() {
         let u = (*v - lo) / (hi - lo) + noise.sample(&mut rng);
-        *v = lo + u.clamp(0.0, 1.0) * (hi - lo);
+        let u = if wrap { u.rem_euclid(1.0) } else { u.clamp(0.0, 1.0) };
+        *v = lo + u * (hi - lo);
     }
+}
+
+/// Motor babbling: `n` joint vectors drawn uniformly from `range` (seeded) and where `forward`
+/// takes them.
+fn babble(
+    forward: &KinematicChain,
+    n: usize,
+    range: [f64; 2],
+    seed: u64,
+) -> (Vec<Point3<f64>>, Vec<Vec<f64>>) {
+    use rand::RngExt;
+    let mut rng = StdRng::seed_from_u64(seed);
+    let [lo, hi] = range;
+    let joints: Vec<Vec<f64>> = (0..n)
+        .map(|_| (0..forward.dof()).map(|_| rng.random_range(lo..=hi)).collect())
+        .collect();
+    (forward.end_effector_batch(&joints), joints)
 }
 
 /// Mean absolute difference of two joint sets in normalised units.
@@ -385,9 +517,39 @@ pub fn emssl_from(
     let mut model = model;
     let mut optim = AdamConfig::new().init();
     let desired = &data.positions[data.train()];
+    let held_out = &data.positions[data.validation()];
+    let wrap = model.joint_output() == JointOutput::Wrapped && data.full_circle();
+    if cfg.warm_start_epochs > 0 {
+        let (reached, tried) = babble(forward, desired.len(), data.range, fit_cfg.seed ^ 0xBABB1E);
+        (model, optim) = fit(
+            model,
+            optim,
+            data,
+            &reached,
+            &tried,
+            &FitConfig {
+                epochs: cfg.warm_start_epochs,
+                ..fit_cfg.clone()
+            },
+            "EMSSL warm start (motor babbling)",
+            tdev,
+        )?;
+    }
     let mut curve: Vec<EmsslIteration> = Vec::new();
     let mut best: Option<Mlp> = None;
     let mut rule = StopRule::default();
+    let mut plateau = cfg.lr_plateau.as_ref().map(|p| {
+        Plateau::new(&Convergence {
+            max_epochs: cfg.max_iterations,
+            patience: usize::MAX,
+            lr_patience: p.patience,
+            lr_factor: p.factor,
+            min_improvement: 1e-3,
+        })
+    });
+    // The pairs of the last `keep_iterations` iterations.
+    let mut kept: std::collections::VecDeque<(Vec<Point3<f64>>, Vec<Vec<f64>>)> =
+        std::collections::VecDeque::new();
     // The answers for the desired positions: the first sampling pass, and after each
     // iteration both its agreement check and the next iteration's sampling.
     let t0 = std::time::Instant::now();
@@ -402,7 +564,9 @@ pub fn emssl_from(
     for iteration in 1..=cfg.max_iterations {
         let decay = |rate: f64| rate.powi(iteration as i32 - 1);
         let sigma = (cfg.exploration * decay(cfg.exploration_decay)).max(cfg.exploration_floor);
-        let learning_rate = fit_cfg.learning_rate * decay(cfg.learning_rate_decay);
+        let learning_rate = fit_cfg.learning_rate
+            * decay(cfg.learning_rate_decay)
+            * plateau.as_ref().map_or(1.0, |p| p.scale);
         // Sampling: the batched inference (done at the end of the last iteration), the
         // exploration noise, then the forward model.
         let t0 = std::time::Instant::now();
@@ -412,15 +576,28 @@ pub fn emssl_from(
             data.range,
             sigma,
             fit_cfg.seed ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            wrap,
         );
         let reached = forward.end_effector_batch(&tried);
         let sampling_seconds = inference_seconds + t0.elapsed().as_secs_f64();
+        kept.push_back((reached, tried));
+        while kept.len() > cfg.keep_iterations.max(1) {
+            kept.pop_front();
+        }
         // Training on the self-generated pairs (reached -> joints tried).
         let t0 = std::time::Instant::now();
         let fit_iter = FitConfig {
             seed: fit_cfg.seed.wrapping_add(iteration as u64),
             learning_rate,
             ..fit_cfg.clone()
+        };
+        let (reached, tried): (Vec<Point3<f64>>, Vec<Vec<f64>>) = if kept.len() == 1 {
+            kept[0].clone()
+        } else {
+            (
+                kept.iter().flat_map(|k| k.0.iter().copied()).collect(),
+                kept.iter().flat_map(|k| k.1.iter().cloned()).collect(),
+            )
         };
         (model, optim) = fit(
             model,
@@ -449,6 +626,10 @@ pub fn emssl_from(
         let disagreement = disagreement(&answers, &back, data.range);
         let train_reach_cm =
             DistanceErrors::from_metres(&distances(desired, &clean_reached)).mean_cm;
+        let validation_reach_cm = (!held_out.is_empty()).then(|| {
+            let q = predict(&valid, data, held_out, fit_cfg.inference_batch, device);
+            DistanceErrors::from_metres(&reach_errors(forward, held_out, &q)).mean_cm
+        });
         let (test, _) = test_errors(&valid, arm, data, fit_cfg.inference_batch, device);
         curve.push(EmsslIteration {
             iteration,
@@ -456,12 +637,17 @@ pub fn emssl_from(
             learning_rate,
             test,
             train_reach_cm,
+            validation_reach_cm,
             disagreement,
             sampling_seconds,
             training_seconds,
             forward_calls: 2 * desired.len() * iteration,
         });
-        let (improved, stop) = rule.observe(curve.last().expect("just pushed"), cfg);
+        let last = curve.last().expect("just pushed");
+        if let Some(p) = plateau.as_mut() {
+            p.observe(last.selection_cm());
+        }
+        let (improved, stop) = rule.observe(last, cfg);
         if improved {
             best = Some(valid);
         }

@@ -24,6 +24,7 @@ pub mod device;
 pub mod dh_robot;
 pub mod distal_learning;
 pub mod emssl_learning_curve;
+pub mod emssl_study;
 pub mod error;
 pub mod evaluation;
 pub mod experiments;

@@ -234,11 +234,10 @@ pub fn run(
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = if cfg.threads == 0 { cores } else { cfg.threads };
     let data = IkData::generate(&robot.chain, &cfg.data)?;
+    let model_cfg = InverseModelConfig::paper(robot.dof());
     let model_cfg = InverseModelConfig {
-        inputs: 3,
         hidden: cfg.hidden.clone(),
-        outputs: robot.dof(),
-        sigmoid_output: true,
+        ..model_cfg
     };
     let bench = Bench {
         model: model_cfg.init(&device, cfg.seed)?,

@@ -412,6 +412,244 @@ pub trait TrainHooks<M> {
     fn after_step(&mut self, model: M, _step: usize) -> Result<(M, bool)> {
         Ok((model, false))
     }
+    /// Sees each step's loss (before the step is taken).
+    fn loss(&mut self, _value: f64, _step: usize) {}
+    /// The learning rate of the next step, given the config's (a schedule).
+    fn learning_rate(&self, base: f64) -> f64 {
+        base
+    }
+    /// Whether training should end now (early stopping).
+    fn stop(&self) -> bool {
+        false
+    }
+}
+
+/// Training until a validation score stops improving: evaluated after every epoch, the
+/// learning rate reduced on a plateau (PyTorch's `ReduceLROnPlateau`), stopped after
+/// `patience` epochs without a new best, the best epoch's weights kept.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Convergence {
+    /// Epochs at most (a cap, not a schedule).
+    pub max_epochs: usize,
+    /// Stop after this many epochs without a new best validation score.
+    pub patience: usize,
+    /// Multiply the learning rate by `lr_factor` after this many epochs without a new best
+    /// (and again after as many more).
+    pub lr_patience: usize,
+    pub lr_factor: f64,
+    /// A score counts as a new best only if it is below the best by this fraction of it.
+    pub min_improvement: f64,
+}
+
+impl Convergence {
+    /// Up to 400 epochs; halve the learning rate after 4 epochs without a new best, stop
+    /// after 12; improvements under 0.1% do not count.
+    pub fn standard() -> Self {
+        Convergence {
+            max_epochs: 400,
+            patience: 12,
+            lr_patience: 4,
+            lr_factor: 0.5,
+            min_improvement: 1e-3,
+        }
+    }
+}
+
+/// One evaluation of a run trained to convergence.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct ValidationPoint {
+    /// Epochs (or, for an iterative learner, iterations) done.
+    pub epoch: usize,
+    pub learning_rate: f64,
+    /// Mean training loss over the epoch.
+    pub train_loss: f64,
+    /// The validation score (lower is better).
+    pub validation: f64,
+    /// Training seconds so far.
+    pub seconds: f64,
+}
+
+/// A plateau rule followed evaluation by evaluation: the best score, the learning-rate scale
+/// and whether to stop. One rule for every learner that trains to convergence (the epoch
+/// loop here and EMSSL's iterations).
+#[derive(Clone, Debug)]
+pub struct Plateau {
+    cfg: Convergence,
+    best: f64,
+    since_best: usize,
+    since_reduce: usize,
+    /// The factor on the base learning rate.
+    pub scale: f64,
+}
+
+impl Plateau {
+    pub fn new(cfg: &Convergence) -> Self {
+        Plateau {
+            cfg: cfg.clone(),
+            best: f64::INFINITY,
+            since_best: 0,
+            since_reduce: 0,
+            scale: 1.0,
+        }
+    }
+
+    /// Take in one score: `(whether it is a new best, whether to stop now)`.
+    pub fn observe(&mut self, score: f64) -> (bool, bool) {
+        let improved = score.is_finite()
+            && (self.best.is_infinite() || score < self.best * (1.0 - self.cfg.min_improvement));
+        if improved {
+            self.best = score;
+            self.since_best = 0;
+        } else {
+            self.since_best += 1;
+        }
+        self.since_reduce += 1;
+        if !improved
+            && self.since_best >= self.cfg.lr_patience
+            && self.since_reduce >= self.cfg.lr_patience
+        {
+            self.scale *= self.cfg.lr_factor;
+            self.since_reduce = 0;
+        }
+        (improved, self.since_best >= self.cfg.patience)
+    }
+
+    pub fn best(&self) -> f64 {
+        self.best
+    }
+}
+
+/// What a run to convergence returns besides its best model.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct ConvergenceLog {
+    pub curve: Vec<ValidationPoint>,
+    /// The epoch whose weights were kept.
+    pub best_epoch: usize,
+    pub best_validation: f64,
+    /// Epochs run, and whether the run stopped on the plateau (or hit `max_epochs`).
+    pub epochs: usize,
+    pub stopped_on_plateau: bool,
+    pub seconds: f64,
+}
+
+impl ConvergenceLog {
+    /// "stopped on a plateau after 57 epochs, best at 45" (or "hit the cap of ...").
+    pub fn summary(&self) -> String {
+        if self.stopped_on_plateau {
+            format!(
+                "stopped on a plateau after {} epochs, best at {}",
+                self.epochs, self.best_epoch
+            )
+        } else {
+            format!(
+                "hit the cap of {} epochs, best at {}",
+                self.epochs, self.best_epoch
+            )
+        }
+    }
+}
+
+/// The hooks of a run to convergence.
+struct Converging<M, V> {
+    validate: V,
+    rule: Plateau,
+    steps_per_epoch: usize,
+    best: Option<M>,
+    log: ConvergenceLog,
+    losses: (f64, usize),
+    stop: bool,
+    base_rate: f64,
+    started: Instant,
+}
+
+impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
+    fn loss(&mut self, value: f64, _step: usize) {
+        self.losses.0 += value;
+        self.losses.1 += 1;
+    }
+    fn learning_rate(&self, base: f64) -> f64 {
+        base * self.rule.scale
+    }
+    fn stop(&self) -> bool {
+        self.stop
+    }
+    fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
+        if step % self.steps_per_epoch != 0 {
+            return Ok((model, false));
+        }
+        let epoch = step / self.steps_per_epoch;
+        let learning_rate = self.base_rate * self.rule.scale;
+        let score = (self.validate)(&model);
+        let (improved, stop) = self.rule.observe(score);
+        if improved {
+            self.best = Some(model.clone());
+            self.log.best_epoch = epoch;
+            self.log.best_validation = score;
+        }
+        self.log.curve.push(ValidationPoint {
+            epoch,
+            learning_rate,
+            train_loss: self.losses.0 / self.losses.1.max(1) as f64,
+            validation: score,
+            seconds: self.started.elapsed().as_secs_f64(),
+        });
+        self.losses = (0.0, 0);
+        self.log.epochs = epoch;
+        self.stop = stop;
+        self.log.stopped_on_plateau = stop;
+        Ok((model, false))
+    }
+}
+
+/// Train `model` on `data` with `loss` until `validate` (lower is better, called with the
+/// model after every epoch) stops improving: `cfg.steps` is ignored for `conv.max_epochs`
+/// epochs, the learning rate follows [`Plateau`]. Returns the best epoch's model and the
+/// validation curve.
+#[allow(clippy::too_many_arguments)]
+pub fn train_to_convergence<M, L, S, V>(
+    model: M,
+    optim: ModuleOptimizer,
+    data: &TrainSet,
+    cfg: &TrainConfig,
+    conv: &Convergence,
+    label: &str,
+    loss: L,
+    validate: V,
+) -> Result<(M, ConvergenceLog)>
+where
+    M: Module,
+    L: Fn(&M, &Batch) -> S,
+    S: Into<StepLoss>,
+    V: FnMut(&M) -> f64,
+{
+    let steps_per_epoch = data.len().div_ceil(cfg.batch.min(data.len()).max(1));
+    let cfg = TrainConfig {
+        steps: conv.max_epochs.max(1) * steps_per_epoch,
+        ..cfg.clone()
+    };
+    let mut hooks = Converging {
+        validate,
+        rule: Plateau::new(conv),
+        steps_per_epoch,
+        best: None,
+        log: ConvergenceLog {
+            curve: Vec::new(),
+            best_epoch: 0,
+            best_validation: f64::INFINITY,
+            epochs: 0,
+            stopped_on_plateau: false,
+            seconds: 0.0,
+        },
+        losses: (0.0, 0),
+        stop: false,
+        base_rate: cfg.learning_rate,
+        started: Instant::now(),
+    };
+    let (model, _, _) =
+        train_continuing(model, optim, data, &cfg, None, label, loss, &mut hooks)?;
+    let mut log = hooks.log;
+    log.seconds = hooks.started.elapsed().as_secs_f64();
+    Ok((hooks.best.unwrap_or(model), log))
 }
 
 /// The training progress bar: steps, rate, the caller's message and ETA.
@@ -494,7 +732,7 @@ where
     bar.set_position(log.step as u64);
     bar.reset_eta();
     let mut window = (0.0f64, 0usize);
-    while log.step < cfg.steps {
+    while log.step < cfg.steps && !hooks.stop() {
         let step = log.step;
         let t0 = Instant::now();
         let batch = batcher.batch(step);
@@ -514,12 +752,13 @@ where
                 step + 1
             )));
         }
+        hooks.loss(value, step);
         let mut grads = step_loss.gradients(&model);
         if let Some(max) = cfg.grad_clip_norm {
             clip_global_norm(&model, &mut grads, max);
         }
         hooks.gradients(&model, &grads, step);
-        model = optim.step(cfg.learning_rate, model, grads);
+        model = optim.step(hooks.learning_rate(cfg.learning_rate), model, grads);
         log.train_seconds += t0.elapsed().as_secs_f64();
         log.images += n;
         log.step += 1;
@@ -562,7 +801,11 @@ where
             plan.save(&model, &optim, &log)?;
         }
     }
-    bar.finish();
+    if log.step < cfg.steps {
+        bar.finish_with_message("stopped early");
+    } else {
+        bar.finish();
+    }
     Ok((model, optim, log))
 }
 

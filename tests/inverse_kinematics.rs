@@ -10,6 +10,7 @@ fn ik_data_is_seeded_split_and_normalised_both_ways() {
         train: 350,
         range_deg: 90.0,
         seed: 3,
+        validation: 0,
     };
     let a = IkData::generate(&robot.chain, &cfg).unwrap();
     let b = IkData::generate(&robot.chain, &cfg).unwrap();
@@ -57,6 +58,7 @@ fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::robot::Robot, IkData)
         train: samples * 4 / 5,
         range_deg,
         seed: 1,
+        validation: 0,
     };
     let data = IkData::generate(&robot.chain, &cfg).unwrap();
     (robot, data)
@@ -145,7 +147,8 @@ fn a_tiny_emssl_beats_direct_regression_on_a_redundant_arm() {
         batch: 64,
         ..FitConfig::paper()
     };
-    let direct = drl(
+    let (direct, _) = drl(
+        &robot.chain,
         &data,
         &model,
         &FitConfig {
@@ -202,6 +205,7 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
         ..FitConfig::paper()
     };
     let distal = dsl(
+        &robot.chain,
         &data,
         &InverseModelConfig::quick(6),
         &fit,
@@ -232,7 +236,8 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
     let (e, _) = test_errors(&distal.inverse, &robot.chain, &data, 512, &device);
     assert!(e.mean_cm < 0.5 * ignorant, "DSL {:.2} cm", e.mean_cm);
 
-    let gan = train_gan(
+    let (gan, _) = train_gan(
+        &robot.chain,
         &data,
         &GanConfig {
             noise: 3,
@@ -246,6 +251,7 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
             },
             best_of: 5,
         },
+        selfmodel::ik_data::JointOutput::Sigmoid,
         &device,
     )
     .unwrap();
