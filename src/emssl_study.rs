@@ -97,6 +97,14 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
             ..s("wrapped output (cos, sin)", fit.clone(), base.clone())
         },
         s(
+            "plateau lr + warm start",
+            fit.clone(),
+            EmsslConfig {
+                warm_start_epochs: 10,
+                ..plateau.clone()
+            },
+        ),
+        s(
             "batch 512",
             FitConfig {
                 batch: 512,
@@ -118,22 +126,6 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
             EmsslConfig {
                 keep_iterations: 2,
                 ..base.clone()
-            },
-        ),
-        s(
-            "noise decay 0.8",
-            fit.clone(),
-            EmsslConfig {
-                exploration_decay: 0.8,
-                ..base.clone()
-            },
-        ),
-        s(
-            "plateau lr + warm start",
-            fit.clone(),
-            EmsslConfig {
-                warm_start_epochs: 10,
-                ..plateau.clone()
             },
         ),
     ]
@@ -271,15 +263,26 @@ pub fn run(
         };
     write_json(&dir.join("config.json"), cfg)?;
     let device = crate::device::select(device_choice)?;
-    for &range in &cfg.ranges_deg {
-        let data = IkData::generate(
-            &robot.chain,
-            &IkDataConfig {
-                range_deg: range,
-                ..cfg.data.clone()
-            },
-        )?;
-        for s in cfg.settings.iter().filter(|s| s.ranges_deg.contains(&range)) {
+    let data: Vec<IkData> = cfg
+        .ranges_deg
+        .iter()
+        .map(|&r| {
+            IkData::generate(
+                &robot.chain,
+                &IkDataConfig {
+                    range_deg: r,
+                    ..cfg.data.clone()
+                },
+            )
+        })
+        .collect::<Result<_>>()?;
+    // Setting by setting (both ranges of a setting before the next), so an interrupted study
+    // has whole settings.
+    for s in &cfg.settings {
+        for (&range, data) in cfg.ranges_deg.iter().zip(&data) {
+            if !s.ranges_deg.contains(&range) {
+                continue;
+            }
             if rows
                 .iter()
                 .any(|r| r.setting == s.name && r.range_deg == range)
@@ -289,7 +292,7 @@ pub fn run(
             eprintln!("emssl_study: +-{range:.0} deg, {}", s.name);
             let model = InverseModelConfig::inverse(cfg.hidden.clone(), robot.dof(), s.output);
             let t = std::time::Instant::now();
-            let (_, curve) = emssl(&robot.chain, &data, &model, &s.fit, &s.emssl, &device)?;
+            let (_, curve) = emssl(&robot.chain, data, &model, &s.fit, &s.emssl, &device)?;
             let seconds = t.elapsed().as_secs_f64();
             let picked = curve
                 .iter()

@@ -29,6 +29,7 @@ pub mod error;
 pub mod evaluation;
 pub mod experiments;
 pub mod fast_adaptation;
+pub mod flow_ik;
 pub mod ffksm;
 pub mod ffksm_step_bench;
 pub mod field_gradients;
