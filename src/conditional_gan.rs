@@ -28,9 +28,7 @@ use crate::inverse_learning::{FitConfig, row_set};
 use crate::inverse_model::{InverseModelConfig, Mlp};
 use crate::kinematics::KinematicChain;
 use crate::losses::bce_with_logits;
-use crate::training::{
-    Batcher, ConvergenceLog, Plateau, ValidationPoint, autodiff_device,
-};
+use crate::training::{Batcher, ConvergenceLog, Plateau, ValidationPoint, autodiff_device};
 
 /// The two networks and their training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -97,7 +95,11 @@ pub fn train_gan(
     let mut d_optim = AdamConfig::new().with_beta_1(0.5).init();
     let train_cfg = cfg.fit.train_config(set.len());
     let steps_per_epoch = set.len().div_ceil(train_cfg.batch.min(set.len()).max(1));
-    let epochs = cfg.fit.converge.as_ref().map_or(cfg.fit.epochs, |c| c.max_epochs);
+    let epochs = cfg
+        .fit
+        .converge
+        .as_ref()
+        .map_or(cfg.fit.epochs, |c| c.max_epochs);
     let mut plateau = cfg.fit.converge.as_ref().map(Plateau::new);
     let mut log = cfg.fit.converge.as_ref().map(|_| ConvergenceLog {
         curve: Vec::new(),
@@ -157,8 +159,7 @@ pub fn train_gan(
         };
         let targets = &data.positions[data.validation()];
         let joints = candidate.sample(data, targets, cfg.fit.inference_batch, 0x7A1, device);
-        let score =
-            DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm;
+        let score = DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm;
         let (improved, stop) = rule.observe(score);
         if improved {
             best = Some(candidate.model);

@@ -165,7 +165,10 @@ fn forward_error_cm(
     let joints = data.joint_rows_as(&data.joints[test.clone()], output);
     let n = test.len();
     let out = forward
-        .forward(Tensor::from_data(TensorData::new(joints, [n, width]), device))
+        .forward(Tensor::from_data(
+            TensorData::new(joints, [n, width]),
+            device,
+        ))
         .into_data()
         .try_into_vec::<f32>()
         .expect("float");

@@ -74,7 +74,11 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
                 ..base.clone()
             },
         ),
-        s("learning rate halved on plateaus", fit.clone(), plateau.clone()),
+        s(
+            "learning rate halved on plateaus",
+            fit.clone(),
+            plateau.clone(),
+        ),
         s(
             "warm start: 10 epochs of motor babbling",
             fit.clone(),
@@ -230,37 +234,39 @@ pub fn run(
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let results = dir.join("results.csv");
     let curves_path = dir.join("curves.csv");
-    let (mut rows, mut curves): (Vec<StudyRow>, Vec<StudyCurveRow>) =
-        if resume && results.exists() && curves_path.exists() {
-            let old: StudyConfig = serde_json::from_str(
-                &std::fs::read_to_string(dir.join("config.json"))
-                    .map_err(|e| Error::io(dir.join("config.json"), e))?,
-            )
-            .map_err(|e| Error::data(dir.join("config.json"), e.to_string()))?;
-            if old.preset != cfg.preset || old.data != cfg.data || old.hidden != cfg.hidden {
-                return Err(Error::Config(format!(
-                    "{} holds a study of other data or another network; drop --resume or choose another --out",
-                    dir.display()
-                )));
-            }
-            // Keep only rows whose setting is unchanged.
-            let same = |name: &str| {
-                old.settings.iter().find(|s| s.name == name)
-                    == cfg.settings.iter().find(|s| s.name == name)
-            };
-            (
-                crate::report::read_csv::<StudyRow>(&results)?
-                    .into_iter()
-                    .filter(|r| same(&r.setting))
-                    .collect(),
-                crate::report::read_csv::<StudyCurveRow>(&curves_path)?
-                    .into_iter()
-                    .filter(|r| same(&r.setting))
-                    .collect(),
-            )
-        } else {
-            (Vec::new(), Vec::new())
+    let (mut rows, mut curves): (Vec<StudyRow>, Vec<StudyCurveRow>) = if resume
+        && results.exists()
+        && curves_path.exists()
+    {
+        let old: StudyConfig = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("config.json"))
+                .map_err(|e| Error::io(dir.join("config.json"), e))?,
+        )
+        .map_err(|e| Error::data(dir.join("config.json"), e.to_string()))?;
+        if old.preset != cfg.preset || old.data != cfg.data || old.hidden != cfg.hidden {
+            return Err(Error::Config(format!(
+                "{} holds a study of other data or another network; drop --resume or choose another --out",
+                dir.display()
+            )));
+        }
+        // Keep only rows whose setting is unchanged.
+        let same = |name: &str| {
+            old.settings.iter().find(|s| s.name == name)
+                == cfg.settings.iter().find(|s| s.name == name)
         };
+        (
+            crate::report::read_csv::<StudyRow>(&results)?
+                .into_iter()
+                .filter(|r| same(&r.setting))
+                .collect(),
+            crate::report::read_csv::<StudyCurveRow>(&curves_path)?
+                .into_iter()
+                .filter(|r| same(&r.setting))
+                .collect(),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
     write_json(&dir.join("config.json"), cfg)?;
     let device = crate::device::select(device_choice)?;
     let data: Vec<IkData> = cfg

@@ -9,7 +9,7 @@ use crate::ablations::{Ablation, run_ablation};
 use crate::decoder_experiment::{DECODER_PRESETS, DecoderRunConfig};
 use crate::device::DeviceChoice;
 use crate::ffksm::{FFKSM_PRESETS, FfksmConfig};
-use crate::ik_comparison::{IK_PRESETS, IkComparisonConfig};
+use crate::ik_comparison::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
 use crate::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
 use crate::model_result::ModelResult;
 use crate::report::{write_csv, write_markdown_report};
@@ -332,10 +332,16 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
 
 /// Table II of the EMSSL paper: every inverse-kinematics method in both joint ranges.
 pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
-    reject_self_model_switches(opts, "emssl_table2")?;
-    let cfg = IkComparisonConfig::preset(&opts.preset)?;
+    reject_self_model_switches(
+        &RunOptions {
+            resume: false,
+            ..opts.clone()
+        },
+        "emssl_table2",
+    )?;
+    let cfg = IkComparisonConfig::named(&opts.preset)?;
     let (robot, name) = opts.ik_robot()?;
-    let rows = crate::ik_comparison::run(&cfg, &robot, &name, dir, opts.device)?;
+    let rows = crate::ik_comparison::run(&cfg, &robot, &name, dir, opts.device, opts.resume)?;
     Ok(rows
         .iter()
         .map(|r| {
@@ -508,9 +514,9 @@ pub const EXPERIMENTS: &[Experiment] = &[
     },
     Experiment {
         name: "emssl_table2",
-        about: "EMSSL paper Table II: learned inverse kinematics (EMSSL, DRL, DSL, CGAN) and a numerical solver, two joint ranges",
+        about: "EMSSL paper Table II: learned inverse kinematics (EMSSL, DRL, DSL, CGAN) trained to convergence (preset paper-schedule: fixed epochs), a many-solution flow and a numerical solver, two joint ranges (--resume reuses finished methods)",
         default_dir: "reports/emssl_table2",
-        presets: IK_PRESETS,
+        presets: TABLE2_PRESETS,
         in_table1: false,
         takes_robot: true,
         run: run_emssl_table2,

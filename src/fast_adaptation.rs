@@ -73,7 +73,7 @@ impl Preset for AdaptationConfig {
     fn paper() -> Self {
         AdaptationConfig {
             preset: "paper".into(),
-            base: IkComparisonConfig::paper(),
+            base: IkComparisonConfig::paper_schedule(),
             range_deg: 90.0,
             robots: vec!["ur5".into(), "arm4".into()],
             changes: vec![

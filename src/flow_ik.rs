@@ -294,7 +294,8 @@ pub fn train_flow(
             })
         }
         None => {
-            let (model, _) = crate::training::train(model, &set, &train_cfg, None, "flow IK", loss)?;
+            let (model, _) =
+                crate::training::train(model, &set, &train_cfg, None, "flow IK", loss)?;
             Ok(TrainedFlow {
                 model: model.valid(),
                 log: None,
@@ -321,8 +322,7 @@ pub fn sample(
             let mut out = Vec::with_capacity(positions.len());
             for (c, part) in positions.chunks(batch.max(1)).enumerate() {
                 let n = part.len();
-                let mut rng =
-                    StdRng::seed_from_u64(seed ^ ((s as u64) << 32) ^ ((c as u64) << 8));
+                let mut rng = StdRng::seed_from_u64(seed ^ ((s as u64) << 32) ^ ((c as u64) << 8));
                 let z: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng)).collect();
                 let mut cond = data.position_rows(part);
                 // Append the noise scale 0 to every row.
@@ -336,7 +336,10 @@ pub fn sample(
                 );
                 let v = x.into_data().try_into_vec::<f32>().expect("float");
                 out.extend(v.chunks(dof).map(|r| {
-                    let u: Vec<f32> = r.iter().map(|x| ((x + 1.0) / 2.0).clamp(0.0, 1.0)).collect();
+                    let u: Vec<f32> = r
+                        .iter()
+                        .map(|x| ((x + 1.0) / 2.0).clamp(0.0, 1.0))
+                        .collect();
                     data.joints_from_normalised(&u)
                 }));
             }

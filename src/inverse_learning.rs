@@ -446,7 +446,11 @@ fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64, wrap
     let [lo, hi] = range;
     for v in joints.iter_mut().flatten() {
         let u = (*v - lo) / (hi - lo) + noise.sample(&mut rng);
-        let u = if wrap { u.rem_euclid(1.0) } else { u.clamp(0.0, 1.0) };
+        let u = if wrap {
+            u.rem_euclid(1.0)
+        } else {
+            u.clamp(0.0, 1.0)
+        };
         *v = lo + u * (hi - lo);
     }
 }
@@ -463,7 +467,11 @@ fn babble(
     let mut rng = StdRng::seed_from_u64(seed);
     let [lo, hi] = range;
     let joints: Vec<Vec<f64>> = (0..n)
-        .map(|_| (0..forward.dof()).map(|_| rng.random_range(lo..=hi)).collect())
+        .map(|_| {
+            (0..forward.dof())
+                .map(|_| rng.random_range(lo..=hi))
+                .collect()
+        })
         .collect();
     (forward.end_effector_batch(&joints), joints)
 }

@@ -44,12 +44,7 @@ impl InverseModelConfig {
     }
 
     /// `inputs` -> `hidden` -> the joints of a `dof`-joint arm under `output`.
-    pub fn with_output(
-        inputs: usize,
-        hidden: Vec<usize>,
-        dof: usize,
-        output: JointOutput,
-    ) -> Self {
+    pub fn with_output(inputs: usize, hidden: Vec<usize>, dof: usize, output: JointOutput) -> Self {
         InverseModelConfig {
             inputs,
             hidden,

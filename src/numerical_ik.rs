@@ -81,11 +81,114 @@ pub fn solve(
             dq *= cfg.max_step / norm;
         }
         for (k, v) in q.iter_mut().enumerate() {
-            let [lo, hi] = ranges[k];
-            *v = (*v + dq[k]).clamp(lo, hi);
+            *v = keep_in(*v + dq[k], ranges[k]);
         }
         iterations += 1;
     }
+}
+
+/// `v` kept in `range`: wrapped around when the range is the whole circle (its ends are one
+/// pose), clamped otherwise.
+fn keep_in(v: f64, [lo, hi]: [f64; 2]) -> f64 {
+    use std::f64::consts::PI;
+    if hi - lo >= 2.0 * PI - 1e-9 {
+        lo + (v - lo).rem_euclid(2.0 * PI)
+    } else {
+        v.clamp(lo, hi)
+    }
+}
+
+/// Where a solve from a learned answer stalls (a joint limit, a singularity, a local minimum):
+/// the starts it tries next, until one converges.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Restarts {
+    /// Samples of a many-solution model (the flow), tried closest first.
+    pub flow_samples: usize,
+    /// Then uniformly random joint vectors in the range (seeded per target).
+    pub random: usize,
+    pub seed: u64,
+}
+
+impl Restarts {
+    /// 10 flow samples, then 20 random starts.
+    pub fn standard() -> Self {
+        Restarts {
+            flow_samples: 10,
+            random: 20,
+            seed: 0,
+        }
+    }
+}
+
+/// [`solve_batch`] from `starts`; every target not within tolerance is solved again from the
+/// `restarts.flow_samples` answers `samples(stalled)` gives for the stalled targets (k answer
+/// sets, closest first), then from random starts, keeping the first converged (or the closest)
+/// answer. Returns the solutions and how many targets were restarted.
+pub fn solve_with_restarts(
+    chain: &KinematicChain,
+    targets: &[Point3<f64>],
+    starts: &[Vec<f64>],
+    ranges: &[[f64; 2]],
+    cfg: &DlsConfig,
+    restarts: &Restarts,
+    samples: impl FnOnce(&[usize]) -> Vec<Vec<Vec<f64>>>,
+) -> (Vec<IkSolution>, usize) {
+    use rand::{RngExt, SeedableRng};
+    let mut solutions = solve_batch(chain, targets, starts, ranges, cfg);
+    let stalled: Vec<usize> = (0..targets.len())
+        .filter(|&i| solutions[i].error_m >= cfg.tolerance_m)
+        .collect();
+    if stalled.is_empty() {
+        return (solutions, 0);
+    }
+    let from_model = if restarts.flow_samples > 0 {
+        samples(&stalled)
+    } else {
+        Vec::new()
+    };
+    let retried: Vec<IkSolution> = stalled
+        .par_iter()
+        .enumerate()
+        .map(|(j, &i)| {
+            let target = &targets[i];
+            let mut best = solutions[i].clone();
+            let mut tried = best.iterations;
+            // The model's samples, closest to the target first.
+            let mut candidates: Vec<&Vec<f64>> = from_model.iter().map(|s| &s[j]).collect();
+            candidates.sort_by(|a, b| {
+                (target - chain.end_effector(a))
+                    .norm()
+                    .total_cmp(&(target - chain.end_effector(b)).norm())
+            });
+            let mut rng = rand::rngs::StdRng::seed_from_u64(
+                restarts.seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            let random: Vec<Vec<f64>> = (0..restarts.random)
+                .map(|_| {
+                    ranges
+                        .iter()
+                        .map(|&[lo, hi]| rng.random_range(lo..=hi))
+                        .collect()
+                })
+                .collect();
+            for start in candidates.into_iter().chain(random.iter()) {
+                let s = solve(chain, target, start, ranges, cfg);
+                tried += s.iterations;
+                if s.error_m < best.error_m {
+                    best = s;
+                }
+                if best.error_m < cfg.tolerance_m {
+                    break;
+                }
+            }
+            best.iterations = tried;
+            best
+        })
+        .collect();
+    for (&i, s) in stalled.iter().zip(retried) {
+        solutions[i] = s;
+    }
+    (solutions, stalled.len())
 }
 
 /// [`solve`] for every target from its start (`starts[i]`), in parallel.

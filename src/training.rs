@@ -645,8 +645,7 @@ where
         base_rate: cfg.learning_rate,
         started: Instant::now(),
     };
-    let (model, _, _) =
-        train_continuing(model, optim, data, &cfg, None, label, loss, &mut hooks)?;
+    let (model, _, _) = train_continuing(model, optim, data, &cfg, None, label, loss, &mut hooks)?;
     let mut log = hooks.log;
     log.seconds = hooks.started.elapsed().as_secs_f64();
     Ok((hooks.best.unwrap_or(model), log))

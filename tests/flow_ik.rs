@@ -30,7 +30,9 @@ fn the_flow_inverts_its_forward_pass_and_its_log_determinant_is_the_volume_chang
     // perturbation of every parameter is quicker and covers every coupling.
     let flow = perturbed(flow, &device);
     let n = 64;
-    let x: Vec<f32> = (0..n * 6).map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0).collect();
+    let x: Vec<f32> = (0..n * 6)
+        .map(|i| ((i * 37 % 101) as f32 / 50.0) - 1.0)
+        .collect();
     let c: Vec<f32> = (0..n * 4).map(|i| (i * 13 % 17) as f32 / 17.0).collect();
     let x = Tensor::<2>::from_data(TensorData::new(x, [n, 6]), &device);
     let c = Tensor::<2>::from_data(TensorData::new(c, [n, 4]), &device);
@@ -40,7 +42,10 @@ fn the_flow_inverts_its_forward_pass_and_its_log_determinant_is_the_volume_chang
     assert!(err < 1e-4, "forward then inverse is off by {err}");
     // The map is not the identity, so the test means something.
     let moved = (z - x.clone()).abs().max().into_scalar::<f32>();
-    assert!(moved > 1e-2, "the perturbed flow barely moves its input ({moved})");
+    assert!(
+        moved > 1e-2,
+        "the perturbed flow barely moves its input ({moved})"
+    );
     // log|det| against finite differences of the whole map for one row.
     let row = |t: &Tensor<2>| t.clone().slice([0..1, 0..6]);
     let (x0, c0) = (row(&x), c.clone().slice([0..1, 0..4]));
@@ -52,7 +57,10 @@ fn the_flow_inverts_its_forward_pass_and_its_log_determinant_is_the_volume_chang
         let d = Tensor::<2>::from_data(TensorData::new(e, [1, 6]), &device);
         let (zp, _) = flow.forward(x0.clone() + d.clone(), c0.clone());
         let (zm, _) = flow.forward(x0.clone() - d, c0.clone());
-        let col = ((zp - zm) / (2.0 * h)).into_data().try_to_vec::<f32>().unwrap();
+        let col = ((zp - zm) / (2.0 * h))
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         for (r, v) in col.iter().enumerate() {
             jac[(r, k)] = *v as f64;
         }
@@ -78,7 +86,9 @@ fn perturbed(flow: FlowIk, device: &burn::tensor::Device) -> FlowIk {
                 let dims = t.dims();
                 let n: usize = dims.iter().product();
                 let v: Vec<f32> = (0..n)
-                    .map(|i| (((i as u64 * 2654435761 + seed * 97) % 1000) as f32 / 1000.0 - 0.5) * 0.2)
+                    .map(|i| {
+                        (((i as u64 * 2654435761 + seed * 97) % 1000) as f32 / 1000.0 - 0.5) * 0.2
+                    })
                     .collect();
                 t + Tensor::<D>::from_data(TensorData::new(v, dims), &device)
             })
@@ -136,7 +146,9 @@ fn a_tiny_flow_fit_lowers_its_likelihood_loss_and_samples_many_seeded_solutions(
     // The answers differ from each other, and the best of 4 beats one sample, which beats an
     // input-blind answer (the training joints in order).
     assert!(diversity(&a) > 0.1, "diversity {}", diversity(&a));
-    let cm = |q: &[Vec<f64>]| DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, q)).mean_cm;
+    let cm = |q: &[Vec<f64>]| {
+        DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, q)).mean_cm
+    };
     let one = cm(&a[0]);
     let best = cm(&best_of(&robot.chain, targets, &a));
     let blind = cm(&data.joints[..targets.len()]);
