@@ -177,6 +177,14 @@ pub fn train_gan(
         log.epochs = epoch + 1;
         log.stopped_on_plateau = stop;
         bar.set_message(format!("validation {score:.2} cm"));
+        if bar.is_hidden() {
+            eprintln!(
+                "CGAN: epoch {}, validation {score:.4}, best {:.4} at {}, lr {rate:.2e}",
+                epoch + 1,
+                log.best_validation,
+                log.best_epoch
+            );
+        }
         if stop {
             break;
         }

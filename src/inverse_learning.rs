@@ -652,6 +652,13 @@ pub fn emssl_from(
             forward_calls: 2 * desired.len() * iteration,
         });
         let last = curve.last().expect("just pushed");
+        if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            eprintln!(
+                "EMSSL iteration {iteration}: selection {:.4} cm, test {:.4} cm, lr {learning_rate:.2e}, noise {sigma:.4}",
+                last.selection_cm(),
+                last.test.mean_cm
+            );
+        }
         if let Some(p) = plateau.as_mut() {
             p.observe(last.selection_cm());
         }

@@ -551,6 +551,7 @@ impl ConvergenceLog {
 
 /// The hooks of a run to convergence.
 struct Converging<M, V> {
+    label: String,
     validate: V,
     rule: Plateau,
     steps_per_epoch: usize,
@@ -597,6 +598,17 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         self.log.epochs = epoch;
         self.stop = stop;
         self.log.stopped_on_plateau = stop;
+        // Without a terminal (a run in the background) the bar is hidden: a line per epoch.
+        if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            eprintln!(
+                "{}: epoch {epoch}, validation {score:.4}{}, best {:.4} at {}, lr {learning_rate:.2e}, {:.0} s",
+                self.label,
+                if improved { " (best)" } else { "" },
+                self.log.best_validation,
+                self.log.best_epoch,
+                self.started.elapsed().as_secs_f64()
+            );
+        }
         Ok((model, false))
     }
 }
@@ -628,6 +640,7 @@ where
         ..cfg.clone()
     };
     let mut hooks = Converging {
+        label: label.to_string(),
         validate,
         rule: Plateau::new(conv),
         steps_per_epoch,
