@@ -4,7 +4,9 @@
 //! model's answer (a good start needs few iterations).
 //!
 //! Each iteration: `e = target - p(q)`, `dq = J^T (J J^T + lambda^2 I)^-1 e`, the step's norm
-//! capped at `max_step` radians, `q` clamped to the joint ranges. Stops when `|e|` falls below
+//! capped at `max_step` radians. A joint the step would push past its limit is moved to the
+//! limit and dropped from that iteration's step, which is solved again for the other joints
+//! (the clamping loop); a whole-circle range wraps instead. Stops when `|e|` falls below
 //! `tolerance_m` or after `max_iterations`. Targets are solved independently, in parallel.
 
 use nalgebra::{Matrix3, Point3};
@@ -66,33 +68,61 @@ pub fn solve(
                 iterations,
             };
         }
-        let j = chain.position_jacobian(&q);
-        let damped = &j * j.transpose() + Matrix3::identity() * cfg.damping.powi(2);
-        let Some(inv) = damped.try_inverse() else {
-            return IkSolution {
-                joints: q,
-                error_m,
-                iterations,
+        // The clamping loop: a joint the step would push past its limit is moved to the limit
+        // and left out of the step, which is solved again for the others (a clamped step would
+        // waste its push on the limit, and the solve would stall there).
+        let mut fixed = vec![false; q.len()];
+        let mut e = e;
+        for _ in 0..=q.len() {
+            let mut j = chain.position_jacobian(&q);
+            for (k, &f) in fixed.iter().enumerate() {
+                if f {
+                    j.column_mut(k).fill(0.0);
+                }
+            }
+            let damped = &j * j.transpose() + Matrix3::identity() * cfg.damping.powi(2);
+            let Some(inv) = damped.try_inverse() else {
+                return IkSolution {
+                    joints: q,
+                    error_m,
+                    iterations,
+                };
             };
-        };
-        let mut dq = j.transpose() * (inv * e);
-        let norm = dq.norm();
-        if norm > cfg.max_step {
-            dq *= cfg.max_step / norm;
-        }
-        for (k, v) in q.iter_mut().enumerate() {
-            *v = keep_in(*v + dq[k], ranges[k]);
+            let mut dq = j.transpose() * (inv * e);
+            let norm = dq.norm();
+            if norm > cfg.max_step {
+                dq *= cfg.max_step / norm;
+            }
+            let hits: Vec<usize> = (0..q.len())
+                .filter(|&k| !fixed[k] && !wraps(ranges[k]))
+                .filter(|&k| !(ranges[k][0]..=ranges[k][1]).contains(&(q[k] + dq[k])))
+                .collect();
+            if hits.is_empty() {
+                for (k, v) in q.iter_mut().enumerate() {
+                    *v = keep_in(*v + dq[k], ranges[k]);
+                }
+                break;
+            }
+            for k in hits {
+                q[k] = keep_in(q[k] + dq[k], ranges[k]);
+                fixed[k] = true;
+            }
+            e = target - chain.end_effector(&q);
         }
         iterations += 1;
     }
 }
 
-/// `v` kept in `range`: wrapped around when the range is the whole circle (its ends are one
-/// pose), clamped otherwise.
-fn keep_in(v: f64, [lo, hi]: [f64; 2]) -> f64 {
-    use std::f64::consts::PI;
-    if hi - lo >= 2.0 * PI - 1e-9 {
-        lo + (v - lo).rem_euclid(2.0 * PI)
+/// Whether a joint range is the whole circle (its ends are one pose).
+fn wraps([lo, hi]: [f64; 2]) -> bool {
+    hi - lo >= 2.0 * std::f64::consts::PI - 1e-9
+}
+
+/// `v` kept in `range`: wrapped around when the range is the whole circle, clamped otherwise.
+fn keep_in(v: f64, range: [f64; 2]) -> f64 {
+    let [lo, hi] = range;
+    if wraps(range) {
+        lo + (v - lo).rem_euclid(2.0 * std::f64::consts::PI)
     } else {
         v.clamp(lo, hi)
     }
@@ -110,11 +140,11 @@ pub struct Restarts {
 }
 
 impl Restarts {
-    /// 10 flow samples, then 20 random starts.
+    /// 10 flow samples, then 50 random starts.
     pub fn standard() -> Self {
         Restarts {
             flow_samples: 10,
-            random: 20,
+            random: 50,
             seed: 0,
         }
     }

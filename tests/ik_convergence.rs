@@ -1,0 +1,297 @@
+//! Training to convergence (the validation split, early stopping, best weights) and the
+//! wrapped joint output of the learned inverse-kinematics methods.
+
+use nalgebra::Point3;
+use selfmodel::device::{DeviceChoice, select};
+use selfmodel::ik_data::{IkData, IkDataConfig, JointOutput};
+use selfmodel::inverse_learning::{FitConfig, drl, predict, validation_cm};
+use selfmodel::inverse_model::InverseModelConfig;
+use selfmodel::training::{Convergence, Plateau};
+
+#[test]
+fn the_validation_split_is_carved_from_the_training_samples_and_leaves_the_test_set_alone() {
+    let robot = selfmodel::dh_robot::ur5([-1.0, 1.0]);
+    let cfg = IkDataConfig {
+        samples: 1_000,
+        train: 700,
+        range_deg: 90.0,
+        seed: 4,
+        validation: 100,
+    };
+    let with = IkData::generate(&robot.chain, &cfg).unwrap();
+    let without = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            validation: 0,
+            ..cfg.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(
+        (with.train(), with.validation(), with.test()),
+        (0..600, 600..700, 700..1000)
+    );
+    assert_eq!(without.validation(), 700..700);
+    // The same samples, the same test targets and normalisation either way.
+    assert_eq!(with.positions, without.positions);
+    assert_eq!(with.position_bounds, without.position_bounds);
+    assert!(
+        IkData::generate(
+            &robot.chain,
+            &IkDataConfig {
+                validation: 700,
+                ..cfg
+            }
+        )
+        .is_err()
+    );
+}
+
+#[test]
+fn the_plateau_rule_halves_the_rate_then_stops() {
+    let mut rule = Plateau::new(&Convergence {
+        max_epochs: 100,
+        patience: 5,
+        lr_patience: 2,
+        lr_factor: 0.5,
+        min_improvement: 0.01,
+    });
+    // Improves twice, then a gain below 1% (not a new best), then nothing: the rate halves
+    // after 2 epochs without a new best and again 2 later; the run stops at the 5th.
+    let scores = [10.0, 9.0, 8.95, 9.5, 9.2, 9.1, 9.3];
+    let seen: Vec<(bool, bool, f64)> = scores
+        .iter()
+        .map(|&s| {
+            let (best, stop) = rule.observe(s);
+            (best, stop, rule.scale)
+        })
+        .collect();
+    assert_eq!(
+        seen.iter().map(|s| s.0).collect::<Vec<_>>(),
+        [true, true, false, false, false, false, false]
+    );
+    assert_eq!(
+        seen.iter().map(|s| s.1).collect::<Vec<_>>(),
+        [false, false, false, false, false, false, true]
+    );
+    assert_eq!(
+        seen.iter().map(|s| s.2).collect::<Vec<_>>(),
+        [1.0, 1.0, 1.0, 0.5, 0.5, 0.25, 0.25]
+    );
+    assert_eq!(rule.best(), 9.0);
+}
+
+#[test]
+fn a_tiny_run_to_convergence_stops_on_a_plateau_and_keeps_its_best_weights() {
+    let r = 90f64.to_radians();
+    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 2_400,
+            train: 2_000,
+            range_deg: 90.0,
+            seed: 5,
+            validation: 400,
+        },
+    )
+    .unwrap();
+    let device = select(DeviceChoice::Cpu).unwrap();
+    // A high learning rate on a small set: the validation error rises and wanders after its
+    // best, so the rule has a plateau to find.
+    let fit = FitConfig {
+        batch: 64,
+        learning_rate: 3e-3,
+        converge: Some(Convergence {
+            max_epochs: 200,
+            patience: 4,
+            lr_patience: 2,
+            lr_factor: 0.5,
+            min_improvement: 1e-3,
+        }),
+        ..FitConfig::paper()
+    };
+    let model_cfg = InverseModelConfig::inverse(vec![64, 64], 6, JointOutput::Sigmoid);
+    let (model, log) = drl(&robot.chain, &data, &model_cfg, &fit, &device).unwrap();
+    let log = log.expect("trained to convergence");
+    assert!(log.stopped_on_plateau, "{}", log.summary());
+    assert!(
+        log.epochs < 200 && log.best_epoch + 4 == log.epochs,
+        "{}",
+        log.summary()
+    );
+    assert_eq!(log.curve.len(), log.epochs);
+    // The kept model is the best epoch's, not the last one's.
+    let best = log
+        .curve
+        .iter()
+        .map(|p| p.validation)
+        .fold(f64::INFINITY, f64::min);
+    let last = log.curve.last().unwrap().validation;
+    assert!(best < last, "the last epoch was the best: nothing to keep");
+    let kept = validation_cm(&model, &robot.chain, &data, 512, &device);
+    assert!(
+        (kept - best).abs() < 1e-6 * best.max(1.0),
+        "kept {kept}, best {best}"
+    );
+    // The learning rate was reduced on the way.
+    assert!(log.curve.last().unwrap().learning_rate < fit.learning_rate);
+}
+
+/// Wrapped difference of two angles (rad).
+fn angle_gap(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    d.min(std::f64::consts::TAU - d)
+}
+
+#[test]
+fn the_wrapped_code_round_trips_and_puts_plus_and_minus_179_degrees_side_by_side() {
+    let robot = selfmodel::dh_robot::ur5([-4.0, 4.0]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 10,
+            train: 5,
+            range_deg: 180.0,
+            seed: 0,
+            validation: 0,
+        },
+    )
+    .unwrap();
+    let q = [
+        179f64.to_radians(),
+        -179f64.to_radians(),
+        0.5,
+        -2.0,
+        3.0,
+        -3.1,
+    ];
+    let back = data.decode_joints(
+        &data.encode_joints(&q, JointOutput::Wrapped),
+        JointOutput::Wrapped,
+    );
+    assert!(
+        back.iter().zip(&q).all(|(a, b)| angle_gap(*a, *b) < 1e-6),
+        "{back:?}"
+    );
+    let code = |deg: f64, out| data.encode_joints(&[f64::to_radians(deg)], out);
+    let gap = |a: Vec<f32>, b: Vec<f32>| {
+        a.iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f32>()
+            .sqrt()
+    };
+    assert!(
+        gap(
+            code(179.0, JointOutput::Wrapped),
+            code(-179.0, JointOutput::Wrapped)
+        ) < 0.04
+    );
+    assert!(
+        gap(
+            code(179.0, JointOutput::Sigmoid),
+            code(-179.0, JointOutput::Sigmoid)
+        ) > 0.98
+    );
+}
+
+#[test]
+fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joints() {
+    // Only the base joint moves, over the whole circle: each target has one answer, and the
+    // targets at +179 and -179 degrees are 2 degrees of base rotation apart.
+    let robot = selfmodel::dh_robot::ur5([-4.0, 4.0]);
+    let rest = [-0.6, 1.1, -0.4, 0.7, 0.2];
+    let arm = |q1: f64| {
+        let mut q = vec![q1];
+        q.extend(rest);
+        q
+    };
+    let n = 3_000;
+    let joints: Vec<Vec<f64>> = (0..n)
+        .map(|i| {
+            arm(-std::f64::consts::PI + std::f64::consts::TAU * ((i * 7919) % n) as f64 / n as f64)
+        })
+        .collect();
+    let template = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: n,
+            train: n - 500,
+            range_deg: 180.0,
+            seed: 0,
+            validation: 0,
+        },
+    )
+    .unwrap();
+    let data = IkData {
+        positions: robot.chain.end_effector_batch(&joints),
+        joints,
+        ..template
+    };
+    let data = IkData {
+        position_bounds: {
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for p in &data.positions {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+            [lo, hi]
+        },
+        ..data
+    };
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let fit = FitConfig {
+        epochs: 30,
+        batch: 64,
+        learning_rate: 2e-3,
+        ..FitConfig::paper()
+    };
+    let seam: Vec<Point3<f64>> = robot
+        .chain
+        .end_effector_batch(&[arm(179f64.to_radians()), arm(-179f64.to_radians())]);
+    let answer = |output| {
+        let (model, _) = drl(
+            &robot.chain,
+            &data,
+            &InverseModelConfig::inverse(vec![64, 64], 6, output),
+            &fit,
+            &device,
+        )
+        .unwrap();
+        let q = predict(&model, &data, &seam, 8, &device);
+        (q[0][0], q[1][0])
+    };
+    let (plus, minus) = answer(JointOutput::Wrapped);
+    eprintln!(
+        "wrapped: {:.1} and {:.1} deg",
+        plus.to_degrees(),
+        minus.to_degrees()
+    );
+    assert!(angle_gap(plus, minus) < 8f64.to_radians(), "{plus} {minus}");
+    assert!(
+        angle_gap(plus, 179f64.to_radians()) < 6f64.to_radians(),
+        "{plus}"
+    );
+    assert!(
+        angle_gap(minus, -179f64.to_radians()) < 6f64.to_radians(),
+        "{minus}"
+    );
+    // The sigmoid cannot put them side by side: its answers at the seam are far from one end.
+    let (plus_s, minus_s) = answer(JointOutput::Sigmoid);
+    eprintln!(
+        "sigmoid: {:.1} and {:.1} deg",
+        plus_s.to_degrees(),
+        minus_s.to_degrees()
+    );
+    let wrapped_err = angle_gap(plus, 179f64.to_radians()) + angle_gap(minus, -179f64.to_radians());
+    let sigmoid_err =
+        angle_gap(plus_s, 179f64.to_radians()) + angle_gap(minus_s, -179f64.to_radians());
+    assert!(
+        sigmoid_err > 2.0 * wrapped_err,
+        "sigmoid {sigmoid_err} against wrapped {wrapped_err}"
+    );
+}
