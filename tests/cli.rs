@@ -12,6 +12,7 @@ const BINARIES: &[&str] = &[
     env!("CARGO_BIN_EXE_fit_arm4_geometry"),
     env!("CARGO_BIN_EXE_emssl_table2"),
     env!("CARGO_BIN_EXE_emssl_learning_curve"),
+    env!("CARGO_BIN_EXE_emssl_study"),
 ];
 
 fn dataset(args: &[&str]) -> Output {
