@@ -442,13 +442,15 @@ pub struct Convergence {
 }
 
 impl Convergence {
-    /// Up to 400 epochs; halve the learning rate after 4 epochs without a new best, stop
-    /// after 12; improvements under 0.1% do not count.
+    /// Up to 400 epochs; halve the learning rate after 6 epochs without a new best, stop
+    /// after 20; improvements under 0.1% do not count. (With 4 and 12, the noisy validation
+    /// error of batch-128 Adam halved the rate from the 9th epoch on: DSL's forward model
+    /// stood at 0.71 cm after 52 epochs, where a cosine schedule reaches about 0.42.)
     pub fn standard() -> Self {
         Convergence {
             max_epochs: 400,
-            patience: 12,
-            lr_patience: 4,
+            patience: 20,
+            lr_patience: 6,
             lr_factor: 0.5,
             min_improvement: 1e-3,
         }
