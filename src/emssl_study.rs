@@ -64,21 +64,14 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
         }),
         ..base.clone()
     };
+    let fast_noise = EmsslConfig {
+        exploration_decay: 0.8,
+        ..base.clone()
+    };
     vec![
         s("baseline (3bc9f24)", fit.clone(), base.clone()),
-        s(
-            "learning rate constant",
-            fit.clone(),
-            EmsslConfig {
-                learning_rate_decay: 1.0,
-                ..base.clone()
-            },
-        ),
-        s(
-            "learning rate halved on plateaus",
-            fit.clone(),
-            plateau.clone(),
-        ),
+        s("noise decay 0.8", fit.clone(), fast_noise.clone()),
+        s("learning rate halved on plateaus", fit.clone(), plateau.clone()),
         s(
             "warm start: 10 epochs of motor babbling",
             fit.clone(),
@@ -88,11 +81,12 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
             },
         ),
         s(
-            "noise floor 0.01",
+            "noise decay 0.8 + plateau lr + warm start",
             fit.clone(),
             EmsslConfig {
-                exploration_floor: 0.01,
-                ..base.clone()
+                exploration_decay: 0.8,
+                warm_start_epochs: 10,
+                ..plateau.clone()
             },
         ),
         Setting {
@@ -101,11 +95,19 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
             ..s("wrapped output (cos, sin)", fit.clone(), base.clone())
         },
         s(
-            "plateau lr + warm start",
+            "learning rate constant",
             fit.clone(),
             EmsslConfig {
-                warm_start_epochs: 10,
-                ..plateau.clone()
+                learning_rate_decay: 1.0,
+                ..base.clone()
+            },
+        ),
+        s(
+            "noise floor 0.01",
+            fit.clone(),
+            EmsslConfig {
+                exploration_floor: 0.01,
+                ..base.clone()
             },
         ),
         s(
