@@ -71,7 +71,11 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
     vec![
         s("baseline (3bc9f24)", fit.clone(), base.clone()),
         s("noise decay 0.8", fit.clone(), fast_noise.clone()),
-        s("learning rate halved on plateaus", fit.clone(), plateau.clone()),
+        s(
+            "learning rate halved on plateaus",
+            fit.clone(),
+            plateau.clone(),
+        ),
         s(
             "warm start: 10 epochs of motor babbling",
             fit.clone(),

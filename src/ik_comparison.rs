@@ -1155,36 +1155,42 @@ fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow]) -> Result<
     crate::atomic_file::write_bytes(&dir.join("table2.md"), text.as_bytes())
 }
 
-/// `validation_curves_<range>.png`: every method's validation error against epoch (EMSSL:
-/// iteration), log-y.
+/// `validation_curves_<range>.png` (and `validation_curves_<range>_wrapped.png` for the wrapped
+/// variants): every method's validation error against epoch (EMSSL: iteration), log-y.
 fn validation_figure(dir: &Path, range_deg: f64, curves: &[ValidationRow]) -> Result<()> {
-    let mut methods: Vec<&str> = Vec::new();
-    for c in curves.iter().filter(|c| c.range_deg == range_deg) {
-        if !methods.contains(&c.method.as_str()) {
-            methods.push(&c.method);
+    for (wrapped, suffix) in [(false, ""), (true, "_wrapped")] {
+        let mut methods: Vec<&str> = Vec::new();
+        for c in curves.iter().filter(|c| c.range_deg == range_deg) {
+            if c.method.contains("(wrapped)") == wrapped && !methods.contains(&c.method.as_str()) {
+                methods.push(&c.method);
+            }
         }
+        if methods.is_empty() {
+            continue;
+        }
+        let runs: Vec<(String, Vec<(usize, f64)>)> = methods
+            .iter()
+            .map(|m| {
+                (
+                    m.to_string(),
+                    curves
+                        .iter()
+                        .filter(|c| c.range_deg == range_deg && c.method == *m)
+                        .map(|c| (c.epoch, c.validation_cm))
+                        .collect(),
+                )
+            })
+            .collect();
+        crate::figures::curves(
+            &dir.join(format!("validation_curves_{range_deg:.0}{suffix}.png")),
+            &format!(
+                "Validation error while training, UR5 +-{range_deg:.0} deg{}",
+                if wrapped { ", wrapped output" } else { "" }
+            ),
+            "epoch (EMSSL: iteration)",
+            "validation distance error (cm, log)",
+            &runs,
+        )?;
     }
-    if methods.is_empty() {
-        return Ok(());
-    }
-    let runs: Vec<(String, Vec<(usize, f64)>)> = methods
-        .iter()
-        .map(|m| {
-            (
-                m.to_string(),
-                curves
-                    .iter()
-                    .filter(|c| c.range_deg == range_deg && c.method == *m)
-                    .map(|c| (c.epoch, c.validation_cm))
-                    .collect(),
-            )
-        })
-        .collect();
-    crate::figures::curves(
-        &dir.join(format!("validation_curves_{range_deg:.0}.png")),
-        &format!("Validation error while training, UR5 +-{range_deg:.0} deg"),
-        "epoch (EMSSL: iteration)",
-        "validation distance error (cm, log)",
-        &runs,
-    )
+    Ok(())
 }

@@ -302,7 +302,10 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
     let cfg = DlsConfig::standard();
     let once = solve_batch(&robot.chain, targets, &home, &ranges, &cfg);
     let stalled = once.iter().filter(|s| s.error_m >= cfg.tolerance_m).count();
-    assert!(stalled > 0, "every target converged from home: the restarts are untested");
+    assert!(
+        stalled > 0,
+        "every target converged from home: the restarts are untested"
+    );
     // The "model" offers the true joints of every second stalled target (as a flow's sample
     // would); random starts must do the rest.
     let truth = &data.joints[data.test()];
@@ -314,16 +317,29 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
         &cfg,
         &Restarts::standard(),
         |idx| {
-            vec![idx
-                .iter()
-                .enumerate()
-                .map(|(j, &i)| if j % 2 == 0 { truth[i].clone() } else { vec![0.0; 6] })
-                .collect()]
+            vec![
+                idx.iter()
+                    .enumerate()
+                    .map(|(j, &i)| {
+                        if j % 2 == 0 {
+                            truth[i].clone()
+                        } else {
+                            vec![0.0; 6]
+                        }
+                    })
+                    .collect(),
+            ]
         },
     );
     assert_eq!(restarted, stalled);
-    let left = solved.iter().filter(|s| s.error_m >= cfg.tolerance_m).count();
-    assert_eq!(left, 0, "{left} of {stalled} stalled targets still unsolved");
+    let left = solved
+        .iter()
+        .filter(|s| s.error_m >= cfg.tolerance_m)
+        .count();
+    assert_eq!(
+        left, 0,
+        "{left} of {stalled} stalled targets still unsolved"
+    );
     // Targets that converged the first time keep that answer.
     for (a, b) in once.iter().zip(&solved) {
         if a.error_m < cfg.tolerance_m {
@@ -331,5 +347,10 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
         }
     }
     // Within the range.
-    assert!(solved.iter().flat_map(|s| &s.joints).all(|q| q.abs() <= data.range[1] + 1e-12));
+    assert!(
+        solved
+            .iter()
+            .flat_map(|s| &s.joints)
+            .all(|q| q.abs() <= data.range[1] + 1e-12)
+    );
 }
