@@ -43,7 +43,7 @@ use crate::error::{Error, Result};
 use crate::flow_ik::{FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
 use crate::ik_data::{DistanceErrors, IkData, IkDataConfig, JointOutput, distances};
 use crate::inverse_learning::{
-    EmsslConfig, EmsslIteration, FitConfig, LrPlateau, drl, emssl, predict,
+    EmsslConfig, EmsslIteration, FitConfig, LrPlateau, drl, emssl_checkpointed, predict,
 };
 use crate::inverse_model::InverseModelConfig;
 use crate::numerical_ik::{DlsConfig, IkSolution, Restarts, solve_batch, solve_with_restarts};
@@ -873,7 +873,16 @@ pub fn run_range(
         let answers = run.predictions_path(&name);
         run.unit(&name, &(&model_cfg, &cfg.fit, &cfg.emssl), &[answers], |r| {
             let t = Instant::now();
-            let (model, curve) = emssl(chain, &r.data, &model_cfg, &cfg.fit, &cfg.emssl, &r.device)?;
+            let checkpoint = r.unit_path(&format!("{name} checkpoint")).with_extension("");
+            let (model, curve) = emssl_checkpointed(
+                chain,
+                &r.data,
+                &model_cfg,
+                &cfg.fit,
+                &cfg.emssl,
+                &r.device,
+                Some(&checkpoint),
+            )?;
             let train_s = t.elapsed().as_secs_f64();
             let best = curve
                 .iter()

@@ -403,6 +403,7 @@ impl EmsslIteration {
 /// EMSSL's stopping rule followed iteration by iteration: the agreement threshold, or
 /// `patience` iterations without a new minimum of the selection error, or the reach error on
 /// the training goals at or below the target, where one is set.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct StopRule {
     best_reach_cm: f64,
     since_best: usize,
@@ -502,9 +503,102 @@ pub fn emssl(
     cfg: &EmsslConfig,
     device: &Device,
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
+    emssl_checkpointed(chain, data, model_cfg, fit_cfg, cfg, device, None)
+}
+
+/// [`emssl`] saving its state after every iteration in `checkpoint` (model, optimiser, best
+/// model, curve and the rules' state) and continuing from it when it holds a run of the same
+/// settings (the iteration cap aside: a run may be continued past its cap): a killed run
+/// resumes to the same result. Runs that train on the pairs of more than one iteration
+/// (`keep_iterations` > 1) are not checkpointed.
+pub fn emssl_checkpointed(
+    chain: &KinematicChain,
+    data: &IkData,
+    model_cfg: &InverseModelConfig,
+    fit_cfg: &FitConfig,
+    cfg: &EmsslConfig,
+    device: &Device,
+    checkpoint: Option<&std::path::Path>,
+) -> Result<(Mlp, Vec<EmsslIteration>)> {
     let tdev = autodiff_device(device, fit_cfg.seed);
     let model = model_cfg.init(&tdev, fit_cfg.seed)?;
-    emssl_from(model, &tdev, chain, chain, data, fit_cfg, cfg, device)
+    let plan = checkpoint
+        .filter(|_| cfg.keep_iterations <= 1)
+        .map(|dir| EmsslCheckpoint {
+            dir: dir.to_path_buf(),
+            settings: serde_json::json!({
+                "model": model_cfg,
+                "fit": fit_cfg,
+                // A run may be continued with a higher cap.
+                "emssl": EmsslConfig {
+                    max_iterations: 0,
+                    ..cfg.clone()
+                },
+                "goals": data.train().len(),
+                "range": data.range,
+            }),
+        });
+    emssl_run(
+        model,
+        &tdev,
+        chain,
+        chain,
+        data,
+        fit_cfg,
+        cfg,
+        device,
+        plan.as_ref(),
+    )
+}
+
+/// Where an EMSSL run keeps its state, and the settings it must match to continue.
+struct EmsslCheckpoint {
+    dir: std::path::PathBuf,
+    settings: serde_json::Value,
+}
+
+/// What an EMSSL checkpoint's `state.json` holds besides the weights.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct EmsslState {
+    settings: serde_json::Value,
+    curve: Vec<EmsslIteration>,
+    rule: StopRule,
+    plateau: Option<Plateau>,
+    /// Whether the stopping rule has ended the run (its best model is final).
+    finished: bool,
+}
+
+impl EmsslCheckpoint {
+    fn path(&self, file: &str) -> std::path::PathBuf {
+        self.dir.join(file)
+    }
+
+    /// The saved state, if it was made with the same settings.
+    fn load(&self) -> Option<EmsslState> {
+        if !(self.path("model.bpk").exists() && self.path("optimizer.bpk").exists()) {
+            return None;
+        }
+        let text = std::fs::read_to_string(self.path("state.json")).ok()?;
+        serde_json::from_str::<EmsslState>(&text)
+            .ok()
+            .filter(|s| s.settings == self.settings)
+    }
+
+    fn save(
+        &self,
+        model: &Mlp,
+        optim: &ModuleOptimizer,
+        best: Option<&Mlp>,
+        state: &EmsslState,
+    ) -> Result<()> {
+        std::fs::create_dir_all(&self.dir).map_err(|e| crate::Error::io(&self.dir, e))?;
+        crate::training::save_renamed(&self.path("model.bpk"), |t| model.clone().save_file(t))?;
+        crate::training::save_renamed(&self.path("optimizer.bpk"), |t| optim.save(t))?;
+        if let Some(b) = best {
+            crate::training::save_renamed(&self.path("best.bpk"), |t| b.clone().save_file(t))?;
+        }
+        crate::atomic_file::write_json(&self.path("state.json"), state)
+    }
 }
 
 /// EMSSL iterations from `model` (on the autodiff device `tdev`; a trained inference model
@@ -522,12 +616,28 @@ pub fn emssl_from(
     cfg: &EmsslConfig,
     device: &Device,
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
+    emssl_run(model, tdev, forward, arm, data, fit_cfg, cfg, device, None)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn emssl_run(
+    model: Mlp,
+    tdev: &Device,
+    forward: &KinematicChain,
+    arm: &KinematicChain,
+    data: &IkData,
+    fit_cfg: &FitConfig,
+    cfg: &EmsslConfig,
+    device: &Device,
+    checkpoint: Option<&EmsslCheckpoint>,
+) -> Result<(Mlp, Vec<EmsslIteration>)> {
     let mut model = model;
     let mut optim = AdamConfig::new().init();
+    let resumed = checkpoint.and_then(|c| c.load().map(|s| (c, s)));
     let desired = &data.positions[data.train()];
     let held_out = &data.positions[data.validation()];
     let wrap = model.joint_output() == JointOutput::Wrapped && data.full_circle();
-    if cfg.warm_start_epochs > 0 {
+    if cfg.warm_start_epochs > 0 && resumed.is_none() {
         let (reached, tried) = babble(forward, desired.len(), data.range, fit_cfg.seed ^ 0xBABB1E);
         (model, optim) = fit(
             model,
@@ -546,6 +656,7 @@ pub fn emssl_from(
     let mut curve: Vec<EmsslIteration> = Vec::new();
     let mut best: Option<Mlp> = None;
     let mut rule = StopRule::default();
+    let mut finished = false;
     let mut plateau = cfg.lr_plateau.as_ref().map(|p| {
         Plateau::new(&Convergence {
             max_epochs: cfg.max_iterations,
@@ -555,6 +666,34 @@ pub fn emssl_from(
             min_improvement: 1e-3,
         })
     });
+    if let Some((c, state)) = resumed {
+        let load = |m: Mlp, file: &str| {
+            m.try_load_file(c.path(file))
+                .map_err(|e| crate::Error::data(c.path(file), format!("cannot load: {e:?}")))
+        };
+        model = load(model.clone(), "model.bpk")?;
+        optim = optim
+            .load(c.path("optimizer.bpk"))
+            .map_err(|e| crate::Error::data(c.path("optimizer.bpk"), format!("{e:?}")))?;
+        if c.path("best.bpk").exists() {
+            best = Some(load(model.clone(), "best.bpk")?.valid());
+        }
+        eprintln!(
+            "EMSSL: continuing from iteration {} in {}",
+            state.curve.len(),
+            c.dir.display()
+        );
+        curve = state.curve;
+        rule = state.rule;
+        plateau = state.plateau;
+        finished = state.finished;
+    }
+    let first = curve.len() + 1;
+    let last_iteration = if finished {
+        curve.len()
+    } else {
+        cfg.max_iterations
+    };
     // The pairs of the last `keep_iterations` iterations.
     let mut kept: std::collections::VecDeque<(Vec<Point3<f64>>, Vec<Vec<f64>>)> =
         std::collections::VecDeque::new();
@@ -569,7 +708,7 @@ pub fn emssl_from(
         device,
     );
     let mut inference_seconds = t0.elapsed().as_secs_f64();
-    for iteration in 1..=cfg.max_iterations {
+    for iteration in first..=last_iteration {
         let decay = |rate: f64| rate.powi(iteration as i32 - 1);
         let sigma = (cfg.exploration * decay(cfg.exploration_decay)).max(cfg.exploration_floor);
         let learning_rate = fit_cfg.learning_rate
@@ -665,6 +804,20 @@ pub fn emssl_from(
         let (improved, stop) = rule.observe(last, cfg);
         if improved {
             best = Some(valid);
+        }
+        if let Some(c) = checkpoint {
+            c.save(
+                &model,
+                &optim,
+                best.as_ref().filter(|_| improved),
+                &EmsslState {
+                    settings: c.settings.clone(),
+                    curve: curve.clone(),
+                    rule: rule.clone(),
+                    plateau: plateau.clone(),
+                    finished: stop,
+                },
+            )?;
         }
         if stop {
             break;

@@ -474,7 +474,7 @@ pub struct ValidationPoint {
 /// A plateau rule followed evaluation by evaluation: the best score, the learning-rate scale
 /// and whether to stop. One rule for every learner that trains to convergence (the epoch
 /// loop here and EMSSL's iterations).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Plateau {
     cfg: Convergence,
     best: f64,

@@ -295,3 +295,83 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
         "sigmoid {sigmoid_err} against wrapped {wrapped_err}"
     );
 }
+
+#[test]
+fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
+    use selfmodel::inverse_learning::{EmsslConfig, LrPlateau, emssl_checkpointed};
+    let r = 90f64.to_radians();
+    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 2_000,
+            train: 1_500,
+            range_deg: 90.0,
+            seed: 6,
+            validation: 300,
+        },
+    )
+    .unwrap();
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
+    // A high learning rate makes the selection error wander, so the plateau rule acts.
+    let fit = FitConfig {
+        epochs: 2,
+        batch: 64,
+        learning_rate: 4e-2,
+        ..FitConfig::paper()
+    };
+    let cfg = EmsslConfig {
+        max_iterations: 8,
+        patience: 100,
+        learning_rate_decay: 1.0,
+        lr_plateau: Some(LrPlateau {
+            patience: 1,
+            factor: 0.5,
+        }),
+        warm_start_epochs: 2,
+        ..EmsslConfig::paper()
+    };
+    let (whole, whole_curve) =
+        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, None).unwrap();
+    let dir = tempdir();
+    let cut = EmsslConfig {
+        max_iterations: 3,
+        ..cfg.clone()
+    };
+    let (_, first) =
+        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cut, &device, Some(&dir)).unwrap();
+    assert_eq!(first.len(), 3);
+    let (resumed, curve) =
+        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+    let key = |c: &[selfmodel::inverse_learning::EmsslIteration]| {
+        c.iter()
+            .map(|i| {
+                (
+                    i.iteration,
+                    i.learning_rate,
+                    i.test.mean_cm,
+                    i.selection_cm(),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(key(&curve), key(&whole_curve));
+    let answers = |m| predict(m, &data, &data.positions[data.test()], 256, &device);
+    assert_eq!(answers(&resumed), answers(&whole));
+    // The plateau rule halved the rate on the way, so its state was carried too.
+    assert!(curve.iter().any(|c| c.learning_rate < fit.learning_rate));
+}
+
+fn tempdir() -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!(
+        "selfmodel-emssl-ckpt-{}-{}",
+        std::process::id(),
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos()
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
