@@ -101,14 +101,7 @@ pub fn train_gan(
         .as_ref()
         .map_or(cfg.fit.epochs, |c| c.max_epochs);
     let mut plateau = cfg.fit.converge.as_ref().map(Plateau::new);
-    let mut log = cfg.fit.converge.as_ref().map(|_| ConvergenceLog {
-        curve: Vec::new(),
-        best_epoch: 0,
-        best_validation: f64::INFINITY,
-        epochs: 0,
-        stopped_on_plateau: false,
-        seconds: 0.0,
-    });
+    let mut log = cfg.fit.converge.as_ref().map(|_| ConvergenceLog::default());
     let mut best: Option<Mlp> = None;
     let started = std::time::Instant::now();
     let batcher = Batcher::new(&set, &train_cfg);

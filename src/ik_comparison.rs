@@ -806,21 +806,8 @@ pub fn run_range(
             }
             crate::training::save_renamed(&flow_file, |tmp| trained.model.clone().save_file(tmp))?;
             let seed = flow_cfg.fit.seed ^ 0x5EED;
-            let mut one = Vec::new();
-            let solve_1 = timed(&mut || {
-                one = sample(
-                    &trained.model,
-                    &r.data,
-                    r.targets(),
-                    1,
-                    batch,
-                    seed,
-                    &r.device,
-                )
-            });
-            let mut samples = Vec::new();
-            let solve_k = timed(&mut || {
-                samples = sample(
+            let draw = |k: usize| {
+                sample(
                     &trained.model,
                     &r.data,
                     r.targets(),
@@ -829,7 +816,11 @@ pub fn run_range(
                     seed,
                     &r.device,
                 )
-            });
+            };
+            let mut one = Vec::new();
+            let solve_1 = timed(&mut || one = draw(1));
+            let mut samples = Vec::new();
+            let solve_k = timed(&mut || samples = draw(k));
             let t = Instant::now();
             let best = best_of(chain, r.targets(), &samples);
             let pick_s = t.elapsed().as_secs_f64();

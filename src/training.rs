@@ -534,6 +534,19 @@ pub struct ConvergenceLog {
     pub seconds: f64,
 }
 
+impl Default for ConvergenceLog {
+    fn default() -> Self {
+        ConvergenceLog {
+            curve: Vec::new(),
+            best_epoch: 0,
+            best_validation: f64::INFINITY,
+            epochs: 0,
+            stopped_on_plateau: false,
+            seconds: 0.0,
+        }
+    }
+}
+
 impl ConvergenceLog {
     /// "stopped on a plateau after 57 epochs, best at 45" (or "hit the cap of ...").
     pub fn summary(&self) -> String {
@@ -647,14 +660,7 @@ where
         rule: Plateau::new(conv),
         steps_per_epoch,
         best: None,
-        log: ConvergenceLog {
-            curve: Vec::new(),
-            best_epoch: 0,
-            best_validation: f64::INFINITY,
-            epochs: 0,
-            stopped_on_plateau: false,
-            seconds: 0.0,
-        },
+        log: ConvergenceLog::default(),
         losses: (0.0, 0),
         stop: false,
         base_rate: cfg.learning_rate,
