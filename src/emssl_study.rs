@@ -85,12 +85,15 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
             },
         ),
         s(
-            "noise decay 0.8 + plateau lr + warm start",
-            fit.clone(),
+            "noise decay 0.8 + cosine within iterations + warm start",
+            FitConfig {
+                cosine: true,
+                ..fit.clone()
+            },
             EmsslConfig {
                 exploration_decay: 0.8,
                 warm_start_epochs: 10,
-                ..plateau.clone()
+                ..base.clone()
             },
         ),
         Setting {

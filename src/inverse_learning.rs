@@ -43,6 +43,10 @@ pub struct FitConfig {
     /// number of epochs; needs a validation split. EMSSL's iterations ignore it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub converge: Option<Convergence>,
+    /// Within one fit, the learning rate falls along a half cosine from `learning_rate` to 1%
+    /// of it (each EMSSL iteration ends annealed); constant otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub cosine: bool,
 }
 
 impl FitConfig {
@@ -55,6 +59,7 @@ impl FitConfig {
             inference_batch: 512,
             seed: 0,
             converge: None,
+            cosine: false,
         }
     }
 
@@ -119,8 +124,30 @@ pub fn fit_set(
     loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
 ) -> Result<(Mlp, ModuleOptimizer)> {
     let train_cfg = cfg.train_config(set.len());
-    struct NoHooks;
-    impl crate::training::TrainHooks<Mlp> for NoHooks {}
+    /// The learning-rate schedule of one fit: constant, or a half cosine to 1%.
+    struct Schedule {
+        cosine: bool,
+        steps: usize,
+        done: usize,
+    }
+    impl crate::training::TrainHooks<Mlp> for Schedule {
+        fn after_step(&mut self, model: Mlp, step: usize) -> Result<(Mlp, bool)> {
+            self.done = step;
+            Ok((model, false))
+        }
+        fn learning_rate(&self, base: f64) -> f64 {
+            if !self.cosine {
+                return base;
+            }
+            let t = self.done as f64 / self.steps.max(1) as f64;
+            base * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+        }
+    }
+    let mut schedule = Schedule {
+        cosine: cfg.cosine,
+        steps: train_cfg.steps,
+        done: 0,
+    };
     let (model, optim, _) = train_continuing(
         model,
         optim,
@@ -129,7 +156,7 @@ pub fn fit_set(
         None,
         label,
         loss,
-        &mut NoHooks,
+        &mut schedule,
     )?;
     Ok((model, optim))
 }
