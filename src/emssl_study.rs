@@ -72,6 +72,14 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
         s("baseline (3bc9f24)", fit.clone(), base.clone()),
         s("noise decay 0.8", fit.clone(), fast_noise.clone()),
         s(
+            "learning rate annealed (cosine) within each iteration",
+            FitConfig {
+                cosine: true,
+                ..fit.clone()
+            },
+            base.clone(),
+        ),
+        s(
             "learning rate halved on plateaus",
             fit.clone(),
             plateau.clone(),
