@@ -1,8 +1,9 @@
 //! Table IV of the EMSSL paper (sections III-C and IV-C): fast adaptation of a trained inverse
 //! model when the arm changes.
 //!
-//! The base model is Table II's EMSSL model in one joint range (the same data, network,
-//! optimiser, schedule and seed, so on the UR5 at +-90 degrees it is Table II's model). Then
+//! The base model is Table II's EMSSL model of the `paper-schedule` preset in one joint range
+//! (the same data, network, optimiser, schedule and seed, so on the UR5 at +-90 degrees it is
+//! that preset's model). Then
 //! the arm changes ([`ArmChange`]: every link 1, 3 and 5 cm longer, as in the paper, and one
 //! link bent) and two approaches adapt the model with further EMSSL iterations:
 //!
@@ -65,7 +66,7 @@ pub struct AdaptationConfig {
 }
 
 impl Preset for AdaptationConfig {
-    /// Table II's paper preset at +-90 degrees for the base model; the UR5 and arm4; links 1,
+    /// Table II's `paper-schedule` preset at +-90 degrees for the base model; the UR5 and arm4; links 1,
     /// 3 and 5 cm longer and the link to joint 3 bent 3 degrees. Adaptation: the paper's 10
     /// epochs a iteration at 3e-4 (a fifth of the paper's rate: the model is already trained),
     /// decaying by 0.9; exploration noise 0.01 decaying by 0.9; up to 20 iterations, patience
