@@ -221,7 +221,7 @@ fn adaptation_recovers_most_of_the_error_a_longer_arm_causes() {
     assert_eq!(rows[0].arm_samples, cfg.calibration.samples);
     assert_eq!(
         rows[1].arm_samples,
-        2 * cfg.base.train * rows[1].iterations_run
+        2 * (cfg.base.train - cfg.base.validation) * rows[1].iterations_run
     );
     assert!(curve.iter().any(|c| c.iteration == 0));
 }
