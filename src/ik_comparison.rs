@@ -467,6 +467,8 @@ struct RangeRun<'a> {
     rows: Vec<IkRow>,
     curves: Vec<ValidationRow>,
     emssl_curve: Vec<EmsslIteration>,
+    /// Called with this range's rows and curves after every unit (the partial report).
+    progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
 
 /// What a method hands back for a row.
@@ -558,7 +560,7 @@ impl RangeRun<'_> {
             self.rows.extend(done.rows);
             self.curves.extend(done.curves);
             self.emssl_curve.extend(done.emssl_curve);
-            return Ok(());
+            return (self.progress)(&self.rows, &self.curves);
         }
         eprintln!("emssl_table2: +-{:.0} deg {unit}", self.range_deg);
         let (answers, curves, emssl_curve) = body(self)?;
@@ -579,7 +581,7 @@ impl RangeRun<'_> {
         self.rows.extend(done.rows);
         self.curves.extend(done.curves);
         self.emssl_curve.extend(done.emssl_curve);
-        Ok(())
+        (self.progress)(&self.rows, &self.curves)
     }
 
     fn data_settings(&self) -> (IkDataConfig, &Vec<usize>) {
@@ -650,6 +652,7 @@ pub fn run_range(
     dir: &Path,
     device_choice: DeviceChoice,
     resume: bool,
+    progress: &dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 ) -> Result<(Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>)> {
     let device = crate::device::select(device_choice)?;
     let data = IkData::generate(&robot.chain, &cfg.data(range_deg))?;
@@ -666,6 +669,7 @@ pub fn run_range(
         rows: Vec::new(),
         curves: Vec::new(),
         emssl_curve: Vec::new(),
+        progress,
     };
     let chain = &robot.chain;
     let dof = robot.dof();
@@ -971,16 +975,23 @@ pub fn run_range(
         Ok((vec![a], Vec::new(), Vec::new()))
     })?;
 
-    // Every row's ratio to the sigmoid DRL of this range.
-    let drl = run
-        .rows
-        .iter()
-        .find(|r| r.method == "DRL")
-        .map(|r| r.mean_cm);
-    for r in &mut run.rows {
-        r.ratio_to_drl = drl.map(|d| r.mean_cm / d);
-    }
+    set_ratios(&mut run.rows);
     Ok((run.rows, run.curves, run.emssl_curve))
+}
+
+/// Every row's ratio to the sigmoid DRL of its range (where that row exists).
+fn set_ratios(rows: &mut [IkRow]) {
+    let drl: Vec<(f64, f64)> = rows
+        .iter()
+        .filter(|r| r.method == "DRL")
+        .map(|r| (r.range_deg, r.mean_cm))
+        .collect();
+    for r in rows.iter_mut() {
+        r.ratio_to_drl = drl
+            .iter()
+            .find(|d| d.0 == r.range_deg)
+            .map(|d| r.mean_cm / d.1);
+    }
 }
 
 /// "99.9% within 0.01 mm, 2.8 iterations on average (cap 100), 31 restarted".
@@ -1090,8 +1101,16 @@ pub fn run(
     let mut curves = Vec::new();
     let mut emssl_curves = Vec::new();
     for &r in &cfg.ranges_deg {
+        // After every unit: the report so far (a killed or unfinished run leaves one).
+        let partial = |range_rows: &[IkRow], range_curves: &[ValidationRow]| {
+            let mut all = rows.clone();
+            all.extend_from_slice(range_rows);
+            let mut all_curves = curves.clone();
+            all_curves.extend_from_slice(range_curves);
+            write_outputs(cfg, robot_name, dir, all, &all_curves, &emssl_curves, true).map(|_| ())
+        };
         let (range_rows, range_curves, emssl_curve) =
-            run_range(cfg, robot, robot_name, r, dir, device, resume)?;
+            run_range(cfg, robot, robot_name, r, dir, device, resume, &partial)?;
         rows.extend(range_rows);
         curves.extend(range_curves);
         emssl_curves.extend(
@@ -1100,37 +1119,65 @@ pub fn run(
                 .map(|c| CurveRow::new(robot_name, r, &cfg.preset, c)),
         );
     }
+    write_outputs(cfg, robot_name, dir, rows, &curves, &emssl_curves, false)
+}
+
+/// Write the tables, curves and figures of `rows` (`partial`: the run has not finished).
+fn write_outputs(
+    cfg: &IkComparisonConfig,
+    robot_name: &str,
+    dir: &Path,
+    mut rows: Vec<IkRow>,
+    curves: &[ValidationRow],
+    emssl_curves: &[CurveRow],
+    partial: bool,
+) -> Result<Vec<IkRow>> {
+    set_ratios(&mut rows);
     crate::report::write_table(
         &dir.join("results.csv"),
         &rows,
-        "Table II: learned inverse kinematics, distance error on held-out targets",
+        &format!(
+            "Table II: learned inverse kinematics, distance error on held-out targets{}",
+            if partial {
+                " (partial: the run has not finished)"
+            } else {
+                ""
+            }
+        ),
         &format!(
             "Robot `{robot_name}` (the UR5 from its standard DH parameters unless stated; the paper does not name its 6-DOF arm), position only. Errors in cm over {} test targets; `ratio_to_drl` is the mean over DRL's of the same range, `paper_mean_cm` and `paper_ratio_to_drl` the paper's Table II for reference. Methods marked (wrapped) write (cos, sin) per joint instead of the paper's sigmoid. `Flow IK`: a conditional normalizing flow (beyond the paper). `DLS`: damped least squares on the analytic Jacobian (beyond the paper). `predictions_<range>/` holds every method's answers, `predictions_sample/<range>/` the first {} of them.",
             cfg.samples - cfg.train,
             cfg.prediction_sample_rows
         ),
     )?;
-    write_table2(dir, cfg, &rows)?;
-    crate::report::write_csv(&dir.join("validation_curves.csv"), &curves)?;
+    write_table2(dir, cfg, &rows, partial)?;
+    crate::report::write_csv(&dir.join("validation_curves.csv"), curves)?;
     for &r in &cfg.ranges_deg {
-        validation_figure(dir, r, &curves)?;
+        validation_figure(dir, r, curves)?;
     }
-    write_curves(
-        dir,
-        "emssl_curve.csv",
-        "EMSSL: test error against iteration",
-        &emssl_curves,
-    )?;
+    if !emssl_curves.is_empty() || !partial {
+        write_curves(
+            dir,
+            "emssl_curve.csv",
+            "EMSSL: test error against iteration",
+            emssl_curves,
+        )?;
+    }
     Ok(rows)
 }
 
 /// `table2.md`: the rows a reader compares, ours beside the paper's.
-fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow]) -> Result<()> {
+fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow], partial: bool) -> Result<()> {
     let opt =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |x| format!("{x:.digits$}"));
     let mut text = format!(
-        "# Table II ({} preset): mean distance error on {} test targets\n\nGenerated from `results.csv` by `emssl_table2`; do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | within 0.01 mm | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` by `emssl_table2`; do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | within 0.01 mm | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
         cfg.preset,
+        if partial {
+            ", partial: the run has not finished"
+        } else {
+            ""
+        },
         cfg.samples - cfg.train,
         cfg.validation
     );
