@@ -57,3 +57,71 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
         .map_err(|e| Error::data(path, format!("cannot serialise JSON: {e}")))?;
     write_bytes(path, (text + "\n").as_bytes())
 }
+
+/// A claim on a piece of work shared by processes started with the same command: the file
+/// `path` holds the claiming process's id and is removed when the claim is dropped. A claim
+/// left by a process that no longer runs (killed) is taken over.
+pub struct Claim {
+    path: PathBuf,
+}
+
+/// What [`Claim::take`] found.
+pub enum Claimed {
+    /// This process holds the work now.
+    Mine(Claim),
+    /// Another running process holds it (its id).
+    Other(u32),
+}
+
+impl Claim {
+    /// Claim the work named by `path`.
+    pub fn take(path: &Path) -> Result<Claimed> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        let me = std::process::id();
+        for _ in 0..2 {
+            match fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(path)
+            {
+                Ok(mut f) => {
+                    write!(f, "{me}").map_err(|e| Error::io(path, e))?;
+                    return Ok(Claimed::Mine(Claim {
+                        path: path.to_path_buf(),
+                    }));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = fs::read_to_string(path)
+                        .ok()
+                        .and_then(|t| t.trim().parse::<u32>().ok());
+                    match holder {
+                        Some(pid) if pid != me && process_runs(pid) => {
+                            return Ok(Claimed::Other(pid));
+                        }
+                        // Stale (or ours): remove it and try once more.
+                        _ => fs::remove_file(path).map_err(|e| Error::io(path, e))?,
+                    }
+                }
+                Err(e) => return Err(Error::io(path, e)),
+            }
+        }
+        Err(Error::io(
+            path,
+            std::io::Error::other("the claim file keeps reappearing"),
+        ))
+    }
+}
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        let _ = fs::remove_file(&self.path);
+    }
+}
+
+/// Whether process `pid` runs (Linux: /proc; elsewhere every claim is taken as live).
+fn process_runs(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.exists() || proc.join(pid.to_string()).exists()
+}

@@ -27,6 +27,9 @@
 //!   three passes after a warm-up pass.
 //! - **Resumable**: each method's rows, curves and answers are kept under `units/<range>/` with
 //!   the settings they ran with; `--resume` reuses every unit whose settings are unchanged.
+//! - **Parallel**: a unit being run is claimed (`units/<range>/<unit>.claim`, the process id);
+//!   the same command started again beside it (one per core, `RAYON_NUM_THREADS=1`) takes the
+//!   units nobody holds. A last `--resume` run, once all are done, writes the whole report.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -467,6 +470,8 @@ struct RangeRun<'a> {
     rows: Vec<IkRow>,
     curves: Vec<ValidationRow>,
     emssl_curve: Vec<EmsslIteration>,
+    /// Units left to another process running the same command (their rows are not here).
+    left_to_others: usize,
     /// Called with this range's rows and curves after every unit (the partial report).
     progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
@@ -562,6 +567,18 @@ impl RangeRun<'_> {
             self.emssl_curve.extend(done.emssl_curve);
             return (self.progress)(&self.rows, &self.curves);
         }
+        // Another process running the same command may hold this unit: leave it to it.
+        let _claim = match crate::atomic_file::Claim::take(&path.with_extension("claim"))? {
+            crate::atomic_file::Claimed::Mine(c) => c,
+            crate::atomic_file::Claimed::Other(pid) => {
+                eprintln!(
+                    "emssl_table2: +-{:.0} deg {unit}: left to process {pid}, which runs it",
+                    self.range_deg
+                );
+                self.left_to_others += 1;
+                return Ok(());
+            }
+        };
         eprintln!("emssl_table2: +-{:.0} deg {unit}", self.range_deg);
         let (answers, curves, emssl_curve) = body(self)?;
         let mut rows = Vec::new();
@@ -642,6 +659,10 @@ impl RangeRun<'_> {
     }
 }
 
+/// What one range's run produced: rows, validation curves, EMSSL curves, and whether units
+/// were left to another process (the report then stays partial).
+type RangeOutcome = (Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>, bool);
+
 /// Run every method in one joint range (reusing finished units when `resume`).
 #[allow(clippy::too_many_arguments)]
 pub fn run_range(
@@ -653,7 +674,7 @@ pub fn run_range(
     device_choice: DeviceChoice,
     resume: bool,
     progress: &dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
-) -> Result<(Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>)> {
+) -> Result<RangeOutcome> {
     let device = crate::device::select(device_choice)?;
     let data = IkData::generate(&robot.chain, &cfg.data(range_deg))?;
     let mut run = RangeRun {
@@ -669,6 +690,7 @@ pub fn run_range(
         rows: Vec::new(),
         curves: Vec::new(),
         emssl_curve: Vec::new(),
+        left_to_others: 0,
         progress,
     };
     let chain = &robot.chain;
@@ -911,6 +933,15 @@ pub fn run_range(
     // EMSSL's answers refined by the solver; where it stalls, restarts from the flow's samples
     // (closest first), then from random joints. The EMSSL variant with the lower validation
     // error is refined; its training and inference count towards the refined answers.
+    if run.left_to_others > 0 {
+        // What this unit starts from is still being made elsewhere.
+        eprintln!(
+            "emssl_table2: +-{range_deg:.0} deg EMSSL + DLS: left for when the units run \
+             elsewhere are done (run the command again with --resume)"
+        );
+        set_ratios(&mut run.rows);
+        return Ok((run.rows, run.curves, run.emssl_curve, true));
+    }
     let emssl_rows: Vec<&IkRow> = run
         .rows
         .iter()
@@ -976,7 +1007,7 @@ pub fn run_range(
     })?;
 
     set_ratios(&mut run.rows);
-    Ok((run.rows, run.curves, run.emssl_curve))
+    Ok((run.rows, run.curves, run.emssl_curve, false))
 }
 
 /// Every row's ratio to the sigmoid DRL of its range (where that row exists).
@@ -1100,6 +1131,7 @@ pub fn run(
     let mut rows = Vec::new();
     let mut curves = Vec::new();
     let mut emssl_curves = Vec::new();
+    let mut left_to_others = false;
     for &r in &cfg.ranges_deg {
         // After every unit: the report so far (a killed or unfinished run leaves one).
         let partial = |range_rows: &[IkRow], range_curves: &[ValidationRow]| {
@@ -1109,8 +1141,9 @@ pub fn run(
             all_curves.extend_from_slice(range_curves);
             write_outputs(cfg, robot_name, dir, all, &all_curves, &emssl_curves, true).map(|_| ())
         };
-        let (range_rows, range_curves, emssl_curve) =
+        let (range_rows, range_curves, emssl_curve, left) =
             run_range(cfg, robot, robot_name, r, dir, device, resume, &partial)?;
+        left_to_others |= left;
         rows.extend(range_rows);
         curves.extend(range_curves);
         emssl_curves.extend(
@@ -1119,7 +1152,15 @@ pub fn run(
                 .map(|c| CurveRow::new(robot_name, r, &cfg.preset, c)),
         );
     }
-    write_outputs(cfg, robot_name, dir, rows, &curves, &emssl_curves, false)
+    write_outputs(
+        cfg,
+        robot_name,
+        dir,
+        rows,
+        &curves,
+        &emssl_curves,
+        left_to_others,
+    )
 }
 
 /// Write the tables, curves and figures of `rows` (`partial`: the run has not finished).
