@@ -104,6 +104,14 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
                 ..base.clone()
             },
         ),
+        s(
+            "noise decay 0.8 + 3 polishing rounds to convergence",
+            fit.clone(),
+            EmsslConfig {
+                polish_rounds: 3,
+                ..fast_noise.clone()
+            },
+        ),
         Setting {
             output: JointOutput::Wrapped,
             ranges_deg: wide,

@@ -365,6 +365,12 @@ pub struct EmsslConfig {
     /// own pairs only).
     #[serde(default = "one", skip_serializing_if = "is_one")]
     pub keep_iterations: usize,
+    /// After the iterations, this many rounds of polishing: the kept model's noise-free pairs
+    /// (positions its answers for the goals reach -> those answers) trained on to convergence
+    /// ([`Convergence::standard`], stopped on the validation goals' reach error) at the kept
+    /// iteration's learning rate; a round is kept only if it lowers that error (0: none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub polish_rounds: usize,
 }
 
 fn one() -> usize {
@@ -401,6 +407,7 @@ impl EmsslConfig {
             lr_plateau: None,
             warm_start_epochs: 0,
             keep_iterations: 1,
+            polish_rounds: 0,
         }
     }
 }
@@ -571,9 +578,10 @@ pub fn emssl_checkpointed(
             settings: serde_json::json!({
                 "model": model_cfg,
                 "fit": fit_cfg,
-                // A run may be continued with a higher cap.
+                // A run may be continued with a higher cap, and polished once finished.
                 "emssl": EmsslConfig {
                     max_iterations: 0,
+                    polish_rounds: 0,
                     ..cfg.clone()
                 },
                 "goals": data.train().len(),
@@ -697,6 +705,8 @@ fn emssl_run(
     }
     let mut curve: Vec<EmsslIteration> = Vec::new();
     let mut best: Option<Mlp> = None;
+    // The best model on the training device, for the polishing rounds.
+    let mut best_trainable: Option<Mlp> = None;
     let mut rule = StopRule::default();
     let mut finished = false;
     let mut plateau = cfg.lr_plateau.as_ref().map(|p| {
@@ -718,7 +728,9 @@ fn emssl_run(
             .load(c.path("optimizer.bpk"))
             .map_err(|e| crate::Error::data(c.path("optimizer.bpk"), format!("{e:?}")))?;
         if c.path("best.bpk").exists() {
-            best = Some(load(model.clone(), "best.bpk")?.valid());
+            let b = load(model.clone(), "best.bpk")?;
+            best = Some(b.valid());
+            best_trainable = Some(b);
         }
         eprintln!(
             "EMSSL: continuing from iteration {} in {}",
@@ -846,6 +858,9 @@ fn emssl_run(
         let (improved, stop) = rule.observe(last, cfg);
         if improved {
             best = Some(valid);
+            if cfg.polish_rounds > 0 {
+                best_trainable = Some(model.clone());
+            }
         }
         if let Some(c) = checkpoint {
             c.save(
@@ -865,6 +880,105 @@ fn emssl_run(
             break;
         }
     }
+    if cfg.polish_rounds > 0 {
+        let start = best_trainable.unwrap_or(model);
+        let (polished, more) = polish(
+            start, tdev, forward, arm, data, fit_cfg, cfg, &curve, device,
+        )?;
+        curve.extend(more);
+        return Ok((polished, curve));
+    }
     let model = best.unwrap_or_else(|| model.valid());
     Ok((model, curve))
+}
+
+/// EMSSL's polishing rounds (see [`EmsslConfig::polish_rounds`]) from `model`, the kept
+/// model of the iterations in `curve`: the inference model to keep and the rounds' curve
+/// points (numbered after the iterations, exploration 0).
+#[allow(clippy::too_many_arguments)]
+fn polish(
+    model: Mlp,
+    tdev: &Device,
+    forward: &KinematicChain,
+    arm: &KinematicChain,
+    data: &IkData,
+    fit_cfg: &FitConfig,
+    cfg: &EmsslConfig,
+    curve: &[EmsslIteration],
+    device: &Device,
+) -> Result<(Mlp, Vec<EmsslIteration>)> {
+    let desired = &data.positions[data.train()];
+    let held_out = &data.positions[data.validation()];
+    let kept = curve
+        .iter()
+        .min_by(|a, b| a.selection_cm().total_cmp(&b.selection_cm()))
+        .ok_or_else(|| crate::Error::Training("EMSSL: no iteration to polish".into()))?;
+    let (mut best_cm, learning_rate) = (kept.selection_cm(), kept.learning_rate);
+    let batch = fit_cfg.inference_batch;
+    // The selection error: the reach error on the validation goals, else the training goals.
+    let goals = if held_out.is_empty() {
+        desired
+    } else {
+        held_out
+    };
+    let reach_cm = |m: &Mlp| {
+        let q = predict(m, data, goals, batch, device);
+        DistanceErrors::from_metres(&reach_errors(forward, goals, &q)).mean_cm
+    };
+    let mut model = model;
+    let mut points = Vec::new();
+    for round in 1..=cfg.polish_rounds {
+        let iteration = curve.len() + round;
+        let t0 = std::time::Instant::now();
+        let answers = predict(&model.valid(), data, desired, batch, device);
+        let reached = forward.end_effector_batch(&answers);
+        let set = joint_set(data, &reached, &answers, model.joint_output(), tdev);
+        let sampling_seconds = t0.elapsed().as_secs_f64();
+        let fit_round = FitConfig {
+            learning_rate,
+            seed: fit_cfg.seed.wrapping_add(iteration as u64),
+            ..fit_cfg.clone()
+        };
+        let (polished, log) = fit_converged(
+            model.clone(),
+            &set,
+            &fit_round,
+            &Convergence::standard(),
+            &format!("EMSSL polishing round {round}"),
+            mse,
+            reach_cm,
+        )?;
+        let valid = polished.valid();
+        let clean = predict(&valid, data, desired, batch, device);
+        let clean_reached = forward.end_effector_batch(&clean);
+        let back = predict(&valid, data, &clean_reached, batch, device);
+        let (test, _) = test_errors(&valid, arm, data, batch, device);
+        let point = EmsslIteration {
+            iteration,
+            exploration: 0.0,
+            learning_rate,
+            test,
+            train_reach_cm: DistanceErrors::from_metres(&distances(desired, &clean_reached))
+                .mean_cm,
+            validation_reach_cm: (!held_out.is_empty()).then_some(log.best_validation),
+            disagreement: disagreement(&clean, &back, data.range),
+            sampling_seconds,
+            training_seconds: log.seconds,
+            forward_calls: curve.last().map_or(0, |c| c.forward_calls) + 2 * desired.len() * round,
+        };
+        eprintln!(
+            "EMSSL polishing round {round}: selection {:.4} cm (before {best_cm:.4}), test {:.4} cm, {}",
+            point.selection_cm(),
+            point.test.mean_cm,
+            log.summary()
+        );
+        let better = point.selection_cm() < best_cm;
+        points.push(point);
+        if !better {
+            break;
+        }
+        best_cm = points.last().expect("pushed").selection_cm();
+        model = polished;
+    }
+    Ok((model.valid(), points))
 }

@@ -375,3 +375,54 @@ fn tempdir() -> std::path::PathBuf {
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
+
+#[test]
+fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
+    use selfmodel::inverse_learning::{EmsslConfig, emssl_checkpointed, validation_cm};
+    let r = 90f64.to_radians();
+    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 2_000,
+            train: 1_500,
+            range_deg: 90.0,
+            seed: 7,
+            validation: 300,
+        },
+    )
+    .unwrap();
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
+    let fit = FitConfig {
+        epochs: 2,
+        batch: 64,
+        ..FitConfig::paper()
+    };
+    let cfg = EmsslConfig {
+        max_iterations: 4,
+        patience: 100,
+        polish_rounds: 2,
+        ..EmsslConfig::paper()
+    };
+    let dir = tempdir();
+    let (polished, curve) =
+        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+    let rounds: Vec<_> = curve.iter().filter(|c| c.iteration > 4).collect();
+    assert!(!rounds.is_empty() && rounds.len() <= 2);
+    assert!(rounds.iter().all(|c| c.exploration == 0.0));
+    // The model returned is the one of the lowest selection error over iterations and rounds.
+    let lowest = curve
+        .iter()
+        .map(|c| c.selection_cm())
+        .fold(f64::INFINITY, f64::min);
+    let got = validation_cm(&polished, &robot.chain, &data, 256, &device);
+    assert!(
+        (got - lowest).abs() < 1e-6 * lowest.max(1.0),
+        "returned model {got} cm, lowest on the curve {lowest} cm"
+    );
+    // A finished checkpoint is polished again without rerunning the iterations.
+    let (_, again) =
+        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+    assert_eq!(again.len(), curve.len());
+}
