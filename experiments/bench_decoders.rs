@@ -7,8 +7,8 @@ use std::process::{Command, ExitCode};
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::decoder_bench::{attach_torch, run};
-use selfmodel::device::DeviceChoice;
+use selfmodel::core::device::DeviceChoice;
+use selfmodel::studies::bench_decoders::{attach_torch, run};
 
 /// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
 /// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
@@ -72,6 +72,6 @@ fn main() -> ExitCode {
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
         }
-        selfmodel::report::write_csv(&args.out, &rows)
+        selfmodel::report::table::write_csv(&args.out, &rows)
     })
 }

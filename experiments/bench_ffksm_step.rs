@@ -8,7 +8,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::device::DeviceChoice;
+use selfmodel::core::device::DeviceChoice;
 
 /// Time one dense FFKSM training step of a whole 100x100 image (640,000 network evaluations)
 /// through burn's autodiff (the reference) and through the hand-written step: for each, one
@@ -35,7 +35,8 @@ fn main() -> ExitCode {
     // The revision the run starts from, before it writes anything.
     selfmodel::cli::git_revision();
     run_main(|| {
-        let rows = selfmodel::ffksm_step_bench::run(args.device, args.quick, args.repeats)?;
+        let rows =
+            selfmodel::studies::bench_ffksm_step::run(args.device, args.quick, args.repeats)?;
         println!(
             "{:<24} {:<13} {:>9} {:>9} {:>9} {:>8}",
             "model", "path", "median s", "min s", "GFLOP/s", "speedup"
@@ -49,7 +50,7 @@ fn main() -> ExitCode {
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
         }
-        selfmodel::report::write_table(
+        selfmodel::report::table::write_table(
             &args.out,
             &rows,
             "One dense FFKSM training step: burn's autodiff against the hand-written step",

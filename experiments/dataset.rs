@@ -8,9 +8,9 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::{RobotArgs, Triple, run_main};
-use selfmodel::dataset::{DatasetConfig, build_and_save, read_angles};
-use selfmodel::preset::Preset;
-use selfmodel::trajectory::SamplerKind;
+use selfmodel::core::preset::Preset;
+use selfmodel::data::dataset::{DatasetConfig, build_and_save, read_angles};
+use selfmodel::sim::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
 #[derive(Parser)]

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::atomic_file::write_bytes;
 use selfmodel::cli::{run_main, shared_arm_urdf};
-use selfmodel::primitive_fit::fit_boxes;
-use selfmodel::urdf_loader::load_urdf;
+use selfmodel::core::atomic_file::write_bytes;
+use selfmodel::sim::primitive_fit::fit_boxes;
+use selfmodel::sim::urdf_loader::load_urdf;
 
 /// Fit the built-in arm4's box geometry to the mesh robot (needs ../shared/robots).
 #[derive(Parser)]
@@ -29,7 +29,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     run_main(|| {
-        let robot = load_urdf(&args.urdf, selfmodel::arm4::scene_base())?;
+        let robot = load_urdf(&args.urdf, selfmodel::sim::arm4::scene_base())?;
         let mut fitted = std::collections::BTreeMap::new();
         for (name, geometry) in robot.chain.links.iter().zip(&robot.geometry) {
             let boxes = fit_boxes(geometry.shapes(), args.cell);

@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::mesh_fidelity::{FidelityConfig, run};
-use selfmodel::preset::Preset;
+use selfmodel::core::preset::Preset;
+use selfmodel::studies::mesh_fidelity::{FidelityConfig, run};
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]

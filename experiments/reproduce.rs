@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::experiments::EXPERIMENTS;
+use selfmodel::studies::registry::EXPERIMENTS;
 
 /// Reproduce everything: each experiment of the registry in turn, into its default folder.
 #[derive(Parser)]
@@ -43,7 +43,7 @@ fn main() -> ExitCode {
             .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))
         {
             let start = Instant::now();
-            let mut opts = selfmodel::experiments::RunOptions::preset(&args.preset);
+            let mut opts = selfmodel::studies::registry::RunOptions::preset(&args.preset);
             // table1 gathers the rows the decoders' own experiments just wrote.
             opts.reuse_root = Some(root.clone());
             let summary = (e.run)(&opts, &root.join(e.default_dir))?;

@@ -1,13 +1,15 @@
 //! Pieces every binary shares: robot selection, the one-line error exit, the git revision.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 
 use nalgebra::Isometry3;
 
-use crate::error::Result;
-use crate::robot::Robot;
-use crate::urdf_loader::{load_urdf, pose_from_xyz_rpy};
+use crate::core::error::Result;
+pub use crate::core::provenance::git_revision;
+use crate::sim::robot::Robot;
+pub use crate::sim::robots::{BuiltinRobot, shared_arm_urdf};
+use crate::sim::urdf_loader::{load_urdf, pose_from_xyz_rpy};
 
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
@@ -24,7 +26,7 @@ pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
 /// its options [`ExperimentArgs`], its default preset `default_preset`.
 pub fn experiment_main(name: &'static str, default_preset: &str) -> ExitCode {
     use clap::{Args, Command, FromArgMatches};
-    let about = crate::experiments::find(name).map_or("", |e| e.about);
+    let about = crate::studies::registry::find(name).map_or("", |e| e.about);
     // After `augment_args`, which would set the about of `ExperimentArgs` itself.
     let command = ExperimentArgs::augment_args(Command::new(name))
         .about(about)
@@ -66,32 +68,6 @@ impl std::fmt::Display for Triple {
     }
 }
 
-/// Built-in robots.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum BuiltinRobot {
-    /// The papers' 4-DOF arm with the project's fitted box geometry.
-    Arm4,
-    /// The UR5 from its standard DH parameters, joints in +-90 degrees (kinematics only, no
-    /// geometry: the arm of the inverse-kinematics experiments).
-    Ur5,
-}
-
-impl BuiltinRobot {
-    pub fn load(self) -> Robot {
-        match self {
-            BuiltinRobot::Arm4 => crate::arm4::arm4(),
-            BuiltinRobot::Ur5 => crate::dh_robot::ur5(crate::kinematics::DEFAULT_ROTATIONAL_RANGE),
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            BuiltinRobot::Arm4 => "arm4",
-            BuiltinRobot::Ur5 => "ur5",
-        }
-    }
-}
-
 /// `--robot` / `--urdf` options.
 #[derive(Clone, Debug, clap::Args)]
 pub struct RobotArgs {
@@ -126,7 +102,7 @@ impl RobotArgs {
     /// The scene placement of a URDF robot.
     pub fn base(&self) -> Isometry3<f64> {
         if self.arm4_scene {
-            return crate::arm4::scene_base();
+            return crate::sim::arm4::scene_base();
         }
         pose_from_xyz_rpy(self.base_xyz.0, self.base_rpy.0)
     }
@@ -148,30 +124,6 @@ impl RobotArgs {
     }
 }
 
-/// Where the papers' robot lies in the shared folder beside the repository.
-pub fn shared_arm_urdf() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/robots/4dof_1st/urdf/4dof_1st.urdf")
-}
-
-/// `git describe --always --dirty` of the working tree when this process first asked, or
-/// "unknown": the code a run started from. Read once, so the files a run writes (its own
-/// `config.json` over a committed report) never mark it dirty; binaries ask at start.
-pub fn git_revision() -> String {
-    static REVISION: std::sync::OnceLock<String> = std::sync::OnceLock::new();
-    REVISION
-        .get_or_init(|| {
-            std::process::Command::new("git")
-                .args(["describe", "--always", "--dirty", "--abbrev=10"])
-                .current_dir(env!("CARGO_MANIFEST_DIR"))
-                .output()
-                .ok()
-                .filter(|o| o.status.success())
-                .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-                .unwrap_or_else(|| "unknown".into())
-        })
-        .clone()
-}
-
 /// The arguments every experiment binary shares.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ExperimentArgs {
@@ -183,8 +135,8 @@ pub struct ExperimentArgs {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Where to train and run the models.
-    #[arg(long, value_enum, default_value_t = crate::device::DeviceChoice::Cpu)]
-    pub device: crate::device::DeviceChoice,
+    #[arg(long, value_enum, default_value_t = crate::core::device::DeviceChoice::Cpu)]
+    pub device: crate::core::device::DeviceChoice,
     /// Train and test on the paper-compatible dataset (its silhouettes include the ground
     /// plane below the horizon, as the paper's did), to compare with the paper's numbers.
     #[arg(long)]
@@ -206,7 +158,7 @@ pub struct ExperimentArgs {
     /// of the preset's: none, sleep:US (waiting on a real arm) or spin:US (a CPU-bound
     /// simulator), comma-separated, e.g. `--latency none,spin:200`.
     #[arg(long, value_delimiter = ',', value_name = "LATENCY")]
-    pub latency: Option<Vec<crate::sampling_pass::Latency>>,
+    pub latency: Option<Vec<crate::ik::sampling_pass::Latency>>,
     /// table1 only: gather the rows the experiments wrote into their own folders under
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]
@@ -216,7 +168,7 @@ pub struct ExperimentArgs {
 impl ExperimentArgs {
     /// Run the registry's experiment `name` with these arguments and print its summary.
     pub fn run(&self, name: &str, default_preset: &str) -> Result<()> {
-        let e = crate::experiments::find(name)?;
+        let e = crate::studies::registry::find(name)?;
         let preset = self
             .preset
             .clone()
@@ -245,7 +197,7 @@ impl ExperimentArgs {
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
-        let opts = crate::experiments::RunOptions {
+        let opts = crate::studies::registry::RunOptions {
             preset,
             device: self.device,
             paper_compatible: self.paper_compatible,

@@ -151,7 +151,7 @@ fn render_recorded_poses_from_csv() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let d = selfmodel::dataset::Dataset::load(&npz).unwrap();
+    let d = selfmodel::data::dataset::Dataset::load(&npz).unwrap();
     assert_eq!(d.angles[1], vec![30.0, -20.0, 45.0, 10.0]);
     assert_ne!(d.image(0), d.image(1));
 }

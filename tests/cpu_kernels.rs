@@ -4,11 +4,11 @@
 
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Device, Distribution, Tensor, TensorData, Tolerance};
-use selfmodel::conv_gemm::{
+use selfmodel::kernels::conv_gemm::{
     ConvGeometry, forward, forward_reference, transpose, transpose_backward, transpose_reference,
     weight_grad, weight_grad_reference,
 };
-use selfmodel::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
+use selfmodel::kernels::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
 
 fn values(n: usize, seed: u32) -> Vec<f32> {
     // A cheap deterministic sequence in [-1, 1).

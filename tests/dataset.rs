@@ -5,10 +5,10 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use selfmodel::Error;
-use selfmodel::arm4::arm4;
-use selfmodel::dataset::{Dataset, DatasetConfig, read_angles};
-use selfmodel::npz::{Array, read_npz, write_npz};
-use selfmodel::preset::Preset;
+use selfmodel::core::preset::Preset;
+use selfmodel::data::dataset::{Dataset, DatasetConfig, read_angles};
+use selfmodel::data::npz::{Array, read_npz, write_npz};
+use selfmodel::sim::arm4::arm4;
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data/fixtures/papers_format.npz")
@@ -53,7 +53,7 @@ fn a_file_in_the_papers_layout_loads() {
 fn dataset_is_deterministic_and_silhouettes_are_binary() {
     let robot = arm4();
     let mut cfg = DatasetConfig::quick();
-    cfg.sampler = selfmodel::trajectory::SamplerKind::Babbling;
+    cfg.sampler = selfmodel::sim::trajectory::SamplerKind::Babbling;
     let a = Dataset::generate(&robot, &cfg, None).unwrap();
     let b = Dataset::generate(&robot, &cfg, None).unwrap();
     assert_eq!(a, b);
@@ -231,7 +231,7 @@ fn angle_files_are_checked() {
 fn a_failed_write_leaves_no_file() {
     let dir = common::tempdir();
     let target = dir.path().join("out.npz");
-    let result = selfmodel::atomic_file::write_atomic(&target, |w| {
+    let result = selfmodel::core::atomic_file::write_atomic(&target, |w| {
         std::io::Write::write_all(w, b"half of a file").unwrap();
         Err(Error::Config("interrupted".into()))
     });
@@ -243,6 +243,7 @@ fn a_failed_write_leaves_no_file() {
     );
     // An existing result survives a failed rewrite untouched.
     std::fs::write(&target, b"old").unwrap();
-    let _ = selfmodel::atomic_file::write_atomic(&target, |_| Err(Error::Config("no".into())));
+    let _ =
+        selfmodel::core::atomic_file::write_atomic(&target, |_| Err(Error::Config("no".into())));
     assert_eq!(std::fs::read(&target).unwrap(), b"old");
 }

@@ -4,12 +4,12 @@
 mod common;
 
 use burn::tensor::Device;
-use selfmodel::decoder_experiment::{DecoderRunConfig, run};
-use selfmodel::device::DeviceChoice;
-use selfmodel::evaluation::{Predictions, iou, psnr_db, score};
-use selfmodel::neurokin::NeuroKinConfig;
-use selfmodel::preset::Preset;
-use selfmodel::resneurokin_d::ResNeuroKinDConfig;
+use selfmodel::core::device::DeviceChoice;
+use selfmodel::core::preset::Preset;
+use selfmodel::eval::evaluation::{Predictions, iou, psnr_db, score};
+use selfmodel::self_models::decoder_run::{DecoderRunConfig, run};
+use selfmodel::self_models::neurokin::NeuroKinConfig;
+use selfmodel::self_models::resneurokin_d::ResNeuroKinDConfig;
 
 #[test]
 fn parameter_counts_match_the_notebooks() {
@@ -191,7 +191,7 @@ fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
     // A renderer that misses the third pixel: its depth error counts the pixels it drew.
     let drawn = Predictions {
         silhouettes: vec![1.0, 0.9, 0.1, 0.0],
-        depth_pixels: selfmodel::evaluation::DepthPixels::Drawn,
+        depth_pixels: selfmodel::eval::evaluation::DepthPixels::Drawn,
         ..pred
     };
     let q = score(&drawn, &truth, Some(&truth_depth), 1);
@@ -200,8 +200,8 @@ fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
 
 #[test]
 fn bench_decoders_quick_measures_every_figure_and_reads_torch_lines() {
-    use selfmodel::decoder_bench::{attach_torch, run};
-    let mut rows = run(selfmodel::device::DeviceChoice::Cpu, true).unwrap();
+    use selfmodel::studies::bench_decoders::{attach_torch, run};
+    let mut rows = run(selfmodel::core::device::DeviceChoice::Cpu, true).unwrap();
     // Two models, each: batch 1, batch 256 and training.
     assert_eq!(rows.len(), 6);
     assert!(rows.iter().all(|r| r.ours.is_finite() && r.ours > 0.0));

@@ -1,7 +1,7 @@
 //! The one device-selection function.
 
 use burn::tensor::Tensor;
-use selfmodel::device::{DeviceChoice, available, select};
+use selfmodel::core::device::{DeviceChoice, available, select};
 
 #[test]
 fn cpu_device_runs_a_tensor_op() {

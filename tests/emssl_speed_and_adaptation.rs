@@ -5,19 +5,19 @@
 use std::time::Instant;
 
 use burn::tensor::{Tensor, TensorData};
-use selfmodel::arm_change::ArmChange;
-use selfmodel::device::{DeviceChoice, select};
-use selfmodel::fast_adaptation::{AdaptationConfig, adapt_robot};
-use selfmodel::ik_data::{IkData, IkDataConfig, distances};
-use selfmodel::inverse_model::InverseModelConfig;
-use selfmodel::link_calibration::{CalibrationConfig, calibrate};
-use selfmodel::preset::Preset;
-use selfmodel::sampling_pass::{ForwardModel, Latency, Workers, sampling_pass};
-use selfmodel::sampling_speed::mlp_flop_per_row;
-use selfmodel::tensor_kinematics::TensorChain;
+use selfmodel::core::device::{DeviceChoice, select};
+use selfmodel::core::preset::Preset;
+use selfmodel::ik::calibration::{CalibrationConfig, calibrate};
+use selfmodel::ik::data::{IkData, IkDataConfig, distances};
+use selfmodel::ik::mlp::InverseModelConfig;
+use selfmodel::ik::sampling_pass::{ForwardModel, Latency, Workers, sampling_pass};
+use selfmodel::sim::arm_change::ArmChange;
+use selfmodel::sim::tensor_kinematics::TensorChain;
+use selfmodel::studies::emssl_adaptation::{AdaptationConfig, adapt_robot};
+use selfmodel::studies::emssl_sampling_speed::mlp_flop_per_row;
 
-fn ur5() -> selfmodel::robot::Robot {
-    selfmodel::dh_robot::ur5([-1.6, 1.6])
+fn ur5() -> selfmodel::sim::robot::Robot {
+    selfmodel::sim::dh_robot::ur5([-1.6, 1.6])
 }
 
 #[test]
@@ -115,7 +115,7 @@ fn the_inverse_models_flop_count_is_its_matrix_products() {
 #[test]
 fn tensor_kinematics_with_origin_tensors_matches_the_chain() {
     let device = select(DeviceChoice::Cpu).unwrap();
-    for chain in [ur5().chain, selfmodel::arm4::chain()] {
+    for chain in [ur5().chain, selfmodel::sim::arm4::chain()] {
         let tensor_chain = TensorChain::new(&chain);
         let (r, t, tip) = tensor_chain.origin_rows();
         let n = tensor_chain.joint_count();
@@ -178,7 +178,7 @@ fn the_link_parameters_of_a_changed_arm_are_learned_from_a_small_sample() {
         .unwrap();
         // Judged on joints it never saw.
         let unseen = &data.joints[1000..1500];
-        let mm = |chain: &selfmodel::kinematics::KinematicChain| {
+        let mm = |chain: &selfmodel::sim::kinematics::KinematicChain| {
             1e3 * distances(
                 &chain.end_effector_batch(unseen),
                 &changed.end_effector_batch(unseen),

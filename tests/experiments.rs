@@ -3,8 +3,8 @@
 
 mod common;
 
-use selfmodel::experiments::EXPERIMENTS;
-use selfmodel::preset::Preset;
+use selfmodel::core::preset::Preset;
+use selfmodel::studies::registry::EXPERIMENTS;
 
 #[test]
 fn every_experiment_runs_on_its_quick_preset() {
@@ -15,7 +15,7 @@ fn every_experiment_runs_on_its_quick_preset() {
             continue;
         }
         let dir = root.path().join(e.default_dir);
-        let mut opts = selfmodel::experiments::RunOptions::preset("quick");
+        let mut opts = selfmodel::studies::registry::RunOptions::preset("quick");
         opts.reuse_root = Some(root.path().to_path_buf());
         let summary = (e.run)(&opts, &dir).unwrap_or_else(|err| panic!("{} failed: {err}", e.name));
         assert!(!summary.is_empty());
@@ -27,13 +27,15 @@ fn every_experiment_runs_on_its_quick_preset() {
     }
     // table1 reused every in-table1 experiment's rows instead of training them again.
     let table1 = root.path().join("reports/table1");
-    let rows = selfmodel::model_result::read_results(&table1.join("results.csv")).unwrap();
+    let rows = selfmodel::self_models::result::read_results(&table1.join("results.csv")).unwrap();
     let expected: usize = EXPERIMENTS
         .iter()
         .filter(|e| e.in_table1)
         .map(|e| {
             let csv = root.path().join(e.default_dir).join("results.csv");
-            selfmodel::model_result::read_results(&csv).unwrap().len()
+            selfmodel::self_models::result::read_results(&csv)
+                .unwrap()
+                .len()
         })
         .sum();
     assert_eq!(rows.len(), expected);
@@ -46,12 +48,12 @@ fn every_experiment_runs_on_its_quick_preset() {
     }
 
     // A shortened run (`--steps`) is never taken for the preset's: table1 trains that model.
-    let neurokin = selfmodel::experiments::find("neurokin").unwrap();
-    let mut short = selfmodel::experiments::RunOptions::preset("quick");
+    let neurokin = selfmodel::studies::registry::find("neurokin").unwrap();
+    let mut short = selfmodel::studies::registry::RunOptions::preset("quick");
     short.steps = Some(3);
     (neurokin.run)(&short, &root.path().join(neurokin.default_dir)).unwrap();
-    let table1_exp = selfmodel::experiments::find("table1").unwrap();
-    let mut opts = selfmodel::experiments::RunOptions::preset("quick");
+    let table1_exp = selfmodel::studies::registry::find("table1").unwrap();
+    let mut opts = selfmodel::studies::registry::RunOptions::preset("quick");
     opts.reuse_root = Some(root.path().to_path_buf());
     (table1_exp.run)(&opts, &table1).unwrap();
     assert!(
@@ -67,7 +69,7 @@ fn every_experiment_runs_on_its_quick_preset() {
     let table1 = root.path().join("reports/table1_partial");
     (table1_exp.run)(&opts, &table1).unwrap();
     assert!(!table1.join("ffksm").exists(), "table1 trained ffksm again");
-    let rows = selfmodel::model_result::read_results(&table1.join("results.csv")).unwrap();
+    let rows = selfmodel::self_models::result::read_results(&table1.join("results.csv")).unwrap();
     let ffksm_rows: Vec<&str> = rows
         .iter()
         .filter(|r| r.model.starts_with("FFKSM"))
@@ -84,8 +86,8 @@ fn arm4_matches_the_mesh_robot_closely() {
         return;
     }
     let dir = common::tempdir();
-    let rows = selfmodel::mesh_fidelity::run(
-        &selfmodel::mesh_fidelity::FidelityConfig::quick(),
+    let rows = selfmodel::studies::mesh_fidelity::run(
+        &selfmodel::studies::mesh_fidelity::FidelityConfig::quick(),
         dir.path(),
     )
     .unwrap();

@@ -4,8 +4,12 @@
 mod common;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use selfmodel::positional_encoding::{encode, encode_into, encode_reference, encoded_width};
-use selfmodel::virtual_frame::{VirtualFrame, to_virtual, to_virtual_reference};
+use selfmodel::self_models::ffksm::encoding::{
+    encode, encode_into, encode_reference, encoded_width,
+};
+use selfmodel::self_models::ffksm::virtual_frame::{
+    VirtualFrame, to_virtual, to_virtual_reference,
+};
 
 fn values(n: usize, seed: u32, scale: f64) -> Vec<f64> {
     (0..n)
@@ -114,8 +118,8 @@ fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
 
 #[test]
 fn occupancy_field_parameter_counts_match_both_implementations() {
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
     let dev = Device::flex();
     let paper = OccupancyFieldConfig::paper().init(&dev, 0).unwrap();
     let original = OccupancyFieldConfig::original().init(&dev, 0).unwrap();
@@ -128,8 +132,8 @@ fn occupancy_field_parameter_counts_match_both_implementations() {
 fn every_joint_and_coordinate_reaches_the_occupancy_output() {
     // The reimplementation lost two joints to a slicing bug for 2,000 steps: each of the four
     // angles and three coordinates must change the output and receive a gradient.
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
     let dev = Device::flex().autodiff();
     for cfg in [
         OccupancyFieldConfig::paper(),
@@ -161,8 +165,10 @@ fn every_joint_and_coordinate_reaches_the_occupancy_output() {
 
 #[test]
 fn ray_marching_samples_and_composites_as_the_paper_defines() {
-    use selfmodel::camera::Camera;
-    use selfmodel::ray_marcher::{MarchConfig, composite, composite_reference, sample_points};
+    use selfmodel::self_models::ffksm::marcher::{
+        MarchConfig, composite, composite_reference, sample_points,
+    };
+    use selfmodel::sim::camera::Camera;
     let dev = Device::flex();
     let march = MarchConfig::paper();
     // Bin centres, and stratified samples inside their bins.
@@ -202,10 +208,10 @@ fn ray_marching_samples_and_composites_as_the_paper_defines() {
 
 #[test]
 fn dense_rendering_is_the_same_in_chunks_and_counts_its_evaluations() {
-    use selfmodel::camera::Camera;
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
-    use selfmodel::ray_marcher::{MarchConfig, expected_depth, render_dense};
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
+    use selfmodel::self_models::ffksm::marcher::{MarchConfig, expected_depth, render_dense};
+    use selfmodel::sim::camera::Camera;
     let dev = Device::flex();
     let field = OccupancyFieldConfig::quick().init(&dev, 1).unwrap();
     let cam = Camera::paper();
@@ -240,8 +246,8 @@ fn dense_rendering_is_the_same_in_chunks_and_counts_its_evaluations() {
 
 #[test]
 fn the_one_pose_fast_path_is_the_general_forward() {
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
     let dev = Device::flex();
     let n = 11;
     let points = tensor(&values(n * 3, 4, 0.4), [n, 3], &dev);
@@ -273,11 +279,13 @@ fn the_one_pose_fast_path_is_the_general_forward() {
 
 #[test]
 fn the_accelerated_marcher_with_every_cell_occupied_is_dense_marching() {
-    use selfmodel::accelerated_marcher::{AcceleratedConfig, render_accelerated};
-    use selfmodel::camera::Camera;
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
-    use selfmodel::ray_marcher::{MarchConfig, render_dense};
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::accelerated_marcher::{
+        AcceleratedConfig, render_accelerated,
+    };
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
+    use selfmodel::self_models::ffksm::marcher::{MarchConfig, render_dense};
+    use selfmodel::sim::camera::Camera;
     let dev = Device::flex();
     let field = OccupancyFieldConfig::quick().init(&dev, 5).unwrap();
     let cam = Camera {
@@ -315,14 +323,14 @@ fn the_accelerated_marcher_with_every_cell_occupied_is_dense_marching() {
 
 #[test]
 fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations() {
-    use selfmodel::device::DeviceChoice;
-    use selfmodel::ffksm::{FfksmConfig, centre_crop};
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::{FfksmConfig, centre_crop};
     // The curriculum's crop: the central pixels, row by row.
     assert_eq!(centre_crop(4, 6, 2), vec![8, 9, 14, 15]);
     let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
     cfg.novel_views_deg = vec![30.0];
     let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
-    let out = selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    let out = selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
     // A constant black image on the same test images.
     let black = common::black_psnr(&cfg.data, cfg.test_images);
     let [dense, fast] = [&out.renderers[0], &out.renderers[1]];
@@ -360,8 +368,8 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
 
 #[test]
 fn a_field_that_renders_black_is_restarted_then_given_up_on() {
-    use selfmodel::device::DeviceChoice;
-    use selfmodel::ffksm::FfksmConfig;
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::FfksmConfig;
     let mut cfg = FfksmConfig::original("quick").unwrap();
     // Every density starts far below zero: ReLU gives no gradient and the image stays black.
     cfg.field.output_bias = -50.0;
@@ -372,7 +380,7 @@ fn a_field_that_renders_black_is_restarted_then_given_up_on() {
         r.max_restarts = 2;
     }
     let dir = std::env::temp_dir().join(format!("selfmodel-collapse-{}", std::process::id()));
-    let err = selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false)
+    let err = selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false)
         .err()
         .expect("a black field must not train");
     let msg = err.to_string();
@@ -394,11 +402,11 @@ fn a_field_that_renders_black_is_restarted_then_given_up_on() {
 #[test]
 fn the_hand_written_dense_step_matches_autodiff() {
     use burn::optim::GradientsParams;
-    use selfmodel::ffksm::{FfksmConfig, weighted_mse};
-    use selfmodel::field_gradients::dense_step;
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
-    use selfmodel::ray_marcher::{MarchConfig, render_silhouette};
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::dense_step::dense_step;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
+    use selfmodel::self_models::ffksm::marcher::{MarchConfig, render_silhouette};
+    use selfmodel::self_models::ffksm::{FfksmConfig, weighted_mse};
 
     let cfg = FfksmConfig::reimplementation("quick").unwrap();
     let camera = cfg.data.dataset.camera.clone();
@@ -516,8 +524,8 @@ fn the_hand_written_dense_step_matches_autodiff() {
 /// all that separates them) and the same test PSNR.
 #[test]
 fn training_with_the_hand_written_step_follows_autodiff() {
-    use selfmodel::device::DeviceChoice;
-    use selfmodel::ffksm::{DenseGradients, FfksmConfig};
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::{DenseGradients, FfksmConfig};
     let mut outcomes = Vec::new();
     for path in [DenseGradients::Autodiff, DenseGradients::HandWrittenOnCpu] {
         let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
@@ -528,7 +536,9 @@ fn training_with_the_hand_written_step_follows_autodiff() {
         cfg.dense_gradients = path;
         let dir =
             std::env::temp_dir().join(format!("selfmodel-ffksm-{path:?}-{}", std::process::id()));
-        outcomes.push(selfmodel::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap());
+        outcomes.push(
+            selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap(),
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
     let (a, b) = (&outcomes[0], &outcomes[1]);
@@ -567,10 +577,10 @@ fn training_with_the_hand_written_step_follows_autodiff() {
 /// reference's speedup 1, and the paper field's arithmetic counted from its layers.
 #[test]
 fn the_step_benchmark_times_both_paths_on_the_same_step() {
-    use selfmodel::device::DeviceChoice;
-    use selfmodel::ffksm_step_bench::{run, step_flop};
-    use selfmodel::occupancy_field::OccupancyFieldConfig;
-    use selfmodel::preset::Preset;
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
+    use selfmodel::studies::bench_ffksm_step::{run, step_flop};
     // Per point, forward: 33x128 + 128x128 (coordinate encoder), 128x128 (first layer's
     // coordinate half), 128x128 + 128x32 + 32x2 = 57,536 multiply-adds; backward twice that
     // less the first layer's input gradient (33x128): 110,848.

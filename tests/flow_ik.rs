@@ -1,10 +1,10 @@
 //! The conditional normalizing flow (IKFlow-style) that returns many IK solutions.
 
 use burn::tensor::{Tensor, TensorData};
-use selfmodel::device::{DeviceChoice, select};
-use selfmodel::flow_ik::{FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
-use selfmodel::ik_data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
-use selfmodel::inverse_learning::FitConfig;
+use selfmodel::core::device::{DeviceChoice, select};
+use selfmodel::ik::data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
+use selfmodel::ik::flow::{FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
+use selfmodel::ik::learning::FitConfig;
 
 fn small() -> FlowConfig {
     FlowConfig {
@@ -100,7 +100,7 @@ fn perturbed(flow: FlowIk, device: &burn::tensor::Device) -> FlowIk {
 #[test]
 fn a_tiny_flow_fit_lowers_its_likelihood_loss_and_samples_many_seeded_solutions() {
     let r = 90f64.to_radians();
-    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
     let data = IkData::generate(
         &robot.chain,
         &IkDataConfig {

@@ -2,15 +2,15 @@
 //! wrapped joint output of the learned inverse-kinematics methods.
 
 use nalgebra::Point3;
-use selfmodel::device::{DeviceChoice, select};
-use selfmodel::ik_data::{IkData, IkDataConfig, JointOutput};
-use selfmodel::inverse_learning::{FitConfig, drl, predict, validation_cm};
-use selfmodel::inverse_model::InverseModelConfig;
-use selfmodel::training::{Convergence, Plateau};
+use selfmodel::core::device::{DeviceChoice, select};
+use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
+use selfmodel::ik::learning::{FitConfig, drl, predict, validation_cm};
+use selfmodel::ik::mlp::InverseModelConfig;
+use selfmodel::train::trainer::{Convergence, Plateau};
 
 #[test]
 fn the_validation_split_is_carved_from_the_training_samples_and_leaves_the_test_set_alone() {
-    let robot = selfmodel::dh_robot::ur5([-1.0, 1.0]);
+    let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
     let cfg = IkDataConfig {
         samples: 1_000,
         train: 700,
@@ -84,7 +84,7 @@ fn the_plateau_rule_halves_the_rate_then_stops() {
 #[test]
 fn a_tiny_run_to_convergence_stops_on_a_plateau_and_keeps_its_best_weights() {
     let r = 90f64.to_radians();
-    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
     let data = IkData::generate(
         &robot.chain,
         &IkDataConfig {
@@ -146,7 +146,7 @@ fn angle_gap(a: f64, b: f64) -> f64 {
 
 #[test]
 fn the_wrapped_code_round_trips_and_puts_plus_and_minus_179_degrees_side_by_side() {
-    let robot = selfmodel::dh_robot::ur5([-4.0, 4.0]);
+    let robot = selfmodel::sim::dh_robot::ur5([-4.0, 4.0]);
     let data = IkData::generate(
         &robot.chain,
         &IkDataConfig {
@@ -200,7 +200,7 @@ fn the_wrapped_code_round_trips_and_puts_plus_and_minus_179_degrees_side_by_side
 fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joints() {
     // Only the base joint moves, over the whole circle: each target has one answer, and the
     // targets at +179 and -179 degrees are 2 degrees of base rotation apart.
-    let robot = selfmodel::dh_robot::ur5([-4.0, 4.0]);
+    let robot = selfmodel::sim::dh_robot::ur5([-4.0, 4.0]);
     let rest = [-0.6, 1.1, -0.4, 0.7, 0.2];
     let arm = |q1: f64| {
         let mut q = vec![q1];
@@ -298,9 +298,9 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
 
 #[test]
 fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
-    use selfmodel::inverse_learning::{EmsslConfig, LrPlateau, emssl_checkpointed};
+    use selfmodel::ik::learning::{EmsslConfig, LrPlateau, emssl_checkpointed};
     let r = 90f64.to_radians();
-    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
     let data = IkData::generate(
         &robot.chain,
         &IkDataConfig {
@@ -344,7 +344,7 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
     assert_eq!(first.len(), 3);
     let (resumed, curve) =
         emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
-    let key = |c: &[selfmodel::inverse_learning::EmsslIteration]| {
+    let key = |c: &[selfmodel::ik::learning::EmsslIteration]| {
         c.iter()
             .map(|i| {
                 (
@@ -378,9 +378,9 @@ fn tempdir() -> std::path::PathBuf {
 
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
-    use selfmodel::inverse_learning::{EmsslConfig, emssl_checkpointed, validation_cm};
+    use selfmodel::ik::learning::{EmsslConfig, emssl_checkpointed, validation_cm};
     let r = 90f64.to_radians();
-    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
     let data = IkData::generate(
         &robot.chain,
         &IkDataConfig {

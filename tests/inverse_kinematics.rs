@@ -1,10 +1,10 @@
 //! Learned inverse kinematics: data, normalisation and error statistics.
 
-use selfmodel::ik_data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
+use selfmodel::ik::data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
 
 #[test]
 fn ik_data_is_seeded_split_and_normalised_both_ways() {
-    let robot = selfmodel::dh_robot::ur5([-1.0, 1.0]);
+    let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
     let cfg = IkDataConfig {
         samples: 500,
         train: 350,
@@ -43,16 +43,16 @@ fn distance_error_statistics_are_in_centimetres() {
     assert_eq!(e.targets, 5);
 }
 
-use selfmodel::conditional_gan::{GanConfig, train_gan};
-use selfmodel::device::{DeviceChoice, select};
-use selfmodel::distal_learning::{DistalConfig, dsl};
-use selfmodel::inverse_learning::{EmsslConfig, FitConfig, drl, emssl, test_errors};
-use selfmodel::inverse_model::InverseModelConfig;
-use selfmodel::numerical_ik::{DlsConfig, solve, solve_batch};
+use selfmodel::core::device::{DeviceChoice, select};
+use selfmodel::ik::cgan::{GanConfig, train_gan};
+use selfmodel::ik::dls::{DlsConfig, solve, solve_batch};
+use selfmodel::ik::dsl::{DistalConfig, dsl};
+use selfmodel::ik::learning::{EmsslConfig, FitConfig, drl, emssl, test_errors};
+use selfmodel::ik::mlp::InverseModelConfig;
 
-fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::robot::Robot, IkData) {
+fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::sim::robot::Robot, IkData) {
     let r = range_deg.to_radians();
-    let robot = selfmodel::dh_robot::ur5([-r, r]);
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
     let cfg = IkDataConfig {
         samples,
         train: samples * 4 / 5,
@@ -66,7 +66,7 @@ fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::robot::Robot, IkData)
 
 /// Mean error (cm) of answering every test target with the training set's joint vectors in
 /// order: what an inverse model that ignores its input scores.
-fn ignorant_cm(robot: &selfmodel::robot::Robot, data: &IkData) -> f64 {
+fn ignorant_cm(robot: &selfmodel::sim::robot::Robot, data: &IkData) -> f64 {
     let targets = &data.positions[data.test()];
     let joints = &data.joints[..targets.len()];
     DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, joints)).mean_cm
@@ -75,8 +75,8 @@ fn ignorant_cm(robot: &selfmodel::robot::Robot, data: &IkData) -> f64 {
 #[test]
 fn the_analytic_position_jacobian_matches_finite_differences() {
     for robot in [
-        selfmodel::dh_robot::ur5([-3.0, 3.0]),
-        selfmodel::arm4::arm4(),
+        selfmodel::sim::dh_robot::ur5([-3.0, 3.0]),
+        selfmodel::sim::arm4::arm4(),
     ] {
         let chain = &robot.chain;
         for i in 0..5 {
@@ -251,7 +251,7 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
             },
             best_of: 5,
         },
-        selfmodel::ik_data::JointOutput::Sigmoid,
+        selfmodel::ik::data::JointOutput::Sigmoid,
         &device,
     )
     .unwrap();
@@ -276,7 +276,7 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
     let targets = &data.positions[data.test()];
     let joints = &data.joints[..targets.len()];
     let reached = robot.chain.end_effector_batch(joints);
-    selfmodel::ik_comparison::write_predictions(&path, targets, joints, &reached).unwrap();
+    selfmodel::studies::emssl_table2::write_predictions(&path, targets, joints, &reached).unwrap();
     let mut reader = csv::Reader::from_path(&path).unwrap();
     let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
     assert_eq!(header.len(), 3 + 6 + 3);
@@ -294,7 +294,7 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
 
 #[test]
 fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
-    use selfmodel::numerical_ik::{Restarts, solve_with_restarts};
+    use selfmodel::ik::dls::{Restarts, solve_with_restarts};
     let (robot, data) = ur5_data(3_000, 90.0);
     let targets = &data.positions[data.test()];
     let home = vec![vec![0.0; 6]; targets.len()];

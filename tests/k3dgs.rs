@@ -5,12 +5,12 @@
 mod common;
 
 use burn::tensor::{Device, Tensor, TensorData};
-use selfmodel::tensor_kinematics::TensorChain;
+use selfmodel::sim::tensor_kinematics::TensorChain;
 
 #[test]
 fn tensor_forward_kinematics_matches_the_foundations_for_every_link() {
     let dev = Device::flex();
-    let chain = selfmodel::arm4::chain();
+    let chain = selfmodel::sim::arm4::chain();
     let tc = TensorChain::new(&chain);
     let qs: Vec<Vec<f64>> = (0..5)
         .map(|i| {
@@ -75,11 +75,11 @@ fn scene(n: usize, dev: &Device) -> (Tensor<3>, Tensor<1>, Tensor<1>) {
 
 #[test]
 fn a_gaussian_lands_on_the_pixel_where_the_simulator_draws_its_point() {
-    use selfmodel::camera::Camera;
-    use selfmodel::gaussian_splatting::project_isotropic;
-    use selfmodel::ray_caster::RayCaster;
+    use selfmodel::self_models::k3dgs::splatting::project_isotropic;
+    use selfmodel::sim::camera::Camera;
+    use selfmodel::sim::ray_caster::RayCaster;
     let dev = Device::flex();
-    let robot = selfmodel::arm4::arm4();
+    let robot = selfmodel::sim::arm4::arm4();
     let camera = Camera::paper();
     let q = robot.chain.to_si(&[20.0, -30.0, 40.0, 10.0]);
     let frame = RayCaster::new(&robot, camera.clone(), Default::default()).render(&q);
@@ -123,10 +123,10 @@ fn a_gaussian_lands_on_the_pixel_where_the_simulator_draws_its_point() {
 
 #[test]
 fn culled_splatting_matches_the_dense_reference() {
-    use selfmodel::camera::Camera;
-    use selfmodel::gaussian_splatting::{
+    use selfmodel::self_models::k3dgs::splatting::{
         Compositing, project_isotropic, render_culled, render_dense,
     };
+    use selfmodel::sim::camera::Camera;
     let dev = Device::flex();
     let camera = Camera {
         width: 40,
@@ -182,8 +182,8 @@ fn culled_splatting_matches_the_dense_reference() {
 #[test]
 fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
     use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector3};
-    use selfmodel::camera::Camera;
-    use selfmodel::gaussian_splatting::project_anisotropic;
+    use selfmodel::self_models::k3dgs::splatting::project_anisotropic;
+    use selfmodel::sim::camera::Camera;
     let dev = Device::flex();
     let camera = Camera::paper().orbited(25.0);
     let centres = [[0.05, -0.1, 0.2], [-0.12, 0.08, -0.05], [0.0, 0.0, 0.0]];
@@ -240,11 +240,11 @@ fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
 
 #[test]
 fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
-    use selfmodel::device::DeviceChoice;
-    use selfmodel::k3dgs::K3dgsConfig;
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::k3dgs::K3dgsConfig;
     let cfg = K3dgsConfig::isotropic_alpha("quick").unwrap();
     let dir = std::env::temp_dir().join(format!("selfmodel-k3dgs-{}", std::process::id()));
-    let out = selfmodel::k3dgs::run(&cfg, &dir, DeviceChoice::Cpu).unwrap();
+    let out = selfmodel::self_models::k3dgs::run(&cfg, &dir, DeviceChoice::Cpu).unwrap();
     let black = common::black_psnr(&cfg.data, None);
     let r = &out.result;
     assert!(

@@ -1,7 +1,7 @@
 //! Forward kinematics of the built-in arm4 against the facts of the papers' URDF.
 
 use nalgebra::{Point3, Vector3};
-use selfmodel::arm4::{arm4, chain};
+use selfmodel::sim::arm4::{arm4, chain};
 
 fn close(a: Point3<f64>, b: [f64; 3], tol: f64) -> bool {
     (a - Point3::from(b)).norm() < tol
@@ -85,7 +85,8 @@ fn the_mesh_urdf_has_the_same_kinematics_as_arm4() {
         eprintln!("skipped: {} not present", path.display());
         return;
     }
-    let mesh = selfmodel::urdf_loader::load_urdf(&path, selfmodel::arm4::scene_base()).unwrap();
+    let mesh =
+        selfmodel::sim::urdf_loader::load_urdf(&path, selfmodel::sim::arm4::scene_base()).unwrap();
     let boxes = arm4();
     for q in [[0.0; 4], [0.3, -0.7, 1.1, 0.4]] {
         let a = mesh.link_frames(&q);

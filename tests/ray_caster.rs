@@ -4,14 +4,14 @@ mod common;
 
 use common::{cube_triangles, static_robot};
 use nalgebra::{Isometry3, Point3, Vector3};
-use selfmodel::arm4::arm4;
-use selfmodel::camera::Camera;
-use selfmodel::metrics::silhouette_iou;
-use selfmodel::ray_caster::{RayCaster, RenderOptions};
-use selfmodel::shape::Shape;
-use selfmodel::trajectory::babbling;
+use selfmodel::eval::metrics::silhouette_iou;
+use selfmodel::sim::arm4::arm4;
+use selfmodel::sim::camera::Camera;
+use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+use selfmodel::sim::shape::Shape;
+use selfmodel::sim::trajectory::babbling;
 
-fn render(shapes: Vec<Shape>) -> selfmodel::ray_caster::Frame {
+fn render(shapes: Vec<Shape>) -> selfmodel::sim::ray_caster::Frame {
     let robot = static_robot(shapes);
     RayCaster::new(&robot, Camera::paper(), RenderOptions::default()).render(&[])
 }

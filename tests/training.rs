@@ -8,8 +8,8 @@ use std::cell::Cell;
 use burn::nn::{Linear, LinearConfig};
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
-use selfmodel::losses::{bce, bce_with_logits, mse};
-use selfmodel::training::{
+use selfmodel::train::losses::{bce, bce_with_logits, mse};
+use selfmodel::train::trainer::{
     CheckpointPlan, TrainConfig, TrainSet, autodiff_device, clip_global_norm, train,
 };
 
@@ -35,7 +35,7 @@ fn data(dev: &Device) -> TrainSet {
     }
 }
 
-fn loss(m: &Linear, b: &selfmodel::training::Batch) -> Tensor<1> {
+fn loss(m: &Linear, b: &selfmodel::train::trainer::Batch) -> Tensor<1> {
     let n = b.inputs.dims()[0];
     mse(
         m.forward(b.inputs.clone()).reshape([n, 1, 1, 1]),

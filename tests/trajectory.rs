@@ -1,6 +1,6 @@
 //! Joint samplers.
 
-use selfmodel::trajectory::{babbling, grid, lorenz};
+use selfmodel::sim::trajectory::{babbling, grid, lorenz};
 
 #[test]
 fn lorenz_first_sample_matches_the_paper() {

@@ -7,10 +7,10 @@ use std::path::Path;
 use common::{cube_stl_ascii, cube_stl_binary};
 use nalgebra::Isometry3;
 use selfmodel::Error;
-use selfmodel::camera::Camera;
-use selfmodel::kinematics::JointKind;
-use selfmodel::ray_caster::{RayCaster, RenderOptions};
-use selfmodel::urdf_loader::{load_urdf, resolve_mesh_path};
+use selfmodel::sim::camera::Camera;
+use selfmodel::sim::kinematics::JointKind;
+use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+use selfmodel::sim::urdf_loader::{load_urdf, resolve_mesh_path};
 
 fn robot_xml(joint_type: &str, mesh: &str) -> String {
     format!(

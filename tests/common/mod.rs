@@ -2,10 +2,10 @@
 #![allow(dead_code)]
 
 use nalgebra::{Isometry3, Point3};
-use selfmodel::bvh::Bvh;
-use selfmodel::kinematics::KinematicChain;
-use selfmodel::robot::Robot;
-use selfmodel::shape::Shape;
+use selfmodel::sim::bvh::Bvh;
+use selfmodel::sim::kinematics::KinematicChain;
+use selfmodel::sim::robot::Robot;
+use selfmodel::sim::shape::Shape;
 
 /// A robot of one fixed link holding `shapes`.
 pub fn static_robot(shapes: Vec<Shape>) -> Robot {
@@ -126,14 +126,14 @@ pub fn tempdir() -> TempDir {
 
 /// Mean PSNR (dB) of an all-black prediction on the first `n` test images of `spec` (all
 /// when `None`): the constant predictor a trained self-model must beat.
-pub fn black_psnr(spec: &selfmodel::decoder_experiment::DataSpec, n: Option<usize>) -> f64 {
+pub fn black_psnr(spec: &selfmodel::self_models::decoder_run::DataSpec, n: Option<usize>) -> f64 {
     let (data, _, test) = spec.load().unwrap();
     let test = test.start..test.start + n.unwrap_or(test.len()).min(test.len());
     let px = data.width * data.height;
     test.clone()
         .map(|i| {
             let truth: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
-            selfmodel::evaluation::psnr_db(&vec![0.0; px], &truth)
+            selfmodel::eval::evaluation::psnr_db(&vec![0.0; px], &truth)
         })
         .sum::<f64>()
         / test.len() as f64

@@ -1,0 +1,9 @@
+//! What every layer stands on: typed errors, atomic files and claims, the one place that
+//! names a burn backend (`device`), named presets and provenance (the revision every result
+//! records). Imports nothing else of the crate.
+
+pub mod atomic_file;
+pub mod device;
+pub mod error;
+pub mod preset;
+pub mod provenance;

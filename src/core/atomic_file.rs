@@ -1,0 +1,127 @@
+//! Write-then-rename: results appear whole or not at all.
+//!
+//! Every file the project writes goes through [`write_atomic`]: the content is written to a
+//! hidden temporary name in the same folder and renamed over the target only once complete,
+//! so an error or a killed run never leaves a partial file behind.
+
+use std::fs;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use crate::core::error::{Error, Result};
+
+/// The temporary name used while `path` is being written (`dir/.name.tmp-PID`).
+fn temp_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
+}
+
+/// Create `path` atomically: `fill` writes the content into a buffered writer on a temporary
+/// file, which is synced and renamed to `path` only if `fill` succeeds. Parent folders are
+/// created. On any error the temporary file is removed and `path` is untouched.
+pub fn write_atomic<F>(path: &Path, fill: F) -> Result<()>
+where
+    F: FnOnce(&mut BufWriter<fs::File>) -> Result<()>,
+{
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    }
+    let tmp = temp_path(path);
+    let result = (|| {
+        let file = fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        let mut w = BufWriter::new(file);
+        fill(&mut w)?;
+        let file = w
+            .into_inner()
+            .map_err(|e| Error::io(&tmp, e.into_error()))?;
+        file.sync_all().map_err(|e| Error::io(&tmp, e))?;
+        fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Atomically write a byte string.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic(path, |w| w.write_all(bytes).map_err(|e| Error::io(path, e)))
+}
+
+/// Atomically write a value as pretty JSON.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<()> {
+    let text = serde_json::to_string_pretty(value)
+        .map_err(|e| Error::data(path, format!("cannot serialise JSON: {e}")))?;
+    write_bytes(path, (text + "\n").as_bytes())
+}
+
+/// A claim on a piece of work shared by processes started with the same command: the file
+/// `path` holds the claiming process's id and is removed when the claim is dropped. A claim
+/// left by a process that no longer runs (killed) is taken over.
+pub struct Claim {
+    path: PathBuf,
+}
+
+/// What [`Claim::take`] found.
+pub enum Claimed {
+    /// This process holds the work now.
+    Mine(Claim),
+    /// Another running process holds it (its id).
+    Other(u32),
+}
+
+impl Claim {
+    /// Claim the work named by `path`.
+    pub fn take(path: &Path) -> Result<Claimed> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        let me = std::process::id();
+        for _ in 0..2 {
+            match fs::OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .open(path)
+            {
+                Ok(mut f) => {
+                    write!(f, "{me}").map_err(|e| Error::io(path, e))?;
+                    return Ok(Claimed::Mine(Claim {
+                        path: path.to_path_buf(),
+                    }));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+                    let holder = fs::read_to_string(path)
+                        .ok()
+                        .and_then(|t| t.trim().parse::<u32>().ok());
+                    match holder {
+                        Some(pid) if pid != me && process_runs(pid) => {
+                            return Ok(Claimed::Other(pid));
+                        }
+                        // Stale (or ours): remove it and try once more.
+                        _ => fs::remove_file(path).map_err(|e| Error::io(path, e))?,
+                    }
+                }
+                Err(e) => return Err(Error::io(path, e)),
+            }
+        }
+        Err(Error::io(
+            path,
+            std::io::Error::other("the claim file keeps reappearing"),
+        ))
+    }
+}
+
+impl Drop for Claim {
+    fn drop(&mut self) {
+        let _ = fs::remove_file(&self.path);
+    }
+}
+
+/// Whether process `pid` runs (Linux: /proc; elsewhere every claim is taken as live).
+fn process_runs(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.exists() || proc.join(pid.to_string()).exists()
+}

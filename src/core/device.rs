@@ -1,0 +1,115 @@
+//! The one place that names a burn backend.
+//!
+//! Model code is backend-agnostic (burn 0.22 tensors carry their backend in the `Device`
+//! value); the binaries call [`select`] with the `--device` flag and pass the device on.
+
+use burn::tensor::Device;
+
+use crate::core::error::{Error, Result};
+
+/// The `--device` choices. Only those compiled in can be selected.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceChoice {
+    /// burn's pure-Rust `flex` CPU backend (default feature `flex`).
+    Cpu,
+    /// burn-ndarray, deprecated and ~80x slower than flex here (feature `ndarray`).
+    Ndarray,
+    /// The best GPU wgpu finds (feature `wgpu`; `CUBECL_WGPU_DEFAULT_DEVICE=Cpu` for lavapipe).
+    Wgpu,
+}
+
+impl std::fmt::Display for DeviceChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            DeviceChoice::Cpu => "cpu",
+            DeviceChoice::Ndarray => "ndarray",
+            DeviceChoice::Wgpu => "wgpu",
+        })
+    }
+}
+
+/// The choices compiled into this binary, in order of preference.
+pub fn available() -> Vec<DeviceChoice> {
+    let mut v = Vec::new();
+    if cfg!(feature = "flex") {
+        v.push(DeviceChoice::Cpu);
+    }
+    if cfg!(feature = "wgpu") {
+        v.push(DeviceChoice::Wgpu);
+    }
+    if cfg!(feature = "ndarray") {
+        v.push(DeviceChoice::Ndarray);
+    }
+    v
+}
+
+/// Build the burn device for a `--device` choice, or say which features to enable.
+pub fn select(choice: DeviceChoice) -> Result<Device> {
+    let missing = |feature: &str| {
+        Error::Device(format!(
+            "--device {choice} is not compiled in: rebuild with `--features {feature}` (compiled in: {})",
+            available()
+                .iter()
+                .map(|c| c.to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+    };
+    match choice {
+        DeviceChoice::Cpu => {
+            #[cfg(feature = "flex")]
+            return Ok(Device::flex());
+            #[cfg(not(feature = "flex"))]
+            return Err(missing("flex"));
+        }
+        DeviceChoice::Ndarray => {
+            #[cfg(feature = "ndarray")]
+            #[allow(deprecated)]
+            return Ok(Device::ndarray());
+            #[cfg(not(feature = "ndarray"))]
+            return Err(missing("ndarray"));
+        }
+        DeviceChoice::Wgpu => {
+            #[cfg(feature = "wgpu")]
+            return Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice));
+            #[cfg(not(feature = "wgpu"))]
+            return Err(missing("wgpu"));
+        }
+    }
+}
+
+/// Serialises seeding and drawing from the backend's random generator, which is global to
+/// the backend (one per process), not to a device value.
+static RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Seed `device`'s random generator and run `draw` while no other thread can draw from it:
+/// every random tensor the library makes is drawn through here or [`seeded`].
+pub fn with_seed<T>(device: &Device, seed: u64, draw: impl FnOnce() -> T) -> T {
+    let _only_us = RNG.lock().unwrap_or_else(|e| e.into_inner());
+    device.seed(seed);
+    draw()
+}
+
+/// Build a module with `build` and draw all its parameters under [`with_seed`], so the same
+/// seed gives the same model whatever else the process is doing (tests run in parallel
+/// threads). burn initialises parameters lazily, on first use, so every parameter is
+/// touched here before the generator is released.
+pub fn seeded<M: burn::module::Module>(device: &Device, seed: u64, build: impl FnOnce() -> M) -> M {
+    struct Touch;
+    impl burn::module::ModuleVisitor for Touch {
+        fn visit_float<const D: usize>(
+            &mut self,
+            param: &burn::module::Param<burn::tensor::Tensor<D>>,
+        ) {
+            let _ = param.val();
+        }
+    }
+    with_seed(device, seed, || {
+        let module = build();
+        module.visit(&mut Touch);
+        module
+    })
+}

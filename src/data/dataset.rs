@@ -1,0 +1,580 @@
+//! The self-modeling datasets: silhouettes, depth maps and joint angles of a robot seen by
+//! a fixed camera (self-modeling paper, section IV-A).
+//!
+//! File format (`.npz`, the keys of the papers' PyTorch code plus ours):
+//! - `images` (N, H, W) uint8, 0 or 255: the silhouette;
+//! - `angles` (N, DOF) float64: joint values, degrees (metres for prismatic joints);
+//! - `focal` () float64: focal length in pixels;
+//! - `poses` (N, 4, 4) float64: camera-to-world matrix of each image (OpenGL axes);
+//! - `depth` (N, H, W) float32: metres along the camera axis, 0 where empty;
+//! - `n_train` () int64: the first `n_train` samples are the training split, the rest test.
+//!   Files without `depth` or `n_train` (the papers') load with depth 0 and an 80/20 split.
+//!
+//! Splits are sequential, as in the paper: with a Lorenz trajectory, the test set is the
+//! continuation of the training trajectory.
+
+use std::path::Path;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::{Deserialize, Serialize};
+
+use crate::core::atomic_file::write_json;
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::core::provenance::git_revision;
+use crate::data::npz::{Array, ArrayData, read_npz, write_npz};
+use crate::report::preview::{depth_to_gray, save_png, tile_grid};
+use crate::sim::camera::Camera;
+use crate::sim::ray_caster::{RayCaster, RenderOptions};
+use crate::sim::robot::Robot;
+use crate::sim::trajectory::{SamplerKind, babbling, grid, lorenz};
+
+/// How a dataset is made.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetConfig {
+    /// Preset name this config started from.
+    pub preset: String,
+    /// Number of samples.
+    pub samples: usize,
+    /// Training samples (the first ones); the rest are the test set.
+    pub train: usize,
+    pub sampler: SamplerKind,
+    /// Step of the grid sampler, degrees.
+    pub grid_step_deg: f64,
+    /// Seed of the random samplers.
+    pub seed: u64,
+    pub camera: Camera,
+    pub render: RenderOptions,
+}
+
+impl Preset for DatasetConfig {
+    /// The paper's dataset: 2,000 Lorenz samples, 1,600 train and 400 test.
+    fn paper() -> Self {
+        DatasetConfig {
+            preset: "paper".into(),
+            samples: 2000,
+            train: 1600,
+            sampler: SamplerKind::Lorenz,
+            grid_step_deg: 9.0,
+            seed: 0,
+            camera: Camera::paper(),
+            render: RenderOptions::default(),
+        }
+    }
+
+    /// Tiny, for tests: 40 samples, 32 train.
+    fn quick() -> Self {
+        DatasetConfig {
+            preset: "quick".into(),
+            samples: 40,
+            train: 32,
+            ..Self::paper()
+        }
+    }
+}
+
+impl DatasetConfig {
+    /// Reject impossible settings.
+    pub fn validate(&self) -> Result<()> {
+        if self.samples == 0 {
+            return Err(Error::Config(
+                "the dataset needs at least 1 sample (--samples)".into(),
+            ));
+        }
+        if self.train > self.samples {
+            return Err(Error::Config(format!(
+                "impossible split: {} training samples out of {} (--train must be at most --samples)",
+                self.train, self.samples
+            )));
+        }
+        self.camera.validate()
+    }
+}
+
+/// Images, depth maps and joint values of one robot from one camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset {
+    /// Joint values per sample (degrees for rotational joints).
+    pub angles: Vec<Vec<f64>>,
+    /// Silhouettes, `N * H * W`, 0 or 255.
+    pub images: Vec<u8>,
+    /// Depth maps, `N * H * W`, metres along the camera axis, 0 where empty.
+    pub depth: Vec<f32>,
+    pub width: usize,
+    pub height: usize,
+    /// Focal length (px).
+    pub focal: f64,
+    /// Camera-to-world matrix (row-major 4x4) of every image.
+    pub poses: Vec<[f64; 16]>,
+    /// The first `n_train` samples are the training split.
+    pub n_train: usize,
+}
+
+/// Joint vectors (user units) for a config, from its sampler.
+pub fn sample_angles(robot: &Robot, cfg: &DatasetConfig) -> Result<Vec<Vec<f64>>> {
+    let ranges = robot.chain.joint_ranges_user();
+    match cfg.sampler {
+        SamplerKind::Lorenz => lorenz(cfg.samples, &ranges),
+        SamplerKind::Babbling => Ok(babbling(cfg.samples, &ranges, cfg.seed)),
+        SamplerKind::Grid => grid(cfg.samples, &ranges, cfg.grid_step_deg, cfg.seed),
+    }
+}
+
+/// A progress bar with rate and ETA (hidden when stderr is not a terminal).
+pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:>10} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+impl Dataset {
+    /// Render `angles` (user units, one row per sample) with `cfg`'s camera and options.
+    pub fn render(
+        robot: &Robot,
+        cfg: &DatasetConfig,
+        angles: Vec<Vec<f64>>,
+        progress: Option<&ProgressBar>,
+    ) -> Result<Self> {
+        cfg.validate()?;
+        if angles.len() != cfg.samples {
+            return Err(Error::Config(format!(
+                "{} joint vectors for {} samples",
+                angles.len(),
+                cfg.samples
+            )));
+        }
+        let caster = RayCaster::new(robot, cfg.camera.clone(), cfg.render.clone());
+        let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+        let frames = caster.render_batch(&si, progress);
+        let (w, h) = (cfg.camera.width, cfg.camera.height);
+        let mut images = Vec::with_capacity(frames.len() * w * h);
+        let mut depth = Vec::with_capacity(frames.len() * w * h);
+        for f in frames {
+            images.extend_from_slice(&f.silhouette);
+            depth.extend_from_slice(&f.depth);
+        }
+        let pose = cfg.camera.pose_matrix();
+        let pose: [f64; 16] = std::array::from_fn(|i| pose[(i / 4, i % 4)]);
+        Ok(Dataset {
+            angles,
+            images,
+            depth,
+            width: w,
+            height: h,
+            focal: cfg.camera.focal_px(),
+            poses: vec![pose; cfg.samples],
+            n_train: cfg.train,
+        })
+    }
+
+    /// Sample joint vectors with the config's sampler and render them.
+    pub fn generate(
+        robot: &Robot,
+        cfg: &DatasetConfig,
+        progress: Option<&ProgressBar>,
+    ) -> Result<Self> {
+        // `render` validates the config.
+        let angles = sample_angles(robot, cfg)?;
+        Self::render(robot, cfg, angles, progress)
+    }
+
+    pub fn len(&self) -> usize {
+        self.angles.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.angles.is_empty()
+    }
+
+    pub fn dof(&self) -> usize {
+        self.angles.first().map_or(0, Vec::len)
+    }
+
+    /// Silhouette of sample `i` (`H * W`).
+    pub fn image(&self, i: usize) -> &[u8] {
+        let n = self.width * self.height;
+        &self.images[i * n..(i + 1) * n]
+    }
+
+    /// Depth map of sample `i` (`H * W`).
+    pub fn depth_map(&self, i: usize) -> &[f32] {
+        let n = self.width * self.height;
+        &self.depth[i * n..(i + 1) * n]
+    }
+
+    /// Indices of the training and test samples.
+    pub fn split(&self) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        (0..self.n_train, self.n_train..self.len())
+    }
+
+    /// Save as `.npz` (atomically).
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let n = self.len();
+        let (h, w) = (self.height, self.width);
+        let images = Array::u8(&[n, h, w], self.images.clone());
+        let angles = Array::f64(&[n, self.dof()], self.angles.concat());
+        let focal = Array::scalar(self.focal);
+        let poses = Array::f64(&[n, 4, 4], self.poses.concat());
+        let depth = Array::f32(&[n, h, w], self.depth.clone());
+        let n_train = Array {
+            shape: vec![],
+            data: ArrayData::I64(vec![self.n_train as i64]),
+        };
+        write_npz(
+            path,
+            &[
+                ("images", &images),
+                ("angles", &angles),
+                ("focal", &focal),
+                ("poses", &poses),
+                ("depth", &depth),
+                ("n_train", &n_train),
+            ],
+        )
+    }
+
+    /// Load an `.npz` dataset, ours or the papers', checking keys, shapes, dtypes and values.
+    pub fn load(path: &Path) -> Result<Self> {
+        let mut arrays = read_npz(path)?;
+        let bad = |msg: String| Error::data(path, msg);
+        let mut take = |key: &str| {
+            arrays
+                .remove(key)
+                .ok_or_else(|| bad(format!("missing key \"{key}\"")))
+        };
+        let images = take("images")?;
+        let angles = take("angles")?;
+        let focal = take("focal")?;
+        let poses = take("poses")?;
+        let depth = arrays.remove("depth");
+        let n_train = arrays.remove("n_train");
+
+        let [n, h, w] = images.shape[..] else {
+            return Err(bad(format!(
+                "\"images\" must have shape (N, H, W), found {:?}",
+                images.shape
+            )));
+        };
+        if n == 0 {
+            return Err(bad("the dataset has zero samples".into()));
+        }
+        let ArrayData::U8(images) = images.data else {
+            return Err(bad(format!(
+                "\"images\" must be uint8, found {}",
+                images.dtype_name()
+            )));
+        };
+        let [na, dof] = angles.shape[..] else {
+            return Err(bad(format!(
+                "\"angles\" must have shape (N, DOF), found {:?}",
+                angles.shape
+            )));
+        };
+        if na != n {
+            return Err(bad(format!(
+                "\"angles\" has {na} rows but \"images\" has {n}"
+            )));
+        }
+        if !matches!(angles.data, ArrayData::F64(_) | ArrayData::F32(_)) {
+            return Err(bad(format!(
+                "\"angles\" must be float, found {}",
+                angles.dtype_name()
+            )));
+        }
+        let flat = angles.to_f64();
+        if let Some(i) = flat.iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!(
+                "\"angles\" row {} is NaN or infinite",
+                i / dof
+            )));
+        }
+        let angles: Vec<Vec<f64>> = flat.chunks(dof).map(<[f64]>::to_vec).collect();
+        let focal = match focal.to_f64()[..] {
+            [f] if f.is_finite() && f > 0.0 => f,
+            _ => return Err(bad("\"focal\" must be one positive number".into())),
+        };
+        let pose_list: Vec<[f64; 16]> = match poses.shape[..] {
+            [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
+            [np, 4, 4] if np == n => poses
+                .to_f64()
+                .chunks(16)
+                .map(|c| std::array::from_fn(|i| c[i]))
+                .collect(),
+            _ => {
+                return Err(bad(format!(
+                    "\"poses\" must have shape (N, 4, 4) or (4, 4), found {:?}",
+                    poses.shape
+                )));
+            }
+        };
+        let depth = match depth {
+            None => vec![0.0; n * h * w],
+            Some(d) => {
+                if d.shape != [n, h, w] {
+                    return Err(bad(format!(
+                        "\"depth\" must have shape {:?}, found {:?}",
+                        [n, h, w],
+                        d.shape
+                    )));
+                }
+                match d.data {
+                    ArrayData::F32(v) => v,
+                    ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+                    _ => {
+                        return Err(bad(format!(
+                            "\"depth\" must be float32, found {}",
+                            d.dtype_name()
+                        )));
+                    }
+                }
+            }
+        };
+        let n_train = match n_train {
+            None => n * 4 / 5,
+            Some(a) => match a.to_f64()[..] {
+                [t] if t >= 0.0 && t as usize <= n => t as usize,
+                _ => return Err(bad(format!("\"n_train\" must be one integer in 0..={n}"))),
+            },
+        };
+        Ok(Dataset {
+            angles,
+            images,
+            depth,
+            width: w,
+            height: h,
+            focal,
+            poses: pose_list,
+            n_train,
+        })
+    }
+
+    /// Summary statistics (the stats JSON beside a dataset).
+    pub fn stats(&self, joint_names: &[String]) -> DatasetStats {
+        let n = self.len();
+        let occ: Vec<f64> = (0..n)
+            .map(|i| {
+                self.image(i).iter().filter(|&&v| v >= 128).count() as f64
+                    / (self.width * self.height) as f64
+            })
+            .collect();
+        let summary = |v: &[f64]| {
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / v.len() as f64;
+            Summary {
+                min: v.iter().cloned().fold(f64::INFINITY, f64::min),
+                max: v.iter().cloned().fold(f64::NEG_INFINITY, f64::max),
+                mean,
+                std: var.sqrt(),
+            }
+        };
+        let joints = (0..self.dof())
+            .map(|j| {
+                let col: Vec<f64> = self.angles.iter().map(|q| q[j]).collect();
+                JointStats {
+                    name: joint_names
+                        .get(j)
+                        .cloned()
+                        .unwrap_or_else(|| format!("joint{j}")),
+                    degrees: summary(&col),
+                }
+            })
+            .collect();
+        let hits: Vec<f64> = self
+            .depth
+            .iter()
+            .filter(|&&d| d > 0.0)
+            .map(|&d| d as f64)
+            .collect();
+        DatasetStats {
+            samples: n,
+            train: self.n_train,
+            test: n - self.n_train,
+            width: self.width,
+            height: self.height,
+            focal_px: self.focal,
+            occupancy: summary(&occ),
+            joints,
+            depth_m: if hits.is_empty() {
+                None
+            } else {
+                Some(summary(&hits))
+            },
+        }
+    }
+}
+
+/// Min, max, mean and standard deviation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    pub min: f64,
+    pub max: f64,
+    pub mean: f64,
+    pub std: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct JointStats {
+    pub name: String,
+    pub degrees: Summary,
+}
+
+/// What the stats JSON holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetStats {
+    pub samples: usize,
+    pub train: usize,
+    pub test: usize,
+    pub width: usize,
+    pub height: usize,
+    pub focal_px: f64,
+    /// Fraction of robot pixels per image.
+    pub occupancy: Summary,
+    pub joints: Vec<JointStats>,
+    /// Depth of robot pixels (m).
+    pub depth_m: Option<Summary>,
+}
+
+/// Read joint vectors (user units) from a CSV (one row per pose, one column per joint, an
+/// optional header) or an `.npz` with an `angles` (N, DOF) array. Checks the column count
+/// and that every value is finite.
+pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
+    let bad = |msg: String| Error::data(path, msg);
+    let rows: Vec<Vec<f64>> = if path.extension().is_some_and(|e| e == "npz") {
+        let mut arrays = read_npz(path)?;
+        let a = arrays
+            .remove("angles")
+            .ok_or_else(|| bad("missing key \"angles\"".into()))?;
+        let [_, cols] = a.shape[..] else {
+            return Err(bad(format!(
+                "\"angles\" must have shape (N, {dof}), found {:?}",
+                a.shape
+            )));
+        };
+        if cols == 0 {
+            return Err(bad("\"angles\" has no columns".into()));
+        }
+        a.to_f64().chunks(cols).map(<[f64]>::to_vec).collect()
+    } else {
+        let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .trim(csv::Trim::All)
+            .comment(Some(b'#'))
+            .from_reader(file);
+        let mut rows = Vec::new();
+        for (i, rec) in reader.records().enumerate() {
+            let rec = rec.map_err(|e| bad(format!("line {}: {e}", i + 1)))?;
+            let parsed: std::result::Result<Vec<f64>, _> =
+                rec.iter().map(str::parse::<f64>).collect();
+            match parsed {
+                Ok(v) => rows.push(v),
+                // A header line is allowed as the first line only.
+                Err(_) if i == 0 => continue,
+                Err(_) => {
+                    return Err(bad(format!(
+                        "line {}: not a list of numbers: \"{}\"",
+                        i + 1,
+                        rec.iter().collect::<Vec<_>>().join(",")
+                    )));
+                }
+            }
+        }
+        rows
+    };
+    if rows.is_empty() {
+        return Err(bad("no joint vectors (zero samples)".into()));
+    }
+    for (i, r) in rows.iter().enumerate() {
+        if r.len() != dof {
+            return Err(bad(format!(
+                "row {} has {} values, the robot has {dof} joints",
+                i + 1,
+                r.len()
+            )));
+        }
+        if r.iter().any(|v| !v.is_finite()) {
+            return Err(bad(format!("row {} has a NaN or infinite angle", i + 1)));
+        }
+    }
+    Ok(rows)
+}
+
+/// What [`build_and_save`] did.
+#[derive(Clone, Debug, Serialize)]
+pub struct BuildReport {
+    pub stats: DatasetStats,
+    pub robot: String,
+    pub shapes: usize,
+    pub render_seconds: f64,
+    pub write_seconds: f64,
+    pub images_per_second: f64,
+    pub threads: usize,
+    pub git_revision: String,
+}
+
+/// Sample (or take `angles`), render, and write `out` (.npz) with `.stats.json`,
+/// `.config.json` and `.preview.png` beside it. `progress`: show a progress bar.
+pub fn build_and_save(
+    robot: &Robot,
+    robot_label: &str,
+    cfg: &DatasetConfig,
+    angles: Option<Vec<Vec<f64>>>,
+    out: &Path,
+    progress: bool,
+) -> Result<(Dataset, BuildReport)> {
+    let bar = progress.then(|| progress_bar(cfg.samples as u64, "render"));
+    let start = std::time::Instant::now();
+    let data = match angles {
+        Some(rows) => Dataset::render(robot, cfg, rows, bar.as_ref())?,
+        None => Dataset::generate(robot, cfg, bar.as_ref())?,
+    };
+    let render_seconds = start.elapsed().as_secs_f64();
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let write_start = std::time::Instant::now();
+    data.save(out)?;
+    let write_seconds = write_start.elapsed().as_secs_f64();
+
+    let names: Vec<String> = robot
+        .chain
+        .movable_joints()
+        .map(|j| j.name.clone())
+        .collect();
+    let stats = data.stats(&names);
+    let report = BuildReport {
+        stats,
+        robot: robot_label.to_string(),
+        shapes: robot.shape_count(),
+        render_seconds,
+        write_seconds,
+        images_per_second: data.len() as f64 / render_seconds,
+        threads: rayon::current_num_threads(),
+        git_revision: git_revision(),
+    };
+    write_json(&out.with_extension("stats.json"), &report)?;
+    write_json(&out.with_extension("config.json"), cfg)?;
+    let shown = 8.min(data.len());
+    let picks: Vec<usize> = (0..shown).map(|k| k * data.len() / shown).collect();
+    let mut tiles: Vec<Vec<u8>> = picks.iter().map(|&i| data.image(i).to_vec()).collect();
+    let range = report
+        .stats
+        .depth_m
+        .as_ref()
+        .map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
+    tiles.extend(
+        picks
+            .iter()
+            .map(|&i| depth_to_gray(data.depth_map(i), range)),
+    );
+    save_png(
+        &out.with_extension("preview.png"),
+        &tile_grid(&tiles, data.width, data.height, shown),
+    )?;
+    Ok((data, report))
+}

@@ -1,0 +1,193 @@
+//! NumPy `.npz` archives: a zip of `.npy` arrays (encoded by the `npyz` crate, zipped by
+//! `zip`). Written with fast deflate (like `np.savez_compressed`); read whether stored or
+//! deflated, so files from `np.savez` and `np.savez_compressed` both load.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufReader, Read, Write};
+use std::path::Path;
+
+use npyz::WriterBuilder;
+use zip::write::SimpleFileOptions;
+
+use crate::core::atomic_file::write_atomic;
+use crate::core::error::{Error, Result};
+
+/// The element types the project stores.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ArrayData {
+    U8(Vec<u8>),
+    F32(Vec<f32>),
+    F64(Vec<f64>),
+    I64(Vec<i64>),
+}
+
+/// An n-dimensional array in C order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Array {
+    pub shape: Vec<usize>,
+    pub data: ArrayData,
+}
+
+impl Array {
+    pub fn u8(shape: &[usize], data: Vec<u8>) -> Self {
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::U8(data),
+        }
+    }
+    pub fn f32(shape: &[usize], data: Vec<f32>) -> Self {
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::F32(data),
+        }
+    }
+    pub fn f64(shape: &[usize], data: Vec<f64>) -> Self {
+        Array {
+            shape: shape.to_vec(),
+            data: ArrayData::F64(data),
+        }
+    }
+    /// A 0-d array holding one number.
+    pub fn scalar(v: f64) -> Self {
+        Array {
+            shape: vec![],
+            data: ArrayData::F64(vec![v]),
+        }
+    }
+
+    /// Number of elements.
+    pub fn len(&self) -> usize {
+        match &self.data {
+            ArrayData::U8(v) => v.len(),
+            ArrayData::F32(v) => v.len(),
+            ArrayData::F64(v) => v.len(),
+            ArrayData::I64(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// NumPy's name of the element type.
+    pub fn dtype_name(&self) -> &'static str {
+        match self.data {
+            ArrayData::U8(_) => "uint8",
+            ArrayData::F32(_) => "float32",
+            ArrayData::F64(_) => "float64",
+            ArrayData::I64(_) => "int64",
+        }
+    }
+
+    /// Values as f64 (any numeric type).
+    pub fn to_f64(&self) -> Vec<f64> {
+        match &self.data {
+            ArrayData::U8(v) => v.iter().map(|&x| x as f64).collect(),
+            ArrayData::F32(v) => v.iter().map(|&x| x as f64).collect(),
+            ArrayData::F64(v) => v.clone(),
+            ArrayData::I64(v) => v.iter().map(|&x| x as f64).collect(),
+        }
+    }
+}
+
+fn encode<T: npyz::AutoSerialize + Copy>(shape: &[usize], data: &[T]) -> std::io::Result<Vec<u8>> {
+    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
+    let mut buf = Vec::with_capacity(data.len() * std::mem::size_of::<T>() + 128);
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&shape)
+        .writer(&mut buf)
+        .begin_nd()?;
+    w.extend(data.iter().copied())?;
+    w.finish()?;
+    Ok(buf)
+}
+
+/// Write `arrays` to `path` atomically (no partial file on error).
+pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
+    let io = |e: std::io::Error| Error::io(path, e);
+    let zipe = |e: zip::result::ZipError| Error::data(path, format!("cannot write zip: {e}"));
+    write_atomic(path, |w| {
+        let mut zip = zip::ZipWriter::new(w);
+        let opts = SimpleFileOptions::default()
+            .compression_method(zip::CompressionMethod::Deflated)
+            .compression_level(Some(1))
+            .large_file(true);
+        for (name, array) in arrays {
+            assert_eq!(
+                array.len(),
+                array.shape.iter().product::<usize>(),
+                "array \"{name}\": data length does not match its shape"
+            );
+            let bytes = match &array.data {
+                ArrayData::U8(v) => encode(&array.shape, v),
+                ArrayData::F32(v) => encode(&array.shape, v),
+                ArrayData::F64(v) => encode(&array.shape, v),
+                ArrayData::I64(v) => encode(&array.shape, v),
+            }
+            .map_err(io)?;
+            zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;
+            zip.write_all(&bytes).map_err(io)?;
+        }
+        zip.finish().map_err(zipe)?;
+        Ok(())
+    })
+}
+
+/// Read every array of an `.npz` file, by key (the member name without `.npy`).
+pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
+    let file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut zip = zip::ZipArchive::new(BufReader::new(file))
+        .map_err(|e| Error::data(path, format!("not an .npz file (bad zip: {e})")))?;
+    let mut out = BTreeMap::new();
+    for i in 0..zip.len() {
+        let mut member = zip
+            .by_index(i)
+            .map_err(|e| Error::data(path, format!("corrupt .npz member {i}: {e}")))?;
+        let name = member
+            .name()
+            .map_err(|e| Error::data(path, format!("corrupt .npz member {i}: {e}")))?
+            .to_string();
+        let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
+        let mut bytes = Vec::with_capacity(member.size() as usize);
+        member
+            .read_to_end(&mut bytes)
+            .map_err(|e| Error::data(path, format!("corrupt .npz member \"{name}\": {e}")))?;
+        let bad = |e: std::io::Error| {
+            Error::data(path, format!("\"{key}\" is not a valid .npy array: {e}"))
+        };
+        let npy = npyz::NpyFile::new(&bytes[..]).map_err(bad)?;
+        let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
+        if npy.order() != npyz::Order::C {
+            return Err(Error::data(
+                path,
+                format!("\"{key}\" is stored in Fortran order; save it C-contiguous"),
+            ));
+        }
+        let descr = npy.dtype().descr().trim_matches('\'').to_string();
+        let data = match descr.as_str() {
+            "|u1" | "<u1" => ArrayData::U8(npy.into_vec().map_err(bad)?),
+            "<f4" => ArrayData::F32(npy.into_vec().map_err(bad)?),
+            "<f8" => ArrayData::F64(npy.into_vec().map_err(bad)?),
+            "<i8" => ArrayData::I64(npy.into_vec().map_err(bad)?),
+            "<i4" => ArrayData::I64(
+                npy.into_vec::<i32>()
+                    .map_err(bad)?
+                    .into_iter()
+                    .map(i64::from)
+                    .collect(),
+            ),
+            other => {
+                return Err(Error::data(
+                    path,
+                    format!(
+                        "\"{key}\" has dtype {other}; expected uint8, float32, float64, int32 or int64"
+                    ),
+                ));
+            }
+        };
+        out.insert(key, Array { shape, data });
+    }
+    Ok(out)
+}

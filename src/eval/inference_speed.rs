@@ -1,0 +1,90 @@
+//! Inference speed measured properly: warm-up calls, then timed calls with the device
+//! synchronised after each, median of the repeats; at batch 1 (latency) and batch 256
+//! (throughput). Training throughput is measured by the training loop itself
+//! ([`crate::train::trainer::TrainLog::images_per_second`]); the paper's "FPS" was that figure.
+
+use std::time::Instant;
+
+use burn::tensor::{Device, Distribution, Tensor};
+
+/// One timed batch size.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Timing {
+    pub batch: usize,
+    /// Median seconds per call.
+    pub median_s: f64,
+    pub repeats: usize,
+}
+
+impl Timing {
+    pub fn images_per_second(&self) -> f64 {
+        self.batch as f64 / self.median_s
+    }
+}
+
+/// How long to measure.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SpeedConfig {
+    pub warmup: usize,
+    /// Timed calls at least this many...
+    pub min_repeats: usize,
+    /// ...and until this many seconds have passed.
+    pub min_seconds: f64,
+    pub batches: Vec<usize>,
+}
+
+impl SpeedConfig {
+    pub fn paper() -> Self {
+        SpeedConfig {
+            warmup: 3,
+            min_repeats: 10,
+            min_seconds: 2.0,
+            batches: vec![1, 256],
+        }
+    }
+
+    pub fn quick() -> Self {
+        SpeedConfig {
+            warmup: 1,
+            min_repeats: 3,
+            min_seconds: 0.0,
+            batches: vec![1, 8],
+        }
+    }
+}
+
+/// Time `forward(angles)` for each batch size; inputs are random joint angles in degrees.
+pub fn measure<F>(forward: F, dof: usize, device: &Device, cfg: &SpeedConfig) -> Vec<Timing>
+where
+    F: Fn(Tensor<2>) -> Tensor<4>,
+{
+    cfg.batches
+        .iter()
+        .map(|&batch| {
+            let q = crate::core::device::with_seed(device, batch as u64, || {
+                Tensor::<2>::random([batch, dof], Distribution::Uniform(-90.0, 90.0), device)
+            });
+            let call = || {
+                let y = forward(q.clone());
+                let _ = device.sync();
+                drop(y);
+            };
+            for _ in 0..cfg.warmup {
+                call();
+            }
+            let start = Instant::now();
+            let mut times = Vec::new();
+            while times.len() < cfg.min_repeats || start.elapsed().as_secs_f64() < cfg.min_seconds {
+                let t = Instant::now();
+                call();
+                times.push(t.elapsed().as_secs_f64());
+            }
+            times.sort_by(f64::total_cmp);
+            Timing {
+                batch,
+                median_s: times[times.len() / 2],
+                repeats: times.len(),
+            }
+        })
+        .collect()
+}

@@ -1,0 +1,247 @@
+//! Conditional GAN inverse kinematics, a baseline of the EMSSL paper (section IV-A): a
+//! generator from (normalised position, noise) to normalised joints and a discriminator on
+//! (position, joints), trained on the random data. It learns the distribution of solutions
+//! for a position rather than their average, so unlike direct regression it need not average
+//! redundant solutions; its samples are only as precise as the discriminator can tell.
+//!
+//! Training: the standard non-saturating GAN losses with logits (binary cross-entropy), Adam
+//! with beta1 = 0.5 for both networks, one discriminator step then one generator step per
+//! batch. Noise is drawn on the host from a seeded generator, so runs repeat exactly.
+//! Evaluation: one sample per target, and best-of-k (the sample the forward model says lands
+//! closest; an extra column, since it calls the forward model k times per target).
+//!
+//! With the fit's `converge` set, training runs epoch by epoch until the one-sample distance
+//! error on the validation targets (fixed noise) stops improving, both learning rates reduced
+//! on its plateaus, and keeps the best epoch's generator.
+
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Tensor, TensorData};
+use nalgebra::Point3;
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand_distr::{Distribution, Normal};
+
+use crate::core::error::Result;
+use crate::ik::data::{DistanceErrors, IkData, JointOutput, reach_errors};
+use crate::ik::learning::{FitConfig, row_set};
+use crate::ik::mlp::{InverseModelConfig, Mlp};
+use crate::sim::kinematics::KinematicChain;
+use crate::train::losses::bce_with_logits;
+use crate::train::trainer::{Batcher, ConvergenceLog, Plateau, ValidationPoint, autodiff_device};
+
+/// The two networks and their training.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GanConfig {
+    /// Noise inputs of the generator (standard normal).
+    pub noise: usize,
+    /// Hidden widths of the generator (3 + noise -> hidden -> dof, sigmoid output).
+    pub generator_hidden: Vec<usize>,
+    /// Hidden widths of the discriminator (3 + dof -> hidden -> 1 logit).
+    pub discriminator_hidden: Vec<usize>,
+    /// Epochs, batch, learning rate (both networks) and seed.
+    pub fit: FitConfig,
+    /// Samples per target for the best-of-k column.
+    pub best_of: usize,
+}
+
+/// Rows of standard-normal noise `[n, width]`, seeded.
+fn noise(n: usize, width: usize, seed: u64, device: &Device) -> Tensor<2> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
+    let v: Vec<f32> = (0..n * width).map(|_| normal.sample(&mut rng)).collect();
+    Tensor::from_data(TensorData::new(v, [n, width]), device)
+}
+
+/// The trained generator and its noise width.
+pub struct Generator {
+    pub model: Mlp,
+    pub noise: usize,
+}
+
+/// Train the conditional GAN on the random training pairs of `data`, its generator writing
+/// joints under `output`: `cfg.fit.epochs` epochs, or with `cfg.fit.converge` until the
+/// validation error (through `chain`) stops improving (its log returned).
+pub fn train_gan(
+    chain: &KinematicChain,
+    data: &IkData,
+    cfg: &GanConfig,
+    output: JointOutput,
+    device: &Device,
+) -> Result<(Generator, Option<ConvergenceLog>)> {
+    let tdev = autodiff_device(device, cfg.fit.seed);
+    let dof = data.joints[0].len();
+    let width = output.width(dof);
+    let train = data.train();
+    let set = row_set(
+        data.position_rows(&data.positions[train.clone()]),
+        3,
+        data.joint_rows_as(&data.joints[train], output),
+        width,
+        &tdev,
+    );
+    let mut generator =
+        InverseModelConfig::with_output(3 + cfg.noise, cfg.generator_hidden.clone(), dof, output)
+            .init(&tdev, cfg.fit.seed)?;
+    let mut discriminator = InverseModelConfig {
+        inputs: 3 + width,
+        hidden: cfg.discriminator_hidden.clone(),
+        outputs: 1,
+        sigmoid_output: false,
+        unit_pairs: false,
+    }
+    .init(&tdev, cfg.fit.seed ^ 0xD15C)?;
+    let mut g_optim = AdamConfig::new().with_beta_1(0.5).init();
+    let mut d_optim = AdamConfig::new().with_beta_1(0.5).init();
+    let train_cfg = cfg.fit.train_config(set.len());
+    let steps_per_epoch = set.len().div_ceil(train_cfg.batch.min(set.len()).max(1));
+    let epochs = cfg
+        .fit
+        .converge
+        .as_ref()
+        .map_or(cfg.fit.epochs, |c| c.max_epochs);
+    let mut plateau = cfg.fit.converge.as_ref().map(Plateau::new);
+    let mut log = cfg.fit.converge.as_ref().map(|_| ConvergenceLog::default());
+    let mut best: Option<Mlp> = None;
+    let started = std::time::Instant::now();
+    let batcher = Batcher::new(&set, &train_cfg);
+    let bar = crate::train::trainer::progress_bar(epochs * steps_per_epoch, "CGAN");
+    let mut g_losses = (0.0f64, 0usize);
+    for epoch in 0..epochs {
+        let rate = cfg.fit.learning_rate * plateau.as_ref().map_or(1.0, |p| p.scale);
+        for step in epoch * steps_per_epoch..(epoch + 1) * steps_per_epoch {
+            let batch = batcher.batch(step);
+            let p = batch.inputs;
+            let [n, _] = p.dims();
+            let real = batch.targets[0].clone().reshape([n, width]);
+            let ones = Tensor::<2>::ones([n, 1], &tdev);
+            let zeros = Tensor::<2>::zeros([n, 1], &tdev);
+            // The discriminator: real pairs against generated ones (the generator detached).
+            let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 1), &tdev);
+            let fake = generator
+                .forward(Tensor::cat(vec![p.clone(), z], 1))
+                .detach();
+            let d_loss = bce_with_logits(
+                discriminator.forward(Tensor::cat(vec![p.clone(), real], 1)),
+                ones.clone(),
+            ) + bce_with_logits(
+                discriminator.forward(Tensor::cat(vec![p.clone(), fake], 1)),
+                zeros,
+            );
+            let grads = GradientsParams::from_grads(d_loss.backward(), &discriminator);
+            discriminator = d_optim.step(rate, discriminator, grads);
+            // The generator: make the discriminator call its pairs real (non-saturating loss).
+            let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 2), &tdev);
+            let fake = generator.forward(Tensor::cat(vec![p.clone(), z], 1));
+            let g_loss =
+                bce_with_logits(discriminator.forward(Tensor::cat(vec![p, fake], 1)), ones);
+            if plateau.is_some() {
+                g_losses.0 += g_loss.clone().into_scalar::<f32>() as f64;
+                g_losses.1 += 1;
+            }
+            let grads = GradientsParams::from_grads(g_loss.backward(), &generator);
+            generator = g_optim.step(rate, generator, grads);
+            bar.inc(1);
+        }
+        let (Some(rule), Some(log)) = (plateau.as_mut(), log.as_mut()) else {
+            continue;
+        };
+        let candidate = Generator {
+            model: generator.valid(),
+            noise: cfg.noise,
+        };
+        let targets = &data.positions[data.validation()];
+        let joints = candidate.sample(data, targets, cfg.fit.inference_batch, 0x7A1, device);
+        let score = DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm;
+        let (improved, stop) = rule.observe(score);
+        if improved {
+            best = Some(candidate.model);
+            log.best_epoch = epoch + 1;
+            log.best_validation = score;
+        }
+        log.curve.push(ValidationPoint {
+            epoch: epoch + 1,
+            learning_rate: rate,
+            train_loss: g_losses.0 / g_losses.1.max(1) as f64,
+            validation: score,
+            seconds: started.elapsed().as_secs_f64(),
+        });
+        g_losses = (0.0, 0);
+        log.epochs = epoch + 1;
+        log.stopped_on_plateau = stop;
+        bar.set_message(format!("validation {score:.2} cm"));
+        if bar.is_hidden() {
+            eprintln!(
+                "CGAN: epoch {}, validation {score:.4}, best {:.4} at {}, lr {rate:.2e}",
+                epoch + 1,
+                log.best_validation,
+                log.best_epoch
+            );
+        }
+        if stop {
+            break;
+        }
+    }
+    bar.finish();
+    if let Some(log) = log.as_mut() {
+        log.seconds = started.elapsed().as_secs_f64();
+    }
+    Ok((
+        Generator {
+            model: best.unwrap_or_else(|| generator.valid()),
+            noise: cfg.noise,
+        },
+        log,
+    ))
+}
+
+impl Generator {
+    /// One sample of joints (radians) per position, noise seeded by `seed`.
+    pub fn sample(
+        &self,
+        data: &IkData,
+        positions: &[Point3<f64>],
+        batch: usize,
+        seed: u64,
+        device: &Device,
+    ) -> Vec<Vec<f64>> {
+        let mut out = Vec::with_capacity(positions.len());
+        for (c, part) in positions.chunks(batch.max(1)).enumerate() {
+            let n = part.len();
+            let p = Tensor::from_data(TensorData::new(data.position_rows(part), [n, 3]), device);
+            let z = noise(n, self.noise, seed ^ ((c as u64) << 20), device);
+            let q = self.model.forward(Tensor::cat(vec![p, z], 1));
+            let [_, width] = q.dims();
+            let output = self.model.joint_output();
+            let v = q.into_data().try_into_vec::<f32>().expect("float");
+            out.extend(v.chunks(width).map(|r| data.decode_joints(r, output)));
+        }
+        out
+    }
+
+    /// For each position, the one of `k` samples whose forward kinematics lands closest.
+    #[allow(clippy::too_many_arguments)]
+    pub fn best_of(
+        &self,
+        chain: &KinematicChain,
+        data: &IkData,
+        positions: &[Point3<f64>],
+        k: usize,
+        batch: usize,
+        seed: u64,
+        device: &Device,
+    ) -> Vec<Vec<f64>> {
+        let mut best: Vec<(f64, Vec<f64>)> = vec![(f64::INFINITY, Vec::new()); positions.len()];
+        for s in 0..k.max(1) {
+            let joints = self.sample(data, positions, batch, seed.wrapping_add(s as u64), device);
+            let reached = chain.end_effector_batch(&joints);
+            for (i, (q, r)) in joints.into_iter().zip(reached).enumerate() {
+                let e = (positions[i] - r).norm();
+                if e < best[i].0 {
+                    best[i] = (e, q);
+                }
+            }
+        }
+        best.into_iter().map(|(_, q)| q).collect()
+    }
+}

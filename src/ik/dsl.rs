@@ -1,0 +1,181 @@
+//! Distal supervised learning (DSL; Jordan and Rumelhart 1992), a baseline of the EMSSL paper
+//! (section IV-A): first learn a forward model network (normalised joints -> normalised
+//! position) on the random data, then train the inverse model through it, frozen, by
+//! minimising the distance between the learned forward model's output and the desired
+//! position. Its accuracy is bounded by the forward model's: the inverse model learns to
+//! satisfy the network, not the arm.
+//!
+//! With the fit's `converge` set, each phase trains until its validation error stops
+//! improving: the forward model's distance error on the validation joints, then the inverse
+//! model's distance error on the validation targets through the arm. Under the wrapped joint
+//! output the forward model reads (cos, sin) per joint, which the inverse model writes.
+
+use burn::module::Module;
+use burn::optim::AdamConfig;
+use burn::tensor::Device;
+
+use crate::core::error::Result;
+use crate::ik::data::IkData;
+use crate::ik::learning::{FitConfig, fit_converged, fit_set, mse, row_set, validation_cm};
+use crate::ik::mlp::{InverseModelConfig, Mlp};
+use crate::sim::kinematics::KinematicChain;
+use crate::train::trainer::{Batch, ConvergenceLog, autodiff_device};
+
+/// The forward model network and how long each phase trains.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DistalConfig {
+    /// Hidden widths of the forward model (dof -> hidden -> 3, linear output).
+    pub forward_hidden: Vec<usize>,
+    pub forward_epochs: usize,
+    pub inverse_epochs: usize,
+}
+
+/// What DSL learned.
+pub struct DistalModels {
+    pub inverse: Mlp,
+    pub forward: Mlp,
+    /// Mean distance (cm) between the forward model's prediction and the true position on the
+    /// test joints.
+    pub forward_test_cm: f64,
+    /// The validation curves of the two phases, where they trained to convergence.
+    pub forward_log: Option<ConvergenceLog>,
+    pub inverse_log: Option<ConvergenceLog>,
+}
+
+/// Learn the forward model, then the inverse model (`model_cfg`, whose output decides the
+/// joint encoding) through it.
+pub fn dsl(
+    chain: &KinematicChain,
+    data: &IkData,
+    model_cfg: &InverseModelConfig,
+    fit_cfg: &FitConfig,
+    cfg: &DistalConfig,
+    device: &Device,
+) -> Result<DistalModels> {
+    let tdev = autodiff_device(device, fit_cfg.seed);
+    let dof = data.joints[0].len();
+    let train = data.train();
+    let inverse = model_cfg.init(&tdev, fit_cfg.seed)?;
+    let output = inverse.joint_output();
+    let positions = data.position_rows(&data.positions[train.clone()]);
+    // Phase 1: the forward model on (joints -> position) of the random data.
+    let forward_cfg = InverseModelConfig {
+        inputs: output.width(dof),
+        hidden: cfg.forward_hidden.clone(),
+        outputs: 3,
+        sigmoid_output: false,
+        unit_pairs: false,
+    };
+    let set = row_set(
+        data.joint_rows_as(&data.joints[train], output),
+        output.width(dof),
+        positions.clone(),
+        3,
+        &tdev,
+    );
+    let forward = forward_cfg.init(&tdev, fit_cfg.seed ^ 0xF0)?;
+    let (forward, forward_log) = match &fit_cfg.converge {
+        Some(conv) => {
+            let (m, log) = fit_converged(
+                forward,
+                &set,
+                fit_cfg,
+                conv,
+                "DSL forward model",
+                mse,
+                |m| forward_error_cm(m, data, data.validation(), output, device),
+            )?;
+            (m, Some(log))
+        }
+        None => {
+            let (m, _) = fit_set(
+                forward,
+                AdamConfig::new().init(),
+                &set,
+                &FitConfig {
+                    epochs: cfg.forward_epochs,
+                    ..fit_cfg.clone()
+                },
+                "DSL forward model",
+                mse,
+            )?;
+            (m, None)
+        }
+    };
+    let forward_test_cm = forward_error_cm(&forward.valid(), data, data.test(), output, device);
+    // Phase 2: the inverse model through the frozen forward model: inputs and targets are the
+    // desired positions.
+    let frozen = forward.no_grad();
+    let set = row_set(positions.clone(), 3, positions, 3, &tdev);
+    let through_forward = |m: &Mlp, b: &Batch| {
+        let [n, d, _, _] = b.targets[0].dims();
+        (frozen.forward(m.forward(b.inputs.clone())) - b.targets[0].clone().reshape([n, d]))
+            .square()
+            .mean()
+    };
+    let (inverse, inverse_log) = match &fit_cfg.converge {
+        Some(conv) => {
+            let (m, log) = fit_converged(
+                inverse,
+                &set,
+                fit_cfg,
+                conv,
+                "DSL inverse model",
+                through_forward,
+                |m| validation_cm(m, chain, data, fit_cfg.inference_batch, device),
+            )?;
+            (m, Some(log))
+        }
+        None => {
+            let (m, _) = fit_set(
+                inverse,
+                AdamConfig::new().init(),
+                &set,
+                &FitConfig {
+                    epochs: cfg.inverse_epochs,
+                    ..fit_cfg.clone()
+                },
+                "DSL inverse model",
+                through_forward,
+            )?;
+            (m, None)
+        }
+    };
+    Ok(DistalModels {
+        inverse: inverse.valid(),
+        forward: frozen.valid(),
+        forward_test_cm,
+        forward_log,
+        inverse_log,
+    })
+}
+
+/// Mean distance (cm) between the forward model's predictions for the joints of the samples
+/// `range` (written under `output`) and their true positions.
+fn forward_error_cm(
+    forward: &Mlp,
+    data: &IkData,
+    range: std::ops::Range<usize>,
+    output: crate::ik::data::JointOutput,
+    device: &Device,
+) -> f64 {
+    use burn::tensor::{Tensor, TensorData};
+    let test = range;
+    let width = output.width(data.joints[0].len());
+    let joints = data.joint_rows_as(&data.joints[test.clone()], output);
+    let n = test.len();
+    let out = forward
+        .forward(Tensor::from_data(
+            TensorData::new(joints, [n, width]),
+            device,
+        ))
+        .into_data()
+        .try_into_vec::<f32>()
+        .expect("float");
+    let total: f64 = data.positions[test]
+        .iter()
+        .zip(out.chunks(3))
+        .map(|(p, v)| (data.position_from_normalised(v) - p).norm())
+        .sum();
+    100.0 * total / n.max(1) as f64
+}

@@ -1,0 +1,393 @@
+//! Beyond the EMSSL paper: a learned inverse kinematics that returns many solutions. A
+//! conditional normalizing flow in the style of IKFlow (Ames et al. 2022, jstmn/ikflow):
+//! RealNVP affine coupling layers whose scale and shift networks read the target position, an
+//! invertible map between joint vectors and a standard normal, trained by maximum likelihood
+//! on the random (joints, position) pairs. Sampling the normal and inverting the map draws
+//! solutions for a target; k draws give k different answers from the family of solutions a
+//! redundant arm has, where every regression (DRL, EMSSL) returns one.
+//!
+//! - Joints are scaled to [-1, 1] over the joint range; samples are clamped back into it.
+//! - Each coupling layer permutes the joints (a fixed, seeded permutation), keeps the first
+//!   half and scales and shifts the second: `y2 = x2 * exp(s) + t`, `(s, t) = net(x1, c)`,
+//!   `s` soft-clamped to `[-clamp, clamp]` by `clamp * tanh(s / clamp)`; the last layer of
+//!   each net starts at zero, so the untrained flow is the identity.
+//! - SoftFlow (Kim et al. 2020), as IKFlow uses it: the solutions of one position lie on a
+//!   surface of zero volume in joint space, where a likelihood is unbounded. Training adds
+//!   Gaussian noise of a scale `c` drawn per sample from `[0, softflow_max]` to the joints and
+//!   tells the networks `c`; sampling asks for `c = 0`.
+//! - The loss is the negative log-likelihood per joint vector (up to a constant):
+//!   `0.5 |z|^2 - log|det dz/dx|`.
+
+use burn::module::Module;
+use burn::nn::{Initializer, Linear, LinearConfig};
+use burn::optim::AdamConfig;
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Int, Tensor, TensorData};
+use nalgebra::Point3;
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use rand_distr::{Distribution, Normal, Uniform};
+
+use crate::core::error::{Error, Result};
+use crate::ik::data::{DistanceErrors, IkData, reach_errors};
+use crate::ik::learning::{FitConfig, row_set};
+use crate::sim::kinematics::KinematicChain;
+use crate::train::trainer::{Batch, ConvergenceLog, autodiff_device, train_to_convergence};
+
+/// The flow's shape and training.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FlowConfig {
+    /// Affine coupling layers, each with its own permutation.
+    pub couplings: usize,
+    /// Hidden widths of each coupling's scale-and-shift network.
+    pub hidden: Vec<usize>,
+    /// The log-scale is soft-clamped to `[-clamp, clamp]`.
+    pub clamp: f64,
+    /// Training noise scales are drawn from `[0, softflow_max]` (joint units scaled to
+    /// [-1, 1]).
+    pub softflow_max: f64,
+    /// Epochs (or convergence), batch, learning rate, seed.
+    pub fit: FitConfig,
+    /// Samples per target for the best-of-k answer and the diversity.
+    pub best_of: usize,
+}
+
+impl FlowConfig {
+    /// 12 couplings of 3 -> 256 -> 256 -> 256 networks (IKFlow's are 1024 wide; 256 fits a
+    /// 2-core CPU), clamp 2, noise up to 0.01, Adam 5e-4, batch 256, best of 10.
+    pub fn standard() -> Self {
+        FlowConfig {
+            couplings: 12,
+            hidden: vec![256, 256, 256],
+            clamp: 2.0,
+            softflow_max: 0.01,
+            fit: FitConfig {
+                epochs: 40,
+                batch: 256,
+                learning_rate: 5e-4,
+                ..FitConfig::paper()
+            },
+            best_of: 10,
+        }
+    }
+}
+
+/// One affine coupling layer: its permutation and its scale-and-shift network.
+#[derive(Module, Debug)]
+pub struct Coupling {
+    layers: Vec<Linear>,
+}
+
+impl Coupling {
+    /// `(s, t)`, each `[n, width]`, of the kept half `x1` and the condition.
+    fn scale_shift(&self, x1: Tensor<2>, cond: Tensor<2>, clamp: f64) -> (Tensor<2>, Tensor<2>) {
+        let mut h = Tensor::cat(vec![x1, cond], 1);
+        let last = self.layers.len() - 1;
+        for (i, l) in self.layers.iter().enumerate() {
+            h = l.forward(h);
+            if i < last {
+                h = relu(h);
+            }
+        }
+        let [n, w2] = h.dims();
+        let w = w2 / 2;
+        let s = h.clone().slice([0..n, 0..w]);
+        let t = h.slice([0..n, w..w2]);
+        ((s / clamp).tanh() * clamp, t)
+    }
+}
+
+/// The conditional flow: joints (scaled to [-1, 1]) <-> a standard normal, given the target.
+#[derive(Module, Debug)]
+pub struct FlowIk {
+    couplings: Vec<Coupling>,
+    #[module(skip)]
+    permutations: Vec<Vec<i64>>,
+    #[module(skip)]
+    clamp: f64,
+}
+
+/// Width of the condition: the normalised position and the SoftFlow noise scale.
+const CONDITION: usize = 4;
+
+impl FlowIk {
+    /// A fresh flow for a `dof`-joint arm (seeded weights and permutations).
+    pub fn new(cfg: &FlowConfig, dof: usize, device: &Device, seed: u64) -> Result<Self> {
+        if dof < 2 || cfg.couplings == 0 || cfg.hidden.contains(&0) {
+            return Err(Error::Config(format!(
+                "flow: needs at least 2 joints, a coupling and positive widths ({cfg:?})"
+            )));
+        }
+        let keep = dof / 2;
+        let mut rng = StdRng::seed_from_u64(seed ^ 0xF10);
+        let permutations = (0..cfg.couplings)
+            .map(|_| {
+                let mut p: Vec<i64> = (0..dof as i64).collect();
+                p.shuffle(&mut rng);
+                p
+            })
+            .collect();
+        let couplings = crate::core::device::seeded(device, seed, || {
+            (0..cfg.couplings)
+                .map(|_| {
+                    let mut widths = vec![keep + CONDITION];
+                    widths.extend(&cfg.hidden);
+                    let n = widths.len();
+                    let mut layers: Vec<Linear> = widths
+                        .windows(2)
+                        .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                        .collect();
+                    layers.push(
+                        LinearConfig::new(widths[n - 1], 2 * (dof - keep))
+                            .with_initializer(Initializer::Zeros)
+                            .init(device),
+                    );
+                    Coupling { layers }
+                })
+                .collect()
+        });
+        Ok(FlowIk {
+            couplings,
+            permutations,
+            clamp: cfg.clamp,
+        })
+    }
+
+    fn dof(&self) -> usize {
+        self.permutations[0].len()
+    }
+
+    fn index(&self, p: &[i64], device: &Device) -> Tensor<1, Int> {
+        Tensor::from_data(TensorData::new(p.to_vec(), [p.len()]), device)
+    }
+
+    /// Joints `x` `[n, dof]` to the latent `z`, with `log|det dz/dx|` `[n]`.
+    pub fn forward(&self, x: Tensor<2>, cond: Tensor<2>) -> (Tensor<2>, Tensor<1>) {
+        let [n, dof] = x.dims();
+        let keep = dof / 2;
+        let device = x.device();
+        let mut x = x;
+        let mut logdet = Tensor::<1>::zeros([n], &device);
+        for (c, p) in self.couplings.iter().zip(&self.permutations) {
+            x = x.select(1, self.index(p, &device));
+            let x1 = x.clone().slice([0..n, 0..keep]);
+            let x2 = x.slice([0..n, keep..dof]);
+            let (s, t) = c.scale_shift(x1.clone(), cond.clone(), self.clamp);
+            logdet = logdet + s.clone().sum_dim(1).reshape([n]);
+            x = Tensor::cat(vec![x1, x2 * s.exp() + t], 1);
+        }
+        (x, logdet)
+    }
+
+    /// The latent `z` `[n, dof]` back to joints (the inverse of [`FlowIk::forward`]).
+    pub fn inverse(&self, z: Tensor<2>, cond: Tensor<2>) -> Tensor<2> {
+        let [n, dof] = z.dims();
+        let keep = dof / 2;
+        let device = z.device();
+        let mut y = z;
+        for (c, p) in self.couplings.iter().zip(&self.permutations).rev() {
+            let y1 = y.clone().slice([0..n, 0..keep]);
+            let y2 = y.slice([0..n, keep..dof]);
+            let (s, t) = c.scale_shift(y1.clone(), cond.clone(), self.clamp);
+            y = Tensor::cat(vec![y1, (y2 - t) * s.neg().exp()], 1);
+            let mut inv = vec![0i64; dof];
+            for (k, &v) in p.iter().enumerate() {
+                inv[v as usize] = k as i64;
+            }
+            y = y.select(1, self.index(&inv, &device));
+        }
+        y
+    }
+
+    /// The mean negative log-likelihood (per joint vector, without the constant) of joints
+    /// `x` given `cond`.
+    pub fn nll(&self, x: Tensor<2>, cond: Tensor<2>) -> Tensor<1> {
+        let (z, logdet) = self.forward(x, cond);
+        let [n, _] = z.dims();
+        (z.square().sum_dim(1).reshape([n]) * 0.5 - logdet).mean()
+    }
+}
+
+/// Joints (radians) scaled to [-1, 1] over the data's range.
+fn scale_joints(data: &IkData, joints: &[Vec<f64>]) -> Vec<f32> {
+    data.joint_rows(joints)
+        .into_iter()
+        .map(|u| 2.0 * u - 1.0)
+        .collect()
+}
+
+/// A trained flow and what it needs to answer.
+pub struct TrainedFlow {
+    pub model: FlowIk,
+    pub log: Option<ConvergenceLog>,
+}
+
+/// Train the flow on the random training pairs of `data`: `cfg.fit.epochs` epochs, or with
+/// `cfg.fit.converge` until the one-sample distance error on the validation targets (through
+/// `chain`) stops improving.
+pub fn train_flow(
+    chain: &KinematicChain,
+    data: &IkData,
+    cfg: &FlowConfig,
+    device: &Device,
+) -> Result<TrainedFlow> {
+    let tdev = autodiff_device(device, cfg.fit.seed);
+    let dof = data.joints[0].len();
+    let train = data.train();
+    // Inputs: the normalised positions; targets: the scaled joints.
+    let set = row_set(
+        data.position_rows(&data.positions[train.clone()]),
+        3,
+        scale_joints(data, &data.joints[train]),
+        dof,
+        &tdev,
+    );
+    let model = FlowIk::new(cfg, dof, &tdev, cfg.fit.seed)?;
+    let softflow = cfg.softflow_max;
+    let seed = cfg.fit.seed;
+    let loss = move |m: &FlowIk, b: &Batch| {
+        let [n, _] = b.inputs.dims();
+        let device = b.inputs.device();
+        let x = b.targets[0].clone().reshape([n, dof]);
+        // SoftFlow: a noise scale per sample, noise of that scale on the joints.
+        let mut rng = StdRng::seed_from_u64(seed ^ (b.step as u64).wrapping_mul(0xA076_1D64));
+        let scale = Uniform::new_inclusive(0.0f32, softflow as f32).expect("valid range");
+        let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
+        let c: Vec<f32> = (0..n).map(|_| scale.sample(&mut rng)).collect();
+        let eps: Vec<f32> = (0..n * dof)
+            .map(|i| c[i / dof] * normal.sample(&mut rng))
+            .collect();
+        let x = x + Tensor::from_data(TensorData::new(eps, [n, dof]), &device);
+        let cond = Tensor::cat(
+            vec![
+                b.inputs.clone(),
+                Tensor::from_data(TensorData::new(c, [n, 1]), &device),
+            ],
+            1,
+        );
+        m.nll(x, cond)
+    };
+    let train_cfg = cfg.fit.train_config(set.len());
+    let batch = cfg.fit.inference_batch;
+    match &cfg.fit.converge {
+        Some(conv) => {
+            let (model, log) = train_to_convergence(
+                model,
+                AdamConfig::new().init(),
+                &set,
+                &train_cfg,
+                conv,
+                "flow IK",
+                loss,
+                |m: &FlowIk| {
+                    let targets = &data.positions[data.validation()];
+                    let q = sample(&m.valid(), data, targets, 1, batch, 0x7A1, device)
+                        .pop()
+                        .expect("one sample");
+                    DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
+                },
+            )?;
+            Ok(TrainedFlow {
+                model: model.valid(),
+                log: Some(log),
+            })
+        }
+        None => {
+            let (model, _) =
+                crate::train::trainer::train(model, &set, &train_cfg, None, "flow IK", loss)?;
+            Ok(TrainedFlow {
+                model: model.valid(),
+                log: None,
+            })
+        }
+    }
+}
+
+/// `k` samples of joints (radians) per position: `k` vectors of one answer per position,
+/// latent noise seeded by `seed`.
+pub fn sample(
+    model: &FlowIk,
+    data: &IkData,
+    positions: &[Point3<f64>],
+    k: usize,
+    batch: usize,
+    seed: u64,
+    device: &Device,
+) -> Vec<Vec<Vec<f64>>> {
+    let dof = model.dof();
+    let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
+    (0..k)
+        .map(|s| {
+            let mut out = Vec::with_capacity(positions.len());
+            for (c, part) in positions.chunks(batch.max(1)).enumerate() {
+                let n = part.len();
+                let mut rng = StdRng::seed_from_u64(seed ^ ((s as u64) << 32) ^ ((c as u64) << 8));
+                let z: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng)).collect();
+                let mut cond = data.position_rows(part);
+                // Append the noise scale 0 to every row.
+                cond = cond
+                    .chunks(3)
+                    .flat_map(|r| [r[0], r[1], r[2], 0.0])
+                    .collect();
+                let x = model.inverse(
+                    Tensor::from_data(TensorData::new(z, [n, dof]), device),
+                    Tensor::from_data(TensorData::new(cond, [n, CONDITION]), device),
+                );
+                let v = x.into_data().try_into_vec::<f32>().expect("float");
+                out.extend(v.chunks(dof).map(|r| {
+                    let u: Vec<f32> = r
+                        .iter()
+                        .map(|x| ((x + 1.0) / 2.0).clamp(0.0, 1.0))
+                        .collect();
+                    data.joints_from_normalised(&u)
+                }));
+            }
+            out
+        })
+        .collect()
+}
+
+/// For each position, the one of `samples` (k answer sets) that `chain` puts closest.
+pub fn best_of(
+    chain: &KinematicChain,
+    positions: &[Point3<f64>],
+    samples: &[Vec<Vec<f64>>],
+) -> Vec<Vec<f64>> {
+    let errors: Vec<Vec<f64>> = samples
+        .iter()
+        .map(|s| reach_errors(chain, positions, s))
+        .collect();
+    (0..positions.len())
+        .map(|i| {
+            let k = (0..samples.len())
+                .min_by(|&a, &b| errors[a][i].total_cmp(&errors[b][i]))
+                .expect("at least one sample");
+            samples[k][i].clone()
+        })
+        .collect()
+}
+
+/// The mean distance (radians, Euclidean in joint space) between two of the k answers of one
+/// target, over all pairs and targets: how different the solutions are.
+pub fn diversity(samples: &[Vec<Vec<f64>>]) -> f64 {
+    let k = samples.len();
+    if k < 2 {
+        return 0.0;
+    }
+    let n = samples[0].len();
+    let mut total = 0.0;
+    for i in 0..n {
+        for a in 0..k {
+            for b in a + 1..k {
+                total += samples[a][i]
+                    .iter()
+                    .zip(&samples[b][i])
+                    .map(|(x, y)| (x - y).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+            }
+        }
+    }
+    total / (n * k * (k - 1) / 2).max(1) as f64
+}

@@ -1,0 +1,8 @@
+//! Our CPU kernels: convolution by im2col + GEMM, bilinear resize, the transposed
+//! convolution layer, and the burn backend extension that puts them in the autodiff graph.
+//! Each beside a slow reference that a test compares it with.
+
+pub mod bilinear_resize;
+pub mod conv_gemm;
+pub mod cpu_extension;
+pub mod upconv;

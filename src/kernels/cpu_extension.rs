@@ -1,0 +1,531 @@
+//! Our CPU kernels inside burn's autodiff graph: a burn backend extension.
+//!
+//! On the flex backend:
+//! - [`conv2d`] and [`conv_transpose2d`] run forward and backward on [`crate::kernels::conv_gemm`]
+//!   (im2col + GEMM): the forward passes, the input gradients (as forward convolutions) and
+//!   the weight gradients, instead of burn-backend's defaults, whose weight gradient runs a
+//!   convolution with the activations as its kernel and took most of a NeuroKin training step;
+//! - [`resize_bilinear`] runs forward and backward on [`crate::kernels::bilinear_resize`].
+//!
+//! On every other device (wgpu, ndarray) they are burn's own ops, unchanged.
+//!
+//! The extension: a backend trait [`CpuKernelOps`] routed through burn's `Dispatch` by
+//! `#[backend_extension]`; its flex implementation calls the kernels; its `Autodiff`
+//! implementation holds the hand-written backward passes. The tests compare values and
+//! gradients with burn's ops.
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind, unary};
+use burn::backend::autodiff::{Autodiff, NodeId};
+use burn::backend::flex::FlexTensor;
+use burn::backend::ops::ModuleOps;
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{
+    Backend, DType, Dispatch, DispatchDevice, Flex, TensorMetadata, backend_extension,
+};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, InterpolateOptions};
+use burn::tensor::{Shape, Tensor, TensorData};
+
+use crate::kernels::bilinear_resize;
+use crate::kernels::conv_gemm::{self, ConvGeometry, weight_grad};
+
+/// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
+#[backend_extension(Flex, Autodiff)]
+pub trait CpuKernelOps: Backend {
+    /// `conv2d` without bias; its backward pass uses [`Self::conv2d_weight_grad`].
+    fn conv2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv2d(x, weight, None, options)
+    }
+
+    /// `conv_transpose2d` without bias; its backward pass uses
+    /// [`Self::conv_transpose2d_weight_grad`].
+    fn conv_transpose2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d(x, weight, None, options)
+    }
+
+    /// Gradient of `conv2d`'s weight, `[c_out, c_in, kh, kw]`.
+    fn conv2d_weight_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv2d_weight_backward(x, weight, output_grad, options)
+    }
+
+    /// Gradient of `conv_transpose2d`'s weight, `[c_in, c_out, kh, kw]`.
+    fn conv_transpose2d_weight_grad(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d_weight_backward(x, weight, output_grad, options)
+    }
+
+    /// Both gradients of `conv_transpose2d`, `(input, weight)`, when both are needed.
+    fn conv_transpose2d_grads(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        output_grad: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let dx = conv_transpose2d_x_grad::<Self>(weight.clone(), output_grad.clone(), &options);
+        let dw = Self::conv_transpose2d_weight_grad(x, weight, output_grad, options);
+        (dx, dw)
+    }
+
+    /// Bilinear resize of `[batch, channels, h, w]` to `size`, align_corners false; its
+    /// backward pass uses [`Self::resize_bilinear_backward`].
+    fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
+        Self::interpolate(x, size, bilinear_options())
+    }
+
+    /// Gradient of [`Self::resize_bilinear_fast`] for an input of shape `input`.
+    fn resize_bilinear_backward(grad: FloatTensor<Self>, input: [usize; 4]) -> FloatTensor<Self> {
+        let [_, _, oh, ow] = grad.shape().dims::<4>();
+        let x = Self::float_zeros(
+            Shape::new(input),
+            &grad.device(),
+            burn::tensor::FloatDType::F32,
+        );
+        Self::interpolate_backward(x, grad, [oh, ow], bilinear_options())
+    }
+}
+
+fn bilinear_options() -> InterpolateOptions {
+    let mut options = InterpolateOptions::new(InterpolateMode::Bilinear);
+    options.align_corners = false;
+    options
+}
+
+/// `(data, [batch, channels, h, w])` of a contiguous f32 flex tensor.
+fn f32_nchw(t: &FlexTensor) -> (FlexTensor, [usize; 4]) {
+    let dims = t.shape().dims::<4>();
+    (t.to_contiguous(), dims)
+}
+
+fn flex_tensor(values: Vec<f32>, dims: [usize; 4]) -> FlexTensor {
+    FlexTensor::from_data(TensorData::new(values, dims))
+}
+
+impl CpuKernelOps for Flex {
+    fn conv2d_fast(x: FlexTensor, weight: FlexTensor, options: ConvOptions<2>) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.is_asymmetric()
+        {
+            return Self::conv2d(x, weight, None, options);
+        }
+        let (x, xd) = f32_nchw(&x);
+        let (weight, wd) = f32_nchw(&weight);
+        let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
+        let y = conv_gemm::forward(x.storage::<f32>(), weight.storage::<f32>(), &g);
+        let [oh, ow] = g.output();
+        flex_tensor(y, [xd[0], wd[0], oh, ow])
+    }
+
+    fn conv_transpose2d_fast(
+        x: FlexTensor,
+        weight: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.padding_out != [0, 0]
+        {
+            return Self::conv_transpose2d(x, weight, None, options);
+        }
+        let (x, xd @ [batch, _, h, w]) = f32_nchw(&x);
+        let (weight, wd @ [_, c_out, kh, kw]) = f32_nchw(&weight);
+        let [s, p] = [options.stride, options.padding];
+        let out = [
+            (h - 1) * s[0] + kh - 2 * p[0],
+            (w - 1) * s[1] + kw - 2 * p[1],
+        ];
+        let g = ConvGeometry::transposed(xd, wd, out, s, p);
+        let y = conv_gemm::transpose(x.storage::<f32>(), weight.storage::<f32>(), &g);
+        flex_tensor(y, [batch, c_out, out[0], out[1]])
+    }
+
+    fn conv2d_weight_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups) || options.is_asymmetric()
+        {
+            return Self::conv2d_weight_backward(x, weight, output_grad, options);
+        }
+        let (x, xd) = f32_nchw(&x);
+        let (go, _) = f32_nchw(&output_grad);
+        let wd = weight.shape().dims::<4>();
+        let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
+        let dw = weight_grad(x.storage::<f32>(), go.storage::<f32>(), &g);
+        flex_tensor(dw, wd)
+    }
+
+    fn conv_transpose2d_weight_grad(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> FlexTensor {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups) {
+            return Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
+        }
+        // The transposed convolution is the adjoint of `g`; `g`'s weight gradient with `x` as
+        // the output gradient is ours.
+        let (x, xd) = f32_nchw(&x);
+        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
+        let wd = weight.shape().dims::<4>();
+        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
+        let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
+        flex_tensor(dw, wd)
+    }
+
+    fn conv_transpose2d_grads(
+        x: FlexTensor,
+        weight: FlexTensor,
+        output_grad: FlexTensor,
+        options: ConvTransposeOptions<2>,
+    ) -> (FlexTensor, FlexTensor) {
+        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+            || weight.dtype() != DType::F32
+            || options.padding_out != [0, 0]
+        {
+            let dx = Self::conv_transpose2d_x_backward(
+                weight.clone(),
+                output_grad.clone(),
+                options.clone(),
+            );
+            let dw = Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
+            return (dx, dw);
+        }
+        let (x, xd) = f32_nchw(&x);
+        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
+        let (weight, wd) = f32_nchw(&weight);
+        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
+        let (dx, dw) = conv_gemm::transpose_backward(
+            x.storage::<f32>(),
+            weight.storage::<f32>(),
+            go.storage::<f32>(),
+            &g,
+        );
+        (flex_tensor(dx, xd), flex_tensor(dw, wd))
+    }
+
+    fn resize_bilinear_fast(x: FlexTensor, size: [usize; 2]) -> FlexTensor {
+        if x.dtype() != DType::F32 {
+            return Self::interpolate(x, size, bilinear_options());
+        }
+        let (x, [n, c, h, w]) = f32_nchw(&x);
+        let y = bilinear_resize::resize(x.storage::<f32>(), n * c, [h, w], size);
+        flex_tensor(y, [n, c, size[0], size[1]])
+    }
+
+    fn resize_bilinear_backward(grad: FlexTensor, input: [usize; 4]) -> FlexTensor {
+        if grad.dtype() != DType::F32 {
+            let [_, _, oh, ow] = grad.shape().dims::<4>();
+            let x = FlexTensor::zeros(Shape::new(input), DType::F32);
+            return Self::interpolate_backward(x, grad, [oh, ow], bilinear_options());
+        }
+        let (g, [n, c, oh, ow]) = f32_nchw(&grad);
+        let [_, _, h, w] = input;
+        let dx = bilinear_resize::resize_backward(g.storage::<f32>(), n * c, [h, w], [oh, ow]);
+        flex_tensor(dx, input)
+    }
+}
+
+fn kernel_supports(dtype: DType, dilation: &[usize; 2], groups: usize) -> bool {
+    dtype == DType::F32 && *dilation == [1, 1] && groups == 1
+}
+
+impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff<B, C> {
+    fn conv2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct Conv2dFast;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for Conv2dFast {
+            type State = (NodeId, NodeId, ConvOptions<2>);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_weight] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (x_state, weight_state, options) = ops.state;
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+                let weight =
+                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
+                if let Some(node) = node_x {
+                    let g = conv2d_x_grad::<B>(x.clone(), weight.clone(), grad.clone(), &options);
+                    grads.register::<B>(node.id, g);
+                }
+                if let Some(node) = node_weight {
+                    grads.register::<B>(node.id, B::conv2d_weight_grad(x, weight, grad, options));
+                }
+            }
+        }
+
+        match Conv2dFast
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let x_state = prep.checkpoint(&x);
+                let weight_state = prep.checkpoint(&weight);
+                prep.finish(
+                    (x_state, weight_state, options.clone()),
+                    B::conv2d_fast(x.into_primitive(), weight.into_primitive(), options),
+                )
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv2d_fast(
+                x.into_primitive(),
+                weight.into_primitive(),
+                options,
+            )),
+        }
+    }
+
+    fn conv_transpose2d_fast(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ConvTranspose2dFast;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for ConvTranspose2dFast {
+            type State = (NodeId, NodeId, ConvTransposeOptions<2>);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_weight] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (x_state, weight_state, options) = ops.state;
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+                let weight =
+                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
+                match (node_x, node_weight) {
+                    (Some(nx), Some(nw)) => {
+                        let (dx, dw) = B::conv_transpose2d_grads(x, weight, grad, options);
+                        grads.register::<B>(nx.id, dx);
+                        grads.register::<B>(nw.id, dw);
+                    }
+                    (Some(node), None) => {
+                        let g = conv_transpose2d_x_grad::<B>(weight, grad, &options);
+                        grads.register::<B>(node.id, g);
+                    }
+                    (None, Some(node)) => {
+                        let g = B::conv_transpose2d_weight_grad(x, weight, grad, options);
+                        grads.register::<B>(node.id, g);
+                    }
+                    (None, None) => {}
+                }
+            }
+        }
+
+        match ConvTranspose2dFast
+            .prepare::<C>([x.node(), weight.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let x_state = prep.checkpoint(&x);
+                let weight_state = prep.checkpoint(&weight);
+                prep.finish(
+                    (x_state, weight_state, options.clone()),
+                    B::conv_transpose2d_fast(x.into_primitive(), weight.into_primitive(), options),
+                )
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d_fast(
+                x.into_primitive(),
+                weight.into_primitive(),
+                options,
+            )),
+        }
+    }
+
+    fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ResizeBilinear;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 1> for ResizeBilinear {
+            type State = [usize; 4];
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 1>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
+                let input = ops.state;
+                unary::<B, _>(ops.parents, ops.node, grads, |grad| {
+                    B::resize_bilinear_backward(grad, input)
+                });
+            }
+        }
+
+        let input = x.shape().dims::<4>();
+        match ResizeBilinear
+            .prepare::<C>([x.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(prep) => {
+                prep.finish(input, B::resize_bilinear_fast(x.into_primitive(), size))
+            }
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::resize_bilinear_fast(x.into_primitive(), size))
+            }
+        }
+    }
+}
+
+/// The input gradient of a convolution. With stride 1 and symmetric padding `p` it is the
+/// forward convolution of the output gradient with the kernel flipped in space and its
+/// channel axes swapped, padded by `k − 1 − p` (our im2col + GEMM forward kernel, faster than the
+/// transposed convolution burn's default uses); otherwise burn's default.
+fn conv2d_x_grad<B: Backend + CpuKernelOps>(
+    x: FloatTensor<B>,
+    weight: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    options: &ConvOptions<2>,
+) -> FloatTensor<B> {
+    let [_, _, kh, kw] = weight.shape().dims::<4>();
+    let [ph, pw] = options.padding_begin();
+    let plain = options.stride == [1, 1]
+        && options.dilation == [1, 1]
+        && options.groups == 1
+        && !options.is_asymmetric()
+        && ph < kh
+        && pw < kw;
+    if !plain {
+        return B::conv2d_x_backward(x, weight, grad, options.clone());
+    }
+    let flipped = B::float_flip(B::float_swap_dims(weight, 0, 1), &[2, 3]);
+    let options = ConvOptions::new([1, 1], [kh - 1 - ph, kw - 1 - pw], [1, 1], 1);
+    B::conv2d_fast(grad, flipped, options)
+}
+
+/// The input gradient of a transposed convolution: the forward convolution of the output
+/// gradient with the same kernel, stride and padding (burn's default does the same through
+/// `conv2d`; here through [`CpuKernelOps::conv2d_fast`]).
+fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
+    weight: FloatTensor<B>,
+    grad: FloatTensor<B>,
+    options: &ConvTransposeOptions<2>,
+) -> FloatTensor<B> {
+    if options.padding_out != [0, 0] || options.dilation != [1, 1] || options.groups != 1 {
+        return B::conv_transpose2d_x_backward(weight, grad, options.clone());
+    }
+    let conv = ConvOptions::new(options.stride, options.padding, [1, 1], 1);
+    B::conv2d_fast(grad, weight, conv)
+}
+
+/// Whether `x` lives on the flex backend (with or without autodiff).
+fn on_flex(x: &Tensor<4>) -> bool {
+    matches!(
+        x.device().without_autodiff().as_dispatch(),
+        DispatchDevice::Flex(_)
+    )
+}
+
+/// `[c_out]` -> broadcast over `[batch, c_out, H, W]`.
+fn add_bias(y: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
+    match bias {
+        Some(b) => {
+            let c = b.dims()[0];
+            y + b.reshape([1, c, 1, 1])
+        }
+        None => y,
+    }
+}
+
+/// burn's `conv2d`, with the weight gradient on our kernel when `x` is on flex.
+pub fn conv2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvOptions<2>,
+) -> Tensor<4> {
+    if !on_flex(&x) {
+        return burn::tensor::module::conv2d(x, weight, bias, options);
+    }
+    let y =
+        <Dispatch as CpuKernelOps>::conv2d_fast(x.into_dispatch(), weight.into_dispatch(), options);
+    add_bias(Tensor::from_dispatch(y), bias)
+}
+
+/// burn's `conv_transpose2d`, with the weight gradient on our kernel when `x` is on flex.
+pub fn conv_transpose2d(
+    x: Tensor<4>,
+    weight: Tensor<4>,
+    bias: Option<Tensor<1>>,
+    options: ConvTransposeOptions<2>,
+) -> Tensor<4> {
+    if !on_flex(&x) {
+        return burn::tensor::module::conv_transpose2d(x, weight, bias, options);
+    }
+    let y = <Dispatch as CpuKernelOps>::conv_transpose2d_fast(
+        x.into_dispatch(),
+        weight.into_dispatch(),
+        options,
+    );
+    add_bias(Tensor::from_dispatch(y), bias)
+}
+
+/// A burn `Conv2d` layer's forward pass through [`conv2d`] (its own `forward` for `Same`
+/// padding, which may be asymmetric).
+pub fn conv2d_layer(layer: &burn::nn::conv::Conv2d, x: Tensor<4>) -> Tensor<4> {
+    use burn::nn::PaddingConfig2d;
+    let padding = match layer.padding {
+        PaddingConfig2d::Valid => [(0, 0), (0, 0)],
+        PaddingConfig2d::Explicit(top, left, bottom, right) => [(top, bottom), (left, right)],
+        PaddingConfig2d::Same => return layer.forward(x),
+    };
+    let options =
+        ConvOptions::new_with_padding(layer.stride, padding, layer.dilation, layer.groups);
+    conv2d(
+        x,
+        layer.weight.val(),
+        layer.bias.as_ref().map(|b| b.val()),
+        options,
+    )
+}
+
+/// Bilinear resize of `[batch, channels, h, w]` to `size` (align_corners false, PyTorch's
+/// `F.interpolate(..., mode="bilinear")`), on our kernel when `x` is on flex.
+pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
+    if !on_flex(&x) {
+        let mut options = bilinear_options();
+        options.output_size = Some(size);
+        return burn::tensor::module::interpolate(x, options);
+    }
+    let y = <Dispatch as CpuKernelOps>::resize_bilinear_fast(x.into_dispatch(), size);
+    Tensor::from_dispatch(y)
+}

@@ -1,0 +1,11 @@
+//! The visual self-models of the self-modeling paper: a model maps joint angles to the
+//! robot's silhouette (and depth) seen by a camera. The direct decoders (NeuroKin,
+//! ResNeuroKin-D) and their run (`decoder_run`), FFKSM (an occupancy field, ray marched) and
+//! K-3DGS (Gaussians on the links, splatted), and `result`, the row of Table I each reports.
+
+pub mod decoder_run;
+pub mod ffksm;
+pub mod k3dgs;
+pub mod neurokin;
+pub mod resneurokin_d;
+pub mod result;

@@ -1,0 +1,660 @@
+//! Train, evaluate and report one direct decoder (NeuroKin, its text variant, ResNeuroKin-D):
+//! the logic behind the `neurokin` and `resneurokin_d` binaries, the ablations and `table1`.
+//!
+//! A run writes into its folder: `config.json` (everything that defines it), `results.csv`
+//! and `results.md` (one [`ModelResult`] row), `curve.csv` and `training_curve.png`,
+//! `qualitative.png` (ground truth, prediction and error for six test poses, plus depth for
+//! ResNeuroKin-D), and `checkpoint/` (model, optimizer state, progress; `--resume` continues).
+
+use std::ops::Range;
+use std::path::Path;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::core::atomic_file::write_json;
+use crate::core::device::DeviceChoice;
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::data::dataset::{Dataset, DatasetConfig};
+use crate::eval::evaluation::{Predictions, Quality, score};
+use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
+use crate::report::figures::{GridRow, image_grid};
+use crate::report::table::{write_csv, write_markdown_report};
+use crate::self_models::neurokin::{NeuroKinConfig, resize_bilinear};
+use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
+use crate::self_models::result::{ModelResult, PaperReference};
+use crate::sim::camera::Camera;
+use crate::train::losses::{bce, bce_with_logits, l1_masked, mse, soft_dice};
+use crate::train::trainer::{
+    CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device, train,
+};
+
+/// Which network.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecoderModel {
+    NeuroKin(NeuroKinConfig),
+    ResNeuroKinD(ResNeuroKinDConfig),
+}
+
+impl DecoderModel {
+    fn image(&self) -> [usize; 2] {
+        match self {
+            DecoderModel::NeuroKin(c) => c.image,
+            DecoderModel::ResNeuroKinD(c) => c.image,
+        }
+    }
+}
+
+/// Which loss (the notebooks' choices; `Mse` is the paper text's).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DecoderLoss {
+    /// Binary cross-entropy on the silhouette.
+    Bce,
+    /// Mean squared error on the silhouette.
+    Mse,
+    /// `(BCE + soft Dice) / 2 + depth_weight * L1(depth)` (ResNeuroKin-D). Our L1 is over the
+    /// robot pixels of the true silhouette: over all pixels (the notebook's blob target), the
+    /// 95% background pushes the ReLU depth head negative everywhere and it dies (measured:
+    /// it predicted 0 on every pixel).
+    BceDiceDepth { depth_weight: f64 },
+}
+
+/// The data a run trains and tests on.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DataSpec {
+    /// Rendered in-process (0.4 s for the paper's 2,000 samples).
+    pub dataset: DatasetConfig,
+    /// Train on only the first this-many samples of the training split.
+    pub train_samples: Option<usize>,
+    /// Test on these samples instead of the test split (indices into the dataset).
+    pub test: Option<Range<usize>>,
+}
+
+impl DataSpec {
+    /// The paper's 2,000-sample dataset (clean: no ground-plane artefact).
+    pub fn paper() -> Self {
+        DataSpec {
+            dataset: DatasetConfig::paper(),
+            train_samples: None,
+            test: None,
+        }
+    }
+
+    /// The paper's 2,000 Lorenz samples (1,600 train) at 32x32 pixels, same camera and field
+    /// of view (fewer samples would cover too little of the trajectory: 200 consecutive
+    /// samples barely move the arm).
+    pub fn quick() -> Self {
+        let mut dataset = DatasetConfig::paper();
+        dataset.preset = "quick".into();
+        dataset.camera = Camera {
+            width: 32,
+            height: 32,
+            ..Camera::paper()
+        };
+        DataSpec {
+            dataset,
+            train_samples: None,
+            test: None,
+        }
+    }
+
+    /// `clean` or `paper_compatible`.
+    pub fn label(&self) -> &'static str {
+        if self.dataset.render.ground_artifact {
+            "paper_compatible"
+        } else {
+            "clean"
+        }
+    }
+
+    /// Render the dataset and pick the train and test samples.
+    pub fn load(&self) -> Result<(Dataset, Range<usize>, Range<usize>)> {
+        let robot = crate::sim::arm4::arm4();
+        let data = Dataset::generate(&robot, &self.dataset, None)?;
+        let (train, test) = data.split();
+        let train = match self.train_samples {
+            Some(k) if k > train.len() => {
+                return Err(Error::Config(format!(
+                    "train_samples {k} is more than the {} training samples",
+                    train.len()
+                )));
+            }
+            Some(k) => train.start..train.start + k,
+            None => train,
+        };
+        let test = self.test.clone().unwrap_or(test);
+        if test.end > data.len() || test.is_empty() {
+            return Err(Error::Config(format!(
+                "test range {test:?} is outside the {} samples",
+                data.len()
+            )));
+        }
+        Ok((data, train, test))
+    }
+}
+
+/// Everything that defines one decoder run. Presets: see [`DecoderRunConfig::neurokin`] and
+/// friends; `quick` variants are tiny.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DecoderRunConfig {
+    /// Row label (`NeuroKin`, `NeuroKin (sigma 0)`, ...).
+    pub name: String,
+    pub preset: String,
+    pub model: DecoderModel,
+    pub loss: DecoderLoss,
+    pub train: TrainConfig,
+    pub data: DataSpec,
+    /// PSNR is also reported on the first this-many test images (the paper's 100).
+    pub paper_subset: usize,
+    pub eval_batch: usize,
+    pub speed: SpeedConfig,
+    pub reference: PaperReference,
+    /// Said in the results row (a shortened run, ...).
+    pub note: String,
+    /// `--steps N` when it changed the preset's step count.
+    #[serde(default)]
+    pub steps_override: Option<usize>,
+}
+
+/// The presets of the decoder experiments: `paper`, `quick`, and `short` (the paper's data
+/// and models with training cut so the whole of `table1` fits well within 10 minutes of a
+/// 2-core CPU, 175 s measured at 390a332; each row says so in its note).
+pub const DECODER_PRESETS: &[&str] = &["paper", "short", "quick"];
+
+fn code_train(preset: &str) -> TrainConfig {
+    match preset {
+        "quick" => TrainConfig {
+            steps: 200,
+            batch: 16,
+            learning_rate: 1e-3,
+            grad_clip_norm: Some(1.0),
+            input_noise: 0.01,
+            seed: 0,
+            checkpoint_every: 50,
+        },
+        _ => TrainConfig {
+            steps: 3000,
+            batch: 32,
+            learning_rate: 1e-3,
+            grad_clip_norm: Some(1.0),
+            input_noise: 0.01,
+            seed: 0,
+            checkpoint_every: 250,
+        },
+    }
+}
+
+fn preset_parts(preset: &str) -> Result<(DataSpec, SpeedConfig)> {
+    match preset {
+        "paper" | "short" => Ok((DataSpec::paper(), SpeedConfig::paper())),
+        "quick" => Ok((DataSpec::quick(), SpeedConfig::quick())),
+        other => Err(Error::Config(format!(
+            "unknown preset \"{other}\" (choose paper, short or quick)"
+        ))),
+    }
+}
+
+/// Shorten a paper-preset run for the `short` preset, and say so in its note.
+fn shorten(mut cfg: DecoderRunConfig, steps: usize, batch: usize) -> DecoderRunConfig {
+    if cfg.preset == "short" {
+        cfg.note = format!(
+            "short preset: {steps} steps of batch {batch} instead of {} of {} (CPU time budget)",
+            cfg.train.steps, cfg.train.batch
+        );
+        cfg.train.steps = steps;
+        cfg.train.batch = batch;
+    }
+    cfg
+}
+
+fn model_preset(preset: &str) -> &str {
+    if preset == "short" { "paper" } else { preset }
+}
+
+impl DecoderRunConfig {
+    /// What every decoder run shares: the preset's data and speed settings, the notebook's
+    /// training protocol, PSNR also on the paper's first 100 test images.
+    fn decoder(
+        preset: &str,
+        name: &str,
+        model: DecoderModel,
+        loss: DecoderLoss,
+        eval_batch: usize,
+        reference: PaperReference,
+    ) -> Result<Self> {
+        let (data, speed) = preset_parts(preset)?;
+        Ok(DecoderRunConfig {
+            name: name.into(),
+            preset: preset.into(),
+            model,
+            loss,
+            train: code_train(preset),
+            data,
+            paper_subset: 100,
+            eval_batch,
+            speed,
+            reference,
+            note: String::new(),
+            steps_override: None,
+        })
+    }
+
+    /// The image size of a preset's camera, `[height, width]`.
+    fn image(preset: &str) -> Result<[usize; 2]> {
+        let camera = &preset_parts(preset)?.0.dataset.camera;
+        Ok([camera.height, camera.width])
+    }
+
+    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
+    /// N(0, 0.01) noise on the angles in degrees.
+    pub fn neurokin(preset: &str) -> Result<Self> {
+        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
+        model.image = Self::image(preset)?;
+        let cfg = Self::decoder(
+            preset,
+            "NeuroKin",
+            DecoderModel::NeuroKin(model),
+            DecoderLoss::Bce,
+            256,
+            PaperReference::neurokin(),
+        )?;
+        Ok(shorten(cfg, 800, 32))
+    }
+
+    /// The paper text's NeuroKin: 64x64 output, MSE, batch 128, 50 epochs.
+    pub fn neurokin64(preset: &str) -> Result<Self> {
+        let quick = preset == "quick";
+        let mut model = NeuroKinConfig::text64();
+        model.image = Self::image(preset)?;
+        if quick {
+            model.latent = 64;
+            model.seed_channels = 32;
+            model.upsampling_layers = 3;
+        }
+        let mut cfg = Self::decoder(
+            preset,
+            "NeuroKin-64 (paper text)",
+            DecoderModel::NeuroKin(model),
+            DecoderLoss::Mse,
+            256,
+            PaperReference::neurokin(),
+        )?;
+        cfg.train.batch = if quick { 32 } else { 128 };
+        cfg.train.steps = TrainConfig::steps_for_epochs(
+            if quick { 30 } else { 50 },
+            cfg.data.dataset.train,
+            cfg.train.batch,
+        );
+        cfg.train.grad_clip_norm = None;
+        let steps = cfg.train.steps / 4;
+        Ok(shorten(cfg, steps, 128))
+    }
+
+    /// ResNeuroKin-D as the notebook trained it, with the simulator's metric depth.
+    pub fn resneurokin_d(preset: &str) -> Result<Self> {
+        let mut model = ResNeuroKinDConfig::preset(model_preset(preset))?;
+        model.image = Self::image(preset)?;
+        let cfg = Self::decoder(
+            preset,
+            "ResNeuroKin-D",
+            DecoderModel::ResNeuroKinD(model),
+            DecoderLoss::BceDiceDepth { depth_weight: 0.1 },
+            64,
+            PaperReference::resneurokin_d(),
+        )?;
+        Ok(shorten(cfg, 30, 16))
+    }
+
+    /// Switch to the paper-compatible dataset (silhouettes with the ground-plane artefact).
+    pub fn paper_compatible(mut self, on: bool) -> Self {
+        self.data.dataset.render.ground_artifact = on;
+        self
+    }
+}
+
+/// The robot pixels of a silhouette batch (1 where the true silhouette is >= 0.5).
+fn y_mask(silhouettes: &Tensor<4>) -> Tensor<4> {
+    silhouettes.clone().greater_equal_elem(0.5).float()
+}
+
+/// What a run produced.
+pub struct DecoderOutcome {
+    pub result: ModelResult,
+    pub quality: Quality,
+    pub log: TrainLog,
+}
+
+/// The test set as host arrays: silhouettes in [0, 1] and depth, `[n, H * W]`.
+pub(crate) fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, Vec<f32>) {
+    let mut sil = Vec::new();
+    let mut depth = Vec::new();
+    for i in range.clone() {
+        sil.extend(data.image(i).iter().map(|&v| v as f32 / 255.0));
+        depth.extend_from_slice(data.depth_map(i));
+    }
+    (sil, depth)
+}
+
+/// Upload samples `range` with their host targets (from [`host_targets`]): angles
+/// `[n, dof]` (degrees), silhouettes and depth `[n, 1, H, W]`.
+pub(crate) fn device_set(
+    data: &Dataset,
+    range: &Range<usize>,
+    (sil, depth): (Vec<f32>, Vec<f32>),
+    device: &Device,
+) -> TrainSet {
+    let n = range.len();
+    let dof = data.dof();
+    let (h, w) = (data.height, data.width);
+    let angles: Vec<f32> = range
+        .clone()
+        .flat_map(|i| data.angles[i].iter().map(|&a| a as f32))
+        .collect();
+    TrainSet {
+        inputs: Tensor::from_data(TensorData::new(angles, [n, dof]), device),
+        targets: vec![
+            Tensor::from_data(TensorData::new(sil, [n, 1, h, w]), device),
+            Tensor::from_data(TensorData::new(depth, [n, 1, h, w]), device),
+        ],
+    }
+}
+
+fn to_host(t: Tensor<4>) -> Vec<f32> {
+    t.into_data().try_into_vec::<f32>().expect("float tensor")
+}
+
+/// Evaluate `predict` over the test set in batches.
+fn predict_all<F>(predict: F, test: &TrainSet, batch: usize, pixels: usize) -> Predictions
+where
+    F: Fn(Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>),
+{
+    let n = test.len();
+    let mut sil = Vec::with_capacity(n * pixels);
+    let mut depth: Option<Vec<f32>> = None;
+    let mut start = 0;
+    while start < n {
+        let end = (start + batch).min(n);
+        let q = test.inputs.clone().slice([start..end]);
+        let (s, d) = predict(q);
+        sil.extend(to_host(s));
+        if let Some(d) = d {
+            depth.get_or_insert_with(Vec::new).extend(to_host(d));
+        }
+        start = end;
+    }
+    Predictions {
+        silhouettes: sil,
+        depth,
+        pixels,
+        depth_pixels: crate::eval::evaluation::DepthPixels::TrueRobot,
+    }
+}
+
+/// Train, evaluate, time and report one decoder into `dir`.
+pub fn run(
+    cfg: &DecoderRunConfig,
+    dir: &Path,
+    device_choice: DeviceChoice,
+    resume: bool,
+) -> Result<DecoderOutcome> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join("config.json"), cfg)?;
+    // Read the revision now: a run that spans commits is the code it started with.
+    let git_revision = crate::core::provenance::git_revision();
+    let device = crate::core::device::select(device_choice)?;
+    let (data, train_range, test_range) = cfg.data.load()?;
+    let image = cfg.model.image();
+    if image != [data.height, data.width] {
+        return Err(Error::Config(format!(
+            "{}: the model outputs {}x{} images but the dataset has {}x{}",
+            cfg.name, image[0], image[1], data.height, data.width
+        )));
+    }
+    let tdev = autodiff_device(&device, cfg.train.seed);
+    let train_set = device_set(
+        &data,
+        &train_range,
+        host_targets(&data, &train_range),
+        &tdev,
+    );
+    let (truth, truth_depth) = host_targets(&data, &test_range);
+    let test_set = device_set(
+        &data,
+        &test_range,
+        (truth.clone(), truth_depth.clone()),
+        &device,
+    );
+    let plan = CheckpointPlan {
+        dir: dir.join("checkpoint"),
+        resume,
+        fingerprint: serde_json::json!({"model": cfg.model, "loss": cfg.loss, "train": cfg.train, "data": cfg.data}),
+    };
+    let label = cfg.name.clone();
+    let pixels = data.height * data.width;
+    let (params, log, predictions, timings) = match &cfg.model {
+        DecoderModel::NeuroKin(mc) => {
+            let model = mc.init(&tdev, cfg.train.seed)?;
+            let params = model.trainable_params();
+            let native = mc.native_size();
+            let mut train_set = train_set;
+            if native != image {
+                train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
+            }
+            let loss_kind = cfg.loss;
+            let (model, log) = train(
+                model,
+                &train_set,
+                &cfg.train,
+                Some(&plan),
+                &label,
+                |m, b| {
+                    let z = m.forward(b.inputs.clone());
+                    match loss_kind {
+                        DecoderLoss::Mse => {
+                            mse(burn::tensor::activation::sigmoid(z), b.targets[0].clone())
+                        }
+                        _ => bce_with_logits(z, b.targets[0].clone()),
+                    }
+                },
+            )?;
+            let model = model.valid();
+            let predictions = predict_all(
+                |q| (model.predict(q), None),
+                &test_set,
+                cfg.eval_batch,
+                pixels,
+            );
+            let timings = measure(|q| model.predict(q), mc.dof, &device, &cfg.speed);
+            (params, log, predictions, timings)
+        }
+        DecoderModel::ResNeuroKinD(mc) => {
+            let model = mc.init(&tdev, cfg.train.seed)?;
+            let params = model.trainable_params();
+            let w = match cfg.loss {
+                DecoderLoss::BceDiceDepth { depth_weight } => depth_weight,
+                _ => 0.0,
+            };
+            let (model, log) = train(
+                model,
+                &train_set,
+                &cfg.train,
+                Some(&plan),
+                &label,
+                |m, b| {
+                    let (s, d) = m.forward(b.inputs.clone());
+                    let y = b.targets[0].clone();
+                    let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
+                    sil + l1_masked(d, b.targets[1].clone(), y_mask(&b.targets[0])).mul_scalar(w)
+                },
+            )?;
+            let model = model.valid();
+            let predictions = predict_all(
+                |q| {
+                    let (s, d) = model.forward(q);
+                    (s, Some(d))
+                },
+                &test_set,
+                cfg.eval_batch,
+                pixels,
+            );
+            let timings = measure(|q| model.forward(q).0, mc.dof, &device, &cfg.speed);
+            (params, log, predictions, timings)
+        }
+    };
+    let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
+    let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
+    let t1 = timing(1).unwrap_or(Timing {
+        batch: 1,
+        median_s: f64::NAN,
+        repeats: 0,
+    });
+    let tb = timings
+        .iter()
+        .max_by_key(|t| t.batch)
+        .cloned()
+        .unwrap_or(t1.clone());
+    let result = ModelResult {
+        model: cfg.name.clone(),
+        dataset: cfg.data.label().into(),
+        preset: cfg.preset.clone(),
+        device: device_choice.to_string(),
+        git_revision,
+        parameters: params,
+        train_samples: train_range.len(),
+        train_steps: log.step,
+        batch: cfg.train.batch,
+        train_time_s: log.train_seconds,
+        train_img_per_s: log.images_per_second(),
+        psnr_db_first100: quality.psnr_db_paper_subset,
+        psnr_db_test: quality.psnr_db_test,
+        iou_test: quality.iou_test,
+        depth_mae_mm: quality
+            .depth_mae_mm
+            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
+        depth_constant_mae_mm: quality
+            .depth_constant_mae_mm
+            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
+        infer_b1_img_per_s: t1.images_per_second(),
+        latency_b1_ms: 1000.0 * t1.median_s,
+        infer_b256_img_per_s: tb.images_per_second(),
+        paper_psnr_db: None,
+        paper_fps: None,
+        paper_latency_ms: None,
+        paper_train_time_s: None,
+        note: cfg.note.clone(),
+        steps_override: cfg.steps_override,
+    }
+    .with_reference(&cfg.reference);
+    write_report(dir, cfg, &result, &log)?;
+    qualitative_figure(
+        &dir.join("qualitative.png"),
+        &truth,
+        &truth_depth,
+        &predictions,
+        [data.height, data.width],
+    )?;
+    Ok(DecoderOutcome {
+        result,
+        quality,
+        log,
+    })
+}
+
+fn write_report(
+    dir: &Path,
+    cfg: &DecoderRunConfig,
+    row: &ModelResult,
+    log: &TrainLog,
+) -> Result<()> {
+    let csv_path = dir.join("results.csv");
+    write_csv(&csv_path, std::slice::from_ref(row))?;
+    write_markdown_report(
+        &csv_path,
+        &format!(
+            "{} ({} preset, {} dataset)",
+            cfg.name,
+            cfg.preset,
+            cfg.data.label()
+        ),
+        &format!(
+            "{} steps of batch {} ({:.1} epochs); PSNR per image as the paper computes it, on the first {} test images and on all {}; IoU at threshold 0.5. `paper_*` columns are the paper's published figures, for reference (its FPS was training throughput). Config: `config.json`.{}",
+            row.train_steps,
+            row.batch,
+            cfg.train.epochs(row.train_samples),
+            cfg.paper_subset,
+            cfg.data
+                .test
+                .as_ref()
+                .map(|r| r.len())
+                .unwrap_or(cfg.data.dataset.samples - cfg.data.dataset.train),
+            if row.note.is_empty() {
+                String::new()
+            } else {
+                format!(" Note: {}", row.note)
+            }
+        ),
+    )?;
+    crate::report::table::write_training_curve(dir, &cfg.name, log)
+}
+
+/// Six test poses spread over the test set: ground truth, prediction, error (and true depth,
+/// and predicted depth where the predicted silhouette is the robot).
+pub(crate) fn qualitative_figure(
+    path: &Path,
+    truth: &[f32],
+    truth_depth: &[f32],
+    pred: &Predictions,
+    size: [usize; 2],
+) -> Result<()> {
+    let px = size[0] * size[1];
+    let n = truth.len() / px;
+    let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
+    fn img(v: &[f32], i: usize, px: usize) -> &[f32] {
+        &v[i * px..(i + 1) * px]
+    }
+    let gt: Vec<&[f32]> = picks.iter().map(|&i| img(truth, i, px)).collect();
+    let pr: Vec<&[f32]> = picks
+        .iter()
+        .map(|&i| img(&pred.silhouettes, i, px))
+        .collect();
+    let err: Vec<Vec<f32>> = gt
+        .iter()
+        .zip(&pr)
+        .map(|(g, p)| g.iter().zip(p.iter()).map(|(a, b)| (a - b).abs()).collect())
+        .collect();
+    // The depth head is trained on robot pixels only: show it where the predicted silhouette
+    // says robot, background elsewhere.
+    let masked_depth: Vec<Vec<f32>> = match &pred.depth {
+        Some(d) => picks
+            .iter()
+            .map(|&i| {
+                let sil = img(&pred.silhouettes, i, px);
+                img(d, i, px)
+                    .iter()
+                    .zip(sil)
+                    .map(|(&d, &s)| if s >= 0.5 { d } else { 0.0 })
+                    .collect()
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    let mut rows = vec![GridRow::Grey(gt), GridRow::Grey(pr), GridRow::Error(err)];
+    if pred.depth.is_some() {
+        let robot: Vec<f32> = truth_depth.iter().copied().filter(|&v| v > 0.0).collect();
+        let lo = robot.iter().copied().fold(f32::INFINITY, f32::min);
+        let hi = robot.iter().copied().fold(0.0, f32::max);
+        let range = if lo.is_finite() { [lo, hi] } else { [0.5, 1.5] };
+        rows.push(GridRow::Depth(
+            picks.iter().map(|&i| img(truth_depth, i, px)).collect(),
+            range,
+        ));
+        rows.push(GridRow::Depth(
+            masked_depth.iter().map(|v| v.as_slice()).collect(),
+            range,
+        ));
+    }
+    image_grid(path, &rows, size[1], size[0], 2)
+}

@@ -1,0 +1,978 @@
+//! FFKSM, the occupancy-field self-model (self-modeling paper section IV-B; Hu, Lin, Lipson
+//! 2024): training with the centre-crop curriculum, evaluation with both ray marchers, novel
+//! views and depth. The logic behind the `ffksm` binary and FFKSM's rows of `table1`.
+//!
+//! Training (the reimplementation's code): one image per step, all its rays (10,000 for
+//! 100x100) marched densely with stratified samples, plain MSE between the rendered pixels and
+//! the silhouette (a robot-pixel weight is an option: the paper's text says 5, its code used
+//! none), Adam 5e-4 for 8,000 steps, and for the first 500 steps only the central 50x50
+//! pixels (the curriculum). The original authors' variant crops for 200 steps and restarts
+//! with a fresh model when training collapses to an all-black image (their code restarted
+//! when the validation loss stopped changing, which is what an all-black model does).
+//!
+//! A run writes into its folder: `config.json`, `results.csv`/`results.md` (one row per
+//! renderer: dense marching and the accelerated marcher, the same trained model),
+//! `renderers.csv` (evaluations per image, images/s, PSNR, and the accelerated image's PSNR
+//! against the dense one), `novel_views.csv` (cameras orbited about z, against the
+//! simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
+//! `novel_views.png`, and `checkpoint/`.
+
+pub mod accelerated_marcher;
+pub mod dense_step;
+pub mod encoding;
+pub mod field;
+pub mod grid;
+pub mod marcher;
+pub mod virtual_frame;
+use std::path::Path;
+use std::time::Instant;
+
+use burn::module::Module;
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::core::atomic_file::write_json;
+use crate::core::device::DeviceChoice;
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::data::dataset::Dataset;
+use crate::eval::evaluation::{Predictions, Quality, iou, psnr_db, score};
+use crate::report::figures::{GridRow, image_grid};
+use crate::report::table::write_table;
+use crate::self_models::decoder_run::{DataSpec, device_set, host_targets, qualitative_figure};
+use crate::self_models::ffksm::accelerated_marcher::{
+    AcceleratedConfig, render_accelerated, render_silhouette_skipping,
+};
+use crate::self_models::ffksm::dense_step::dense_step;
+use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
+use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
+use crate::self_models::result::{ModelResult, PaperReference};
+use crate::sim::camera::Camera;
+use crate::train::trainer::{
+    CheckpointPlan, StepLoss, TrainConfig, TrainLog, autodiff_device, train_watched,
+};
+
+/// Train on the central `crop x crop` pixels for the first `steps` steps.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Curriculum {
+    pub steps: usize,
+    pub crop: usize,
+}
+
+/// Restart with a fresh model when the rendered centre of the first training image is all
+/// black (every pixel below 1e-3), checked every `every` steps up to step `until`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CollapseRestart {
+    pub every: usize,
+    pub until: usize,
+    pub max_restarts: usize,
+}
+
+/// How training renders its rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainMarcher {
+    /// Every sample of every ray (the paper's: 640,000 evaluations per 100x100 image).
+    #[default]
+    Dense,
+    /// Only samples in occupied cells of the per-pose grid (`accelerated.grid`), rebuilt
+    /// from the current model at every step (beyond the paper).
+    Skipping,
+}
+
+/// How a dense training step's gradients are computed. Both give the same gradients
+/// (`tests/ffksm.rs` compares them); they differ in speed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DenseGradients {
+    /// The hand-written step of [`crate::self_models::ffksm::dense_step`] on the CPU backends (2-3x
+    /// burn's graph on 2 cores, `bench_ffksm_step`); burn's autodiff on a GPU.
+    #[default]
+    HandWrittenOnCpu,
+    /// burn's autodiff through the dense marcher everywhere (the reference).
+    Autodiff,
+}
+
+/// Everything that defines one FFKSM run.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FfksmConfig {
+    /// Row label.
+    pub name: String,
+    pub preset: String,
+    pub field: OccupancyFieldConfig,
+    pub march: MarchConfig,
+    pub accelerated: AcceleratedConfig,
+    /// Steps, learning rate, seed, checkpoints (batch 1: one image per step).
+    pub train: TrainConfig,
+    pub curriculum: Curriculum,
+    #[serde(default)]
+    pub train_marcher: TrainMarcher,
+    /// How dense steps are differentiated (not part of a checkpoint's fingerprint: both paths
+    /// compute the same gradients, so a run may resume on the other).
+    #[serde(default)]
+    pub dense_gradients: DenseGradients,
+    /// MSE weight of robot pixels (1: the code's plain MSE; the text's 5).
+    pub robot_weight: f64,
+    pub restart: Option<CollapseRestart>,
+    pub data: DataSpec,
+    /// PSNR is also reported on the first this-many test images (the paper's subset).
+    pub paper_subset: usize,
+    /// Score on the first this-many test images (all when absent): dense marching of the
+    /// paper preset costs ~1 s per image on a 2-core CPU.
+    pub test_images: Option<usize>,
+    /// Novel views: the training camera orbited about the world z axis by these angles (deg).
+    pub novel_views_deg: Vec<f64>,
+    /// Rays per network call when marching densely.
+    pub chunk_rays: usize,
+    pub reference: PaperReference,
+    pub note: String,
+    #[serde(default)]
+    pub steps_override: Option<usize>,
+}
+
+/// The presets of `ffksm`: `paper`, `short` (the paper's model and data, 30 steps and 5
+/// test images, for the short `table1`), `quick` (tiny, seconds).
+pub const FFKSM_PRESETS: &[&str] = &["paper", "short", "quick"];
+
+impl PaperReference {
+    /// FFKSM in the paper: 17.35 dB at 5.22 FPS (191.6 ms) on a T4, ~50 minutes of training.
+    pub fn ffksm() -> Self {
+        PaperReference {
+            psnr_db: Some(17.35),
+            fps: Some(5.22),
+            latency_ms: Some(191.6),
+            train_time_s: Some(3000.0),
+        }
+    }
+
+    /// The original authors' model: their logs correspond to about 23.4 dB (12,000 samples,
+    /// far longer training); no speed was published with it.
+    pub fn ffksm_original() -> Self {
+        PaperReference {
+            psnr_db: Some(23.4),
+            ..Default::default()
+        }
+    }
+}
+
+impl FfksmConfig {
+    /// The reimplementation (the paper preset = its code).
+    pub fn reimplementation(preset: &str) -> Result<Self> {
+        let quick = preset == "quick";
+        let data = match preset {
+            "paper" | "short" => DataSpec::paper(),
+            "quick" => DataSpec::quick(),
+            other => {
+                return Err(Error::Config(format!(
+                    "unknown preset \"{other}\" (choose paper, short or quick)"
+                )));
+            }
+        };
+        let mut cfg = FfksmConfig {
+            name: "FFKSM".into(),
+            preset: preset.into(),
+            field: if quick {
+                OccupancyFieldConfig::quick()
+            } else {
+                OccupancyFieldConfig::paper()
+            },
+            march: if quick {
+                MarchConfig {
+                    samples: 32,
+                    ..MarchConfig::paper()
+                }
+            } else {
+                MarchConfig::paper()
+            },
+            accelerated: AcceleratedConfig::paper(),
+            train: TrainConfig {
+                steps: if quick { 400 } else { 8000 },
+                batch: 1,
+                learning_rate: if quick { 5e-3 } else { 5e-4 },
+                grad_clip_norm: None,
+                input_noise: 0.0,
+                seed: 0,
+                checkpoint_every: if quick { 100 } else { 250 },
+            },
+            curriculum: Curriculum {
+                steps: if quick { 50 } else { 500 },
+                crop: if quick { 16 } else { 50 },
+            },
+            train_marcher: TrainMarcher::Dense,
+            dense_gradients: DenseGradients::default(),
+            robot_weight: 1.0,
+            restart: None,
+            data,
+            paper_subset: 100,
+            test_images: if quick { Some(24) } else { None },
+            novel_views_deg: vec![30.0, 60.0],
+            chunk_rays: 2048,
+            reference: PaperReference::ffksm(),
+            note: String::new(),
+            steps_override: None,
+        };
+        if quick {
+            cfg.accelerated.grid.block = 2;
+        }
+        if preset == "short" {
+            cfg.train.steps = 30;
+            cfg.curriculum.steps = 15;
+            cfg.test_images = Some(5);
+            cfg.note = "short preset: 30 steps instead of 8,000 (15 of them cropped), scored on 5 test images (CPU time budget)".into();
+        }
+        Ok(cfg)
+    }
+
+    /// The original authors' model (`ffksm_original`): L = 10, the shorter predictive module,
+    /// their virtual frame, a 200-step curriculum and restarts on collapse.
+    pub fn original(preset: &str) -> Result<Self> {
+        let mut cfg = Self::reimplementation(preset)?;
+        cfg.name = "FFKSM (original model)".into();
+        cfg.field = if preset == "quick" {
+            OccupancyFieldConfig {
+                bands: 5,
+                ..OccupancyFieldConfig::quick()
+            }
+        } else {
+            OccupancyFieldConfig::original()
+        };
+        cfg.field.relu_before_output = false;
+        cfg.field.virtual_frame = crate::self_models::ffksm::virtual_frame::VirtualFrame::Original;
+        cfg.curriculum.steps = cfg.curriculum.steps * 2 / 5;
+        cfg.restart = Some(CollapseRestart {
+            every: if preset == "quick" { 25 } else { 100 },
+            until: cfg.curriculum.steps * 5,
+            max_restarts: 5,
+        });
+        cfg.reference = PaperReference::ffksm_original();
+        Ok(cfg)
+    }
+
+    /// The reimplementation trained with empty-space skipping (beyond the paper): the same
+    /// model, data and schedule, each step marching only the samples in occupied cells of a
+    /// grid probed from the current model.
+    pub fn skipping(preset: &str) -> Result<Self> {
+        let mut cfg = Self::reimplementation(preset)?;
+        cfg.name = "FFKSM (trained with skipping)".into();
+        cfg.train_marcher = TrainMarcher::Skipping;
+        Ok(cfg)
+    }
+
+    /// Switch to the paper-compatible dataset (silhouettes with the ground-plane artefact).
+    pub fn paper_compatible(mut self, on: bool) -> Self {
+        self.data.dataset.render.ground_artifact = on;
+        self
+    }
+}
+
+/// Row-major indices of the central `crop x crop` pixels of a `height x width` image.
+pub fn centre_crop(height: usize, width: usize, crop: usize) -> Vec<usize> {
+    let (ch, cw) = (crop.min(height), crop.min(width));
+    let (r0, c0) = ((height - ch) / 2, (width - cw) / 2);
+    (r0..r0 + ch)
+        .flat_map(|r| (c0..c0 + cw).map(move |c| r * width + c))
+        .collect()
+}
+
+/// Degrees to the field's radians.
+fn radians(angles_deg: &[f32]) -> [f64; 4] {
+    let mut a = [0.0; 4];
+    for (k, v) in angles_deg.iter().take(4).enumerate() {
+        a[k] = (*v as f64).to_radians();
+    }
+    a
+}
+
+/// The weighted MSE of `pred` `[rays]` against `truth` (host, `[rays]` in [0, 1]):
+/// `mean(w (pred − truth)²)` with `w = robot_weight` on robot pixels, 1 elsewhere (the
+/// paper's equation 10).
+pub fn weighted_mse(pred: Tensor<1>, truth: &[f32], robot_weight: f64) -> Tensor<1> {
+    let device = pred.device();
+    let n = truth.len();
+    let weights: Vec<f32> = truth
+        .iter()
+        .map(|&t| if t >= 0.5 { robot_weight as f32 } else { 1.0 })
+        .collect();
+    let t = Tensor::<1>::from_data(TensorData::new(truth.to_vec(), [n]), &device);
+    let w = Tensor::<1>::from_data(TensorData::new(weights, [n]), &device);
+    ((pred - t).square() * w).mean()
+}
+
+/// What a run produced.
+pub struct FfksmOutcome {
+    /// Dense marching's row, then the accelerated marcher's.
+    pub rows: Vec<ModelResult>,
+    pub renderers: Vec<RendererRow>,
+    pub novel_views: Vec<NovelViewRow>,
+    pub log: TrainLog,
+    pub restarts: usize,
+}
+
+/// Dense marching against the accelerated marcher, the same model and test images.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct RendererRow {
+    pub model: String,
+    pub renderer: String,
+    pub test_images: usize,
+    /// Mean network evaluations per image (the accelerated marcher's include its grid).
+    pub evaluations_per_image: f64,
+    pub grid_evaluations_per_image: f64,
+    /// Mean fraction of grid cells occupied (1 for dense marching, which has no grid).
+    pub grid_occupancy: f64,
+    /// Dense evaluations per image divided by this renderer's.
+    pub fewer_evaluations: f64,
+    pub img_per_s: f64,
+    pub psnr_db_test: f64,
+    pub iou_test: f64,
+    /// PSNR of this renderer's images against dense marching's (infinite for dense itself).
+    pub psnr_db_vs_dense: f64,
+    pub depth_mae_mm: Option<f64>,
+    pub git_revision: String,
+    pub device: String,
+    pub preset: String,
+}
+
+/// Quality from a camera the model was never trained on.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct NovelViewRow {
+    pub model: String,
+    /// Camera orbited about the world z axis by this angle (0: the training camera).
+    pub yaw_deg: f64,
+    pub test_images: usize,
+    pub psnr_db: f64,
+    pub iou: f64,
+    pub depth_mae_mm: Option<f64>,
+    /// A view-blind model's score: the training camera's true silhouette offered as the
+    /// prediction for this camera (what a 2-D decoder such as NeuroKin can at best output).
+    pub view_blind_psnr_db: f64,
+    pub view_blind_iou: f64,
+    pub renderer: String,
+    pub git_revision: String,
+    pub device: String,
+    pub preset: String,
+}
+
+/// Images rendered by one renderer, with per-image evaluations and seconds.
+struct Rendered {
+    predictions: Predictions,
+    evaluations: Vec<usize>,
+    grid_evaluations: Vec<usize>,
+    grid_occupancy: Vec<f64>,
+    seconds: Vec<f64>,
+}
+
+impl Rendered {
+    fn mean_evaluations(&self) -> f64 {
+        self.evaluations.iter().sum::<usize>() as f64 / self.evaluations.len().max(1) as f64
+    }
+
+    /// Images per second from the median time per image, the first (warm-up) left out.
+    fn images_per_second(&self) -> f64 {
+        let mut t: Vec<f64> = self.seconds.iter().skip(1).copied().collect();
+        if t.is_empty() {
+            t = self.seconds.clone();
+        }
+        t.sort_by(f64::total_cmp);
+        1.0 / t[t.len() / 2].max(1e-12)
+    }
+}
+
+/// Render every pose of `angles_deg` (`[n][4]`, degrees) from `camera`, densely (`None`) or
+/// with the accelerated marcher.
+fn render_all(
+    field: &OccupancyField,
+    camera: &Camera,
+    angles_deg: &[Vec<f64>],
+    cfg: &FfksmConfig,
+    accelerated: Option<&AcceleratedConfig>,
+    device: &Device,
+    label: &str,
+) -> Rendered {
+    let pixels = camera.width * camera.height;
+    let all: Vec<usize> = (0..pixels).collect();
+    let mut out = Rendered {
+        predictions: Predictions {
+            silhouettes: Vec::new(),
+            depth: Some(Vec::new()),
+            pixels,
+            depth_pixels: crate::eval::evaluation::DepthPixels::Drawn,
+        },
+        evaluations: Vec::new(),
+        grid_evaluations: Vec::new(),
+        grid_occupancy: Vec::new(),
+        seconds: Vec::new(),
+    };
+    let bar = crate::data::dataset::progress_bar(angles_deg.len() as u64, label);
+    for a in angles_deg {
+        let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
+        let view = (camera, radians(&a32));
+        let t0 = Instant::now();
+        let (sil, depth, evals, grid, occupancy) = if let Some(acc) = accelerated {
+            let img = render_accelerated(field, view, &cfg.march, acc, device);
+            (
+                img.silhouette,
+                img.depth,
+                img.evaluations,
+                img.grid_evaluations,
+                img.grid_occupancy,
+            )
+        } else {
+            let (s, d, e) =
+                render_dense(field, view, &all, &cfg.march, None, cfg.chunk_rays, device);
+            let host = |t: Tensor<1>| t.into_data().try_into_vec::<f32>().expect("float");
+            (host(s), host(d), e, 0, 1.0)
+        };
+        out.seconds.push(t0.elapsed().as_secs_f64());
+        out.predictions.silhouettes.extend(sil);
+        if let Some(d) = out.predictions.depth.as_mut() {
+            d.extend(depth);
+        }
+        out.evaluations.push(evals);
+        out.grid_evaluations.push(grid);
+        out.grid_occupancy.push(occupancy);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    out
+}
+
+/// Mean PSNR of `a` against `b`, image by image (`pixels` each).
+fn mean_psnr(a: &[f32], b: &[f32], pixels: usize) -> f64 {
+    let n = a.len() / pixels.max(1);
+    (0..n)
+        .map(|i| {
+            psnr_db(
+                &a[i * pixels..(i + 1) * pixels],
+                &b[i * pixels..(i + 1) * pixels],
+            )
+        })
+        .sum::<f64>()
+        / n.max(1) as f64
+}
+
+fn mean_iou(a: &[f32], b: &[f32], pixels: usize) -> f64 {
+    let n = a.len() / pixels.max(1);
+    (0..n)
+        .map(|i| {
+            iou(
+                &a[i * pixels..(i + 1) * pixels],
+                &b[i * pixels..(i + 1) * pixels],
+            )
+        })
+        .sum::<f64>()
+        / n.max(1) as f64
+}
+
+/// What a checkpoint must match to be resumed: everything that shapes training except the
+/// step count (step `k` draws the same image and samples whatever the total, so a longer run
+/// continues a shorter one: `--steps 2000` then `--resume` to the preset's 8,000).
+fn fingerprint(cfg: &FfksmConfig) -> serde_json::Value {
+    let mut train = serde_json::to_value(&cfg.train).expect("serialisable");
+    if let Some(t) = train.as_object_mut() {
+        t.remove("steps");
+    }
+    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": cfg.data});
+    // Only when it is not the default, so checkpoints from before the option still resume.
+    if cfg.train_marcher != TrainMarcher::Dense {
+        print["train_marcher"] = serde_json::json!(cfg.train_marcher);
+    }
+    print
+}
+
+/// A count a run keeps beside its checkpoint (JSON), if the file is there and reads.
+fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
+    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+}
+
+/// Train the field, restarting with a fresh model on collapse when the config asks for it.
+fn train_field(
+    cfg: &FfksmConfig,
+    data: &Dataset,
+    train_range: &std::ops::Range<usize>,
+    dir: &Path,
+    resume: bool,
+    device: &Device,
+    hand_written: bool,
+) -> Result<(OccupancyField, TrainLog, usize, f64)> {
+    let tdev = autodiff_device(device, cfg.train.seed);
+    let train_set = device_set(data, train_range, host_targets(data, train_range), &tdev);
+    let camera = cfg.data.dataset.camera.clone();
+    let (h, w) = (camera.height, camera.width);
+    let all: Vec<usize> = (0..h * w).collect();
+    let crop = centre_crop(h, w, cfg.curriculum.crop);
+    let probe_truth = data.angles[train_range.start].clone();
+    let plan = CheckpointPlan {
+        dir: dir.join("checkpoint"),
+        resume,
+        fingerprint: fingerprint(cfg),
+    };
+    // Restarts after collapse so far, so a resumed run reports them (and initialises the same
+    // model).
+    let restarts_path = plan.dir.join("restarts.json");
+    let mut restarts: usize = resume
+        .then(|| read_kept(&restarts_path))
+        .flatten()
+        .unwrap_or(0);
+    // Network evaluations and steps of training, so a resumed run reports them for all its
+    // steps (`[evaluations, steps]`).
+    let counts_path = plan.dir.join("evaluations.json");
+    let earlier: [usize; 2] = resume
+        .then(|| read_kept(&counts_path))
+        .flatten()
+        .unwrap_or([0, 0]);
+    let train_evaluations = std::cell::Cell::new(earlier[0]);
+    let train_steps = std::cell::Cell::new(earlier[1]);
+    loop {
+        let seed = cfg.train.seed + 1000 * restarts as u64;
+        let field = cfg.field.init(&tdev, seed)?;
+        let loss = |m: &OccupancyField, b: &crate::train::trainer::Batch| {
+            let a = b
+                .inputs
+                .clone()
+                .into_data()
+                .try_into_vec::<f32>()
+                .expect("float");
+            let truth = b.targets[0]
+                .clone()
+                .into_data()
+                .try_into_vec::<f32>()
+                .expect("float");
+            let pixels = if b.step < cfg.curriculum.steps {
+                &crop
+            } else {
+                &all
+            };
+            let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
+            let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            let view = (&camera, radians(&a));
+            train_steps.set(train_steps.get() + 1);
+            match cfg.train_marcher {
+                TrainMarcher::Dense => {
+                    train_evaluations
+                        .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
+                    if hand_written {
+                        let step = dense_step(
+                            m,
+                            view,
+                            pixels,
+                            &t,
+                            cfg.robot_weight,
+                            &cfg.march,
+                            Some(jitter),
+                            device,
+                        );
+                        return StepLoss::Computed {
+                            value: step.loss,
+                            gradients: step.gradients,
+                        };
+                    }
+                    let pred = render_silhouette(
+                        m,
+                        view,
+                        pixels,
+                        &cfg.march,
+                        Some(jitter),
+                        &b.inputs.device(),
+                    );
+                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
+                }
+                TrainMarcher::Skipping => {
+                    let (pred, evaluations) = render_silhouette_skipping(
+                        m,
+                        &m.valid(),
+                        view,
+                        pixels,
+                        &cfg.march,
+                        &cfg.accelerated.grid,
+                        Some(jitter),
+                        &b.inputs.device(),
+                    );
+                    train_evaluations.set(train_evaluations.get() + evaluations);
+                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
+                }
+            }
+        };
+        let watch = |m: &OccupancyField, step: usize| -> Result<()> {
+            // The counts go beside each checkpoint (saved right after this), so a run stopped
+            // and resumed still reports all its steps.
+            let every = cfg.train.checkpoint_every;
+            if every > 0 && (step % every == 0 || step == cfg.train.steps) {
+                std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
+                write_json(&counts_path, &[train_evaluations.get(), train_steps.get()])?;
+            }
+            let Some(r) = &cfg.restart else { return Ok(()) };
+            if step > r.until || step % r.every.max(1) != 0 {
+                return Ok(());
+            }
+            let a: Vec<f32> = probe_truth.iter().map(|&v| v as f32).collect();
+            let valid = m.valid();
+            let probe = render_silhouette(
+                &valid,
+                (&camera, radians(&a)),
+                &crop,
+                &cfg.march,
+                None,
+                device,
+            );
+            let max = probe.max().into_scalar::<f32>();
+            if max < 1e-3 {
+                Err(Error::Collapsed { step })
+            } else {
+                Ok(())
+            }
+        };
+        let label = if restarts == 0 {
+            cfg.name.clone()
+        } else {
+            format!("{} (restart {restarts})", cfg.name)
+        };
+        match train_watched(
+            field,
+            &train_set,
+            &cfg.train,
+            Some(&plan),
+            &label,
+            loss,
+            watch,
+        ) {
+            Ok((field, log)) => {
+                let counts = [train_evaluations.get(), train_steps.get()];
+                if plan.dir.is_dir() {
+                    write_json(&counts_path, &counts)?;
+                }
+                let per_step = match cfg.train_marcher {
+                    // Known exactly, however many processes the run took.
+                    TrainMarcher::Dense => {
+                        let cropped = log.step.min(cfg.curriculum.steps) * crop.len();
+                        let full = log.step.saturating_sub(cfg.curriculum.steps) * all.len();
+                        ((cropped + full) * cfg.march.samples) as f64 / log.step.max(1) as f64
+                    }
+                    TrainMarcher::Skipping => counts[0] as f64 / counts[1].max(1) as f64,
+                };
+                return Ok((field.valid(), log, restarts, per_step));
+            }
+            Err(Error::Collapsed { step }) => {
+                let max = cfg.restart.as_ref().map_or(0, |r| r.max_restarts);
+                eprintln!("{label}: all-black image at step {step}; restarting with a fresh model");
+                if restarts >= max {
+                    return Err(Error::Training(format!(
+                        "{}: collapsed to an all-black image {} times; raise the robot-pixel weight or the curriculum",
+                        cfg.name,
+                        restarts + 1
+                    )));
+                }
+                restarts += 1;
+                // The checkpoint holds the collapsed model: start the next try from scratch.
+                let _ = std::fs::remove_dir_all(&plan.dir);
+                if cfg.train.checkpoint_every > 0 {
+                    std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
+                    write_json(&restarts_path, &restarts)?;
+                }
+                train_evaluations.set(0);
+                train_steps.set(0);
+            }
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Train, evaluate with both renderers and from novel views, and report into `dir`.
+pub fn run(
+    cfg: &FfksmConfig,
+    dir: &Path,
+    device_choice: DeviceChoice,
+    resume: bool,
+) -> Result<FfksmOutcome> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join("config.json"), cfg)?;
+    let git_revision = crate::core::provenance::git_revision();
+    let device = crate::core::device::select(device_choice)?;
+    let (data, train_range, test_range) = cfg.data.load()?;
+    let test_range = match cfg.test_images {
+        Some(k) => test_range.start..test_range.start + k.min(test_range.len()),
+        None => test_range,
+    };
+    let camera = cfg.data.dataset.camera.clone();
+    let pixels = camera.width * camera.height;
+    let hand_written = cfg.dense_gradients == DenseGradients::HandWrittenOnCpu
+        && matches!(device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
+    let (field, log, restarts, train_evals) =
+        train_field(cfg, &data, &train_range, dir, resume, &device, hand_written)?;
+    let params = field.num_params();
+
+    // The training camera, both renderers.
+    let test_angles: Vec<Vec<f64>> = test_range.clone().map(|i| data.angles[i].clone()).collect();
+    let (truth, truth_depth) = host_targets(&data, &test_range);
+    let dense = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        None,
+        &device,
+        "dense marching",
+    );
+    let fast = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        Some(&cfg.accelerated),
+        &device,
+        "accelerated marching",
+    );
+    // What early termination adds to the grid: the same marcher without it.
+    let no_termination = AcceleratedConfig {
+        termination: None,
+        ..cfg.accelerated.clone()
+    };
+    let skipping_only = render_all(
+        &field,
+        &camera,
+        &test_angles,
+        cfg,
+        Some(&no_termination),
+        &device,
+        "skipping only",
+    );
+    let skipping_q = score(
+        &skipping_only.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    let dense_q = score(
+        &dense.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    let fast_q = score(
+        &fast.predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    let dataset_label = cfg.data.label().to_string();
+    let row = |renderer: &str, r: &Rendered, q: &Quality| -> ModelResult {
+        let ips = r.images_per_second();
+        ModelResult {
+            model: format!("{} ({renderer})", cfg.name),
+            dataset: dataset_label.clone(),
+            preset: cfg.preset.clone(),
+            device: device_choice.to_string(),
+            git_revision: git_revision.clone(),
+            parameters: params,
+            train_samples: train_range.len(),
+            train_steps: log.step,
+            batch: 1,
+            train_time_s: log.train_seconds,
+            train_img_per_s: log.images_per_second(),
+            psnr_db_first100: q.psnr_db_paper_subset,
+            psnr_db_test: q.psnr_db_test,
+            iou_test: q.iou_test,
+            depth_mae_mm: q.depth_mae_mm,
+            depth_constant_mae_mm: q.depth_constant_mae_mm,
+            infer_b1_img_per_s: ips,
+            latency_b1_ms: 1000.0 / ips,
+            // Rendering is per image: no batched path; the sequential throughput stands here.
+            infer_b256_img_per_s: ips,
+            paper_psnr_db: None,
+            paper_fps: None,
+            paper_latency_ms: None,
+            paper_train_time_s: None,
+            note: {
+                let mut n = vec![format!(
+                    "{:.0} network evaluations per image; tested on {} images; trained with {} marching, {:.0} evaluations per step",
+                    r.mean_evaluations(),
+                    q.test_images,
+                    match cfg.train_marcher {
+                        TrainMarcher::Dense if hand_written => "dense (hand-written gradients)",
+                        TrainMarcher::Dense => "dense",
+                        TrainMarcher::Skipping => "skipping",
+                    },
+                    train_evals
+                )];
+                if restarts > 0 {
+                    n.push(format!("{restarts} restarts after collapse"));
+                }
+                if !cfg.note.is_empty() {
+                    n.push(cfg.note.clone());
+                }
+                n.join("; ")
+            },
+            steps_override: cfg.steps_override,
+        }
+        .with_reference(&cfg.reference)
+    };
+    let rows = vec![
+        row("dense marching", &dense, &dense_q),
+        row("accelerated", &fast, &fast_q),
+    ];
+    let dense_evals = dense.mean_evaluations();
+    let renderer_row = |name: &str, r: &Rendered, q: &Quality| RendererRow {
+        model: cfg.name.clone(),
+        renderer: name.into(),
+        test_images: q.test_images,
+        evaluations_per_image: r.mean_evaluations(),
+        grid_evaluations_per_image: r.grid_evaluations.iter().sum::<usize>() as f64
+            / r.grid_evaluations.len().max(1) as f64,
+        grid_occupancy: r.grid_occupancy.iter().sum::<f64>() / r.grid_occupancy.len().max(1) as f64,
+        fewer_evaluations: dense_evals / r.mean_evaluations().max(1.0),
+        img_per_s: r.images_per_second(),
+        psnr_db_test: q.psnr_db_test,
+        iou_test: q.iou_test,
+        psnr_db_vs_dense: mean_psnr(
+            &r.predictions.silhouettes,
+            &dense.predictions.silhouettes,
+            pixels,
+        ),
+        depth_mae_mm: q.depth_mae_mm,
+        git_revision: git_revision.clone(),
+        device: device_choice.to_string(),
+        preset: cfg.preset.clone(),
+    };
+    let renderers = vec![
+        renderer_row("dense marching", &dense, &dense_q),
+        renderer_row("accelerated", &fast, &fast_q),
+        renderer_row(
+            "accelerated without early termination",
+            &skipping_only,
+            &skipping_q,
+        ),
+    ];
+
+    // Novel views: the simulator's images from orbited cameras, the accelerated marcher.
+    let mut novel = vec![NovelViewRow {
+        model: cfg.name.clone(),
+        yaw_deg: 0.0,
+        test_images: fast_q.test_images,
+        psnr_db: fast_q.psnr_db_test,
+        iou: fast_q.iou_test,
+        depth_mae_mm: fast_q.depth_mae_mm,
+        view_blind_psnr_db: f64::INFINITY,
+        view_blind_iou: 1.0,
+        renderer: "accelerated".into(),
+        git_revision: git_revision.clone(),
+        device: device_choice.to_string(),
+        preset: cfg.preset.clone(),
+    }];
+    let mut novel_images = Vec::new();
+    for &yaw in &cfg.novel_views_deg {
+        let mut spec = cfg.data.dataset.clone();
+        spec.camera = camera.orbited(yaw);
+        let view_data = Dataset::generate(&crate::sim::arm4::arm4(), &spec, None)?;
+        let (vt, vd) = host_targets(&view_data, &test_range);
+        let r = render_all(
+            &field,
+            &spec.camera,
+            &test_angles,
+            cfg,
+            Some(&cfg.accelerated),
+            &device,
+            &format!("novel view {yaw} deg"),
+        );
+        let q = score(&r.predictions, &vt, Some(&vd), cfg.paper_subset);
+        novel.push(NovelViewRow {
+            model: cfg.name.clone(),
+            yaw_deg: yaw,
+            test_images: q.test_images,
+            psnr_db: q.psnr_db_test,
+            iou: q.iou_test,
+            depth_mae_mm: q.depth_mae_mm,
+            view_blind_psnr_db: mean_psnr(&truth, &vt, pixels),
+            view_blind_iou: mean_iou(&truth, &vt, pixels),
+            renderer: "accelerated".into(),
+            git_revision: git_revision.clone(),
+            device: device_choice.to_string(),
+            preset: cfg.preset.clone(),
+        });
+        novel_images.push((vt, r.predictions.silhouettes));
+    }
+
+    write_reports(dir, cfg, &rows, &renderers, &novel, &log)?;
+    qualitative_figure(
+        &dir.join("qualitative.png"),
+        &truth,
+        &truth_depth,
+        &dense.predictions,
+        [camera.height, camera.width],
+    )?;
+    novel_view_figure(
+        &dir.join("novel_views.png"),
+        &novel_images,
+        [camera.height, camera.width],
+    )?;
+    Ok(FfksmOutcome {
+        rows,
+        renderers,
+        novel_views: novel,
+        log,
+        restarts,
+    })
+}
+
+fn write_reports(
+    dir: &Path,
+    cfg: &FfksmConfig,
+    rows: &[ModelResult],
+    renderers: &[RendererRow],
+    novel: &[NovelViewRow],
+    log: &TrainLog,
+) -> Result<()> {
+    let csv = dir.join("results.csv");
+    write_table(
+        &csv,
+        rows,
+        &format!(
+            "{} ({} preset, {} dataset)",
+            cfg.name,
+            cfg.preset,
+            cfg.data.label()
+        ),
+        &format!(
+            "One trained model, two renderers: dense marching ({} samples per ray, the paper's) and the accelerated marcher (per-pose occupancy grid and early ray termination; `renderers.csv`). {} steps of one image; PSNR per image as the paper computes it, IoU at threshold 0.5, depth as the expected ray depth against the simulator's on robot pixels. `paper_*` columns are the paper's figures, for reference (a Tesla T4). Config: `config.json`.",
+            cfg.march.samples, log.step
+        ),
+    )?;
+    let path = dir.join("renderers.csv");
+    write_table(
+        &path,
+        renderers,
+        &format!(
+            "{}: dense marching against the accelerated marcher",
+            cfg.name
+        ),
+        "Same model, same test images. `fewer_evaluations` is dense marching's network evaluations per image over this renderer's (the grid's probes included); `psnr_db_vs_dense` compares the two renderers' images directly. Images/s: median time per image after one warm-up image, batch 1, this machine.",
+    )?;
+    let path = dir.join("novel_views.csv");
+    write_table(
+        &path,
+        novel,
+        &format!("{}: views it was never trained on", cfg.name),
+        "The training camera orbited about the world z axis; the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
+    )?;
+    crate::report::table::write_training_curve(dir, &cfg.name, log)
+}
+
+/// For each novel view, a row of truths then a row of predictions (six poses).
+fn novel_view_figure(path: &Path, views: &[(Vec<f32>, Vec<f32>)], size: [usize; 2]) -> Result<()> {
+    let px = size[0] * size[1];
+    let mut rows = Vec::new();
+    for (truth, pred) in views {
+        let n = truth.len() / px;
+        let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
+        rows.push(GridRow::Grey(
+            picks
+                .iter()
+                .map(|&i| &truth[i * px..(i + 1) * px])
+                .collect(),
+        ));
+        rows.push(GridRow::Grey(
+            picks.iter().map(|&i| &pred[i * px..(i + 1) * px]).collect(),
+        ));
+    }
+    if rows.is_empty() {
+        return Ok(());
+    }
+    image_grid(path, &rows, size[1], size[0], 2)
+}

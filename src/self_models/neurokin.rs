@@ -1,0 +1,278 @@
+//! NeuroKin: a direct joint-angles-to-silhouette decoder (self-modeling paper, Section IV-C).
+//!
+//! Two architectures share this file, because the paper's text and the code that produced its
+//! numbers disagree:
+//! - [`NeuroKinArch::Code`] (the `paper` preset, the notebook's facts): encoder
+//!   4->128->256->latent (ReLUs between, none on the output), Linear(latent, 4096)+ReLU reshaped
+//!   to 256x4x4, transposed convolutions k4/s2/p1 with BatchNorm+ReLU (256->128->64->32, 4->32 px),
+//!   ConvTranspose2d(32->16, k3, s1, p2)+BN+ReLU (30x30), a bilinear resize of the 16 feature
+//!   channels to 100x100 (align_corners false), Conv3x3(16->8)+ReLU, Conv1x1(8->1). 5,189,857
+//!   parameters at latent 1024.
+//! - [`NeuroKinArch::Text64`] (variant `neurokin64`, as the paper's text describes it): Linear
+//!   4->512->4096 (ReLU) -> 256x4x4, four ConvTranspose2d(k4, s2, p1)+ReLU to 16x64x64,
+//!   Conv1x1 -> 1. Trained at 64x64; its predictions are resized bilinearly to 100x100 for
+//!   evaluation.
+//!
+//! Input: joint angles in degrees, `[batch, dof]`. Output: silhouette logits `[batch, 1, H, W]`
+//! (the sigmoid is applied by [`NeuroKin::predict`] and inside the loss, where it is stable).
+//!
+//! The ablation knobs (`upsampling_layers`, `latent`) follow the paper's Section V-C: the
+//! decoder has `upsampling_layers` transposed convolutions; all but the last double the
+//! resolution (channels halve from 256 down to a floor of 16); the last is the k3/s1/p2 layer.
+
+use burn::module::Module;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
+use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::{Device, Tensor};
+
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::kernels::cpu_extension::conv2d_layer;
+use crate::kernels::upconv::{UpConv, UpConvConfig};
+
+/// Which of the two published NeuroKin architectures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NeuroKinArch {
+    /// The notebook's architecture (BatchNorm, 30x30 features resized to 100x100, conv head).
+    Code,
+    /// The paper text's architecture (no BatchNorm, 64x64 output, 1x1 head).
+    Text64,
+}
+
+/// NeuroKin's architecture. Presets: `paper` (the code's facts), `quick` (tiny, for tests),
+/// [`NeuroKinConfig::text64`] (the paper text's variant).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct NeuroKinConfig {
+    pub arch: NeuroKinArch,
+    /// Joints (input width).
+    pub dof: usize,
+    /// Hidden widths of the joint encoder before the latent layer.
+    pub encoder_hidden: Vec<usize>,
+    /// Latent width `z` (Section V-C3 ablates 256..2048).
+    pub latent: usize,
+    /// Channels of the 4x4 seed feature map.
+    pub seed_channels: usize,
+    /// Transposed convolutions in the decoder (Section V-C2 ablates 2, 4, 6).
+    pub upsampling_layers: usize,
+    /// Output image size `[height, width]` in pixels (evaluation size).
+    pub image: [usize; 2],
+}
+
+impl Preset for NeuroKinConfig {
+    fn paper() -> Self {
+        NeuroKinConfig {
+            arch: NeuroKinArch::Code,
+            dof: 4,
+            encoder_hidden: vec![128, 256],
+            latent: 1024,
+            seed_channels: 256,
+            upsampling_layers: 4,
+            image: [100, 100],
+        }
+    }
+
+    fn quick() -> Self {
+        NeuroKinConfig {
+            encoder_hidden: vec![32],
+            latent: 64,
+            seed_channels: 32,
+            image: [32, 32],
+            ..Self::paper()
+        }
+    }
+}
+
+impl NeuroKinConfig {
+    /// The paper text's architecture: 4->512->4096, four ConvT+ReLU to 16x64x64, 1x1 head.
+    pub fn text64() -> Self {
+        NeuroKinConfig {
+            arch: NeuroKinArch::Text64,
+            dof: 4,
+            encoder_hidden: vec![],
+            latent: 512,
+            seed_channels: 256,
+            upsampling_layers: 4,
+            image: [100, 100],
+        }
+    }
+
+    /// Resolution the network is trained at (`image`, except 64x64-style native outputs of
+    /// the text variant, which are `4 * 2^layers`).
+    pub fn native_size(&self) -> [usize; 2] {
+        match self.arch {
+            NeuroKinArch::Code => self.image,
+            NeuroKinArch::Text64 => {
+                let s = 4 << self.upsampling_layers;
+                [s, s]
+            }
+        }
+    }
+
+    /// Reject impossible shapes with a message that says what to change.
+    pub fn validate(&self) -> Result<()> {
+        if self.dof == 0 || self.latent == 0 || self.seed_channels == 0 {
+            return Err(Error::Config(
+                "neurokin: dof, latent and seed_channels must be positive".into(),
+            ));
+        }
+        if !(1..=7).contains(&self.upsampling_layers) {
+            return Err(Error::Config(format!(
+                "neurokin: upsampling_layers must be 1..7, got {}",
+                self.upsampling_layers
+            )));
+        }
+        if self.arch == NeuroKinArch::Code && self.upsampling_layers < 2 {
+            return Err(Error::Config(
+                "neurokin: the code architecture needs at least 2 upsampling layers".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Channels after each transposed convolution.
+    fn decoder_channels(&self) -> Vec<usize> {
+        let doubling = match self.arch {
+            NeuroKinArch::Code => self.upsampling_layers - 1,
+            NeuroKinArch::Text64 => self.upsampling_layers,
+        };
+        let mut chans: Vec<usize> = (1..=doubling)
+            .map(|i| (self.seed_channels >> i).max(16))
+            .collect();
+        if self.arch == NeuroKinArch::Code {
+            chans.push(16);
+        }
+        chans
+    }
+
+    /// Build the model on a device, its parameters drawn from the generator seeded with
+    /// `seed` (see [`crate::core::device::seeded`]).
+    pub fn init(&self, device: &Device, seed: u64) -> Result<NeuroKin> {
+        self.validate()?;
+        Ok(crate::core::device::seeded(device, seed, || {
+            self.build(device)
+        }))
+    }
+
+    fn build(&self, device: &Device) -> NeuroKin {
+        let mut widths = vec![self.dof];
+        widths.extend(&self.encoder_hidden);
+        widths.push(self.latent);
+        let encoder = widths
+            .windows(2)
+            .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+            .collect();
+        let seed = LinearConfig::new(self.latent, self.seed_channels * 16).init(device);
+        let chans = self.decoder_channels();
+        let mut ups = Vec::new();
+        let mut norms = Vec::new();
+        let mut cin = self.seed_channels;
+        for (i, &cout) in chans.iter().enumerate() {
+            let last_code_layer = self.arch == NeuroKinArch::Code && i + 1 == chans.len();
+            let cfg = if last_code_layer {
+                UpConvConfig::new(cin, cout, 3, 1, 2)
+            } else {
+                UpConvConfig::new(cin, cout, 4, 2, 1)
+            };
+            ups.push(cfg.init(device));
+            if self.arch == NeuroKinArch::Code {
+                norms.push(BatchNormConfig::new(cout).init(device));
+            }
+            cin = cout;
+        }
+        let head = match self.arch {
+            NeuroKinArch::Code => vec![
+                Conv2dConfig::new([cin, 8], [3, 3])
+                    .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
+                    .init(device),
+                Conv2dConfig::new([8, 1], [1, 1]).init(device),
+            ],
+            NeuroKinArch::Text64 => vec![Conv2dConfig::new([cin, 1], [1, 1]).init(device)],
+        };
+        NeuroKin {
+            encoder,
+            seed,
+            ups,
+            norms,
+            head,
+            seed_channels: self.seed_channels,
+            arch: self.arch,
+            image: self.image,
+        }
+    }
+}
+
+/// The NeuroKin network (either architecture).
+#[derive(Module, Debug)]
+pub struct NeuroKin {
+    encoder: Vec<Linear>,
+    seed: Linear,
+    ups: Vec<UpConv>,
+    norms: Vec<BatchNorm>,
+    head: Vec<Conv2d>,
+    #[module(skip)]
+    seed_channels: usize,
+    #[module(skip)]
+    arch: NeuroKinArch,
+    #[module(skip)]
+    image: [usize; 2],
+}
+
+/// Bilinear resize with align_corners false (PyTorch's `F.interpolate(..., "bilinear")`).
+pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
+    let [_, _, h, w] = x.dims();
+    if [h, w] == size {
+        return x;
+    }
+    crate::kernels::cpu_extension::resize_bilinear(x, size)
+}
+
+impl NeuroKin {
+    /// Latent code `z`: `[batch, dof]` degrees -> `[batch, latent]`.
+    pub fn encode(&self, angles: Tensor<2>) -> Tensor<2> {
+        let mut x = angles;
+        let last = self.encoder.len() - 1;
+        for (i, layer) in self.encoder.iter().enumerate() {
+            x = layer.forward(x);
+            // The code's encoder has no activation on its output; the text variant's has.
+            if i < last || self.arch == NeuroKinArch::Text64 {
+                x = relu(x);
+            }
+        }
+        x
+    }
+
+    /// Silhouette logits at the training resolution: `[batch, dof]` -> `[batch, 1, H, W]`.
+    pub fn forward(&self, angles: Tensor<2>) -> Tensor<4> {
+        let z = self.encode(angles);
+        let [b, _] = z.dims();
+        let mut x = relu(self.seed.forward(z)).reshape([b, self.seed_channels, 4, 4]);
+        for (i, up) in self.ups.iter().enumerate() {
+            x = up.forward(x);
+            if let Some(norm) = self.norms.get(i) {
+                x = norm.forward(x);
+            }
+            x = relu(x);
+        }
+        match self.arch {
+            NeuroKinArch::Code => {
+                x = resize_bilinear(x, self.image);
+                x = relu(conv2d_layer(&self.head[0], x));
+                conv2d_layer(&self.head[1], x)
+            }
+            NeuroKinArch::Text64 => conv2d_layer(&self.head[0], x),
+        }
+    }
+
+    /// Trainable parameters (PyTorch's count: BatchNorm running statistics excluded).
+    pub fn trainable_params(&self) -> usize {
+        crate::train::trainer::trainable_params(self, &self.norms.iter().collect::<Vec<_>>())
+    }
+
+    /// Silhouette probabilities at the evaluation size: `[batch, dof]` -> `[batch, 1, H, W]`
+    /// in [0, 1].
+    pub fn predict(&self, angles: Tensor<2>) -> Tensor<4> {
+        resize_bilinear(sigmoid(self.forward(angles)), self.image)
+    }
+}

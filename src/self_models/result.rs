@@ -1,0 +1,114 @@
+//! One row of Table I: what every self-model experiment reports, with the paper's figures as
+//! labelled reference columns beside ours. Every self-model experiment writes these rows to
+//! `results.csv`; `table1` gathers them without knowing which models exist.
+
+/// The paper's published figures for a model (self-modeling paper, Table I and Section V).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PaperReference {
+    pub psnr_db: Option<f64>,
+    /// What the paper called FPS (its training-step throughput for the decoders).
+    pub fps: Option<f64>,
+    pub latency_ms: Option<f64>,
+    pub train_time_s: Option<f64>,
+}
+
+impl PaperReference {
+    pub fn neurokin() -> Self {
+        PaperReference {
+            psnr_db: Some(21.88),
+            fps: Some(7400.0),
+            latency_ms: Some(0.135),
+            train_time_s: Some(33.5),
+        }
+    }
+
+    pub fn resneurokin_d() -> Self {
+        PaperReference {
+            psnr_db: Some(21.23),
+            fps: Some(2500.0),
+            latency_ms: Some(0.4),
+            train_time_s: Some(365.5),
+        }
+    }
+}
+
+/// One trained model, measured. Units are in the column names.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ModelResult {
+    /// Model (or ablation setting) name.
+    pub model: String,
+    /// `clean` or `paper_compatible` (the ground-plane artefact of the paper's dataset).
+    pub dataset: String,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+    pub parameters: usize,
+    pub train_samples: usize,
+    pub train_steps: usize,
+    pub batch: usize,
+    pub train_time_s: f64,
+    /// Images per second through forward, backward and the optimiser step.
+    pub train_img_per_s: f64,
+    /// PSNR over the first 100 test images (the paper's subset for the decoders).
+    pub psnr_db_first100: f64,
+    pub psnr_db_test: f64,
+    pub iou_test: f64,
+    pub depth_mae_mm: Option<f64>,
+    /// The best constant depth's error on the same pixels, for reference.
+    #[serde(default)]
+    pub depth_constant_mae_mm: Option<f64>,
+    pub infer_b1_img_per_s: f64,
+    pub latency_b1_ms: f64,
+    pub infer_b256_img_per_s: f64,
+    /// The paper's figures, for reference only.
+    pub paper_psnr_db: Option<f64>,
+    pub paper_fps: Option<f64>,
+    pub paper_latency_ms: Option<f64>,
+    pub paper_train_time_s: Option<f64>,
+    /// Anything a reader must know (a shortened run, a different protocol).
+    pub note: String,
+    /// `--steps N` when the run changed its preset's step count (then not a `preset` run in
+    /// full: `table1 --reuse` takes it only for the same `--steps`).
+    #[serde(default)]
+    pub steps_override: Option<usize>,
+}
+
+impl ModelResult {
+    /// Attach the paper's reference figures.
+    pub fn with_reference(mut self, r: &PaperReference) -> Self {
+        self.paper_psnr_db = r.psnr_db;
+        self.paper_fps = r.fps;
+        self.paper_latency_ms = r.latency_ms;
+        self.paper_train_time_s = r.train_time_s;
+        self
+    }
+}
+
+/// Read rows written by [`crate::report::table::write_csv`].
+pub fn read_results(path: &std::path::Path) -> crate::Result<Vec<ModelResult>> {
+    crate::report::table::read_csv(path)
+}
+
+/// The points of a Pareto plot: each row's test PSNR against its batch-1 inference speed, and
+/// beside it the paper's figures for that row (as references) where the paper printed them.
+pub fn pareto_points(
+    rows: &[ModelResult],
+    label: impl Fn(&str) -> String,
+) -> Vec<crate::report::figures::ParetoPoint> {
+    use crate::report::figures::ParetoPoint;
+    let ours = rows.iter().map(|r| ParetoPoint {
+        label: label(&r.model),
+        fps: r.infer_b1_img_per_s,
+        quality: r.psnr_db_test,
+        reference: false,
+    });
+    let paper = rows.iter().filter_map(|r| {
+        Some(ParetoPoint {
+            label: format!("paper: {}", label(&r.model)),
+            fps: r.paper_fps?,
+            quality: r.paper_psnr_db?,
+            reference: true,
+        })
+    });
+    ours.chain(paper).collect()
+}

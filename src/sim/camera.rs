@@ -1,0 +1,184 @@
+//! The pinhole camera shared by the renderer and every model.
+//!
+//! Papers' camera: eye [1, 0, 0] looking at the origin, up +z, 42 degree vertical field of
+//! view, 100x100 pixels, so the focal length is 50 / tan(21 deg) = 130.2545 px. Pixel
+//! (row a, column b) looks along `forward + (b - W/2)/f * right - (a - H/2)/f * up`, which for
+//! the papers' camera is the FFKSM ray convention `(-1, (b - 50)/f, -(a - 50)/f)`: the point
+//! straight ahead lands on row 50, column 50 (PyBullet's TinyRenderer puts it on row 49).
+//! The forward component of every ray direction is 1, so a hit's ray parameter `t` is its
+//! depth along the camera axis in metres.
+
+use nalgebra::{Matrix4, Point3, Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::core::error::{Error, Result};
+use crate::sim::shape::Ray;
+
+/// A pinhole camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Camera {
+    /// Camera position (m).
+    pub eye: [f64; 3],
+    /// The point the camera looks at (m).
+    pub target: [f64; 3],
+    /// World direction that appears up in the image.
+    pub up: [f64; 3],
+    /// Vertical field of view (degrees).
+    pub fov_deg: f64,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera::paper()
+    }
+}
+
+impl Camera {
+    /// The camera of both self-modeling papers.
+    pub fn paper() -> Self {
+        Camera {
+            eye: [1.0, 0.0, 0.0],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            fov_deg: 42.0,
+            width: 100,
+            height: 100,
+        }
+    }
+
+    /// The same camera moved around the world z axis by `yaw_deg` (for novel views).
+    pub fn orbited(&self, yaw_deg: f64) -> Self {
+        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw_deg.to_radians());
+        let eye = r * Point3::from(self.eye);
+        Camera {
+            eye: eye.into(),
+            ..self.clone()
+        }
+    }
+
+    /// Check the camera is usable.
+    pub fn validate(&self) -> Result<()> {
+        let fwd = Vector3::from(self.target) - Vector3::from(self.eye);
+        if self.width == 0 || self.height == 0 {
+            return Err(Error::Config(
+                "camera width and height must be positive".into(),
+            ));
+        }
+        if !(self.fov_deg > 0.0 && self.fov_deg < 180.0) {
+            return Err(Error::Config(format!(
+                "camera fov {} must be in (0, 180) degrees",
+                self.fov_deg
+            )));
+        }
+        if fwd.norm() < 1e-12 || fwd.cross(&Vector3::from(self.up)).norm() < 1e-12 {
+            return Err(Error::Config(
+                "camera eye, target and up must span a frame".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Focal length in pixels from the vertical field of view.
+    pub fn focal_px(&self) -> f64 {
+        (self.height as f64 / 2.0) / (self.fov_deg.to_radians() / 2.0).tan()
+    }
+
+    /// Principal point (column, row): (W/2, H/2).
+    pub fn principal_point(&self) -> (f64, f64) {
+        (self.width as f64 / 2.0, self.height as f64 / 2.0)
+    }
+
+    /// Unit forward, right and up vectors of the image.
+    pub fn basis(&self) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+        let fwd = (Vector3::from(self.target) - Vector3::from(self.eye)).normalize();
+        let right = fwd.cross(&Vector3::from(self.up)).normalize();
+        let up = right.cross(&fwd);
+        (fwd, right, up)
+    }
+
+    pub fn eye_point(&self) -> Point3<f64> {
+        Point3::from(self.eye)
+    }
+
+    /// Everything a per-pixel loop needs, computed once.
+    pub fn frame(&self) -> CameraFrame {
+        let (fwd, right, up) = self.basis();
+        let (cx, cy) = self.principal_point();
+        CameraFrame {
+            eye: self.eye_point(),
+            fwd,
+            right,
+            up,
+            focal: self.focal_px(),
+            cx,
+            cy,
+        }
+    }
+
+    /// Ray through pixel (row, column); its direction has forward component 1.
+    pub fn ray(&self, row: f64, col: f64) -> Ray {
+        self.frame().ray(row, col)
+    }
+
+    /// Project a world point: (row, column, depth along the camera axis). `None` behind the eye.
+    pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64, f64)> {
+        self.frame().project(p)
+    }
+
+    /// Camera-to-world matrix in the NeRF/OpenGL convention (columns right, up, backward, eye),
+    /// as stored under `poses` in the papers' datasets.
+    pub fn pose_matrix(&self) -> Matrix4<f64> {
+        let (fwd, right, up) = self.basis();
+        let e = Vector3::from(self.eye);
+        Matrix4::new(
+            right.x, up.x, -fwd.x, e.x, //
+            right.y, up.y, -fwd.y, e.y, //
+            right.z, up.z, -fwd.z, e.z, //
+            0.0, 0.0, 0.0, 1.0,
+        )
+    }
+}
+
+/// A camera's eye, unit axes, focal length and principal point, precomputed for the
+/// per-pixel loops of the renderer ([`Camera::frame`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraFrame {
+    pub eye: Point3<f64>,
+    pub fwd: Vector3<f64>,
+    pub right: Vector3<f64>,
+    pub up: Vector3<f64>,
+    /// Focal length (px).
+    pub focal: f64,
+    /// Principal point: column `cx`, row `cy`.
+    pub cx: f64,
+    pub cy: f64,
+}
+
+impl CameraFrame {
+    /// Ray through pixel (row, column); its direction has forward component 1.
+    #[inline]
+    pub fn ray(&self, row: f64, col: f64) -> Ray {
+        Ray {
+            origin: self.eye,
+            dir: self.fwd + self.right * ((col - self.cx) / self.focal)
+                - self.up * ((row - self.cy) / self.focal),
+        }
+    }
+
+    /// Project a world point: (row, column, depth along the camera axis). `None` behind the eye.
+    #[inline]
+    pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64, f64)> {
+        let v = p - self.eye;
+        let z = v.dot(&self.fwd);
+        if z <= 1e-9 {
+            return None;
+        }
+        Some((
+            self.cy - self.focal * v.dot(&self.up) / z,
+            self.cx + self.focal * v.dot(&self.right) / z,
+            z,
+        ))
+    }
+}

@@ -1,0 +1,15 @@
+//! The experiments of both papers, one module per binary of the same name in `experiments/`,
+//! the registry that lists them (`registry`) and what they share (`run`).
+
+pub mod ablations;
+pub mod bench_decoders;
+pub mod bench_ffksm_step;
+pub mod emssl_adaptation;
+pub mod emssl_learning_curve;
+pub mod emssl_sampling_speed;
+pub mod emssl_study;
+pub mod emssl_table2;
+pub mod mesh_fidelity;
+pub mod registry;
+pub mod run;
+pub mod table1;

@@ -1,0 +1,154 @@
+//! Speed of the direct decoders, side by side with PyTorch: inference images/s at batch 1 and
+//! 256 and training images/s (forward, backward, Adam step) at the paper's batch, for both
+//! NeuroKin architectures. `../shared/bench/torch_reference.py` measures the same workloads;
+//! `bench_decoders --torch PYTHON` runs it in the same sitting and prints the ratios.
+
+use std::time::Instant;
+
+use burn::optim::{AdamConfig, GradientsParams};
+use burn::tensor::{Device, Distribution, Tensor};
+
+use crate::core::device::DeviceChoice;
+use crate::core::error::Result;
+use crate::core::preset::Preset;
+use crate::eval::inference_speed::{SpeedConfig, measure};
+use crate::self_models::neurokin::{NeuroKinArch, NeuroKinConfig};
+use crate::train::losses::{bce_with_logits, mse};
+use crate::train::trainer::autodiff_device;
+
+/// One measured figure, named as torch_reference.py names it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct BenchRow {
+    pub model: String,
+    pub figure: String,
+    pub ours: f64,
+    pub torch: Option<f64>,
+    /// `ours / torch`: above 1 is faster than PyTorch.
+    pub ratio: Option<f64>,
+    /// `paper` (the paper's models and batches) or `quick`.
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+impl BenchRow {
+    fn new(model: &str, figure: String, ours: f64, quick: bool, device: DeviceChoice) -> Self {
+        BenchRow {
+            model: model.into(),
+            figure,
+            ours,
+            torch: None,
+            ratio: None,
+            preset: if quick { "quick" } else { "paper" }.into(),
+            device: device.to_string(),
+            git_revision: crate::core::provenance::git_revision(),
+        }
+    }
+}
+
+/// Median seconds of `repeats` training steps after `warmup`.
+fn train_rate(
+    cfg: &NeuroKinConfig,
+    batch: usize,
+    device: &Device,
+    warmup: usize,
+    repeats: usize,
+) -> Result<f64> {
+    let tdev = autodiff_device(device, 0);
+    let mut model = cfg.init(&tdev, 0)?;
+    let mut optim = AdamConfig::new().init();
+    let native = cfg.native_size();
+    let (q, y) = crate::core::device::with_seed(&tdev, 1, || {
+        let q = Tensor::<2>::random([batch, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev);
+        let y = Tensor::<4>::random(
+            [batch, 1, native[0], native[1]],
+            Distribution::Bernoulli(0.1),
+            &tdev,
+        );
+        (q, y)
+    });
+    let mut times = Vec::new();
+    for i in 0..warmup + repeats {
+        let t = Instant::now();
+        let z = model.forward(q.clone());
+        let loss = match cfg.arch {
+            NeuroKinArch::Code => bce_with_logits(z, y.clone()),
+            NeuroKinArch::Text64 => mse(burn::tensor::activation::sigmoid(z), y.clone()),
+        };
+        let grads = GradientsParams::from_grads(loss.backward(), &model);
+        model = optim.step(1e-3, model, grads);
+        let _ = tdev.sync();
+        if i >= warmup {
+            times.push(t.elapsed().as_secs_f64());
+        }
+    }
+    times.sort_by(f64::total_cmp);
+    Ok(batch as f64 / times[times.len() / 2])
+}
+
+/// Measure both NeuroKin architectures on `choice`.
+pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
+    let device = &crate::core::device::select(choice)?;
+    let speed = if quick {
+        SpeedConfig::quick()
+    } else {
+        SpeedConfig::paper()
+    };
+    let mut rows = Vec::new();
+    for (name, cfg, batch) in [
+        ("neurokin", NeuroKinConfig::paper(), 32),
+        ("neurokin64", NeuroKinConfig::text64(), 128),
+    ] {
+        let cfg = if quick {
+            NeuroKinConfig {
+                image: [32, 32],
+                ..NeuroKinConfig::quick()
+            }
+        } else {
+            cfg
+        };
+        let model = cfg.init(device, 0)?;
+        for t in measure(
+            |q| model.predict(q),
+            cfg.dof,
+            device,
+            &SpeedConfig {
+                batches: vec![1, 256],
+                ..speed.clone()
+            },
+        ) {
+            rows.push(BenchRow::new(
+                name,
+                format!("infer_b{}_img_per_s", t.batch),
+                t.images_per_second(),
+                quick,
+                choice,
+            ));
+        }
+        let (w, r) = if quick { (1, 2) } else { (3, 10) };
+        rows.push(BenchRow::new(
+            name,
+            format!("train_b{batch}_img_per_s"),
+            train_rate(&cfg, batch, device, w, r)?,
+            quick,
+            choice,
+        ));
+    }
+    Ok(rows)
+}
+
+/// Fill the `torch` column from torch_reference.py's output lines (`model figure value`).
+pub fn attach_torch(rows: &mut [BenchRow], torch_output: &str) {
+    for line in torch_output.lines() {
+        let parts: Vec<&str> = line.split_whitespace().collect();
+        if let [model, figure, value] = parts[..]
+            && let Ok(v) = value.parse::<f64>()
+            && let Some(r) = rows
+                .iter_mut()
+                .find(|r| r.model == model && r.figure == figure)
+        {
+            r.torch = Some(v);
+            r.ratio = Some(r.ours / v);
+        }
+    }
+}

@@ -1,0 +1,458 @@
+//! The one registry of experiments: it drives the smoke tests (`tests/experiments.rs`, every
+//! entry on its `quick` preset), the reproduce-everything command (`reproduce`) and the
+//! reports, and `table1` (every entry marked `in_table1` contributes its rows). Each binary in
+//! `experiments/` parses its arguments and calls the same function.
+
+use std::path::Path;
+
+use crate::self_models::decoder_run::{DECODER_PRESETS, DecoderRunConfig};
+use crate::self_models::ffksm::{FFKSM_PRESETS, FfksmConfig};
+use crate::self_models::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
+use crate::self_models::result::ModelResult;
+use crate::studies::ablations::{Ablation, run_ablation};
+use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
+
+use crate::core::error::Result;
+use crate::core::preset::Preset;
+use crate::data::dataset::{DatasetConfig, build_and_save};
+use crate::studies::mesh_fidelity::{self, FidelityConfig};
+pub use crate::studies::run::{Experiment, RunOptions, write_rows};
+
+fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut cfg = DatasetConfig::preset(if opts.preset == "short" {
+        "paper"
+    } else {
+        &opts.preset
+    })?;
+    cfg.render.ground_artifact = opts.paper_compatible;
+    let robot = crate::sim::arm4::arm4();
+    let (data, report) =
+        build_and_save(&robot, "arm4", &cfg, None, &dir.join("dataset.npz"), false)?;
+    Ok(format!(
+        "{} samples rendered in {:.3} s, mean occupancy {:.2}%",
+        data.len(),
+        report.render_seconds,
+        100.0 * report.stats.occupancy.mean
+    ))
+}
+
+fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let preset = if opts.preset == "short" {
+        "quick"
+    } else {
+        &opts.preset
+    };
+    let rows = mesh_fidelity::run(&FidelityConfig::preset(preset)?, dir)?;
+    Ok(format!(
+        "arm4 vs mesh robot: mean IoU {:.4} over {} poses",
+        rows[0].mean_iou, rows[0].poses
+    ))
+}
+
+fn summary(rows: &[ModelResult]) -> String {
+    rows.iter()
+        .map(|r| {
+            format!(
+                "{}: PSNR {:.2} dB (first 100) / {:.2} dB (test), IoU {:.3}, {:.0} img/s at batch 1",
+                r.model, r.psnr_db_first100, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
+}
+
+/// NeuroKin (the code's architecture) and NeuroKin-64 (the paper text's), one row each.
+pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut rows = Vec::new();
+    for (sub, cfg) in [
+        ("neurokin", DecoderRunConfig::neurokin(&opts.preset)?),
+        ("neurokin64", DecoderRunConfig::neurokin64(&opts.preset)?),
+    ] {
+        let cfg = opts.apply(cfg);
+        rows.push(
+            crate::self_models::decoder_run::run(&cfg, &dir.join(sub), opts.device, opts.resume)?
+                .result,
+        );
+    }
+    write_rows(
+        dir,
+        &rows,
+        "NeuroKin: the notebook's architecture and the paper text's",
+        "One row per architecture; each folder holds its config, curve and figures. `paper_*` columns are the paper's published figures (its FPS was training throughput).",
+    )?;
+    Ok(summary(&rows))
+}
+
+/// ResNeuroKin-D with the simulator's metric depth.
+pub fn run_resneurokin_d(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = opts.apply(DecoderRunConfig::resneurokin_d(&opts.preset)?);
+    let out = crate::self_models::decoder_run::run(&cfg, dir, opts.device, opts.resume)?;
+    Ok(summary(std::slice::from_ref(&out.result)))
+}
+
+/// FFKSM: the reimplementation, the original authors' model, and the reimplementation trained
+/// with empty-space skipping, each rendered densely and with the accelerated marcher (two rows
+/// each), novel views and depth.
+pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut rows = Vec::new();
+    let mut renderers = Vec::new();
+    let mut novel = Vec::new();
+    for (sub, cfg) in [
+        ("ffksm", FfksmConfig::reimplementation(&opts.preset)?),
+        ("ffksm_original", FfksmConfig::original(&opts.preset)?),
+        ("ffksm_skipping", FfksmConfig::skipping(&opts.preset)?),
+    ] {
+        let out = crate::self_models::ffksm::run(
+            &opts.apply_ffksm(cfg),
+            &dir.join(sub),
+            opts.device,
+            opts.resume,
+        )?;
+        rows.extend(out.rows);
+        renderers.extend(out.renderers);
+        novel.extend(out.novel_views);
+    }
+    write_rows(
+        dir,
+        &rows,
+        "FFKSM: the occupancy-field self-model, two implementations, two renderers",
+        "One row per model and renderer (the same trained model renders both ways); `FFKSM (trained with skipping)` is the reimplementation trained on the samples of occupied grid cells only (beyond the paper); each folder holds its config, curve, figures, `renderers.csv` and `novel_views.csv`. `paper_*` columns are the paper's figures for reference: 17.35 dB at 5.22 FPS on a T4 for the reimplementation (its code logged 16.35 dB), about 23.4 dB for the original authors' model with 12,000 samples and far longer training.",
+    )?;
+    let path = dir.join("renderers.csv");
+    crate::report::table::write_table(
+        &path,
+        &renderers,
+        "FFKSM: dense marching against the accelerated marcher",
+        "Same models, same test images. `fewer_evaluations`: dense marching's network evaluations per image over this renderer's (grid probes included); `psnr_db_vs_dense`: the two renderers' images compared directly. Images/s: median per image after a warm-up image, batch 1.",
+    )?;
+    let path = dir.join("novel_views.csv");
+    crate::report::table::write_table(
+        &path,
+        &novel,
+        "FFKSM: views it was never trained on",
+        "Cameras orbited about the world z axis, against the simulator's images from there; `view_blind_*` offers the training camera's true silhouette as the prediction (the best a 2-D decoder can do).",
+    )?;
+    let summary: Vec<String> = rows
+        .iter()
+        .map(|r| {
+            format!(
+                "{}: PSNR {:.2} dB, IoU {:.3}, {:.2} img/s",
+                r.model, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
+            )
+        })
+        .collect();
+    Ok(summary.join("; "))
+}
+
+/// K-3DGS: isotropic Gaussians with the reimplementation's compositing and with alpha
+/// compositing, one row each.
+pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let mut rows = Vec::new();
+    let mut speed = Vec::new();
+    for (sub, cfg) in [
+        ("isotropic", K3dgsConfig::isotropic(&opts.preset)?),
+        (
+            "isotropic_alpha",
+            K3dgsConfig::isotropic_alpha(&opts.preset)?,
+        ),
+        ("anisotropic", K3dgsConfig::anisotropic(&opts.preset)?),
+    ] {
+        let out =
+            crate::self_models::k3dgs::run(&opts.apply_k3dgs(cfg), &dir.join(sub), opts.device)?;
+        rows.push(out.result);
+        speed.extend(out.speed);
+    }
+    write_rows(
+        dir,
+        &rows,
+        "K-3DGS: Gaussians on the robot's kinematic chain",
+        "One row per model; each folder holds its config, curve, `qualitative.png`, `gaussians.png` (centres over the true silhouette) and `render_speed.csv`. PSNR over all test images (the paper's 17.01 dB was over all 400). `paper_*` columns: the paper's figures on a T4, for reference.",
+    )?;
+    let path = dir.join("render_speed.csv");
+    crate::report::table::write_table(
+        &path,
+        &speed,
+        "K-3DGS: culled against dense splatting",
+        "Images/s, median of synchronised timed calls after warm-up. Dense evaluates every (Gaussian, pixel) pair (one timed call per batch size, 8 images at a time); culled only pairs within 3 standard deviations.",
+    )?;
+    Ok(summary(&rows))
+}
+
+fn ablation(a: Ablation, opts: &RunOptions, dir: &Path) -> Result<String> {
+    let base = opts.apply(DecoderRunConfig::neurokin(&opts.preset)?);
+    let rows = run_ablation(a, &base, dir, opts.device, opts.resume)?;
+    Ok(summary(&rows))
+}
+
+fn run_ablation_noise(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Noise, opts, dir)
+}
+fn run_ablation_depth(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Depth, opts, dir)
+}
+fn run_ablation_latent(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::Latent, opts, dir)
+}
+fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
+    ablation(Ablation::DataScale, opts, dir)
+}
+
+/// The inverse-kinematics experiments train no self-model: the dataset, step and resume
+/// switches do not apply to them, and say so rather than being ignored.
+fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
+    let given: Vec<&str> = [
+        (opts.paper_compatible, "--paper-compatible"),
+        (opts.resume, "--resume"),
+        (opts.steps.is_some(), "--steps"),
+    ]
+    .into_iter()
+    .filter_map(|(on, flag)| on.then_some(flag))
+    .collect();
+    if given.is_empty() {
+        Ok(())
+    } else {
+        Err(crate::Error::Config(format!(
+            "{} does not apply to {name} (its presets set the iterations and epochs)",
+            given.join(", ")
+        )))
+    }
+}
+
+/// Table II of the EMSSL paper: every inverse-kinematics method in both joint ranges.
+pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(
+        &RunOptions {
+            resume: false,
+            ..opts.clone()
+        },
+        "emssl_table2",
+    )?;
+    let cfg = IkComparisonConfig::named(&opts.preset)?;
+    let (robot, name) = opts.ik_robot()?;
+    let rows =
+        crate::studies::emssl_table2::run(&cfg, &robot, &name, dir, opts.device, opts.resume)?;
+    Ok(rows
+        .iter()
+        .map(|r| {
+            format!(
+                "+-{:.0} {}: {:.2} cm mean, {:.2} median, {:.0}/s",
+                r.range_deg, r.method, r.mean_cm, r.median_cm, r.solutions_per_s
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; "))
+}
+
+/// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
+pub fn run_emssl_study(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(
+        &RunOptions {
+            resume: false,
+            ..opts.clone()
+        },
+        "emssl_study",
+    )?;
+    let cfg = crate::studies::emssl_study::StudyConfig::preset(&opts.preset)?;
+    let (robot, _) = opts.ik_robot()?;
+    crate::studies::emssl_study::run(&cfg, &robot, dir, opts.device, opts.resume)
+}
+
+/// Figure 6 of the EMSSL paper: EMSSL's test error against iteration, stopping off.
+pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_learning_curve")?;
+    let base = IkComparisonConfig::preset(&opts.preset)?;
+    let iterations = if opts.preset == "quick" { 8 } else { 40 };
+    let cfg = crate::studies::emssl_learning_curve::config(&base, iterations);
+    let (robot, name) = opts.ik_robot()?;
+    crate::studies::emssl_learning_curve::run(&cfg, &base.emssl, &robot, &name, dir, opts.device)
+}
+
+/// Table III and Figure 7 of the EMSSL paper: the sampling phase's time under each strategy.
+pub fn run_emssl_sampling_speed(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_sampling_speed")?;
+    let mut cfg = crate::studies::emssl_sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
+    if let Some(l) = &opts.latencies {
+        cfg.latencies = l.clone();
+    }
+    let (robot, name) = opts.ik_robot()?;
+    crate::studies::emssl_sampling_speed::run(&cfg, &robot, &name, dir, opts.device)
+}
+
+/// Table IV of the EMSSL paper: adapting the inverse model to a changed arm, two approaches.
+pub fn run_emssl_adaptation(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(opts, "emssl_adaptation")?;
+    let cfg = crate::studies::emssl_adaptation::AdaptationConfig::preset(&opts.preset)?;
+    let robot = if opts.robot.is_some() || opts.urdf.is_some() {
+        Some(opts.ik_robot()?)
+    } else {
+        None
+    };
+    crate::studies::emssl_adaptation::run(&cfg, robot, dir, opts.device)
+}
+
+fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let rows = crate::studies::table1::run(opts, dir, EXPERIMENTS)?;
+    Ok(summary(&rows))
+}
+
+/// Look an experiment up by name.
+pub fn find(name: &str) -> Result<&'static Experiment> {
+    EXPERIMENTS.iter().find(|e| e.name == name).ok_or_else(|| {
+        crate::Error::Config(format!(
+            "no experiment named \"{name}\" (known: {})",
+            EXPERIMENTS
+                .iter()
+                .map(|e| e.name)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ))
+    })
+}
+
+/// Every experiment, in the order `reproduce` runs them.
+pub const EXPERIMENTS: &[Experiment] = &[
+    Experiment {
+        name: "dataset",
+        about: "the papers' 2,000-sample Lorenz dataset of the 4-DOF arm (silhouettes, depth, angles)",
+        default_dir: "data",
+        presets: &["paper", "quick"],
+        in_table1: false,
+        takes_robot: false,
+        run: run_dataset,
+    },
+    Experiment {
+        name: "mesh_fidelity",
+        about: "silhouette IoU of the built-in arm4 against the mesh robot (and PyBullet)",
+        default_dir: "reports/mesh_fidelity",
+        presets: &["paper", "quick"],
+        in_table1: false,
+        takes_robot: false,
+        run: run_mesh_fidelity,
+    },
+    Experiment {
+        name: "neurokin",
+        about: "NeuroKin, the direct joint-angle-to-silhouette decoder (code's and text's architectures)",
+        default_dir: "reports/neurokin",
+        presets: DECODER_PRESETS,
+        in_table1: true,
+        takes_robot: false,
+        run: run_neurokin,
+    },
+    Experiment {
+        name: "resneurokin_d",
+        about: "ResNeuroKin-D: residual decoder with a metric depth head",
+        default_dir: "reports/resneurokin_d",
+        presets: DECODER_PRESETS,
+        in_table1: true,
+        takes_robot: false,
+        run: run_resneurokin_d,
+    },
+    Experiment {
+        name: "ffksm",
+        about: "FFKSM, the occupancy-field self-model: both implementations, dense and accelerated ray marching, novel views",
+        default_dir: "reports/ffksm",
+        presets: FFKSM_PRESETS,
+        in_table1: true,
+        takes_robot: false,
+        run: run_ffksm,
+    },
+    Experiment {
+        name: "k3dgs",
+        about: "K-3DGS: Gaussians on the kinematic chain, splatted (culled and dense), two compositing rules",
+        default_dir: "reports/k3dgs",
+        presets: K3DGS_PRESETS,
+        in_table1: true,
+        takes_robot: false,
+        run: run_k3dgs,
+    },
+    Experiment {
+        name: "ablation_noise",
+        about: "NeuroKin ablation: input noise sigma 0 vs 0.01",
+        default_dir: "reports/ablation_noise",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        takes_robot: false,
+        run: run_ablation_noise,
+    },
+    Experiment {
+        name: "ablation_depth",
+        about: "NeuroKin ablation: 2, 4 and 6 transposed convolutions",
+        default_dir: "reports/ablation_depth",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        takes_robot: false,
+        run: run_ablation_depth,
+    },
+    Experiment {
+        name: "ablation_latent",
+        about: "NeuroKin ablation: latent width 256, 512, 1024, 2048",
+        default_dir: "reports/ablation_latent",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        takes_robot: false,
+        run: run_ablation_latent,
+    },
+    Experiment {
+        name: "ablation_data_scale",
+        about: "NeuroKin ablation: 400, 2,000 and 12,000 samples",
+        default_dir: "reports/ablation_data_scale",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        takes_robot: false,
+        run: run_ablation_data_scale,
+    },
+    Experiment {
+        name: "emssl_table2",
+        about: "EMSSL paper Table II: learned inverse kinematics (EMSSL, DRL, DSL, CGAN) trained to convergence (preset paper-schedule: fixed epochs), a many-solution flow and a numerical solver, two joint ranges (--resume reuses finished methods)",
+        default_dir: "reports/emssl_table2",
+        presets: TABLE2_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_table2,
+    },
+    Experiment {
+        name: "emssl_learning_curve",
+        about: "EMSSL paper Figure 6: EMSSL's test error against iteration (stopping off), two joint ranges",
+        default_dir: "reports/emssl_learning_curve",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_learning_curve,
+    },
+    Experiment {
+        name: "emssl_study",
+        about: "What limits EMSSL: learning-rate schedule, exploration noise, warm start, batch, epochs, data kept, wrapped output; one knob at a time, both ranges (--resume keeps finished rows)",
+        default_dir: "reports/emssl_study",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_study,
+    },
+    Experiment {
+        name: "emssl_sampling_speed",
+        about: "EMSSL paper Table III and Figure 7: the sampling phase under batch inference and a parallel forward model, against the machine's peak",
+        default_dir: "reports/emssl_sampling_speed",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_sampling_speed,
+    },
+    Experiment {
+        name: "emssl_adaptation",
+        about: "EMSSL paper Table IV: fast adaptation to lengthened links (and a bent link) by learned link parameters or the changed arm itself, UR5 and arm4",
+        default_dir: "reports/emssl_adaptation",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        run: run_emssl_adaptation,
+    },
+    Experiment {
+        name: "table1",
+        about: "Table I: every self-model on the same dataset, quality against speed, Pareto plot",
+        default_dir: "reports/table1",
+        presets: DECODER_PRESETS,
+        in_table1: false,
+        takes_robot: false,
+        run: run_table1,
+    },
+];

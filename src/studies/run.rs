@@ -1,0 +1,125 @@
+//! What every study shares: how it is asked to run ([`RunOptions`]), what the registry knows
+//! of it ([`Experiment`]) and how self-model rows are written.
+
+use std::path::Path;
+
+use crate::core::device::DeviceChoice;
+use crate::core::error::Result;
+use crate::report::table::{write_csv, write_markdown_report};
+use crate::self_models::decoder_run::DecoderRunConfig;
+use crate::self_models::ffksm::FfksmConfig;
+use crate::self_models::k3dgs::K3dgsConfig;
+use crate::self_models::result::ModelResult;
+
+/// How to run an experiment: the preset and the switches every experiment understands.
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub preset: String,
+    pub device: DeviceChoice,
+    /// Train and test on the paper-compatible dataset (the ground-plane artefact).
+    pub paper_compatible: bool,
+    /// Continue from the checkpoints in the output folder.
+    pub resume: bool,
+    /// Override the training steps (a shortened run says so in its results).
+    pub steps: Option<usize>,
+    /// Where experiments may already have written their results (`reproduce`'s root): `table1`
+    /// gathers rows found there, of the same preset, dataset and steps, instead of training
+    /// the same models a second time.
+    pub reuse_root: Option<std::path::PathBuf>,
+    /// The arm of the inverse-kinematics experiments: a built-in one or a URDF (default ur5).
+    pub robot: Option<crate::sim::robots::BuiltinRobot>,
+    pub urdf: Option<std::path::PathBuf>,
+    /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
+    pub latencies: Option<Vec<crate::ik::sampling_pass::Latency>>,
+}
+
+impl RunOptions {
+    /// A preset with the defaults: CPU, clean dataset, fresh run.
+    pub fn preset(preset: &str) -> Self {
+        RunOptions {
+            preset: preset.into(),
+            device: DeviceChoice::Cpu,
+            paper_compatible: false,
+            resume: false,
+            steps: None,
+            reuse_root: None,
+            robot: None,
+            urdf: None,
+            latencies: None,
+        }
+    }
+
+    /// The arm of the inverse-kinematics experiments and its name for reports.
+    pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
+        match (&self.urdf, self.robot) {
+            (Some(path), _) => Ok((
+                crate::sim::urdf_loader::load_urdf(path, nalgebra::Isometry3::identity())?,
+                path.display().to_string(),
+            )),
+            (None, robot) => {
+                let r = robot.unwrap_or(crate::sim::robots::BuiltinRobot::Ur5);
+                Ok((r.load(), r.name().to_string()))
+            }
+        }
+    }
+
+    /// Apply the switches to a decoder config.
+    pub fn apply(&self, cfg: DecoderRunConfig) -> DecoderRunConfig {
+        let mut cfg = cfg.paper_compatible(self.paper_compatible);
+        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
+        cfg
+    }
+
+    /// Apply the switches to an FFKSM config.
+    pub fn apply_ffksm(&self, cfg: FfksmConfig) -> FfksmConfig {
+        let mut cfg = cfg.paper_compatible(self.paper_compatible);
+        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
+        cfg
+    }
+
+    /// Apply the switches to a K-3DGS config (`--resume` does not apply: a run takes seconds
+    /// to minutes and its Gaussians change in number, so it keeps no checkpoints).
+    pub fn apply_k3dgs(&self, cfg: K3dgsConfig) -> K3dgsConfig {
+        let mut cfg = cfg.paper_compatible(self.paper_compatible);
+        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
+        cfg
+    }
+
+    /// `--steps N`: set `steps` and say so in `note`; returns the override, if any.
+    fn override_steps(&self, steps: &mut usize, note: &mut String) -> Option<usize> {
+        let new = self.steps.filter(|s| s != steps)?;
+        let msg = format!("{new} steps instead of the preset's {steps}");
+        *note = if note.is_empty() {
+            msg
+        } else {
+            format!("{note}; {msg}")
+        };
+        *steps = new;
+        Some(new)
+    }
+}
+
+/// One experiment.
+pub struct Experiment {
+    /// The binary's name (`cargo run --release --bin NAME`).
+    pub name: &'static str,
+    /// One line: what it reproduces.
+    pub about: &'static str,
+    /// Where `reproduce` writes it, relative to the repository root.
+    pub default_dir: &'static str,
+    /// The presets it understands (`paper` and `quick` always).
+    pub presets: &'static [&'static str],
+    /// Whether it trains self-models whose rows belong in Table I.
+    pub in_table1: bool,
+    /// Whether it accepts `--robot` / `--urdf` (the inverse-kinematics experiments).
+    pub takes_robot: bool,
+    /// Run into a folder; returns a one-line summary.
+    pub run: fn(opts: &RunOptions, dir: &Path) -> Result<String>,
+}
+
+/// Write `rows` as `dir/results.csv` and `results.md`.
+pub fn write_rows(dir: &Path, rows: &[ModelResult], title: &str, note: &str) -> Result<()> {
+    let csv = dir.join("results.csv");
+    write_csv(&csv, rows)?;
+    write_markdown_report(&csv, title, note)
+}

@@ -1,0 +1,101 @@
+//! Table I of the self-modeling paper: every self-model in the zoo trained on the same
+//! dataset, one row each, and the speed-quality Pareto plot.
+//!
+//! The zoo is the registry: every experiment marked `in_table1` runs into `dir/<name>/` and
+//! its `results.csv` rows are gathered, so a new self-model (FFKSM, K-3DGS) appears here by
+//! registering itself, with no edit to this file. Under `reproduce` and with `table1 --reuse`,
+//! rows the experiments have written into their own folders under `reports/` (same preset,
+//! dataset and steps) are gathered instead of trained again, from the experiment's
+//! `results.csv` or, while it is still running, from those of the models it has finished.
+
+use std::path::Path;
+
+use crate::core::error::Result;
+use crate::report::figures::pareto_plot;
+use crate::self_models::result::{ModelResult, pareto_points, read_results};
+use crate::studies::run::{Experiment, RunOptions, write_rows};
+
+/// Run the zoo (the `experiments` marked `in_table1`) on `opts` into `dir` and write the table and the Pareto plot.
+pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<Vec<ModelResult>> {
+    let mut rows = Vec::new();
+    for e in experiments.iter().filter(|e| e.in_table1) {
+        if let Some(found) = reusable_rows(opts, e.default_dir)? {
+            eprintln!(
+                "table1: {} ({} preset): {} rows reused from {}",
+                e.name,
+                opts.preset,
+                found.len(),
+                e.default_dir
+            );
+            rows.extend(found);
+            continue;
+        }
+        let sub = dir.join(e.name);
+        eprintln!("table1: {} ({} preset)", e.name, opts.preset);
+        (e.run)(opts, &sub)?;
+        rows.extend(read_results(&sub.join("results.csv"))?);
+    }
+    write_rows(
+        dir,
+        &rows,
+        "Table I: self-models of the 4-DOF arm, quality against speed",
+        &format!(
+            "All models trained and tested on the same dataset ({} preset). PSNR as the paper computes it (per image, then averaged) on the first 100 test images and on the whole test set; IoU of silhouettes thresholded at 0.5. Inference speed: median of synchronised timed calls after warm-up, at batch 1 (latency) and batch 256. `train_img_per_s` is training throughput, which is what the paper's \"FPS\" column measured; the paper's figures (`paper_*`) were taken on an NVIDIA T4 and are shown for reference only. Each model's folder holds its config, training curve and qualitative figure.",
+            opts.preset
+        ),
+    )?;
+    let points = pareto_points(&rows, |m| m.to_string());
+    pareto_plot(
+        &dir.join("pareto.png"),
+        "Self-models: quality against inference speed",
+        "PSNR on the test set (dB)",
+        &points,
+    )?;
+    Ok(rows)
+}
+
+/// The rows under `opts.reuse_root/default_dir/results.csv`, if that file exists and every row
+/// has this run's preset, dataset and step count (`--steps N`: N steps; none: the preset's,
+/// so a shortened run is never taken for a full one). Without that file (an experiment of
+/// several models still running, FFKSM's paper preset), the matching rows of its models'
+/// own `default_dir/*/results.csv`, if any: Table I then holds the models that are done.
+fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<ModelResult>>> {
+    let Some(root) = &opts.reuse_root else {
+        return Ok(None);
+    };
+    let dataset = if opts.paper_compatible {
+        "paper_compatible"
+    } else {
+        "clean"
+    };
+    let matches = |r: &ModelResult| {
+        r.preset == opts.preset
+            && r.dataset == dataset
+            && match opts.steps {
+                Some(s) => r.train_steps == s,
+                None => r.steps_override.is_none(),
+            }
+    };
+    let dir = root.join(default_dir);
+    let path = dir.join("results.csv");
+    if path.is_file() {
+        let rows = read_results(&path)?;
+        return Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows));
+    }
+    let mut subdirs: Vec<std::path::PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries.filter_map(|e| e.ok().map(|e| e.path())).collect(),
+        Err(_) => return Ok(None),
+    };
+    subdirs.sort();
+    let mut rows = Vec::new();
+    for sub in subdirs {
+        let path = sub.join("results.csv");
+        if path.is_file() {
+            let found = read_results(&path)?;
+            if !found.is_empty() && found.iter().all(matches) {
+                rows.extend(found);
+            }
+        }
+    }
+    Ok((!rows.is_empty()).then_some(rows))
+}
