@@ -3,9 +3,10 @@
 //! ResNeuroKin-D) and their run (`decoder_run`), FFKSM (an occupancy field, ray marched) and
 //! K-3DGS (Gaussians on the links, splatted), and `result`, the row of Table I each reports.
 
-pub mod decoder_run;
 pub mod ffksm;
+pub mod harness;
 pub mod k3dgs;
+pub mod mean_silhouette;
 pub mod neurokin;
 pub mod resneurokin_d;
 pub mod result;

@@ -134,7 +134,12 @@ fn no_module_imports_one_that_imports_it_back() {
 fn the_cycle_finder_finds_a_cycle() {
     let mut graph = BTreeMap::new();
     let edge = |a: &str, b: &[&str]| (a.to_string(), b.iter().map(|s| s.to_string()).collect());
-    graph.extend([edge("a", &["b"]), edge("b", &["c"]), edge("c", &["a"]), edge("d", &["a"])]);
+    graph.extend([
+        edge("a", &["b"]),
+        edge("b", &["c"]),
+        edge("c", &["a"]),
+        edge("d", &["a"]),
+    ]);
     assert_eq!(cycles(&graph), vec![vec!["a", "b", "c"]]);
 }
 

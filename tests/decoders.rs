@@ -6,8 +6,9 @@ mod common;
 use burn::tensor::Device;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::preset::Preset;
-use selfmodel::eval::evaluation::{Predictions, iou, psnr_db, score};
-use selfmodel::self_models::decoder_run::{DecoderRunConfig, run};
+use selfmodel::eval::evaluation::{Predictions, score};
+use selfmodel::self_models::harness::{SelfModel, SelfModelRun, run};
+use selfmodel::self_models::mean_silhouette::MeanSilhouette;
 use selfmodel::self_models::neurokin::NeuroKinConfig;
 use selfmodel::self_models::resneurokin_d::ResNeuroKinDConfig;
 
@@ -57,23 +58,16 @@ fn output_shapes_are_the_image_size() {
     }
 }
 
-/// PSNR and IoU of always predicting the mean training image, on the test set.
-fn constant_predictor(cfg: &DecoderRunConfig) -> (f64, f64) {
-    let (data, train, test) = cfg.data.load().unwrap();
-    let px = data.width * data.height;
-    let mut mean = vec![0f32; px];
-    for i in train.clone() {
-        for (m, &v) in mean.iter_mut().zip(data.image(i)) {
-            *m += v as f32 / 255.0 / train.len() as f32;
-        }
-    }
-    let (mut psnr, mut iou_sum) = (0.0, 0.0);
-    for i in test.clone() {
-        let t: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
-        psnr += psnr_db(&mean, &t) / test.len() as f64;
-        iou_sum += iou(&mean, &t) / test.len() as f64;
-    }
-    (psnr, iou_sum)
+/// PSNR and IoU of the best constant image (MeanSilhouette) on the run's data and test set.
+fn constant_predictor<M: SelfModel>(cfg: &SelfModelRun<M>) -> (f64, f64) {
+    let mut constant = MeanSilhouette::preset_run(&cfg.preset).unwrap();
+    constant.data = cfg.data.clone();
+    constant.model.image = cfg.model.image();
+    let dir = common::tempdir();
+    let q = run(&constant, dir.path(), DeviceChoice::Cpu, false)
+        .unwrap()
+        .quality;
+    (q.psnr_db_test, q.iou_test)
 }
 
 /// Training seeds the device's global RNG: tests that train run one at a time so each gets
@@ -84,7 +78,7 @@ static TRAINING: std::sync::Mutex<()> = std::sync::Mutex::new(());
 fn tiny_neurokin_beats_a_constant_predictor() {
     let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());
     let dir = common::tempdir();
-    let mut cfg = DecoderRunConfig::neurokin("quick").unwrap();
+    let mut cfg = selfmodel::self_models::neurokin::neurokin_run("quick").unwrap();
     cfg.train.steps = 1000;
     let out = run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
     // The mean training image is a strong constant on the quick set (its 200 Lorenz samples
@@ -117,7 +111,7 @@ fn tiny_neurokin_beats_a_constant_predictor() {
 fn tiny_resneurokin_d_learns_silhouette_and_metric_depth() {
     let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());
     let dir = common::tempdir();
-    let mut cfg = DecoderRunConfig::resneurokin_d("quick").unwrap();
+    let mut cfg = selfmodel::self_models::resneurokin_d::resneurokin_d_run("quick").unwrap();
     cfg.train.steps = 400;
     let out = run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
     let (c_psnr, c_iou) = constant_predictor(&cfg);

@@ -38,13 +38,13 @@ use crate::data::dataset::Dataset;
 use crate::eval::evaluation::{Predictions, Quality, iou, psnr_db, score};
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::write_table;
-use crate::self_models::decoder_run::{DataSpec, device_set, host_targets, qualitative_figure};
 use crate::self_models::ffksm::accelerated_marcher::{
     AcceleratedConfig, render_accelerated, render_silhouette_skipping,
 };
 use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
+use crate::self_models::harness::{DataSpec, device_set, host_targets, qualitative_figure};
 use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
 use crate::train::trainer::{

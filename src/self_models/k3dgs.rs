@@ -27,7 +27,7 @@ use crate::core::error::{Error, Result};
 use crate::eval::evaluation::{Predictions, score};
 use crate::eval::inference_speed::{SpeedConfig, measure};
 use crate::report::table::write_table;
-use crate::self_models::decoder_run::{DataSpec, device_set, host_targets, qualitative_figure};
+use crate::self_models::harness::{DataSpec, device_set, host_targets, qualitative_figure};
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::{ModelResult, PaperReference};

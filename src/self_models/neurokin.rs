@@ -30,6 +30,10 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::conv2d_layer;
 use crate::kernels::upconv::{UpConv, UpConvConfig};
+use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
+use crate::self_models::result::PaperReference;
+use crate::train::losses::{bce_with_logits, mse};
+use crate::train::trainer::{TrainConfig, train};
 
 /// Which of the two published NeuroKin architectures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -58,6 +62,20 @@ pub struct NeuroKinConfig {
     pub upsampling_layers: usize,
     /// Output image size `[height, width]` in pixels (evaluation size).
     pub image: [usize; 2],
+    /// The training loss (the notebook's BCE; the paper text's MSE).
+    #[serde(default)]
+    pub loss: NeuroKinLoss,
+}
+
+/// NeuroKin's training loss on the silhouette.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NeuroKinLoss {
+    /// Binary cross-entropy (the notebook's).
+    #[default]
+    Bce,
+    /// Mean squared error on the probabilities (the paper text's).
+    Mse,
 }
 
 impl Preset for NeuroKinConfig {
@@ -70,6 +88,7 @@ impl Preset for NeuroKinConfig {
             seed_channels: 256,
             upsampling_layers: 4,
             image: [100, 100],
+            loss: NeuroKinLoss::Bce,
         }
     }
 
@@ -95,6 +114,7 @@ impl NeuroKinConfig {
             seed_channels: 256,
             upsampling_layers: 4,
             image: [100, 100],
+            loss: NeuroKinLoss::Mse,
         }
     }
 
@@ -275,4 +295,89 @@ impl NeuroKin {
     pub fn predict(&self, angles: Tensor<2>) -> Tensor<4> {
         resize_bilinear(sigmoid(self.forward(angles)), self.image)
     }
+}
+
+impl Render for NeuroKin {
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
+        (self.predict(angles), None)
+    }
+}
+
+impl SelfModel for NeuroKinConfig {
+    fn image(&self) -> [usize; 2] {
+        self.image
+    }
+
+    fn fit(&self, fit: &Fit) -> Result<Trained> {
+        let model = self.init(fit.train_device, fit.train.seed)?;
+        let parameters = model.trainable_params();
+        let native = self.native_size();
+        let mut train_set = fit.train_set.clone();
+        if native != self.image {
+            train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
+        }
+        let loss = self.loss;
+        let (model, log) = train(
+            model,
+            &train_set,
+            fit.train,
+            Some(fit.plan),
+            fit.label,
+            |m, b| {
+                let z = m.forward(b.inputs.clone());
+                match loss {
+                    NeuroKinLoss::Mse => mse(sigmoid(z), b.targets[0].clone()),
+                    NeuroKinLoss::Bce => bce_with_logits(z, b.targets[0].clone()),
+                }
+            },
+        )?;
+        Ok(Trained {
+            renderer: Box::new(model.valid()),
+            parameters,
+            log,
+        })
+    }
+
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
+        neurokin_run(preset)
+    }
+}
+
+/// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
+/// N(0, 0.01) noise on the angles in degrees.
+pub fn neurokin_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
+    let mut model = NeuroKinConfig::preset(model_preset(preset))?;
+    model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
+    Ok(
+        SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?
+            .shorten(800, 32),
+    )
+}
+
+/// The paper text's NeuroKin: 64x64 output, MSE, batch 128, 50 epochs.
+pub fn neurokin64_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
+    let quick = preset == "quick";
+    let mut model = NeuroKinConfig::text64();
+    model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
+    if quick {
+        model.latent = 64;
+        model.seed_channels = 32;
+        model.upsampling_layers = 3;
+    }
+    let mut cfg = SelfModelRun::new(
+        preset,
+        "NeuroKin-64 (paper text)",
+        model,
+        256,
+        PaperReference::neurokin(),
+    )?;
+    cfg.train.batch = if quick { 32 } else { 128 };
+    cfg.train.steps = TrainConfig::steps_for_epochs(
+        if quick { 30 } else { 50 },
+        cfg.data.dataset.train,
+        cfg.train.batch,
+    );
+    cfg.train.grad_clip_norm = None;
+    let steps = cfg.train.steps / 4;
+    Ok(cfg.shorten(steps, 128))
 }

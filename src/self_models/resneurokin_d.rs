@@ -23,7 +23,11 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::conv2d_layer;
 use crate::kernels::upconv::{UpConv, UpConvConfig};
+use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::neurokin::resize_bilinear;
+use crate::self_models::result::PaperReference;
+use crate::train::losses::{bce, l1_masked, soft_dice};
+use crate::train::trainer::train;
 
 /// ResNeuroKin-D's architecture. Presets: `paper` (the code's facts), `quick` (tiny).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -37,6 +41,16 @@ pub struct ResNeuroKinDConfig {
     pub head: [usize; 2],
     /// Output image size `[height, width]`.
     pub image: [usize; 2],
+    /// The loss is `(BCE + soft Dice) / 2 + depth_weight * L1(depth)`. Our L1 is over the
+    /// robot pixels of the true silhouette: over all pixels (the notebook's blob target), the
+    /// 95% background pushes the ReLU depth head negative everywhere and it dies (measured:
+    /// it predicted 0 on every pixel).
+    #[serde(default = "notebook_depth_weight")]
+    pub depth_weight: f64,
+}
+
+fn notebook_depth_weight() -> f64 {
+    0.1
 }
 
 impl Preset for ResNeuroKinDConfig {
@@ -47,6 +61,7 @@ impl Preset for ResNeuroKinDConfig {
             channels: vec![512, 256, 128, 64],
             head: [32, 16],
             image: [100, 100],
+            depth_weight: notebook_depth_weight(),
         }
     }
 
@@ -57,6 +72,7 @@ impl Preset for ResNeuroKinDConfig {
             channels: vec![32, 16, 8],
             head: [8, 8],
             image: [32, 32],
+            depth_weight: notebook_depth_weight(),
         }
     }
 }
@@ -224,4 +240,64 @@ impl ResNeuroKinD {
         let depth = resize_bilinear(relu(self.depth_head.forward(x)), self.image);
         (silhouette, depth)
     }
+}
+
+impl Render for ResNeuroKinD {
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
+        let (s, d) = self.forward(angles);
+        (s, Some(d))
+    }
+}
+
+/// The robot pixels of a silhouette batch (1 where the true silhouette is >= 0.5).
+fn robot_mask(silhouettes: &Tensor<4>) -> Tensor<4> {
+    silhouettes.clone().greater_equal_elem(0.5).float()
+}
+
+impl SelfModel for ResNeuroKinDConfig {
+    fn image(&self) -> [usize; 2] {
+        self.image
+    }
+
+    fn fit(&self, fit: &Fit) -> Result<Trained> {
+        let model = self.init(fit.train_device, fit.train.seed)?;
+        let parameters = model.trainable_params();
+        let w = self.depth_weight;
+        let (model, log) = train(
+            model,
+            fit.train_set,
+            fit.train,
+            Some(fit.plan),
+            fit.label,
+            |m, b| {
+                let (s, d) = m.forward(b.inputs.clone());
+                let y = b.targets[0].clone();
+                let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
+                sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
+            },
+        )?;
+        Ok(Trained {
+            renderer: Box::new(model.valid()),
+            parameters,
+            log,
+        })
+    }
+
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
+        resneurokin_d_run(preset)
+    }
+}
+
+/// ResNeuroKin-D as the notebook trained it, with the simulator's metric depth.
+pub fn resneurokin_d_run(preset: &str) -> Result<SelfModelRun<ResNeuroKinDConfig>> {
+    let mut model = ResNeuroKinDConfig::preset(model_preset(preset))?;
+    model.image = SelfModelRun::<ResNeuroKinDConfig>::image(preset)?;
+    Ok(SelfModelRun::new(
+        preset,
+        "ResNeuroKin-D",
+        model,
+        64,
+        PaperReference::resneurokin_d(),
+    )?
+    .shorten(30, 16))
 }

@@ -17,7 +17,11 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::figures::{pareto_plot, training_curves};
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::decoder_run::{DecoderModel, DecoderRunConfig, run};
+use crate::self_models::harness::{SelfModelRun, run};
+use crate::self_models::neurokin::NeuroKinConfig;
+
+/// One NeuroKin run, as the ablations vary it.
+type NeuroKinRun = SelfModelRun<NeuroKinConfig>;
 use crate::self_models::result::{ModelResult, PaperReference, pareto_points};
 
 /// Which ablation.
@@ -32,16 +36,9 @@ pub enum Ablation {
 /// One setting of an ablation: a label, how it changes the NeuroKin config, the paper's figure.
 pub struct Setting {
     pub label: String,
-    pub apply: Box<dyn Fn(&mut DecoderRunConfig)>,
+    pub apply: Box<dyn Fn(&mut NeuroKinRun)>,
     pub paper_psnr_db: Option<f64>,
     pub paper_fps: Option<f64>,
-}
-
-fn neurokin_mut(cfg: &mut DecoderRunConfig) -> &mut crate::self_models::neurokin::NeuroKinConfig {
-    match &mut cfg.model {
-        DecoderModel::NeuroKin(m) => m,
-        DecoderModel::ResNeuroKinD(_) => unreachable!("ablations are of NeuroKin"),
-    }
 }
 
 impl Ablation {
@@ -68,7 +65,7 @@ impl Ablation {
         let s = |label: String,
                  p: Option<f64>,
                  f: Option<f64>,
-                 apply: Box<dyn Fn(&mut DecoderRunConfig)>| Setting {
+                 apply: Box<dyn Fn(&mut NeuroKinRun)>| Setting {
             label,
             apply,
             paper_psnr_db: p,
@@ -82,7 +79,7 @@ impl Ablation {
                         format!("sigma {sigma}"),
                         p,
                         None,
-                        Box::new(move |c: &mut DecoderRunConfig| c.train.input_noise = sigma),
+                        Box::new(move |c: &mut NeuroKinRun| c.train.input_noise = sigma),
                     )
                 })
                 .collect(),
@@ -97,9 +94,7 @@ impl Ablation {
                     format!("{layers} layers"),
                     p,
                     f,
-                    Box::new(move |c: &mut DecoderRunConfig| {
-                        neurokin_mut(c).upsampling_layers = layers
-                    }),
+                    Box::new(move |c: &mut NeuroKinRun| c.model.upsampling_layers = layers),
                 )
             })
             .collect(),
@@ -118,7 +113,7 @@ impl Ablation {
                         format!("latent {l}"),
                         p,
                         None,
-                        Box::new(move |c: &mut DecoderRunConfig| neurokin_mut(c).latent = l),
+                        Box::new(move |c: &mut NeuroKinRun| c.model.latent = l),
                     )
                 })
                 .collect()
@@ -137,7 +132,7 @@ impl Ablation {
                             format!("{size} samples"),
                             p,
                             None,
-                            Box::new(move |c: &mut DecoderRunConfig| {
+                            Box::new(move |c: &mut NeuroKinRun| {
                                 c.data.dataset.samples = max + test;
                                 c.data.dataset.train = max;
                                 c.data.train_samples = Some(size * 4 / 5);
@@ -160,7 +155,7 @@ impl Ablation {
 /// training curves and Pareto plot into `dir`.
 pub fn run_ablation(
     ablation: Ablation,
-    base: &DecoderRunConfig,
+    base: &NeuroKinRun,
     dir: &Path,
     device: DeviceChoice,
     resume: bool,

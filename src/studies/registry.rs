@@ -5,10 +5,12 @@
 
 use std::path::Path;
 
-use crate::self_models::decoder_run::{DECODER_PRESETS, DecoderRunConfig};
 use crate::self_models::ffksm::{FFKSM_PRESETS, FfksmConfig};
+use crate::self_models::harness::SELF_MODEL_PRESETS;
 use crate::self_models::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
-use crate::self_models::result::ModelResult;
+use crate::self_models::mean_silhouette::MeanSilhouette;
+use crate::self_models::neurokin::{neurokin_run, neurokin64_run};
+use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::studies::ablations::{Ablation, run_ablation};
 use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
 
@@ -16,7 +18,7 @@ use crate::core::error::Result;
 use crate::core::preset::Preset;
 use crate::data::dataset::{DatasetConfig, build_and_save};
 use crate::studies::mesh_fidelity::{self, FidelityConfig};
-pub use crate::studies::run::{Experiment, RunOptions, write_rows};
+pub use crate::studies::run::{Experiment, RunOptions, run_self_model, summary, write_rows};
 
 fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut cfg = DatasetConfig::preset(if opts.preset == "short" {
@@ -49,28 +51,16 @@ fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
     ))
 }
 
-fn summary(rows: &[ModelResult]) -> String {
-    rows.iter()
-        .map(|r| {
-            format!(
-                "{}: PSNR {:.2} dB (first 100) / {:.2} dB (test), IoU {:.3}, {:.0} img/s at batch 1",
-                r.model, r.psnr_db_first100, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("; ")
-}
-
 /// NeuroKin (the code's architecture) and NeuroKin-64 (the paper text's), one row each.
 pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut rows = Vec::new();
     for (sub, cfg) in [
-        ("neurokin", DecoderRunConfig::neurokin(&opts.preset)?),
-        ("neurokin64", DecoderRunConfig::neurokin64(&opts.preset)?),
+        ("neurokin", neurokin_run(&opts.preset)?),
+        ("neurokin64", neurokin64_run(&opts.preset)?),
     ] {
         let cfg = opts.apply(cfg);
         rows.push(
-            crate::self_models::decoder_run::run(&cfg, &dir.join(sub), opts.device, opts.resume)?
+            crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?
                 .result,
         );
     }
@@ -81,13 +71,6 @@ pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
         "One row per architecture; each folder holds its config, curve and figures. `paper_*` columns are the paper's published figures (its FPS was training throughput).",
     )?;
     Ok(summary(&rows))
-}
-
-/// ResNeuroKin-D with the simulator's metric depth.
-pub fn run_resneurokin_d(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let cfg = opts.apply(DecoderRunConfig::resneurokin_d(&opts.preset)?);
-    let out = crate::self_models::decoder_run::run(&cfg, dir, opts.device, opts.resume)?;
-    Ok(summary(std::slice::from_ref(&out.result)))
 }
 
 /// FFKSM: the reimplementation, the original authors' model, and the reimplementation trained
@@ -179,7 +162,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
 }
 
 fn ablation(a: Ablation, opts: &RunOptions, dir: &Path) -> Result<String> {
-    let base = opts.apply(DecoderRunConfig::neurokin(&opts.preset)?);
+    let base = opts.apply(neurokin_run(&opts.preset)?);
     let rows = run_ablation(a, &base, dir, opts.device, opts.resume)?;
     Ok(summary(&rows))
 }
@@ -333,20 +316,23 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "neurokin",
         about: "NeuroKin, the direct joint-angle-to-silhouette decoder (code's and text's architectures)",
         default_dir: "reports/neurokin",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: true,
         takes_robot: false,
         run: run_neurokin,
     },
-    Experiment {
-        name: "resneurokin_d",
-        about: "ResNeuroKin-D: residual decoder with a metric depth head",
-        default_dir: "reports/resneurokin_d",
-        presets: DECODER_PRESETS,
-        in_table1: true,
-        takes_robot: false,
-        run: run_resneurokin_d,
-    },
+    Experiment::self_model(
+        "resneurokin_d",
+        "ResNeuroKin-D: residual decoder with a metric depth head",
+        "reports/resneurokin_d",
+        run_self_model::<ResNeuroKinDConfig>,
+    ),
+    Experiment::self_model(
+        "mean_silhouette",
+        "the best constant image (mean training silhouette): the lower bound of Table I",
+        "reports/mean_silhouette",
+        run_self_model::<MeanSilhouette>,
+    ),
     Experiment {
         name: "ffksm",
         about: "FFKSM, the occupancy-field self-model: both implementations, dense and accelerated ray marching, novel views",
@@ -369,7 +355,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "ablation_noise",
         about: "NeuroKin ablation: input noise sigma 0 vs 0.01",
         default_dir: "reports/ablation_noise",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
         run: run_ablation_noise,
@@ -378,7 +364,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "ablation_depth",
         about: "NeuroKin ablation: 2, 4 and 6 transposed convolutions",
         default_dir: "reports/ablation_depth",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
         run: run_ablation_depth,
@@ -387,7 +373,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "ablation_latent",
         about: "NeuroKin ablation: latent width 256, 512, 1024, 2048",
         default_dir: "reports/ablation_latent",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
         run: run_ablation_latent,
@@ -396,7 +382,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "ablation_data_scale",
         about: "NeuroKin ablation: 400, 2,000 and 12,000 samples",
         default_dir: "reports/ablation_data_scale",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
         run: run_ablation_data_scale,
@@ -450,7 +436,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "table1",
         about: "Table I: every self-model on the same dataset, quality against speed, Pareto plot",
         default_dir: "reports/table1",
-        presets: DECODER_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
         run: run_table1,

@@ -6,8 +6,8 @@ use std::path::Path;
 use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::decoder_run::DecoderRunConfig;
 use crate::self_models::ffksm::FfksmConfig;
+use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
 use crate::self_models::k3dgs::K3dgsConfig;
 use crate::self_models::result::ModelResult;
 
@@ -63,8 +63,8 @@ impl RunOptions {
         }
     }
 
-    /// Apply the switches to a decoder config.
-    pub fn apply(&self, cfg: DecoderRunConfig) -> DecoderRunConfig {
+    /// Apply the switches to a self-model run.
+    pub fn apply<M: SelfModel>(&self, cfg: SelfModelRun<M>) -> SelfModelRun<M> {
         let mut cfg = cfg.paper_compatible(self.paper_compatible);
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
         cfg
@@ -100,6 +100,7 @@ impl RunOptions {
 }
 
 /// One experiment.
+#[derive(Clone, Copy)]
 pub struct Experiment {
     /// The binary's name (`cargo run --release --bin NAME`).
     pub name: &'static str,
@@ -122,4 +123,44 @@ pub fn write_rows(dir: &Path, rows: &[ModelResult], title: &str, note: &str) -> 
     let csv = dir.join("results.csv");
     write_csv(&csv, rows)?;
     write_markdown_report(&csv, title, note)
+}
+
+impl Experiment {
+    /// A self-model of Table I (run by [`run_self_model`]), written into `default_dir`.
+    pub const fn self_model(
+        name: &'static str,
+        about: &'static str,
+        default_dir: &'static str,
+        run: fn(&RunOptions, &Path) -> Result<String>,
+    ) -> Self {
+        Experiment {
+            name,
+            about,
+            default_dir,
+            presets: SELF_MODEL_PRESETS,
+            in_table1: true,
+            takes_robot: false,
+            run,
+        }
+    }
+}
+
+/// One self-model on its preset run ([`SelfModel::preset_run`]) through the harness.
+pub fn run_self_model<M: SelfModel>(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = opts.apply(M::preset_run(&opts.preset)?);
+    let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    Ok(summary(std::slice::from_ref(&out.result)))
+}
+
+/// One line per row: the model, its PSNR, IoU and speed.
+pub fn summary(rows: &[ModelResult]) -> String {
+    rows.iter()
+        .map(|r| {
+            format!(
+                "{}: PSNR {:.2} dB (first 100) / {:.2} dB (test), IoU {:.3}, {:.0} img/s at batch 1",
+                r.model, r.psnr_db_first100, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }

@@ -126,7 +126,7 @@ pub fn tempdir() -> TempDir {
 
 /// Mean PSNR (dB) of an all-black prediction on the first `n` test images of `spec` (all
 /// when `None`): the constant predictor a trained self-model must beat.
-pub fn black_psnr(spec: &selfmodel::self_models::decoder_run::DataSpec, n: Option<usize>) -> f64 {
+pub fn black_psnr(spec: &selfmodel::self_models::harness::DataSpec, n: Option<usize>) -> f64 {
     let (data, _, test) = spec.load().unwrap();
     let test = test.start..test.start + n.unwrap_or(test.len()).min(test.len());
     let px = data.width * data.height;

@@ -1,15 +1,17 @@
-//! Train, evaluate and report one direct decoder (NeuroKin, its text variant, ResNeuroKin-D):
-//! the logic behind the `neurokin` and `resneurokin_d` binaries, the ablations and `table1`.
+//! The one harness every self-model runs in: it renders the dataset, trains the model through
+//! [`SelfModel::fit`], predicts the test poses in batches, scores them, times inference, and
+//! writes the row of Table I ([`ModelResult`]) with its report. A self-model brings only what
+//! is its own: its config (with presets), its network and loss, and how it renders.
 //!
 //! A run writes into its folder: `config.json` (everything that defines it), `results.csv`
 //! and `results.md` (one [`ModelResult`] row), `curve.csv` and `training_curve.png`,
-//! `qualitative.png` (ground truth, prediction and error for six test poses, plus depth for
-//! ResNeuroKin-D), and `checkpoint/` (model, optimizer state, progress; `--resume` continues).
+//! `qualitative.png` (ground truth, prediction and error for six test poses, plus depth where
+//! the model predicts it), and `checkpoint/` (model, optimizer state, progress; `--resume`
+//! continues).
 
 use std::ops::Range;
 use std::path::Path;
 
-use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::core::atomic_file::write_json;
@@ -21,45 +23,51 @@ use crate::eval::evaluation::{Predictions, Quality, score};
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::neurokin::{NeuroKinConfig, resize_bilinear};
-use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
-use crate::train::losses::{bce, bce_with_logits, l1_masked, mse, soft_dice};
-use crate::train::trainer::{
-    CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device, train,
-};
+use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device};
 
-/// Which network.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DecoderModel {
-    NeuroKin(NeuroKinConfig),
-    ResNeuroKinD(ResNeuroKinDConfig),
+/// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
+/// it on the model's config; [`run`] does the rest.
+pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
+    /// The image it renders, `[height, width]` (the dataset's camera must match).
+    fn image(&self) -> [usize; 2];
+    /// Train on `fit.train_set` and hand back what renders.
+    fn fit(&self, fit: &Fit) -> Result<Trained>;
+    /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
+    where
+        Self: Sized;
 }
 
-impl DecoderModel {
-    fn image(&self) -> [usize; 2] {
-        match self {
-            DecoderModel::NeuroKin(c) => c.image,
-            DecoderModel::ResNeuroKinD(c) => c.image,
-        }
-    }
+/// What a self-model trains with.
+pub struct Fit<'a> {
+    /// On the training (autodiff) device: inputs `[n, dof]` joint angles in degrees, targets
+    /// silhouettes and depth (metres), each `[n, 1, H, W]`.
+    pub train_set: &'a TrainSet,
+    pub train: &'a TrainConfig,
+    /// Checkpoints (`--resume`), for the shared training loop.
+    pub plan: &'a CheckpointPlan,
+    /// The run's name, for progress bars.
+    pub label: &'a str,
+    /// Where the model trains (autodiff, seeded) and where the trained model renders.
+    pub train_device: &'a Device,
+    pub device: &'a Device,
 }
 
-/// Which loss (the notebooks' choices; `Mse` is the paper text's).
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DecoderLoss {
-    /// Binary cross-entropy on the silhouette.
-    Bce,
-    /// Mean squared error on the silhouette.
-    Mse,
-    /// `(BCE + soft Dice) / 2 + depth_weight * L1(depth)` (ResNeuroKin-D). Our L1 is over the
-    /// robot pixels of the true silhouette: over all pixels (the notebook's blob target), the
-    /// 95% background pushes the ReLU depth head negative everywhere and it dies (measured:
-    /// it predicted 0 on every pixel).
-    BceDiceDepth { depth_weight: f64 },
+/// A trained self-model.
+pub struct Trained {
+    pub renderer: Box<dyn Render>,
+    /// Trainable parameters (PyTorch's count).
+    pub parameters: usize,
+    pub log: TrainLog,
+}
+
+/// Rendering with a trained self-model.
+pub trait Render {
+    /// `[n, dof]` joint angles (degrees) -> silhouette probabilities in [0, 1]
+    /// `[n, 1, H, W]`, and depth in metres where the model predicts it.
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>);
 }
 
 /// The data a run trains and tests on.
@@ -136,15 +144,13 @@ impl DataSpec {
     }
 }
 
-/// Everything that defines one decoder run. Presets: see [`DecoderRunConfig::neurokin`] and
-/// friends; `quick` variants are tiny.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct DecoderRunConfig {
+/// Everything that defines one self-model run: the model's config and what every run shares.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SelfModelRun<M> {
     /// Row label (`NeuroKin`, `NeuroKin (sigma 0)`, ...).
     pub name: String,
     pub preset: String,
-    pub model: DecoderModel,
-    pub loss: DecoderLoss,
+    pub model: M,
     pub train: TrainConfig,
     pub data: DataSpec,
     /// PSNR is also reported on the first this-many test images (the paper's 100).
@@ -155,16 +161,17 @@ pub struct DecoderRunConfig {
     /// Said in the results row (a shortened run, ...).
     pub note: String,
     /// `--steps N` when it changed the preset's step count.
-    #[serde(default)]
     pub steps_override: Option<usize>,
 }
 
-/// The presets of the decoder experiments: `paper`, `quick`, and `short` (the paper's data
-/// and models with training cut so the whole of `table1` fits well within 10 minutes of a
-/// 2-core CPU, 175 s measured at 390a332; each row says so in its note).
-pub const DECODER_PRESETS: &[&str] = &["paper", "short", "quick"];
+/// The presets of the self-model runs: `paper`, `quick`, and `short` (the paper's data and
+/// models with training cut so the whole of `table1` fits well within 10 minutes of a 2-core
+/// CPU, 175 s measured at 390a332; each row says so in its note).
+pub const SELF_MODEL_PRESETS: &[&str] = &["paper", "short", "quick"];
 
-fn code_train(preset: &str) -> TrainConfig {
+/// The notebooks' training protocol: Adam 1e-3, batch 32, 3,000 steps, clip 1.0, N(0, 0.01)
+/// noise on the angles in degrees (`quick`: 200 steps of batch 16).
+pub fn notebook_train(preset: &str) -> TrainConfig {
     match preset {
         "quick" => TrainConfig {
             steps: 200,
@@ -197,41 +204,27 @@ fn preset_parts(preset: &str) -> Result<(DataSpec, SpeedConfig)> {
     }
 }
 
-/// Shorten a paper-preset run for the `short` preset, and say so in its note.
-fn shorten(mut cfg: DecoderRunConfig, steps: usize, batch: usize) -> DecoderRunConfig {
-    if cfg.preset == "short" {
-        cfg.note = format!(
-            "short preset: {steps} steps of batch {batch} instead of {} of {} (CPU time budget)",
-            cfg.train.steps, cfg.train.batch
-        );
-        cfg.train.steps = steps;
-        cfg.train.batch = batch;
-    }
-    cfg
-}
-
-fn model_preset(preset: &str) -> &str {
+/// The model preset a run preset uses (`short` trains the paper's models).
+pub fn model_preset(preset: &str) -> &str {
     if preset == "short" { "paper" } else { preset }
 }
 
-impl DecoderRunConfig {
-    /// What every decoder run shares: the preset's data and speed settings, the notebook's
-    /// training protocol, PSNR also on the paper's first 100 test images.
-    fn decoder(
+impl<M: SelfModel> SelfModelRun<M> {
+    /// A run of `model` on a preset's data and speed settings, with the notebooks' training
+    /// protocol and PSNR also on the paper's first 100 test images.
+    pub fn new(
         preset: &str,
         name: &str,
-        model: DecoderModel,
-        loss: DecoderLoss,
+        model: M,
         eval_batch: usize,
         reference: PaperReference,
     ) -> Result<Self> {
         let (data, speed) = preset_parts(preset)?;
-        Ok(DecoderRunConfig {
+        Ok(SelfModelRun {
             name: name.into(),
             preset: preset.into(),
             model,
-            loss,
-            train: code_train(preset),
+            train: notebook_train(preset),
             data,
             paper_subset: 100,
             eval_batch,
@@ -243,69 +236,22 @@ impl DecoderRunConfig {
     }
 
     /// The image size of a preset's camera, `[height, width]`.
-    fn image(preset: &str) -> Result<[usize; 2]> {
+    pub fn image(preset: &str) -> Result<[usize; 2]> {
         let camera = &preset_parts(preset)?.0.dataset.camera;
         Ok([camera.height, camera.width])
     }
 
-    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
-    /// N(0, 0.01) noise on the angles in degrees.
-    pub fn neurokin(preset: &str) -> Result<Self> {
-        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
-        model.image = Self::image(preset)?;
-        let cfg = Self::decoder(
-            preset,
-            "NeuroKin",
-            DecoderModel::NeuroKin(model),
-            DecoderLoss::Bce,
-            256,
-            PaperReference::neurokin(),
-        )?;
-        Ok(shorten(cfg, 800, 32))
-    }
-
-    /// The paper text's NeuroKin: 64x64 output, MSE, batch 128, 50 epochs.
-    pub fn neurokin64(preset: &str) -> Result<Self> {
-        let quick = preset == "quick";
-        let mut model = NeuroKinConfig::text64();
-        model.image = Self::image(preset)?;
-        if quick {
-            model.latent = 64;
-            model.seed_channels = 32;
-            model.upsampling_layers = 3;
+    /// Shorten a paper-preset run for the `short` preset, and say so in its note.
+    pub fn shorten(mut self, steps: usize, batch: usize) -> Self {
+        if self.preset == "short" {
+            self.note = format!(
+                "short preset: {steps} steps of batch {batch} instead of {} of {} (CPU time budget)",
+                self.train.steps, self.train.batch
+            );
+            self.train.steps = steps;
+            self.train.batch = batch;
         }
-        let mut cfg = Self::decoder(
-            preset,
-            "NeuroKin-64 (paper text)",
-            DecoderModel::NeuroKin(model),
-            DecoderLoss::Mse,
-            256,
-            PaperReference::neurokin(),
-        )?;
-        cfg.train.batch = if quick { 32 } else { 128 };
-        cfg.train.steps = TrainConfig::steps_for_epochs(
-            if quick { 30 } else { 50 },
-            cfg.data.dataset.train,
-            cfg.train.batch,
-        );
-        cfg.train.grad_clip_norm = None;
-        let steps = cfg.train.steps / 4;
-        Ok(shorten(cfg, steps, 128))
-    }
-
-    /// ResNeuroKin-D as the notebook trained it, with the simulator's metric depth.
-    pub fn resneurokin_d(preset: &str) -> Result<Self> {
-        let mut model = ResNeuroKinDConfig::preset(model_preset(preset))?;
-        model.image = Self::image(preset)?;
-        let cfg = Self::decoder(
-            preset,
-            "ResNeuroKin-D",
-            DecoderModel::ResNeuroKinD(model),
-            DecoderLoss::BceDiceDepth { depth_weight: 0.1 },
-            64,
-            PaperReference::resneurokin_d(),
-        )?;
-        Ok(shorten(cfg, 30, 16))
+        self
     }
 
     /// Switch to the paper-compatible dataset (silhouettes with the ground-plane artefact).
@@ -315,13 +261,8 @@ impl DecoderRunConfig {
     }
 }
 
-/// The robot pixels of a silhouette batch (1 where the true silhouette is >= 0.5).
-fn y_mask(silhouettes: &Tensor<4>) -> Tensor<4> {
-    silhouettes.clone().greater_equal_elem(0.5).float()
-}
-
 /// What a run produced.
-pub struct DecoderOutcome {
+pub struct RunOutcome {
     pub result: ModelResult,
     pub quality: Quality,
     pub log: TrainLog,
@@ -367,10 +308,7 @@ fn to_host(t: Tensor<4>) -> Vec<f32> {
 }
 
 /// Evaluate `predict` over the test set in batches.
-fn predict_all<F>(predict: F, test: &TrainSet, batch: usize, pixels: usize) -> Predictions
-where
-    F: Fn(Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>),
-{
+fn predict_all(model: &dyn Render, test: &TrainSet, batch: usize, pixels: usize) -> Predictions {
     let n = test.len();
     let mut sil = Vec::with_capacity(n * pixels);
     let mut depth: Option<Vec<f32>> = None;
@@ -378,7 +316,7 @@ where
     while start < n {
         let end = (start + batch).min(n);
         let q = test.inputs.clone().slice([start..end]);
-        let (s, d) = predict(q);
+        let (s, d) = model.render(q);
         sil.extend(to_host(s));
         if let Some(d) = d {
             depth.get_or_insert_with(Vec::new).extend(to_host(d));
@@ -393,13 +331,13 @@ where
     }
 }
 
-/// Train, evaluate, time and report one decoder into `dir`.
-pub fn run(
-    cfg: &DecoderRunConfig,
+/// Train, evaluate, time and report one self-model into `dir`.
+pub fn run<M: SelfModel>(
+    cfg: &SelfModelRun<M>,
     dir: &Path,
     device_choice: DeviceChoice,
     resume: bool,
-) -> Result<DecoderOutcome> {
+) -> Result<RunOutcome> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
     // Read the revision now: a run that spans commits is the code it started with.
@@ -430,80 +368,20 @@ pub fn run(
     let plan = CheckpointPlan {
         dir: dir.join("checkpoint"),
         resume,
-        fingerprint: serde_json::json!({"model": cfg.model, "loss": cfg.loss, "train": cfg.train, "data": cfg.data}),
+        fingerprint: serde_json::json!({"model": cfg.model, "train": cfg.train, "data": cfg.data}),
     };
-    let label = cfg.name.clone();
+    let trained = cfg.model.fit(&Fit {
+        train_set: &train_set,
+        train: &cfg.train,
+        plan: &plan,
+        label: &cfg.name,
+        train_device: &tdev,
+        device: &device,
+    })?;
+    let (renderer, log) = (trained.renderer.as_ref(), trained.log);
     let pixels = data.height * data.width;
-    let (params, log, predictions, timings) = match &cfg.model {
-        DecoderModel::NeuroKin(mc) => {
-            let model = mc.init(&tdev, cfg.train.seed)?;
-            let params = model.trainable_params();
-            let native = mc.native_size();
-            let mut train_set = train_set;
-            if native != image {
-                train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
-            }
-            let loss_kind = cfg.loss;
-            let (model, log) = train(
-                model,
-                &train_set,
-                &cfg.train,
-                Some(&plan),
-                &label,
-                |m, b| {
-                    let z = m.forward(b.inputs.clone());
-                    match loss_kind {
-                        DecoderLoss::Mse => {
-                            mse(burn::tensor::activation::sigmoid(z), b.targets[0].clone())
-                        }
-                        _ => bce_with_logits(z, b.targets[0].clone()),
-                    }
-                },
-            )?;
-            let model = model.valid();
-            let predictions = predict_all(
-                |q| (model.predict(q), None),
-                &test_set,
-                cfg.eval_batch,
-                pixels,
-            );
-            let timings = measure(|q| model.predict(q), mc.dof, &device, &cfg.speed);
-            (params, log, predictions, timings)
-        }
-        DecoderModel::ResNeuroKinD(mc) => {
-            let model = mc.init(&tdev, cfg.train.seed)?;
-            let params = model.trainable_params();
-            let w = match cfg.loss {
-                DecoderLoss::BceDiceDepth { depth_weight } => depth_weight,
-                _ => 0.0,
-            };
-            let (model, log) = train(
-                model,
-                &train_set,
-                &cfg.train,
-                Some(&plan),
-                &label,
-                |m, b| {
-                    let (s, d) = m.forward(b.inputs.clone());
-                    let y = b.targets[0].clone();
-                    let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
-                    sil + l1_masked(d, b.targets[1].clone(), y_mask(&b.targets[0])).mul_scalar(w)
-                },
-            )?;
-            let model = model.valid();
-            let predictions = predict_all(
-                |q| {
-                    let (s, d) = model.forward(q);
-                    (s, Some(d))
-                },
-                &test_set,
-                cfg.eval_batch,
-                pixels,
-            );
-            let timings = measure(|q| model.forward(q).0, mc.dof, &device, &cfg.speed);
-            (params, log, predictions, timings)
-        }
-    };
+    let predictions = predict_all(renderer, &test_set, cfg.eval_batch, pixels);
+    let timings = measure(|q| renderer.render(q).0, data.dof(), &device, &cfg.speed);
     let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
     let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
     let t1 = timing(1).unwrap_or(Timing {
@@ -516,13 +394,14 @@ pub fn run(
         .max_by_key(|t| t.batch)
         .cloned()
         .unwrap_or(t1.clone());
+    let predicts_depth = predictions.depth.is_some();
     let result = ModelResult {
         model: cfg.name.clone(),
         dataset: cfg.data.label().into(),
         preset: cfg.preset.clone(),
         device: device_choice.to_string(),
         git_revision,
-        parameters: params,
+        parameters: trained.parameters,
         train_samples: train_range.len(),
         train_steps: log.step,
         batch: cfg.train.batch,
@@ -531,12 +410,8 @@ pub fn run(
         psnr_db_first100: quality.psnr_db_paper_subset,
         psnr_db_test: quality.psnr_db_test,
         iou_test: quality.iou_test,
-        depth_mae_mm: quality
-            .depth_mae_mm
-            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
-        depth_constant_mae_mm: quality
-            .depth_constant_mae_mm
-            .filter(|_| matches!(cfg.model, DecoderModel::ResNeuroKinD(_))),
+        depth_mae_mm: quality.depth_mae_mm.filter(|_| predicts_depth),
+        depth_constant_mae_mm: quality.depth_constant_mae_mm.filter(|_| predicts_depth),
         infer_b1_img_per_s: t1.images_per_second(),
         latency_b1_ms: 1000.0 * t1.median_s,
         infer_b256_img_per_s: tb.images_per_second(),
@@ -556,16 +431,16 @@ pub fn run(
         &predictions,
         [data.height, data.width],
     )?;
-    Ok(DecoderOutcome {
+    Ok(RunOutcome {
         result,
         quality,
         log,
     })
 }
 
-fn write_report(
+fn write_report<M>(
     dir: &Path,
-    cfg: &DecoderRunConfig,
+    cfg: &SelfModelRun<M>,
     row: &ModelResult,
     log: &TrainLog,
 ) -> Result<()> {
