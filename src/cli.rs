@@ -147,13 +147,18 @@ pub struct ExperimentArgs {
     /// Train for this many steps instead of the preset's (the results say so).
     #[arg(long)]
     pub steps: Option<usize>,
-    /// Inverse-kinematics experiments (emssl_*) only: the arm [default: ur5].
+    /// The robot: the arm of the inverse-kinematics experiments (emssl_*) [default: ur5], or
+    /// the robot a self-model (neurokin, resneurokin_d, ...) learns [default: arm4].
     #[arg(long, value_enum)]
     pub robot: Option<BuiltinRobot>,
-    /// Inverse-kinematics experiments only: load the arm from a URDF instead (its root link at
-    /// the origin; the end effector is the origin of the last link of its longest chain).
+    /// Load the robot from a URDF instead (meshes: STL; its root link at the origin unless
+    /// --arm4-scene; the end effector is the origin of the last link of its longest chain).
     #[arg(long, value_name = "PATH", conflicts_with = "robot")]
     pub urdf: Option<PathBuf>,
+    /// Place the URDF as the papers' scene places arm4 (base at [0,0,-0.108], yaw -pi/2), so
+    /// the papers' camera sees it.
+    #[arg(long, requires = "urdf")]
+    pub arm4_scene: bool,
     /// emssl_sampling_speed only: the forward model's per-call latencies to measure, instead
     /// of the preset's: none, sleep:US (waiting on a real arm) or spin:US (a CPU-bound
     /// simulator), comma-separated, e.g. `--latency none,spin:200`.
@@ -186,7 +191,7 @@ impl ExperimentArgs {
         }
         if (self.robot.is_some() || self.urdf.is_some()) && !e.takes_robot {
             return Err(crate::Error::Config(format!(
-                "--robot and --urdf apply to the inverse-kinematics experiments only, not {name}"
+                "--robot and --urdf apply to the inverse-kinematics and self-model experiments, not {name}"
             )));
         }
         if self.latency.is_some() && name != "emssl_sampling_speed" {
@@ -206,6 +211,7 @@ impl ExperimentArgs {
             reuse_root: self.reuse.then(|| PathBuf::from(".")),
             robot: self.robot,
             urdf: self.urdf.clone(),
+            arm4_scene: self.arm4_scene,
             latencies: self.latency.clone(),
         };
         let dir = self

@@ -860,7 +860,7 @@ pub fn run(
     for &yaw in &cfg.novel_views_deg {
         let mut spec = cfg.data.dataset.clone();
         spec.camera = camera.orbited(yaw);
-        let view_data = Dataset::generate(&crate::sim::arm4::arm4(), &spec, None)?;
+        let view_data = Dataset::generate(&cfg.data.robot.load()?, &spec, None)?;
         let (vt, vd) = host_targets(&view_data, &test_range);
         let r = render_all(
             &field,

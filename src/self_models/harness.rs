@@ -25,6 +25,7 @@ use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
+use crate::sim::robots::RobotSpec;
 use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device};
 
 /// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
@@ -73,6 +74,9 @@ pub trait Render {
 /// The data a run trains and tests on.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DataSpec {
+    /// The robot seen (the papers' arm4 unless `--robot`/`--urdf` says otherwise).
+    #[serde(default)]
+    pub robot: RobotSpec,
     /// Rendered in-process (0.4 s for the paper's 2,000 samples).
     pub dataset: DatasetConfig,
     /// Train on only the first this-many samples of the training split.
@@ -85,6 +89,7 @@ impl DataSpec {
     /// The paper's 2,000-sample dataset (clean: no ground-plane artefact).
     pub fn paper() -> Self {
         DataSpec {
+            robot: RobotSpec::default(),
             dataset: DatasetConfig::paper(),
             train_samples: None,
             test: None,
@@ -103,6 +108,7 @@ impl DataSpec {
             ..Camera::paper()
         };
         DataSpec {
+            robot: RobotSpec::default(),
             dataset,
             train_samples: None,
             test: None,
@@ -120,7 +126,7 @@ impl DataSpec {
 
     /// Render the dataset and pick the train and test samples.
     pub fn load(&self) -> Result<(Dataset, Range<usize>, Range<usize>)> {
-        let robot = crate::sim::arm4::arm4();
+        let robot = self.robot.load()?;
         let data = Dataset::generate(&robot, &self.dataset, None)?;
         let (train, test) = data.split();
         let train = match self.train_samples {

@@ -329,7 +329,7 @@ pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result
     write_json(&dir.join("config.json"), cfg)?;
     let git_revision = crate::core::provenance::git_revision();
     let device = crate::core::device::select(device_choice)?;
-    let robot = crate::sim::arm4::arm4();
+    let robot = cfg.data.robot.load()?;
     let chain = TensorChain::new(&robot.chain);
     let camera = cfg.data.dataset.camera.clone();
     let (data, train_range, test_range) = cfg.data.load()?;

@@ -3,10 +3,14 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::core::error::Result;
 use crate::sim::robot::Robot;
 
 /// Built-in robots.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
 pub enum BuiltinRobot {
     /// The papers' 4-DOF arm with the project's fitted box geometry.
     Arm4,
@@ -36,4 +40,61 @@ impl BuiltinRobot {
 /// Where the papers' robot lies in the shared folder beside the repository.
 pub fn shared_arm_urdf() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/robots/4dof_1st/urdf/4dof_1st.urdf")
+}
+
+/// The robot a run uses, as its config records it: a built-in one, or a URDF placed in the
+/// scene (its root link at `base_xyz`, metres, turned by `base_rpy`, radians).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RobotSpec {
+    Builtin(BuiltinRobot),
+    Urdf {
+        path: PathBuf,
+        base_xyz: [f64; 3],
+        base_rpy: [f64; 3],
+    },
+}
+
+impl Default for RobotSpec {
+    /// The papers' arm.
+    fn default() -> Self {
+        RobotSpec::Builtin(BuiltinRobot::Arm4)
+    }
+}
+
+impl RobotSpec {
+    /// A URDF placed where the papers' scene places arm4 (base at [0, 0, -0.108], yaw -pi/2),
+    /// so the papers' camera sees it as it sees arm4.
+    pub fn urdf_in_arm4_scene(path: PathBuf) -> Self {
+        let base = crate::sim::arm4::scene_base();
+        let (r, p, y) = base.rotation.euler_angles();
+        let t = base.translation.vector;
+        RobotSpec::Urdf {
+            path,
+            base_xyz: [t.x, t.y, t.z],
+            base_rpy: [r, p, y],
+        }
+    }
+
+    pub fn load(&self) -> Result<Robot> {
+        match self {
+            RobotSpec::Builtin(b) => Ok(b.load()),
+            RobotSpec::Urdf {
+                path,
+                base_xyz,
+                base_rpy,
+            } => crate::sim::urdf_loader::load_urdf(
+                path,
+                crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
+            ),
+        }
+    }
+
+    /// `arm4`, `ur5` or the URDF's path.
+    pub fn label(&self) -> String {
+        match self {
+            RobotSpec::Builtin(b) => b.name().into(),
+            RobotSpec::Urdf { path, .. } => path.display().to_string(),
+        }
+    }
 }

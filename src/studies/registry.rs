@@ -318,7 +318,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/neurokin",
         presets: SELF_MODEL_PRESETS,
         in_table1: true,
-        takes_robot: false,
+        takes_robot: true,
         run: run_neurokin,
     },
     Experiment::self_model(

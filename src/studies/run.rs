@@ -10,6 +10,7 @@ use crate::self_models::ffksm::FfksmConfig;
 use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
 use crate::self_models::k3dgs::K3dgsConfig;
 use crate::self_models::result::ModelResult;
+use crate::sim::robots::{BuiltinRobot, RobotSpec};
 
 /// How to run an experiment: the preset and the switches every experiment understands.
 #[derive(Clone, Debug)]
@@ -26,9 +27,12 @@ pub struct RunOptions {
     /// gathers rows found there, of the same preset, dataset and steps, instead of training
     /// the same models a second time.
     pub reuse_root: Option<std::path::PathBuf>,
-    /// The arm of the inverse-kinematics experiments: a built-in one or a URDF (default ur5).
+    /// The robot (`--robot`, `--urdf`, `--arm4-scene`): the arm of the inverse-kinematics
+    /// experiments (default ur5) or the robot a self-model learns (default arm4).
     pub robot: Option<crate::sim::robots::BuiltinRobot>,
     pub urdf: Option<std::path::PathBuf>,
+    /// Place the URDF as the papers' scene places arm4 (else its root link at the origin).
+    pub arm4_scene: bool,
     /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
     pub latencies: Option<Vec<crate::ik::sampling_pass::Latency>>,
 }
@@ -45,27 +49,34 @@ impl RunOptions {
             reuse_root: None,
             robot: None,
             urdf: None,
+            arm4_scene: false,
             latencies: None,
         }
     }
 
-    /// The arm of the inverse-kinematics experiments and its name for reports.
-    pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
+    /// The robot the options name, `default` where they name none.
+    pub fn robot_spec(&self, default: BuiltinRobot) -> RobotSpec {
         match (&self.urdf, self.robot) {
-            (Some(path), _) => Ok((
-                crate::sim::urdf_loader::load_urdf(path, nalgebra::Isometry3::identity())?,
-                path.display().to_string(),
-            )),
-            (None, robot) => {
-                let r = robot.unwrap_or(crate::sim::robots::BuiltinRobot::Ur5);
-                Ok((r.load(), r.name().to_string()))
-            }
+            (Some(path), _) if self.arm4_scene => RobotSpec::urdf_in_arm4_scene(path.clone()),
+            (Some(path), _) => RobotSpec::Urdf {
+                path: path.clone(),
+                base_xyz: [0.0; 3],
+                base_rpy: [0.0; 3],
+            },
+            (None, robot) => RobotSpec::Builtin(robot.unwrap_or(default)),
         }
+    }
+
+    /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports.
+    pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
+        let spec = self.robot_spec(BuiltinRobot::Ur5);
+        Ok((spec.load()?, spec.label()))
     }
 
     /// Apply the switches to a self-model run.
     pub fn apply<M: SelfModel>(&self, cfg: SelfModelRun<M>) -> SelfModelRun<M> {
         let mut cfg = cfg.paper_compatible(self.paper_compatible);
+        cfg.data.robot = self.robot_spec(BuiltinRobot::Arm4);
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
         cfg
     }
@@ -139,7 +150,7 @@ impl Experiment {
             default_dir,
             presets: SELF_MODEL_PRESETS,
             in_table1: true,
-            takes_robot: false,
+            takes_robot: true,
             run,
         }
     }
