@@ -1,14 +1,19 @@
-//! Learned inverse kinematics (the EMSSL paper): the data (`data`), the inverse MLP (`mlp`),
-//! direct regression and EMSSL (`learning`), distal supervised learning (`dsl`), the
-//! conditional GAN (`cgan`), the normalizing flow (`flow`), damped least squares (`dls`),
-//! link calibration and EMSSL's batched sampling pass.
+//! Learned inverse kinematics (the EMSSL paper). `method` is the IkMethod trait that Table II
+//! runs; the methods are `drl` (direct regression), `emssl` (the paper's method), `dsl`
+//! (distal supervised learning), `cgan` (conditional GAN), `flow` (a normalizing flow, many
+//! solutions) and `dls` (damped least squares, numerical). Beneath them: the data (`data`),
+//! the inverse MLP (`mlp`), the fitting and EMSSL's iterations (`learning`), link
+//! calibration and EMSSL's batched sampling pass.
 
 pub mod calibration;
 pub mod cgan;
 pub mod data;
 pub mod dls;
+pub mod drl;
 pub mod dsl;
+pub mod emssl;
 pub mod flow;
 pub mod learning;
+pub mod method;
 pub mod mlp;
 pub mod sampling_pass;

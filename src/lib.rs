@@ -16,7 +16,15 @@ pub mod sim;
 pub mod studies;
 pub mod train;
 
+// The types a user needs, from where they live.
 pub use crate::core::error::{Error, Result};
+pub use crate::core::preset::Preset;
+pub use crate::data::dataset::{Dataset, DatasetConfig};
+pub use crate::ik::data::{IkData, IkDataConfig};
+pub use crate::self_models::harness::{DataSpec, Render, SelfModel, SelfModelRun};
+pub use crate::sim::robot::Robot;
+pub use crate::sim::robots::{BuiltinRobot, RobotSpec};
+pub use crate::studies::registry::{EXPERIMENTS, Experiment, RunOptions};
 
 /// mimalloc instead of the system allocator: training allocates and frees buffers of tens of
 /// megabytes every step, which glibc returns to the kernel and faults back in (page faults

@@ -245,3 +245,70 @@ impl Generator {
         best.into_iter().map(|(_, q)| q).collect()
     }
 }
+
+/// The conditional GAN as a Table II method: one sample, and the best of `gan.best_of`.
+pub struct CganMethod {
+    pub name: String,
+    pub gan: GanConfig,
+    pub output: JointOutput,
+}
+
+impl crate::ik::method::IkMethod for CganMethod {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn settings(&self) -> serde_json::Value {
+        crate::ik::method::settings_json(&(&self.gan, self.output))
+    }
+
+    fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
+        use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
+        let gan = &self.gan;
+        let t = std::time::Instant::now();
+        let (generator, log) = train_gan(task.chain, task.data, gan, self.output, task.device)?;
+        let train_s = t.elapsed().as_secs_f64();
+        let seed = gan.fit.seed ^ 0x5EED;
+        let mut joints = Vec::new();
+        let solve_s = timed(&mut || {
+            joints = generator.sample(task.data, task.targets, task.batch, seed, task.device)
+        });
+        let one =
+            Answers::new(&self.name, joints, train_s, solve_s).converged(&log, gan.fit.epochs);
+        let k = gan.best_of;
+        let mut samples = Vec::new();
+        let solve_k = timed(&mut || {
+            samples = (0..k as u64)
+                .map(|s| {
+                    generator.sample(
+                        task.data,
+                        task.targets,
+                        task.batch,
+                        seed.wrapping_add(s),
+                        task.device,
+                    )
+                })
+                .collect::<Vec<_>>()
+        });
+        let t = std::time::Instant::now();
+        let joints = crate::ik::flow::best_of(task.chain, task.targets, &samples);
+        let pick_s = t.elapsed().as_secs_f64();
+        let sfx = self.name.strip_prefix("CGAN").unwrap_or("");
+        let mut best = Answers::new(
+            &format!("CGAN best of {k}{sfx}"),
+            joints,
+            train_s,
+            solve_k + pick_s,
+        );
+        best.diversity_rad = Some(crate::ik::flow::diversity(&samples));
+        best.detail = format!("the sample of {k} the forward model puts closest");
+        Ok(MethodOutput {
+            answers: vec![one, best],
+            curves: log
+                .iter()
+                .flat_map(|l| ValidationRow::from_log(task.range_deg, &self.name, l))
+                .collect(),
+            emssl_curve: Vec::new(),
+        })
+    }
+}

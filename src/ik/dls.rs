@@ -235,3 +235,61 @@ pub fn solve_batch(
         .map(|(t, s)| solve(chain, t, s, ranges, cfg))
         .collect()
 }
+
+/// How a batch of solutions converged: the share within tolerance, the mean iterations, and
+/// how many targets were restarted (where that applies).
+pub fn solver_detail(
+    solutions: &[IkSolution],
+    dls: &DlsConfig,
+    restarted: Option<usize>,
+) -> String {
+    let converged = solutions
+        .iter()
+        .filter(|x| x.error_m < dls.tolerance_m)
+        .count();
+    let mean_iterations = solutions.iter().map(|x| x.iterations).sum::<usize>() as f64
+        / solutions.len().max(1) as f64;
+    format!(
+        "{:.2}% within {} mm, {mean_iterations:.1} iterations on average (cap {}){}",
+        100.0 * converged as f64 / solutions.len().max(1) as f64,
+        dls.tolerance_m * 1e3,
+        dls.max_iterations,
+        restarted.map_or(String::new(), |n| format!(", {n} targets restarted"))
+    )
+}
+
+/// DLS from the home pose (all joints 0) as a Table II method.
+pub struct DlsFromHome {
+    pub cfg: DlsConfig,
+}
+
+impl crate::ik::method::IkMethod for DlsFromHome {
+    fn name(&self) -> String {
+        "DLS from home".into()
+    }
+
+    fn settings(&self) -> serde_json::Value {
+        crate::ik::method::settings_json(&self.cfg)
+    }
+
+    fn run(
+        &self,
+        task: &crate::ik::method::IkTask,
+    ) -> crate::Result<crate::ik::method::MethodOutput> {
+        use crate::ik::method::{Answers, MethodOutput, timed};
+        let dof = task.chain.dof();
+        let ranges = vec![task.data.range; dof];
+        let home = vec![vec![0.0; dof]; task.targets.len()];
+        let mut solutions = Vec::new();
+        let s = timed(&mut || {
+            solutions = solve_batch(task.chain, task.targets, &home, &ranges, &self.cfg)
+        });
+        let mut a = Answers::new("DLS from home", Vec::new(), 0.0, s);
+        a.detail = solver_detail(&solutions, &self.cfg, None);
+        a.joints = solutions.into_iter().map(|x| x.joints).collect();
+        Ok(MethodOutput {
+            answers: vec![a],
+            ..Default::default()
+        })
+    }
+}

@@ -179,3 +179,74 @@ fn forward_error_cm(
         .sum();
     100.0 * total / n.max(1) as f64
 }
+
+/// Distal supervised learning as a Table II method.
+pub struct DslMethod {
+    pub name: String,
+    pub model: InverseModelConfig,
+    pub fit: FitConfig,
+    pub dsl: DistalConfig,
+}
+
+impl crate::ik::method::IkMethod for DslMethod {
+    fn name(&self) -> String {
+        self.name.clone()
+    }
+
+    fn settings(&self) -> serde_json::Value {
+        crate::ik::method::settings_json(&(&self.model, &self.fit, &self.dsl))
+    }
+
+    fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
+        use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
+        let t = std::time::Instant::now();
+        let distal = dsl(
+            task.chain,
+            task.data,
+            &self.model,
+            &self.fit,
+            &self.dsl,
+            task.device,
+        )?;
+        let train_s = t.elapsed().as_secs_f64();
+        let mut joints = Vec::new();
+        let solve_s = timed(&mut || {
+            joints = crate::ik::learning::predict(
+                &distal.inverse,
+                task.data,
+                task.targets,
+                task.batch,
+                task.device,
+            )
+        });
+        let mut a = Answers::new(&self.name, joints, train_s, solve_s)
+            .converged(&distal.inverse_log, self.dsl.inverse_epochs);
+        a.detail = format!(
+            "inverse: {}; forward model: {}, test error {:.2} cm",
+            a.detail,
+            distal
+                .forward_log
+                .as_ref()
+                .map_or(format!("{} epochs (fixed)", self.dsl.forward_epochs), |l| l
+                    .summary()),
+            distal.forward_test_cm
+        );
+        let forward_name = self.name.replacen("DSL", "DSL forward model", 1);
+        let mut curves: Vec<ValidationRow> = distal
+            .forward_log
+            .iter()
+            .flat_map(|l| ValidationRow::from_log(task.range_deg, &forward_name, l))
+            .collect();
+        curves.extend(
+            distal
+                .inverse_log
+                .iter()
+                .flat_map(|l| ValidationRow::from_log(task.range_deg, &self.name, l)),
+        );
+        Ok(MethodOutput {
+            answers: vec![a],
+            curves,
+            emssl_curve: Vec::new(),
+        })
+    }
+}

@@ -33,7 +33,6 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use burn::module::Module;
 use nalgebra::Point3;
@@ -42,17 +41,20 @@ use crate::core::atomic_file::{write_atomic, write_json};
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
-use crate::ik::cgan::{GanConfig, train_gan};
+use crate::ik::cgan::{CganMethod, GanConfig};
 use crate::ik::data::{DistanceErrors, IkData, IkDataConfig, JointOutput, distances};
-use crate::ik::dls::{DlsConfig, IkSolution, Restarts, solve_batch, solve_with_restarts};
-use crate::ik::dsl::{DistalConfig, dsl};
-use crate::ik::flow::{FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
-use crate::ik::learning::{
-    EmsslConfig, EmsslIteration, FitConfig, drl, emssl_checkpointed, predict,
+use crate::ik::dls::{
+    DlsConfig, DlsFromHome, IkSolution, Restarts, solve_with_restarts, solver_detail,
 };
+use crate::ik::drl::DrlMethod;
+use crate::ik::dsl::{DistalConfig, DslMethod};
+use crate::ik::emssl::EmsslMethod;
+use crate::ik::flow::{FlowConfig, FlowIk, FlowMethod, sample};
+use crate::ik::learning::{EmsslConfig, EmsslIteration, FitConfig};
+use crate::ik::method::{Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed};
 use crate::ik::mlp::InverseModelConfig;
 use crate::sim::robot::Robot;
-use crate::train::trainer::{Convergence, ConvergenceLog};
+use crate::train::trainer::Convergence;
 
 /// The presets of the inverse-kinematics experiments.
 pub const IK_PRESETS: &[&str] = &["paper", "quick"];
@@ -275,6 +277,58 @@ impl IkComparisonConfig {
             ..fit.clone()
         }
     }
+
+    /// The methods of Table II in `range_deg`, in the order they run (EMSSL last: it takes
+    /// the longest). A new method is one line here.
+    pub fn methods(&self, range_deg: f64, dof: usize) -> Vec<Box<dyn IkMethod>> {
+        let mut methods: Vec<Box<dyn IkMethod>> = Vec::new();
+        for output in self.outputs(range_deg) {
+            let (sfx, model) = (output.suffix(), self.model_as(dof, output));
+            methods.push(Box::new(DrlMethod {
+                name: format!("DRL{sfx}"),
+                model: model.clone(),
+                fit: self.baseline_fit(&self.fit, self.drl_epochs),
+                fixed_epochs: self.drl_epochs,
+            }));
+            methods.push(Box::new(DslMethod {
+                name: format!("DSL{sfx}"),
+                model,
+                fit: self.baseline_fit(&self.fit, self.dsl.inverse_epochs),
+                dsl: self.dsl.clone(),
+            }));
+            methods.push(Box::new(CganMethod {
+                name: format!("CGAN{sfx}"),
+                gan: GanConfig {
+                    fit: self.baseline_fit(&self.gan.fit, self.gan.fit.epochs),
+                    ..self.gan.clone()
+                },
+                output,
+            }));
+        }
+        methods.push(Box::new(self.flow_method()));
+        methods.push(Box::new(DlsFromHome {
+            cfg: self.dls.clone(),
+        }));
+        for output in self.outputs(range_deg) {
+            methods.push(Box::new(EmsslMethod {
+                name: format!("EMSSL{}", output.suffix()),
+                model: self.model_as(dof, output),
+                fit: self.fit.clone(),
+                emssl: self.emssl.clone(),
+            }));
+        }
+        methods
+    }
+
+    /// The flow, whose samples also restart EMSSL + DLS where it stalls.
+    pub fn flow_method(&self) -> FlowMethod {
+        FlowMethod {
+            cfg: FlowConfig {
+                fit: self.baseline_fit(&self.flow.fit, self.flow.fit.epochs),
+                ..self.flow.clone()
+            },
+        }
+    }
 }
 
 /// One method in one joint range: a row of Table II.
@@ -328,35 +382,6 @@ fn paper_reference(method: &str, range_deg: f64) -> Option<f64> {
     Some(values[column])
 }
 
-/// One epoch (or iteration) of one method's validation curve.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct ValidationRow {
-    pub range_deg: f64,
-    pub method: String,
-    pub epoch: usize,
-    pub learning_rate: f64,
-    pub train_loss: f64,
-    pub validation_cm: f64,
-    pub seconds: f64,
-}
-
-impl ValidationRow {
-    fn from_log(range_deg: f64, method: &str, log: &ConvergenceLog) -> Vec<Self> {
-        log.curve
-            .iter()
-            .map(|p| ValidationRow {
-                range_deg,
-                method: method.into(),
-                epoch: p.epoch,
-                learning_rate: p.learning_rate,
-                train_loss: p.train_loss,
-                validation_cm: p.validation,
-                seconds: p.seconds,
-            })
-            .collect()
-    }
-}
-
 /// Write answers as CSV: target x, y, z (m), joints q1.. (rad), reached x, y, z (m) (where the
 /// forward kinematics of the joints puts the end effector).
 pub fn write_predictions(
@@ -404,16 +429,6 @@ struct Unit {
     emssl_curve: Vec<EmsslIteration>,
 }
 
-/// A method's file name: "EMSSL + DLS" -> "emssl_dls".
-fn file_name(method: &str) -> String {
-    method
-        .to_lowercase()
-        .split(|c: char| !c.is_ascii_alphanumeric())
-        .filter(|w| !w.is_empty())
-        .collect::<Vec<_>>()
-        .join("_")
-}
-
 /// Read the joints back from a predictions CSV ([`write_predictions`]).
 pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
     let mut reader = csv::Reader::from_path(path)
@@ -442,20 +457,6 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
         .collect()
 }
 
-/// Seconds to run `f`: one warm-up pass, then the median of three.
-fn timed(f: &mut dyn FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..3)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[1]
-}
-
 /// One range's run: the data, the folders and the rows so far.
 struct RangeRun<'a> {
     cfg: &'a IkComparisonConfig,
@@ -476,64 +477,52 @@ struct RangeRun<'a> {
     progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
 
-/// What a method hands back for a row.
-struct Answers {
-    method: String,
-    joints: Vec<Vec<f64>>,
-    train_seconds: f64,
-    solve_seconds: f64,
-    epochs: Option<usize>,
-    validation_cm: Option<f64>,
-    diversity_rad: Option<f64>,
-    detail: String,
-}
-
-impl Answers {
-    fn new(method: &str, joints: Vec<Vec<f64>>, train_seconds: f64, solve_seconds: f64) -> Self {
-        Answers {
-            method: method.into(),
-            joints,
-            train_seconds,
-            solve_seconds,
-            epochs: None,
-            validation_cm: None,
-            diversity_rad: None,
-            detail: String::new(),
-        }
-    }
-
-    fn converged(mut self, log: &Option<ConvergenceLog>, fixed_epochs: usize) -> Self {
-        match log {
-            Some(l) => {
-                self.epochs = Some(l.epochs);
-                self.validation_cm = Some(l.best_validation);
-                self.detail = l.summary();
-            }
-            None => {
-                self.epochs = Some(fixed_epochs);
-                self.detail = format!("{fixed_epochs} epochs (fixed)");
-            }
-        }
-        self
-    }
-}
-
 impl RangeRun<'_> {
     fn targets(&self) -> &[Point3<f64>] {
         &self.data.positions[self.data.test()]
     }
 
+    fn predictions_dir(&self) -> PathBuf {
+        self.dir.join(format!("predictions_{:.0}", self.range_deg))
+    }
+
     fn predictions_path(&self, method: &str) -> PathBuf {
-        self.dir
-            .join(format!("predictions_{:.0}", self.range_deg))
+        self.predictions_dir()
             .join(format!("{}.csv", file_name(method)))
     }
 
-    fn unit_path(&self, unit: &str) -> PathBuf {
+    /// Where this range's units and the files of its methods are kept.
+    fn files(&self) -> PathBuf {
         self.dir
             .join("units")
             .join(format!("{:.0}", self.range_deg))
-            .join(format!("{}.json", file_name(unit)))
+    }
+
+    fn unit_path(&self, unit: &str) -> PathBuf {
+        self.files().join(format!("{}.json", file_name(unit)))
+    }
+
+    /// What a method works with in this range.
+    fn task<'a>(&'a self, files: &'a Path, predictions: &'a Path) -> IkTask<'a> {
+        IkTask {
+            chain: &self.robot.chain,
+            data: &self.data,
+            targets: self.targets(),
+            device: &self.device,
+            batch: self.cfg.fit.inference_batch,
+            range_deg: self.range_deg,
+            files,
+            predictions,
+        }
+    }
+
+    /// Run one method as a unit (reused where it is done with the same settings).
+    fn method(&mut self, method: &dyn IkMethod) -> Result<()> {
+        let (files, predictions) = (self.files(), self.predictions_dir());
+        let required = method.required(&self.task(&files, &predictions));
+        self.unit(&method.name(), &method.settings(), &required, |r| {
+            method.run(&r.task(&files, &predictions))
+        })
     }
 
     /// Run `unit` unless `--resume` finds it done with the same `settings` and the files in
@@ -545,7 +534,7 @@ impl RangeRun<'_> {
         unit: &str,
         settings: &S,
         required: &[PathBuf],
-        body: impl FnOnce(&Self) -> Result<(Vec<Answers>, Vec<ValidationRow>, Vec<EmsslIteration>)>,
+        body: impl FnOnce(&Self) -> Result<MethodOutput>,
     ) -> Result<()> {
         let settings = serde_json::to_value((settings, &self.data_settings()))
             .map_err(|e| Error::Config(format!("settings of {unit}: {e}")))?;
@@ -580,7 +569,11 @@ impl RangeRun<'_> {
             }
         };
         eprintln!("emssl_table2: +-{:.0} deg {unit}", self.range_deg);
-        let (answers, curves, emssl_curve) = body(self)?;
+        let MethodOutput {
+            answers,
+            curves,
+            emssl_curve,
+        } = body(self)?;
         let mut rows = Vec::new();
         for a in answers {
             rows.push(self.row(a)?);
@@ -696,241 +689,11 @@ pub fn run_range(
     let chain = &robot.chain;
     let dof = robot.dof();
     let batch = cfg.fit.inference_batch;
-    for output in cfg.outputs(range_deg) {
-        let sfx = output.suffix();
-        let model_cfg = cfg.model_as(dof, output);
-
-        // Direct regression.
-        let drl_fit = cfg.baseline_fit(&cfg.fit, cfg.drl_epochs);
-        let name = format!("DRL{sfx}");
-        run.unit(&name, &(&model_cfg, &drl_fit), &[], |r| {
-            let t = Instant::now();
-            let (model, log) = drl(chain, &r.data, &model_cfg, &drl_fit, &r.device)?;
-            let train_s = t.elapsed().as_secs_f64();
-            let mut joints = Vec::new();
-            let solve_s =
-                timed(&mut || joints = predict(&model, &r.data, r.targets(), batch, &r.device));
-            let curves = log
-                .iter()
-                .flat_map(|l| ValidationRow::from_log(range_deg, &name, l))
-                .collect();
-            Ok((
-                vec![Answers::new(&name, joints, train_s, solve_s).converged(&log, cfg.drl_epochs)],
-                curves,
-                Vec::new(),
-            ))
-        })?;
-
-        // Distal supervised learning.
-        let dsl_fit = cfg.baseline_fit(&cfg.fit, cfg.dsl.inverse_epochs);
-        let name = format!("DSL{sfx}");
-        run.unit(&name, &(&model_cfg, &dsl_fit, &cfg.dsl), &[], |r| {
-            let t = Instant::now();
-            let distal = dsl(chain, &r.data, &model_cfg, &dsl_fit, &cfg.dsl, &r.device)?;
-            let train_s = t.elapsed().as_secs_f64();
-            let mut joints = Vec::new();
-            let solve_s = timed(&mut || {
-                joints = predict(&distal.inverse, &r.data, r.targets(), batch, &r.device)
-            });
-            let mut a = Answers::new(&name, joints, train_s, solve_s)
-                .converged(&distal.inverse_log, cfg.dsl.inverse_epochs);
-            a.detail = format!(
-                "inverse: {}; forward model: {}, test error {:.2} cm",
-                a.detail,
-                distal
-                    .forward_log
-                    .as_ref()
-                    .map_or(format!("{} epochs (fixed)", cfg.dsl.forward_epochs), |l| l
-                        .summary()),
-                distal.forward_test_cm
-            );
-            let mut curves: Vec<ValidationRow> = distal
-                .forward_log
-                .iter()
-                .flat_map(|l| {
-                    ValidationRow::from_log(range_deg, &format!("DSL forward model{sfx}"), l)
-                })
-                .collect();
-            curves.extend(
-                distal
-                    .inverse_log
-                    .iter()
-                    .flat_map(|l| ValidationRow::from_log(range_deg, &name, l)),
-            );
-            Ok((vec![a], curves, Vec::new()))
-        })?;
-
-        // Conditional GAN: one sample, and the best of k.
-        let gan = GanConfig {
-            fit: cfg.baseline_fit(&cfg.gan.fit, cfg.gan.fit.epochs),
-            ..cfg.gan.clone()
-        };
-        let name = format!("CGAN{sfx}");
-        run.unit(&name, &(&gan, output), &[], |r| {
-            let t = Instant::now();
-            let (generator, log) = train_gan(chain, &r.data, &gan, output, &r.device)?;
-            let train_s = t.elapsed().as_secs_f64();
-            let seed = gan.fit.seed ^ 0x5EED;
-            let mut joints = Vec::new();
-            let solve_s = timed(&mut || {
-                joints = generator.sample(&r.data, r.targets(), batch, seed, &r.device)
-            });
-            let one = Answers::new(&name, joints, train_s, solve_s).converged(&log, gan.fit.epochs);
-            let k = gan.best_of;
-            let mut samples = Vec::new();
-            let solve_k = timed(&mut || {
-                samples = (0..k as u64)
-                    .map(|s| {
-                        generator.sample(
-                            &r.data,
-                            r.targets(),
-                            batch,
-                            seed.wrapping_add(s),
-                            &r.device,
-                        )
-                    })
-                    .collect::<Vec<_>>()
-            });
-            let t = Instant::now();
-            let joints = best_of(chain, r.targets(), &samples);
-            let pick_s = t.elapsed().as_secs_f64();
-            let mut best = Answers::new(
-                &format!("CGAN best of {k}{sfx}"),
-                joints,
-                train_s,
-                solve_k + pick_s,
-            );
-            best.diversity_rad = Some(diversity(&samples));
-            best.detail = format!("the sample of {k} the forward model puts closest");
-            let curves = log
-                .iter()
-                .flat_map(|l| ValidationRow::from_log(range_deg, &name, l))
-                .collect();
-            Ok((vec![one, best], curves, Vec::new()))
-        })?;
+    for method in cfg.methods(range_deg, dof) {
+        run.method(method.as_ref())?;
     }
-
-    // The flow: one sample and the best of k, and its model for the restarts below.
-    let flow_cfg = FlowConfig {
-        fit: cfg.baseline_fit(&cfg.flow.fit, cfg.flow.fit.epochs),
-        ..cfg.flow.clone()
-    };
-    let flow_file = run.unit_path("flow_model").with_extension("bpk");
-    let k = flow_cfg.best_of;
-    run.unit(
-        "Flow IK",
-        &flow_cfg,
-        std::slice::from_ref(&flow_file),
-        |r| {
-            let t = Instant::now();
-            let trained = train_flow(chain, &r.data, &flow_cfg, &r.device)?;
-            let train_s = t.elapsed().as_secs_f64();
-            if let Some(parent) = flow_file.parent() {
-                std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
-            }
-            crate::train::trainer::save_renamed(&flow_file, |tmp| {
-                trained.model.clone().save_file(tmp)
-            })?;
-            let seed = flow_cfg.fit.seed ^ 0x5EED;
-            let draw = |k: usize| {
-                sample(
-                    &trained.model,
-                    &r.data,
-                    r.targets(),
-                    k,
-                    batch,
-                    seed,
-                    &r.device,
-                )
-            };
-            let mut one = Vec::new();
-            let solve_1 = timed(&mut || one = draw(1));
-            let mut samples = Vec::new();
-            let solve_k = timed(&mut || samples = draw(k));
-            let t = Instant::now();
-            let best = best_of(chain, r.targets(), &samples);
-            let pick_s = t.elapsed().as_secs_f64();
-            let one = Answers::new("Flow IK", one.pop().expect("one sample"), train_s, solve_1)
-                .converged(&trained.log, flow_cfg.fit.epochs);
-            let mut best = Answers::new(
-                &format!("Flow IK best of {k}"),
-                best,
-                train_s,
-                solve_k + pick_s,
-            );
-            best.diversity_rad = Some(diversity(&samples));
-            best.detail = format!("the sample of {k} the forward model puts closest");
-            let curves = trained
-                .log
-                .iter()
-                .flat_map(|l| ValidationRow::from_log(range_deg, "Flow IK", l))
-                .collect();
-            Ok((vec![one, best], curves, Vec::new()))
-        },
-    )?;
-
-    // The numerical solver from the home pose.
+    let flow_cfg = cfg.flow_method().cfg;
     let ranges = vec![run.data.range; dof];
-    run.unit("DLS from home", &cfg.dls, &[], |r| {
-        let home = vec![vec![0.0; dof]; r.targets().len()];
-        let mut solutions = Vec::new();
-        let s =
-            timed(&mut || solutions = solve_batch(chain, r.targets(), &home, &ranges, &cfg.dls));
-        let mut a = Answers::new("DLS from home", Vec::new(), 0.0, s);
-        a.detail = solver_detail(&solutions, &cfg.dls, None);
-        a.joints = solutions.into_iter().map(|x| x.joints).collect();
-        Ok((vec![a], Vec::new(), Vec::new()))
-    })?;
-
-    // EMSSL, after the baselines (it takes the longest).
-    for output in cfg.outputs(range_deg) {
-        let sfx = output.suffix();
-        let model_cfg = cfg.model_as(dof, output);
-        let name = format!("EMSSL{sfx}");
-        let answers = run.predictions_path(&name);
-        run.unit(&name, &(&model_cfg, &cfg.fit, &cfg.emssl), &[answers], |r| {
-            let t = Instant::now();
-            let checkpoint = r.unit_path(&format!("{name} checkpoint")).with_extension("");
-            let (model, curve) = emssl_checkpointed(
-                chain,
-                &r.data,
-                &model_cfg,
-                &cfg.fit,
-                &cfg.emssl,
-                &r.device,
-                Some(&checkpoint),
-            )?;
-            let train_s = t.elapsed().as_secs_f64();
-            let best = curve
-                .iter()
-                .min_by(|a, b| a.selection_cm().total_cmp(&b.selection_cm()))
-                .ok_or_else(|| Error::Training("EMSSL ran no iteration".into()))?;
-            let mut joints = Vec::new();
-            let solve_s = timed(&mut || joints = predict(&model, &r.data, r.targets(), batch, &r.device));
-            let mut a = Answers::new(&name, joints, train_s, solve_s);
-            a.epochs = Some(curve.len());
-            a.validation_cm = best.validation_reach_cm;
-            a.detail = format!(
-                "{} iterations run, the model of iteration {} kept (lowest reach error on the {} goals)",
-                curve.len(),
-                best.iteration,
-                if best.validation_reach_cm.is_some() { "validation" } else { "training" }
-            );
-            let curves = curve
-                .iter()
-                .map(|c| ValidationRow {
-                    range_deg,
-                    method: name.clone(),
-                    epoch: c.iteration,
-                    learning_rate: c.learning_rate,
-                    train_loss: c.train_reach_cm,
-                    validation_cm: c.selection_cm(),
-                    seconds: 0.0,
-                })
-                .collect();
-            Ok((vec![a], curves, curve))
-        })?;
-    }
 
     // EMSSL's answers refined by the solver; where it stalls, restarts from the flow's samples
     // (closest first), then from random joints. The EMSSL variant with the lower validation
@@ -960,6 +723,7 @@ pub fn run_range(
         .cloned()
         .ok_or_else(|| Error::Training("no EMSSL row to refine".into()))?;
     let settings = (&cfg.refine, &cfg.restarts, &start_row.method, &flow_cfg);
+    let flow_file = run.files().join("flow_model.bpk");
     run.unit("EMSSL + DLS", &settings, &[], |r| {
         let starts = read_predictions(&r.predictions_path(&start_row.method))?;
         let flow = FlowIk::new(&flow_cfg, dof, &r.device, flow_cfg.fit.seed)?
@@ -1005,7 +769,10 @@ pub fn run_range(
             solver_detail(&out, &cfg.refine, Some(restarted))
         );
         a.joints = out.into_iter().map(|x| x.joints).collect();
-        Ok((vec![a], Vec::new(), Vec::new()))
+        Ok(MethodOutput {
+            answers: vec![a],
+            ..Default::default()
+        })
     })?;
 
     set_ratios(&mut run.rows);
@@ -1028,22 +795,6 @@ fn set_ratios(rows: &mut [IkRow]) {
 }
 
 /// "99.9% within 0.01 mm, 2.8 iterations on average (cap 100), 31 restarted".
-fn solver_detail(solutions: &[IkSolution], dls: &DlsConfig, restarted: Option<usize>) -> String {
-    let converged = solutions
-        .iter()
-        .filter(|x| x.error_m < dls.tolerance_m)
-        .count();
-    let mean_iterations = solutions.iter().map(|x| x.iterations).sum::<usize>() as f64
-        / solutions.len().max(1) as f64;
-    format!(
-        "{:.2}% within {} mm, {mean_iterations:.1} iterations on average (cap {}){}",
-        100.0 * converged as f64 / solutions.len().max(1) as f64,
-        dls.tolerance_m * 1e3,
-        dls.max_iterations,
-        restarted.map_or(String::new(), |n| format!(", {n} targets restarted"))
-    )
-}
-
 /// A row of an EMSSL learning curve (Figure 6), flattened for CSV.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct CurveRow {
