@@ -13,13 +13,15 @@ use crate::ik::learning::{EmsslConfig, EmsslIteration, StopRule, emssl};
 use crate::sim::robot::Robot;
 use crate::studies::emssl_table2::{CurveRow, IkComparisonConfig, write_curves};
 
-/// Table II's config with `iterations` EMSSL iterations and no stopping.
+/// Table II's config with `iterations` EMSSL iterations, no stopping and no polishing
+/// (Figure 6 is Algorithm 1's curve).
 pub fn config(base: &IkComparisonConfig, iterations: usize) -> IkComparisonConfig {
     IkComparisonConfig {
         emssl: EmsslConfig {
             max_iterations: iterations,
             agreement: 0.0,
             patience: usize::MAX,
+            polish_rounds: 0,
             ..base.emssl.clone()
         },
         ..base.clone()

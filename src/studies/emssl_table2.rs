@@ -200,6 +200,7 @@ impl Preset for IkComparisonConfig {
             emssl: EmsslConfig {
                 max_iterations: 15,
                 patience: 5,
+                polish_rounds: 1,
                 ..p.emssl.clone()
             },
             drl_epochs: 20,
