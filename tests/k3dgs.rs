@@ -241,10 +241,16 @@ fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
 #[test]
 fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     use selfmodel::core::device::DeviceChoice;
-    use selfmodel::self_models::k3dgs::K3dgsConfig;
-    let cfg = K3dgsConfig::isotropic_alpha("quick").unwrap();
+    use selfmodel::self_models::k3dgs::{CountRow, K3dgsVariant, k3dgs_run};
+    let cfg = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha).unwrap();
     let dir = std::env::temp_dir().join(format!("selfmodel-k3dgs-{}", std::process::id()));
-    let out = selfmodel::self_models::k3dgs::run(&cfg, &dir, DeviceChoice::Cpu).unwrap();
+    let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    let counts: Vec<(usize, usize)> =
+        selfmodel::report::table::read_csv::<CountRow>(&dir.join("gaussian_counts.csv"))
+            .unwrap()
+            .into_iter()
+            .map(|c| (c.step, c.gaussians))
+            .collect();
     let black = common::black_psnr(&cfg.data, None);
     let r = &out.result;
     assert!(
@@ -253,19 +259,14 @@ fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
         r.psnr_db_test,
         r.iou_test
     );
-    let d = &cfg.densification;
+    let d = &cfg.model.densification;
+    assert!(counts.len() > 2, "the set never changed: {counts:?}");
     assert!(
-        out.counts.len() > 2,
-        "the set never changed: {:?}",
-        out.counts
-    );
-    assert!(
-        out.counts
+        counts
             .iter()
             .skip(1)
             .all(|&(_, n)| n >= d.min_gaussians && n <= d.max_gaussians),
-        "{:?}",
-        out.counts
+        "{counts:?}"
     );
     for f in [
         "results.csv",

@@ -19,12 +19,13 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::data::dataset::{Dataset, DatasetConfig};
-use crate::eval::evaluation::{Predictions, Quality, score};
+use crate::eval::evaluation::{DepthPixels, Predictions, Quality, score};
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
+use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device};
 
@@ -54,6 +55,9 @@ pub struct Fit<'a> {
     /// Where the model trains (autodiff, seeded) and where the trained model renders.
     pub train_device: &'a Device,
     pub device: &'a Device,
+    /// The robot and the camera the dataset was rendered with (for models with geometry).
+    pub robot: &'a Robot,
+    pub camera: &'a Camera,
 }
 
 /// A trained self-model.
@@ -62,6 +66,8 @@ pub struct Trained {
     /// Trainable parameters (PyTorch's count).
     pub parameters: usize,
     pub log: TrainLog,
+    /// Said in the results row before the run's own note (empty: nothing).
+    pub note: String,
 }
 
 /// Rendering with a trained self-model.
@@ -69,6 +75,30 @@ pub trait Render {
     /// `[n, dof]` joint angles (degrees) -> silhouette probabilities in [0, 1]
     /// `[n, 1, H, W]`, and depth in metres where the model predicts it.
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>);
+    /// The pixels its depth error counts (where the true silhouette is the robot, unless
+    /// the model draws depth only where it draws the robot).
+    fn depth_pixels(&self) -> DepthPixels {
+        DepthPixels::TrueRobot
+    }
+    /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
+    fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
+        Ok(())
+    }
+}
+
+/// What a model's own reports may use.
+pub struct ReportContext<'a> {
+    pub dir: &'a Path,
+    pub name: &'a str,
+    pub data: &'a Dataset,
+    pub test: &'a Range<usize>,
+    pub device: &'a Device,
+    /// The harness's inference timings of [`Render::render`].
+    pub timings: &'a [Timing],
+    /// Revision, device and preset, as every result row records them.
+    pub git_revision: &'a str,
+    pub device_name: String,
+    pub preset: &'a str,
 }
 
 /// The data a run trains and tests on.
@@ -333,7 +363,7 @@ fn predict_all(model: &dyn Render, test: &TrainSet, batch: usize, pixels: usize)
         silhouettes: sil,
         depth,
         pixels,
-        depth_pixels: crate::eval::evaluation::DepthPixels::TrueRobot,
+        depth_pixels: model.depth_pixels(),
     }
 }
 
@@ -350,6 +380,7 @@ pub fn run<M: SelfModel>(
     let git_revision = crate::core::provenance::git_revision();
     let device = crate::core::device::select(device_choice)?;
     let (data, train_range, test_range) = cfg.data.load()?;
+    let robot = cfg.data.robot.load()?;
     let image = cfg.model.image();
     if image != [data.height, data.width] {
         return Err(Error::Config(format!(
@@ -383,6 +414,8 @@ pub fn run<M: SelfModel>(
         label: &cfg.name,
         train_device: &tdev,
         device: &device,
+        robot: &robot,
+        camera: &cfg.data.dataset.camera,
     })?;
     let (renderer, log) = (trained.renderer.as_ref(), trained.log);
     let pixels = data.height * data.width;
@@ -425,11 +458,27 @@ pub fn run<M: SelfModel>(
         paper_fps: None,
         paper_latency_ms: None,
         paper_train_time_s: None,
-        note: cfg.note.clone(),
+        note: [trained.note.as_str(), cfg.note.as_str()]
+            .iter()
+            .filter(|n| !n.is_empty())
+            .copied()
+            .collect::<Vec<_>>()
+            .join("; "),
         steps_override: cfg.steps_override,
     }
     .with_reference(&cfg.reference);
     write_report(dir, cfg, &result, &log)?;
+    renderer.extra_reports(&ReportContext {
+        dir,
+        name: &cfg.name,
+        data: &data,
+        test: &test_range,
+        device: &device,
+        timings: &timings,
+        git_revision: &result.git_revision,
+        device_name: device_choice.to_string(),
+        preset: &cfg.preset,
+    })?;
     qualitative_figure(
         &dir.join("qualitative.png"),
         &truth,

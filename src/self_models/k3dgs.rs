@@ -1,5 +1,5 @@
-//! K-3DGS training, evaluation and reports (self-modeling paper section IV-C): the logic
-//! behind the `k3dgs` binary and its rows of `table1`.
+//! K-3DGS, a self-model of Gaussians on the links (self-modeling paper section IV-C): the
+//! logic behind the `k3dgs` binary and its rows of `table1`.
 //!
 //! Training (the reimplementation's code, minus its errors: the robot's real chain and the
 //! simulator's camera): one image per step, Adam 5e-3, 3,000 steps, MSE with weight 5 on
@@ -9,9 +9,10 @@
 //! each change. The faithful image is `sigmoid(T (Σ α − 0.5))` with `T` rising linearly from
 //! 1 to 20 over training; the principled one alpha compositing.
 //!
-//! A run writes `config.json`, `results.csv`/`results.md` (one row), `render_speed.csv`
-//! (culled against dense splatting at batch 1 and 256), `curve.csv`, `training_curve.png`,
-//! `qualitative.png` and `gaussians.png` (the Gaussians' centres over the silhouette).
+//! A run (through the self-model harness) writes `config.json`, `results.csv`/`results.md`
+//! (one row), `render_speed.csv` (culled against dense splatting at batch 1 and 256),
+//! `gaussian_counts.csv`, `curve.csv`, `training_curve.png`, `qualitative.png` and
+//! `gaussians.png` (the Gaussians' centres over the silhouette).
 
 pub mod gaussians;
 pub mod splatting;
@@ -21,18 +22,17 @@ use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Tensor, TensorData};
 
-use crate::core::atomic_file::write_json;
-use crate::core::device::DeviceChoice;
-use crate::core::error::{Error, Result};
-use crate::eval::evaluation::{Predictions, score};
-use crate::eval::inference_speed::{SpeedConfig, measure};
+use crate::core::error::Result;
+use crate::eval::evaluation::DepthPixels;
+use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::table::write_table;
-use crate::self_models::harness::{DataSpec, device_set, host_targets, qualitative_figure};
+use crate::self_models::harness::{Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained};
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
-use crate::self_models::result::{ModelResult, PaperReference};
+use crate::self_models::result::PaperReference;
+use crate::sim::camera::Camera;
 use crate::sim::tensor_kinematics::TensorChain;
-use crate::train::trainer::{TrainConfig, TrainHooks, TrainLog, autodiff_device, train_with_hooks};
+use crate::train::trainer::{TrainConfig, TrainHooks, train_with_hooks};
 
 /// When and how the set of Gaussians changes during training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -61,32 +61,42 @@ pub enum K3dgsCompositing {
     Alpha,
 }
 
-/// Everything that defines one K-3DGS run.
+/// K-3DGS's model and how it trains (the run around it: [`SelfModelRun`], from [`k3dgs_run`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct K3dgsConfig {
-    pub name: String,
-    pub preset: String,
+pub struct K3dgs {
     pub init: GaussianInit,
     pub compositing: K3dgsCompositing,
     pub densification: Densification,
-    pub train: TrainConfig,
     pub robot_weight: f64,
     /// Splat only pairs within this many standard deviations (the fast path).
     pub cull_sigmas: f64,
-    pub data: DataSpec,
-    pub paper_subset: usize,
-    pub speed: SpeedConfig,
     /// Batch sizes at which dense splatting, the slow reference, is timed.
     #[serde(default)]
     pub dense_batches: Vec<usize>,
-    pub reference: PaperReference,
-    pub note: String,
-    #[serde(default)]
-    pub steps_override: Option<usize>,
+    /// Output image size `[height, width]`.
+    pub image: [usize; 2],
 }
 
-/// `paper`, `short` and `quick`.
-pub const K3DGS_PRESETS: &[&str] = &["paper", "short", "quick"];
+/// The three K-3DGS models of Table I.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum K3dgsVariant {
+    /// Isotropic Gaussians, the reimplementation's (faithful) compositing.
+    Isotropic,
+    /// The same with alpha compositing.
+    IsotropicAlpha,
+    /// Anisotropic Gaussians with alpha compositing, half the isotropic count (300 at the
+    /// start, at most 500).
+    Anisotropic,
+}
+
+impl K3dgsVariant {
+    /// Every variant with its folder name.
+    pub const ALL: [(&str, K3dgsVariant); 3] = [
+        ("isotropic", K3dgsVariant::Isotropic),
+        ("isotropic_alpha", K3dgsVariant::IsotropicAlpha),
+        ("anisotropic", K3dgsVariant::Anisotropic),
+    ];
+}
 
 impl PaperReference {
     /// K-3DGS in the paper: 17.01 dB at 37 FPS, 30.3 s of training, on a T4.
@@ -100,124 +110,92 @@ impl PaperReference {
     }
 }
 
-impl K3dgsConfig {
-    /// Isotropic Gaussians, the faithful compositing.
-    pub fn isotropic(preset: &str) -> Result<Self> {
-        let quick = preset == "quick";
-        let (data, speed) = match preset {
-            "paper" | "short" => (DataSpec::paper(), SpeedConfig::paper()),
-            "quick" => (DataSpec::quick(), SpeedConfig::quick()),
-            other => {
-                return Err(Error::Config(format!(
-                    "unknown preset \"{other}\" (choose paper, short or quick)"
-                )));
-            }
-        };
-        let steps = match preset {
-            "paper" => 3000,
-            "short" => 600,
-            _ => 300,
-        };
-        let scale = steps as f64 / 3000.0;
-        let at = |s: usize| ((s as f64 * scale) as usize).max(1);
-        Ok(K3dgsConfig {
-            name: "K-3DGS (isotropic)".into(),
-            preset: preset.into(),
-            init: if quick {
-                GaussianInit::quick()
-            } else {
-                GaussianInit::paper()
-            },
-            compositing: K3dgsCompositing::SigmoidSum {
-                start: 1.0,
-                end: 20.0,
-            },
-            densification: Densification {
-                every: at(100),
-                until: at(1500),
-                max_clones: if quick { 6 } else { 30 },
-                gradient_threshold: 2e-4,
-                prune_every: at(200),
-                min_opacity: 0.02,
-                min_gaussians: if quick { 40 } else { 200 },
-                max_gaussians: if quick { 200 } else { 1000 },
-            },
-            train: TrainConfig {
-                steps,
-                batch: 1,
-                learning_rate: 5e-3,
-                grad_clip_norm: None,
-                input_noise: 0.0,
-                seed: 0,
-                checkpoint_every: 0,
-            },
-            robot_weight: 5.0,
-            cull_sigmas: 3.0,
-            data,
-            paper_subset: 100,
-            speed,
-            // A dense batch of 256 takes about a minute: timed in the paper preset only.
-            dense_batches: if preset == "paper" {
-                vec![1, 256]
-            } else {
-                vec![1, 8]
-            },
-            reference: PaperReference::k3dgs(),
-            note: if preset == "short" {
-                "short preset: 600 steps instead of 3,000 (CPU time budget)".into()
-            } else {
-                String::new()
-            },
-            steps_override: None,
-        })
+/// A K-3DGS run on `preset` (`paper`, `short`, `quick`).
+pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3dgs>> {
+    let quick = preset == "quick";
+    let steps = match preset {
+        "paper" => 3000,
+        "short" => 600,
+        _ => 300,
+    };
+    let scale = steps as f64 / 3000.0;
+    let at = |s: usize| ((s as f64 * scale) as usize).max(1);
+    let mut model = K3dgs {
+        init: if quick {
+            GaussianInit::quick()
+        } else {
+            GaussianInit::paper()
+        },
+        compositing: K3dgsCompositing::SigmoidSum {
+            start: 1.0,
+            end: 20.0,
+        },
+        densification: Densification {
+            every: at(100),
+            until: at(1500),
+            max_clones: if quick { 6 } else { 30 },
+            gradient_threshold: 2e-4,
+            prune_every: at(200),
+            min_opacity: 0.02,
+            min_gaussians: if quick { 40 } else { 200 },
+            max_gaussians: if quick { 200 } else { 1000 },
+        },
+        robot_weight: 5.0,
+        cull_sigmas: 3.0,
+        // A dense batch of 256 takes about a minute: timed in the paper preset only.
+        dense_batches: if preset == "paper" {
+            vec![1, 256]
+        } else {
+            vec![1, 8]
+        },
+        image: SelfModelRun::<K3dgs>::image(preset)?,
+    };
+    let name = match variant {
+        K3dgsVariant::Isotropic => "K-3DGS (isotropic)",
+        K3dgsVariant::IsotropicAlpha => "K-3DGS (isotropic, alpha)",
+        K3dgsVariant::Anisotropic => "K-3DGS (anisotropic, alpha)",
+    };
+    if variant != K3dgsVariant::Isotropic {
+        model.compositing = K3dgsCompositing::Alpha;
     }
-
-    /// The same with alpha compositing.
-    pub fn isotropic_alpha(preset: &str) -> Result<Self> {
-        let mut cfg = Self::isotropic(preset)?;
-        cfg.name = "K-3DGS (isotropic, alpha)".into();
-        cfg.compositing = K3dgsCompositing::Alpha;
-        Ok(cfg)
-    }
-
-    /// Anisotropic Gaussians with alpha compositing, half the isotropic count (300 at the
-    /// start, at most 500).
-    pub fn anisotropic(preset: &str) -> Result<Self> {
-        let mut cfg = Self::isotropic_alpha(preset)?;
-        cfg.name = "K-3DGS (anisotropic, alpha)".into();
-        let quick = preset == "quick";
-        cfg.init = crate::self_models::k3dgs::gaussians::GaussianInit::anisotropic();
+    if variant == K3dgsVariant::Anisotropic {
+        model.init = GaussianInit::anisotropic();
         if quick {
-            for (_, n) in &mut cfg.init.per_link {
+            for (_, n) in &mut model.init.per_link {
                 *n /= 5;
             }
         }
-        cfg.densification.max_gaussians = if quick { 100 } else { 500 };
-        cfg.densification.min_gaussians = if quick { 20 } else { 100 };
-        Ok(cfg)
+        model.densification.max_gaussians = if quick { 100 } else { 500 };
+        model.densification.min_gaussians = if quick { 20 } else { 100 };
     }
-
-    pub fn paper_compatible(mut self, on: bool) -> Self {
-        self.data.dataset.render.ground_artifact = on;
-        self
+    let mut run = SelfModelRun::new(preset, name, model, 32, PaperReference::k3dgs())?;
+    run.train = TrainConfig {
+        steps,
+        batch: 1,
+        learning_rate: 5e-3,
+        grad_clip_norm: None,
+        input_noise: 0.0,
+        seed: 0,
+        checkpoint_every: 0,
+    };
+    if preset == "short" {
+        run.note = "short preset: 600 steps instead of 3,000 (CPU time budget)".into();
     }
+    Ok(run)
+}
 
-    /// The compositing rule at `step` of training (the temperature's schedule).
-    pub fn mode_at(&self, step: usize) -> Compositing {
+impl K3dgs {
+    /// The compositing rule at `step` of `steps` (the temperature's schedule).
+    pub fn mode_at(&self, step: usize, steps: usize) -> Compositing {
         match self.compositing {
             K3dgsCompositing::SigmoidSum { start, end } => {
-                let f = step as f64 / self.train.steps.max(1) as f64;
+                let f = step as f64 / steps.max(1) as f64;
                 Compositing::SigmoidSum {
                     temperature: start + (end - start) * f.min(1.0),
                 }
             }
             K3dgsCompositing::Alpha => Compositing::Alpha,
         }
-    }
-
-    /// The rule after training.
-    pub fn final_mode(&self) -> Compositing {
-        self.mode_at(self.train.steps)
     }
 }
 
@@ -301,15 +279,6 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
     }
 }
 
-/// What a run produced.
-pub struct K3dgsOutcome {
-    pub result: ModelResult,
-    pub speed: Vec<RenderSpeedRow>,
-    pub log: TrainLog,
-    /// `(step, Gaussians)` after each change.
-    pub counts: Vec<(usize, usize)>,
-}
-
 /// Culled against dense splatting.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct RenderSpeedRow {
@@ -323,220 +292,192 @@ pub struct RenderSpeedRow {
     pub preset: String,
 }
 
-/// Train, evaluate and report one K-3DGS model into `dir`.
-pub fn run(cfg: &K3dgsConfig, dir: &Path, device_choice: DeviceChoice) -> Result<K3dgsOutcome> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    write_json(&dir.join("config.json"), cfg)?;
-    let git_revision = crate::core::provenance::git_revision();
-    let device = crate::core::device::select(device_choice)?;
-    let robot = cfg.data.robot.load()?;
-    let chain = TensorChain::new(&robot.chain);
-    let camera = cfg.data.dataset.camera.clone();
-    let (data, train_range, test_range) = cfg.data.load()?;
-    let tdev = autodiff_device(&device, cfg.train.seed);
-    let train_set = device_set(
-        &data,
-        &train_range,
-        host_targets(&data, &train_range),
-        &tdev,
-    );
-    let (links, positions) = cfg.init.positions(&robot, cfg.train.seed)?;
-    let long_axis: Vec<usize> = (0..robot.chain.links.len())
-        .map(|l| GaussianInit::long_axis(&robot, l))
-        .collect();
-    let model = KinematicGaussians::new(&links, &positions, &cfg.init, &long_axis, &tdev);
-    let mut hooks = Densifier {
-        cfg: &cfg.densification,
-        grad_sum: Vec::new(),
-        steps: 0,
-        counts: vec![(0, model.len())],
-    };
-    let pixels = camera.width * camera.height;
-    let (model, log) = train_with_hooks(
-        model,
-        &train_set,
-        &cfg.train,
-        None,
-        &cfg.name,
-        |m: &KinematicGaussians, b| {
-            let q = b.inputs.clone().mul_scalar(std::f64::consts::PI / 180.0);
-            let (sil, _) = m.render(
-                &chain,
-                q,
-                &camera,
-                cfg.mode_at(b.step),
-                Some(cfg.cull_sigmas),
-            );
-            let y = b.targets[0].clone().reshape([1, pixels]);
-            let w = y.clone().mul_scalar(cfg.robot_weight - 1.0).add_scalar(1.0);
-            ((sil - y).square() * w).mean()
-        },
-        &mut hooks,
-    )?;
-    let model = model.valid();
-    let counts = hooks.counts;
-    // Test set: culled splatting, in batches.
-    let (truth, truth_depth) = host_targets(&data, &test_range);
-    let test_set = device_set(
-        &data,
-        &test_range,
-        (truth.clone(), truth_depth.clone()),
-        &device,
-    );
-    let mode = cfg.final_mode();
-    let mut sil = Vec::new();
-    let mut depth = Vec::new();
-    let n = test_set.len();
-    for start in (0..n).step_by(32) {
-        let q = test_set
-            .inputs
-            .clone()
-            .slice([start..(start + 32).min(n)])
-            .mul_scalar(std::f64::consts::PI / 180.0);
-        let (s, d) = model.render(&chain, q, &camera, mode, Some(cfg.cull_sigmas));
-        sil.extend(s.into_data().try_into_vec::<f32>().expect("float"));
-        depth.extend(d.into_data().try_into_vec::<f32>().expect("float"));
+/// The Gaussians' count after each change of the set during training.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct CountRow {
+    pub step: usize,
+    pub gaussians: usize,
+}
+
+impl SelfModel for K3dgs {
+    fn image(&self) -> [usize; 2] {
+        self.image
     }
-    let predictions = Predictions {
-        silhouettes: sil,
-        depth: Some(depth),
-        pixels,
-        depth_pixels: crate::eval::evaluation::DepthPixels::Drawn,
-    };
-    let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-    // Speed: culled and dense splatting.
-    let mut speed = Vec::new();
-    // Dense splatting is the slow reference: one warm-up and one timed call per batch size.
-    let dense_speed = SpeedConfig {
-        warmup: 1,
-        min_repeats: 1,
-        min_seconds: 0.0,
-        batches: cfg.dense_batches.clone(),
-    };
-    for (label, cull, speed_cfg) in [
-        ("culled", Some(cfg.cull_sigmas), &cfg.speed),
-        ("dense", None, &dense_speed),
-    ] {
-        let timings = measure(
-            |q| {
-                let [b, _] = q.dims();
-                let q = q.mul_scalar(std::f64::consts::PI / 180.0);
-                // Dense splatting of 256 images at once would hold 256 x N x P floats.
-                let parts: Vec<Tensor<2>> = (0..b)
-                    .step_by(if cull.is_some() { b } else { 8 })
-                    .map(|s| {
-                        let e = (s + if cull.is_some() { b } else { 8 }).min(b);
-                        model
-                            .render(&chain, q.clone().slice([s..e]), &camera, mode, cull)
-                            .0
-                    })
-                    .collect();
-                Tensor::cat(parts, 0).reshape([b, 1, camera.height, camera.width])
+
+    /// One image per step, the robot pixels weighted, densified and pruned between steps
+    /// (no checkpoints: a run takes seconds to minutes and its Gaussians change in number).
+    fn fit(&self, fit: &Fit) -> Result<Trained> {
+        let robot = fit.robot;
+        let chain = TensorChain::new(&robot.chain);
+        let camera = fit.camera.clone();
+        let (links, positions) = self.init.positions(robot, fit.train.seed)?;
+        let long_axis: Vec<usize> = (0..robot.chain.links.len())
+            .map(|l| GaussianInit::long_axis(robot, l))
+            .collect();
+        let model =
+            KinematicGaussians::new(&links, &positions, &self.init, &long_axis, fit.train_device);
+        let mut hooks = Densifier {
+            cfg: &self.densification,
+            grad_sum: Vec::new(),
+            steps: 0,
+            counts: vec![(0, model.len())],
+        };
+        let pixels = camera.width * camera.height;
+        let steps = fit.train.steps;
+        let (model, log) = train_with_hooks(
+            model,
+            fit.train_set,
+            fit.train,
+            None,
+            fit.label,
+            |m: &KinematicGaussians, b| {
+                let q = b.inputs.clone().mul_scalar(std::f64::consts::PI / 180.0);
+                let (sil, _) = m.render(
+                    &chain,
+                    q,
+                    &camera,
+                    self.mode_at(b.step, steps),
+                    Some(self.cull_sigmas),
+                );
+                let y = b.targets[0].clone().reshape([1, pixels]);
+                let w = y
+                    .clone()
+                    .mul_scalar(self.robot_weight - 1.0)
+                    .add_scalar(1.0);
+                ((sil - y).square() * w).mean()
             },
-            robot.dof(),
-            &device,
-            speed_cfg,
-        );
-        for t in timings {
-            speed.push(RenderSpeedRow {
-                model: cfg.name.clone(),
-                splatting: label.into(),
-                batch: t.batch,
-                img_per_s: t.images_per_second(),
-                gaussians: model.len(),
-                git_revision: git_revision.clone(),
-                device: device_choice.to_string(),
-                preset: cfg.preset.clone(),
-            });
-        }
-    }
-    let culled = |b: usize| {
-        speed
-            .iter()
-            .filter(|r| r.splatting == "culled")
-            .find(|r| r.batch == b)
-            .map_or(f64::NAN, |r| r.img_per_s)
-    };
-    let big = cfg.speed.batches.iter().copied().max().unwrap_or(1);
-    let result = ModelResult {
-        model: cfg.name.clone(),
-        dataset: cfg.data.label().into(),
-        preset: cfg.preset.clone(),
-        device: device_choice.to_string(),
-        git_revision: git_revision.clone(),
-        parameters: model.num_params(),
-        train_samples: train_range.len(),
-        train_steps: log.step,
-        batch: 1,
-        train_time_s: log.train_seconds,
-        train_img_per_s: log.images_per_second(),
-        psnr_db_first100: quality.psnr_db_paper_subset,
-        psnr_db_test: quality.psnr_db_test,
-        iou_test: quality.iou_test,
-        depth_mae_mm: quality.depth_mae_mm,
-        depth_constant_mae_mm: quality.depth_constant_mae_mm,
-        infer_b1_img_per_s: culled(1),
-        latency_b1_ms: 1000.0 / culled(1),
-        infer_b256_img_per_s: culled(big),
-        paper_psnr_db: None,
-        paper_fps: None,
-        paper_latency_ms: None,
-        paper_train_time_s: None,
-        note: {
-            let mut n = vec![format!(
+            &mut hooks,
+        )?;
+        let model = model.valid();
+        let counts = hooks.counts;
+        Ok(Trained {
+            parameters: model.num_params(),
+            note: format!(
                 "{} Gaussians at the end ({} at the start)",
                 model.len(),
                 counts.first().map_or(0, |c| c.1)
-            )];
-            if !cfg.note.is_empty() {
-                n.push(cfg.note.clone());
-            }
-            n.join("; ")
-        },
-        steps_override: cfg.steps_override,
+            ),
+            renderer: Box::new(K3dgsRenderer {
+                mode: self.mode_at(steps, steps),
+                model,
+                chain,
+                camera,
+                cull_sigmas: self.cull_sigmas,
+                dense_batches: self.dense_batches.clone(),
+                counts,
+            }),
+            log,
+        })
     }
-    .with_reference(&cfg.reference);
-    let csv = dir.join("results.csv");
-    write_table(
-        &csv,
-        std::slice::from_ref(&result),
-        &format!(
-            "{} ({} preset, {} dataset)",
-            cfg.name,
-            cfg.preset,
-            cfg.data.label()
-        ),
-        "PSNR per image over all test images (the paper's K-3DGS figure was over all 400), IoU at 0.5, depth by front-to-back compositing against the simulator's on robot pixels. Inference: culled splatting (`render_speed.csv` has dense beside it). `paper_*`: the paper's figures on a T4, for reference. Config: `config.json`.",
-    )?;
-    let path = dir.join("render_speed.csv");
-    write_table(
-        &path,
-        &speed,
-        &format!("{}: culled against dense splatting", cfg.name),
-        "Images/s of the trained model, median of synchronised timed calls after warm-up; dense splatting evaluates every (Gaussian, pixel) pair, culled only those within `cull_sigmas` standard deviations.",
-    )?;
-    crate::report::table::write_training_curve(dir, &cfg.name, &log)?;
-    qualitative_figure(
-        &dir.join("qualitative.png"),
-        &truth,
-        &truth_depth,
-        &predictions,
-        [camera.height, camera.width],
-    )?;
-    gaussians_figure(
-        &dir.join("gaussians.png"),
-        &model,
-        &chain,
-        &data,
-        &test_range,
-        &camera,
-    )?;
-    Ok(K3dgsOutcome {
-        result,
-        speed,
-        log,
-        counts,
-    })
+
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
+        k3dgs_run(preset, K3dgsVariant::Isotropic)
+    }
+}
+
+/// A trained K-3DGS model with what it renders with.
+pub struct K3dgsRenderer {
+    pub model: KinematicGaussians,
+    chain: TensorChain,
+    camera: Camera,
+    mode: Compositing,
+    cull_sigmas: f64,
+    dense_batches: Vec<usize>,
+    /// `(step, Gaussians)` after each change of the set.
+    pub counts: Vec<(usize, usize)>,
+}
+
+impl K3dgsRenderer {
+    /// Silhouettes `[b, 1, H, W]` of `angles` (degrees), culled (`cull`) or dense, dense in
+    /// parts of 8 images (256 at once would hold 256 x N x P floats).
+    fn splat(&self, angles: Tensor<2>, cull: Option<f64>) -> (Tensor<4>, Tensor<4>) {
+        let [b, _] = angles.dims();
+        let q = angles.mul_scalar(std::f64::consts::PI / 180.0);
+        let part = if cull.is_some() { b.max(1) } else { 8 };
+        let (mut sil, mut depth) = (Vec::new(), Vec::new());
+        for s in (0..b).step_by(part) {
+            let (si, de) = self.model.render(
+                &self.chain,
+                q.clone().slice([s..(s + part).min(b)]),
+                &self.camera,
+                self.mode,
+                cull,
+            );
+            sil.push(si);
+            depth.push(de);
+        }
+        let shape = [b, 1, self.camera.height, self.camera.width];
+        (
+            Tensor::cat(sil, 0).reshape(shape),
+            Tensor::cat(depth, 0).reshape(shape),
+        )
+    }
+}
+
+impl Render for K3dgsRenderer {
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
+        let (s, d) = self.splat(angles, Some(self.cull_sigmas));
+        (s, Some(d))
+    }
+
+    /// Depth is drawn where the Gaussians are.
+    fn depth_pixels(&self) -> DepthPixels {
+        DepthPixels::Drawn
+    }
+
+    /// `render_speed.csv` (culled, as the harness timed it, against dense splatting),
+    /// `gaussian_counts.csv` and `gaussians.png`.
+    fn extra_reports(&self, ctx: &ReportContext) -> Result<()> {
+        // Dense splatting is the slow reference: one warm-up and one timed call per batch.
+        let dense_speed = SpeedConfig {
+            warmup: 1,
+            min_repeats: 1,
+            min_seconds: 0.0,
+            batches: self.dense_batches.clone(),
+        };
+        let dense = measure(
+            |q| self.splat(q, None).0,
+            ctx.data.dof(),
+            ctx.device,
+            &dense_speed,
+        );
+        let row = |splatting: &str, t: &Timing| RenderSpeedRow {
+            model: ctx.name.into(),
+            splatting: splatting.into(),
+            batch: t.batch,
+            img_per_s: t.images_per_second(),
+            gaussians: self.model.len(),
+            git_revision: ctx.git_revision.into(),
+            device: ctx.device_name.clone(),
+            preset: ctx.preset.into(),
+        };
+        let speed: Vec<RenderSpeedRow> = ctx
+            .timings
+            .iter()
+            .map(|t| row("culled", t))
+            .chain(dense.iter().map(|t| row("dense", t)))
+            .collect();
+        write_table(
+            &ctx.dir.join("render_speed.csv"),
+            &speed,
+            &format!("{}: culled against dense splatting", ctx.name),
+            "Images/s of the trained model, median of synchronised timed calls after warm-up; dense splatting evaluates every (Gaussian, pixel) pair, culled only those within `cull_sigmas` standard deviations.",
+        )?;
+        let counts: Vec<CountRow> = self
+            .counts
+            .iter()
+            .map(|&(step, gaussians)| CountRow { step, gaussians })
+            .collect();
+        crate::report::table::write_csv(&ctx.dir.join("gaussian_counts.csv"), &counts)?;
+        gaussians_figure(
+            &ctx.dir.join("gaussians.png"),
+            &self.model,
+            &self.chain,
+            ctx.data,
+            ctx.test,
+            &self.camera,
+        )
+    }
 }
 
 /// Six test poses: the true silhouette with the Gaussians' projected centres over it.

@@ -111,6 +111,7 @@ impl SelfModel for MeanSilhouette {
                 images: n,
                 resumed_from: None,
             },
+            note: String::new(),
         })
     }
 

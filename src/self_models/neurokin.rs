@@ -335,6 +335,7 @@ impl SelfModel for NeuroKinConfig {
             renderer: Box::new(model.valid()),
             parameters,
             log,
+            note: String::new(),
         })
     }
 

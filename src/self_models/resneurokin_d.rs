@@ -280,6 +280,7 @@ impl SelfModel for ResNeuroKinDConfig {
             renderer: Box::new(model.valid()),
             parameters,
             log,
+            note: String::new(),
         })
     }
 

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use crate::self_models::ffksm::{FFKSM_PRESETS, FfksmConfig};
 use crate::self_models::harness::SELF_MODEL_PRESETS;
-use crate::self_models::k3dgs::{K3DGS_PRESETS, K3dgsConfig};
+use crate::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
 use crate::self_models::mean_silhouette::MeanSilhouette;
 use crate::self_models::neurokin::{neurokin_run, neurokin64_run};
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
@@ -132,18 +132,13 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
 pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut rows = Vec::new();
     let mut speed = Vec::new();
-    for (sub, cfg) in [
-        ("isotropic", K3dgsConfig::isotropic(&opts.preset)?),
-        (
-            "isotropic_alpha",
-            K3dgsConfig::isotropic_alpha(&opts.preset)?,
-        ),
-        ("anisotropic", K3dgsConfig::anisotropic(&opts.preset)?),
-    ] {
-        let out =
-            crate::self_models::k3dgs::run(&opts.apply_k3dgs(cfg), &dir.join(sub), opts.device)?;
+    for (sub, variant) in K3dgsVariant::ALL {
+        let cfg = opts.apply(k3dgs_run(&opts.preset, variant)?);
+        let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.push(out.result);
-        speed.extend(out.speed);
+        speed.extend(crate::report::table::read_csv::<RenderSpeedRow>(
+            &dir.join(sub).join("render_speed.csv"),
+        )?);
     }
     write_rows(
         dir,
@@ -346,7 +341,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "k3dgs",
         about: "K-3DGS: Gaussians on the kinematic chain, splatted (culled and dense), two compositing rules",
         default_dir: "reports/k3dgs",
-        presets: K3DGS_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: true,
         takes_robot: false,
         run: run_k3dgs,

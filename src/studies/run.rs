@@ -8,7 +8,6 @@ use crate::core::error::Result;
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::ffksm::FfksmConfig;
 use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
-use crate::self_models::k3dgs::K3dgsConfig;
 use crate::self_models::result::ModelResult;
 use crate::sim::robots::{BuiltinRobot, RobotSpec};
 
@@ -83,14 +82,6 @@ impl RunOptions {
 
     /// Apply the switches to an FFKSM config.
     pub fn apply_ffksm(&self, cfg: FfksmConfig) -> FfksmConfig {
-        let mut cfg = cfg.paper_compatible(self.paper_compatible);
-        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
-        cfg
-    }
-
-    /// Apply the switches to a K-3DGS config (`--resume` does not apply: a run takes seconds
-    /// to minutes and its Gaussians change in number, so it keeps no checkpoints).
-    pub fn apply_k3dgs(&self, cfg: K3dgsConfig) -> K3dgsConfig {
         let mut cfg = cfg.paper_compatible(self.paper_compatible);
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
         cfg
