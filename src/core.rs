@@ -6,4 +6,6 @@ pub mod atomic_file;
 pub mod device;
 pub mod error;
 pub mod preset;
+pub mod progress;
 pub mod provenance;
+pub mod timing;

@@ -15,13 +15,14 @@
 
 use std::path::Path;
 
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 
 use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::core::provenance::git_revision;
+use indicatif::ProgressBar;
+
 use crate::data::npz::{Array, ArrayData, read_npz, write_npz};
 use crate::report::preview::{depth_to_gray, save_png, tile_grid};
 use crate::sim::camera::Camera;
@@ -118,18 +119,6 @@ pub fn sample_angles(robot: &Robot, cfg: &DatasetConfig) -> Result<Vec<Vec<f64>>
         SamplerKind::Babbling => Ok(babbling(cfg.samples, &ranges, cfg.seed)),
         SamplerKind::Grid => grid(cfg.samples, &ranges, cfg.grid_step_deg, cfg.seed),
     }
-}
-
-/// A progress bar with rate and ETA (hidden when stderr is not a terminal).
-pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    bar.set_style(
-        ProgressStyle::with_template("{msg:>10} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
-    );
-    bar.set_message(what.to_string());
-    bar
 }
 
 impl Dataset {
@@ -527,7 +516,8 @@ pub fn build_and_save(
     out: &Path,
     progress: bool,
 ) -> Result<(Dataset, BuildReport)> {
-    let bar = progress.then(|| progress_bar(cfg.samples as u64, "render"));
+    let bar = progress
+        .then(|| crate::core::progress::progress_bar(cfg.samples as u64, "render", "images"));
     let start = std::time::Instant::now();
     let data = match angles {
         Some(rows) => Dataset::render(robot, cfg, rows, bar.as_ref())?,

@@ -2,8 +2,6 @@
 //! can do: the theoretical single-precision rate from the CPU's cores, clock and vector units,
 //! and the rate a large matrix product reaches on the same burn backend.
 
-use std::time::Instant;
-
 use burn::tensor::{Device, Distribution, Tensor};
 
 /// What this CPU can do in single precision.
@@ -80,16 +78,14 @@ pub fn matmul_gflops(device: &Device, n: usize, repeats: usize) -> f64 {
             Tensor::random([n, n], Distribution::Default, device),
         )
     });
-    let run = || {
-        let t = Instant::now();
-        let c = a.clone().matmul(b.clone());
-        let _ = c.into_data();
-        t.elapsed().as_secs_f64()
-    };
-    run();
-    let mut times: Vec<f64> = (0..repeats.max(1)).map(|_| run()).collect();
-    times.sort_by(f64::total_cmp);
-    2.0 * (n as f64).powi(3) / times[times.len() / 2] / 1e9
+    let seconds = crate::core::timing::median_seconds(
+        crate::core::timing::Repeats::exactly(1, repeats),
+        || {
+            let c = a.clone().matmul(b.clone());
+            let _ = c.into_data();
+        },
+    );
+    2.0 * (n as f64).powi(3) / seconds / 1e9
 }
 
 #[cfg(test)]

@@ -3,8 +3,6 @@
 //! (throughput). Training throughput is measured by the training loop itself
 //! ([`crate::train::trainer::TrainLog::images_per_second`]); the paper's "FPS" was that figure.
 
-use std::time::Instant;
-
 use burn::tensor::{Device, Distribution, Tensor};
 
 /// One timed batch size.
@@ -34,6 +32,15 @@ pub struct SpeedConfig {
 }
 
 impl SpeedConfig {
+    /// Its warm-up and repeats, for the timer.
+    pub fn repeats(&self) -> crate::core::timing::Repeats {
+        crate::core::timing::Repeats {
+            warmup: self.warmup,
+            min_repeats: self.min_repeats,
+            min_seconds: self.min_seconds,
+        }
+    }
+
     pub fn paper() -> Self {
         SpeedConfig {
             warmup: 3,
@@ -64,25 +71,14 @@ where
             let q = crate::core::device::with_seed(device, batch as u64, || {
                 Tensor::<2>::random([batch, dof], Distribution::Uniform(-90.0, 90.0), device)
             });
-            let call = || {
+            let times = crate::core::timing::time_calls(cfg.repeats(), || {
                 let y = forward(q.clone());
                 let _ = device.sync();
                 drop(y);
-            };
-            for _ in 0..cfg.warmup {
-                call();
-            }
-            let start = Instant::now();
-            let mut times = Vec::new();
-            while times.len() < cfg.min_repeats || start.elapsed().as_secs_f64() < cfg.min_seconds {
-                let t = Instant::now();
-                call();
-                times.push(t.elapsed().as_secs_f64());
-            }
-            times.sort_by(f64::total_cmp);
+            });
             Timing {
                 batch,
-                median_s: times[times.len() / 2],
+                median_s: crate::core::timing::median(&times),
                 repeats: times.len(),
             }
         })

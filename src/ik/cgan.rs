@@ -105,7 +105,8 @@ pub fn train_gan(
     let mut best: Option<Mlp> = None;
     let started = std::time::Instant::now();
     let batcher = Batcher::new(&set, &train_cfg);
-    let bar = crate::train::trainer::progress_bar(epochs * steps_per_epoch, "CGAN");
+    let bar =
+        crate::core::progress::progress_bar((epochs * steps_per_epoch) as u64, "CGAN", "steps");
     let mut g_losses = (0.0f64, 0usize);
     for epoch in 0..epochs {
         let rate = cfg.fit.learning_rate * plateau.as_ref().map_or(1.0, |p| p.scale);

@@ -162,16 +162,7 @@ pub trait IkMethod {
 
 /// Seconds to run `f`: one warm-up pass, then the median of three.
 pub fn timed(f: &mut dyn FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..3)
-        .map(|_| {
-            let t = std::time::Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[1]
+    crate::core::timing::median_seconds(crate::core::timing::Repeats::exactly(1, 3), f)
 }
 
 /// A value's JSON, for [`IkMethod::settings`].

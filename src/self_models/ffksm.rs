@@ -367,12 +367,9 @@ impl Rendered {
 
     /// Images per second from the median time per image, the first (warm-up) left out.
     fn images_per_second(&self) -> f64 {
-        let mut t: Vec<f64> = self.seconds.iter().skip(1).copied().collect();
-        if t.is_empty() {
-            t = self.seconds.clone();
-        }
-        t.sort_by(f64::total_cmp);
-        1.0 / t[t.len() / 2].max(1e-12)
+        let t: Vec<f64> = self.seconds.iter().skip(1).copied().collect();
+        let t = if t.is_empty() { &self.seconds } else { &t };
+        1.0 / crate::core::timing::median(t).max(1e-12)
     }
 }
 
@@ -401,7 +398,7 @@ fn render_all(
         grid_occupancy: Vec::new(),
         seconds: Vec::new(),
     };
-    let bar = crate::data::dataset::progress_bar(angles_deg.len() as u64, label);
+    let bar = crate::core::progress::progress_bar(angles_deg.len() as u64, label, "images");
     for a in angles_deg {
         let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
         let view = (camera, radians(&a32));

@@ -3,8 +3,6 @@
 //! NeuroKin architectures. `../shared/bench/torch_reference.py` measures the same workloads;
 //! `bench_decoders --torch PYTHON` runs it in the same sitting and prints the ratios.
 
-use std::time::Instant;
-
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
 
@@ -55,7 +53,7 @@ fn train_rate(
     repeats: usize,
 ) -> Result<f64> {
     let tdev = autodiff_device(device, 0);
-    let mut model = cfg.init(&tdev, 0)?;
+    let model = cfg.init(&tdev, 0)?;
     let mut optim = AdamConfig::new().init();
     let native = cfg.native_size();
     let (q, y) = crate::core::device::with_seed(&tdev, 1, || {
@@ -67,23 +65,22 @@ fn train_rate(
         );
         (q, y)
     });
-    let mut times = Vec::new();
-    for i in 0..warmup + repeats {
-        let t = Instant::now();
-        let z = model.forward(q.clone());
-        let loss = match cfg.arch {
-            NeuroKinArch::Code => bce_with_logits(z, y.clone()),
-            NeuroKinArch::Text64 => mse(burn::tensor::activation::sigmoid(z), y.clone()),
-        };
-        let grads = GradientsParams::from_grads(loss.backward(), &model);
-        model = optim.step(1e-3, model, grads);
-        let _ = tdev.sync();
-        if i >= warmup {
-            times.push(t.elapsed().as_secs_f64());
-        }
-    }
-    times.sort_by(f64::total_cmp);
-    Ok(batch as f64 / times[times.len() / 2])
+    let mut slot = Some(model);
+    let seconds = crate::core::timing::median_seconds(
+        crate::core::timing::Repeats::exactly(warmup, repeats),
+        || {
+            let model = slot.take().expect("the model between steps");
+            let z = model.forward(q.clone());
+            let loss = match cfg.arch {
+                NeuroKinArch::Code => bce_with_logits(z, y.clone()),
+                NeuroKinArch::Text64 => mse(burn::tensor::activation::sigmoid(z), y.clone()),
+            };
+            let grads = GradientsParams::from_grads(loss.backward(), &model);
+            slot = Some(optim.step(1e-3, model, grads));
+            let _ = tdev.sync();
+        },
+    );
+    Ok(batch as f64 / seconds)
 }
 
 /// Measure both NeuroKin architectures on `choice`.

@@ -152,6 +152,5 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
 }
 
 fn median(t: &mut [f64]) -> f64 {
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    crate::core::timing::median(t)
 }

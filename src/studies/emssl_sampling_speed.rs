@@ -299,7 +299,7 @@ pub fn run(
         cfg.thread_sweep.clone()
     };
     let total = cfg.latencies.len() * (4 + cfg.batch_sweep.len() + thread_sweep.len());
-    let bar = crate::train::trainer::progress_bar(total, "sampling speed");
+    let bar = crate::core::progress::progress_bar(total as u64, "sampling speed", "passes");
     let step = |what: String| {
         bar.set_message(what);
         bar.inc(1);

@@ -672,20 +672,6 @@ where
     Ok((hooks.best.unwrap_or(model), log))
 }
 
-/// The training progress bar: steps, rate, the caller's message and ETA.
-pub fn progress_bar(steps: usize, label: &str) -> indicatif::ProgressBar {
-    let bar = indicatif::ProgressBar::new(steps as u64);
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{prefix} [{bar:30}] {pos}/{len} steps {per_sec} {msg} ETA {eta}",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    bar.set_prefix(label.to_string());
-    bar
-}
-
 /// [`train`] with [`TrainHooks`].
 pub fn train_with_hooks<M, L, S, H>(
     model: M,
@@ -748,7 +734,7 @@ where
     }
     let batcher = Batcher::new(data, cfg);
     let log_every = (cfg.steps / 200).max(1);
-    let bar = progress_bar(cfg.steps, label);
+    let bar = crate::core::progress::progress_bar(cfg.steps as u64, label, "steps");
     bar.set_position(log.step as u64);
     bar.reset_eta();
     let mut window = (0.0f64, 0usize);
