@@ -10,8 +10,23 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
 use selfmodel::train::losses::{bce, bce_with_logits, mse};
 use selfmodel::train::trainer::{
-    CheckpointPlan, TrainConfig, TrainSet, autodiff_device, clip_global_norm, train,
+    Batch, CheckpointPlan, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer, autodiff_device,
+    clip_global_norm,
 };
+
+/// The training loop with an optional checkpoint plan.
+fn train<M: burn::module::Module, S: Into<StepLoss>>(
+    model: M,
+    set: &TrainSet,
+    cfg: &TrainConfig,
+    plan: Option<&CheckpointPlan>,
+    label: &str,
+    loss: impl Fn(&M, &Batch) -> S,
+) -> selfmodel::Result<(M, TrainLog)> {
+    Trainer::new(cfg, label)
+        .checkpoint(plan)
+        .fit(model, set, loss)
+}
 
 fn cfg(steps: usize) -> TrainConfig {
     TrainConfig {

@@ -19,7 +19,7 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::distances;
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::tensor_kinematics::TensorChain;
-use crate::train::trainer::{Batch, TrainConfig, TrainSet, autodiff_device, train_continuing};
+use crate::train::trainer::{Batch, TrainConfig, TrainSet, Trainer, autodiff_device};
 
 /// How the link parameters are learned.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -186,8 +186,6 @@ pub fn calibrate(
     let fit_before_mm = fit_mm(nominal);
     let mut model = LinkParameters::new(nominal, &tdev);
     let mut optim = AdamConfig::new().init();
-    struct NoHooks;
-    impl crate::train::trainer::TrainHooks<LinkParameters> for NoHooks {}
     for (i, &(steps, learning_rate)) in cfg.stages.iter().enumerate() {
         let train = TrainConfig {
             steps,
@@ -198,16 +196,10 @@ pub fn calibrate(
             seed: cfg.seed,
             checkpoint_every: 0,
         };
-        (model, optim, _) = train_continuing(
-            model,
-            optim,
-            &set,
-            &train,
-            None,
-            &format!("link parameters, stage {}", i + 1),
-            loss,
-            &mut NoHooks,
-        )?;
+        let label = format!("link parameters, stage {}", i + 1);
+        (model, optim, _) = Trainer::new(&train, &label)
+            .optimizer(optim)
+            .run(model, &set, loss)?;
     }
     let chain = model.valid().to_chain(nominal);
     let fit_after_mm = fit_mm(&chain);

@@ -294,8 +294,8 @@ pub fn train_flow(
             })
         }
         None => {
-            let (model, _) =
-                crate::train::trainer::train(model, &set, &train_cfg, None, "flow IK", loss)?;
+            let (model, _) = crate::train::trainer::Trainer::new(&train_cfg, "flow IK")
+                .fit(model, &set, loss)?;
             Ok(TrainedFlow {
                 model: model.valid(),
                 log: None,

@@ -42,8 +42,8 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::train::trainer::{
-    Batch, Convergence, ConvergenceLog, Plateau, TrainConfig, TrainSet, autodiff_device,
-    train_continuing, train_to_convergence,
+    Batch, Convergence, ConvergenceLog, Plateau, TrainConfig, TrainSet, Trainer, autodiff_device,
+    train_to_convergence,
 };
 
 /// Optimisation of one fit.
@@ -163,16 +163,10 @@ pub fn fit_set(
         steps: train_cfg.steps,
         done: 0,
     };
-    let (model, optim, _) = train_continuing(
-        model,
-        optim,
-        set,
-        &train_cfg,
-        None,
-        label,
-        loss,
-        &mut schedule,
-    )?;
+    let (model, optim, _) = Trainer::new(&train_cfg, label)
+        .optimizer(optim)
+        .hooks(&mut schedule)
+        .run(model, set, loss)?;
     Ok((model, optim))
 }
 

@@ -48,7 +48,7 @@ use crate::self_models::harness::{DataSpec, device_set, host_targets, qualitativ
 use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
 use crate::train::trainer::{
-    CheckpointPlan, StepLoss, TrainConfig, TrainLog, autodiff_device, train_watched,
+    CheckpointPlan, StepLoss, TrainConfig, TrainLog, Trainer, Watch, autodiff_device,
 };
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
@@ -622,15 +622,12 @@ fn train_field(
         } else {
             format!("{} (restart {restarts})", cfg.name)
         };
-        match train_watched(
-            field,
-            &train_set,
-            &cfg.train,
-            Some(&plan),
-            &label,
-            loss,
-            watch,
-        ) {
+        let mut watch = Watch(watch);
+        match Trainer::new(&cfg.train, &label)
+            .checkpoint(Some(&plan))
+            .hooks(&mut watch)
+            .fit(field, &train_set, loss)
+        {
             Ok((field, log)) => {
                 let counts = [train_evaluations.get(), train_steps.get()];
                 if plan.dir.is_dir() {

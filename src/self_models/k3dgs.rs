@@ -32,7 +32,7 @@ use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
 use crate::sim::tensor_kinematics::TensorChain;
-use crate::train::trainer::{TrainConfig, TrainHooks, train_with_hooks};
+use crate::train::trainer::{TrainConfig, TrainHooks, Trainer};
 
 /// When and how the set of Gaussians changes during training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -324,12 +324,9 @@ impl SelfModel for K3dgs {
         };
         let pixels = camera.width * camera.height;
         let steps = fit.train.steps;
-        let (model, log) = train_with_hooks(
+        let (model, log) = Trainer::new(fit.train, fit.label).hooks(&mut hooks).fit(
             model,
             fit.train_set,
-            fit.train,
-            None,
-            fit.label,
             |m: &KinematicGaussians, b| {
                 let q = b.inputs.clone().mul_scalar(std::f64::consts::PI / 180.0);
                 let (sil, _) = m.render(
@@ -346,7 +343,6 @@ impl SelfModel for K3dgs {
                     .add_scalar(1.0);
                 ((sil - y).square() * w).mean()
             },
-            &mut hooks,
         )?;
         let model = model.valid();
         let counts = hooks.counts;

@@ -33,7 +33,7 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
 use crate::train::losses::{bce_with_logits, mse};
-use crate::train::trainer::{TrainConfig, train};
+use crate::train::trainer::{TrainConfig, Trainer};
 
 /// Which of the two published NeuroKin architectures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -317,20 +317,15 @@ impl SelfModel for NeuroKinConfig {
             train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
         }
         let loss = self.loss;
-        let (model, log) = train(
-            model,
-            &train_set,
-            fit.train,
-            Some(fit.plan),
-            fit.label,
-            |m, b| {
+        let (model, log) = Trainer::new(fit.train, fit.label)
+            .checkpoint(Some(fit.plan))
+            .fit(model, &train_set, |m, b| {
                 let z = m.forward(b.inputs.clone());
                 match loss {
                     NeuroKinLoss::Mse => mse(sigmoid(z), b.targets[0].clone()),
                     NeuroKinLoss::Bce => bce_with_logits(z, b.targets[0].clone()),
                 }
-            },
-        )?;
+            })?;
         Ok(Trained {
             renderer: Box::new(model.valid()),
             parameters,

@@ -27,7 +27,7 @@ use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained,
 use crate::self_models::neurokin::resize_bilinear;
 use crate::self_models::result::PaperReference;
 use crate::train::losses::{bce, l1_masked, soft_dice};
-use crate::train::trainer::train;
+use crate::train::trainer::Trainer;
 
 /// ResNeuroKin-D's architecture. Presets: `paper` (the code's facts), `quick` (tiny).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -263,19 +263,14 @@ impl SelfModel for ResNeuroKinDConfig {
         let model = self.init(fit.train_device, fit.train.seed)?;
         let parameters = model.trainable_params();
         let w = self.depth_weight;
-        let (model, log) = train(
-            model,
-            fit.train_set,
-            fit.train,
-            Some(fit.plan),
-            fit.label,
-            |m, b| {
+        let (model, log) = Trainer::new(fit.train, fit.label)
+            .checkpoint(Some(fit.plan))
+            .fit(model, fit.train_set, |m, b| {
                 let (s, d) = m.forward(b.inputs.clone());
                 let y = b.targets[0].clone();
                 let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
                 sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
-            },
-        )?;
+            })?;
         Ok(Trained {
             renderer: Box::new(model.valid()),
             parameters,

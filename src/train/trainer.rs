@@ -346,60 +346,102 @@ impl StepLoss {
     }
 }
 
-/// Train `model` on `data` (both on an autodiff device) with `loss(model, batch)`.
+/// The one training loop, configured by a builder: `Trainer::new(&cfg, label)`, then any of
+/// `.checkpoint(plan)` (save every `cfg.checkpoint_every` steps and at the end; resume when
+/// the plan says so), `.optimizer(optim)` (continue from an optimiser state: a learner that
+/// trains one model on a sequence of datasets, EMSSL's iterations, keeps Adam's moments
+/// across them, as one optimiser created before the loop does in PyTorch), `.hooks(h)` (see
+/// [`TrainHooks`]; [`Watch`] for a closure), and `.run(model, data, loss)`.
 ///
-/// Returns the trained model and its log. With a [`CheckpointPlan`], saves every
-/// `cfg.checkpoint_every` steps and at the end, and resumes when asked. A non-finite loss
-/// stops the run with [`Error::Training`], keeping the last good checkpoint.
-pub fn train<M, L, S>(
-    model: M,
-    data: &TrainSet,
-    cfg: &TrainConfig,
-    checkpoint: Option<&CheckpointPlan>,
-    label: &str,
-    loss: L,
-) -> Result<(M, TrainLog)>
-where
-    M: Module,
-    L: Fn(&M, &Batch) -> S,
-    S: Into<StepLoss>,
-{
-    train_watched(model, data, cfg, checkpoint, label, loss, |_, _| Ok(()))
+/// `model` and `data` live on an autodiff device; `loss(model, batch)` is the step's loss. A
+/// non-finite loss stops the run with [`Error::Training`], keeping the last good checkpoint.
+pub struct Trainer<'a, M> {
+    cfg: &'a TrainConfig,
+    label: &'a str,
+    checkpoint: Option<&'a CheckpointPlan>,
+    optim: Option<ModuleOptimizer>,
+    hooks: Option<&'a mut dyn TrainHooks<M>>,
 }
 
-/// [`train`] with a watcher called after every step with the model and the steps done; an
-/// error from it stops training and is returned (FFKSM's restart on collapse uses this).
-pub fn train_watched<M, L, S, W>(
-    model: M,
-    data: &TrainSet,
-    cfg: &TrainConfig,
-    checkpoint: Option<&CheckpointPlan>,
-    label: &str,
-    loss: L,
-    watch: W,
-) -> Result<(M, TrainLog)>
-where
-    M: Module,
-    L: Fn(&M, &Batch) -> S,
-    S: Into<StepLoss>,
-    W: FnMut(&M, usize) -> Result<()>,
-{
-    struct Watcher<W>(W);
-    impl<M, W: FnMut(&M, usize) -> Result<()>> TrainHooks<M> for Watcher<W> {
-        fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
-            (self.0)(&model, step)?;
-            Ok((model, false))
+impl<'a, M: Module> Trainer<'a, M> {
+    pub fn new(cfg: &'a TrainConfig, label: &'a str) -> Self {
+        Trainer {
+            cfg,
+            label,
+            checkpoint: None,
+            optim: None,
+            hooks: None,
         }
     }
-    train_with_hooks(
-        model,
-        data,
-        cfg,
-        checkpoint,
-        label,
-        loss,
-        &mut Watcher(watch),
-    )
+
+    pub fn checkpoint(mut self, plan: Option<&'a CheckpointPlan>) -> Self {
+        self.checkpoint = plan;
+        self
+    }
+
+    pub fn optimizer(mut self, optim: ModuleOptimizer) -> Self {
+        self.optim = Some(optim);
+        self
+    }
+
+    pub fn hooks(mut self, hooks: &'a mut dyn TrainHooks<M>) -> Self {
+        self.hooks = Some(hooks);
+        self
+    }
+
+    /// Train; returns the model, the optimiser state and the log.
+    pub fn run<L, S>(
+        self,
+        model: M,
+        data: &TrainSet,
+        loss: L,
+    ) -> Result<(M, ModuleOptimizer, TrainLog)>
+    where
+        L: Fn(&M, &Batch) -> S,
+        S: Into<StepLoss>,
+    {
+        let optim = self.optim.unwrap_or_else(|| AdamConfig::new().init());
+        let mut none = NoHooks;
+        let hooks: &mut dyn TrainHooks<M> = match self.hooks {
+            Some(h) => h,
+            None => &mut none,
+        };
+        train_loop(
+            model,
+            optim,
+            data,
+            self.cfg,
+            self.checkpoint,
+            self.label,
+            loss,
+            hooks,
+        )
+    }
+
+    /// [`Trainer::run`] without the optimiser state.
+    pub fn fit<L, S>(self, model: M, data: &TrainSet, loss: L) -> Result<(M, TrainLog)>
+    where
+        L: Fn(&M, &Batch) -> S,
+        S: Into<StepLoss>,
+    {
+        let (model, _, log) = self.run(model, data, loss)?;
+        Ok((model, log))
+    }
+}
+
+/// No hooks.
+struct NoHooks;
+impl<M> TrainHooks<M> for NoHooks {}
+
+/// Hooks from a closure called after every step with the model and the steps done; an error
+/// from it stops training and is returned (FFKSM's restart on collapse).
+pub struct Watch<W>(pub W);
+
+impl<M, W: FnMut(&M, usize) -> Result<()>> TrainHooks<M> for Watch<W> {
+    fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
+        (self.0)(&model, step)?;
+        Ok((model, false))
+    }
 }
 
 /// What a model may do during training besides descending the loss.
@@ -666,39 +708,18 @@ where
         base_rate: cfg.learning_rate,
         started: Instant::now(),
     };
-    let (model, _, _) = train_continuing(model, optim, data, &cfg, None, label, loss, &mut hooks)?;
+    let (model, _, _) = Trainer::new(&cfg, label)
+        .optimizer(optim)
+        .hooks(&mut hooks)
+        .run(model, data, loss)?;
     let mut log = hooks.log;
     log.seconds = hooks.started.elapsed().as_secs_f64();
     Ok((hooks.best.unwrap_or(model), log))
 }
 
-/// [`train`] with [`TrainHooks`].
-pub fn train_with_hooks<M, L, S, H>(
-    model: M,
-    data: &TrainSet,
-    cfg: &TrainConfig,
-    checkpoint: Option<&CheckpointPlan>,
-    label: &str,
-    loss: L,
-    hooks: &mut H,
-) -> Result<(M, TrainLog)>
-where
-    M: Module,
-    L: Fn(&M, &Batch) -> S,
-    S: Into<StepLoss>,
-    H: TrainHooks<M>,
-{
-    let optim = AdamConfig::new().init();
-    let (model, _, log) =
-        train_continuing(model, optim, data, cfg, checkpoint, label, loss, hooks)?;
-    Ok((model, log))
-}
-
-/// [`train_with_hooks`] from a given optimiser state, returned with the model: a learner
-/// that trains one model on a sequence of datasets (EMSSL's iterations) keeps Adam's moments
-/// across them, as one optimiser created before the loop does in PyTorch.
+/// The loop behind [`Trainer`].
 #[allow(clippy::too_many_arguments)]
-pub fn train_continuing<M, L, S, H>(
+fn train_loop<M, L, S>(
     mut model: M,
     mut optim: ModuleOptimizer,
     data: &TrainSet,
@@ -706,13 +727,12 @@ pub fn train_continuing<M, L, S, H>(
     checkpoint: Option<&CheckpointPlan>,
     label: &str,
     loss: L,
-    hooks: &mut H,
+    hooks: &mut dyn TrainHooks<M>,
 ) -> Result<(M, ModuleOptimizer, TrainLog)>
 where
     M: Module,
     L: Fn(&M, &Batch) -> S,
     S: Into<StepLoss>,
-    H: TrainHooks<M>,
 {
     if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
         return Err(Error::Config(format!(
