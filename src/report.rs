@@ -2,5 +2,4 @@
 //! image previews. Nothing here is typed by hand.
 
 pub mod figures;
-pub mod preview;
 pub mod table;

@@ -24,7 +24,7 @@ use crate::core::provenance::git_revision;
 use indicatif::ProgressBar;
 
 use crate::data::npz::{Array, ArrayData, read_npz, write_npz};
-use crate::report::preview::{depth_to_gray, save_png, tile_grid};
+use crate::report::figures::{GridRow, image_grid};
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::{RayCaster, RenderOptions};
 use crate::sim::robot::Robot;
@@ -551,20 +551,25 @@ pub fn build_and_save(
     write_json(&out.with_extension("config.json"), cfg)?;
     let shown = 8.min(data.len());
     let picks: Vec<usize> = (0..shown).map(|k| k * data.len() / shown).collect();
-    let mut tiles: Vec<Vec<u8>> = picks.iter().map(|&i| data.image(i).to_vec()).collect();
+    let silhouettes: Vec<Vec<f32>> = picks
+        .iter()
+        .map(|&i| data.image(i).iter().map(|&v| v as f32 / 255.0).collect())
+        .collect();
     let range = report
         .stats
         .depth_m
         .as_ref()
-        .map_or((0.5, 1.5), |d| (d.min as f32, d.max as f32));
-    tiles.extend(
-        picks
-            .iter()
-            .map(|&i| depth_to_gray(data.depth_map(i), range)),
-    );
-    save_png(
+        .map_or([0.5, 1.5], |d| [d.min as f32, d.max as f32]);
+    let rows = [
+        GridRow::Grey(silhouettes.iter().map(Vec::as_slice).collect()),
+        GridRow::Depth(picks.iter().map(|&i| data.depth_map(i)).collect(), range),
+    ];
+    image_grid(
         &out.with_extension("preview.png"),
-        &tile_grid(&tiles, data.width, data.height, shown),
+        &rows,
+        data.width,
+        data.height,
+        1,
     )?;
     Ok((data, report))
 }
