@@ -41,6 +41,7 @@ fn draw_err(path: &Path, e: impl std::fmt::Display) -> Error {
 fn draw_legend<'a, DB, X, Y>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
     path: &Path,
+    position: SeriesLabelPosition,
 ) -> Result<()>
 where
     DB: DrawingBackend + 'a,
@@ -49,6 +50,7 @@ where
 {
     chart
         .configure_series_labels()
+        .position(position)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font((FONT, 13))
@@ -69,7 +71,14 @@ pub struct ParetoPoint {
 }
 
 /// Quality against inference speed, log-x, with the 1,000 FPS control-loop line.
-pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoint]) -> Result<()> {
+/// `floors`: lower bounds (label, quality), drawn as dashed horizontal lines.
+pub fn pareto_plot(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    points: &[ParetoPoint],
+    floors: &[(String, f64)],
+) -> Result<()> {
     register_font();
     let (w, h) = (900u32, 600u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -85,10 +94,12 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
         let q_min = points
             .iter()
             .map(|p| p.quality)
+            .chain(floors.iter().map(|f| f.1))
             .fold(f64::INFINITY, f64::min);
         let q_max = points
             .iter()
             .map(|p| p.quality)
+            .chain(floors.iter().map(|f| f.1))
             .fold(f64::NEG_INFINITY, f64::max);
         let pad = ((q_max - q_min) * 0.15).max(0.5 * q_max.abs().max(1e-3) * 0.02);
         let mut chart = ChartBuilder::on(&root)
@@ -116,6 +127,30 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
             .map_err(|e| draw_err(path, e))?
             .label("1,000 FPS (1 kHz control loop)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+        for (label, q) in floors {
+            let grey = BLACK.mix(0.5);
+            let (x0, x1) = (fps_min / 2.0, fps_max * 3.0);
+            // Dashes: short segments across the log axis.
+            let n = 60;
+            let segments: Vec<Vec<(f64, f64)>> = (0..n)
+                .step_by(2)
+                .map(|k| {
+                    let at = |t: f64| x0 * (x1 / x0).powf(t / n as f64);
+                    vec![(at(k as f64), *q), (at(k as f64 + 1.0), *q)]
+                })
+                .collect();
+            chart
+                .draw_series(
+                    segments
+                        .into_iter()
+                        .map(|s| PathElement::new(s, grey.stroke_width(2))),
+                )
+                .map_err(|e| draw_err(path, e))?
+                .label(format!("{label} ({q:.2})"))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(2))
+                });
+        }
         for p in points {
             let color = if p.reference {
                 BLACK.mix(0.6)
@@ -138,7 +173,8 @@ pub fn pareto_plot(path: &Path, title: &str, y_label: &str, points: &[ParetoPoin
                 )))
                 .map_err(|e| draw_err(path, e))?;
         }
-        draw_legend(&mut chart, path)?;
+        // Bottom left: the slow, poor corner no model sits in.
+        draw_legend(&mut chart, path, SeriesLabelPosition::LowerLeft)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
@@ -199,7 +235,7 @@ pub fn curves(
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });
         }
-        draw_legend(&mut chart, path)?;
+        draw_legend(&mut chart, path, SeriesLabelPosition::MiddleRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
@@ -282,7 +318,7 @@ pub fn log_log_lines(
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
                 .map_err(|e| draw_err(path, e))?;
         }
-        draw_legend(&mut chart, path)?;
+        draw_legend(&mut chart, path, SeriesLabelPosition::MiddleRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)

@@ -795,6 +795,7 @@ pub fn run(
                 n.join("; ")
             },
             steps_override: cfg.steps_override,
+            lower_bound: false,
         }
         .with_reference(&cfg.reference)
     };

@@ -36,6 +36,10 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn image(&self) -> [usize; 2];
     /// Train on `fit.train_set` and hand back what renders.
     fn fit(&self, fit: &Fit) -> Result<Trained>;
+    /// Whether it is a lower bound every model must beat (a constant), not a model.
+    fn lower_bound(&self) -> bool {
+        false
+    }
     /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
     where
@@ -465,6 +469,7 @@ pub fn run<M: SelfModel>(
             .collect::<Vec<_>>()
             .join("; "),
         steps_override: cfg.steps_override,
+        lower_bound: cfg.model.lower_bound(),
     }
     .with_reference(&cfg.reference);
     write_report(dir, cfg, &result, &log)?;

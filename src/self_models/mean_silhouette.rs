@@ -115,6 +115,10 @@ impl SelfModel for MeanSilhouette {
         })
     }
 
+    fn lower_bound(&self) -> bool {
+        true
+    }
+
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
         let mut model = MeanSilhouette::preset(model_preset(preset))?;
         model.image = SelfModelRun::<Self>::image(preset)?;
@@ -126,6 +130,9 @@ impl SelfModel for MeanSilhouette {
             PaperReference::default(),
         )?;
         run.note = "the best constant image: a lower bound, not a model".into();
+        // One pass over the training silhouettes.
+        run.train.steps = 1;
+        run.train.batch = run.data.dataset.train;
         Ok(run)
     }
 }

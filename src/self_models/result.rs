@@ -71,6 +71,10 @@ pub struct ModelResult {
     /// full: `table1 --reuse` takes it only for the same `--steps`).
     #[serde(default)]
     pub steps_override: Option<usize>,
+    /// A lower bound every self-model must beat (the best constant image), not a model:
+    /// figures draw it as a line.
+    #[serde(default)]
+    pub lower_bound: bool,
 }
 
 impl ModelResult {
@@ -96,7 +100,7 @@ pub fn pareto_points(
     label: impl Fn(&str) -> String,
 ) -> Vec<crate::report::figures::ParetoPoint> {
     use crate::report::figures::ParetoPoint;
-    let ours = rows.iter().map(|r| ParetoPoint {
+    let ours = rows.iter().filter(|r| !r.lower_bound).map(|r| ParetoPoint {
         label: label(&r.model),
         fps: r.infer_b1_img_per_s,
         quality: r.psnr_db_test,
@@ -111,4 +115,17 @@ pub fn pareto_points(
         })
     });
     ours.chain(paper).collect()
+}
+
+/// The lower bounds among `rows` (label, test PSNR), for [`crate::report::figures::pareto_plot`].
+pub fn pareto_floors(rows: &[ModelResult]) -> Vec<(String, f64)> {
+    rows.iter()
+        .filter(|r| r.lower_bound)
+        .map(|r| {
+            (
+                format!("{}: the best constant image", r.model),
+                r.psnr_db_test,
+            )
+        })
+        .collect()
 }

@@ -203,6 +203,7 @@ pub fn run_ablation(
         ablation.title(),
         "PSNR on the test set (dB)",
         &points,
+        &[],
     )?;
     Ok(rows)
 }

@@ -12,7 +12,7 @@ use std::path::Path;
 
 use crate::core::error::Result;
 use crate::report::figures::pareto_plot;
-use crate::self_models::result::{ModelResult, pareto_points, read_results};
+use crate::self_models::result::{ModelResult, pareto_floors, pareto_points, read_results};
 use crate::studies::run::{Experiment, RunOptions, write_rows};
 
 /// Run the zoo (the `experiments` marked `in_table1`) on `opts` into `dir` and write the table and the Pareto plot.
@@ -50,6 +50,7 @@ pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<
         "Self-models: quality against inference speed",
         "PSNR on the test set (dB)",
         &points,
+        &pareto_floors(&rows),
     )?;
     Ok(rows)
 }
