@@ -324,16 +324,22 @@ fn the_accelerated_marcher_with_every_cell_occupied_is_dense_marching() {
 #[test]
 fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations() {
     use selfmodel::core::device::DeviceChoice;
-    use selfmodel::self_models::ffksm::{FfksmConfig, centre_crop};
+    use selfmodel::self_models::ffksm::{
+        FfksmVariant, NovelViewRow, RendererRow, centre_crop, ffksm_run,
+    };
     // The curriculum's crop: the central pixels, row by row.
     assert_eq!(centre_crop(4, 6, 2), vec![8, 9, 14, 15]);
-    let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
-    cfg.novel_views_deg = vec![30.0];
+    let mut cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
+    cfg.model.novel_views_deg = vec![30.0];
     let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
-    let out = selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    let read = selfmodel::report::table::read_csv::<RendererRow>;
+    let renderers = read(&dir.join("renderers.csv")).unwrap();
+    let novel_views =
+        selfmodel::report::table::read_csv::<NovelViewRow>(&dir.join("novel_views.csv")).unwrap();
     // A constant black image on the same test images.
-    let black = common::black_psnr(&cfg.data, cfg.test_images);
-    let [dense, fast] = [&out.renderers[0], &out.renderers[1]];
+    let black = common::black_psnr(&cfg.data, None);
+    let [dense, fast] = [&renderers[0], &renderers[1]];
     assert!(
         dense.psnr_db_test > black + 1.0 && dense.iou_test > 0.2,
         "trained {:.2} dB (IoU {:.3}) against black {black:.2} dB",
@@ -351,7 +357,7 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
         "only {:.2}x fewer",
         fast.fewer_evaluations
     );
-    assert_eq!(out.novel_views.len(), 2);
+    assert_eq!(novel_views.len(), 2);
     for f in [
         "results.csv",
         "renderers.csv",
@@ -369,18 +375,18 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
 #[test]
 fn a_field_that_renders_black_is_restarted_then_given_up_on() {
     use selfmodel::core::device::DeviceChoice;
-    use selfmodel::self_models::ffksm::FfksmConfig;
-    let mut cfg = FfksmConfig::original("quick").unwrap();
+    use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
+    let mut cfg = ffksm_run("quick", FfksmVariant::Original).unwrap();
     // Every density starts far below zero: ReLU gives no gradient and the image stays black.
-    cfg.field.output_bias = -50.0;
+    cfg.model.field.output_bias = -50.0;
     cfg.train.steps = 40;
-    if let Some(r) = cfg.restart.as_mut() {
+    if let Some(r) = cfg.model.restart.as_mut() {
         r.every = 10;
         r.until = 20;
         r.max_restarts = 2;
     }
     let dir = std::env::temp_dir().join(format!("selfmodel-collapse-{}", std::process::id()));
-    let err = selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false)
+    let err = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false)
         .err()
         .expect("a black field must not train");
     let msg = err.to_string();
@@ -406,9 +412,9 @@ fn the_hand_written_dense_step_matches_autodiff() {
     use selfmodel::self_models::ffksm::dense_step::dense_step;
     use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
     use selfmodel::self_models::ffksm::marcher::{MarchConfig, render_silhouette};
-    use selfmodel::self_models::ffksm::{FfksmConfig, weighted_mse};
+    use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run, weighted_mse};
 
-    let cfg = FfksmConfig::reimplementation("quick").unwrap();
+    let cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
     let camera = cfg.data.dataset.camera.clone();
     let (h, w) = (camera.height, camera.width);
     let pixels: Vec<usize> = (0..90)
@@ -525,19 +531,20 @@ fn the_hand_written_dense_step_matches_autodiff() {
 #[test]
 fn training_with_the_hand_written_step_follows_autodiff() {
     use selfmodel::core::device::DeviceChoice;
-    use selfmodel::self_models::ffksm::{DenseGradients, FfksmConfig};
+    use selfmodel::self_models::ffksm::{DenseGradients, FfksmVariant, ffksm_run};
     let mut outcomes = Vec::new();
     for path in [DenseGradients::Autodiff, DenseGradients::HandWrittenOnCpu] {
-        let mut cfg = FfksmConfig::reimplementation("quick").unwrap();
+        let mut cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
         cfg.train.steps = 80;
         cfg.train.checkpoint_every = 0;
-        cfg.test_images = Some(3);
-        cfg.novel_views_deg = vec![];
-        cfg.dense_gradients = path;
+        let start = cfg.data.dataset.train;
+        cfg.data.test = Some(start..start + 3);
+        cfg.model.novel_views_deg = vec![];
+        cfg.model.dense_gradients = path;
         let dir =
             std::env::temp_dir().join(format!("selfmodel-ffksm-{path:?}-{}", std::process::id()));
         outcomes.push(
-            selfmodel::self_models::ffksm::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap(),
+            selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap(),
         );
         let _ = std::fs::remove_dir_all(&dir);
     }
@@ -569,7 +576,7 @@ fn training_with_the_hand_written_step_follows_autodiff() {
             "step {step}: autodiff loss {la}, hand-written {lb}"
         );
     }
-    let (pa, pb) = (a.renderers[0].psnr_db_test, b.renderers[0].psnr_db_test);
+    let (pa, pb) = (a.rows[0].psnr_db_test, b.rows[0].psnr_db_test);
     assert!((pa - pb).abs() < 0.05, "test PSNR {pa} against {pb}");
 }
 

@@ -24,7 +24,10 @@ pub mod field;
 pub mod grid;
 pub mod marcher;
 pub mod virtual_frame;
+use std::cell::RefCell;
+use std::collections::BTreeMap;
 use std::path::Path;
+use std::rc::Rc;
 use std::time::Instant;
 
 use burn::module::Module;
@@ -35,7 +38,9 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::data::dataset::Dataset;
+use crate::eval::evaluation::DepthPixels;
 use crate::eval::evaluation::{Predictions, Quality, iou, psnr_db, score};
+use crate::eval::inference_speed::SpeedConfig;
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::write_table;
 use crate::self_models::ffksm::accelerated_marcher::{
@@ -44,12 +49,13 @@ use crate::self_models::ffksm::accelerated_marcher::{
 use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
-use crate::self_models::harness::{DataSpec, device_set, host_targets, qualitative_figure};
-use crate::self_models::result::{ModelResult, PaperReference};
-use crate::sim::camera::Camera;
-use crate::train::trainer::{
-    CheckpointPlan, StepLoss, TrainConfig, TrainLog, Trainer, Watch, autodiff_device,
+use crate::self_models::harness::{
+    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, host_targets,
 };
+use crate::self_models::result::PaperReference;
+use crate::sim::camera::Camera;
+use crate::sim::robot::Robot;
+use crate::train::trainer::{StepLoss, TrainConfig, TrainLog, Trainer, Watch};
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -92,17 +98,12 @@ pub enum DenseGradients {
     Autodiff,
 }
 
-/// Everything that defines one FFKSM run.
+/// FFKSM's model and how it trains (the run around it: [`SelfModelRun`], from [`ffksm_run`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct FfksmConfig {
-    /// Row label.
-    pub name: String,
-    pub preset: String,
+pub struct Ffksm {
     pub field: OccupancyFieldConfig,
     pub march: MarchConfig,
     pub accelerated: AcceleratedConfig,
-    /// Steps, learning rate, seed, checkpoints (batch 1: one image per step).
-    pub train: TrainConfig,
     pub curriculum: Curriculum,
     #[serde(default)]
     pub train_marcher: TrainMarcher,
@@ -113,25 +114,36 @@ pub struct FfksmConfig {
     /// MSE weight of robot pixels (1: the code's plain MSE; the text's 5).
     pub robot_weight: f64,
     pub restart: Option<CollapseRestart>,
-    pub data: DataSpec,
-    /// PSNR is also reported on the first this-many test images (the paper's subset).
-    pub paper_subset: usize,
-    /// Score on the first this-many test images (all when absent): dense marching of the
-    /// paper preset costs ~1 s per image on a 2-core CPU.
-    pub test_images: Option<usize>,
     /// Novel views: the training camera orbited about the world z axis by these angles (deg).
     pub novel_views_deg: Vec<f64>,
     /// Rays per network call when marching densely.
     pub chunk_rays: usize,
-    pub reference: PaperReference,
-    pub note: String,
-    #[serde(default)]
-    pub steps_override: Option<usize>,
+    /// Output image size `[height, width]`.
+    pub image: [usize; 2],
 }
 
-/// The presets of `ffksm`: `paper`, `short` (the paper's model and data, 30 steps and 5
-/// test images, for the short `table1`), `quick` (tiny, seconds).
-pub const FFKSM_PRESETS: &[&str] = &["paper", "short", "quick"];
+/// The three FFKSM models of Table I.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FfksmVariant {
+    /// The reimplementation (the paper preset = its code).
+    Reimplementation,
+    /// The original authors' model: L = 10, the shorter predictive module, their virtual
+    /// frame, a 200-step curriculum and restarts on collapse.
+    Original,
+    /// The reimplementation trained with empty-space skipping (beyond the paper): the same
+    /// model, data and schedule, each step marching only the samples in occupied cells of a
+    /// grid probed from the current model.
+    Skipping,
+}
+
+impl FfksmVariant {
+    /// Every variant with its folder name.
+    pub const ALL: [(&str, FfksmVariant); 3] = [
+        ("ffksm", FfksmVariant::Reimplementation),
+        ("ffksm_original", FfksmVariant::Original),
+        ("ffksm_skipping", FfksmVariant::Skipping),
+    ];
+}
 
 impl PaperReference {
     /// FFKSM in the paper: 17.35 dB at 5.22 FPS (191.6 ms) on a T4, ~50 minutes of training.
@@ -154,114 +166,99 @@ impl PaperReference {
     }
 }
 
-impl FfksmConfig {
-    /// The reimplementation (the paper preset = its code).
-    pub fn reimplementation(preset: &str) -> Result<Self> {
-        let quick = preset == "quick";
-        let data = match preset {
-            "paper" | "short" => DataSpec::paper(),
-            "quick" => DataSpec::quick(),
-            other => {
-                return Err(Error::Config(format!(
-                    "unknown preset \"{other}\" (choose paper, short or quick)"
-                )));
-            }
-        };
-        let mut cfg = FfksmConfig {
-            name: "FFKSM".into(),
-            preset: preset.into(),
-            field: if quick {
-                OccupancyFieldConfig::quick()
-            } else {
-                OccupancyFieldConfig::paper()
-            },
-            march: if quick {
-                MarchConfig {
-                    samples: 32,
-                    ..MarchConfig::paper()
-                }
-            } else {
-                MarchConfig::paper()
-            },
-            accelerated: AcceleratedConfig::paper(),
-            train: TrainConfig {
-                steps: if quick { 400 } else { 8000 },
-                batch: 1,
-                learning_rate: if quick { 5e-3 } else { 5e-4 },
-                grad_clip_norm: None,
-                input_noise: 0.0,
-                seed: 0,
-                checkpoint_every: if quick { 100 } else { 250 },
-            },
-            curriculum: Curriculum {
-                steps: if quick { 50 } else { 500 },
-                crop: if quick { 16 } else { 50 },
-            },
-            train_marcher: TrainMarcher::Dense,
-            dense_gradients: DenseGradients::default(),
-            robot_weight: 1.0,
-            restart: None,
-            data,
-            paper_subset: 100,
-            test_images: if quick { Some(24) } else { None },
-            novel_views_deg: vec![30.0, 60.0],
-            chunk_rays: 2048,
-            reference: PaperReference::ffksm(),
-            note: String::new(),
-            steps_override: None,
-        };
-        if quick {
-            cfg.accelerated.grid.block = 2;
-        }
-        if preset == "short" {
-            cfg.train.steps = 30;
-            cfg.curriculum.steps = 15;
-            cfg.test_images = Some(5);
-            cfg.note = "short preset: 30 steps instead of 8,000 (15 of them cropped), scored on 5 test images (CPU time budget)".into();
-        }
-        Ok(cfg)
-    }
-
-    /// The original authors' model (`ffksm_original`): L = 10, the shorter predictive module,
-    /// their virtual frame, a 200-step curriculum and restarts on collapse.
-    pub fn original(preset: &str) -> Result<Self> {
-        let mut cfg = Self::reimplementation(preset)?;
-        cfg.name = "FFKSM (original model)".into();
-        cfg.field = if preset == "quick" {
-            OccupancyFieldConfig {
-                bands: 5,
-                ..OccupancyFieldConfig::quick()
+/// An FFKSM run on `preset`: `paper`, `short` (the paper's model and data, 30 steps and 5
+/// test images, for the short `table1`), `quick` (tiny, seconds; 24 test images).
+pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffksm>> {
+    let quick = preset == "quick";
+    let mut model = Ffksm {
+        field: if quick {
+            OccupancyFieldConfig::quick()
+        } else {
+            OccupancyFieldConfig::paper()
+        },
+        march: if quick {
+            MarchConfig {
+                samples: 32,
+                ..MarchConfig::paper()
             }
         } else {
-            OccupancyFieldConfig::original()
-        };
-        cfg.field.relu_before_output = false;
-        cfg.field.virtual_frame = crate::self_models::ffksm::virtual_frame::VirtualFrame::Original;
-        cfg.curriculum.steps = cfg.curriculum.steps * 2 / 5;
-        cfg.restart = Some(CollapseRestart {
-            every: if preset == "quick" { 25 } else { 100 },
-            until: cfg.curriculum.steps * 5,
-            max_restarts: 5,
-        });
-        cfg.reference = PaperReference::ffksm_original();
-        Ok(cfg)
+            MarchConfig::paper()
+        },
+        accelerated: AcceleratedConfig::paper(),
+        curriculum: Curriculum {
+            steps: if quick { 50 } else { 500 },
+            crop: if quick { 16 } else { 50 },
+        },
+        train_marcher: TrainMarcher::Dense,
+        dense_gradients: DenseGradients::default(),
+        robot_weight: 1.0,
+        restart: None,
+        novel_views_deg: vec![30.0, 60.0],
+        chunk_rays: 2048,
+        image: SelfModelRun::<Ffksm>::image(preset)?,
+    };
+    if quick {
+        model.accelerated.grid.block = 2;
     }
-
-    /// The reimplementation trained with empty-space skipping (beyond the paper): the same
-    /// model, data and schedule, each step marching only the samples in occupied cells of a
-    /// grid probed from the current model.
-    pub fn skipping(preset: &str) -> Result<Self> {
-        let mut cfg = Self::reimplementation(preset)?;
-        cfg.name = "FFKSM (trained with skipping)".into();
-        cfg.train_marcher = TrainMarcher::Skipping;
-        Ok(cfg)
+    let mut run = SelfModelRun::new(preset, "FFKSM", model, 16, PaperReference::ffksm())?;
+    run.train = TrainConfig {
+        steps: if quick { 400 } else { 8000 },
+        batch: 1,
+        learning_rate: if quick { 5e-3 } else { 5e-4 },
+        grad_clip_norm: None,
+        input_noise: 0.0,
+        seed: 0,
+        checkpoint_every: if quick { 100 } else { 250 },
+    };
+    // Rendering is per image: timed at batch 1 (median of 3 after one warm-up image).
+    run.speed = SpeedConfig {
+        warmup: 1,
+        min_repeats: 3,
+        min_seconds: 0.0,
+        batches: vec![1],
+    };
+    let mut test_images = quick.then_some(24);
+    if preset == "short" {
+        run.train.steps = 30;
+        run.model.curriculum.steps = 15;
+        test_images = Some(5);
+        run.note = "short preset: 30 steps instead of 8,000 (15 of them cropped), scored on 5 test images (CPU time budget)".into();
     }
-
-    /// Switch to the paper-compatible dataset (silhouettes with the ground-plane artefact).
-    pub fn paper_compatible(mut self, on: bool) -> Self {
-        self.data.dataset.render.ground_artifact = on;
-        self
+    // Dense marching of the paper preset costs ~1 s per image on a 2-core CPU.
+    if let Some(k) = test_images {
+        let start = run.data.dataset.train;
+        run.data.test = Some(start..start + k.min(run.data.dataset.samples - start));
     }
+    match variant {
+        FfksmVariant::Reimplementation => {}
+        FfksmVariant::Original => {
+            run.name = "FFKSM (original model)".into();
+            let m = &mut run.model;
+            m.field = if quick {
+                OccupancyFieldConfig {
+                    bands: 5,
+                    ..OccupancyFieldConfig::quick()
+                }
+            } else {
+                OccupancyFieldConfig::original()
+            };
+            m.field.relu_before_output = false;
+            m.field.virtual_frame =
+                crate::self_models::ffksm::virtual_frame::VirtualFrame::Original;
+            m.curriculum.steps = m.curriculum.steps * 2 / 5;
+            m.restart = Some(CollapseRestart {
+                every: if quick { 25 } else { 100 },
+                until: m.curriculum.steps * 5,
+                max_restarts: 5,
+            });
+            run.reference = PaperReference::ffksm_original();
+        }
+        FfksmVariant::Skipping => {
+            run.name = "FFKSM (trained with skipping)".into();
+            run.model.train_marcher = TrainMarcher::Skipping;
+        }
+    }
+    Ok(run)
 }
 
 /// Row-major indices of the central `crop x crop` pixels of a `height x width` image.
@@ -295,16 +292,6 @@ pub fn weighted_mse(pred: Tensor<1>, truth: &[f32], robot_weight: f64) -> Tensor
     let t = Tensor::<1>::from_data(TensorData::new(truth.to_vec(), [n]), &device);
     let w = Tensor::<1>::from_data(TensorData::new(weights, [n]), &device);
     ((pred - t).square() * w).mean()
-}
-
-/// What a run produced.
-pub struct FfksmOutcome {
-    /// Dense marching's row, then the accelerated marcher's.
-    pub rows: Vec<ModelResult>,
-    pub renderers: Vec<RendererRow>,
-    pub novel_views: Vec<NovelViewRow>,
-    pub log: TrainLog,
-    pub restarts: usize,
 }
 
 /// Dense marching against the accelerated marcher, the same model and test images.
@@ -361,6 +348,58 @@ struct Rendered {
 }
 
 impl Rendered {
+    fn empty() -> Self {
+        Rendered {
+            predictions: Predictions {
+                silhouettes: Vec::new(),
+                depth: Some(Vec::new()),
+                pixels: 0,
+                depth_pixels: DepthPixels::Drawn,
+            },
+            evaluations: Vec::new(),
+            grid_evaluations: Vec::new(),
+            grid_occupancy: Vec::new(),
+            seconds: Vec::new(),
+        }
+    }
+
+    /// Append `other`'s images.
+    fn extend(&mut self, other: Rendered) {
+        self.predictions.pixels = other.predictions.pixels;
+        self.predictions
+            .silhouettes
+            .extend(other.predictions.silhouettes);
+        if let (Some(d), Some(o)) = (self.predictions.depth.as_mut(), other.predictions.depth) {
+            d.extend(o);
+        }
+        self.evaluations.extend(other.evaluations);
+        self.grid_evaluations.extend(other.grid_evaluations);
+        self.grid_occupancy.extend(other.grid_occupancy);
+        self.seconds.extend(other.seconds);
+    }
+
+    /// The first `n` images (the test set: the harness renders it before it times).
+    fn first(&self, n: usize) -> Rendered {
+        let px = self.predictions.pixels;
+        let n = n.min(self.evaluations.len());
+        Rendered {
+            predictions: Predictions {
+                silhouettes: self.predictions.silhouettes[..n * px].to_vec(),
+                depth: self
+                    .predictions
+                    .depth
+                    .as_ref()
+                    .map(|d| d[..n * px].to_vec()),
+                pixels: px,
+                depth_pixels: self.predictions.depth_pixels,
+            },
+            evaluations: self.evaluations[..n].to_vec(),
+            grid_evaluations: self.grid_evaluations[..n].to_vec(),
+            grid_occupancy: self.grid_occupancy[..n].to_vec(),
+            seconds: self.seconds[..n].to_vec(),
+        }
+    }
+
     fn mean_evaluations(&self) -> f64 {
         self.evaluations.iter().sum::<usize>() as f64 / self.evaluations.len().max(1) as f64
     }
@@ -379,7 +418,7 @@ fn render_all(
     field: &OccupancyField,
     camera: &Camera,
     angles_deg: &[Vec<f64>],
-    cfg: &FfksmConfig,
+    cfg: &Ffksm,
     accelerated: Option<&AcceleratedConfig>,
     device: &Device,
     label: &str,
@@ -462,12 +501,12 @@ fn mean_iou(a: &[f32], b: &[f32], pixels: usize) -> f64 {
 /// What a checkpoint must match to be resumed: everything that shapes training except the
 /// step count (step `k` draws the same image and samples whatever the total, so a longer run
 /// continues a shorter one: `--steps 2000` then `--resume` to the preset's 8,000).
-fn fingerprint(cfg: &FfksmConfig) -> serde_json::Value {
-    let mut train = serde_json::to_value(&cfg.train).expect("serialisable");
+fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json::Value {
+    let mut train = serde_json::to_value(train).expect("serialisable");
     if let Some(t) = train.as_object_mut() {
         t.remove("steps");
     }
-    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": cfg.data});
+    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": data});
     // Only when it is not the default, so checkpoints from before the option still resume.
     if cfg.train_marcher != TrainMarcher::Dense {
         print["train_marcher"] = serde_json::json!(cfg.train_marcher);
@@ -480,28 +519,29 @@ fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
     serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
 }
 
-/// Train the field, restarting with a fresh model on collapse when the config asks for it.
+/// Train the field, restarting with a fresh model on collapse when the config asks for it:
+/// the field, its log, the restarts and the network evaluations per step.
 fn train_field(
-    cfg: &FfksmConfig,
-    data: &Dataset,
-    train_range: &std::ops::Range<usize>,
-    dir: &Path,
-    resume: bool,
-    device: &Device,
+    cfg: &Ffksm,
+    name: &str,
+    fit: &Fit,
     hand_written: bool,
 ) -> Result<(OccupancyField, TrainLog, usize, f64)> {
-    let tdev = autodiff_device(device, cfg.train.seed);
-    let train_set = device_set(data, train_range, host_targets(data, train_range), &tdev);
-    let camera = cfg.data.dataset.camera.clone();
+    let (train_set, plan, device, train) = (fit.train_set, fit.plan, fit.device, fit.train);
+    let camera = fit.camera.clone();
     let (h, w) = (camera.height, camera.width);
     let all: Vec<usize> = (0..h * w).collect();
     let crop = centre_crop(h, w, cfg.curriculum.crop);
-    let probe_truth = data.angles[train_range.start].clone();
-    let plan = CheckpointPlan {
-        dir: dir.join("checkpoint"),
-        resume,
-        fingerprint: fingerprint(cfg),
-    };
+    // The first training image's angles, where collapse is probed.
+    let probe_truth: Vec<f32> = train_set
+        .inputs
+        .clone()
+        .slice([0..1])
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("float");
+    let resume = plan.resume;
     // Restarts after collapse so far, so a resumed run reports them (and initialises the same
     // model).
     let restarts_path = plan.dir.join("restarts.json");
@@ -519,8 +559,8 @@ fn train_field(
     let train_evaluations = std::cell::Cell::new(earlier[0]);
     let train_steps = std::cell::Cell::new(earlier[1]);
     loop {
-        let seed = cfg.train.seed + 1000 * restarts as u64;
-        let field = cfg.field.init(&tdev, seed)?;
+        let seed = train.seed + 1000 * restarts as u64;
+        let field = cfg.field.init(fit.train_device, seed)?;
         let loss = |m: &OccupancyField, b: &crate::train::trainer::Batch| {
             let a = b
                 .inputs
@@ -539,7 +579,7 @@ fn train_field(
                 &all
             };
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
-            let jitter = cfg.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+            let jitter = train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             let view = (&camera, radians(&a));
             train_steps.set(train_steps.get() + 1);
             match cfg.train_marcher {
@@ -591,8 +631,8 @@ fn train_field(
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
             // The counts go beside each checkpoint (saved right after this), so a run stopped
             // and resumed still reports all its steps.
-            let every = cfg.train.checkpoint_every;
-            if every > 0 && (step % every == 0 || step == cfg.train.steps) {
+            let every = train.checkpoint_every;
+            if every > 0 && (step % every == 0 || step == train.steps) {
                 std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
                 write_json(&counts_path, &[train_evaluations.get(), train_steps.get()])?;
             }
@@ -600,11 +640,10 @@ fn train_field(
             if step > r.until || step % r.every.max(1) != 0 {
                 return Ok(());
             }
-            let a: Vec<f32> = probe_truth.iter().map(|&v| v as f32).collect();
             let valid = m.valid();
             let probe = render_silhouette(
                 &valid,
-                (&camera, radians(&a)),
+                (&camera, radians(&probe_truth)),
                 &crop,
                 &cfg.march,
                 None,
@@ -618,15 +657,15 @@ fn train_field(
             }
         };
         let label = if restarts == 0 {
-            cfg.name.clone()
+            name.to_string()
         } else {
-            format!("{} (restart {restarts})", cfg.name)
+            format!("{name} (restart {restarts})")
         };
         let mut watch = Watch(watch);
-        match Trainer::new(&cfg.train, &label)
-            .checkpoint(Some(&plan))
+        match Trainer::new(train, &label)
+            .checkpoint(Some(plan))
             .hooks(&mut watch)
-            .fit(field, &train_set, loss)
+            .fit(field, train_set, loss)
         {
             Ok((field, log)) => {
                 let counts = [train_evaluations.get(), train_steps.get()];
@@ -650,14 +689,14 @@ fn train_field(
                 if restarts >= max {
                     return Err(Error::Training(format!(
                         "{}: collapsed to an all-black image {} times; raise the robot-pixel weight or the curriculum",
-                        cfg.name,
+                        name,
                         restarts + 1
                     )));
                 }
                 restarts += 1;
                 // The checkpoint holds the collapsed model: start the next try from scratch.
                 let _ = std::fs::remove_dir_all(&plan.dir);
-                if cfg.train.checkpoint_every > 0 {
+                if train.checkpoint_every > 0 {
                     std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
                     write_json(&restarts_path, &restarts)?;
                 }
@@ -669,284 +708,273 @@ fn train_field(
     }
 }
 
-/// Train, evaluate with both renderers and from novel views, and report into `dir`.
-pub fn run(
-    cfg: &FfksmConfig,
-    dir: &Path,
-    device_choice: DeviceChoice,
-    resume: bool,
-) -> Result<FfksmOutcome> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    write_json(&dir.join("config.json"), cfg)?;
-    let git_revision = crate::core::provenance::git_revision();
-    let device = crate::core::device::select(device_choice)?;
-    let (data, train_range, test_range) = cfg.data.load()?;
-    let test_range = match cfg.test_images {
-        Some(k) => test_range.start..test_range.start + k.min(test_range.len()),
-        None => test_range,
-    };
-    let camera = cfg.data.dataset.camera.clone();
-    let pixels = camera.width * camera.height;
-    let hand_written = cfg.dense_gradients == DenseGradients::HandWrittenOnCpu
-        && matches!(device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
-    let (field, log, restarts, train_evals) =
-        train_field(cfg, &data, &train_range, dir, resume, &device, hand_written)?;
-    let params = field.num_params();
+impl SelfModel for Ffksm {
+    fn image(&self) -> [usize; 2] {
+        self.image
+    }
 
-    // The training camera, both renderers.
-    let test_angles: Vec<Vec<f64>> = test_range.clone().map(|i| data.angles[i].clone()).collect();
-    let (truth, truth_depth) = host_targets(&data, &test_range);
-    let dense = render_all(
-        &field,
-        &camera,
-        &test_angles,
-        cfg,
-        None,
-        &device,
-        "dense marching",
-    );
-    let fast = render_all(
-        &field,
-        &camera,
-        &test_angles,
-        cfg,
-        Some(&cfg.accelerated),
-        &device,
-        "accelerated marching",
-    );
-    // What early termination adds to the grid: the same marcher without it.
-    let no_termination = AcceleratedConfig {
-        termination: None,
-        ..cfg.accelerated.clone()
-    };
-    let skipping_only = render_all(
-        &field,
-        &camera,
-        &test_angles,
-        cfg,
-        Some(&no_termination),
-        &device,
-        "skipping only",
-    );
-    let skipping_q = score(
-        &skipping_only.predictions,
-        &truth,
-        Some(&truth_depth),
-        cfg.paper_subset,
-    );
-    let dense_q = score(
-        &dense.predictions,
-        &truth,
-        Some(&truth_depth),
-        cfg.paper_subset,
-    );
-    let fast_q = score(
-        &fast.predictions,
-        &truth,
-        Some(&truth_depth),
-        cfg.paper_subset,
-    );
-    let dataset_label = cfg.data.label().to_string();
-    let row = |renderer: &str, r: &Rendered, q: &Quality| -> ModelResult {
-        let ips = r.images_per_second();
-        ModelResult {
-            model: format!("{} ({renderer})", cfg.name),
-            dataset: dataset_label.clone(),
-            preset: cfg.preset.clone(),
-            device: device_choice.to_string(),
-            git_revision: git_revision.clone(),
-            parameters: params,
-            train_samples: train_range.len(),
-            train_steps: log.step,
-            batch: 1,
-            train_time_s: log.train_seconds,
-            train_img_per_s: log.images_per_second(),
-            psnr_db_first100: q.psnr_db_paper_subset,
-            psnr_db_test: q.psnr_db_test,
-            iou_test: q.iou_test,
-            depth_mae_mm: q.depth_mae_mm,
-            depth_constant_mae_mm: q.depth_constant_mae_mm,
-            infer_b1_img_per_s: ips,
-            latency_b1_ms: 1000.0 / ips,
-            // Rendering is per image: no batched path; the sequential throughput stands here.
-            infer_b256_img_per_s: ips,
-            paper_psnr_db: None,
-            paper_fps: None,
-            paper_latency_ms: None,
-            paper_train_time_s: None,
-            note: {
-                let mut n = vec![format!(
-                    "{:.0} network evaluations per image; tested on {} images; trained with {} marching, {:.0} evaluations per step",
-                    r.mean_evaluations(),
-                    q.test_images,
-                    match cfg.train_marcher {
-                        TrainMarcher::Dense if hand_written => "dense (hand-written gradients)",
-                        TrainMarcher::Dense => "dense",
-                        TrainMarcher::Skipping => "skipping",
-                    },
-                    train_evals
-                )];
-                if restarts > 0 {
-                    n.push(format!("{restarts} restarts after collapse"));
-                }
-                if !cfg.note.is_empty() {
-                    n.push(cfg.note.clone());
-                }
-                n.join("; ")
-            },
-            steps_override: cfg.steps_override,
-            lower_bound: false,
+    fn fingerprint(&self, train: &TrainConfig, data: &DataSpec) -> serde_json::Value {
+        fingerprint(self, train, data)
+    }
+
+    /// Train the field; it renders two ways: dense marching (the paper's) and the
+    /// accelerated marcher.
+    fn fit(&self, fit: &Fit) -> Result<Trained> {
+        let hand_written = self.dense_gradients == DenseGradients::HandWrittenOnCpu
+            && matches!(fit.device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
+        let (field, log, restarts, train_evals) = train_field(self, fit.label, fit, hand_written)?;
+        let mut note = vec![format!(
+            "trained with {} marching, {train_evals:.0} evaluations per step",
+            match self.train_marcher {
+                TrainMarcher::Dense if hand_written => "dense (hand-written gradients)",
+                TrainMarcher::Dense => "dense",
+                TrainMarcher::Skipping => "skipping",
+            }
+        )];
+        if restarts > 0 {
+            note.push(format!("{restarts} restarts after collapse"));
         }
-        .with_reference(&cfg.reference)
-    };
-    let rows = vec![
-        row("dense marching", &dense, &dense_q),
-        row("accelerated", &fast, &fast_q),
-    ];
-    let dense_evals = dense.mean_evaluations();
-    let renderer_row = |name: &str, r: &Rendered, q: &Quality| RendererRow {
-        model: cfg.name.clone(),
-        renderer: name.into(),
-        test_images: q.test_images,
-        evaluations_per_image: r.mean_evaluations(),
-        grid_evaluations_per_image: r.grid_evaluations.iter().sum::<usize>() as f64
-            / r.grid_evaluations.len().max(1) as f64,
-        grid_occupancy: r.grid_occupancy.iter().sum::<f64>() / r.grid_occupancy.len().max(1) as f64,
-        fewer_evaluations: dense_evals / r.mean_evaluations().max(1.0),
-        img_per_s: r.images_per_second(),
-        psnr_db_test: q.psnr_db_test,
-        iou_test: q.iou_test,
-        psnr_db_vs_dense: mean_psnr(
-            &r.predictions.silhouettes,
-            &dense.predictions.silhouettes,
-            pixels,
-        ),
-        depth_mae_mm: q.depth_mae_mm,
-        git_revision: git_revision.clone(),
-        device: device_choice.to_string(),
-        preset: cfg.preset.clone(),
-    };
-    let renderers = vec![
-        renderer_row("dense marching", &dense, &dense_q),
-        renderer_row("accelerated", &fast, &fast_q),
-        renderer_row(
-            "accelerated without early termination",
-            &skipping_only,
-            &skipping_q,
-        ),
-    ];
+        let shared = Rc::new(FfksmShared {
+            field,
+            model: self.clone(),
+            camera: fit.camera.clone(),
+            robot: fit.robot.clone(),
+            device: fit.device.clone(),
+            stats: Default::default(),
+        });
+        let renderer = |accelerated: Option<AcceleratedConfig>, label: &str| -> Box<dyn Render> {
+            Box::new(FfksmRenderer {
+                shared: shared.clone(),
+                accelerated,
+                label: label.to_string(),
+            })
+        };
+        Ok(Trained {
+            parameters: shared.field.num_params(),
+            renderers: vec![
+                ("dense marching".into(), renderer(None, "dense marching")),
+                (
+                    "accelerated".into(),
+                    renderer(Some(self.accelerated.clone()), "accelerated"),
+                ),
+            ],
+            log,
+            note: note.join("; "),
+        })
+    }
 
-    // Novel views: the simulator's images from orbited cameras, the accelerated marcher.
-    let mut novel = vec![NovelViewRow {
-        model: cfg.name.clone(),
-        yaw_deg: 0.0,
-        test_images: fast_q.test_images,
-        psnr_db: fast_q.psnr_db_test,
-        iou: fast_q.iou_test,
-        depth_mae_mm: fast_q.depth_mae_mm,
-        view_blind_psnr_db: f64::INFINITY,
-        view_blind_iou: 1.0,
-        renderer: "accelerated".into(),
-        git_revision: git_revision.clone(),
-        device: device_choice.to_string(),
-        preset: cfg.preset.clone(),
-    }];
-    let mut novel_images = Vec::new();
-    for &yaw in &cfg.novel_views_deg {
-        let mut spec = cfg.data.dataset.clone();
-        spec.camera = camera.orbited(yaw);
-        let view_data = Dataset::generate(&cfg.data.robot.load()?, &spec, None)?;
-        let (vt, vd) = host_targets(&view_data, &test_range);
-        let r = render_all(
-            &field,
-            &spec.camera,
-            &test_angles,
-            cfg,
-            Some(&cfg.accelerated),
-            &device,
-            &format!("novel view {yaw} deg"),
-        );
-        let q = score(&r.predictions, &vt, Some(&vd), cfg.paper_subset);
-        novel.push(NovelViewRow {
-            model: cfg.name.clone(),
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
+        ffksm_run(preset, FfksmVariant::Reimplementation)
+    }
+}
+
+/// A trained field and what its renderers share: every image they render is kept.
+struct FfksmShared {
+    field: OccupancyField,
+    model: Ffksm,
+    camera: Camera,
+    robot: Robot,
+    device: Device,
+    /// Per renderer label: the images rendered so far (the test set first).
+    stats: RefCell<BTreeMap<String, Rendered>>,
+}
+
+/// One of a trained field's renderers (dense marching, or the accelerated marcher).
+struct FfksmRenderer {
+    shared: Rc<FfksmShared>,
+    accelerated: Option<AcceleratedConfig>,
+    label: String,
+}
+
+impl FfksmRenderer {
+    fn render_from(&self, camera: &Camera, angles_deg: &[Vec<f64>], label: &str) -> Rendered {
+        let s = &self.shared;
+        render_all(
+            &s.field,
+            camera,
+            angles_deg,
+            &s.model,
+            self.accelerated.as_ref(),
+            &s.device,
+            label,
+        )
+    }
+}
+
+/// `[n, dof]` degrees as host rows.
+fn angle_rows(angles: Tensor<2>) -> Vec<Vec<f64>> {
+    let [_, dof] = angles.dims();
+    let v = angles
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("float");
+    v.chunks(dof.max(1))
+        .map(|r| r.iter().map(|&a| a as f64).collect())
+        .collect()
+}
+
+impl Render for FfksmRenderer {
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
+        let rows = angle_rows(angles);
+        let camera = &self.shared.camera;
+        let shape = [rows.len(), 1, camera.height, camera.width];
+        let r = self.render_from(camera, &rows, &self.label);
+        let tensor =
+            |v: Vec<f32>| Tensor::<4>::from_data(TensorData::new(v, shape), &self.shared.device);
+        let sil = tensor(r.predictions.silhouettes.clone());
+        let depth = r.predictions.depth.clone().map(tensor);
+        self.shared
+            .stats
+            .borrow_mut()
+            .entry(self.label.clone())
+            .or_insert_with(Rendered::empty)
+            .extend(r);
+        (sil, depth)
+    }
+
+    fn depth_pixels(&self) -> DepthPixels {
+        DepthPixels::Drawn
+    }
+
+    fn note(&self, test_images: usize) -> String {
+        let evals = self
+            .shared
+            .stats
+            .borrow()
+            .get(&self.label)
+            .map_or(0.0, |r| r.first(test_images).mean_evaluations());
+        format!("{evals:.0} network evaluations per image; tested on {test_images} images")
+    }
+
+    /// The accelerated marcher (the last renderer) writes the field's own reports:
+    /// `renderers.csv` (both marchers, and the accelerated one without early termination)
+    /// and the novel views (`novel_views.csv`, `novel_views.png`).
+    fn extra_reports(&self, ctx: &ReportContext) -> Result<()> {
+        if self.accelerated.is_none() {
+            return Ok(());
+        }
+        let s = &self.shared;
+        let (truth, truth_depth) = ctx.truth;
+        let pixels = s.camera.width * s.camera.height;
+        let n = ctx.test.len();
+        let test_angles: Vec<Vec<f64>> = ctx
+            .test
+            .clone()
+            .map(|i| ctx.data.angles[i].clone())
+            .collect();
+        let score_of =
+            |p: &Predictions, t: &[f32], d: &[f32]| score(p, t, Some(d), ctx.paper_subset);
+        let first = |label: &str| -> Result<Rendered> {
+            s.stats
+                .borrow()
+                .get(label)
+                .map(|r| r.first(n))
+                .ok_or_else(|| Error::Training(format!("{label}: nothing rendered")))
+        };
+        let dense = first("dense marching")?;
+        let fast = first("accelerated")?;
+        // What early termination adds to the grid: the same marcher without it.
+        let no_termination = FfksmRenderer {
+            shared: s.clone(),
+            accelerated: Some(AcceleratedConfig {
+                termination: None,
+                ..s.model.accelerated.clone()
+            }),
+            label: "skipping only".into(),
+        };
+        let skipping_only = no_termination.render_from(&s.camera, &test_angles, "skipping only");
+        let dense_evals = dense.mean_evaluations();
+        let renderer_row = |name: &str, r: &Rendered| {
+            let q = score_of(&r.predictions, truth, truth_depth);
+            RendererRow {
+                model: ctx.name.into(),
+                renderer: name.into(),
+                test_images: q.test_images,
+                evaluations_per_image: r.mean_evaluations(),
+                grid_evaluations_per_image: r.grid_evaluations.iter().sum::<usize>() as f64
+                    / r.grid_evaluations.len().max(1) as f64,
+                grid_occupancy: r.grid_occupancy.iter().sum::<f64>()
+                    / r.grid_occupancy.len().max(1) as f64,
+                fewer_evaluations: dense_evals / r.mean_evaluations().max(1.0),
+                img_per_s: r.images_per_second(),
+                psnr_db_test: q.psnr_db_test,
+                iou_test: q.iou_test,
+                psnr_db_vs_dense: mean_psnr(
+                    &r.predictions.silhouettes,
+                    &dense.predictions.silhouettes,
+                    pixels,
+                ),
+                depth_mae_mm: q.depth_mae_mm,
+                git_revision: ctx.git_revision.into(),
+                device: ctx.device_name.clone(),
+                preset: ctx.preset.into(),
+            }
+        };
+        let renderers = vec![
+            renderer_row("dense marching", &dense),
+            renderer_row("accelerated", &fast),
+            renderer_row("accelerated without early termination", &skipping_only),
+        ];
+        // Novel views: the simulator's images from orbited cameras, the accelerated marcher.
+        let fast_q = score_of(&fast.predictions, truth, truth_depth);
+        let view_row = |yaw: f64, q: &Quality, blind: (f64, f64)| NovelViewRow {
+            model: ctx.name.into(),
             yaw_deg: yaw,
             test_images: q.test_images,
             psnr_db: q.psnr_db_test,
             iou: q.iou_test,
             depth_mae_mm: q.depth_mae_mm,
-            view_blind_psnr_db: mean_psnr(&truth, &vt, pixels),
-            view_blind_iou: mean_iou(&truth, &vt, pixels),
+            view_blind_psnr_db: blind.0,
+            view_blind_iou: blind.1,
             renderer: "accelerated".into(),
-            git_revision: git_revision.clone(),
-            device: device_choice.to_string(),
-            preset: cfg.preset.clone(),
-        });
-        novel_images.push((vt, r.predictions.silhouettes));
+            git_revision: ctx.git_revision.into(),
+            device: ctx.device_name.clone(),
+            preset: ctx.preset.into(),
+        };
+        let mut novel = vec![view_row(0.0, &fast_q, (f64::INFINITY, 1.0))];
+        let mut novel_images = Vec::new();
+        for &yaw in &s.model.novel_views_deg {
+            let mut spec = ctx.spec.dataset.clone();
+            spec.camera = s.camera.orbited(yaw);
+            let view_data = Dataset::generate(&s.robot, &spec, None)?;
+            let (vt, vd) = host_targets(&view_data, ctx.test);
+            let r = self.render_from(&spec.camera, &test_angles, &format!("novel view {yaw} deg"));
+            let q = score_of(&r.predictions, &vt, &vd);
+            novel.push(view_row(
+                yaw,
+                &q,
+                (mean_psnr(truth, &vt, pixels), mean_iou(truth, &vt, pixels)),
+            ));
+            novel_images.push((vt, r.predictions.silhouettes));
+        }
+        write_reports(ctx.dir, ctx.name, &renderers, &novel)?;
+        novel_view_figure(
+            &ctx.dir.join("novel_views.png"),
+            &novel_images,
+            [s.camera.height, s.camera.width],
+        )
     }
-
-    write_reports(dir, cfg, &rows, &renderers, &novel, &log)?;
-    qualitative_figure(
-        &dir.join("qualitative.png"),
-        &truth,
-        &truth_depth,
-        &dense.predictions,
-        [camera.height, camera.width],
-    )?;
-    novel_view_figure(
-        &dir.join("novel_views.png"),
-        &novel_images,
-        [camera.height, camera.width],
-    )?;
-    Ok(FfksmOutcome {
-        rows,
-        renderers,
-        novel_views: novel,
-        log,
-        restarts,
-    })
 }
 
 fn write_reports(
     dir: &Path,
-    cfg: &FfksmConfig,
-    rows: &[ModelResult],
+    name: &str,
     renderers: &[RendererRow],
     novel: &[NovelViewRow],
-    log: &TrainLog,
 ) -> Result<()> {
-    let csv = dir.join("results.csv");
     write_table(
-        &csv,
-        rows,
-        &format!(
-            "{} ({} preset, {} dataset)",
-            cfg.name,
-            cfg.preset,
-            cfg.data.label()
-        ),
-        &format!(
-            "One trained model, two renderers: dense marching ({} samples per ray, the paper's) and the accelerated marcher (per-pose occupancy grid and early ray termination; `renderers.csv`). {} steps of one image; PSNR per image as the paper computes it, IoU at threshold 0.5, depth as the expected ray depth against the simulator's on robot pixels. `paper_*` columns are the paper's figures, for reference (a Tesla T4). Config: `config.json`.",
-            cfg.march.samples, log.step
-        ),
-    )?;
-    let path = dir.join("renderers.csv");
-    write_table(
-        &path,
+        &dir.join("renderers.csv"),
         renderers,
-        &format!(
-            "{}: dense marching against the accelerated marcher",
-            cfg.name
-        ),
+        &format!("{name}: dense marching against the accelerated marcher"),
         "Same model, same test images. `fewer_evaluations` is dense marching's network evaluations per image over this renderer's (the grid's probes included); `psnr_db_vs_dense` compares the two renderers' images directly. Images/s: median time per image after one warm-up image, batch 1, this machine.",
     )?;
-    let path = dir.join("novel_views.csv");
     write_table(
-        &path,
+        &dir.join("novel_views.csv"),
         novel,
-        &format!("{}: views it was never trained on", cfg.name),
+        &format!("{name}: views it was never trained on"),
         "The training camera orbited about the world z axis; the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
-    )?;
-    crate::report::table::write_training_curve(dir, &cfg.name, log)
+    )
 }
 
 /// For each novel view, a row of truths then a row of predictions (six poses).

@@ -36,6 +36,10 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn image(&self) -> [usize; 2];
     /// Train on `fit.train_set` and hand back what renders.
     fn fit(&self, fit: &Fit) -> Result<Trained>;
+    /// What a checkpoint must match to be resumed.
+    fn fingerprint(&self, train: &TrainConfig, data: &DataSpec) -> serde_json::Value {
+        serde_json::json!({"model": self, "train": train, "data": data})
+    }
     /// Whether it is a lower bound every model must beat (a constant), not a model.
     fn lower_bound(&self) -> bool {
         false
@@ -62,11 +66,15 @@ pub struct Fit<'a> {
     /// The robot and the camera the dataset was rendered with (for models with geometry).
     pub robot: &'a Robot,
     pub camera: &'a Camera,
+    /// The device as chosen (`--device`): CPU-only fast paths check it.
+    pub device_choice: DeviceChoice,
 }
 
 /// A trained self-model.
 pub struct Trained {
-    pub renderer: Box<dyn Render>,
+    /// What renders, each with its label (empty for a model's one renderer; otherwise its
+    /// row is "name (label)"). The first draws the qualitative figure.
+    pub renderers: Vec<(String, Box<dyn Render>)>,
     /// Trainable parameters (PyTorch's count).
     pub parameters: usize,
     pub log: TrainLog,
@@ -84,21 +92,36 @@ pub trait Render {
     fn depth_pixels(&self) -> DepthPixels {
         DepthPixels::TrueRobot
     }
+    /// Said first in its row's note, once the `test_images` are rendered (empty: nothing).
+    fn note(&self, _test_images: usize) -> String {
+        String::new()
+    }
     /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
         Ok(())
     }
 }
 
+/// One renderer's test predictions and inference timings.
+pub struct RenderedSet {
+    pub label: String,
+    pub predictions: Predictions,
+    pub timings: Vec<Timing>,
+}
+
 /// What a model's own reports may use.
 pub struct ReportContext<'a> {
     pub dir: &'a Path,
     pub name: &'a str,
+    pub spec: &'a DataSpec,
     pub data: &'a Dataset,
     pub test: &'a Range<usize>,
+    /// The test silhouettes and depth, `[n, H * W]`.
+    pub truth: (&'a [f32], &'a [f32]),
+    /// Every renderer's predictions and timings, in order.
+    pub rendered: &'a [RenderedSet],
+    pub paper_subset: usize,
     pub device: &'a Device,
-    /// The harness's inference timings of [`Render::render`].
-    pub timings: &'a [Timing],
     /// Revision, device and preset, as every result row records them.
     pub git_revision: &'a str,
     pub device_name: String,
@@ -303,8 +326,11 @@ impl<M: SelfModel> SelfModelRun<M> {
 
 /// What a run produced.
 pub struct RunOutcome {
+    /// The first renderer's row and quality.
     pub result: ModelResult,
     pub quality: Quality,
+    /// One row per renderer.
+    pub rows: Vec<ModelResult>,
     pub log: TrainLog,
 }
 
@@ -409,7 +435,7 @@ pub fn run<M: SelfModel>(
     let plan = CheckpointPlan {
         dir: dir.join("checkpoint"),
         resume,
-        fingerprint: serde_json::json!({"model": cfg.model, "train": cfg.train, "data": cfg.data}),
+        fingerprint: cfg.model.fingerprint(&cfg.train, &cfg.data),
     };
     let trained = cfg.model.fit(&Fit {
         train_set: &train_set,
@@ -420,92 +446,126 @@ pub fn run<M: SelfModel>(
         device: &device,
         robot: &robot,
         camera: &cfg.data.dataset.camera,
+        device_choice,
     })?;
-    let (renderer, log) = (trained.renderer.as_ref(), trained.log);
+    let log = &trained.log;
     let pixels = data.height * data.width;
-    let predictions = predict_all(renderer, &test_set, cfg.eval_batch, pixels);
-    let timings = measure(|q| renderer.render(q).0, data.dof(), &device, &cfg.speed);
-    let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-    let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
-    let t1 = timing(1).unwrap_or(Timing {
-        batch: 1,
-        median_s: f64::NAN,
-        repeats: 0,
-    });
-    let tb = timings
-        .iter()
-        .max_by_key(|t| t.batch)
-        .cloned()
-        .unwrap_or(t1.clone());
-    let predicts_depth = predictions.depth.is_some();
-    let result = ModelResult {
-        model: cfg.name.clone(),
-        dataset: cfg.data.label().into(),
-        preset: cfg.preset.clone(),
-        device: device_choice.to_string(),
-        git_revision,
-        parameters: trained.parameters,
-        train_samples: train_range.len(),
-        train_steps: log.step,
-        batch: cfg.train.batch,
-        train_time_s: log.train_seconds,
-        train_img_per_s: log.images_per_second(),
-        psnr_db_first100: quality.psnr_db_paper_subset,
-        psnr_db_test: quality.psnr_db_test,
-        iou_test: quality.iou_test,
-        depth_mae_mm: quality.depth_mae_mm.filter(|_| predicts_depth),
-        depth_constant_mae_mm: quality.depth_constant_mae_mm.filter(|_| predicts_depth),
-        infer_b1_img_per_s: t1.images_per_second(),
-        latency_b1_ms: 1000.0 * t1.median_s,
-        infer_b256_img_per_s: tb.images_per_second(),
-        paper_psnr_db: None,
-        paper_fps: None,
-        paper_latency_ms: None,
-        paper_train_time_s: None,
-        note: [trained.note.as_str(), cfg.note.as_str()]
+    let git_revision = git_revision.as_str();
+    let mut rows = Vec::new();
+    let mut qualities = Vec::new();
+    let mut rendered: Vec<RenderedSet> = Vec::new();
+    for (label, renderer) in &trained.renderers {
+        let renderer = renderer.as_ref();
+        let predictions = predict_all(renderer, &test_set, cfg.eval_batch, pixels);
+        let timings = measure(|q| renderer.render(q).0, data.dof(), &device, &cfg.speed);
+        let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
+        let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
+        let t1 = timing(1).unwrap_or(Timing {
+            batch: 1,
+            median_s: f64::NAN,
+            repeats: 0,
+        });
+        let tb = timings
             .iter()
-            .filter(|n| !n.is_empty())
-            .copied()
-            .collect::<Vec<_>>()
-            .join("; "),
-        steps_override: cfg.steps_override,
-        lower_bound: cfg.model.lower_bound(),
+            .max_by_key(|t| t.batch)
+            .cloned()
+            .unwrap_or(t1.clone());
+        let predicts_depth = predictions.depth.is_some();
+        let renderer_note = renderer.note(test_range.len());
+        rows.push(
+            ModelResult {
+                model: if label.is_empty() {
+                    cfg.name.clone()
+                } else {
+                    format!("{} ({label})", cfg.name)
+                },
+                dataset: cfg.data.label().into(),
+                preset: cfg.preset.clone(),
+                device: device_choice.to_string(),
+                git_revision: git_revision.into(),
+                parameters: trained.parameters,
+                train_samples: train_range.len(),
+                train_steps: log.step,
+                batch: cfg.train.batch,
+                train_time_s: log.train_seconds,
+                train_img_per_s: log.images_per_second(),
+                psnr_db_first100: quality.psnr_db_paper_subset,
+                psnr_db_test: quality.psnr_db_test,
+                iou_test: quality.iou_test,
+                depth_mae_mm: quality.depth_mae_mm.filter(|_| predicts_depth),
+                depth_constant_mae_mm: quality.depth_constant_mae_mm.filter(|_| predicts_depth),
+                infer_b1_img_per_s: t1.images_per_second(),
+                latency_b1_ms: 1000.0 * t1.median_s,
+                infer_b256_img_per_s: tb.images_per_second(),
+                paper_psnr_db: None,
+                paper_fps: None,
+                paper_latency_ms: None,
+                paper_train_time_s: None,
+                note: [
+                    renderer_note.as_str(),
+                    trained.note.as_str(),
+                    cfg.note.as_str(),
+                ]
+                .iter()
+                .filter(|n| !n.is_empty())
+                .copied()
+                .collect::<Vec<_>>()
+                .join("; "),
+                steps_override: cfg.steps_override,
+                lower_bound: cfg.model.lower_bound(),
+            }
+            .with_reference(&cfg.reference),
+        );
+        qualities.push(quality);
+        rendered.push(RenderedSet {
+            label: label.clone(),
+            predictions,
+            timings,
+        });
     }
-    .with_reference(&cfg.reference);
-    write_report(dir, cfg, &result, &log)?;
-    renderer.extra_reports(&ReportContext {
+    write_report(dir, cfg, &rows, log)?;
+    let ctx = ReportContext {
         dir,
         name: &cfg.name,
+        spec: &cfg.data,
         data: &data,
         test: &test_range,
+        truth: (&truth, &truth_depth),
+        rendered: &rendered,
+        paper_subset: cfg.paper_subset,
         device: &device,
-        timings: &timings,
-        git_revision: &result.git_revision,
+        git_revision,
         device_name: device_choice.to_string(),
         preset: &cfg.preset,
-    })?;
+    };
+    for (_, renderer) in &trained.renderers {
+        renderer.extra_reports(&ctx)?;
+    }
     qualitative_figure(
         &dir.join("qualitative.png"),
         &truth,
         &truth_depth,
-        &predictions,
+        &rendered[0].predictions,
         [data.height, data.width],
     )?;
+    let (result, quality) = (rows[0].clone(), qualities.swap_remove(0));
     Ok(RunOutcome {
         result,
         quality,
-        log,
+        rows,
+        log: trained.log,
     })
 }
 
 fn write_report<M>(
     dir: &Path,
     cfg: &SelfModelRun<M>,
-    row: &ModelResult,
+    rows: &[ModelResult],
     log: &TrainLog,
 ) -> Result<()> {
+    let row = &rows[0];
     let csv_path = dir.join("results.csv");
-    write_csv(&csv_path, std::slice::from_ref(row))?;
+    write_csv(&csv_path, rows)?;
     write_markdown_report(
         &csv_path,
         &format!(

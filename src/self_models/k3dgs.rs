@@ -353,15 +353,18 @@ impl SelfModel for K3dgs {
                 model.len(),
                 counts.first().map_or(0, |c| c.1)
             ),
-            renderer: Box::new(K3dgsRenderer {
-                mode: self.mode_at(steps, steps),
-                model,
-                chain,
-                camera,
-                cull_sigmas: self.cull_sigmas,
-                dense_batches: self.dense_batches.clone(),
-                counts,
-            }),
+            renderers: vec![(
+                String::new(),
+                Box::new(K3dgsRenderer {
+                    mode: self.mode_at(steps, steps),
+                    model,
+                    chain,
+                    camera,
+                    cull_sigmas: self.cull_sigmas,
+                    dense_batches: self.dense_batches.clone(),
+                    counts,
+                }),
+            )],
             log,
         })
     }
@@ -447,7 +450,7 @@ impl Render for K3dgsRenderer {
             device: ctx.device_name.clone(),
             preset: ctx.preset.into(),
         };
-        let speed: Vec<RenderSpeedRow> = ctx
+        let speed: Vec<RenderSpeedRow> = ctx.rendered[0]
             .timings
             .iter()
             .map(|t| row("culled", t))

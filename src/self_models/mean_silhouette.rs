@@ -100,9 +100,12 @@ impl SelfModel for MeanSilhouette {
             / images.len().max(1) as f64;
         let device: &Device = fit.device;
         Ok(Trained {
-            renderer: Box::new(ConstantImage {
-                image: Tensor::from_data(TensorData::new(mean, [1, 1, h, w]), device),
-            }),
+            renderers: vec![(
+                String::new(),
+                Box::new(ConstantImage {
+                    image: Tensor::from_data(TensorData::new(mean, [1, 1, h, w]), device),
+                }),
+            )],
             parameters: px,
             log: TrainLog {
                 step: 1,

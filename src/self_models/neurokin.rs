@@ -327,7 +327,7 @@ impl SelfModel for NeuroKinConfig {
                 }
             })?;
         Ok(Trained {
-            renderer: Box::new(model.valid()),
+            renderers: vec![(String::new(), Box::new(model.valid()))],
             parameters,
             log,
             note: String::new(),

@@ -272,7 +272,7 @@ impl SelfModel for ResNeuroKinDConfig {
                 sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
             })?;
         Ok(Trained {
-            renderer: Box::new(model.valid()),
+            renderers: vec![(String::new(), Box::new(model.valid()))],
             parameters,
             log,
             note: String::new(),

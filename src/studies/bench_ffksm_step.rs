@@ -13,7 +13,7 @@ use crate::core::error::Result;
 use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::OccupancyField;
 use crate::self_models::ffksm::marcher::render_silhouette;
-use crate::self_models::ffksm::{FfksmConfig, weighted_mse};
+use crate::self_models::ffksm::{FfksmVariant, ffksm_run, weighted_mse};
 use crate::train::trainer::autodiff_device;
 
 /// One architecture through one path.
@@ -67,10 +67,10 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
     let tdev = autodiff_device(&device, 0);
     let mut rows = Vec::new();
     for cfg in [
-        FfksmConfig::reimplementation(preset)?,
-        FfksmConfig::original(preset)?,
+        ffksm_run(preset, FfksmVariant::Reimplementation)?,
+        ffksm_run(preset, FfksmVariant::Original)?,
     ] {
-        let field = cfg.field.init(&tdev, 0)?;
+        let field = cfg.model.field.init(&tdev, 0)?;
         let camera = cfg.data.dataset.camera.clone();
         let pixels: Vec<usize> = (0..camera.width * camera.height).collect();
         // A silhouette-like truth: a disc of robot pixels in the middle.
@@ -89,8 +89,9 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
         let view = (&camera, [0.2, -0.3, 0.5, 0.9]);
         let autodiff = |seed: u64| {
             let t0 = Instant::now();
-            let pred = render_silhouette(&field, view, &pixels, &cfg.march, Some(seed), &tdev);
-            let loss = weighted_mse(pred, &truth, cfg.robot_weight);
+            let pred =
+                render_silhouette(&field, view, &pixels, &cfg.model.march, Some(seed), &tdev);
+            let loss = weighted_mse(pred, &truth, cfg.model.robot_weight);
             let value = loss.clone().into_scalar::<f32>() as f64;
             let grads = GradientsParams::from_grads(loss.backward(), &field);
             std::hint::black_box(grads);
@@ -103,8 +104,8 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
                 view,
                 &pixels,
                 &truth,
-                cfg.robot_weight,
-                &cfg.march,
+                cfg.model.robot_weight,
+                &cfg.model.march,
                 Some(seed),
                 &device,
             );
@@ -122,7 +123,7 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
         };
         let (mut times_a, loss_a) = timed(&autodiff);
         let (mut times_h, loss_h) = timed(&hand_written);
-        let evaluations = pixels.len() * cfg.march.samples;
+        let evaluations = pixels.len() * cfg.model.march.samples;
         let gflop = step_flop(&field, evaluations) / 1e9;
         let median_a = median(&mut times_a);
         for (path, times, loss) in [

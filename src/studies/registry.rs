@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use crate::self_models::ffksm::{FFKSM_PRESETS, FfksmConfig};
+use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
 use crate::self_models::harness::SELF_MODEL_PRESETS;
 use crate::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
 use crate::self_models::mean_silhouette::MeanSilhouette;
@@ -80,20 +80,14 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut rows = Vec::new();
     let mut renderers = Vec::new();
     let mut novel = Vec::new();
-    for (sub, cfg) in [
-        ("ffksm", FfksmConfig::reimplementation(&opts.preset)?),
-        ("ffksm_original", FfksmConfig::original(&opts.preset)?),
-        ("ffksm_skipping", FfksmConfig::skipping(&opts.preset)?),
-    ] {
-        let out = crate::self_models::ffksm::run(
-            &opts.apply_ffksm(cfg),
-            &dir.join(sub),
-            opts.device,
-            opts.resume,
-        )?;
+    let dense = crate::report::table::read_csv::<crate::self_models::ffksm::RendererRow>;
+    let novel_rows = crate::report::table::read_csv::<crate::self_models::ffksm::NovelViewRow>;
+    for (sub, variant) in FfksmVariant::ALL {
+        let cfg = opts.apply(ffksm_run(&opts.preset, variant)?);
+        let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.extend(out.rows);
-        renderers.extend(out.renderers);
-        novel.extend(out.novel_views);
+        renderers.extend(dense(&dir.join(sub).join("renderers.csv"))?);
+        novel.extend(novel_rows(&dir.join(sub).join("novel_views.csv"))?);
     }
     write_rows(
         dir,
@@ -332,7 +326,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "ffksm",
         about: "FFKSM, the occupancy-field self-model: both implementations, dense and accelerated ray marching, novel views",
         default_dir: "reports/ffksm",
-        presets: FFKSM_PRESETS,
+        presets: SELF_MODEL_PRESETS,
         in_table1: true,
         takes_robot: false,
         run: run_ffksm,

@@ -6,7 +6,6 @@ use std::path::Path;
 use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::ffksm::FfksmConfig;
 use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
 use crate::self_models::result::ModelResult;
 use crate::sim::robots::{BuiltinRobot, RobotSpec};
@@ -76,13 +75,6 @@ impl RunOptions {
     pub fn apply<M: SelfModel>(&self, cfg: SelfModelRun<M>) -> SelfModelRun<M> {
         let mut cfg = cfg.paper_compatible(self.paper_compatible);
         cfg.data.robot = self.robot_spec(BuiltinRobot::Arm4);
-        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
-        cfg
-    }
-
-    /// Apply the switches to an FFKSM config.
-    pub fn apply_ffksm(&self, cfg: FfksmConfig) -> FfksmConfig {
-        let mut cfg = cfg.paper_compatible(self.paper_compatible);
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
         cfg
     }
