@@ -299,19 +299,7 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
 #[test]
 fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     use selfmodel::ik::learning::{EmsslConfig, LrPlateau, emssl_checkpointed};
-    let r = 90f64.to_radians();
-    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
-    let data = IkData::generate(
-        &robot.chain,
-        &IkDataConfig {
-            samples: 2_000,
-            train: 1_500,
-            range_deg: 90.0,
-            seed: 6,
-            validation: 300,
-        },
-    )
-    .unwrap();
+    let (robot, data) = tiny_ur5(6);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
     // A high learning rate makes the selection error wander, so the plateau rule acts.
@@ -379,19 +367,7 @@ fn tempdir() -> std::path::PathBuf {
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
     use selfmodel::ik::learning::{EmsslConfig, emssl_checkpointed, validation_cm};
-    let r = 90f64.to_radians();
-    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
-    let data = IkData::generate(
-        &robot.chain,
-        &IkDataConfig {
-            samples: 2_000,
-            train: 1_500,
-            range_deg: 90.0,
-            seed: 7,
-            validation: 300,
-        },
-    )
-    .unwrap();
+    let (robot, data) = tiny_ur5(7);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
     let fit = FitConfig {
@@ -425,4 +401,22 @@ fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error(
     let (_, again) =
         emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
     assert_eq!(again.len(), curve.len());
+}
+
+/// The UR5 in +-90 degrees and 2,000 samples of it (1,500 to train, 300 of them to validate).
+fn tiny_ur5(seed: u64) -> (selfmodel::sim::robot::Robot, IkData) {
+    let r = 90f64.to_radians();
+    let robot = selfmodel::sim::dh_robot::ur5([-r, r]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 2_000,
+            train: 1_500,
+            range_deg: 90.0,
+            seed,
+            validation: 300,
+        },
+    )
+    .unwrap();
+    (robot, data)
 }

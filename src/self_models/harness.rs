@@ -82,6 +82,18 @@ pub struct Trained {
     pub note: String,
 }
 
+impl Trained {
+    /// A model with one renderer and nothing of its own to say in its row.
+    pub fn one(renderer: impl Render + 'static, parameters: usize, log: TrainLog) -> Self {
+        Trained {
+            renderers: vec![(String::new(), Box::new(renderer))],
+            parameters,
+            log,
+            note: String::new(),
+        }
+    }
+}
+
 /// Rendering with a trained self-model.
 pub trait Render {
     /// `[n, dof]` joint angles (degrees) -> silhouette probabilities in [0, 1]

@@ -99,23 +99,18 @@ impl SelfModel for MeanSilhouette {
             .sum::<f64>()
             / images.len().max(1) as f64;
         let device: &Device = fit.device;
-        Ok(Trained {
-            renderers: vec![(
-                String::new(),
-                Box::new(ConstantImage {
-                    image: Tensor::from_data(TensorData::new(mean, [1, 1, h, w]), device),
-                }),
-            )],
-            parameters: px,
-            log: TrainLog {
+        let image = Tensor::from_data(TensorData::new(mean, [1, 1, h, w]), device);
+        Ok(Trained::one(
+            ConstantImage { image },
+            px,
+            TrainLog {
                 step: 1,
                 curve: vec![(1, mse)],
                 train_seconds: start.elapsed().as_secs_f64(),
                 images: n,
                 resumed_from: None,
             },
-            note: String::new(),
-        })
+        ))
     }
 
     fn lower_bound(&self) -> bool {

@@ -326,12 +326,7 @@ impl SelfModel for NeuroKinConfig {
                     NeuroKinLoss::Bce => bce_with_logits(z, b.targets[0].clone()),
                 }
             })?;
-        Ok(Trained {
-            renderers: vec![(String::new(), Box::new(model.valid()))],
-            parameters,
-            log,
-            note: String::new(),
-        })
+        Ok(Trained::one(model.valid(), parameters, log))
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

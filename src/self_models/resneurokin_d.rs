@@ -271,12 +271,7 @@ impl SelfModel for ResNeuroKinDConfig {
                 let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
                 sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
             })?;
-        Ok(Trained {
-            renderers: vec![(String::new(), Box::new(model.valid()))],
-            parameters,
-            log,
-            note: String::new(),
-        })
+        Ok(Trained::one(model.valid(), parameters, log))
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
