@@ -197,10 +197,12 @@ impl Preset for IkComparisonConfig {
                 batch: 64,
                 ..FitConfig::paper()
             },
+            // No polishing: the quick preset stays what it was (tests/ik_convergence.rs
+            // checks the polishing rounds on their own).
             emssl: EmsslConfig {
                 max_iterations: 15,
                 patience: 5,
-                polish_rounds: 1,
+                polish_rounds: 0,
                 ..p.emssl.clone()
             },
             drl_epochs: 20,
