@@ -7,6 +7,7 @@ pub mod ffksm;
 pub mod harness;
 pub mod k3dgs;
 pub mod mean_silhouette;
+pub mod nearest_pose;
 pub mod neurokin;
 pub mod resneurokin_d;
 pub mod result;

@@ -317,6 +317,12 @@ pub const EXPERIMENTS: &[Experiment] = &[
         run_self_model::<ResNeuroKinDConfig>,
     ),
     Experiment::self_model(
+        "nearest_pose",
+        "a lookup table: the training images of the nearest training pose (a baseline of Table I)",
+        "reports/nearest_pose",
+        run_self_model::<crate::self_models::nearest_pose::NearestPose>,
+    ),
+    Experiment::self_model(
         "mean_silhouette",
         "the best constant image (mean training silhouette): the lower bound of Table I",
         "reports/mean_silhouette",
