@@ -112,6 +112,19 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
                 ..fast_noise.clone()
             },
         ),
+        s(
+            "noise decay 0.8 + cosine within iterations + warm start + 3 polishing rounds",
+            FitConfig {
+                cosine: true,
+                ..fit.clone()
+            },
+            EmsslConfig {
+                exploration_decay: 0.8,
+                warm_start_epochs: 10,
+                polish_rounds: 3,
+                ..base.clone()
+            },
+        ),
         Setting {
             output: JointOutput::Wrapped,
             ranges_deg: wide,
