@@ -221,3 +221,27 @@ fn bench_decoders_quick_measures_every_figure_and_reads_torch_lines() {
             .all(|r| r.torch.is_none() && r.ratio.is_none())
     );
 }
+
+#[test]
+fn the_lookup_table_answers_a_training_pose_with_its_own_images() {
+    use selfmodel::self_models::nearest_pose::NearestPose;
+    let mut cfg = NearestPose::preset_run("quick").unwrap();
+    // Test on eight training poses: each is its own nearest pose.
+    cfg.data.test = Some(0..8);
+    let dir = common::tempdir();
+    let out = run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
+    assert_eq!(out.quality.iou_test, 1.0);
+    assert_eq!(out.quality.depth_mae_mm, Some(0.0));
+    // And on the held-out poses it beats the best constant image.
+    let held_out = NearestPose::preset_run("quick").unwrap();
+    let q = run(&held_out, dir.path(), DeviceChoice::Cpu, false)
+        .unwrap()
+        .quality;
+    let (c_psnr, c_iou) = constant_predictor(&held_out);
+    assert!(
+        q.iou_test > c_iou && q.psnr_db_test > c_psnr,
+        "lookup {:.3} ({:.2} dB) against constant {c_iou:.3} ({c_psnr:.2} dB)",
+        q.iou_test,
+        q.psnr_db_test
+    );
+}
