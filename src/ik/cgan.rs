@@ -232,18 +232,10 @@ impl Generator {
         seed: u64,
         device: &Device,
     ) -> Vec<Vec<f64>> {
-        let mut best: Vec<(f64, Vec<f64>)> = vec![(f64::INFINITY, Vec::new()); positions.len()];
-        for s in 0..k.max(1) {
-            let joints = self.sample(data, positions, batch, seed.wrapping_add(s as u64), device);
-            let reached = chain.end_effector_batch(&joints);
-            for (i, (q, r)) in joints.into_iter().zip(reached).enumerate() {
-                let e = (positions[i] - r).norm();
-                if e < best[i].0 {
-                    best[i] = (e, q);
-                }
-            }
-        }
-        best.into_iter().map(|(_, q)| q).collect()
+        let samples: Vec<Vec<Vec<f64>>> = (0..k.max(1))
+            .map(|s| self.sample(data, positions, batch, seed.wrapping_add(s as u64), device))
+            .collect();
+        crate::ik::flow::best_of(chain, positions, &samples)
     }
 }
 

@@ -195,6 +195,12 @@ impl DataSpec {
 
     /// Render the dataset and pick the train and test samples.
     pub fn load(&self) -> Result<(Dataset, Range<usize>, Range<usize>)> {
+        self.load_with_robot()
+            .map(|(_, data, train, test)| (data, train, test))
+    }
+
+    /// [`DataSpec::load`] with the robot it rendered (loaded once: a URDF reads its meshes).
+    pub fn load_with_robot(&self) -> Result<(Robot, Dataset, Range<usize>, Range<usize>)> {
         let robot = self.robot.load()?;
         let data = Dataset::generate(&robot, &self.dataset, None)?;
         let (train, test) = data.split();
@@ -215,7 +221,7 @@ impl DataSpec {
                 data.len()
             )));
         }
-        Ok((data, train, test))
+        Ok((robot, data, train, test))
     }
 }
 
@@ -421,8 +427,7 @@ pub fn run<M: SelfModel>(
     // Read the revision now: a run that spans commits is the code it started with.
     let git_revision = crate::core::provenance::git_revision();
     let device = crate::core::device::select(device_choice)?;
-    let (data, train_range, test_range) = cfg.data.load()?;
-    let robot = cfg.data.robot.load()?;
+    let (robot, data, train_range, test_range) = cfg.data.load_with_robot()?;
     let image = cfg.model.image();
     if image != [data.height, data.width] {
         return Err(Error::Config(format!(
