@@ -82,6 +82,10 @@ pub fn write_training_curve(
         .map(|&(step, loss)| CurveRow { step, loss })
         .collect();
     write_csv(&dir.join("curve.csv"), &rows)?;
+    // A single point (a model fitted in one pass: the baselines) draws no line.
+    if rows.len() < 2 {
+        return Ok(());
+    }
     crate::report::figures::training_curves(
         &dir.join("training_curve.png"),
         &format!("{name}: training loss"),

@@ -4,7 +4,8 @@
 //! is its own: its config (with presets), its network and loss, and how it renders.
 //!
 //! A run writes into its folder: `config.json` (everything that defines it), `results.csv`
-//! and `results.md` (one [`ModelResult`] row), `curve.csv` and `training_curve.png`,
+//! and `results.md` (one [`ModelResult`] row per renderer), `curve.csv` and `training_curve.png`
+//! (the figure where training took more than one step),
 //! `qualitative.png` (ground truth, prediction and error for six test poses, plus depth where
 //! the model predicts it), and `checkpoint/` (model, optimizer state, progress; `--resume`
 //! continues).
