@@ -97,7 +97,16 @@ pub fn with_seed<T>(device: &Device, seed: u64, draw: impl FnOnce() -> T) -> T {
 /// seed gives the same model whatever else the process is doing (tests run in parallel
 /// threads). burn initialises parameters lazily, on first use, so every parameter is
 /// touched here before the generator is released.
-pub fn seeded<M: burn::module::Module>(device: &Device, seed: u64, build: impl FnOnce() -> M) -> M {
+///
+/// The parameters are drawn on the CPU (`flex`, when compiled in) and then moved to `device`:
+/// each backend has its own generator, and this way a model trained on a GPU starts from the
+/// very numbers it starts from on the CPU (`--device wgpu` is compared with the CPU from the
+/// same seed in `tests/wgpu_equivalence.rs`).
+pub fn seeded<M: burn::module::Module>(
+    device: &Device,
+    seed: u64,
+    build: impl FnOnce(&Device) -> M,
+) -> M {
     struct Touch;
     impl burn::module::ModuleVisitor for Touch {
         fn visit_float<const D: usize>(
@@ -107,9 +116,31 @@ pub fn seeded<M: burn::module::Module>(device: &Device, seed: u64, build: impl F
             let _ = param.val();
         }
     }
-    with_seed(device, seed, || {
-        let module = build();
+    let home = draw_device(device);
+    let module = with_seed(&home, seed, || {
+        let module = build(&home);
         module.visit(&mut Touch);
         module
-    })
+    });
+    if &home == device {
+        module
+    } else {
+        module.to_device(device)
+    }
+}
+
+/// Where [`seeded`] draws parameters for `device`: the CPU backend, with autodiff when
+/// `device` has it.
+fn draw_device(device: &Device) -> Device {
+    #[cfg(feature = "flex")]
+    {
+        let cpu = Device::flex();
+        if device.is_autodiff() {
+            cpu.autodiff()
+        } else {
+            cpu
+        }
+    }
+    #[cfg(not(feature = "flex"))]
+    device.clone()
 }

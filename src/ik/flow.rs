@@ -128,7 +128,7 @@ impl FlowIk {
                 p
             })
             .collect();
-        let couplings = crate::core::device::seeded(device, seed, || {
+        let couplings = crate::core::device::seeded(device, seed, |d| {
             (0..cfg.couplings)
                 .map(|_| {
                     let mut widths = vec![keep + CONDITION];
@@ -136,12 +136,12 @@ impl FlowIk {
                     let n = widths.len();
                     let mut layers: Vec<Linear> = widths
                         .windows(2)
-                        .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                        .map(|w| LinearConfig::new(w[0], w[1]).init(d))
                         .collect();
                     layers.push(
                         LinearConfig::new(widths[n - 1], 2 * (dof - keep))
                             .with_initializer(Initializer::Zeros)
-                            .init(device),
+                            .init(d),
                     );
                     Coupling { layers }
                 })

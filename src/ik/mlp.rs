@@ -73,10 +73,10 @@ impl InverseModelConfig {
         let mut widths = vec![self.inputs];
         widths.extend(&self.hidden);
         widths.push(self.outputs);
-        Ok(crate::core::device::seeded(device, seed, || Mlp {
+        Ok(crate::core::device::seeded(device, seed, |d| Mlp {
             layers: widths
                 .windows(2)
-                .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                .map(|w| LinearConfig::new(w[0], w[1]).init(d))
                 .collect(),
             head: match (self.unit_pairs, self.sigmoid_output) {
                 (true, _) => Head::UnitPairs,

@@ -24,7 +24,72 @@ pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>> {
         .map_err(|e| Error::data(path, format!("cannot read CSV rows: {e}")))
 }
 
-/// A Markdown table of a CSV file (numbers with more than 4 decimals are rounded to 4).
+/// Columns that say where a row came from, not what it measured: a generated table shows
+/// them apart from the results (a footnote when every row agrees, a second table otherwise).
+pub const PROVENANCE: &[&str] = &[
+    "dataset",
+    "preset",
+    "device",
+    "git_revision",
+    "revision",
+    "steps_override",
+    "note",
+    "notes",
+];
+
+/// A number as a table shows it: 4 significant digits, no more than 4 decimals, none at
+/// 1,000 and above; anything else as written.
+pub fn format_cell(cell: &str) -> String {
+    let Ok(v) = cell.parse::<f64>() else {
+        return cell.to_string();
+    };
+    if !cell.contains('.') || !v.is_finite() {
+        return cell.to_string();
+    }
+    let a = v.abs();
+    let decimals = if a >= 1000.0 || a == 0.0 {
+        0
+    } else {
+        (3 - a.log10().floor() as i32).clamp(0, 4) as usize
+    };
+    format!("{v:.decimals$}")
+}
+
+/// One Markdown table of `columns` (indices into `header`) of `rows`.
+fn markdown_table(header: &[String], rows: &[Vec<String>], columns: &[usize]) -> String {
+    let mut out = format!(
+        "| {} |\n|{}\n",
+        columns
+            .iter()
+            .map(|&c| header[c].as_str())
+            .collect::<Vec<_>>()
+            .join(" | "),
+        "---|".repeat(columns.len())
+    );
+    for r in rows {
+        let cells: Vec<String> = columns
+            .iter()
+            .map(|&c| format_cell(&r[c]).replace('|', "\\|"))
+            .collect();
+        out += &format!("| {} |\n", cells.join(" | "));
+    }
+    out
+}
+
+/// The columns a table of `header` shows first: a self-model's results
+/// ([`crate::self_models::result::RESULT_COLUMNS`]) or, for any other table, every column but
+/// the provenance ones (empty).
+fn main_columns(header: &[String]) -> &'static [&'static str] {
+    if header.iter().any(|h| h == "psnr_db_test") {
+        crate::self_models::result::RESULT_COLUMNS
+    } else {
+        &[]
+    }
+}
+
+/// The Markdown of a CSV file: its main columns ([`main_columns`]) in one table, the others
+/// (with the first column, the row's name) in a second, and the provenance columns folded
+/// into a footnote where every row agrees.
 pub fn markdown_from_csv(path: &Path) -> Result<String> {
     let mut reader = csv::Reader::from_path(path)
         .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
@@ -34,35 +99,92 @@ pub fn markdown_from_csv(path: &Path) -> Result<String> {
         .iter()
         .map(str::to_string)
         .collect();
-    let mut out = format!(
-        "| {} |\n|{}\n",
-        header.join(" | "),
-        "---|".repeat(header.len())
-    );
+    let mut rows = Vec::new();
     for rec in reader.records() {
         let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
-        let cells: Vec<String> = rec
-            .iter()
-            .map(|c| match c.parse::<f64>() {
-                Ok(v) if c.contains('.') && c.split('.').nth(1).is_some_and(|d| d.len() > 4) => {
-                    format!("{v:.4}")
-                }
-                _ => c.to_string(),
-            })
-            .collect();
-        out += &format!("| {} |\n", cells.join(" | "));
+        rows.push(rec.iter().map(str::to_string).collect::<Vec<_>>());
+    }
+    let main = main_columns(&header);
+    let is_provenance = |c: &usize| PROVENANCE.contains(&header[*c].as_str());
+    let all: Vec<usize> = (0..header.len()).collect();
+    let main_cols: Vec<usize> = if main.is_empty() {
+        all.iter().copied().filter(|c| !is_provenance(c)).collect()
+    } else {
+        main.iter()
+            .filter_map(|m| header.iter().position(|h| h == m))
+            .collect()
+    };
+    let key = main_cols.first().copied().unwrap_or(0);
+    let rest: Vec<usize> = all
+        .iter()
+        .copied()
+        .filter(|c| !main_cols.contains(c) && !is_provenance(c))
+        .collect();
+    let mut out = markdown_table(&header, &rows, &main_cols);
+    if !rest.is_empty() {
+        out += "\n### More columns\n\n";
+        out += &markdown_table(&header, &rows, &[vec![key], rest].concat());
+    }
+    // Provenance: one line for what every row shares, a table for what differs.
+    let (mut same, mut differ) = (Vec::new(), Vec::new());
+    for c in all.iter().copied().filter(is_provenance) {
+        let first = rows.first().map(|r| r[c].as_str()).unwrap_or("");
+        if rows.iter().all(|r| r[c] == first) {
+            if !first.is_empty() {
+                same.push(format!("{} `{first}`", header[c]));
+            }
+        } else {
+            differ.push(c);
+        }
+    }
+    if !same.is_empty() || !differ.is_empty() {
+        out += "\n### Provenance\n\n";
+    }
+    if !same.is_empty() {
+        out += &format!("Every row: {}.\n", same.join(", "));
+    }
+    if !differ.is_empty() {
+        out += "\n";
+        out += &markdown_table(&header, &rows, &[vec![key], differ].concat());
     }
     Ok(out)
 }
 
-/// Write `results.md` beside `results.csv`: a title, a note, and the generated table.
+/// Write `results.md` beside `results.csv`: a title, a note, and the generated tables.
 pub fn write_markdown_report(csv_path: &Path, title: &str, note: &str) -> Result<()> {
-    let table = markdown_from_csv(csv_path)?;
-    let text = format!(
-        "# {title}\n\n{note}\n\nGenerated from `{}`; do not edit by hand.\n\n{table}",
-        csv_path.file_name().unwrap_or_default().to_string_lossy()
-    );
+    let text = markdown_report(csv_path, title, note)?;
     write_bytes(&csv_path.with_extension("md"), text.as_bytes())
+}
+
+/// The line that marks a Markdown report as generated from the CSV beside it.
+const GENERATED: &str = "Generated from `";
+
+/// What [`write_markdown_report`] writes.
+pub fn markdown_report(csv_path: &Path, title: &str, note: &str) -> Result<String> {
+    let table = markdown_from_csv(csv_path)?;
+    Ok(format!(
+        "# {title}\n\n{note}\n\n{GENERATED}{}` (every column, full precision); do not edit by hand.\n\n{table}",
+        csv_path.file_name().unwrap_or_default().to_string_lossy()
+    ))
+}
+
+/// A generated Markdown report (`x.md` beside `x.csv`) as it would be written from the CSV
+/// now, keeping its title and note: `None` for a file that is not such a report.
+pub fn regenerated_report(md_path: &Path) -> Result<Option<String>> {
+    let csv_path = md_path.with_extension("csv");
+    if !csv_path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(md_path).map_err(|e| Error::io(md_path, e))?;
+    let Some(title) = text.lines().next().and_then(|l| l.strip_prefix("# ")) else {
+        return Ok(None);
+    };
+    let body = &text[text.find('\n').unwrap_or(text.len())..];
+    let Some(at) = body.find(&format!("\n{GENERATED}")) else {
+        return Ok(None);
+    };
+    let note = body[..at].trim();
+    markdown_report(&csv_path, title, note).map(Some)
 }
 
 /// A run's training curve: `dir/curve.csv` (step, loss) and `dir/training_curve.png`.

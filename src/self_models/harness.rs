@@ -416,17 +416,30 @@ fn predict_all(model: &dyn Render, test: &TrainSet, batch: usize, pixels: usize)
     }
 }
 
-/// Train, evaluate, time and report one self-model into `dir`.
-pub fn run<M: SelfModel>(
+/// A self-model trained by [`fit_run`], with the data it is scored on.
+pub struct Fitted {
+    pub trained: Trained,
+    /// Where it renders.
+    pub device: Device,
+    pub data: crate::data::dataset::Dataset,
+    pub train_range: std::ops::Range<usize>,
+    pub test_range: std::ops::Range<usize>,
+    /// The test poses and targets on `device`.
+    pub test_set: TrainSet,
+    /// The test silhouettes and depth on the host.
+    pub truth: Vec<f32>,
+    pub truth_depth: Vec<f32>,
+}
+
+/// Load `cfg`'s data and train its model on `device_choice`, checkpointing into
+/// `checkpoint_dir` (`resume`: continue from there). The first half of [`run`]; the
+/// GPU-against-CPU test calls it directly.
+pub fn fit_run<M: SelfModel>(
     cfg: &SelfModelRun<M>,
-    dir: &Path,
+    checkpoint_dir: &Path,
     device_choice: DeviceChoice,
     resume: bool,
-) -> Result<RunOutcome> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    write_json(&dir.join("config.json"), cfg)?;
-    // Read the revision now: a run that spans commits is the code it started with.
-    let git_revision = crate::core::provenance::git_revision();
+) -> Result<Fitted> {
     let device = crate::core::device::select(device_choice)?;
     let (robot, data, train_range, test_range) = cfg.data.load_with_robot()?;
     let image = cfg.model.image();
@@ -451,7 +464,7 @@ pub fn run<M: SelfModel>(
         &device,
     );
     let plan = CheckpointPlan {
-        dir: dir.join("checkpoint"),
+        dir: checkpoint_dir.to_path_buf(),
         resume,
         fingerprint: cfg.model.fingerprint(&cfg.train, &cfg.data),
     };
@@ -466,6 +479,39 @@ pub fn run<M: SelfModel>(
         camera: &cfg.data.dataset.camera,
         device_choice,
     })?;
+    Ok(Fitted {
+        trained,
+        device,
+        data,
+        train_range,
+        test_range,
+        test_set,
+        truth,
+        truth_depth,
+    })
+}
+
+/// Train, evaluate, time and report one self-model into `dir`.
+pub fn run<M: SelfModel>(
+    cfg: &SelfModelRun<M>,
+    dir: &Path,
+    device_choice: DeviceChoice,
+    resume: bool,
+) -> Result<RunOutcome> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    write_json(&dir.join("config.json"), cfg)?;
+    // Read the revision now: a run that spans commits is the code it started with.
+    let git_revision = crate::core::provenance::git_revision();
+    let Fitted {
+        trained,
+        device,
+        data,
+        train_range,
+        test_range,
+        test_set,
+        truth,
+        truth_depth,
+    } = fit_run(cfg, &dir.join("checkpoint"), device_choice, resume)?;
     let log = &trained.log;
     let pixels = data.height * data.width;
     let git_revision = git_revision.as_str();

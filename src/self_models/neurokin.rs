@@ -170,9 +170,7 @@ impl NeuroKinConfig {
     /// `seed` (see [`crate::core::device::seeded`]).
     pub fn init(&self, device: &Device, seed: u64) -> Result<NeuroKin> {
         self.validate()?;
-        Ok(crate::core::device::seeded(device, seed, || {
-            self.build(device)
-        }))
+        Ok(crate::core::device::seeded(device, seed, |d| self.build(d)))
     }
 
     fn build(&self, device: &Device) -> NeuroKin {

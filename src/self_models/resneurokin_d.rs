@@ -147,9 +147,7 @@ impl ResNeuroKinDConfig {
     /// `seed` (see [`crate::core::device::seeded`]).
     pub fn init(&self, device: &Device, seed: u64) -> Result<ResNeuroKinD> {
         self.validate()?;
-        Ok(crate::core::device::seeded(device, seed, || {
-            self.build(device)
-        }))
+        Ok(crate::core::device::seeded(device, seed, |d| self.build(d)))
     }
 
     fn build(&self, device: &Device) -> ResNeuroKinD {

@@ -32,6 +32,21 @@ impl PaperReference {
     }
 }
 
+/// The columns of a generated table of [`ModelResult`]s that a reader needs first; the rest
+/// follow in a second table (the CSV keeps everything).
+pub const RESULT_COLUMNS: &[&str] = &[
+    "model",
+    "psnr_db_test",
+    "iou_test",
+    "depth_mae_mm",
+    "infer_b1_img_per_s",
+    "infer_b256_img_per_s",
+    "train_time_s",
+    "paper_psnr_db",
+    "paper_fps",
+    "paper_train_time_s",
+];
+
 /// One trained model, measured. Units are in the column names.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ModelResult {

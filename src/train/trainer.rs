@@ -154,13 +154,22 @@ impl CheckpointPlan {
         )
     }
 
-    /// Load a checkpoint if `resume` is set and one exists.
+    /// Load a checkpoint if `resume` is set and one exists; with `resume` set, say on stderr
+    /// which of the two happened (`label`: the run's name).
     fn load<M: Module>(
         &self,
         model: M,
         optim: ModuleOptimizer,
+        label: &str,
     ) -> Result<(M, ModuleOptimizer, Option<TrainLog>)> {
-        if !self.resume || !self.state_path().exists() {
+        if !self.resume {
+            return Ok((model, optim, None));
+        }
+        if !self.state_path().exists() {
+            eprintln!(
+                "{label}: --resume: no checkpoint in {}; training starts from step 0",
+                self.dir.display()
+            );
             return Ok((model, optim, None));
         }
         let path = self.state_path();
@@ -179,6 +188,11 @@ impl CheckpointPlan {
         let optim = optim.load(self.optim_path()).map_err(|e| {
             Error::data(self.optim_path(), format!("cannot load checkpoint: {e:?}"))
         })?;
+        eprintln!(
+            "{label}: --resume: continuing from step {} (checkpoint in {})",
+            state.log.step,
+            self.dir.display()
+        );
         Ok((model, optim, Some(state.log)))
     }
 }
@@ -744,7 +758,7 @@ where
     }
     let mut log = TrainLog::default();
     if let Some(plan) = checkpoint {
-        let (m, o, resumed) = plan.load(model, optim)?;
+        let (m, o, resumed) = plan.load(model, optim, label)?;
         model = m;
         optim = o;
         if let Some(l) = resumed {

@@ -86,9 +86,7 @@ impl OccupancyFieldConfig {
     /// Build the field with parameters drawn from `seed`.
     pub fn init(&self, device: &Device, seed: u64) -> Result<OccupancyField> {
         self.validate()?;
-        Ok(crate::core::device::seeded(device, seed, || {
-            self.build(device)
-        }))
+        Ok(crate::core::device::seeded(device, seed, |d| self.build(d)))
     }
 
     fn build(&self, device: &Device) -> OccupancyField {

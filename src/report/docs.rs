@@ -1,0 +1,267 @@
+//! The README and `docs/` are generated: their prose lives in `docs/src/*.md`, and every
+//! number in them comes from a CSV (or a file an experiment wrote) through a directive, so
+//! no typed result can go stale. `cargo run --release --bin reports` writes them (and
+//! refreshes every generated `results.md` under `reports/` from its CSV); `tests/docs.rs`
+//! checks the checked-in files equal what it would write.
+//!
+//! Directives, each on one line of a source file, paths relative to the repository root:
+//! - `{{table PATH | cols: a, b, c | where: col=value | names: A, B, C}}`: a Markdown table of
+//!   those columns of a CSV (all, without `cols`), of the rows that match every `where`
+//!   (several, comma-separated), headed by `names` (the column names, without).
+//! - `{{value PATH | row: col=value | col: name}}`: one cell, formatted as in the tables.
+//! - `{{md PATH}}`: the tables of a generated Markdown report (what follows its
+//!   "Generated from" line).
+//! - `{{text PATH}}`: a file as it is (a command's captured output).
+
+use std::path::{Path, PathBuf};
+
+use crate::core::error::{Error, Result};
+use crate::report::table::format_cell;
+
+/// Where the sources are, relative to the repository root.
+pub const SOURCES: &str = "docs/src";
+
+/// A CSV file's header and rows.
+fn read_table(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>)> {
+    let mut reader = csv::Reader::from_path(path)
+        .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
+    let header = reader
+        .headers()
+        .map_err(|e| Error::data(path, format!("bad CSV header: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let mut rows = Vec::new();
+    for rec in reader.records() {
+        let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
+        rows.push(rec.iter().map(str::to_string).collect());
+    }
+    Ok((header, rows))
+}
+
+/// A directive's options: `key: value` parts after the path.
+struct Directive<'a> {
+    kind: &'a str,
+    path: &'a str,
+    options: Vec<(&'a str, &'a str)>,
+}
+
+impl<'a> Directive<'a> {
+    fn parse(inner: &'a str) -> Option<Self> {
+        let mut parts = inner.split('|').map(str::trim);
+        let (kind, path) = parts.next()?.split_once(' ')?;
+        let options = parts
+            .map(|p| p.split_once(':').map(|(k, v)| (k.trim(), v.trim())))
+            .collect::<Option<Vec<_>>>()?;
+        Some(Directive {
+            kind,
+            path: path.trim(),
+            options,
+        })
+    }
+
+    fn option(&self, key: &str) -> Option<&'a str> {
+        self.options
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, v)| *v)
+    }
+
+    fn list(&self, key: &str) -> Vec<&'a str> {
+        self.option(key)
+            .map(|v| v.split(',').map(str::trim).collect())
+            .unwrap_or_default()
+    }
+}
+
+/// The index of `name` in `header`, or an error naming the file.
+fn column(header: &[String], name: &str, path: &Path) -> Result<usize> {
+    header
+        .iter()
+        .position(|h| h == name)
+        .ok_or_else(|| Error::data(path, format!("no column `{name}`")))
+}
+
+/// Whether `row` matches every `col=value` condition.
+fn matches(header: &[String], row: &[String], conditions: &[&str], path: &Path) -> Result<bool> {
+    for c in conditions {
+        let (col, value) = c
+            .split_once('=')
+            .ok_or_else(|| Error::data(path, format!("bad condition `{c}` (want col=value)")))?;
+        if row[column(header, col.trim(), path)?] != value.trim() {
+            return Ok(false);
+        }
+    }
+    Ok(true)
+}
+
+/// What one directive expands to.
+fn expand(root: &Path, d: &Directive) -> Result<String> {
+    let path = root.join(d.path);
+    let read = |p: &Path| std::fs::read_to_string(p).map_err(|e| Error::io(p, e));
+    match d.kind {
+        "table" => {
+            let (header, rows) = read_table(&path)?;
+            let cols: Vec<usize> = match d.list("cols") {
+                c if c.is_empty() => (0..header.len()).collect(),
+                c => c
+                    .iter()
+                    .map(|n| column(&header, n, &path))
+                    .collect::<Result<_>>()?,
+            };
+            let names = d.list("names");
+            let heads: Vec<&str> = if names.is_empty() {
+                cols.iter().map(|&c| header[c].as_str()).collect()
+            } else if names.len() == cols.len() {
+                names
+            } else {
+                return Err(Error::data(
+                    &path,
+                    format!("{} names for {} columns", names.len(), cols.len()),
+                ));
+            };
+            let conditions = d.list("where");
+            let mut out = format!(
+                "| {} |\n|{}\n",
+                heads.join(" | "),
+                "---|".repeat(cols.len())
+            );
+            for r in &rows {
+                if matches(&header, r, &conditions, &path)? {
+                    let cells: Vec<String> = cols.iter().map(|&c| format_cell(&r[c])).collect();
+                    out += &format!("| {} |\n", cells.join(" | "));
+                }
+            }
+            Ok(out.trim_end().to_string())
+        }
+        "value" => {
+            let (header, rows) = read_table(&path)?;
+            let conditions = d.list("row");
+            let col = column(
+                &header,
+                d.option("col")
+                    .ok_or_else(|| Error::data(&path, "a value needs `col: name`"))?,
+                &path,
+            )?;
+            let mut found = None;
+            for r in &rows {
+                if matches(&header, r, &conditions, &path)? {
+                    found = Some(format_cell(&r[col]));
+                    break;
+                }
+            }
+            found.ok_or_else(|| Error::data(&path, format!("no row where {conditions:?}")))
+        }
+        "md" => {
+            let text = read(&path)?;
+            let at = text
+                .find("Generated from `")
+                .ok_or_else(|| Error::data(&path, "not a generated report"))?;
+            let rest = &text[at..];
+            let tables = &rest[rest.find('\n').unwrap_or(rest.len())..];
+            // Its own headings sit one level below the including section's.
+            Ok(tables.trim().replace("\n### ", "\n#### "))
+        }
+        "text" => Ok(read(&path)?.trim_end().to_string()),
+        other => Err(Error::data(&path, format!("unknown directive `{other}`"))),
+    }
+}
+
+/// A source's text with every directive expanded.
+pub fn render(root: &Path, source: &str) -> Result<String> {
+    let mut out = String::new();
+    let mut rest = source;
+    while let Some(start) = rest.find("{{") {
+        out += &rest[..start];
+        let end = rest[start..]
+            .find("}}")
+            .ok_or_else(|| Error::Config("an unclosed `{{` in a docs source".into()))?;
+        let inner = &rest[start + 2..start + end];
+        let d = Directive::parse(inner)
+            .ok_or_else(|| Error::Config(format!("bad directive `{{{{{inner}}}}}`")))?;
+        out += &expand(root, &d)?;
+        rest = &rest[start + end + 2..];
+    }
+    out += rest;
+    Ok(out)
+}
+
+/// Every generated file (path relative to `root`, contents): the README and `docs/*.md`
+/// from their sources, then every `results.md`-style report under `reports/` from its CSV.
+pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
+    let mut out = Vec::new();
+    let src_dir = root.join(SOURCES);
+    let mut sources: Vec<PathBuf> = std::fs::read_dir(&src_dir)
+        .map_err(|e| Error::io(&src_dir, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .collect();
+    sources.sort();
+    for src in sources {
+        let name = src
+            .file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .to_string();
+        let target = if name == "README.md" {
+            PathBuf::from("README.md")
+        } else {
+            Path::new("docs").join(&name)
+        };
+        let text = std::fs::read_to_string(&src).map_err(|e| Error::io(&src, e))?;
+        let banner = format!(
+            "<!-- Generated from {SOURCES}/{name} and the CSVs under reports/ by `cargo run --release --bin reports`; edit the source, not this file. -->\n\n"
+        );
+        out.push((target, banner + &render(root, &text)?));
+    }
+    let mut reports = Vec::new();
+    collect_markdown(&root.join("reports"), &mut reports)?;
+    reports.sort();
+    for md in reports {
+        if let Some(text) = crate::report::table::regenerated_report(&md)? {
+            let rel = md.strip_prefix(root).unwrap_or(&md).to_path_buf();
+            out.push((rel, text));
+        }
+    }
+    Ok(out)
+}
+
+fn collect_markdown(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Ok(());
+    };
+    for e in entries.flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            collect_markdown(&p, out)?;
+        } else if p.extension().is_some_and(|x| x == "md") {
+            out.push(p);
+        }
+    }
+    Ok(())
+}
+
+/// The generated files whose checked-in text differs from what [`generate`] writes.
+pub fn stale(root: &Path) -> Result<Vec<PathBuf>> {
+    Ok(generate(root)?
+        .into_iter()
+        .filter(|(p, text)| std::fs::read_to_string(root.join(p)).ok().as_deref() != Some(text))
+        .map(|(p, _)| p)
+        .collect())
+}
+
+/// Write every generated file; returns how many changed.
+pub fn write_all(root: &Path) -> Result<usize> {
+    let mut changed = 0;
+    for (p, text) in generate(root)? {
+        let path = root.join(&p);
+        if std::fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            }
+            crate::core::atomic_file::write_bytes(&path, text.as_bytes())?;
+            changed += 1;
+        }
+    }
+    Ok(changed)
+}
