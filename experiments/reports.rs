@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::report::docs;
+use selfmodel::studies::docs;
 
 /// Generate the documents from the results: README.md and docs/*.md from their sources in
 /// docs/src/ (every number read from reports/), and the Markdown tables beside every CSV.
@@ -17,6 +17,10 @@ struct Args {
     /// Write nothing; exit non-zero, naming them, if any generated file is stale.
     #[arg(long)]
     check: bool,
+    /// Also redraw the figures drawn from one CSV beside them (Pareto plots, training
+    /// curves) from that CSV.
+    #[arg(long)]
+    figures: bool,
     /// The repository root.
     #[arg(long, default_value = ".")]
     root: PathBuf,
@@ -36,6 +40,10 @@ fn main() -> ExitCode {
                 "stale generated documents: {} (run `cargo run --release --bin reports`)",
                 names.join(", ")
             )));
+        }
+        if args.figures {
+            let n = docs::redraw_figures(&args.root)?;
+            println!("reports: {n} figures redrawn from their CSVs");
         }
         let changed = docs::write_all(&args.root)?;
         println!("reports: {changed} generated documents rewritten");

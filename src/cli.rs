@@ -214,18 +214,25 @@ impl ExperimentArgs {
             arm4_scene: self.arm4_scene,
             latencies: self.latency.clone(),
         };
-        let dir = self
-            .out
-            .clone()
-            .unwrap_or_else(|| PathBuf::from(e.default_dir));
+        let dir = self.out.clone().unwrap_or_else(|| e.dir_for(&opts.preset));
         let start = std::time::Instant::now();
         let summary = (e.run)(&opts, &dir)?;
-        println!("{summary}");
-        println!(
-            "{name}: {:.1} s; wrote {}/results.csv (+ results.md, figures)",
+        let cpu = crate::eval::compute_peak::CpuPeak::detect().map_or_else(
+            || "an unknown CPU".into(),
+            |c| format!("{} cores of {}", c.cores, c.model),
+        );
+        let done = format!(
+            "{name} ({} preset): {:.0} s on {cpu}; wrote {}/results.csv (+ results.md, figures)",
+            opts.preset,
             start.elapsed().as_secs_f64(),
             dir.display()
         );
+        println!("{summary}\n{done}");
+        // What the command printed, for the README (which includes it, not a typed copy).
+        crate::core::atomic_file::write_bytes(
+            &dir.join("console.txt"),
+            format!("{summary}\n{done}\n").as_bytes(),
+        )?;
         Ok(())
     }
 }

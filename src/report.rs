@@ -1,6 +1,5 @@
 //! Results are data: CSV rows and the Markdown tables made from them, figures (plotters) and
 //! image previews. Nothing here is typed by hand.
 
-pub mod docs;
 pub mod figures;
 pub mod table;

@@ -1,9 +1,11 @@
 //! The experiments of both papers, one module per binary of the same name in `experiments/`,
-//! the registry that lists them (`registry`) and what they share (`run`).
+//! the registry that lists them (`registry`), what they share (`run`), and the documents
+//! generated from their results (`docs`: the README, docs/, every results.md).
 
 pub mod ablations;
 pub mod bench_decoders;
 pub mod bench_ffksm_step;
+pub mod docs;
 pub mod emssl_adaptation;
 pub mod emssl_learning_curve;
 pub mod emssl_sampling_speed;

@@ -567,6 +567,8 @@ pub fn build_and_save(
     image_grid(
         &out.with_extension("preview.png"),
         &rows,
+        &["silhouette", "depth"],
+        &[],
         data.width,
         data.height,
         1,

@@ -8,6 +8,7 @@ use std::path::Path;
 use std::sync::Once;
 
 use image::ImageEncoder;
+use plotters::coord::combinators::BindKeyPoints;
 use plotters::prelude::*;
 
 use crate::core::atomic_file::write_bytes;
@@ -70,8 +71,115 @@ pub struct ParetoPoint {
     pub reference: bool,
 }
 
+/// Tick values on a log axis over `[lo, hi]`: 1-2-5 in each decade over up to two decades,
+/// 1-3 up to four, the decades beyond; one label per tick, no minor lines.
+pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo) {
+        return vec![];
+    }
+    let decades = hi.log10() - lo.log10();
+    let mantissas: &[f64] = if decades <= 2.2 {
+        &[1.0, 2.0, 5.0]
+    } else if decades <= 4.5 {
+        &[1.0, 3.0]
+    } else {
+        &[1.0]
+    };
+    let mut ticks = Vec::new();
+    for k in (lo.log10().floor() as i32)..=(hi.log10().ceil() as i32) {
+        for m in mantissas {
+            let v = m * 10f64.powi(k);
+            if v >= lo * 0.999 && v <= hi * 1.001 {
+                ticks.push(v);
+            }
+        }
+    }
+    ticks
+}
+
+/// A tick value as a label: no trailing zeros, thousands unseparated ("0.02", "5", "2000").
+pub fn tick_label(v: f64) -> String {
+    if v >= 1.0 || v == 0.0 {
+        format!("{v:.0}")
+    } else {
+        let decimals = (-v.log10().floor()) as usize;
+        format!("{v:.decimals$}")
+    }
+}
+
+/// A rectangle in pixels, for placing labels that do not overlap.
+#[derive(Clone, Copy)]
+struct Rect {
+    x0: i32,
+    y0: i32,
+    x1: i32,
+    y1: i32,
+}
+
+impl Rect {
+    fn overlaps(&self, o: &Rect) -> bool {
+        self.x0 < o.x1 && o.x0 < self.x1 && self.y0 < o.y1 && o.y0 < self.y1
+    }
+    fn inside(&self, o: &Rect) -> bool {
+        self.x0 >= o.x0 && self.x1 <= o.x1 && self.y0 >= o.y0 && self.y1 <= o.y1
+    }
+}
+
+/// Where to put each label beside its point (pixel position of the point, label width and
+/// height): the first of a ring of candidate positions that stays inside `area` and clear of
+/// every point and label placed so far; `None` where none is clear (the caller numbers it).
+fn place_labels(points: &[(i32, i32, i32, i32)], area: Rect) -> Vec<Option<(i32, i32)>> {
+    let marker = |&(x, y, _, _): &(i32, i32, i32, i32)| Rect {
+        x0: x - 7,
+        y0: y - 7,
+        x1: x + 7,
+        y1: y + 7,
+    };
+    let mut taken: Vec<Rect> = points.iter().map(marker).collect();
+    let mut out = Vec::with_capacity(points.len());
+    for &(x, y, w, h) in points {
+        let gap = 9;
+        let candidates = [
+            (x + gap, y - h / 2),
+            (x - gap - w, y - h / 2),
+            (x - w / 2, y - gap - h),
+            (x - w / 2, y + gap),
+            (x + gap, y - gap - h),
+            (x + gap, y + gap),
+            (x - gap - w, y - gap - h),
+            (x - gap - w, y + gap),
+            (x + gap, y - 2 * h - gap),
+            (x + gap, y + h + gap),
+            (x - gap - w, y - 2 * h - gap),
+            (x - gap - w, y + h + gap),
+        ];
+        let spot = candidates.iter().copied().find(|&(cx, cy)| {
+            let r = Rect {
+                x0: cx - 2,
+                y0: cy - 1,
+                x1: cx + w + 2,
+                y1: cy + h + 1,
+            };
+            r.inside(&area) && !taken.iter().any(|t| t.overlaps(&r))
+        });
+        if let Some((cx, cy)) = spot {
+            taken.push(Rect {
+                x0: cx - 2,
+                y0: cy - 1,
+                x1: cx + w + 2,
+                y1: cy + h + 1,
+            });
+        }
+        out.push(spot);
+    }
+    out
+}
+
 /// Quality against inference speed, log-x, with the 1,000 FPS control-loop line.
-/// `floors`: lower bounds (label, quality), drawn as dashed horizontal lines.
+/// `floors`: lower bounds (label, quality), drawn as dashed horizontal lines. Our points are
+/// filled blue, the paper's hollow black (another machine: a T4 GPU); labels are placed
+/// beside their points where they overlap nothing, and numbered in a key below the legend
+/// where no place is free.
 pub fn pareto_plot(
     path: &Path,
     title: &str,
@@ -80,7 +188,7 @@ pub fn pareto_plot(
     floors: &[(String, f64)],
 ) -> Result<()> {
     register_font();
-    let (w, h) = (900u32, 600u32);
+    let (w, h) = (1000u32, 650u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -91,6 +199,7 @@ pub fn pareto_plot(
             .fold(f64::INFINITY, f64::min)
             .min(1.0);
         let fps_max = points.iter().map(|p| p.fps).fold(1.0, f64::max).max(2000.0);
+        let (x0, x1) = (fps_min / 2.0, fps_max * 3.0);
         let q_min = points
             .iter()
             .map(|p| p.quality)
@@ -102,26 +211,31 @@ pub fn pareto_plot(
             .chain(floors.iter().map(|f| f.1))
             .fold(f64::NEG_INFINITY, f64::max);
         let pad = ((q_max - q_min) * 0.15).max(0.5 * q_max.abs().max(1e-3) * 0.02);
+        let (y0, y1) = (q_min - pad, q_max + pad);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 22))
             .margin(15)
-            .x_label_area_size(45)
+            .x_label_area_size(50)
             .y_label_area_size(60)
             .build_cartesian_2d(
-                (fps_min / 2.0..fps_max * 3.0).log_scale(),
-                (q_min - pad)..(q_max + pad),
+                (x0..x1).log_scale().with_key_points(log_ticks(x0, x1)),
+                y0..y1,
             )
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
-            .x_desc("inference images/s at batch 1 (log)")
+            .x_desc(
+                "inference images/s at batch 1 (log): ours on this CPU, the paper's on a T4 GPU",
+            )
             .y_desc(y_label)
+            .x_label_formatter(&|v| tick_label(*v))
             .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
             .draw()
             .map_err(|e| draw_err(path, e))?;
         chart
             .draw_series(LineSeries::new(
-                [(1000.0, q_min - pad), (1000.0, q_max + pad)],
+                [(1000.0, y0), (1000.0, y1)],
                 RED.stroke_width(2),
             ))
             .map_err(|e| draw_err(path, e))?
@@ -129,7 +243,6 @@ pub fn pareto_plot(
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         for (label, q) in floors {
             let grey = BLACK.mix(0.5);
-            let (x0, x1) = (fps_min / 2.0, fps_max * 3.0);
             // Dashes: short segments across the log axis.
             let n = 60;
             let segments: Vec<Vec<(f64, f64)>> = (0..n)
@@ -151,30 +264,65 @@ pub fn pareto_plot(
                     PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(2))
                 });
         }
-        for p in points {
-            let color = if p.reference {
-                BLACK.mix(0.6)
-            } else {
-                BLUE.mix(1.0)
-            };
-            let style = if p.reference {
-                color.stroke_width(2)
-            } else {
-                color.filled()
-            };
+        let ours_style = BLUE.filled();
+        let paper_style = BLACK.stroke_width(2);
+        for (reference, name) in [(false, "ours (this CPU)"), (true, "paper (T4 GPU)")] {
+            let style = if reference { paper_style } else { ours_style };
             chart
-                .draw_series(std::iter::once(Circle::new((p.fps, p.quality), 6, style)))
-                .map_err(|e| draw_err(path, e))?;
-            chart
-                .draw_series(std::iter::once(Text::new(
-                    p.label.clone(),
-                    (p.fps, p.quality),
-                    (FONT, 13).into_font().color(&color),
-                )))
-                .map_err(|e| draw_err(path, e))?;
+                .draw_series(
+                    points
+                        .iter()
+                        .filter(|p| p.reference == reference)
+                        .map(|p| Circle::new((p.fps, p.quality), 6, style)),
+                )
+                .map_err(|e| draw_err(path, e))?
+                .label(name)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 6, style));
+        }
+        // Labels where they overlap nothing; a number and a key entry elsewhere.
+        let font_px = 13;
+        let char_w = 8;
+        let (xr, yr) = chart.plotting_area().get_pixel_range();
+        let (px0, px1, py0, py1) = (xr.start, xr.end, yr.start, yr.end);
+        let area = Rect {
+            x0: px0,
+            y0: py0,
+            x1: px1,
+            y1: py1,
+        };
+        let sized: Vec<(i32, i32, i32, i32)> = points
+            .iter()
+            .map(|p| {
+                let (x, y) = chart.backend_coord(&(p.fps, p.quality));
+                (x, y, char_w * p.label.chars().count() as i32, font_px + 2)
+            })
+            .collect();
+        let spots = place_labels(&sized, area);
+        let mut key = Vec::new();
+        for ((p, spot), &(x, y, _, _)) in points.iter().zip(&spots).zip(&sized) {
+            let color = if p.reference { BLACK } else { BLUE };
+            let font = (FONT, font_px).into_font().color(&color);
+            match spot {
+                Some((cx, cy)) => root
+                    .draw(&Text::new(p.label.clone(), (*cx, *cy), font))
+                    .map_err(|e| draw_err(path, e))?,
+                None => {
+                    key.push(format!("{}: {}", key.len() + 1, p.label));
+                    root.draw(&Text::new(format!("{}", key.len()), (x + 8, y - 16), font))
+                        .map_err(|e| draw_err(path, e))?;
+                }
+            }
         }
         // Bottom left: the slow, poor corner no model sits in.
         draw_legend(&mut chart, path, SeriesLabelPosition::LowerLeft)?;
+        for (i, line) in key.iter().enumerate() {
+            root.draw(&Text::new(
+                line.clone(),
+                (px0 + 10, py0 + 8 + i as i32 * (font_px + 4)),
+                (FONT, font_px).into_font(),
+            ))
+            .map_err(|e| draw_err(path, e))?;
+        }
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
@@ -213,13 +361,20 @@ pub fn curves(
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(0..max_step, (lo * 0.8..hi * 1.2).log_scale())
+            .build_cartesian_2d(
+                0..max_step,
+                (lo * 0.8..hi * 1.2)
+                    .log_scale()
+                    .with_key_points(log_ticks(lo * 0.8, hi * 1.2)),
+            )
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
             .x_desc(x_desc)
             .y_desc(y_desc)
+            .y_label_formatter(&|v| tick_label(*v))
             .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
             .draw()
             .map_err(|e| draw_err(path, e))?;
         for (i, (label, curve)) in runs.iter().enumerate() {
@@ -235,14 +390,17 @@ pub fn curves(
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });
         }
-        draw_legend(&mut chart, path, SeriesLabelPosition::MiddleRight)?;
+        // Falling curves leave the upper right empty.
+        draw_legend(&mut chart, path, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
 }
 
 /// Lines of positive `(x, y)` points, one per run, both axes logarithmic (sweeps over batch
-/// sizes or thread counts), with a marker on every measured point.
+/// sizes or thread counts), with a marker on every measured point. The x ticks are the
+/// measured x values themselves (counts: 1, 2, 3, 4 threads; 64, 512 batch), the y ticks
+/// 1-2-5 per decade.
 pub fn log_log_lines(
     path: &Path,
     title: &str,
@@ -253,15 +411,13 @@ pub fn log_log_lines(
     register_font();
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
-    // Plotted as log10 values on linear axes, labelled with the values themselves: every
-    // tick gets a label, not only the decades.
-    let logs: Vec<(String, Vec<(f64, f64)>)> = runs
+    let runs: Vec<(String, Vec<(f64, f64)>)> = runs
         .iter()
         .map(|(l, c)| {
             let pts = c
                 .iter()
+                .copied()
                 .filter(|p| p.0 > 0.0 && p.1 > 0.0)
-                .map(|p| (p.0.log10(), p.1.log10()))
                 .collect();
             (l.clone(), pts)
         })
@@ -269,43 +425,48 @@ pub fn log_log_lines(
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
-        let points = logs.iter().flat_map(|(_, c)| c.iter());
+        let points = runs.iter().flat_map(|(_, c)| c.iter());
         let range = |f: fn(&(f64, f64)) -> f64| {
             let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
             let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
             if lo.is_finite() && hi.is_finite() {
-                let pad = ((hi - lo) * 0.08).max(0.05);
-                (lo - pad, hi + pad)
+                let pad = ((hi / lo).powf(0.06)).max(1.15);
+                (lo / pad, hi * pad)
             } else {
-                (0.0, 1.0)
+                (1.0, 10.0)
             }
         };
         let (x_lo, x_hi) = range(|p| p.0);
         let (y_lo, y_hi) = range(|p| p.1);
-        let value = |v: &f64| {
-            let x = 10f64.powf(*v);
-            let digits = (2 - x.log10().floor() as i32).max(0) as usize;
-            format!("{x:.digits$}")
-        };
+        let mut xs: Vec<f64> = points.clone().map(|p| p.0).collect();
+        xs.sort_by(f64::total_cmp);
+        xs.dedup();
+        if xs.len() > 12 {
+            xs = log_ticks(x_lo, x_hi);
+        }
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 20))
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
+            .build_cartesian_2d(
+                (x_lo..x_hi).log_scale().with_key_points(xs),
+                (y_lo..y_hi)
+                    .log_scale()
+                    .with_key_points(log_ticks(y_lo, y_hi)),
+            )
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
             .x_desc(x_desc)
             .y_desc(y_desc)
-            .x_labels(10)
-            .y_labels(10)
-            .x_label_formatter(&value)
-            .y_label_formatter(&value)
+            .x_label_formatter(&|v| tick_label(*v))
+            .y_label_formatter(&|v| tick_label(*v))
             .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
             .draw()
             .map_err(|e| draw_err(path, e))?;
-        for (i, (label, pts)) in logs.iter().enumerate() {
+        for (i, (label, pts)) in runs.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
@@ -318,7 +479,7 @@ pub fn log_log_lines(
                 .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
                 .map_err(|e| draw_err(path, e))?;
         }
-        draw_legend(&mut chart, path, SeriesLabelPosition::MiddleRight)?;
+        draw_legend(&mut chart, path, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
@@ -350,14 +511,20 @@ pub enum GridRow<'a> {
     Depth(Vec<&'a [f32]>, [f32; 2]),
 }
 
-/// A grid of images (rows of equal length), each pixel drawn `scale` times, 2 px gaps.
+/// A grid of images (rows of equal length), each pixel drawn `scale` times, 2 px gaps, with
+/// each row's title on the left (`titles`, one per row), a caption under each column
+/// (`captions`: per-sample scores; empty: none) and, right of every error or depth row, a
+/// colour bar with its scale.
 pub fn image_grid(
     path: &Path,
     rows: &[GridRow],
+    titles: &[&str],
+    captions: &[String],
     width: usize,
     height: usize,
     scale: usize,
 ) -> Result<()> {
+    register_font();
     let cols = rows
         .iter()
         .map(|r| match r {
@@ -367,9 +534,34 @@ pub fn image_grid(
         .max()
         .unwrap_or(0);
     let gap = 2;
+    let font_px = 13;
+    let left = if titles.iter().any(|t| !t.is_empty()) {
+        8 + 8 * titles.iter().map(|t| t.chars().count()).max().unwrap_or(0)
+    } else {
+        0
+    };
+    let bars = rows
+        .iter()
+        .any(|r| matches!(r, GridRow::Error(_) | GridRow::Depth(..)));
+    let right = if bars { 90 } else { 0 };
+    // Captions go one part per line ("24.5 dB, IoU 0.91": two lines), to fit narrow cells.
+    let caption_lines = captions
+        .iter()
+        .map(|c| c.split(", ").count())
+        .max()
+        .unwrap_or(0);
+    let bottom = caption_lines * (font_px + 3) + if caption_lines > 0 { 6 } else { 0 };
     let (cw, ch) = (width * scale + gap, height * scale + gap);
-    let (w, h) = (cols * cw + gap, rows.len() * ch + gap);
-    let mut img = image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([200, 200, 200]));
+    let (w, h) = (
+        left + cols * cw + gap + right,
+        rows.len() * ch + gap + bottom,
+    );
+    let mut img = image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([255, 255, 255]));
+    let depth_color = |d: f32, lo: f32, hi: f32| -> [u8; 3] {
+        let t = 1.0 - ((d - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
+        let g = (40.0 + 215.0 * t) as u8;
+        [g, (g as f32 * 0.85) as u8, 255 - g / 2]
+    };
     for (r, row) in rows.iter().enumerate() {
         for c in 0..cols {
             let color = |i: usize| -> Option<[u8; 3]> {
@@ -383,9 +575,7 @@ pub fn image_grid(
                         if im[i] <= 0.0 {
                             [0, 0, 0]
                         } else {
-                            let t = 1.0 - ((im[i] - lo) / (hi - lo).max(1e-6)).clamp(0.0, 1.0);
-                            let g = (40.0 + 215.0 * t) as u8;
-                            [g, (g as f32 * 0.85) as u8, 255 - g / 2]
+                            depth_color(im[i], *lo, *hi)
                         }
                     }),
                 }
@@ -398,7 +588,7 @@ pub fn image_grid(
                     for dy in 0..scale {
                         for dx in 0..scale {
                             img.put_pixel(
-                                (gap + c * cw + x * scale + dx) as u32,
+                                (left + gap + c * cw + x * scale + dx) as u32,
                                 (gap + r * ch + y * scale + dy) as u32,
                                 image::Rgb(px),
                             );
@@ -407,8 +597,63 @@ pub fn image_grid(
                 }
             }
         }
+        // The colour bar: low at the bottom, high at the top.
+        let bar = match row {
+            GridRow::Error(_) => Some((0.0f32, 1.0f32, false)),
+            GridRow::Depth(_, [lo, hi]) => Some((*lo, *hi, true)),
+            GridRow::Grey(_) => None,
+        };
+        if let Some((lo, hi, depth)) = bar {
+            let x0 = left + cols * cw + gap + 6;
+            let (y0, bh) = (gap + r * ch + 4, height * scale - 8);
+            for y in 0..bh {
+                let f = 1.0 - y as f32 / (bh - 1).max(1) as f32;
+                let v = lo + f * (hi - lo);
+                let px = if depth {
+                    depth_color(v, lo, hi)
+                } else {
+                    error_color(v)
+                };
+                for x in 0..12 {
+                    img.put_pixel((x0 + x) as u32, (y0 + y) as u32, image::Rgb(px));
+                }
+            }
+        }
     }
-    save_rgb(path, img.as_raw(), w as u32, h as u32)
+    let mut buf = img.into_raw();
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let font = (FONT, font_px as f64).into_font().color(&BLACK);
+        for (r, title) in titles.iter().enumerate().take(rows.len()) {
+            let y = (gap + r * ch + height * scale / 2) as i32 - font_px as i32 / 2;
+            root.draw(&Text::new(title.to_string(), (4, y), font.clone()))
+                .map_err(|e| draw_err(path, e))?;
+        }
+        for (c, caption) in captions.iter().enumerate().take(cols) {
+            let x = (left + gap + c * cw) as i32 + 2;
+            for (k, line) in caption.split(", ").enumerate() {
+                let y = (rows.len() * ch + gap + 3 + k * (font_px + 3)) as i32;
+                root.draw(&Text::new(line.to_string(), (x, y), font.clone()))
+                    .map_err(|e| draw_err(path, e))?;
+            }
+        }
+        for (r, row) in rows.iter().enumerate() {
+            let (top, bottom) = match row {
+                GridRow::Error(_) => ("1".to_string(), "0".to_string()),
+                GridRow::Depth(_, [lo, hi]) => (format!("{hi:.2} m"), format!("{lo:.2} m")),
+                GridRow::Grey(_) => continue,
+            };
+            let x = (left + cols * cw + gap + 22) as i32;
+            let y0 = (gap + r * ch + 2) as i32;
+            let y1 = (gap + r * ch + height * scale) as i32 - font_px as i32 - 2;
+            root.draw(&Text::new(top, (x, y0), font.clone()))
+                .map_err(|e| draw_err(path, e))?;
+            root.draw(&Text::new(bottom, (x, y1), font.clone()))
+                .map_err(|e| draw_err(path, e))?;
+        }
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w as u32, h as u32)
 }
 
 /// Images side by side (grey levels in [0, 1]), each with points drawn over it as green dots:

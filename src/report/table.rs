@@ -24,6 +24,21 @@ pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>> {
         .map_err(|e| Error::data(path, format!("cannot read CSV rows: {e}")))
 }
 
+/// The columns of a generated table of self-model results (`ModelResult`) that a reader needs first; the rest
+/// follow in a second table (the CSV keeps everything).
+pub const SELF_MODEL_COLUMNS: &[&str] = &[
+    "model",
+    "psnr_db_test",
+    "iou_test",
+    "depth_mae_mm",
+    "infer_b1_img_per_s",
+    "infer_b256_img_per_s",
+    "train_time_s",
+    "paper_psnr_db",
+    "paper_fps",
+    "paper_train_time_s",
+];
+
 /// Columns that say where a row came from, not what it measured: a generated table shows
 /// them apart from the results (a footnote when every row agrees, a second table otherwise).
 pub const PROVENANCE: &[&str] = &[
@@ -77,11 +92,11 @@ fn markdown_table(header: &[String], rows: &[Vec<String>], columns: &[usize]) ->
 }
 
 /// The columns a table of `header` shows first: a self-model's results
-/// ([`crate::self_models::result::RESULT_COLUMNS`]) or, for any other table, every column but
+/// ([`SELF_MODEL_COLUMNS`]) or, for any other table, every column but
 /// the provenance ones (empty).
 fn main_columns(header: &[String]) -> &'static [&'static str] {
     if header.iter().any(|h| h == "psnr_db_test") {
-        crate::self_models::result::RESULT_COLUMNS
+        SELF_MODEL_COLUMNS
     } else {
         &[]
     }

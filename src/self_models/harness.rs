@@ -700,6 +700,19 @@ pub(crate) fn qualitative_figure(
             .collect(),
         None => Vec::new(),
     };
+    // Under each column: that sample's PSNR and IoU.
+    let captions: Vec<String> = gt
+        .iter()
+        .zip(&pr)
+        .map(|(g, p)| {
+            format!(
+                "{:.1} dB, IoU {:.2}",
+                crate::eval::evaluation::psnr_db(p, g),
+                crate::eval::evaluation::iou(p, g)
+            )
+        })
+        .collect();
+    let mut titles = vec!["truth", "prediction", "|error|"];
     let mut rows = vec![GridRow::Grey(gt), GridRow::Grey(pr), GridRow::Error(err)];
     if pred.depth.is_some() {
         let robot: Vec<f32> = truth_depth.iter().copied().filter(|&v| v > 0.0).collect();
@@ -714,6 +727,7 @@ pub(crate) fn qualitative_figure(
             masked_depth.iter().map(|v| v.as_slice()).collect(),
             range,
         ));
+        titles.extend(["true depth", "predicted depth"]);
     }
-    image_grid(path, &rows, size[1], size[0], 2)
+    image_grid(path, &rows, &titles, &captions, size[1], size[0], 2)
 }

@@ -288,5 +288,5 @@ pub fn resneurokin_d_run(preset: &str) -> Result<SelfModelRun<ResNeuroKinDConfig
         64,
         PaperReference::resneurokin_d(),
     )?
-    .shorten(30, 16))
+    .shorten(60, 16))
 }

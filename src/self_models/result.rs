@@ -32,21 +32,6 @@ impl PaperReference {
     }
 }
 
-/// The columns of a generated table of [`ModelResult`]s that a reader needs first; the rest
-/// follow in a second table (the CSV keeps everything).
-pub const RESULT_COLUMNS: &[&str] = &[
-    "model",
-    "psnr_db_test",
-    "iou_test",
-    "depth_mae_mm",
-    "infer_b1_img_per_s",
-    "infer_b256_img_per_s",
-    "train_time_s",
-    "paper_psnr_db",
-    "paper_fps",
-    "paper_train_time_s",
-];
-
 /// One trained model, measured. Units are in the column names.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ModelResult {
@@ -121,15 +106,53 @@ pub fn pareto_points(
         quality: r.psnr_db_test,
         reference: false,
     });
-    let paper = rows.iter().filter_map(|r| {
-        Some(ParetoPoint {
-            label: format!("paper: {}", label(&r.model)),
-            fps: r.paper_fps?,
-            quality: r.paper_psnr_db?,
-            reference: true,
-        })
+    // One point per paper figure, however many of our rows it stands beside, named by what
+    // those rows' names share ("FFKSM (dense marching)", "FFKSM (accelerated)": "FFKSM").
+    let mut paper: Vec<(f64, f64, Vec<String>)> = Vec::new();
+    for r in rows {
+        let (Some(fps), Some(q)) = (r.paper_fps, r.paper_psnr_db) else {
+            continue;
+        };
+        match paper.iter_mut().find(|p| p.0 == fps && p.1 == q) {
+            Some(p) => p.2.push(label(&r.model)),
+            None => paper.push((fps, q, vec![label(&r.model)])),
+        }
+    }
+    let paper = paper.into_iter().map(|(fps, quality, names)| ParetoPoint {
+        label: format!("paper: {}", common_name(&names)),
+        fps,
+        quality,
+        reference: true,
     });
     ours.chain(paper).collect()
+}
+
+/// What `names` share: their common prefix, cut back to a whole word and stripped of an
+/// opened parenthesis ("K-3DGS (isotropic)", "K-3DGS (anisotropic, alpha)": "K-3DGS").
+fn common_name(names: &[String]) -> String {
+    let first = names.first().map(String::as_str).unwrap_or("");
+    let mut n = first.len();
+    for other in names {
+        n = n.min(
+            first
+                .chars()
+                .zip(other.chars())
+                .take_while(|(a, b)| a == b)
+                .count(),
+        );
+    }
+    let mut prefix: String = first.chars().take(n).collect();
+    if n < first.chars().count() {
+        // Cut back to the last whole word.
+        let cut = prefix.rfind([' ', '(']).unwrap_or(prefix.len());
+        prefix.truncate(cut);
+    }
+    let trimmed = prefix.trim_end_matches([' ', '(', ',']).trim();
+    if trimmed.is_empty() {
+        first.to_string()
+    } else {
+        trimmed.to_string()
+    }
 }
 
 /// The lower bounds among `rows` (label, test PSNR), for [`crate::report::figures::pareto_plot`].

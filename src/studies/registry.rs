@@ -9,7 +9,7 @@ use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
 use crate::self_models::harness::SELF_MODEL_PRESETS;
 use crate::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
 use crate::self_models::mean_silhouette::MeanSilhouette;
-use crate::self_models::neurokin::{neurokin_run, neurokin64_run};
+use crate::self_models::neurokin::{NeuroKinConfig, neurokin_run, neurokin64_run};
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::studies::ablations::{Ablation, run_ablation};
 use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
@@ -51,26 +51,12 @@ fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
     ))
 }
 
-/// NeuroKin (the code's architecture) and NeuroKin-64 (the paper text's), one row each.
-pub fn run_neurokin(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let mut rows = Vec::new();
-    for (sub, cfg) in [
-        ("neurokin", neurokin_run(&opts.preset)?),
-        ("neurokin64", neurokin64_run(&opts.preset)?),
-    ] {
-        let cfg = opts.apply(cfg);
-        rows.push(
-            crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?
-                .result,
-        );
-    }
-    write_rows(
-        dir,
-        &rows,
-        "NeuroKin: the notebook's architecture and the paper text's",
-        "One row per architecture; each folder holds its config, curve and figures. `paper_*` columns are the paper's published figures (its FPS was training throughput).",
-    )?;
-    Ok(summary(&rows))
+/// NeuroKin-64, the paper text's variant: on the clean data it collapses to an empty image (a
+/// documented negative result, kept out of Table I); on the paper-compatible data it trains.
+pub fn run_neurokin64(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = opts.apply(neurokin64_run(&opts.preset)?);
+    let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    Ok(summary(std::slice::from_ref(&out.result)))
 }
 
 /// FFKSM: the reimplementation, the original authors' model, and the reimplementation trained
@@ -82,7 +68,7 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut novel = Vec::new();
     let dense = crate::report::table::read_csv::<crate::self_models::ffksm::RendererRow>;
     let novel_rows = crate::report::table::read_csv::<crate::self_models::ffksm::NovelViewRow>;
-    for (sub, variant) in FfksmVariant::ALL {
+    for &(sub, variant) in FfksmVariant::of_preset(&opts.preset) {
         let cfg = opts.apply(ffksm_run(&opts.preset, variant)?);
         let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.extend(out.rows);
@@ -109,16 +95,7 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
         "FFKSM: views it was never trained on",
         "Cameras orbited about the world z axis, against the simulator's images from there; `view_blind_*` offers the training camera's true silhouette as the prediction (the best a 2-D decoder can do).",
     )?;
-    let summary: Vec<String> = rows
-        .iter()
-        .map(|r| {
-            format!(
-                "{}: PSNR {:.2} dB, IoU {:.3}, {:.2} img/s",
-                r.model, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
-            )
-        })
-        .collect();
-    Ok(summary.join("; "))
+    Ok(summary(&rows))
 }
 
 /// K-3DGS: isotropic Gaussians with the reimplementation's compositing and with alpha
@@ -301,14 +278,20 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: false,
         run: run_mesh_fidelity,
     },
+    Experiment::self_model(
+        "neurokin",
+        "NeuroKin, the direct joint-angle-to-silhouette decoder (the notebook's architecture)",
+        "reports/neurokin",
+        run_self_model::<NeuroKinConfig>,
+    ),
     Experiment {
-        name: "neurokin",
-        about: "NeuroKin, the direct joint-angle-to-silhouette decoder (code's and text's architectures)",
-        default_dir: "reports/neurokin",
+        name: "neurokin64",
+        about: "NeuroKin-64, the paper text's 64x64 variant (MSE): collapses to an empty image on the clean data, a negative result kept out of Table I",
+        default_dir: "reports/neurokin64",
         presets: SELF_MODEL_PRESETS,
-        in_table1: true,
+        in_table1: false,
         takes_robot: true,
-        run: run_neurokin,
+        run: run_neurokin64,
     },
     Experiment::self_model(
         "resneurokin_d",

@@ -120,6 +120,17 @@ pub fn write_rows(dir: &Path, rows: &[ModelResult], title: &str, note: &str) -> 
 }
 
 impl Experiment {
+    /// Where a run on `preset` writes by default: `default_dir` for the paper preset,
+    /// `default_dir_<preset>` for any other, so a short or quick run never overwrites the
+    /// paper run's reports.
+    pub fn dir_for(&self, preset: &str) -> std::path::PathBuf {
+        if preset == "paper" {
+            self.default_dir.into()
+        } else {
+            format!("{}_{preset}", self.default_dir).into()
+        }
+    }
+
     /// A self-model of Table I (run by [`run_self_model`]), written into `default_dir`.
     pub const fn self_model(
         name: &'static str,
@@ -148,13 +159,28 @@ pub fn run_self_model<M: SelfModel>(opts: &RunOptions, dir: &Path) -> Result<Str
 
 /// One line per row: the model, its PSNR, IoU and speed.
 pub fn summary(rows: &[ModelResult]) -> String {
-    rows.iter()
-        .map(|r| {
-            format!(
-                "{}: PSNR {:.2} dB (first 100) / {:.2} dB (test), IoU {:.3}, {:.0} img/s at batch 1",
-                r.model, r.psnr_db_first100, r.psnr_db_test, r.iou_test, r.infer_b1_img_per_s
-            )
-        })
-        .collect::<Vec<_>>()
-        .join("; ")
+    let width = rows.iter().map(|r| r.model.len()).max().unwrap_or(5).max(5);
+    let num = |v: Option<f64>, decimals: usize| match v {
+        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        _ => "-".into(),
+    };
+    let mut out = format!(
+        "{:width$}  {:>8}  {:>6}  {:>9}  {:>11}  {:>10}",
+        "model", "PSNR dB", "IoU", "img/s", "paper PSNR", "paper FPS*"
+    );
+    for r in rows {
+        out += &format!(
+            "\n{:width$}  {:>8}  {:>6}  {:>9}  {:>11}  {:>10}",
+            r.model,
+            num(Some(r.psnr_db_test), 2),
+            num(Some(r.iou_test), 3),
+            num(
+                Some(r.infer_b1_img_per_s),
+                if r.infer_b1_img_per_s < 10.0 { 1 } else { 0 },
+            ),
+            num(r.paper_psnr_db, 2),
+            num(r.paper_fps, 1),
+        );
+    }
+    out + "\n(PSNR and IoU on the test set; img/s: inference at batch 1 on this machine; *the paper's FPS was training throughput on a T4)"
 }

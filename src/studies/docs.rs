@@ -12,6 +12,7 @@
 //! - `{{md PATH}}`: the tables of a generated Markdown report (what follows its
 //!   "Generated from" line).
 //! - `{{text PATH}}`: a file as it is (a command's captured output).
+//! - `{{experiments}}`: the registry's experiments, one line and one command each.
 
 use std::path::{Path, PathBuf};
 
@@ -167,6 +168,21 @@ fn expand(root: &Path, d: &Directive) -> Result<String> {
     }
 }
 
+/// `{{experiments}}`: the registry, one line and one command per experiment.
+fn experiment_list() -> String {
+    let mut out = String::from("| command | what it runs | presets |\n|---|---|---|\n");
+    for e in crate::studies::registry::EXPERIMENTS {
+        let about = e.about.split(" (").next().unwrap_or(e.about);
+        out += &format!(
+            "| `cargo run --release --bin {}` | {} | {} |\n",
+            e.name,
+            about.replace('|', "\\|"),
+            e.presets.join(", ")
+        );
+    }
+    out.trim_end().to_string()
+}
+
 /// A source's text with every directive expanded.
 pub fn render(root: &Path, source: &str) -> Result<String> {
     let mut out = String::new();
@@ -177,6 +193,11 @@ pub fn render(root: &Path, source: &str) -> Result<String> {
             .find("}}")
             .ok_or_else(|| Error::Config("an unclosed `{{` in a docs source".into()))?;
         let inner = &rest[start + 2..start + end];
+        if inner.trim() == "experiments" {
+            out += &experiment_list();
+            rest = &rest[start + end + 2..];
+            continue;
+        }
         let d = Directive::parse(inner)
             .ok_or_else(|| Error::Config(format!("bad directive `{{{{{inner}}}}}`")))?;
         out += &expand(root, &d)?;
@@ -264,4 +285,71 @@ pub fn write_all(root: &Path) -> Result<usize> {
         }
     }
     Ok(changed)
+}
+
+/// Redraw the figures that are drawn from one CSV beside them, from that CSV: every
+/// `pareto.png` beside a self-model `results.csv` (titled by its `results.md`) and every
+/// `training_curve.png` beside a `curve.csv`. Returns how many were drawn.
+pub fn redraw_figures(root: &Path) -> Result<usize> {
+    use crate::self_models::result::{pareto_floors, pareto_points, read_results};
+    let mut dirs = Vec::new();
+    collect_dirs(&root.join("reports"), &mut dirs);
+    dirs.sort();
+    let mut drawn = 0;
+    for dir in dirs {
+        let results = dir.join("results.csv");
+        if dir.join("pareto.png").is_file() && results.is_file() {
+            let rows = read_results(&results)?;
+            let title = std::fs::read_to_string(dir.join("results.md"))
+                .ok()
+                .and_then(|t| {
+                    t.lines()
+                        .next()
+                        .map(|l| l.trim_start_matches("# ").to_string())
+                })
+                .unwrap_or_else(|| "Quality against inference speed".into());
+            crate::report::figures::pareto_plot(
+                &dir.join("pareto.png"),
+                &title,
+                "PSNR on the test set (dB)",
+                &pareto_points(&rows, |m| m.to_string()),
+                &pareto_floors(&rows),
+            )?;
+            drawn += 1;
+        }
+        let curve = dir.join("curve.csv");
+        if dir.join("training_curve.png").is_file() && curve.is_file() {
+            #[derive(serde::Deserialize)]
+            struct Row {
+                step: usize,
+                loss: f64,
+            }
+            let points: Vec<(usize, f64)> = crate::report::table::read_csv::<Row>(&curve)?
+                .into_iter()
+                .map(|r| (r.step, r.loss))
+                .collect();
+            let name = read_results(&results)
+                .ok()
+                .and_then(|r| r.first().map(|r| r.model.clone()))
+                .unwrap_or_else(|| dir.file_name().unwrap_or_default().to_string_lossy().into());
+            crate::report::figures::training_curves(
+                &dir.join("training_curve.png"),
+                &format!("{name}: training loss"),
+                &[(name, points)],
+            )?;
+            drawn += 1;
+        }
+    }
+    Ok(drawn)
+}
+
+fn collect_dirs(dir: &Path, out: &mut Vec<PathBuf>) {
+    out.push(dir.to_path_buf());
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            if e.path().is_dir() {
+                collect_dirs(&e.path(), out);
+            }
+        }
+    }
 }

@@ -1,0 +1,46 @@
+//! The README, docs/ and every generated `results.md` equal what `reports` writes from the
+//! checked-in CSVs and `docs/src/` (run `cargo run --release --bin reports` after a change).
+
+use std::path::Path;
+
+use selfmodel::studies::docs::{generate, render, stale};
+
+#[test]
+fn generated_documents_are_up_to_date() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let stale = stale(root).unwrap();
+    assert!(
+        stale.is_empty(),
+        "stale generated documents (run `cargo run --release --bin reports`): {stale:?}"
+    );
+    let files = generate(root).unwrap();
+    assert!(files.iter().any(|(p, _)| p == Path::new("README.md")));
+    assert!(files.iter().any(|(p, _)| p.starts_with("docs")));
+}
+
+#[test]
+fn directives_read_the_csv() {
+    let dir = tempfile_dir();
+    std::fs::write(
+        dir.join("t.csv"),
+        "model,psnr,note\na,21.23456,x\nb,19.5,y\n",
+    )
+    .unwrap();
+    let table = render(
+        &dir,
+        "{{table t.csv | cols: model, psnr | where: note=y | names: M, P}}",
+    )
+    .unwrap();
+    assert_eq!(table, "| M | P |\n|---|---|\n| b | 19.50 |");
+    let value = render(&dir, "PSNR {{value t.csv | row: model=a | col: psnr}} dB").unwrap();
+    assert_eq!(value, "PSNR 21.23 dB");
+    assert!(render(&dir, "{{value t.csv | row: model=c | col: psnr}}").is_err());
+    assert!(render(&dir, "{{table t.csv | cols: nope}}").is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+fn tempfile_dir() -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("selfmodel_docs_{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
