@@ -97,6 +97,26 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
     ticks
 }
 
+/// The smallest 1-2-5 value at or above `v` (> 0), so a log axis ends on a labelled tick.
+pub fn nice_ceil(v: f64) -> f64 {
+    let k = v.log10().floor();
+    [1.0, 2.0, 5.0, 10.0]
+        .iter()
+        .map(|m| m * 10f64.powf(k))
+        .find(|&x| x >= v * 0.9999)
+        .unwrap_or(v)
+}
+
+/// The largest 1-2-5 value at or below `v` (> 0).
+pub fn nice_floor(v: f64) -> f64 {
+    let k = v.log10().floor();
+    [5.0, 2.0, 1.0]
+        .iter()
+        .map(|m| m * 10f64.powf(k))
+        .find(|&x| x <= v * 1.0001)
+        .unwrap_or(v)
+}
+
 /// A tick value as a label: no trailing zeros, thousands unseparated ("0.02", "5", "2000").
 pub fn tick_label(v: f64) -> String {
     if v >= 1.0 || v == 0.0 {
@@ -354,8 +374,9 @@ pub fn curves(
         let all = runs.iter().flat_map(|(_, c)| c.iter());
         let max_step = all.clone().map(|p| p.0).max().unwrap_or(1).max(1);
         let pos = all.map(|p| p.1).filter(|v| *v > 0.0);
-        let lo = pos.clone().fold(f64::INFINITY, f64::min).min(1.0);
-        let hi = pos.fold(0.0, f64::max).max(lo * 10.0);
+        let lo = pos.clone().fold(f64::INFINITY, f64::min);
+        let lo = if lo.is_finite() { lo } else { 1.0 };
+        let hi = pos.fold(0.0, f64::max).max(lo * 3.0);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 22))
             .margin(15)
@@ -363,9 +384,9 @@ pub fn curves(
             .y_label_area_size(70)
             .build_cartesian_2d(
                 0..max_step,
-                (lo * 0.8..hi * 1.2)
+                (nice_floor(lo * 0.95)..nice_ceil(hi * 1.05))
                     .log_scale()
-                    .with_key_points(log_ticks(lo * 0.8, hi * 1.2)),
+                    .with_key_points(log_ticks(nice_floor(lo * 0.95), nice_ceil(hi * 1.05))),
             )
             .map_err(|e| draw_err(path, e))?;
         chart
@@ -451,9 +472,9 @@ pub fn log_log_lines(
             .y_label_area_size(70)
             .build_cartesian_2d(
                 (x_lo..x_hi).log_scale().with_key_points(xs),
-                (y_lo..y_hi)
+                (nice_floor(y_lo)..nice_ceil(y_hi))
                     .log_scale()
-                    .with_key_points(log_ticks(y_lo, y_hi)),
+                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi))),
             )
             .map_err(|e| draw_err(path, e))?;
         chart

@@ -317,6 +317,32 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
             )?;
             drawn += 1;
         }
+        // The studies' own figures, each redrawn by the study's code from its CSVs.
+        type Draw = fn(&Path) -> Result<()>;
+        // (the CSV it reads, a figure it draws, the study's drawing code)
+        let studies: [(&str, &str, Draw); 3] = [
+            (
+                "curves.csv",
+                "curves_90.png",
+                crate::studies::emssl_study::draw_figures,
+            ),
+            (
+                "adaptation_curve.csv",
+                "adaptation_ur5.png",
+                crate::studies::emssl_adaptation::draw_figures,
+            ),
+            (
+                "thread_sweep.csv",
+                "sampling_time_vs_threads.png",
+                crate::studies::emssl_sampling_speed::draw_figures,
+            ),
+        ];
+        for (csv, figure, draw) in studies {
+            if dir.join(csv).is_file() && dir.join(figure).is_file() {
+                draw(&dir)?;
+                drawn += 1;
+            }
+        }
         let curve = dir.join("curve.csv");
         if dir.join("training_curve.png").is_file() && curve.is_file() {
             #[derive(serde::Deserialize)]

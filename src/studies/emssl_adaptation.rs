@@ -512,23 +512,7 @@ pub fn run(
         "Fast adaptation: test error against adaptation iteration",
         "Iteration 0 is the base model on the changed arm.",
     )?;
-    for (_, name) in &robots {
-        let mut runs: Vec<(String, Vec<(usize, f64)>)> = Vec::new();
-        for c in curves.iter().filter(|c| &c.robot == name) {
-            let label = format!("{}, approach {}", c.change, &c.approach[..1]);
-            match runs.last_mut() {
-                Some((l, pts)) if *l == label => pts.push((c.iteration, c.test_mean_cm)),
-                _ => runs.push((label, vec![(c.iteration, c.test_mean_cm)])),
-            }
-        }
-        crate::report::figures::curves(
-            &dir.join(format!("adaptation_{}.png", file_name(name))),
-            &format!("Fast adaptation of the inverse model ({name})"),
-            "adaptation iteration (0: before)",
-            "test distance error (cm, log)",
-            &runs,
-        )?;
-    }
+    draw_figures(dir)?;
     Ok(rows
         .iter()
         .filter(|r| names.contains(&r.robot.as_str()))
@@ -546,4 +530,35 @@ pub fn run(
         })
         .collect::<Vec<_>>()
         .join("; "))
+}
+
+/// Table IV's figures from `adaptation_curve.csv` in `dir`: `adaptation_<robot>.png`, one line
+/// per change and approach.
+pub fn draw_figures(dir: &Path) -> Result<()> {
+    let curves: Vec<AdaptationCurveRow> =
+        crate::report::table::read_csv(&dir.join("adaptation_curve.csv"))?;
+    let mut robots: Vec<String> = Vec::new();
+    for c in &curves {
+        if !robots.contains(&c.robot) {
+            robots.push(c.robot.clone());
+        }
+    }
+    for name in &robots {
+        let mut runs: Vec<(String, Vec<(usize, f64)>)> = Vec::new();
+        for c in curves.iter().filter(|c| &c.robot == name) {
+            let label = format!("{}, approach {}", c.change, &c.approach[..1]);
+            match runs.last_mut() {
+                Some((l, pts)) if *l == label => pts.push((c.iteration, c.test_mean_cm)),
+                _ => runs.push((label, vec![(c.iteration, c.test_mean_cm)])),
+            }
+        }
+        crate::report::figures::curves(
+            &dir.join(format!("adaptation_{}.png", file_name(name))),
+            &format!("Fast adaptation of the inverse model ({name})"),
+            "adaptation iteration (0: before)",
+            "test distance error (cm, log)",
+            &runs,
+        )?;
+    }
+    Ok(())
 }

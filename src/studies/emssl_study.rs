@@ -416,22 +416,35 @@ fn write_outputs(
         ),
     )?;
     crate::report::table::write_csv(&dir.join("curves.csv"), curves)?;
-    for &range in &cfg.ranges_deg {
-        let runs: Vec<(String, Vec<(usize, f64)>)> = cfg
-            .settings
+    draw_figures(dir)
+}
+
+/// The study's figures from `curves.csv` in `dir`: `curves_<range>.png`, one line per setting
+/// (in the order the CSV first names them).
+pub fn draw_figures(dir: &Path) -> Result<()> {
+    let curves: Vec<StudyCurveRow> = crate::report::table::read_csv(&dir.join("curves.csv"))?;
+    let mut ranges: Vec<f64> = Vec::new();
+    let mut settings: Vec<String> = Vec::new();
+    for c in &curves {
+        if !ranges.contains(&c.range_deg) {
+            ranges.push(c.range_deg);
+        }
+        if !settings.contains(&c.setting) {
+            settings.push(c.setting.clone());
+        }
+    }
+    for range in ranges {
+        let runs: Vec<(String, Vec<(usize, f64)>)> = settings
             .iter()
             .filter_map(|s| {
                 let c: Vec<(usize, f64)> = curves
                     .iter()
-                    .filter(|c| c.setting == s.name && c.range_deg == range)
+                    .filter(|c| &c.setting == s && c.range_deg == range)
                     .map(|c| (c.iteration, c.test_mean_cm))
                     .collect();
-                (!c.is_empty()).then(|| (s.name.clone(), c))
+                (!c.is_empty()).then(|| (s.clone(), c))
             })
             .collect();
-        if runs.is_empty() {
-            continue;
-        }
         crate::report::figures::curves(
             &dir.join(format!("curves_{range:.0}.png")),
             &format!("EMSSL study, UR5 +-{range:.0} deg: test error per iteration"),
