@@ -148,7 +148,11 @@ impl Rect {
 /// Where to put each label beside its point (pixel position of the point, label width and
 /// height): the first of a ring of candidate positions that stays inside `area` and clear of
 /// every point and label placed so far; `None` where none is clear (the caller numbers it).
-fn place_labels(points: &[(i32, i32, i32, i32)], area: Rect) -> Vec<Option<(i32, i32)>> {
+fn place_labels(
+    points: &[(i32, i32, i32, i32)],
+    area: Rect,
+    obstacles: &[Rect],
+) -> Vec<Option<(i32, i32)>> {
     let marker = |&(x, y, _, _): &(i32, i32, i32, i32)| Rect {
         x0: x - 7,
         y0: y - 7,
@@ -156,6 +160,7 @@ fn place_labels(points: &[(i32, i32, i32, i32)], area: Rect) -> Vec<Option<(i32,
         y1: y + 7,
     };
     let mut taken: Vec<Rect> = points.iter().map(marker).collect();
+    taken.extend_from_slice(obstacles);
     let mut out = Vec::with_capacity(points.len());
     for &(x, y, w, h) in points {
         let gap = 9;
@@ -317,7 +322,49 @@ pub fn pareto_plot(
                 (x, y, char_w * p.label.chars().count() as i32, font_px + 2)
             })
             .collect();
-        let spots = place_labels(&sized, area);
+        // The legend goes in the corner where it covers the fewest points.
+        let entries = 3 + floors.len();
+        let legend_w = 50
+            + char_w
+                * floors
+                    .iter()
+                    .map(|(l, _)| l.chars().count() + 8)
+                    .chain([30])
+                    .max()
+                    .unwrap_or(30) as i32;
+        let legend_h = 12 + 17 * entries as i32;
+        let corners = [
+            (SeriesLabelPosition::LowerLeft, px0, py1 - legend_h),
+            (SeriesLabelPosition::LowerRight, px1 - legend_w, py1 - legend_h),
+            (SeriesLabelPosition::UpperLeft, px0, py0),
+            (SeriesLabelPosition::UpperRight, px1 - legend_w, py0),
+        ];
+        let (legend_pos, legend_rect) = corners
+            .into_iter()
+            .map(|(pos, x, y)| {
+                let r = Rect {
+                    x0: x,
+                    y0: y,
+                    x1: x + legend_w + 10,
+                    y1: y + legend_h + 10,
+                };
+                (pos, r)
+            })
+            .min_by_key(|(_, r)| {
+                sized
+                    .iter()
+                    .filter(|&&(x, y, w, _)| {
+                        r.overlaps(&Rect {
+                            x0: x - 7,
+                            y0: y - 10,
+                            x1: x + w.min(80),
+                            y1: y + 10,
+                        })
+                    })
+                    .count()
+            })
+            .expect("four corners");
+        let spots = place_labels(&sized, area, &[legend_rect]);
         let mut key = Vec::new();
         for ((p, spot), &(x, y, _, _)) in points.iter().zip(&spots).zip(&sized) {
             let color = if p.reference { BLACK } else { BLUE };
@@ -333,12 +380,17 @@ pub fn pareto_plot(
                 }
             }
         }
-        // Bottom left: the slow, poor corner no model sits in.
-        draw_legend(&mut chart, path, SeriesLabelPosition::LowerLeft)?;
+        draw_legend(&mut chart, path, legend_pos)?;
+        // The key of numbered labels: in the top corner the legend does not take.
+        let key_x = if legend_rect.y0 == py0 && legend_rect.x0 == px0 {
+            px1 - 10 - char_w * key.iter().map(|k| k.chars().count()).max().unwrap_or(0) as i32
+        } else {
+            px0 + 10
+        };
         for (i, line) in key.iter().enumerate() {
             root.draw(&Text::new(
                 line.clone(),
-                (px0 + 10, py0 + 8 + i as i32 * (font_px + 4)),
+                (key_x, py0 + 8 + i as i32 * (font_px + 4)),
                 (FONT, font_px).into_font(),
             ))
             .map_err(|e| draw_err(path, e))?;
