@@ -161,6 +161,8 @@ fn resize_bilinear_and_its_gradient_match_burn() {
             [y.into_data(), x.grad(&grads).unwrap().into_data()]
         };
         let ours = run(&|x| resize_bilinear(x, output));
+        // The GPU path (two matrix products), run here on the CPU against the same reference.
+        let matmul = run(&|x| selfmodel::kernels::bilinear_resize::resize_matmul(x, output));
         let burns = run(&|x| {
             let mut options = burn::tensor::ops::InterpolateOptions::new(
                 burn::tensor::ops::InterpolateMode::Bilinear,
@@ -171,6 +173,13 @@ fn resize_bilinear_and_its_gradient_match_burn() {
         });
         for (name, (a, b)) in ["output", "input grad"].iter().zip(ours.iter().zip(&burns)) {
             println!("resize {input:?} -> {output:?}: {name}");
+            a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-4, 1e-5));
+        }
+        for (name, (a, b)) in ["output", "input grad"]
+            .iter()
+            .zip(matmul.iter().zip(&burns))
+        {
+            println!("resize {input:?} -> {output:?} by matmul: {name}");
             a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-4, 1e-5));
         }
     }

@@ -125,7 +125,9 @@ pub fn seeded<M: burn::module::Module>(
     if &home == device {
         module
     } else {
-        module.to_device(device)
+        // `fork`, not `to_device`: the parameters start a graph of their own there (moved,
+        // they would stay tied to the CPU's tape).
+        module.fork(device)
     }
 }
 

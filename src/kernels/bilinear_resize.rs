@@ -108,3 +108,38 @@ pub fn resize_backward(
         });
     out
 }
+
+/// The `[output, input]` matrix of a 1-D bilinear resize (align_corners false: PyTorch's
+/// source coordinate `(o + 0.5) * input / output - 0.5`, clamped at 0).
+pub fn resize_matrix(input: usize, output: usize) -> Vec<f32> {
+    let mut m = vec![0.0f32; output * input];
+    let scale = input as f64 / output as f64;
+    for o in 0..output {
+        let src = ((o as f64 + 0.5) * scale - 0.5).max(0.0);
+        let i0 = (src.floor() as usize).min(input - 1);
+        let i1 = (i0 + 1).min(input - 1);
+        let l1 = (src - i0 as f64) as f32;
+        m[o * input + i0] += 1.0 - l1;
+        m[o * input + i1] += l1;
+    }
+    m
+}
+
+/// Bilinear resize of `[batch, channels, h, w]` to `size` as two matrix products
+/// (`R_h · x · R_wᵀ`): any backend, differentiable wherever matmul is (burn's GPU backends
+/// have no backward for bilinear `interpolate`). Tested against the CPU kernel.
+pub fn resize_matmul(x: burn::tensor::Tensor<4>, size: [usize; 2]) -> burn::tensor::Tensor<4> {
+    use burn::tensor::{Tensor, TensorData};
+    let [b, c, h, w] = x.dims();
+    let device = x.device();
+    let rw: Tensor<2> = Tensor::from_data(
+        TensorData::new(resize_matrix(w, size[1]), [size[1], w]),
+        &device,
+    );
+    let rh: Tensor<2> = Tensor::from_data(
+        TensorData::new(resize_matrix(h, size[0]), [size[0], h]),
+        &device,
+    );
+    let rows = x.matmul(rw.transpose().unsqueeze::<4>().expand([b, c, w, size[1]]));
+    rh.unsqueeze::<4>().expand([b, c, size[0], h]).matmul(rows)
+}

@@ -522,9 +522,9 @@ pub fn conv2d_layer(layer: &burn::nn::conv::Conv2d, x: Tensor<4>) -> Tensor<4> {
 /// `F.interpolate(..., mode="bilinear")`), on our kernel when `x` is on flex.
 pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
     if !on_flex(&x) {
-        let mut options = bilinear_options();
-        options.output_size = Some(size);
-        return burn::tensor::module::interpolate(x, options);
+        // Off the CPU: two matrix products (burn's GPU backends cannot differentiate
+        // bilinear `interpolate`).
+        return crate::kernels::bilinear_resize::resize_matmul(x, size);
     }
     let y = <Dispatch as CpuKernelOps>::resize_bilinear_fast(x.into_dispatch(), size);
     Tensor::from_dispatch(y)

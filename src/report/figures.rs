@@ -335,7 +335,11 @@ pub fn pareto_plot(
         let legend_h = 12 + 17 * entries as i32;
         let corners = [
             (SeriesLabelPosition::LowerLeft, px0, py1 - legend_h),
-            (SeriesLabelPosition::LowerRight, px1 - legend_w, py1 - legend_h),
+            (
+                SeriesLabelPosition::LowerRight,
+                px1 - legend_w,
+                py1 - legend_h,
+            ),
             (SeriesLabelPosition::UpperLeft, px0, py0),
             (SeriesLabelPosition::UpperRight, px1 - legend_w, py0),
         ];

@@ -91,6 +91,24 @@ fn markdown_table(header: &[String], rows: &[Vec<String>], columns: &[usize]) ->
     out
 }
 
+/// A CSV file as text: its header and its rows of cells.
+pub fn read_cells(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>)> {
+    let mut reader = csv::Reader::from_path(path)
+        .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
+    let header = reader
+        .headers()
+        .map_err(|e| Error::data(path, format!("bad CSV header: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    let mut rows = Vec::new();
+    for rec in reader.records() {
+        let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
+        rows.push(rec.iter().map(str::to_string).collect());
+    }
+    Ok((header, rows))
+}
+
 /// The columns a table of `header` shows first: a self-model's results
 /// ([`SELF_MODEL_COLUMNS`]) or, for any other table, every column but
 /// the provenance ones (empty).
@@ -106,19 +124,7 @@ fn main_columns(header: &[String]) -> &'static [&'static str] {
 /// (with the first column, the row's name) in a second, and the provenance columns folded
 /// into a footnote where every row agrees.
 pub fn markdown_from_csv(path: &Path) -> Result<String> {
-    let mut reader = csv::Reader::from_path(path)
-        .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
-    let header: Vec<String> = reader
-        .headers()
-        .map_err(|e| Error::data(path, format!("bad CSV header: {e}")))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    let mut rows = Vec::new();
-    for rec in reader.records() {
-        let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
-        rows.push(rec.iter().map(str::to_string).collect::<Vec<_>>());
-    }
+    let (header, rows) = read_cells(path)?;
     let main = main_columns(&header);
     let is_provenance = |c: &usize| PROVENANCE.contains(&header[*c].as_str());
     let all: Vec<usize> = (0..header.len()).collect();

@@ -17,28 +17,10 @@
 use std::path::{Path, PathBuf};
 
 use crate::core::error::{Error, Result};
-use crate::report::table::format_cell;
+use crate::report::table::{format_cell, read_cells as read_table};
 
 /// Where the sources are, relative to the repository root.
 pub const SOURCES: &str = "docs/src";
-
-/// A CSV file's header and rows.
-fn read_table(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>)> {
-    let mut reader = csv::Reader::from_path(path)
-        .map_err(|e| Error::data(path, format!("cannot read CSV: {e}")))?;
-    let header = reader
-        .headers()
-        .map_err(|e| Error::data(path, format!("bad CSV header: {e}")))?
-        .iter()
-        .map(str::to_string)
-        .collect();
-    let mut rows = Vec::new();
-    for rec in reader.records() {
-        let rec = rec.map_err(|e| Error::data(path, format!("bad CSV row: {e}")))?;
-        rows.push(rec.iter().map(str::to_string).collect());
-    }
-    Ok((header, rows))
-}
 
 /// A directive's options: `key: value` parts after the path.
 struct Directive<'a> {
