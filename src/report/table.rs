@@ -208,31 +208,42 @@ pub fn regenerated_report(md_path: &Path) -> Result<Option<String>> {
     markdown_report(&csv_path, title, note).map(Some)
 }
 
+/// One logged point of a training curve (`curve.csv`).
+#[derive(serde::Serialize, serde::Deserialize)]
+struct CurveRow {
+    step: usize,
+    loss: f64,
+}
+
 /// A run's training curve: `dir/curve.csv` (step, loss) and `dir/training_curve.png`.
 pub fn write_training_curve(
     dir: &Path,
     name: &str,
     log: &crate::train::trainer::TrainLog,
 ) -> Result<()> {
-    #[derive(serde::Serialize)]
-    struct CurveRow {
-        step: usize,
-        loss: f64,
-    }
     let rows: Vec<CurveRow> = log
         .curve
         .iter()
         .map(|&(step, loss)| CurveRow { step, loss })
         .collect();
     write_csv(&dir.join("curve.csv"), &rows)?;
+    draw_training_curve(dir, name)
+}
+
+/// `dir/training_curve.png` from `dir/curve.csv`, titled by the model's `name`.
+pub fn draw_training_curve(dir: &Path, name: &str) -> Result<()> {
+    let points: Vec<(usize, f64)> = read_csv::<CurveRow>(&dir.join("curve.csv"))?
+        .into_iter()
+        .map(|r| (r.step, r.loss))
+        .collect();
     // A single point (a model fitted in one pass: the baselines) draws no line.
-    if rows.len() < 2 {
+    if points.len() < 2 {
         return Ok(());
     }
     crate::report::figures::training_curves(
         &dir.join("training_curve.png"),
         &format!("{name}: training loss"),
-        &[(name.to_string(), log.curve.clone())],
+        &[(name.to_string(), points)],
     )
 }
 

@@ -217,8 +217,14 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
         );
         out.push((target, banner + &render(root, &text)?));
     }
-    let mut reports = Vec::new();
-    collect_markdown(&root.join("reports"), &mut reports)?;
+    let mut dirs = Vec::new();
+    collect_dirs(&root.join("reports"), &mut dirs);
+    let mut reports: Vec<PathBuf> = dirs
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flat_map(|entries| entries.flatten().map(|e| e.path()))
+        .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "md"))
+        .collect();
     reports.sort();
     for md in reports {
         if let Some(text) = crate::report::table::regenerated_report(&md)? {
@@ -227,21 +233,6 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
         }
     }
     Ok(out)
-}
-
-fn collect_markdown(dir: &Path, out: &mut Vec<PathBuf>) -> Result<()> {
-    let Ok(entries) = std::fs::read_dir(dir) else {
-        return Ok(());
-    };
-    for e in entries.flatten() {
-        let p = e.path();
-        if p.is_dir() {
-            collect_markdown(&p, out)?;
-        } else if p.extension().is_some_and(|x| x == "md") {
-            out.push(p);
-        }
-    }
-    Ok(())
 }
 
 /// The generated files whose checked-in text differs from what [`generate`] writes.
@@ -274,6 +265,26 @@ pub fn write_all(root: &Path) -> Result<usize> {
 /// `training_curve.png` beside a `curve.csv`. Returns how many were drawn.
 pub fn redraw_figures(root: &Path) -> Result<usize> {
     use crate::self_models::result::{pareto_floors, pareto_points, read_results};
+    type Draw = fn(&Path) -> Result<()>;
+    // The studies' own figures, each redrawn by the study's code from its CSVs:
+    // (the CSV it reads, a figure it draws, the drawing code).
+    let studies: [(&str, &str, Draw); 3] = [
+        (
+            "curves.csv",
+            "curves_90.png",
+            crate::studies::emssl_study::draw_figures,
+        ),
+        (
+            "adaptation_curve.csv",
+            "adaptation_ur5.png",
+            crate::studies::emssl_adaptation::draw_figures,
+        ),
+        (
+            "thread_sweep.csv",
+            "sampling_time_vs_threads.png",
+            crate::studies::emssl_sampling_speed::draw_figures,
+        ),
+    ];
     let mut dirs = Vec::new();
     collect_dirs(&root.join("reports"), &mut dirs);
     dirs.sort();
@@ -299,52 +310,19 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
             )?;
             drawn += 1;
         }
-        // The studies' own figures, each redrawn by the study's code from its CSVs.
-        type Draw = fn(&Path) -> Result<()>;
-        // (the CSV it reads, a figure it draws, the study's drawing code)
-        let studies: [(&str, &str, Draw); 3] = [
-            (
-                "curves.csv",
-                "curves_90.png",
-                crate::studies::emssl_study::draw_figures,
-            ),
-            (
-                "adaptation_curve.csv",
-                "adaptation_ur5.png",
-                crate::studies::emssl_adaptation::draw_figures,
-            ),
-            (
-                "thread_sweep.csv",
-                "sampling_time_vs_threads.png",
-                crate::studies::emssl_sampling_speed::draw_figures,
-            ),
-        ];
         for (csv, figure, draw) in studies {
             if dir.join(csv).is_file() && dir.join(figure).is_file() {
                 draw(&dir)?;
                 drawn += 1;
             }
         }
-        let curve = dir.join("curve.csv");
-        if dir.join("training_curve.png").is_file() && curve.is_file() {
-            #[derive(serde::Deserialize)]
-            struct Row {
-                step: usize,
-                loss: f64,
-            }
-            let points: Vec<(usize, f64)> = crate::report::table::read_csv::<Row>(&curve)?
-                .into_iter()
-                .map(|r| (r.step, r.loss))
-                .collect();
+        if dir.join("training_curve.png").is_file() && dir.join("curve.csv").is_file() {
+            // Titled by the model the run trained (a results.csv of self-model rows).
             let name = read_results(&results)
                 .ok()
                 .and_then(|r| r.first().map(|r| r.model.clone()))
                 .unwrap_or_else(|| dir.file_name().unwrap_or_default().to_string_lossy().into());
-            crate::report::figures::training_curves(
-                &dir.join("training_curve.png"),
-                &format!("{name}: training loss"),
-                &[(name, points)],
-            )?;
+            crate::report::table::draw_training_curve(&dir, &name)?;
             drawn += 1;
         }
     }

@@ -68,6 +68,15 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
         exploration_decay: 0.8,
         ..base.clone()
     };
+    // Noise decay 0.8, the cosine within iterations and a warm start together.
+    let cosine_fit = FitConfig {
+        cosine: true,
+        ..fit.clone()
+    };
+    let combination = EmsslConfig {
+        warm_start_epochs: 10,
+        ..fast_noise.clone()
+    };
     vec![
         s("baseline (3bc9f24)", fit.clone(), base.clone()),
         s("noise decay 0.8", fit.clone(), fast_noise.clone()),
@@ -94,15 +103,8 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
         ),
         s(
             "noise decay 0.8 + cosine within iterations + warm start",
-            FitConfig {
-                cosine: true,
-                ..fit.clone()
-            },
-            EmsslConfig {
-                exploration_decay: 0.8,
-                warm_start_epochs: 10,
-                ..base.clone()
-            },
+            cosine_fit.clone(),
+            combination.clone(),
         ),
         s(
             "noise decay 0.8 + 3 polishing rounds to convergence",
@@ -114,15 +116,10 @@ pub fn settings(fit: &FitConfig, base: &EmsslConfig, ranges: &[f64]) -> Vec<Sett
         ),
         s(
             "noise decay 0.8 + cosine within iterations + warm start + 3 polishing rounds",
-            FitConfig {
-                cosine: true,
-                ..fit.clone()
-            },
+            cosine_fit.clone(),
             EmsslConfig {
-                exploration_decay: 0.8,
-                warm_start_epochs: 10,
                 polish_rounds: 3,
-                ..base.clone()
+                ..combination.clone()
             },
         ),
         Setting {
