@@ -420,3 +420,109 @@ fn tiny_ur5(seed: u64) -> (selfmodel::sim::robot::Robot, IkData) {
     .unwrap();
     (robot, data)
 }
+
+/// A run to convergence killed mid-way (here: a loss that turns NaN in its 12th epoch, after the rate was halved, which
+/// stops the run with the last epoch's checkpoint kept) and started again continues from its
+/// checkpoint to the uninterrupted run's curve, best epoch and weights.
+#[test]
+fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
+    use selfmodel::ik::learning::{fit_converged, joint_set, mse};
+    use selfmodel::train::trainer::{Batch, FitCheckpoint, autodiff_device};
+    let (robot, data) = tiny_ur5(8);
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let conv = Convergence {
+        max_epochs: 60,
+        patience: 3,
+        lr_patience: 1,
+        lr_factor: 0.5,
+        min_improvement: 1e-3,
+    };
+    let fit = FitConfig {
+        batch: 64,
+        learning_rate: 1e-2,
+        ..FitConfig::paper()
+    };
+    let model_cfg = InverseModelConfig::inverse(vec![32, 32], 6, JointOutput::Sigmoid);
+    let run = |fit: &FitConfig, kill_at: Option<usize>| {
+        let tdev = autodiff_device(&device, fit.seed);
+        let model = model_cfg.init(&tdev, fit.seed).unwrap();
+        let train = data.train();
+        let set = joint_set(
+            &data,
+            &data.positions[train.clone()],
+            &data.joints[train],
+            JointOutput::Sigmoid,
+            &tdev,
+        );
+        let loss = |m: &selfmodel::ik::mlp::Mlp, b: &Batch| {
+            let l = mse(m, b);
+            if Some(b.step) == kill_at {
+                l.mul_scalar(f32::NAN)
+            } else {
+                l
+            }
+        };
+        fit_converged(model, &set, fit, &conv, "DRL", loss, |m| {
+            validation_cm(m, &robot.chain, &data, 512, &device)
+        })
+    };
+    let (whole, whole_log) = run(&fit, None).unwrap();
+    assert!(
+        whole_log.stopped_on_plateau && whole_log.epochs > 12,
+        "{}",
+        whole_log.summary()
+    );
+    assert!(
+        whole_log
+            .curve
+            .iter()
+            .any(|p| p.learning_rate < fit.learning_rate)
+    );
+    let dir = tempdir();
+    let kept = FitConfig {
+        checkpoint: Some(FitCheckpoint {
+            dir: dir.clone(),
+            settings: serde_json::json!("test"),
+        }),
+        ..fit.clone()
+    };
+    let steps_per_epoch = data.train().len().div_ceil(64);
+    let killed = run(&kept, Some(11 * steps_per_epoch + 2));
+    assert!(killed.is_err(), "the NaN loss must stop the run");
+    let (resumed, log) = run(&kept, None).unwrap();
+    let key = |l: &selfmodel::train::trainer::ConvergenceLog| {
+        l.curve
+            .iter()
+            .map(|p| (p.epoch, p.learning_rate, p.validation))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(key(&log), key(&whole_log));
+    assert_eq!(log.best_epoch, whole_log.best_epoch);
+    let answers = |m: &selfmodel::ik::mlp::Mlp| {
+        predict(
+            &burn::module::Module::valid(m),
+            &data,
+            &data.positions[data.test()],
+            256,
+            &device,
+        )
+    };
+    assert_eq!(answers(&resumed), answers(&whole));
+    // Only the best epoch's weights are left beside the checkpoint.
+    let best_files: Vec<_> = std::fs::read_dir(dir.join("drl"))
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.starts_with("best-"))
+        .collect();
+    assert_eq!(best_files, [format!("best-{}.bpk", log.best_epoch)]);
+    // A checkpoint made with other settings is not continued: the run starts afresh.
+    let other = FitConfig {
+        checkpoint: Some(FitCheckpoint {
+            dir: dir.clone(),
+            settings: serde_json::json!("other"),
+        }),
+        ..fit.clone()
+    };
+    let (_, fresh) = run(&other, None).unwrap();
+    assert_eq!(key(&fresh), key(&whole_log));
+}

@@ -12,7 +12,9 @@
 //!
 //! With the fit's `converge` set, training runs epoch by epoch until the one-sample distance
 //! error on the validation targets (fixed noise) stops improving, both learning rates reduced
-//! on its plateaus, and keeps the best epoch's generator.
+//! on its plateaus, and keeps the best epoch's generator. With the fit's `checkpoint` set, both
+//! networks, their optimisers, the plateau rule and the best generator are saved after every
+//! epoch, and a killed run continues from its last epoch to the same result.
 
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
@@ -28,7 +30,9 @@ use crate::ik::learning::{FitConfig, row_set};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
 use crate::train::losses::bce_with_logits;
-use crate::train::trainer::{Batcher, ConvergenceLog, Plateau, ValidationPoint, autodiff_device};
+use crate::train::trainer::{
+    Batcher, ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint, autodiff_device, save_renamed,
+};
 
 /// The two networks and their training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -57,6 +61,56 @@ fn noise(n: usize, width: usize, seed: u64, device: &Device) -> Tensor<2> {
 pub struct Generator {
     pub model: Mlp,
     pub noise: usize,
+}
+
+/// What a GAN checkpoint's `state.json` holds besides the weights.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct GanState {
+    fingerprint: serde_json::Value,
+    /// Epochs done.
+    epochs: usize,
+    plateau: Option<Plateau>,
+    log: Option<ConvergenceLog>,
+    /// Training seconds so far.
+    seconds: f64,
+    stopped: bool,
+}
+
+/// A GAN run's checkpoint folder: `generator.bpk`, `discriminator.bpk`, their optimisers,
+/// `best-<epoch>.bpk` and `state.json` (written last).
+struct GanCheckpoint {
+    dir: std::path::PathBuf,
+    fingerprint: serde_json::Value,
+}
+
+impl GanCheckpoint {
+    fn new(c: &FitCheckpoint, cfg: &GanConfig, output: JointOutput) -> Self {
+        GanCheckpoint {
+            dir: c.dir.join("cgan"),
+            fingerprint: serde_json::json!({ "settings": c.settings, "gan": cfg, "output": output }),
+        }
+    }
+
+    fn path(&self, file: &str) -> std::path::PathBuf {
+        self.dir.join(file)
+    }
+
+    fn best(&self, epoch: usize) -> std::path::PathBuf {
+        self.path(&format!("best-{epoch}.bpk"))
+    }
+
+    /// The saved state if it was made with the same settings; otherwise the folder is
+    /// cleared.
+    fn load(&self) -> Option<GanState> {
+        let state = std::fs::read_to_string(self.path("state.json"))
+            .ok()
+            .and_then(|t| serde_json::from_str::<GanState>(&t).ok())
+            .filter(|s| s.fingerprint == self.fingerprint);
+        if state.is_none() && self.dir.exists() {
+            let _ = std::fs::remove_dir_all(&self.dir);
+        }
+        state
+    }
 }
 
 /// Train the conditional GAN on the random training pairs of `data`, its generator writing
@@ -103,12 +157,70 @@ pub fn train_gan(
     let mut plateau = cfg.fit.converge.as_ref().map(Plateau::new);
     let mut log = cfg.fit.converge.as_ref().map(|_| ConvergenceLog::default());
     let mut best: Option<Mlp> = None;
-    let started = std::time::Instant::now();
+    let mut started = std::time::Instant::now();
+    let mut earlier_seconds = 0.0;
+    let mut first_epoch = 0;
+    let mut stopped = false;
+    // The best generator's epoch the checkpoint on disk names, and files no longer named.
+    let mut saved_best: Option<usize> = None;
+    let mut stale: Vec<usize> = Vec::new();
+    let checkpoint = cfg
+        .fit
+        .checkpoint
+        .as_ref()
+        .map(|c| GanCheckpoint::new(c, cfg, output));
+    if let Some(c) = &checkpoint
+        && let Some(state) = c.load()
+    {
+        let bad = |path: std::path::PathBuf, e: &dyn std::fmt::Debug| {
+            crate::Error::data(path, format!("cannot load checkpoint: {e:?}"))
+        };
+        let load = |m: Mlp, file: &str| {
+            m.try_load_file(c.path(file))
+                .map_err(|e| bad(c.path(file), &e))
+        };
+        generator = load(generator, "generator.bpk")?;
+        discriminator = load(discriminator, "discriminator.bpk")?;
+        g_optim = g_optim
+            .load(c.path("generator_optimizer.bpk"))
+            .map_err(|e| bad(c.path("generator_optimizer.bpk"), &e))?;
+        d_optim = d_optim
+            .load(c.path("discriminator_optimizer.bpk"))
+            .map_err(|e| bad(c.path("discriminator_optimizer.bpk"), &e))?;
+        if let Some(l) = state.log.as_ref().filter(|l| l.best_epoch > 0) {
+            let path = c.best(l.best_epoch);
+            best = Some(
+                generator
+                    .valid()
+                    .try_load_file(&path)
+                    .map_err(|e| bad(path.clone(), &e))?,
+            );
+            saved_best = Some(l.best_epoch);
+        }
+        crate::train::trainer::remove_best_files_but(&c.dir, saved_best);
+        eprintln!(
+            "CGAN: continuing from epoch {} (checkpoint in {})",
+            state.epochs,
+            c.dir.display()
+        );
+        first_epoch = state.epochs;
+        plateau = state.plateau;
+        log = state.log;
+        earlier_seconds = state.seconds;
+        stopped = state.stopped;
+        started = std::time::Instant::now();
+    }
+    let seconds = |started: &std::time::Instant| earlier_seconds + started.elapsed().as_secs_f64();
     let batcher = Batcher::new(&set, &train_cfg);
     let bar =
         crate::core::progress::progress_bar((epochs * steps_per_epoch) as u64, "CGAN", "steps");
+    bar.set_position((first_epoch * steps_per_epoch) as u64);
+    bar.reset_eta();
     let mut g_losses = (0.0f64, 0usize);
-    for epoch in 0..epochs {
+    for epoch in first_epoch..epochs {
+        if stopped {
+            break;
+        }
         let rate = cfg.fit.learning_rate * plateau.as_ref().map_or(1.0, |p| p.scale);
         for step in epoch * steps_per_epoch..(epoch + 1) * steps_per_epoch {
             let batch = batcher.batch(step);
@@ -165,11 +277,41 @@ pub fn train_gan(
             learning_rate: rate,
             train_loss: g_losses.0 / g_losses.1.max(1) as f64,
             validation: score,
-            seconds: started.elapsed().as_secs_f64(),
+            seconds: seconds(&started),
         });
         g_losses = (0.0, 0);
         log.epochs = epoch + 1;
         log.stopped_on_plateau = stop;
+        stopped = stop;
+        if let Some(c) = &checkpoint {
+            std::fs::create_dir_all(&c.dir).map_err(|e| crate::Error::io(&c.dir, e))?;
+            for old in stale.drain(..) {
+                let _ = std::fs::remove_file(c.best(old));
+            }
+            if let Some(b) = &best
+                && saved_best != Some(log.best_epoch)
+            {
+                save_renamed(&c.best(log.best_epoch), |t| b.clone().save_file(t))?;
+                stale.extend(saved_best.replace(log.best_epoch));
+            }
+            save_renamed(&c.path("generator.bpk"), |t| generator.clone().save_file(t))?;
+            save_renamed(&c.path("discriminator.bpk"), |t| {
+                discriminator.clone().save_file(t)
+            })?;
+            save_renamed(&c.path("generator_optimizer.bpk"), |t| g_optim.save(t))?;
+            save_renamed(&c.path("discriminator_optimizer.bpk"), |t| d_optim.save(t))?;
+            crate::core::atomic_file::write_json(
+                &c.path("state.json"),
+                &GanState {
+                    fingerprint: c.fingerprint.clone(),
+                    epochs: epoch + 1,
+                    plateau: Some(rule.clone()),
+                    log: Some(log.clone()),
+                    seconds: seconds(&started),
+                    stopped: stop,
+                },
+            )?;
+        }
         bar.set_message(format!("validation {score:.2} cm"));
         if bar.is_hidden() {
             eprintln!(
@@ -185,7 +327,7 @@ pub fn train_gan(
     }
     bar.finish();
     if let Some(log) = log.as_mut() {
-        log.seconds = started.elapsed().as_secs_f64();
+        log.seconds = seconds(&started);
     }
     Ok((
         Generator {
@@ -259,8 +401,16 @@ impl crate::ik::method::IkMethod for CganMethod {
         use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
         let gan = &self.gan;
         let t = std::time::Instant::now();
+        let gan = &GanConfig {
+            fit: task.checkpointed(&self.name, self.settings(), &gan.fit),
+            ..gan.clone()
+        };
         let (generator, log) = train_gan(task.chain, task.data, gan, self.output, task.device)?;
-        let train_s = t.elapsed().as_secs_f64();
+        // Counting the seconds before a restart from the checkpoint.
+        let train_s = t
+            .elapsed()
+            .as_secs_f64()
+            .max(log.as_ref().map_or(0.0, |l| l.seconds));
         let seed = gan.fit.seed ^ 0x5EED;
         let mut joints = Vec::new();
         let solve_s = timed(&mut || {

@@ -26,7 +26,8 @@ impl crate::ik::method::IkMethod for DrlMethod {
     fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
         use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
         let t = std::time::Instant::now();
-        let (model, log) = drl(task.chain, task.data, &self.model, &self.fit, task.device)?;
+        let fit = task.checkpointed(&self.name, self.settings(), &self.fit);
+        let (model, log) = drl(task.chain, task.data, &self.model, &fit, task.device)?;
         let train_s = t.elapsed().as_secs_f64();
         let mut joints = Vec::new();
         let solve_s = timed(&mut || {

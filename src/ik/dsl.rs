@@ -200,15 +200,21 @@ impl crate::ik::method::IkMethod for DslMethod {
     fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
         use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
         let t = std::time::Instant::now();
+        let fit = task.checkpointed(&self.name, self.settings(), &self.fit);
         let distal = dsl(
             task.chain,
             task.data,
             &self.model,
-            &self.fit,
+            &fit,
             &self.dsl,
             task.device,
         )?;
-        let train_s = t.elapsed().as_secs_f64();
+        // Counting the seconds before a restart from the checkpoint.
+        let logged: f64 = [&distal.forward_log, &distal.inverse_log]
+            .iter()
+            .filter_map(|l| l.as_ref().map(|l| l.seconds))
+            .sum();
+        let train_s = t.elapsed().as_secs_f64().max(logged);
         let mut joints = Vec::new();
         let solve_s = timed(&mut || {
             joints = crate::ik::learning::predict(

@@ -287,6 +287,7 @@ pub fn train_flow(
                         .expect("one sample");
                     DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
                 },
+                cfg.fit.checkpoint_for("flow IK").as_ref(),
             )?;
             Ok(TrainedFlow {
                 model: model.valid(),
@@ -422,8 +423,16 @@ impl crate::ik::method::IkMethod for FlowMethod {
         use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
         let cfg = &self.cfg;
         let t = std::time::Instant::now();
+        let cfg = &FlowConfig {
+            fit: task.checkpointed(&self.name(), self.settings(), &cfg.fit),
+            ..cfg.clone()
+        };
         let trained = train_flow(task.chain, task.data, cfg, task.device)?;
-        let train_s = t.elapsed().as_secs_f64();
+        // Counting the seconds before a restart from the checkpoint.
+        let train_s = t
+            .elapsed()
+            .as_secs_f64()
+            .max(trained.log.as_ref().map_or(0.0, |l| l.seconds));
         let file = Self::model_file(task);
         if let Some(parent) = file.parent() {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;

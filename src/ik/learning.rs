@@ -42,8 +42,8 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::train::trainer::{
-    Batch, Convergence, ConvergenceLog, Plateau, TrainConfig, TrainSet, Trainer, autodiff_device,
-    train_to_convergence,
+    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, TrainConfig, TrainSet, Trainer,
+    autodiff_device, train_to_convergence,
 };
 
 /// Optimisation of one fit.
@@ -62,6 +62,10 @@ pub struct FitConfig {
     /// of it (each EMSSL iteration ends annealed); constant otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub cosine: bool,
+    /// Where a run to convergence keeps its checkpoints (each network in a folder named
+    /// after its label); none if absent. Not a setting: not written with the config.
+    #[serde(skip)]
+    pub checkpoint: Option<FitCheckpoint>,
 }
 
 impl FitConfig {
@@ -75,7 +79,16 @@ impl FitConfig {
             seed: 0,
             converge: None,
             cosine: false,
+            checkpoint: None,
         }
+    }
+
+    /// Where the network `label` keeps its checkpoint, if this fit keeps any.
+    pub fn checkpoint_for(&self, label: &str) -> Option<FitCheckpoint> {
+        self.checkpoint.as_ref().map(|c| FitCheckpoint {
+            dir: c.dir.join(crate::ik::method::file_name(label)),
+            settings: c.settings.clone(),
+        })
     }
 
     /// The shared loop's config for `cfg.epochs` epochs over `samples` (no clipping, no input
@@ -224,6 +237,7 @@ pub fn fit_converged(
         label,
         loss,
         |m: &Mlp| validate(&m.valid()),
+        cfg.checkpoint_for(label).as_ref(),
     )
 }
 

@@ -40,6 +40,28 @@ impl IkTask<'_> {
         self.files.join(file_name(name)).with_extension(extension)
     }
 
+    /// `fit` keeping checkpoints in this task's files (`<name> checkpoint/`, a folder per
+    /// network), valid only for `settings` (the method's) in this range: a killed run
+    /// continues from its last epoch.
+    pub fn checkpointed(
+        &self,
+        name: &str,
+        settings: serde_json::Value,
+        fit: &crate::ik::learning::FitConfig,
+    ) -> crate::ik::learning::FitConfig {
+        crate::ik::learning::FitConfig {
+            checkpoint: Some(crate::train::trainer::FitCheckpoint {
+                dir: self.file(&format!("{name} checkpoint"), ""),
+                settings: serde_json::json!({
+                    "method": settings,
+                    "range_deg": self.range_deg,
+                    "samples": self.data.positions.len(),
+                }),
+            }),
+            ..fit.clone()
+        }
+    }
+
     /// Where the answers of the row `method` are written.
     pub fn predictions_path(&self, method: &str) -> PathBuf {
         self.predictions.join(format!("{}.csv", file_name(method)))
@@ -94,6 +116,8 @@ impl Answers {
     pub fn converged(mut self, log: &Option<ConvergenceLog>, fixed_epochs: usize) -> Self {
         match log {
             Some(l) => {
+                // A run continued from a checkpoint counts its seconds before the restart.
+                self.train_seconds = self.train_seconds.max(l.seconds);
                 self.epochs = Some(l.epochs);
                 self.validation_cm = Some(l.best_validation);
                 self.detail = l.summary();

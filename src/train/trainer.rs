@@ -115,6 +115,10 @@ pub struct CheckpointPlan {
 struct CheckpointState {
     fingerprint: serde_json::Value,
     log: TrainLog,
+    /// What the run's hooks keep ([`TrainHooks::save_state`]): a run to convergence's
+    /// plateau rule, validation curve and best epoch.
+    #[serde(default, skip_serializing_if = "serde_json::Value::is_null")]
+    hooks: serde_json::Value,
 }
 
 /// Write a burnpack file to a temporary name, then rename it into place.
@@ -141,15 +145,23 @@ impl CheckpointPlan {
     /// Write model, optimizer and progress; each file is written to a temporary name and
     /// renamed, the progress file last, so a crash never leaves a checkpoint that claims more
     /// than it holds.
-    fn save<M: Module>(&self, model: &M, optim: &ModuleOptimizer, log: &TrainLog) -> Result<()> {
+    fn save<M: Module>(
+        &self,
+        model: &M,
+        optim: &ModuleOptimizer,
+        log: &TrainLog,
+        hooks: &mut dyn TrainHooks<M>,
+    ) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
         save_renamed(&self.model_path(), |tmp| model.clone().save_file(tmp))?;
         save_renamed(&self.optim_path(), |tmp| optim.save(tmp))?;
+        let hooks = hooks.save_state(&self.dir)?;
         write_json(
             &self.state_path(),
             &CheckpointState {
                 fingerprint: self.fingerprint.clone(),
                 log: log.clone(),
+                hooks,
             },
         )
     }
@@ -161,7 +173,7 @@ impl CheckpointPlan {
         model: M,
         optim: ModuleOptimizer,
         label: &str,
-    ) -> Result<(M, ModuleOptimizer, Option<TrainLog>)> {
+    ) -> Result<(M, ModuleOptimizer, Option<(TrainLog, serde_json::Value)>)> {
         if !self.resume {
             return Ok((model, optim, None));
         }
@@ -189,11 +201,11 @@ impl CheckpointPlan {
             Error::data(self.optim_path(), format!("cannot load checkpoint: {e:?}"))
         })?;
         eprintln!(
-            "{label}: --resume: continuing from step {} (checkpoint in {})",
+            "{label}: continuing from step {} (checkpoint in {})",
             state.log.step,
             self.dir.display()
         );
-        Ok((model, optim, Some(state.log)))
+        Ok((model, optim, Some((state.log, state.hooks))))
     }
 }
 
@@ -478,6 +490,16 @@ pub trait TrainHooks<M> {
     fn stop(&self) -> bool {
         false
     }
+    /// What to keep in a checkpoint besides model, optimiser and step: files written into
+    /// `dir` and the JSON returned (stored with the checkpoint's progress, written last).
+    fn save_state(&mut self, _dir: &Path) -> Result<serde_json::Value> {
+        Ok(serde_json::Value::Null)
+    }
+    /// Take back what [`TrainHooks::save_state`] kept (`model`: the resumed model, a
+    /// template for any model file).
+    fn load_state(&mut self, _dir: &Path, _state: serde_json::Value, _model: &M) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// Training until a validation score stops improving: evaluated after every epoch, the
@@ -632,6 +654,42 @@ struct Converging<M, V> {
     stop: bool,
     base_rate: f64,
     started: Instant,
+    /// Seconds trained before a resume.
+    earlier_seconds: f64,
+    /// The best epoch whose weights the checkpoint on disk points to (`best-<epoch>.bpk`).
+    saved_best: Option<usize>,
+    /// Best files no checkpoint names any more after the next save.
+    stale: Vec<usize>,
+}
+
+/// Delete the `best-<epoch>.bpk` files in `dir` but `keep`'s.
+pub fn remove_best_files_but(dir: &Path, keep: Option<usize>) {
+    let keep = keep.map(|e| format!("best-{e}.bpk"));
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with("best-") && name.ends_with(".bpk") && Some(&name) != keep.as_ref() {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// What a run to convergence keeps in its checkpoint besides the weights.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct ConvergingState {
+    rule: Plateau,
+    log: ConvergenceLog,
+    stop: bool,
+    seconds: f64,
+}
+
+impl<M, V> Converging<M, V> {
+    fn seconds(&self) -> f64 {
+        self.earlier_seconds + self.started.elapsed().as_secs_f64()
+    }
+
+    fn best_path(dir: &Path, epoch: usize) -> PathBuf {
+        dir.join(format!("best-{epoch}.bpk"))
+    }
 }
 
 impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
@@ -644,6 +702,51 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
     }
     fn stop(&self) -> bool {
         self.stop
+    }
+    fn save_state(&mut self, dir: &Path) -> Result<serde_json::Value> {
+        // The best weights go to a file named by their epoch, written once; the file the
+        // checkpoint on disk points to stays until the new state replaces it.
+        for old in self.stale.drain(..) {
+            let _ = std::fs::remove_file(Self::best_path(dir, old));
+        }
+        let epoch = self.log.best_epoch;
+        if let Some(best) = &self.best
+            && self.saved_best != Some(epoch)
+        {
+            save_renamed(&Self::best_path(dir, epoch), |tmp| {
+                best.clone().save_file(tmp)
+            })?;
+            // The file the state on disk names goes at the next save, once it names this one.
+            self.stale.extend(self.saved_best.replace(epoch));
+        }
+        serde_json::to_value(ConvergingState {
+            rule: self.rule.clone(),
+            log: self.log.clone(),
+            stop: self.stop,
+            seconds: self.seconds(),
+        })
+        .map_err(|e| Error::Config(format!("{}: checkpoint state: {e}", self.label)))
+    }
+    fn load_state(&mut self, dir: &Path, state: serde_json::Value, model: &M) -> Result<()> {
+        let state: ConvergingState = serde_json::from_value(state)
+            .map_err(|e| Error::data(dir, format!("bad checkpoint state: {e}")))?;
+        if state.log.best_epoch > 0 {
+            let path = Self::best_path(dir, state.log.best_epoch);
+            let best = model
+                .clone()
+                .try_load_file(&path)
+                .map_err(|e| Error::data(&path, format!("cannot load checkpoint: {e:?}")))?;
+            self.best = Some(best);
+            self.saved_best = Some(state.log.best_epoch);
+        }
+        // Best files of a run killed before it removed them.
+        remove_best_files_but(dir, self.saved_best);
+        self.rule = state.rule;
+        self.log = state.log;
+        self.stop = state.stop;
+        self.earlier_seconds = state.seconds;
+        self.started = Instant::now();
+        Ok(())
     }
     fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
         if step % self.steps_per_epoch != 0 {
@@ -663,7 +766,7 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
             learning_rate,
             train_loss: self.losses.0 / self.losses.1.max(1) as f64,
             validation: score,
-            seconds: self.started.elapsed().as_secs_f64(),
+            seconds: self.seconds(),
         });
         self.losses = (0.0, 0);
         self.log.epochs = epoch;
@@ -677,17 +780,27 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
                 if improved { " (best)" } else { "" },
                 self.log.best_validation,
                 self.log.best_epoch,
-                self.started.elapsed().as_secs_f64()
+                self.seconds()
             );
         }
         Ok((model, false))
     }
 }
 
+/// Where a run to convergence keeps a checkpoint (after every epoch: weights, optimiser,
+/// plateau rule, curve and best weights), and the settings it must have been made with to be
+/// continued; one made with other settings is deleted and the run starts afresh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FitCheckpoint {
+    pub dir: PathBuf,
+    pub settings: serde_json::Value,
+}
+
 /// Train `model` on `data` with `loss` until `validate` (lower is better, called with the
 /// model after every epoch) stops improving: `cfg.steps` is ignored for `conv.max_epochs`
 /// epochs, the learning rate follows [`Plateau`]. Returns the best epoch's model and the
-/// validation curve.
+/// validation curve. With `checkpoint`, a killed run continues from its last epoch to the
+/// same result.
 #[allow(clippy::too_many_arguments)]
 pub fn train_to_convergence<M, L, S, V>(
     model: M,
@@ -698,6 +811,7 @@ pub fn train_to_convergence<M, L, S, V>(
     label: &str,
     loss: L,
     validate: V,
+    checkpoint: Option<&FitCheckpoint>,
 ) -> Result<(M, ConvergenceLog)>
 where
     M: Module,
@@ -708,8 +822,36 @@ where
     let steps_per_epoch = data.len().div_ceil(cfg.batch.min(data.len()).max(1));
     let cfg = TrainConfig {
         steps: conv.max_epochs.max(1) * steps_per_epoch,
+        checkpoint_every: if checkpoint.is_some() {
+            steps_per_epoch
+        } else {
+            cfg.checkpoint_every
+        },
         ..cfg.clone()
     };
+    let plan = checkpoint.map(|c| {
+        let fingerprint = serde_json::json!({
+            "settings": c.settings,
+            "label": label,
+            "train": &cfg,
+            "converge": conv,
+            "samples": data.len(),
+        });
+        let state = c.dir.join("state.json");
+        let matches = std::fs::read_to_string(&state)
+            .ok()
+            .and_then(|t| serde_json::from_str::<CheckpointState>(&t).ok())
+            .is_some_and(|s| s.fingerprint == fingerprint);
+        if !matches && c.dir.exists() {
+            // Made with other settings (or half written): not this run's.
+            let _ = std::fs::remove_dir_all(&c.dir);
+        }
+        CheckpointPlan {
+            dir: c.dir.clone(),
+            resume: matches,
+            fingerprint,
+        }
+    });
     let mut hooks = Converging {
         label: label.to_string(),
         validate,
@@ -721,13 +863,17 @@ where
         stop: false,
         base_rate: cfg.learning_rate,
         started: Instant::now(),
+        earlier_seconds: 0.0,
+        saved_best: None,
+        stale: Vec::new(),
     };
     let (model, _, _) = Trainer::new(&cfg, label)
         .optimizer(optim)
+        .checkpoint(plan.as_ref())
         .hooks(&mut hooks)
         .run(model, data, loss)?;
-    let mut log = hooks.log;
-    log.seconds = hooks.started.elapsed().as_secs_f64();
+    let mut log = hooks.log.clone();
+    log.seconds = hooks.seconds();
     Ok((hooks.best.unwrap_or(model), log))
 }
 
@@ -761,9 +907,10 @@ where
         let (m, o, resumed) = plan.load(model, optim, label)?;
         model = m;
         optim = o;
-        if let Some(l) = resumed {
+        if let Some((l, state)) = resumed {
             log = l;
             log.resumed_from = Some(log.step);
+            hooks.load_state(&plan.dir, state, &model)?;
         }
     }
     let batcher = Batcher::new(data, cfg);
@@ -838,7 +985,7 @@ where
             && cfg.checkpoint_every > 0
             && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps)
         {
-            plan.save(&model, &optim, &log)?;
+            plan.save(&model, &optim, &log, hooks)?;
         }
     }
     if log.step < cfg.steps {
