@@ -50,6 +50,17 @@ impl SpeedConfig {
         }
     }
 
+    /// The `short` preset (the main command's few minutes): batch 1 only, median of 3 calls
+    /// after one warm-up.
+    pub fn short() -> Self {
+        SpeedConfig {
+            warmup: 1,
+            min_repeats: 3,
+            min_seconds: 0.0,
+            batches: vec![1],
+        }
+    }
+
     pub fn quick() -> Self {
         SpeedConfig {
             warmup: 1,

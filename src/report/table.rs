@@ -58,6 +58,10 @@ pub fn format_cell(cell: &str) -> String {
     let Ok(v) = cell.parse::<f64>() else {
         return cell.to_string();
     };
+    if v.is_nan() {
+        // Not measured (the short preset times batch 1 only).
+        return "–".to_string();
+    }
     if !cell.contains('.') || !v.is_finite() {
         return cell.to_string();
     }

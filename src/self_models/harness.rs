@@ -278,7 +278,8 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
 
 fn preset_parts(preset: &str) -> Result<(DataSpec, SpeedConfig)> {
     match preset {
-        "paper" | "short" => Ok((DataSpec::paper(), SpeedConfig::paper())),
+        "paper" => Ok((DataSpec::paper(), SpeedConfig::paper())),
+        "short" => Ok((DataSpec::paper(), SpeedConfig::short())),
         "quick" => Ok((DataSpec::quick(), SpeedConfig::quick())),
         other => Err(Error::Config(format!(
             "unknown preset \"{other}\" (choose paper, short or quick)"
@@ -332,6 +333,23 @@ impl<M: SelfModel> SelfModelRun<M> {
             );
             self.train.steps = steps;
             self.train.batch = batch;
+        }
+        self
+    }
+
+    /// Score a `short` run on the first `n` test images only (the paper's PSNR subset is the
+    /// first 100), and say so in its note.
+    pub fn short_test_set(mut self, n: usize) -> Self {
+        if self.preset == "short" {
+            let start = self.data.dataset.train;
+            let end = (start + n).min(self.data.dataset.samples);
+            self.data.test = Some(start..end);
+            let said = format!("scored on the first {} test images", end - start);
+            self.note = if self.note.is_empty() {
+                format!("short preset: {said}")
+            } else {
+                format!("{}, {said}", self.note)
+            };
         }
         self
     }
@@ -529,11 +547,17 @@ pub fn run<M: SelfModel>(
             median_s: f64::NAN,
             repeats: 0,
         });
+        // The largest batch timed (none beyond batch 1: not measured).
         let tb = timings
             .iter()
+            .filter(|t| t.batch > 1)
             .max_by_key(|t| t.batch)
             .cloned()
-            .unwrap_or(t1.clone());
+            .unwrap_or(Timing {
+                batch: 0,
+                median_s: f64::NAN,
+                repeats: 0,
+            });
         let predicts_depth = predictions.depth.is_some();
         let renderer_note = renderer.note(test_range.len());
         rows.push(

@@ -339,7 +339,7 @@ pub fn neurokin_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
     model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
     Ok(
         SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?
-            .shorten(400, 32),
+            .shorten(200, 32),
     )
 }
 

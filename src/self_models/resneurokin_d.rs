@@ -288,5 +288,6 @@ pub fn resneurokin_d_run(preset: &str) -> Result<SelfModelRun<ResNeuroKinDConfig
         64,
         PaperReference::resneurokin_d(),
     )?
-    .shorten(60, 16))
+    .shorten(40, 12)
+    .short_test_set(100))
 }
