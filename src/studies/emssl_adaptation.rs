@@ -179,8 +179,12 @@ pub struct AdaptationCurveRow {
     pub forward_calls: usize,
 }
 
-/// The paper's Table IV: (before, after, iterations) for links lengthened by `cm`.
-fn paper_reference(change: &ArmChange) -> Option<(f64, f64, usize)> {
+/// The paper's Table IV: (before, after, iterations) for links lengthened by `cm`, on the
+/// 6-joint arm of its Table II (our UR5); none for any other robot (arm4 is ours).
+fn paper_reference(robot: &str, change: &ArmChange) -> Option<(f64, f64, usize)> {
+    if robot != "ur5" {
+        return None;
+    }
     match change {
         ArmChange::Lengthen { cm } if *cm == 1.0 => Some((2.98, 0.28, 2)),
         ArmChange::Lengthen { cm } if *cm == 3.0 => Some((8.87, 0.30, 3)),
@@ -378,7 +382,7 @@ pub fn adapt_robot(
                 .fold(f64::INFINITY, f64::min);
             let arm_samples = calibration_samples
                 .unwrap_or_else(|| curve.last().map_or(0, |c: &EmsslIteration| c.forward_calls));
-            let paper = paper_reference(change);
+            let paper = paper_reference(robot_name, change);
             rows.push(AdaptationRow {
                 robot: robot_name.into(),
                 change: change.label(),
