@@ -1,20 +1,43 @@
 //! Where a result came from: the code revision every result row records.
 
-/// `git describe --always --dirty` of the working tree when this process first asked, or
-/// "unknown": the code a run started from. Read once, so the files a run writes (its own
-/// `config.json` over a committed report) never mark it dirty; binaries ask at start.
+/// The code a run started from: `git describe --always` of the working tree when this process
+/// first asked, with `-dirty` when the code differs from that commit (the sources, the
+/// experiments, the manifest and lock file; not `reports/`, which other runs write while this
+/// one trains), or "unknown". Read once; binaries ask at start.
 pub fn git_revision() -> String {
     static REVISION: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     REVISION
         .get_or_init(|| {
-            std::process::Command::new("git")
-                .args(["describe", "--always", "--dirty", "--abbrev=10"])
-                .current_dir(env!("CARGO_MANIFEST_DIR"))
-                .output()
-                .ok()
-                .filter(|o| o.status.success())
-                .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-                .unwrap_or_else(|| "unknown".into())
+            let git = |args: &[&str]| {
+                std::process::Command::new("git")
+                    .args(args)
+                    .current_dir(env!("CARGO_MANIFEST_DIR"))
+                    .output()
+                    .ok()
+                    .filter(|o| o.status.success())
+                    .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+            };
+            let Some(revision) = git(&["describe", "--always", "--abbrev=10"]) else {
+                return "unknown".into();
+            };
+            let changed = git(&[
+                "status",
+                "--porcelain",
+                "--",
+                CODE_PATHS[0],
+                CODE_PATHS[1],
+                CODE_PATHS[2],
+                CODE_PATHS[3],
+            ])
+            .is_none_or(|s| !s.is_empty());
+            if changed {
+                format!("{revision}-dirty")
+            } else {
+                revision
+            }
         })
         .clone()
 }
+
+/// What a result depends on: a change here marks a run's revision `-dirty`.
+pub const CODE_PATHS: [&str; 4] = ["src", "experiments", "Cargo.toml", "Cargo.lock"];
