@@ -172,8 +172,14 @@ pub fn markdown_from_csv(path: &Path) -> Result<String> {
         out += "\n";
         out += &markdown_table(&header, &rows, &[vec![key], differ].concat());
     }
+    if rows.iter().flatten().any(|c| c.ends_with("-dirty")) {
+        out += &format!("\n{DIRTY}\n");
+    }
     Ok(out)
 }
+
+/// What a `-dirty` revision means, under every generated table that has one.
+pub const DIRTY: &str = "A revision ending in `-dirty`: the working tree differed from that commit when the run started, so its code was that commit's plus changes that were not recorded. Runs before 2026-11-23 were marked so by any changed tracked file, a report another run was rewriting included; since then only a change to the code (`src/`, `experiments/`, `Cargo.toml`, `Cargo.lock`) marks a row. Re-running the command on a clean checkout replaces such a row.";
 
 /// Write `results.md` beside `results.csv`: a title, a note, and the generated tables.
 pub fn write_markdown_report(csv_path: &Path, title: &str, note: &str) -> Result<()> {
