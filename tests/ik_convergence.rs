@@ -526,3 +526,62 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
     let (_, fresh) = run(&other, None).unwrap();
     assert_eq!(key(&fresh), key(&whole_log));
 }
+
+/// The GAN's own loop keeps a checkpoint every epoch: a run stopped at a cap of 4 epochs and
+/// continued with the full cap gives the uninterrupted run's curve and generator, and a
+/// finished run asked again loads its best generator without training.
+#[test]
+fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
+    use selfmodel::ik::cgan::{GanConfig, train_gan};
+    use selfmodel::train::trainer::FitCheckpoint;
+    let (robot, data) = tiny_ur5(9);
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let gan = |max_epochs: usize, checkpoint: Option<std::path::PathBuf>| GanConfig {
+        noise: 2,
+        generator_hidden: vec![32, 32],
+        discriminator_hidden: vec![32, 32],
+        fit: FitConfig {
+            batch: 64,
+            learning_rate: 2e-3,
+            converge: Some(Convergence {
+                max_epochs,
+                patience: 3,
+                lr_patience: 1,
+                lr_factor: 0.5,
+                min_improvement: 1e-3,
+            }),
+            checkpoint: checkpoint.map(|dir| FitCheckpoint {
+                dir,
+                settings: serde_json::json!("test"),
+            }),
+            ..FitConfig::paper()
+        },
+        best_of: 2,
+    };
+    let run = |cfg: &GanConfig| {
+        train_gan(&robot.chain, &data, cfg, JointOutput::Sigmoid, &device).unwrap()
+    };
+    let (whole, whole_log) = run(&gan(12, None));
+    let whole_log = whole_log.unwrap();
+    assert!(whole_log.epochs > 4, "{}", whole_log.summary());
+    let dir = tempdir();
+    let (_, cut) = run(&gan(4, Some(dir.clone())));
+    assert_eq!(cut.unwrap().epochs, 4);
+    let (resumed, log) = run(&gan(12, Some(dir.clone())));
+    let log = log.unwrap();
+    let key = |l: &selfmodel::train::trainer::ConvergenceLog| {
+        l.curve
+            .iter()
+            .map(|p| (p.epoch, p.learning_rate, p.validation, p.train_loss))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(key(&log), key(&whole_log));
+    let targets = &data.positions[data.test()];
+    let answers = |g: &selfmodel::ik::cgan::Generator| g.sample(&data, targets, 256, 7, &device);
+    assert_eq!(answers(&resumed), answers(&whole));
+    // Finished: asked again, it trains nothing and answers the same.
+    let t = std::time::Instant::now();
+    let (again, _) = run(&gan(12, Some(dir.clone())));
+    assert_eq!(answers(&again), answers(&whole));
+    assert!(t.elapsed().as_secs_f64() < 5.0);
+}

@@ -84,10 +84,16 @@ struct GanCheckpoint {
 }
 
 impl GanCheckpoint {
+    /// A run may be continued with a higher cap on its epochs: the cap is not in the
+    /// fingerprint.
     fn new(c: &FitCheckpoint, cfg: &GanConfig, output: JointOutput) -> Self {
+        let mut uncapped = cfg.clone();
+        if let Some(conv) = uncapped.fit.converge.as_mut() {
+            conv.max_epochs = 0;
+        }
         GanCheckpoint {
             dir: c.dir.join("cgan"),
-            fingerprint: serde_json::json!({ "settings": c.settings, "gan": cfg, "output": output }),
+            fingerprint: serde_json::json!({ "settings": c.settings, "gan": uncapped, "output": output }),
         }
     }
 
