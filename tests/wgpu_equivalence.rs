@@ -15,7 +15,7 @@ use selfmodel::self_models::neurokin::neurokin_run;
 const POSES: usize = 4;
 
 fn host(t: Tensor<4>) -> Vec<f32> {
-    t.into_data().to_vec::<f32>().unwrap()
+    t.into_data().try_into_vec::<f32>().unwrap()
 }
 
 /// Every renderer's images (silhouettes, then depth where it has one) of the first test poses.
