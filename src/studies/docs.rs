@@ -317,10 +317,18 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
             }
         }
         if dir.join("training_curve.png").is_file() && dir.join("curve.csv").is_file() {
-            // Titled by the model the run trained (a results.csv of self-model rows).
-            let name = read_results(&results)
+            // Titled by the model the run trained (its config's name, as the run titled it),
+            // else its first result row's.
+            let configured = std::fs::read_to_string(dir.join("config.json"))
                 .ok()
-                .and_then(|r| r.first().map(|r| r.model.clone()))
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .and_then(|c| c.get("name")?.as_str().map(String::from));
+            let name = configured
+                .or_else(|| {
+                    read_results(&results)
+                        .ok()
+                        .and_then(|r| r.first().map(|r| r.model.clone()))
+                })
                 .unwrap_or_else(|| dir.file_name().unwrap_or_default().to_string_lossy().into());
             crate::report::table::draw_training_curve(&dir, &name)?;
             drawn += 1;
