@@ -13,7 +13,7 @@ use selfmodel::studies::bench_decoders::{attach_torch, run};
 /// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
 /// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
 #[derive(Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Args {
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     device: DeviceChoice,

@@ -15,7 +15,7 @@ use selfmodel::core::device::DeviceChoice;
 /// warm-up step, then the median of the repeats, back to back; with the GFLOP/s of the step's
 /// matrix products.
 #[derive(Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Args {
     #[arg(long, value_enum, default_value_t = DeviceChoice::Cpu)]
     device: DeviceChoice,

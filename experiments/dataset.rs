@@ -14,7 +14,7 @@ use selfmodel::sim::trajectory::SamplerKind;
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
 #[derive(Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Args {
     /// Named preset: paper (2,000 Lorenz samples, 1,600 train) or quick (40, 32 train).
     #[arg(long, default_value = "paper")]

@@ -12,7 +12,7 @@ use selfmodel::studies::mesh_fidelity::{FidelityConfig, run};
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]
-#[command(version)]
+#[command(version, allow_negative_numbers = true)]
 struct Args {
     /// paper (100 poses) or quick (5 poses).
     #[arg(long, default_value = "paper")]

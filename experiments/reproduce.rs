@@ -37,6 +37,15 @@ fn main() -> ExitCode {
             }
             return Ok(());
         }
+        if let Some(unknown) = args
+            .only
+            .iter()
+            .find(|o| !EXPERIMENTS.iter().any(|e| e.name == o.as_str()))
+        {
+            return Err(selfmodel::Error::Config(format!(
+                "--only {unknown}: no such experiment (reproduce --list names them)"
+            )));
+        }
         let root = args.root.clone().unwrap_or_else(|| PathBuf::from("."));
         for e in EXPERIMENTS
             .iter()

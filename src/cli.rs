@@ -30,7 +30,9 @@ pub fn experiment_main(name: &'static str, default_preset: &str) -> ExitCode {
     // After `augment_args`, which would set the about of `ExperimentArgs` itself.
     let command = ExperimentArgs::augment_args(Command::new(name))
         .about(about)
-        .version(env!("CARGO_PKG_VERSION"));
+        .version(env!("CARGO_PKG_VERSION"))
+        // `--steps -5` is a bad number, not an unknown option.
+        .allow_negative_numbers(true);
     let args = match ExperimentArgs::from_arg_matches(&command.get_matches()) {
         Ok(args) => args,
         Err(e) => e.exit(),

@@ -155,3 +155,209 @@ fn render_recorded_poses_from_csv() {
     assert_eq!(d.angles[1], vec![30.0, -20.0, 45.0, 10.0]);
     assert_ne!(d.image(0), d.image(1));
 }
+
+/// Run `bin` with `args`; it must fail with one `error:` line holding every needle, and leave
+/// nothing at `out` (the output path it was given).
+fn fails_cleanly(bin: &str, args: &[&str], needles: &[&str], out: &Path) {
+    let o = Command::new(bin).args(args).output().unwrap();
+    assert!(!o.status.success(), "{bin} {args:?} succeeded");
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    // clap's own errors add a "For more information" line.
+    assert!(lines[0].starts_with("error: "), "{bin} {args:?}: {err}");
+    assert!(
+        lines.len() == 1
+            || lines[1..]
+                .iter()
+                .all(|l| l.starts_with("For more information")),
+        "{bin} {args:?}: more than one line: {err}"
+    );
+    for n in needles {
+        assert!(
+            lines[0].contains(n),
+            "{bin} {args:?}: expected \"{n}\" in: {err}"
+        );
+    }
+    assert!(!out.exists(), "{bin} {args:?} left {}", out.display());
+}
+
+/// The inputs an adversarial user tried (issue 20): each rejected with one line, a non-zero
+/// exit and nothing written.
+#[test]
+fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let out = d.join("out");
+    let o = out.to_str().unwrap();
+    let npz_out = d.join("out.npz");
+    let n = npz_out.to_str().unwrap();
+    let write = |name: &str, text: &str| {
+        let p = d.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let bin = |name: &str| match name {
+        "dataset" => env!("CARGO_BIN_EXE_dataset"),
+        "fit" => env!("CARGO_BIN_EXE_fit_arm4_geometry"),
+        "reproduce" => env!("CARGO_BIN_EXE_reproduce"),
+        "bench" => env!("CARGO_BIN_EXE_bench_ffksm_step"),
+        "speed" => env!("CARGO_BIN_EXE_emssl_sampling_speed"),
+        "table2" => env!("CARGO_BIN_EXE_emssl_table2"),
+        _ => unreachable!(),
+    };
+    // A typo in the first row is not a header; a header is a row of names.
+    let typo = write("typo.csv", "1O,20,30,40\n1,2,3,4\n");
+    fails_cleanly(
+        bin("dataset"),
+        &["--angles", &typo, "--out", n],
+        &["line 1", "1O,20,30,40"],
+        &npz_out,
+    );
+    let semi = write("semi.csv", "10;20;30;40\n");
+    fails_cleanly(
+        bin("dataset"),
+        &["--angles", &semi, "--out", n],
+        &["separate the joints with commas"],
+        &npz_out,
+    );
+    let huge = write("huge.csv", "a,b,c,d\n100000,1,2,3\n");
+    fails_cleanly(
+        bin("dataset"),
+        &["--angles", &huge, "--out", n],
+        &["row 1", "outside +-360"],
+        &npz_out,
+    );
+    // A header claiming 2^62 rows.
+    let forged = d.join("forged.npz");
+    {
+        use std::io::Write;
+        let dict = "{'descr': '<f8', 'fortran_order': False, 'shape': (4611686018427387904, 4), }";
+        let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+        let header = format!("{dict}{}\n", " ".repeat(pad));
+        let mut npy = b"\x93NUMPY\x01\x00".to_vec();
+        npy.extend((header.len() as u16).to_le_bytes());
+        npy.extend(header.as_bytes());
+        npy.extend([0u8; 96]);
+        let mut zip = zip::ZipWriter::new(std::fs::File::create(&forged).unwrap());
+        zip.start_file("angles.npy", zip::write::SimpleFileOptions::default())
+            .unwrap();
+        zip.write_all(&npy).unwrap();
+        zip.finish().unwrap();
+    }
+    fails_cleanly(
+        bin("dataset"),
+        &["--angles", forged.to_str().unwrap(), "--out", n],
+        &["more elements than the file holds"],
+        &npz_out,
+    );
+    fails_cleanly(
+        bin("dataset"),
+        &["--size", "100000", "--out", n],
+        &["GiB limit", "--size"],
+        &npz_out,
+    );
+    fails_cleanly(
+        bin("dataset"),
+        &["--samples", "-5", "--out", n],
+        &["invalid value '-5'"],
+        &npz_out,
+    );
+    let geometry = d.join("g.json");
+    for cell in ["0", "-1"] {
+        fails_cleanly(
+            bin("fit"),
+            &["--cell", cell, "--out", geometry.to_str().unwrap()],
+            &["not a voxel size"],
+            &geometry,
+        );
+    }
+    fails_cleanly(
+        bin("reproduce"),
+        &["--only", "nonsense", "--root", o],
+        &["no such experiment"],
+        &out,
+    );
+    let bench = d.join("b.csv");
+    fails_cleanly(
+        bin("bench"),
+        &[
+            "--repeats",
+            "0",
+            "--quick",
+            "--out",
+            bench.to_str().unwrap(),
+        ],
+        &["at least one timed step"],
+        &bench,
+    );
+    fails_cleanly(
+        bin("speed"),
+        &[
+            "--preset",
+            "quick",
+            "--latency",
+            "sleep:99999999999",
+            "--out",
+            o,
+        ],
+        &["at most 10000 us"],
+        &out,
+    );
+    let fixed = write(
+        "fixed.urdf",
+        r#"<robot name="f"><link name="base"/><link name="a"/><joint name="j" type="fixed"><parent link="base"/><child link="a"/></joint></robot>"#,
+    );
+    fails_cleanly(
+        bin("table2"),
+        &["--preset", "quick", "--urdf", &fixed, "--out", o],
+        &["no movable joints"],
+        &out,
+    );
+    let limit = r#"<axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/>"#;
+    let cycle = write(
+        "cycle.urdf",
+        &format!(
+            r#"<robot name="c"><link name="a"/><link name="b"/><joint name="j1" type="revolute"><parent link="a"/><child link="b"/>{limit}</joint><joint name="j2" type="revolute"><parent link="b"/><child link="a"/>{limit}</joint></robot>"#
+        ),
+    );
+    fails_cleanly(
+        bin("table2"),
+        &["--preset", "quick", "--urdf", &cycle, "--out", o],
+        &["the joints form a cycle"],
+        &out,
+    );
+}
+
+/// A damaged checkpoint is reported in one line that says what to do.
+#[test]
+fn a_damaged_checkpoint_says_what_to_do() {
+    let dir = common::tempdir();
+    let out = dir.path().join("nk");
+    let o = out.to_str().unwrap();
+    let run = |resume: bool| {
+        let mut args = vec!["--preset", "quick", "--steps", "40", "--out", o];
+        if resume {
+            args.push("--resume");
+        }
+        Command::new(env!("CARGO_BIN_EXE_neurokin"))
+            .args(&args)
+            .output()
+            .unwrap()
+    };
+    assert!(run(false).status.success());
+    let model = out.join("checkpoint").join("model.bpk");
+    let bytes = std::fs::read(&model).unwrap();
+    std::fs::write(&model, &bytes[..100]).unwrap();
+    let o = run(true);
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    let last = err.lines().last().unwrap();
+    assert!(
+        last.starts_with("error: ")
+            && last.contains("model.bpk")
+            && last.contains("delete")
+            && last.contains("--resume"),
+        "{err}"
+    );
+    assert!(!last.contains("Io(\""), "debug text in: {last}");
+}

@@ -82,6 +82,20 @@ impl DatasetConfig {
                 "the dataset needs at least 1 sample (--samples)".into(),
             ));
         }
+        // Silhouettes (1 byte) and depth (4 bytes) per pixel are held in memory while the
+        // dataset is built: bound them by what a 24 GiB machine holds with room to spare.
+        let pixels = (self.camera.width as u128) * (self.camera.height as u128);
+        let bytes = pixels * 5 * self.samples as u128;
+        if bytes > MAX_DATASET_BYTES as u128 {
+            return Err(Error::Config(format!(
+                "{} samples of {}x{} pixels need {:.1} GiB of images in memory, above the {} GiB limit; lower --samples or --size",
+                self.samples,
+                self.camera.width,
+                self.camera.height,
+                bytes as f64 / (1u64 << 30) as f64,
+                MAX_DATASET_BYTES >> 30
+            )));
+        }
         if self.train > self.samples {
             return Err(Error::Config(format!(
                 "impossible split: {} training samples out of {} (--train must be at most --samples)",
@@ -428,6 +442,12 @@ pub struct DatasetStats {
     pub depth_m: Option<Summary>,
 }
 
+/// The most memory a dataset's images may take (silhouettes and depth): 8 GiB.
+pub const MAX_DATASET_BYTES: u64 = 8 << 30;
+
+/// The largest joint value [`read_angles`] takes: one turn, in degrees.
+pub const MAX_JOINT_VALUE: f64 = 360.0;
+
 /// Read joint vectors (user units) from a CSV (one row per pose, one column per joint, an
 /// optional header) or an `.npz` with an `angles` (N, DOF) array. Checks the column count
 /// and that every value is finite.
@@ -458,17 +478,24 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
         let mut rows = Vec::new();
         for (i, rec) in reader.records().enumerate() {
             let rec = rec.map_err(|e| bad(format!("line {}: {e}", i + 1)))?;
-            let parsed: std::result::Result<Vec<f64>, _> =
-                rec.iter().map(str::parse::<f64>).collect();
-            match parsed {
-                Ok(v) => rows.push(v),
-                // A header line is allowed as the first line only.
-                Err(_) if i == 0 => continue,
-                Err(_) => {
+            let line = rec.iter().collect::<Vec<_>>().join(",");
+            if rec.len() == 1 && [';', '\t', ' '].iter().any(|c| line.contains(*c)) {
+                return Err(bad(format!(
+                    "line {}: \"{line}\" is one field; separate the joints with commas",
+                    i + 1
+                )));
+            }
+            let parsed: Vec<Option<f64>> = rec.iter().map(|f| f.parse::<f64>().ok()).collect();
+            // A header is a first line of names only: a line with one bad number is a typo.
+            if i == 0 && parsed.iter().all(Option::is_none) {
+                continue;
+            }
+            match parsed.into_iter().collect::<Option<Vec<f64>>>() {
+                Some(v) => rows.push(v),
+                None => {
                     return Err(bad(format!(
-                        "line {}: not a list of numbers: \"{}\"",
-                        i + 1,
-                        rec.iter().collect::<Vec<_>>().join(",")
+                        "line {}: not a list of numbers: \"{line}\"",
+                        i + 1
                     )));
                 }
             }
@@ -488,6 +515,12 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
         }
         if r.iter().any(|v| !v.is_finite()) {
             return Err(bad(format!("row {} has a NaN or infinite angle", i + 1)));
+        }
+        if let Some(v) = r.iter().find(|v| v.abs() > MAX_JOINT_VALUE) {
+            return Err(bad(format!(
+                "row {}: {v} is outside +-{MAX_JOINT_VALUE} (degrees for a rotational joint: one turn either way)",
+                i + 1
+            )));
         }
     }
     Ok(rows)

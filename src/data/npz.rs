@@ -159,6 +159,22 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
         };
         let npy = npyz::NpyFile::new(&bytes[..]).map_err(bad)?;
         let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
+        // A damaged or forged header can claim more elements than the member holds (or than
+        // the count can hold): every element takes at least a byte.
+        let fits = npy
+            .shape()
+            .iter()
+            .try_fold(1u64, |n, &d| n.checked_mul(d))
+            .is_some_and(|n| n <= bytes.len() as u64);
+        if !fits {
+            return Err(Error::data(
+                path,
+                format!(
+                    "\"{key}\": its header claims shape {:?}, more elements than the file holds",
+                    npy.shape()
+                ),
+            ));
+        }
         if npy.order() != npyz::Order::C {
             return Err(Error::data(
                 path,

@@ -178,8 +178,8 @@ pub fn train_gan(
     if let Some(c) = &checkpoint
         && let Some(state) = c.load()
     {
-        let bad = |path: std::path::PathBuf, e: &dyn std::fmt::Debug| {
-            crate::Error::data(path, format!("cannot load checkpoint: {e:?}"))
+        let bad = |path: std::path::PathBuf, e: &dyn std::fmt::Display| {
+            crate::train::trainer::unreadable_checkpoint(&path, &c.dir, e)
         };
         let load = |m: Mlp, file: &str| {
             m.try_load_file(c.path(file))

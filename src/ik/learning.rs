@@ -733,12 +733,12 @@ fn emssl_run(
     if let Some((c, state)) = resumed {
         let load = |m: Mlp, file: &str| {
             m.try_load_file(c.path(file))
-                .map_err(|e| crate::Error::data(c.path(file), format!("cannot load: {e:?}")))
+                .map_err(|e| crate::train::trainer::unreadable_checkpoint(&c.path(file), &c.dir, e))
         };
         model = load(model.clone(), "model.bpk")?;
-        optim = optim
-            .load(c.path("optimizer.bpk"))
-            .map_err(|e| crate::Error::data(c.path("optimizer.bpk"), format!("{e:?}")))?;
+        optim = optim.load(c.path("optimizer.bpk")).map_err(|e| {
+            crate::train::trainer::unreadable_checkpoint(&c.path("optimizer.bpk"), &c.dir, e)
+        })?;
         if c.path("best.bpk").exists() {
             let b = load(model.clone(), "best.bpk")?;
             best = Some(b.valid());

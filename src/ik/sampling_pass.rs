@@ -53,14 +53,25 @@ impl Latency {
     }
 }
 
+/// The longest per-call latency a measurement takes (10 ms: a paper-preset pass then lasts
+/// about 12 minutes on one thread).
+pub const MAX_LATENCY_US: u64 = 10_000;
+
 impl std::str::FromStr for Latency {
     type Err = String;
 
     /// `none`, `sleep:US` or `spin:US` (microseconds per call).
     fn from_str(s: &str) -> std::result::Result<Self, String> {
         let us = |v: &str| {
-            v.parse::<u64>()
-                .map_err(|_| format!("\"{s}\": the microseconds must be a whole number"))
+            let us = v
+                .parse::<u64>()
+                .map_err(|_| format!("\"{s}\": the microseconds must be a whole number"))?;
+            if us > MAX_LATENCY_US {
+                return Err(format!(
+                    "\"{s}\": at most {MAX_LATENCY_US} us a call (a pass calls the forward model once per target, 70,000 times on the paper preset)"
+                ));
+            }
+            Ok(us)
         };
         match s.split_once(':') {
             None if s == "none" => Ok(Latency::None),

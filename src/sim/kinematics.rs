@@ -117,6 +117,11 @@ impl KinematicChain {
             }
         }
         let roots: Vec<usize> = (0..n).filter(|&l| parent_joint[l].is_none()).collect();
+        if roots.is_empty() {
+            return Err(Error::Config(
+                "the links must form one tree, but every link is some joint's child: the joints form a cycle".into(),
+            ));
+        }
         if roots.len() != 1 {
             return Err(Error::Config(format!(
                 "the links must form one tree, found {} roots: {}",

@@ -62,6 +62,11 @@ pub fn step_flop(field: &OccupancyField, points: usize) -> f64 {
 /// Time both paths on both architectures: for each path one warm-up step, then `repeats`
 /// steps back to back (the same steps, seeds 1..=repeats, for both paths).
 pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<Vec<StepBenchRow>> {
+    if repeats == 0 {
+        return Err(crate::Error::Config(
+            "--repeats 0: a median needs at least one timed step (give 1 or more)".into(),
+        ));
+    }
     let preset = if quick { "quick" } else { "paper" };
     let device = crate::core::device::select(device_choice)?;
     let tdev = autodiff_device(&device, 0);
@@ -117,7 +122,7 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
         // (alternating the paths made its median 35% slower, measured).
         let timed = |step: &dyn Fn(u64) -> (f64, f64)| {
             step(0);
-            let runs: Vec<(f64, f64)> = (0..repeats.max(1)).map(|k| step(1 + k as u64)).collect();
+            let runs: Vec<(f64, f64)> = (0..repeats).map(|k| step(1 + k as u64)).collect();
             let loss = runs.last().map_or(f64::NAN, |r| r.1);
             (runs.into_iter().map(|r| r.0).collect::<Vec<f64>>(), loss)
         };

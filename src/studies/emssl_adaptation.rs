@@ -291,7 +291,12 @@ fn load(model_cfg: &InverseModelConfig, file: &Path, device: &Device, seed: u64)
     model_cfg
         .init(device, seed)?
         .try_load_file(file)
-        .map_err(|e| Error::data(file, format!("cannot load the base model: {e:?}")))
+        .map_err(|e| {
+            Error::data(
+                file,
+                format!("the cached base model cannot be read ({e}); delete it and the command trains it again"),
+            )
+        })
 }
 
 fn file_name(name: &str) -> String {

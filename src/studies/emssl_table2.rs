@@ -732,7 +732,12 @@ pub fn run_range(
         let starts = read_predictions(&r.predictions_path(&start_row.method))?;
         let flow = FlowIk::new(&flow_cfg, dof, &r.device, flow_cfg.fit.seed)?
             .try_load_file(&flow_file)
-            .map_err(|e| Error::data(&flow_file, format!("cannot load the flow: {e:?}")))?;
+            .map_err(|e| {
+                Error::data(
+                    &flow_file,
+                    format!("the trained flow cannot be read ({e}); delete it and run again with --resume (the flow's unit then trains it again)"),
+                )
+            })?;
         let targets = r.targets();
         let mut out: Vec<IkSolution> = Vec::new();
         let mut restarted = 0;

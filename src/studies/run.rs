@@ -68,7 +68,14 @@ impl RunOptions {
     /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports.
     pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
         let spec = self.robot_spec(BuiltinRobot::Ur5);
-        Ok((spec.load()?, spec.label()))
+        let robot = spec.load()?;
+        if robot.dof() == 0 {
+            return Err(crate::Error::Config(format!(
+                "{}: this robot has no movable joints (all are fixed); inverse kinematics needs at least one",
+                spec.label()
+            )));
+        }
+        Ok((robot, spec.label()))
     }
 
     /// Apply the switches to a self-model run.

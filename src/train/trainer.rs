@@ -121,13 +121,25 @@ struct CheckpointState {
     hooks: serde_json::Value,
 }
 
+/// A saved model or optimiser file that cannot be read back: what failed, and that deleting
+/// the checkpoint's folder `dir` (or running without `--resume`) starts afresh.
+pub fn unreadable_checkpoint(file: &Path, dir: &Path, e: impl std::fmt::Display) -> Error {
+    Error::data(
+        file,
+        format!(
+            "this checkpoint cannot be read ({e}); delete {} to start afresh, or run without --resume",
+            dir.display()
+        ),
+    )
+}
+
 /// Write a burnpack file to a temporary name, then rename it into place.
 pub(crate) fn save_renamed(
     path: &Path,
     write: impl FnOnce(&Path) -> std::result::Result<(), burn::store::RecordError>,
 ) -> Result<()> {
     let tmp = path.with_extension("bpk.tmp");
-    write(&tmp).map_err(|e| Error::data(path, format!("cannot write checkpoint: {e:?}")))?;
+    write(&tmp).map_err(|e| Error::data(path, format!("cannot write checkpoint: {e}")))?;
     std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
 }
 
@@ -186,20 +198,20 @@ impl CheckpointPlan {
         }
         let path = self.state_path();
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let state: CheckpointState = serde_json::from_str(&text)
-            .map_err(|e| Error::data(&path, format!("bad checkpoint state: {e}")))?;
+        let state: CheckpointState =
+            serde_json::from_str(&text).map_err(|e| unreadable_checkpoint(&path, &self.dir, e))?;
         if state.fingerprint != self.fingerprint {
             return Err(Error::Config(format!(
                 "the checkpoint in {} was made with a different configuration; drop --resume or delete that folder",
                 self.dir.display()
             )));
         }
-        let model = model.try_load_file(self.model_path()).map_err(|e| {
-            Error::data(self.model_path(), format!("cannot load checkpoint: {e:?}"))
-        })?;
-        let optim = optim.load(self.optim_path()).map_err(|e| {
-            Error::data(self.optim_path(), format!("cannot load checkpoint: {e:?}"))
-        })?;
+        let model = model
+            .try_load_file(self.model_path())
+            .map_err(|e| unreadable_checkpoint(&self.model_path(), &self.dir, e))?;
+        let optim = optim
+            .load(self.optim_path())
+            .map_err(|e| unreadable_checkpoint(&self.optim_path(), &self.dir, e))?;
         eprintln!(
             "{label}: continuing from step {} (checkpoint in {})",
             state.log.step,
@@ -729,13 +741,13 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
     }
     fn load_state(&mut self, dir: &Path, state: serde_json::Value, model: &M) -> Result<()> {
         let state: ConvergingState = serde_json::from_value(state)
-            .map_err(|e| Error::data(dir, format!("bad checkpoint state: {e}")))?;
+            .map_err(|e| unreadable_checkpoint(&dir.join("state.json"), dir, e))?;
         if state.log.best_epoch > 0 {
             let path = Self::best_path(dir, state.log.best_epoch);
             let best = model
                 .clone()
                 .try_load_file(&path)
-                .map_err(|e| Error::data(&path, format!("cannot load checkpoint: {e:?}")))?;
+                .map_err(|e| unreadable_checkpoint(&path, dir, e))?;
             self.best = Some(best);
             self.saved_best = Some(state.log.best_epoch);
         }
