@@ -216,6 +216,18 @@ impl ExperimentArgs {
             arm4_scene: self.arm4_scene,
             latencies: self.latency.clone(),
         };
+        // Everything that can be checked is checked before the run writes its first file: the
+        // device is compiled in, and a robot given by URDF loads and has a joint to move.
+        crate::core::device::select(opts.device)?;
+        if opts.urdf.is_some() {
+            let spec = opts.robot_spec(crate::sim::robots::BuiltinRobot::Arm4);
+            if spec.load()?.dof() == 0 {
+                return Err(crate::Error::Config(format!(
+                    "{}: this robot has no movable joints (all are fixed); a self-model or an inverse model needs at least one",
+                    spec.label()
+                )));
+            }
+        }
         let dir = self.out.clone().unwrap_or_else(|| e.dir_for(&opts.preset));
         let start = std::time::Instant::now();
         let summary = (e.run)(&opts, &dir)?;
