@@ -326,6 +326,21 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["the joints form a cycle"],
         &out,
     );
+    // Checked before the first file is written: no config.json left behind.
+    let neurokin = env!("CARGO_BIN_EXE_neurokin");
+    fails_cleanly(
+        neurokin,
+        &["--preset", "quick", "--urdf", &fixed, "--out", o],
+        &["no movable joints"],
+        &out,
+    );
+    #[cfg(not(feature = "wgpu"))]
+    fails_cleanly(
+        neurokin,
+        &["--preset", "quick", "--device", "wgpu", "--out", o],
+        &["not compiled in", "--features wgpu"],
+        &out,
+    );
 }
 
 /// A damaged checkpoint is reported in one line that says what to do.
