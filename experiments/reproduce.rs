@@ -55,7 +55,7 @@ fn main() -> ExitCode {
             let mut opts = selfmodel::studies::registry::RunOptions::preset(&args.preset);
             // table1 gathers the rows the decoders' own experiments just wrote.
             opts.reuse_root = Some(root.clone());
-            let summary = (e.run)(&opts, &root.join(e.default_dir))?;
+            let summary = e.run_in(&opts, &root.join(e.default_dir))?;
             println!(
                 "{:<16} {:>7.1} s  {summary}",
                 e.name,

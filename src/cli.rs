@@ -230,7 +230,7 @@ impl ExperimentArgs {
         }
         let dir = self.out.clone().unwrap_or_else(|| e.dir_for(&opts.preset));
         let start = std::time::Instant::now();
-        let summary = (e.run)(&opts, &dir)?;
+        let summary = e.run_in(&opts, &dir)?;
         let cpu = crate::eval::compute_peak::CpuPeak::detect().map_or_else(
             || "an unknown CPU".into(),
             |c| format!("{} cores of {}", c.cores, c.model),

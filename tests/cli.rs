@@ -376,3 +376,42 @@ fn a_damaged_checkpoint_says_what_to_do() {
     );
     assert!(!last.contains("Io(\""), "debug text in: {last}");
 }
+
+/// One run per output folder: a folder locked by a live process is refused with its id (the
+/// lock stays); a lock left by a dead process is taken over.
+#[test]
+fn an_output_folder_in_use_is_refused_and_a_stale_lock_is_taken_over() {
+    let dir = common::tempdir();
+    let out = dir.path().join("nk");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut holder = Command::new("sleep").arg("30").spawn().unwrap();
+    std::fs::write(out.join(".lock"), holder.id().to_string()).unwrap();
+    let run = || {
+        Command::new(env!("CARGO_BIN_EXE_neurokin"))
+            .args([
+                "--preset",
+                "quick",
+                "--steps",
+                "20",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    let o = run();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains(&format!("in use by process {}", holder.id())),
+        "{err}"
+    );
+    assert!(!out.join("results.csv").exists());
+    assert!(out.join(".lock").exists(), "the holder's lock was removed");
+    holder.kill().unwrap();
+    holder.wait().unwrap();
+    let o = run();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("results.csv").exists());
+    assert!(!out.join(".lock").exists(), "the lock outlived the run");
+}

@@ -273,6 +273,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: &["paper", "quick"],
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_dataset,
     },
     Experiment {
@@ -282,6 +283,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: &["paper", "quick"],
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_mesh_fidelity,
     },
     Experiment::self_model(
@@ -297,6 +299,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: false,
         run: run_neurokin64,
     },
     Experiment::self_model(
@@ -324,6 +327,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: true,
         takes_robot: false,
+        shares_output: false,
         run: run_ffksm,
     },
     Experiment {
@@ -333,6 +337,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: true,
         takes_robot: false,
+        shares_output: false,
         run: run_k3dgs,
     },
     Experiment {
@@ -342,6 +347,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_ablation_noise,
     },
     Experiment {
@@ -351,6 +357,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_ablation_depth,
     },
     Experiment {
@@ -360,6 +367,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_ablation_latent,
     },
     Experiment {
@@ -369,6 +377,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_ablation_data_scale,
     },
     Experiment {
@@ -378,6 +387,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: TABLE2_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: true,
         run: run_emssl_table2,
     },
     Experiment {
@@ -387,6 +397,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: IK_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: false,
         run: run_emssl_learning_curve,
     },
     Experiment {
@@ -396,6 +407,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: IK_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: false,
         run: run_emssl_study,
     },
     Experiment {
@@ -405,6 +417,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: IK_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: false,
         run: run_emssl_sampling_speed,
     },
     Experiment {
@@ -414,6 +427,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: IK_PRESETS,
         in_table1: false,
         takes_robot: true,
+        shares_output: false,
         run: run_emssl_adaptation,
     },
     Experiment {
@@ -423,6 +437,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
         takes_robot: false,
+        shares_output: false,
         run: run_table1,
     },
 ];

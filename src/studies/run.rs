@@ -115,6 +115,9 @@ pub struct Experiment {
     pub in_table1: bool,
     /// Whether it accepts `--robot` / `--urdf` (the inverse-kinematics experiments).
     pub takes_robot: bool,
+    /// Whether several processes may run it into one folder at once (each takes its own
+    /// units: `emssl_table2`); every other experiment locks its folder for the run.
+    pub shares_output: bool,
     /// Run into a folder; returns a one-line summary.
     pub run: fn(opts: &RunOptions, dir: &Path) -> Result<String>,
 }
@@ -127,6 +130,34 @@ pub fn write_rows(dir: &Path, rows: &[ModelResult], title: &str, note: &str) -> 
 }
 
 impl Experiment {
+    /// Run into `dir`, holding its lock (`dir/.lock`, the holder's process id) unless the
+    /// experiment shares its folder: a second run into the same folder is refused with the
+    /// holder's id; a lock left by a dead process is taken over. A folder the run created and
+    /// left empty (it failed before writing) is removed.
+    pub fn run_in(&self, opts: &RunOptions, dir: &Path) -> Result<String> {
+        let existed = dir.exists();
+        let lock = if self.shares_output {
+            None
+        } else {
+            match crate::core::atomic_file::Claim::take(&dir.join(".lock"))? {
+                crate::core::atomic_file::Claimed::Mine(c) => Some(c),
+                crate::core::atomic_file::Claimed::Other(pid) => {
+                    return Err(crate::Error::Config(format!(
+                        "{} is in use by process {pid}, another {} run writing there; wait for it to finish or choose another --out",
+                        dir.display(),
+                        self.name
+                    )));
+                }
+            }
+        };
+        let result = (self.run)(opts, dir);
+        drop(lock);
+        if !existed && std::fs::read_dir(dir).is_ok_and(|mut d| d.next().is_none()) {
+            let _ = std::fs::remove_dir(dir);
+        }
+        result
+    }
+
     /// Where a run on `preset` writes by default: `default_dir` for the paper preset,
     /// `default_dir_<preset>` for any other, so a short or quick run never overwrites the
     /// paper run's reports.
@@ -152,6 +183,7 @@ impl Experiment {
             presets: SELF_MODEL_PRESETS,
             in_table1: true,
             takes_robot: true,
+            shares_output: false,
             run,
         }
     }
