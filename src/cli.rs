@@ -13,8 +13,13 @@ use crate::sim::urdf_loader::{load_urdf, pose_from_xyz_rpy};
 
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
+    crate::core::interrupt::install();
     match body() {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e @ crate::Error::Interrupted(_)) => {
+            eprintln!("interrupted: {e}");
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE

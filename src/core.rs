@@ -5,6 +5,7 @@
 pub mod atomic_file;
 pub mod device;
 pub mod error;
+pub mod interrupt;
 pub mod preset;
 pub mod progress;
 pub mod provenance;

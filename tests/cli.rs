@@ -415,3 +415,52 @@ fn an_output_folder_in_use_is_refused_and_a_stale_lock_is_taken_over() {
     assert!(out.join("results.csv").exists());
     assert!(!out.join(".lock").exists(), "the lock outlived the run");
 }
+
+/// Ctrl-C ends a training run after its current step with a checkpoint saved, a line that
+/// says how to continue, and exit code 130; `--resume` continues from that step.
+#[test]
+fn ctrl_c_saves_a_checkpoint_and_exits_130() {
+    let dir = common::tempdir();
+    let out = dir.path().join("nk");
+    let args = [
+        "--preset",
+        "quick",
+        "--steps",
+        "100000",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let child = Command::new(env!("CARGO_BIN_EXE_neurokin"))
+        .args(args)
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until it trains (its config is written before the first step).
+    let started = std::time::Instant::now();
+    while !out.join("config.json").exists() && started.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    let last = err.lines().last().unwrap();
+    assert!(
+        last.starts_with("interrupted: NeuroKin stopped after step") && last.contains("--resume"),
+        "{last}"
+    );
+    let state = std::fs::read_to_string(out.join("checkpoint").join("state.json")).unwrap();
+    let step: usize = serde_json::from_str::<serde_json::Value>(&state).unwrap()["log"]["step"]
+        .as_u64()
+        .unwrap() as usize;
+    assert!(
+        last.contains(&format!("after step {step};")),
+        "{last} / saved step {step}"
+    );
+}

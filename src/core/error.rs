@@ -40,6 +40,9 @@ pub enum Error {
     /// the caller may restart with a fresh model.
     #[error("training collapsed to an all-black image at step {step}")]
     Collapsed { step: usize },
+    /// Stopped by Ctrl-C: what was saved and how to continue.
+    #[error("{0}")]
+    Interrupted(String),
 }
 
 /// The library's result type.

@@ -692,6 +692,9 @@ struct ConvergingState {
     log: ConvergenceLog,
     stop: bool,
     seconds: f64,
+    /// The epoch's training losses so far (a checkpoint taken mid-epoch, on Ctrl-C).
+    #[serde(default)]
+    losses: (f64, usize),
 }
 
 impl<M, V> Converging<M, V> {
@@ -736,6 +739,7 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
             log: self.log.clone(),
             stop: self.stop,
             seconds: self.seconds(),
+            losses: self.losses,
         })
         .map_err(|e| Error::Config(format!("{}: checkpoint state: {e}", self.label)))
     }
@@ -757,6 +761,7 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         self.log = state.log;
         self.stop = state.stop;
         self.earlier_seconds = state.seconds;
+        self.losses = state.losses;
         self.started = Instant::now();
         Ok(())
     }
@@ -993,11 +998,27 @@ where
                 return Err(e);
             }
         }
+        let interrupted = crate::core::interrupt::requested();
         if let Some(plan) = checkpoint
-            && cfg.checkpoint_every > 0
-            && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps)
+            && (interrupted
+                || cfg.checkpoint_every > 0
+                    && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps))
         {
             plan.save(&model, &optim, &log, hooks)?;
+        }
+        if interrupted {
+            bar.abandon();
+            return Err(Error::Interrupted(match checkpoint {
+                Some(plan) => format!(
+                    "{label} stopped after step {}; its checkpoint is in {}: run the same command with --resume to continue",
+                    log.step,
+                    plan.dir.display()
+                ),
+                None => format!(
+                    "{label} stopped after step {}; this run keeps no checkpoint, so it starts afresh when run again",
+                    log.step
+                ),
+            }));
         }
     }
     if log.step < cfg.steps {
