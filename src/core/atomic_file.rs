@@ -125,3 +125,14 @@ fn process_runs(pid: u32) -> bool {
     let proc = Path::new("/proc");
     !proc.exists() || proc.join(pid.to_string()).exists()
 }
+
+/// A label as a file name: lower case, runs of anything but ASCII letters and digits as one
+/// `_` ("EMSSL + DLS" -> "emssl_dls").
+pub fn file_name(label: &str) -> String {
+    label
+        .to_lowercase()
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .collect::<Vec<_>>()
+        .join("_")
+}

@@ -86,7 +86,7 @@ impl FitConfig {
     /// Where the network `label` keeps its checkpoint, if this fit keeps any.
     pub fn checkpoint_for(&self, label: &str) -> Option<FitCheckpoint> {
         self.checkpoint.as_ref().map(|c| FitCheckpoint {
-            dir: c.dir.join(crate::ik::method::file_name(label)),
+            dir: c.dir.join(crate::core::atomic_file::file_name(label)),
             settings: c.settings.clone(),
         })
     }

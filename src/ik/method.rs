@@ -69,14 +69,7 @@ impl IkTask<'_> {
 }
 
 /// A method's file name: "EMSSL + DLS" -> "emssl_dls".
-pub fn file_name(method: &str) -> String {
-    method
-        .to_lowercase()
-        .split(|c: char| !c.is_ascii_alphanumeric())
-        .filter(|w| !w.is_empty())
-        .collect::<Vec<_>>()
-        .join("_")
-}
+pub use crate::core::atomic_file::file_name;
 
 /// A method's answers for the test targets: one row of Table II.
 pub struct Answers {
