@@ -194,7 +194,7 @@ impl PaperReference {
 /// Training steps of the `short` preset (the main command's few minutes).
 const SHORT_STEPS: usize = 300;
 /// Pixels per training step of the `short` preset (of 10,000).
-const SHORT_RAYS: usize = 2000;
+const SHORT_RAYS: usize = 1500;
 /// Test images the `short` preset scores (the accelerated marcher: ~0.1 s an image).
 const SHORT_TEST_IMAGES: usize = 20;
 
