@@ -101,10 +101,6 @@ impl GanCheckpoint {
         self.dir.join(file)
     }
 
-    fn best(&self, epoch: usize) -> std::path::PathBuf {
-        self.path(&format!("best-{epoch}.bpk"))
-    }
-
     /// The saved state if it was made with the same settings; otherwise the folder is
     /// cleared.
     fn load(&self) -> Option<GanState> {
@@ -167,9 +163,7 @@ pub fn train_gan(
     let mut earlier_seconds = 0.0;
     let mut first_epoch = 0;
     let mut stopped = false;
-    // The best generator's epoch the checkpoint on disk names, and files no longer named.
-    let mut saved_best: Option<usize> = None;
-    let mut stale: Vec<usize> = Vec::new();
+    let mut best_file = crate::train::trainer::BestFile::default();
     let checkpoint = cfg
         .fit
         .checkpoint
@@ -193,17 +187,8 @@ pub fn train_gan(
         d_optim = d_optim
             .load(c.path("discriminator_optimizer.bpk"))
             .map_err(|e| bad(c.path("discriminator_optimizer.bpk"), &e))?;
-        if let Some(l) = state.log.as_ref().filter(|l| l.best_epoch > 0) {
-            let path = c.best(l.best_epoch);
-            best = Some(
-                generator
-                    .valid()
-                    .try_load_file(&path)
-                    .map_err(|e| bad(path.clone(), &e))?,
-            );
-            saved_best = Some(l.best_epoch);
-        }
-        crate::train::trainer::remove_best_files_but(&c.dir, saved_best);
+        let best_epoch = state.log.as_ref().map_or(0, |l| l.best_epoch);
+        best = best_file.load(&c.dir, best_epoch, generator.valid())?;
         eprintln!(
             "CGAN: continuing from epoch {} (checkpoint in {})",
             state.epochs,
@@ -291,15 +276,7 @@ pub fn train_gan(
         stopped = stop;
         if let Some(c) = &checkpoint {
             std::fs::create_dir_all(&c.dir).map_err(|e| crate::Error::io(&c.dir, e))?;
-            for old in stale.drain(..) {
-                let _ = std::fs::remove_file(c.best(old));
-            }
-            if let Some(b) = &best
-                && saved_best != Some(log.best_epoch)
-            {
-                save_renamed(&c.best(log.best_epoch), |t| b.clone().save_file(t))?;
-                stale.extend(saved_best.replace(log.best_epoch));
-            }
+            best_file.save(&c.dir, log.best_epoch, best.as_ref())?;
             save_renamed(&c.path("generator.bpk"), |t| generator.clone().save_file(t))?;
             save_renamed(&c.path("discriminator.bpk"), |t| {
                 discriminator.clone().save_file(t)

@@ -668,20 +668,61 @@ struct Converging<M, V> {
     started: Instant,
     /// Seconds trained before a resume.
     earlier_seconds: f64,
-    /// The best epoch whose weights the checkpoint on disk points to (`best-<epoch>.bpk`).
-    saved_best: Option<usize>,
-    /// Best files no checkpoint names any more after the next save.
+    best_file: BestFile,
+}
+
+/// The best epoch's weights beside a checkpoint: `best-<epoch>.bpk`, written once per new
+/// best. The file the checkpoint on disk names stays until a newer state names another, so a
+/// crash between the two writes never leaves a state without its best weights.
+#[derive(Default)]
+pub struct BestFile {
+    /// The epoch of the file the latest state names.
+    saved: Option<usize>,
+    /// Files no state names once the next state is written.
     stale: Vec<usize>,
 }
 
-/// Delete the `best-<epoch>.bpk` files in `dir` but `keep`'s.
-pub fn remove_best_files_but(dir: &Path, keep: Option<usize>) {
-    let keep = keep.map(|e| format!("best-{e}.bpk"));
-    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if name.starts_with("best-") && name.ends_with(".bpk") && Some(&name) != keep.as_ref() {
-            let _ = std::fs::remove_file(entry.path());
+impl BestFile {
+    fn path(dir: &Path, epoch: usize) -> PathBuf {
+        dir.join(format!("best-{epoch}.bpk"))
+    }
+
+    /// Before writing a state that names `epoch`: remove the files no state names any more,
+    /// and write `best` if its epoch is new.
+    pub fn save<M: Module>(&mut self, dir: &Path, epoch: usize, best: Option<&M>) -> Result<()> {
+        for old in self.stale.drain(..) {
+            let _ = std::fs::remove_file(Self::path(dir, old));
         }
+        if let Some(best) = best
+            && self.saved != Some(epoch)
+        {
+            save_renamed(&Self::path(dir, epoch), |tmp| best.clone().save_file(tmp))?;
+            self.stale.extend(self.saved.replace(epoch));
+        }
+        Ok(())
+    }
+
+    /// After reading a state that names `epoch` (0: no best yet): the best weights, loaded
+    /// into `template`; files of a run killed before it removed them are deleted.
+    pub fn load<M: Module>(&mut self, dir: &Path, epoch: usize, template: M) -> Result<Option<M>> {
+        let best = if epoch > 0 {
+            let path = Self::path(dir, epoch);
+            let m = template
+                .try_load_file(&path)
+                .map_err(|e| unreadable_checkpoint(&path, dir, e))?;
+            self.saved = Some(epoch);
+            Some(m)
+        } else {
+            None
+        };
+        let keep = self.saved.map(|e| format!("best-{e}.bpk"));
+        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if name.starts_with("best-") && name.ends_with(".bpk") && Some(&name) != keep.as_ref() {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+        Ok(best)
     }
 }
 
@@ -701,10 +742,6 @@ impl<M, V> Converging<M, V> {
     fn seconds(&self) -> f64 {
         self.earlier_seconds + self.started.elapsed().as_secs_f64()
     }
-
-    fn best_path(dir: &Path, epoch: usize) -> PathBuf {
-        dir.join(format!("best-{epoch}.bpk"))
-    }
 }
 
 impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
@@ -719,21 +756,8 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         self.stop
     }
     fn save_state(&mut self, dir: &Path) -> Result<serde_json::Value> {
-        // The best weights go to a file named by their epoch, written once; the file the
-        // checkpoint on disk points to stays until the new state replaces it.
-        for old in self.stale.drain(..) {
-            let _ = std::fs::remove_file(Self::best_path(dir, old));
-        }
-        let epoch = self.log.best_epoch;
-        if let Some(best) = &self.best
-            && self.saved_best != Some(epoch)
-        {
-            save_renamed(&Self::best_path(dir, epoch), |tmp| {
-                best.clone().save_file(tmp)
-            })?;
-            // The file the state on disk names goes at the next save, once it names this one.
-            self.stale.extend(self.saved_best.replace(epoch));
-        }
+        self.best_file
+            .save(dir, self.log.best_epoch, self.best.as_ref())?;
         serde_json::to_value(ConvergingState {
             rule: self.rule.clone(),
             log: self.log.clone(),
@@ -746,17 +770,9 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
     fn load_state(&mut self, dir: &Path, state: serde_json::Value, model: &M) -> Result<()> {
         let state: ConvergingState = serde_json::from_value(state)
             .map_err(|e| unreadable_checkpoint(&dir.join("state.json"), dir, e))?;
-        if state.log.best_epoch > 0 {
-            let path = Self::best_path(dir, state.log.best_epoch);
-            let best = model
-                .clone()
-                .try_load_file(&path)
-                .map_err(|e| unreadable_checkpoint(&path, dir, e))?;
-            self.best = Some(best);
-            self.saved_best = Some(state.log.best_epoch);
-        }
-        // Best files of a run killed before it removed them.
-        remove_best_files_but(dir, self.saved_best);
+        self.best = self
+            .best_file
+            .load(dir, state.log.best_epoch, model.clone())?;
         self.rule = state.rule;
         self.log = state.log;
         self.stop = state.stop;
@@ -881,8 +897,7 @@ where
         base_rate: cfg.learning_rate,
         started: Instant::now(),
         earlier_seconds: 0.0,
-        saved_best: None,
-        stale: Vec::new(),
+        best_file: BestFile::default(),
     };
     let (model, _, _) = Trainer::new(&cfg, label)
         .optimizer(optim)
