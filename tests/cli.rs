@@ -227,6 +227,13 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["row 1", "outside +-360"],
         &npz_out,
     );
+    let huger = write("huger.csv", "1,2,3,1e308\n");
+    fails_cleanly(
+        bin("dataset"),
+        &["--angles", &huger, "--out", n],
+        &["row 1: 1e308 is outside +-360"],
+        &npz_out,
+    );
     // A header claiming 2^62 rows.
     let forged = d.join("forged.npz");
     {
@@ -343,9 +350,10 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     );
 }
 
-/// A damaged checkpoint is reported in one line that says what to do.
+/// A finished run resumed scores bit for bit as before; a damaged checkpoint is reported in
+/// one line that says what to do.
 #[test]
-fn a_damaged_checkpoint_says_what_to_do() {
+fn a_resumed_checkpoint_scores_the_same_and_a_damaged_one_says_what_to_do() {
     let dir = common::tempdir();
     let out = dir.path().join("nk");
     let o = out.to_str().unwrap();
@@ -360,6 +368,22 @@ fn a_damaged_checkpoint_says_what_to_do() {
             .unwrap()
     };
     assert!(run(false).status.success());
+    // An untouched finished run, resumed, scores exactly as it did (BatchNorm included).
+    let scores = || {
+        let text = std::fs::read_to_string(out.join("results.csv")).unwrap();
+        let (head, row) = text.split_once('\n').unwrap();
+        let col = |name: &str| head.split(',').position(|c| c == name).unwrap();
+        let cells: Vec<String> = row.split(',').map(String::from).collect();
+        [
+            cells[col("psnr_db_test")].clone(),
+            cells[col("iou_test")].clone(),
+        ]
+    };
+    let before = scores();
+    let again = run(true);
+    assert!(again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("continuing from step 40"));
+    assert_eq!(scores(), before, "the reloaded model scores differently");
     let model = out.join("checkpoint").join("model.bpk");
     let bytes = std::fs::read(&model).unwrap();
     std::fs::write(&model, &bytes[..100]).unwrap();
@@ -463,4 +487,30 @@ fn ctrl_c_saves_a_checkpoint_and_exits_130() {
         last.contains(&format!("after step {step};")),
         "{last} / saved step {step}"
     );
+}
+
+/// `--resume` says what it does where there is nothing to resume: no checkpoint yet, or a
+/// model that keeps none (K-3DGS).
+#[test]
+fn resume_without_a_checkpoint_says_so() {
+    let dir = common::tempdir();
+    for (bin, said) in [
+        (env!("CARGO_BIN_EXE_neurokin"), "no checkpoint in"),
+        (env!("CARGO_BIN_EXE_k3dgs"), "K-3DGS keeps no checkpoint"),
+    ] {
+        let out = dir.path().join(said.replace(' ', "_"));
+        let o = Command::new(bin)
+            .args(["--preset", "quick", "--steps", "4", "--resume"])
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(
+            err.lines()
+                .any(|l| l.contains(said) && l.contains("starts from step 0")),
+            "{bin}: {err}"
+        );
+    }
 }

@@ -247,3 +247,26 @@ fn a_failed_write_leaves_no_file() {
         selfmodel::core::atomic_file::write_atomic(&target, |_| Err(Error::Config("no".into())));
     assert_eq!(std::fs::read(&target).unwrap(), b"old");
 }
+
+/// A run killed mid-write (SIGKILL) leaves its hidden temporary file; the next write of the
+/// same file removes it, but not the one of a process still writing.
+#[test]
+fn a_killed_writers_temporary_file_is_removed_by_the_next_write() {
+    let dir = common::tempdir();
+    let target = dir.path().join("d.npz");
+    let mut dead = std::process::Command::new("true").spawn().unwrap();
+    dead.wait().unwrap();
+    let mut live = std::process::Command::new("sleep")
+        .arg("30")
+        .spawn()
+        .unwrap();
+    let temp = |pid: u32| dir.path().join(format!(".d.npz.tmp-{pid}"));
+    std::fs::write(temp(dead.id()), b"half").unwrap();
+    std::fs::write(temp(live.id()), b"half").unwrap();
+    selfmodel::core::atomic_file::write_bytes(&target, b"whole").unwrap();
+    assert!(!temp(dead.id()).exists(), "the dead writer's file was kept");
+    assert!(temp(live.id()).exists(), "a live writer's file was removed");
+    assert_eq!(std::fs::read(&target).unwrap(), b"whole");
+    live.kill().unwrap();
+    live.wait().unwrap();
+}

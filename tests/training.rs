@@ -94,6 +94,9 @@ fn resuming_reproduces_an_uninterrupted_run() {
         train(fresh, &set, &resumed_cfg, Some(&plan(true)), "resume", loss).unwrap();
     assert_eq!(log.resumed_from, Some(10));
     assert_eq!(log.step, 20);
+    // The losses read back from state.json are the logged ones to the last bit.
+    assert!(!first.curve.is_empty());
+    assert_eq!(&log.curve[..first.curve.len()], &first.curve[..]);
     let (a, b) = (weights(&full), weights(&resumed));
     for (x, y) in a.iter().zip(&b) {
         assert!((x - y).abs() < 1e-6, "{a:?} vs {b:?}");
@@ -175,4 +178,64 @@ fn bce_from_logits_matches_bce_of_probabilities() {
     let z = Tensor::<2>::from_floats([[-200.0, 200.0]], &dev);
     let y = Tensor::<2>::from_floats([[1.0, 0.0]], &dev);
     assert!(bce_with_logits(z, y).into_scalar::<f32>().is_finite());
+}
+
+/// Every self-model with a checkpoint, reloaded from it after a finished run (`--resume` on a
+/// done run), renders bit for bit what the trained model rendered: BatchNorm's running
+/// statistics included (burn writes them one training step behind unless synchronised).
+#[test]
+fn every_self_model_reloaded_from_its_checkpoint_renders_bit_identically() {
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
+    use selfmodel::self_models::harness::{Fitted, SelfModel, SelfModelRun, fit_run};
+    use selfmodel::self_models::neurokin::{neurokin_run, neurokin64_run};
+    use selfmodel::self_models::resneurokin_d::resneurokin_d_run;
+
+    fn images(f: &Fitted) -> Vec<Vec<f32>> {
+        let q = f.test_set.inputs.clone().slice([0..4]);
+        let host = |t: Tensor<4>| t.into_data().try_into_vec::<f32>().unwrap();
+        f.trained
+            .renderers
+            .iter()
+            .flat_map(|(_, r)| {
+                let (s, d) = r.render(q.clone());
+                std::iter::once(host(s)).chain(d.map(host))
+            })
+            .collect()
+    }
+    fn reloads_exactly<M: SelfModel>(mut cfg: SelfModelRun<M>, steps: usize) {
+        cfg.train.steps = steps;
+        cfg.train.checkpoint_every = steps;
+        let dir = common::tempdir();
+        let fit = |resume| {
+            fit_run(&cfg, &dir.path().join("ckpt"), DeviceChoice::Cpu, resume)
+                .unwrap_or_else(|e| panic!("{}: {e}", cfg.name))
+        };
+        let trained = fit(false);
+        let reloaded = fit(true);
+        assert_eq!(
+            reloaded.trained.log.resumed_from,
+            Some(steps),
+            "{}",
+            cfg.name
+        );
+        let (a, b) = (images(&trained), images(&reloaded));
+        assert!(!a.is_empty());
+        for (x, y) in a.iter().zip(&b) {
+            let differing = x.iter().zip(y).filter(|(p, q)| p.to_bits() != q.to_bits());
+            assert_eq!(
+                differing.count(),
+                0,
+                "{}: the reloaded model renders other pixels",
+                cfg.name
+            );
+        }
+    }
+    reloads_exactly(neurokin_run("quick").unwrap(), 12);
+    reloads_exactly(neurokin64_run("quick").unwrap(), 6);
+    reloads_exactly(resneurokin_d_run("quick").unwrap(), 6);
+    reloads_exactly(
+        ffksm_run("quick", FfksmVariant::Reimplementation).unwrap(),
+        6,
+    );
 }

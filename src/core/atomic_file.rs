@@ -19,6 +19,32 @@ fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.tmp-{}", std::process::id()))
 }
 
+/// Remove the temporary files of `path` left by processes that no longer run (a run killed
+/// with SIGKILL mid-write cannot remove its own).
+fn remove_stale_temps(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else {
+        return;
+    };
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let prefix = format!(".{}.tmp-", name.to_string_lossy());
+    for entry in fs::read_dir(dir).into_iter().flatten().flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let pid = file
+            .strip_prefix(&prefix)
+            .and_then(|p| p.parse::<u32>().ok());
+        if let Some(pid) = pid
+            && pid != std::process::id()
+            && !process_runs(pid)
+        {
+            let _ = fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// Create `path` atomically: `fill` writes the content into a buffered writer on a temporary
 /// file, which is synced and renamed to `path` only if `fill` succeeds. Parent folders are
 /// created. On any error the temporary file is removed and `path` is untouched.
@@ -29,6 +55,7 @@ where
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     }
+    remove_stale_temps(path);
     let tmp = temp_path(path);
     let result = (|| {
         let file = fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;

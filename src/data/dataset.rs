@@ -517,6 +517,11 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
             return Err(bad(format!("row {} has a NaN or infinite angle", i + 1)));
         }
         if let Some(v) = r.iter().find(|v| v.abs() > MAX_JOINT_VALUE) {
+            let v = if v.abs() >= 1e6 {
+                format!("{v:e}")
+            } else {
+                v.to_string()
+            };
             return Err(bad(format!(
                 "row {}: {v} is outside +-{MAX_JOINT_VALUE} (degrees for a rotational joint: one turn either way)",
                 i + 1

@@ -31,7 +31,8 @@ use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
 use crate::train::losses::bce_with_logits;
 use crate::train::trainer::{
-    Batcher, ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint, autodiff_device, save_renamed,
+    Batcher, ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint, autodiff_device, save_module,
+    save_renamed,
 };
 
 /// The two networks and their training.
@@ -277,10 +278,8 @@ pub fn train_gan(
         if let Some(c) = &checkpoint {
             std::fs::create_dir_all(&c.dir).map_err(|e| crate::Error::io(&c.dir, e))?;
             best_file.save(&c.dir, log.best_epoch, best.as_ref())?;
-            save_renamed(&c.path("generator.bpk"), |t| generator.clone().save_file(t))?;
-            save_renamed(&c.path("discriminator.bpk"), |t| {
-                discriminator.clone().save_file(t)
-            })?;
+            save_module(&generator, &c.path("generator.bpk"))?;
+            save_module(&discriminator, &c.path("discriminator.bpk"))?;
             save_renamed(&c.path("generator_optimizer.bpk"), |t| g_optim.save(t))?;
             save_renamed(&c.path("discriminator_optimizer.bpk"), |t| d_optim.save(t))?;
             crate::core::atomic_file::write_json(

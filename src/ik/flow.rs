@@ -437,7 +437,7 @@ impl crate::ik::method::IkMethod for FlowMethod {
         if let Some(parent) = file.parent() {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
-        crate::train::trainer::save_renamed(&file, |tmp| trained.model.clone().save_file(tmp))?;
+        crate::train::trainer::save_module(&trained.model, &file)?;
         let seed = cfg.fit.seed ^ 0x5EED;
         let draw = |k: usize| {
             sample(

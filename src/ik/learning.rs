@@ -650,14 +650,10 @@ impl EmsslCheckpoint {
         state: &EmsslState,
     ) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| crate::Error::io(&self.dir, e))?;
-        crate::train::trainer::save_renamed(&self.path("model.bpk"), |t| {
-            model.clone().save_file(t)
-        })?;
+        crate::train::trainer::save_module(model, &self.path("model.bpk"))?;
         crate::train::trainer::save_renamed(&self.path("optimizer.bpk"), |t| optim.save(t))?;
         if let Some(b) = best {
-            crate::train::trainer::save_renamed(&self.path("best.bpk"), |t| {
-                b.clone().save_file(t)
-            })?;
+            crate::train::trainer::save_module(b, &self.path("best.bpk"))?;
         }
         crate::core::atomic_file::write_json(&self.path("state.json"), state)
     }

@@ -308,6 +308,14 @@ impl SelfModel for K3dgs {
     /// One image per step, the robot pixels weighted, densified and pruned between steps
     /// (no checkpoints: a run takes seconds to minutes and its Gaussians change in number).
     fn fit(&self, fit: &Fit) -> Result<Trained> {
+        if fit.plan.resume {
+            // Densification changes the parameters' shapes as it trains, so the shared
+            // checkpoint (weights loaded into the initial model's shapes) cannot hold it.
+            eprintln!(
+                "{}: --resume: K-3DGS keeps no checkpoint (the paper preset trains in about a minute); training starts from step 0",
+                fit.label
+            );
+        }
         let robot = fit.robot;
         let chain = TensorChain::new(&robot.chain);
         let camera = fit.camera.clone();

@@ -11,7 +11,8 @@
 //! - `{{value PATH | row: col=value | col: name}}`: one cell, formatted as in the tables.
 //! - `{{md PATH}}`: the tables of a generated Markdown report (what follows its
 //!   "Generated from" line).
-//! - `{{text PATH}}`: a file as it is (a command's captured output).
+//! - `{{text PATH}}`: a file as it is (a command's captured output); `| last: N` keeps its
+//!   last N lines.
 //! - `{{experiments}}`: the registry's experiments, one line and one command each.
 
 use std::path::{Path, PathBuf};
@@ -145,7 +146,17 @@ fn expand(root: &Path, d: &Directive) -> Result<String> {
             // Its own headings sit one level below the including section's.
             Ok(tables.trim().replace("\n### ", "\n#### "))
         }
-        "text" => Ok(read(&path)?.trim_end().to_string()),
+        "text" => {
+            let text = read(&path)?;
+            let lines: Vec<&str> = text.trim_end().lines().collect();
+            let keep = match d.option("last") {
+                Some(n) => n.trim().parse::<usize>().map_err(|_| {
+                    Error::data(&path, format!("`last: {n}` is not a number of lines"))
+                })?,
+                None => lines.len(),
+            };
+            Ok(lines[lines.len().saturating_sub(keep)..].join("\n"))
+        }
         other => Err(Error::data(&path, format!("unknown directive `{other}`"))),
     }
 }

@@ -133,6 +133,14 @@ pub fn unreadable_checkpoint(file: &Path, dir: &Path, e: impl std::fmt::Display)
     )
 }
 
+/// Save a module's weights to a burnpack file, bit for bit what the module computes with: its
+/// running statistics (BatchNorm's) are synchronised first, since burn writes the value before
+/// the last training step's pending update, which `valid()` (and so every evaluation) applies.
+pub fn save_module<M: Module>(model: &M, path: &Path) -> Result<()> {
+    let _synchronised = model.valid();
+    save_renamed(path, |tmp| model.clone().save_file(tmp))
+}
+
 /// Write a burnpack file to a temporary name, then rename it into place.
 pub(crate) fn save_renamed(
     path: &Path,
@@ -165,7 +173,7 @@ impl CheckpointPlan {
         hooks: &mut dyn TrainHooks<M>,
     ) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| Error::io(&self.dir, e))?;
-        save_renamed(&self.model_path(), |tmp| model.clone().save_file(tmp))?;
+        save_module(model, &self.model_path())?;
         save_renamed(&self.optim_path(), |tmp| optim.save(tmp))?;
         let hooks = hooks.save_state(&self.dir)?;
         write_json(
@@ -696,7 +704,7 @@ impl BestFile {
         if let Some(best) = best
             && self.saved != Some(epoch)
         {
-            save_renamed(&Self::path(dir, epoch), |tmp| best.clone().save_file(tmp))?;
+            save_module(best, &Self::path(dir, epoch))?;
             self.stale.extend(self.saved.replace(epoch));
         }
         Ok(())
