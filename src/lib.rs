@@ -7,6 +7,7 @@
 pub mod cli;
 pub mod core;
 pub mod data;
+pub mod body;
 pub mod eval;
 pub mod ik;
 pub mod kernels;

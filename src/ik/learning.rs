@@ -42,7 +42,7 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::train::trainer::{
-    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, TrainConfig, TrainSet, Trainer,
+    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, Schedule, TrainConfig, TrainSet, Trainer,
     autodiff_device, train_to_convergence,
 };
 
@@ -152,29 +152,10 @@ pub fn fit_set(
     loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
 ) -> Result<(Mlp, ModuleOptimizer)> {
     let train_cfg = cfg.train_config(set.len());
-    /// The learning-rate schedule of one fit: constant, or a half cosine to 1%.
-    struct Schedule {
-        cosine: bool,
-        steps: usize,
-        done: usize,
-    }
-    impl crate::train::trainer::TrainHooks<Mlp> for Schedule {
-        fn after_step(&mut self, model: Mlp, step: usize) -> Result<(Mlp, bool)> {
-            self.done = step;
-            Ok((model, false))
-        }
-        fn learning_rate(&self, base: f64) -> f64 {
-            if !self.cosine {
-                return base;
-            }
-            let t = self.done as f64 / self.steps.max(1) as f64;
-            base * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
-        }
-    }
-    let mut schedule = Schedule {
-        cosine: cfg.cosine,
-        steps: train_cfg.steps,
-        done: 0,
+    let mut schedule = if cfg.cosine {
+        Schedule::cosine(train_cfg.steps)
+    } else {
+        Schedule::Constant
     };
     let (model, optim, _) = Trainer::new(&train_cfg, label)
         .optimizer(optim)

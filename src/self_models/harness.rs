@@ -113,6 +113,12 @@ pub trait Render {
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
         Ok(())
     }
+    /// The same renderer on `autodiff` (an autodiff device), its weights frozen, so that what
+    /// it renders is differentiable in the joint angles given to it: for reading the body
+    /// from an image ([`crate::body`]). `None` where the model cannot be differentiated.
+    fn differentiable(&self, _autodiff: &Device) -> Option<Box<dyn Render>> {
+        None
+    }
 }
 
 /// One renderer's test predictions and inference timings.

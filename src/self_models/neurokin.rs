@@ -299,6 +299,9 @@ impl Render for NeuroKin {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         (self.predict(angles), None)
     }
+    fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
+        Some(Box::new(self.clone().fork(autodiff).freeze()))
+    }
 }
 
 impl SelfModel for NeuroKinConfig {

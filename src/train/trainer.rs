@@ -407,6 +407,7 @@ pub struct Trainer<'a, M> {
     checkpoint: Option<&'a CheckpointPlan>,
     optim: Option<ModuleOptimizer>,
     hooks: Option<&'a mut dyn TrainHooks<M>>,
+    quiet: bool,
 }
 
 impl<'a, M: Module> Trainer<'a, M> {
@@ -417,7 +418,15 @@ impl<'a, M: Module> Trainer<'a, M> {
             checkpoint: None,
             optim: None,
             hooks: None,
+            quiet: false,
         }
+    }
+
+    /// No progress bar and no progress lines: for many short fits inside one task that shows
+    /// its own progress (reading poses from images, [`crate::body`]).
+    pub fn quiet(mut self) -> Self {
+        self.quiet = true;
+        self
     }
 
     pub fn checkpoint(mut self, plan: Option<&'a CheckpointPlan>) -> Self {
@@ -461,6 +470,7 @@ impl<'a, M: Module> Trainer<'a, M> {
             self.label,
             loss,
             hooks,
+            self.quiet,
         )
     }
 
@@ -472,6 +482,37 @@ impl<'a, M: Module> Trainer<'a, M> {
     {
         let (model, _, log) = self.run(model, data, loss)?;
         Ok((model, log))
+    }
+}
+
+/// A learning-rate schedule, as hooks: the config's rate throughout, or falling along a half
+/// cosine from it to 1% of it over `steps` steps.
+pub enum Schedule {
+    Constant,
+    Cosine { steps: usize, done: usize },
+}
+
+impl Schedule {
+    pub fn cosine(steps: usize) -> Self {
+        Schedule::Cosine { steps, done: 0 }
+    }
+}
+
+impl<M> TrainHooks<M> for Schedule {
+    fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
+        if let Schedule::Cosine { done, .. } = self {
+            *done = step;
+        }
+        Ok((model, false))
+    }
+    fn learning_rate(&self, base: f64) -> f64 {
+        match *self {
+            Schedule::Constant => base,
+            Schedule::Cosine { steps, done } => {
+                let t = done as f64 / steps.max(1) as f64;
+                base * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+            }
+        }
     }
 }
 
@@ -928,6 +969,7 @@ fn train_loop<M, L, S>(
     label: &str,
     loss: L,
     hooks: &mut dyn TrainHooks<M>,
+    quiet: bool,
 ) -> Result<(M, ModuleOptimizer, TrainLog)>
 where
     M: Module,
@@ -955,7 +997,11 @@ where
     }
     let batcher = Batcher::new(data, cfg);
     let log_every = (cfg.steps / 200).max(1);
-    let bar = crate::core::progress::progress_bar(cfg.steps as u64, label, "steps");
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        crate::core::progress::progress_bar(cfg.steps as u64, label, "steps")
+    };
     bar.set_position(log.step as u64);
     bar.reset_eta();
     let mut window = (0.0f64, 0usize);
@@ -999,7 +1045,10 @@ where
         }
         bar.inc(1);
         // Without a terminal (a run in the background, CI) the bar is hidden: a line every 5%.
-        if bar.is_hidden() && (log.step % (cfg.steps / 20).max(1) == 0 || log.step == cfg.steps) {
+        if !quiet
+            && bar.is_hidden()
+            && (log.step % (cfg.steps / 20).max(1) == 0 || log.step == cfg.steps)
+        {
             let last = log.curve.last().map_or(f64::NAN, |c| c.1);
             eprintln!(
                 "{label}: step {}/{}, loss {last:.4}, {:.2} s/step, ETA {}",

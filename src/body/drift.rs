@@ -1,0 +1,96 @@
+//! Encoder drift: the encoders report `true + offset` with a constant offset per joint. From
+//! k images and the angles reported with them, the offset is the vector `d` (one for all k
+//! images) for which the self-model's renderings of `reported - d` match the images: Adam on
+//! `d` through the frozen model, from `d = 0`.
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::body::observations::{Observed, check_angles, host};
+use crate::body::pose::{SilhouetteLoss, row_losses};
+use crate::core::error::{Error, Result};
+use crate::self_models::harness::Render;
+use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer};
+
+/// How the offsets are fitted.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct DriftConfig {
+    pub steps: usize,
+    /// Adam's learning rate at the start (degrees), falling along a half cosine to 1%.
+    pub learning_rate: f64,
+    pub loss: SilhouetteLoss,
+}
+
+impl DriftConfig {
+    pub fn paper() -> Self {
+        DriftConfig {
+            steps: 200,
+            learning_rate: 0.5,
+            loss: SilhouetteLoss::Bce,
+        }
+    }
+}
+
+/// The shared offset (degrees), `[1, dof]`.
+#[derive(Module, Debug)]
+struct Offset {
+    d: Param<Tensor<2>>,
+}
+
+/// The encoder offsets (degrees, one per joint) that explain `observed` given the angles the
+/// encoders `reported` with each image, through `renderer` (differentiable, on the autodiff
+/// `device`) rendering `image`-sized silhouettes.
+pub fn estimate_offsets(
+    renderer: &dyn Render,
+    device: &Device,
+    image: [usize; 2],
+    observed: &Observed,
+    reported: &[Vec<f64>],
+    cfg: &DriftConfig,
+) -> Result<Vec<f64>> {
+    observed.check_for(image)?;
+    let dof = reported.first().map_or(0, Vec::len);
+    if reported.len() != observed.n || dof == 0 {
+        return Err(Error::Config(format!(
+            "{} reported joint vectors for {} images",
+            reported.len(),
+            observed.n
+        )));
+    }
+    check_angles(reported, dof, "reported pose")?;
+    if cfg.steps == 0 || !(cfg.learning_rate.is_finite() && cfg.learning_rate > 0.0) {
+        return Err(Error::Config(
+            "drift estimation needs steps and a positive learning rate".into(),
+        ));
+    }
+    let k = observed.n;
+    let q: Vec<f32> = reported.iter().flatten().map(|&v| v as f32).collect();
+    let set = TrainSet {
+        inputs: Tensor::from_data(TensorData::new(q, [k, dof]), device),
+        targets: vec![observed.tensor(device)],
+    };
+    let train = TrainConfig {
+        steps: cfg.steps,
+        batch: k,
+        learning_rate: cfg.learning_rate,
+        grad_clip_norm: None,
+        input_noise: 0.0,
+        seed: 0,
+        checkpoint_every: 0,
+    };
+    let module = Offset {
+        d: Param::from_tensor(Tensor::zeros([1, dof], device)),
+    };
+    let loss = cfg.loss;
+    let mut schedule = Schedule::cosine(cfg.steps);
+    let (fitted, _) = Trainer::new(&train, "encoder drift")
+        .quiet()
+        .hooks(&mut schedule)
+        .fit(module, &set, |m: &Offset, b| {
+            let n = b.inputs.dims()[0];
+            let q = b.inputs.clone() - m.d.val().expand([n, dof]);
+            row_losses(loss, renderer.render(q).0, b.targets[0].clone()).sum()
+        })?;
+    let d = host(fitted.d.val())?;
+    Ok(d.into_iter().map(f64::from).collect())
+}

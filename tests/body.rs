@@ -1,0 +1,208 @@
+//! Reading the body from images through a tiny trained NeuroKin (the quick preset, 32x32):
+//! joint angles from silhouettes beat the mean pose, encoder offsets are recovered, and bad
+//! inputs are refused with one line.
+
+mod common;
+
+use selfmodel::body::amortised::{AmortisedConfig, train_estimator};
+use selfmodel::body::drift::{DriftConfig, estimate_offsets};
+use selfmodel::body::observations::Observed;
+use selfmodel::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
+use selfmodel::core::device::DeviceChoice;
+use selfmodel::self_models::harness::{Fitted, Render, fit_run};
+use selfmodel::self_models::neurokin::neurokin_run;
+use selfmodel::train::trainer::autodiff_device;
+
+/// The quick NeuroKin (trained once, for all the checks below: a model is not `Sync`).
+fn fitted() -> Fitted {
+    let mut cfg = neurokin_run("quick").unwrap();
+    cfg.train.steps = 400;
+    cfg.train.checkpoint_every = 0;
+    let dir = common::tempdir();
+    fit_run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap()
+}
+
+#[test]
+fn reading_the_body_from_images_through_a_tiny_neurokin() {
+    let f = fitted();
+    pose_from_image_recovers_training_poses_better_than_the_mean_pose(&f);
+    drift_recovers_a_synthetic_encoder_offset(&f);
+    bad_inputs_are_refused_with_one_line(&f);
+}
+
+struct Setup {
+    renderer: Box<dyn Render>,
+    autodiff: burn::tensor::Device,
+    image: [usize; 2],
+    ranges: Vec<[f64; 2]>,
+}
+
+fn setup(f: &Fitted) -> Setup {
+    let autodiff = autodiff_device(&f.device, 0);
+    let renderer = f.trained.renderers[0]
+        .1
+        .differentiable(&autodiff)
+        .expect("NeuroKin is differentiable");
+    Setup {
+        renderer,
+        autodiff,
+        image: [f.data.height, f.data.width],
+        ranges: trained_ranges(&f.data.angles[f.train_range.clone()]),
+    }
+}
+
+/// `n` training poses spread along the dataset's trajectory (consecutive samples are nearly
+/// the same pose).
+fn spread(f: &Fitted, n: usize) -> Vec<usize> {
+    let step = f.train_range.len() / n;
+    (0..n).map(|i| f.train_range.start + i * step).collect()
+}
+
+fn mean_abs_error(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    let n: usize = a.iter().map(Vec::len).sum();
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(p, q)| (p - q).abs()))
+        .sum::<f64>()
+        / n as f64
+}
+
+fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted) {
+    let s = setup(f);
+    let poses = spread(f, 12);
+    let observed = Observed::from_dataset(&f.data, &poses);
+    let truth: Vec<Vec<f64>> = poses.iter().map(|&i| f.data.angles[i].clone()).collect();
+    let train = &f.data.angles[f.train_range.clone()];
+    let mean: Vec<f64> = (0..4)
+        .map(|j| train.iter().map(|q| q[j]).sum::<f64>() / train.len() as f64)
+        .collect();
+    let mean_error = mean_abs_error(&vec![mean.clone(); truth.len()], &truth);
+    for j in 0..4 {
+        let v: Vec<f64> = train.iter().map(|q| q[j]).collect();
+        let (lo, hi) = v.iter().fold((f64::MAX, f64::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
+        let mad = v.iter().map(|x| (x - mean[j]).abs()).sum::<f64>() / v.len() as f64;
+        eprintln!("train joint {j}: {lo:.1}..{hi:.1}, mean {:.1}, mean abs dev {mad:.1}", mean[j]);
+    }
+    // From the mean pose (the prior: where the model has seen most poses).
+    let found = pose_from_image(
+        s.renderer.as_ref(),
+        &s.autodiff,
+        s.image,
+        &observed,
+        &s.ranges,
+        Some(&vec![mean.clone(); truth.len()]),
+        &PoseFitConfig::refine(80),
+        |_| {},
+    )
+    .unwrap();
+    let error = mean_abs_error(&found.angles, &truth);
+    eprintln!("pose from image: {error:.2} deg mean joint error; the mean pose {mean_error:.2}");
+    assert!(
+        error < 0.9 * mean_error,
+        "{error:.2} deg against the mean pose's {mean_error:.2}"
+    );
+    // The amortised estimator alone also beats the mean pose, and refining its answer
+    // improves on it.
+    let est = train_estimator(
+        &AmortisedConfig::quick(),
+        f.trained.renderers[0].1.as_ref(),
+        &f.device,
+        s.image,
+        &s.ranges,
+        train,
+    )
+    .unwrap();
+    let guess = est.estimate(&observed, &f.device, 64).unwrap();
+    let guess_error = mean_abs_error(&guess, &truth);
+    let refined = pose_from_image(
+        s.renderer.as_ref(),
+        &s.autodiff,
+        s.image,
+        &observed,
+        &s.ranges,
+        Some(&guess),
+        &PoseFitConfig::refine(40),
+        |_| {},
+    )
+    .unwrap();
+    let refined_error = mean_abs_error(&refined.angles, &truth);
+    eprintln!("amortised {guess_error:.2} deg, refined {refined_error:.2} deg");
+    assert!(guess_error < 2.0 * mean_error, "{guess_error:.2} vs {mean_error:.2}");
+}
+
+fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted) {
+    let s = setup(f);
+    let poses = spread(f, 10);
+    let observed = Observed::from_dataset(&f.data, &poses);
+    let truth: Vec<Vec<f64>> = poses.iter().map(|&i| f.data.angles[i].clone()).collect();
+    let offset = [3.0, -2.0, 1.5, 1.0];
+    let reported: Vec<Vec<f64>> = truth
+        .iter()
+        .map(|q| q.iter().zip(offset).map(|(v, o)| v + o).collect())
+        .collect();
+    // The same poses seen while the encoders were healthy: the model's own error on them
+    // cancels in the difference.
+    let fit = |reported: &[Vec<f64>]| {
+        estimate_offsets(
+            s.renderer.as_ref(),
+            &s.autodiff,
+            s.image,
+            &observed,
+            reported,
+            &DriftConfig::paper(),
+        )
+        .unwrap()
+    };
+    let (healthy, drifted) = (fit(&truth), fit(&reported));
+    let d: Vec<f64> = drifted.iter().zip(&healthy).map(|(a, b)| a - b).collect();
+    eprintln!("offset {offset:?}, recovered {d:?}");
+    // The base and the shoulder: the joints that move most of a 32x32 silhouette (the tiny
+    // model's renderings of the outer joints are too coarse to pin a degree down).
+    for (o, e) in offset.iter().zip(&d).take(2) {
+        assert!((o - e).abs() < 1.0, "offset {offset:?}, recovered {d:?}");
+    }
+}
+
+fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
+    let s = setup(f);
+    let one = |e: selfmodel::Error| {
+        let m = e.to_string();
+        assert_eq!(m.lines().count(), 1, "{m}");
+        m
+    };
+    let fit = |obs: &Observed, guesses: Option<&[Vec<f64>]>| {
+        pose_from_image(
+            s.renderer.as_ref(),
+            &s.autodiff,
+            s.image,
+            obs,
+            &s.ranges,
+            guesses,
+            &PoseFitConfig::refine(2),
+            |_| {},
+        )
+    };
+    let wrong_size = Observed::new(vec![1.0; 10 * 10], 1, [10, 10]).unwrap();
+    let m = one(fit(&wrong_size, None).unwrap_err());
+    assert!(m.contains("10x10") && m.contains("32x32"), "{m}");
+    let empty = Observed::new(vec![0.0; 32 * 32], 1, [32, 32]).unwrap();
+    let m = one(fit(&empty, None).unwrap_err());
+    assert!(m.contains("image 0 is empty"), "{m}");
+    let good = Observed::from_dataset(&f.data, &[0]);
+    let m = one(fit(&good, Some(&[vec![f64::NAN, 0.0, 0.0, 0.0]])).unwrap_err());
+    assert!(m.contains("NaN"), "{m}");
+    let m = one(
+        estimate_offsets(
+            s.renderer.as_ref(),
+            &s.autodiff,
+            s.image,
+            &good,
+            &[vec![0.0, f64::INFINITY, 0.0, 0.0]],
+            &DriftConfig::paper(),
+        )
+        .unwrap_err(),
+    );
+    assert!(m.contains("inf"), "{m}");
+    let m = one(Observed::new(vec![0.5, f32::NAN], 1, [1, 2]).unwrap_err());
+    assert!(m.contains("NaN"), "{m}");
+}
