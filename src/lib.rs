@@ -4,10 +4,10 @@
 //! self-models of a robot arm and learned inverse kinematics. This crate holds the library;
 //! `experiments/` holds one thin binary per experiment. See `ARCHITECTURE.md`.
 
+pub mod body;
 pub mod cli;
 pub mod core;
 pub mod data;
-pub mod body;
 pub mod eval;
 pub mod ik;
 pub mod kernels;

@@ -5,6 +5,7 @@
 pub mod ablations;
 pub mod bench_decoders;
 pub mod bench_ffksm_step;
+pub mod body_from_image;
 pub mod docs;
 pub mod emssl_adaptation;
 pub mod emssl_learning_curve;

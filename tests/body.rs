@@ -79,9 +79,14 @@ fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted)
     let mean_error = mean_abs_error(&vec![mean.clone(); truth.len()], &truth);
     for j in 0..4 {
         let v: Vec<f64> = train.iter().map(|q| q[j]).collect();
-        let (lo, hi) = v.iter().fold((f64::MAX, f64::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
+        let (lo, hi) = v
+            .iter()
+            .fold((f64::MAX, f64::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
         let mad = v.iter().map(|x| (x - mean[j]).abs()).sum::<f64>() / v.len() as f64;
-        eprintln!("train joint {j}: {lo:.1}..{hi:.1}, mean {:.1}, mean abs dev {mad:.1}", mean[j]);
+        eprintln!(
+            "train joint {j}: {lo:.1}..{hi:.1}, mean {:.1}, mean abs dev {mad:.1}",
+            mean[j]
+        );
     }
     // From the mean pose (the prior: where the model has seen most poses).
     let found = pose_from_image(
@@ -127,7 +132,10 @@ fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted)
     .unwrap();
     let refined_error = mean_abs_error(&refined.angles, &truth);
     eprintln!("amortised {guess_error:.2} deg, refined {refined_error:.2} deg");
-    assert!(guess_error < 2.0 * mean_error, "{guess_error:.2} vs {mean_error:.2}");
+    assert!(
+        guess_error < 2.0 * mean_error,
+        "{guess_error:.2} vs {mean_error:.2}"
+    );
 }
 
 fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted) {
@@ -191,17 +199,15 @@ fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
     let good = Observed::from_dataset(&f.data, &[0]);
     let m = one(fit(&good, Some(&[vec![f64::NAN, 0.0, 0.0, 0.0]])).unwrap_err());
     assert!(m.contains("NaN"), "{m}");
-    let m = one(
-        estimate_offsets(
-            s.renderer.as_ref(),
-            &s.autodiff,
-            s.image,
-            &good,
-            &[vec![0.0, f64::INFINITY, 0.0, 0.0]],
-            &DriftConfig::paper(),
-        )
-        .unwrap_err(),
-    );
+    let m = one(estimate_offsets(
+        s.renderer.as_ref(),
+        &s.autodiff,
+        s.image,
+        &good,
+        &[vec![0.0, f64::INFINITY, 0.0, 0.0]],
+        &DriftConfig::paper(),
+    )
+    .unwrap_err());
     assert!(m.contains("inf"), "{m}");
     let m = one(Observed::new(vec![0.5, f32::NAN], 1, [1, 2]).unwrap_err());
     assert!(m.contains("NaN"), "{m}");

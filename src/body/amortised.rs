@@ -210,8 +210,8 @@ pub fn train_estimator(
             mse(m.forward(b.targets[0].clone()), b.inputs.clone())
         })?;
     let tail = (log.curve.len() / 10).max(1);
-    let final_loss =
-        log.curve.iter().rev().take(tail).map(|c| c.1).sum::<f64>() / tail.min(log.curve.len()).max(1) as f64;
+    let final_loss = log.curve.iter().rev().take(tail).map(|c| c.1).sum::<f64>()
+        / tail.min(log.curve.len()).max(1) as f64;
     Ok(PoseEstimator {
         model: model.valid(),
         ranges: ranges.to_vec(),
@@ -223,7 +223,12 @@ pub fn train_estimator(
 
 impl PoseEstimator {
     /// Joint angles (degrees) of every observed image, in batches of `batch`.
-    pub fn estimate(&self, observed: &Observed, device: &Device, batch: usize) -> Result<Vec<Vec<f64>>> {
+    pub fn estimate(
+        &self,
+        observed: &Observed,
+        device: &Device,
+        batch: usize,
+    ) -> Result<Vec<Vec<f64>>> {
         observed.check_for(self.image)?;
         let dof = self.ranges.len();
         let mut out = Vec::with_capacity(observed.n);

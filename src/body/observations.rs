@@ -100,7 +100,10 @@ impl Observed {
     /// `[n, 1, H, W]` on `device`.
     pub fn tensor(&self, device: &Device) -> Tensor<4> {
         let [h, w] = self.size;
-        Tensor::from_data(TensorData::new(self.pixels.clone(), [self.n, 1, h, w]), device)
+        Tensor::from_data(
+            TensorData::new(self.pixels.clone(), [self.n, 1, h, w]),
+            device,
+        )
     }
 
     /// Each image `times` times in a row (image 0 `times` times, then image 1, ...).

@@ -124,18 +124,30 @@ pub fn trained_ranges(seen: &[Vec<f64>]) -> Vec<[f64; 2]> {
         .map(|j| {
             seen.iter()
                 .map(|q| q[j])
-                .fold([f64::INFINITY, f64::NEG_INFINITY], |r, v| [r[0].min(v), r[1].max(v)])
+                .fold([f64::INFINITY, f64::NEG_INFINITY], |r, v| {
+                    [r[0].min(v), r[1].max(v)]
+                })
         })
         .collect()
 }
 
 /// Starting poses for one image: `guess` (when given) and uniform draws within `ranges`
 /// (degrees), `starts` in all; the draws depend on `seed` only.
-fn starting_poses(guess: Option<&[f64]>, ranges: &[[f64; 2]], starts: usize, seed: u64) -> Vec<Vec<f64>> {
+fn starting_poses(
+    guess: Option<&[f64]>,
+    ranges: &[[f64; 2]],
+    starts: usize,
+    seed: u64,
+) -> Vec<Vec<f64>> {
     let mut rng = StdRng::seed_from_u64(seed);
     let mut out: Vec<Vec<f64>> = guess.map(|g| g.to_vec()).into_iter().collect();
     while out.len() < starts {
-        out.push(ranges.iter().map(|r| rng.random_range(r[0]..=r[1])).collect());
+        out.push(
+            ranges
+                .iter()
+                .map(|r| rng.random_range(r[0]..=r[1]))
+                .collect(),
+        );
     }
     out.truncate(starts);
     out
@@ -145,6 +157,7 @@ fn starting_poses(guess: Option<&[f64]>, ranges: &[[f64; 2]], starts: usize, see
 /// `device`: [`Render::differentiable`]), which renders `image`-sized silhouettes of a robot
 /// with joint `ranges` (degrees). `guesses`: one starting pose per image, or none.
 /// `progress(done)` is told how many images are finished.
+#[allow(clippy::too_many_arguments)]
 pub fn pose_from_image(
     renderer: &dyn Render,
     device: &Device,
@@ -228,7 +241,12 @@ pub fn pose_from_image(
                 .min_by(|&a, &b| row_loss[i * starts + a].total_cmp(&row_loss[i * starts + b]))
                 .expect("at least one start");
             let r = i * starts + best;
-            angles.push(q[r * dof..(r + 1) * dof].iter().map(|&v| v as f64).collect());
+            angles.push(
+                q[r * dof..(r + 1) * dof]
+                    .iter()
+                    .map(|&v| v as f64)
+                    .collect(),
+            );
             losses.push(row_loss[r] as f64);
         }
         first = end;

@@ -42,8 +42,8 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::train::trainer::{
-    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, Schedule, TrainConfig, TrainSet, Trainer,
-    autodiff_device, train_to_convergence,
+    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, Schedule, TrainConfig, TrainSet,
+    Trainer, autodiff_device, train_to_convergence,
 };
 
 /// Optimisation of one fit.

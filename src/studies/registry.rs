@@ -245,6 +245,17 @@ pub fn run_emssl_adaptation(opts: &RunOptions, dir: &Path) -> Result<String> {
     crate::studies::emssl_adaptation::run(&cfg, robot, dir, opts.device)
 }
 
+/// Reading the body from images through the trained NeuroKin: joint angles and encoder drift.
+fn run_body_from_image(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if opts.paper_compatible || opts.steps.is_some() {
+        return Err(crate::Error::Config(
+            "--paper-compatible and --steps do not apply to body_from_image (its presets set the self-model it reads through)".into(),
+        ));
+    }
+    let cfg = crate::studies::body_from_image::BodyFromImageConfig::preset(&opts.preset)?;
+    crate::studies::body_from_image::run(&cfg, dir, opts.device, opts.resume)
+}
+
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
     let rows = crate::studies::table1::run(opts, dir, EXPERIMENTS)?;
     Ok(summary(&rows))
@@ -429,6 +440,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_emssl_adaptation,
+    },
+    Experiment {
+        name: "body_from_image",
+        about: "the self-model read backwards: joint angles from a silhouette (amortised CNN, refinement through NeuroKin, search) and encoder drift from k images",
+        default_dir: "reports/body_from_image",
+        presets: &["paper", "quick"],
+        in_table1: false,
+        takes_robot: false,
+        shares_output: false,
+        run: run_body_from_image,
     },
     Experiment {
         name: "table1",

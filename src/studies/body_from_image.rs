@@ -1,0 +1,647 @@
+//! `body_from_image`: the trained self-model read backwards ([`crate::body`]) on the test set
+//! of the papers' arm. Writes `reports/body_from_image/`:
+//! - `results.csv`: joint angles from silhouettes. Methods: the mean training pose (a
+//!   baseline), the amortised CNN, the CNN refined through the self-model, and a search from
+//!   random starts without a guess; the refined CNN also on spoiled images (pixels flipped,
+//!   an occluder, a 1-pixel shift). Errors per joint and overall (degrees), end effector (mm),
+//!   the share of poses with every joint within 2 degrees, milliseconds per pose.
+//! - `drift.csv`: encoder offsets (uniform in +-`max_offset_deg` on every joint) recovered from
+//!   k images, against k. The protocol: the robot visits k poses; the same poses seen once
+//!   while its encoders were known good give a reference estimate, and the drift is the
+//!   difference of the two estimates (the self-model's own error on those poses cancels).
+//!   Every capture has its own sensor noise (`capture_flip` of the pixels flipped). The error
+//!   without the reference (the estimate taken as it is) is reported beside it.
+//! - `detection.csv`: the smallest offset told apart from healthy encoders: a threshold at the
+//!   99th percentile of the statistic (largest |offset| over the joints) on healthy trials (a
+//!   false alarm rate of 1%), and the share of trials detected per offset size on one joint.
+//! - `figures`: `pose_grid.png` (observed, rendered at the estimate, error) and
+//!   `drift_vs_k.png`.
+//!
+//! The self-model is NeuroKin of the same preset, trained here (checkpointed, `--resume`
+//! continues it). Visual calibration of link lengths (K-3DGS) is not in this study yet.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::rngs::StdRng;
+use rand::seq::index::sample;
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+use crate::body::amortised::{AmortisedConfig, train_estimator};
+use crate::body::drift::{DriftConfig, estimate_offsets};
+use crate::body::observations::{Observed, Perturbation, host};
+use crate::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
+use crate::core::atomic_file::write_json;
+use crate::core::device::DeviceChoice;
+use crate::core::error::{Error, Result};
+use crate::core::provenance::git_revision;
+use crate::core::timing::{Repeats, median_seconds};
+use crate::report::figures::{GridRow, image_grid, log_log_lines};
+use crate::report::table::{write_csv, write_markdown_report};
+use crate::self_models::harness::{Render, fit_run};
+use crate::self_models::neurokin::neurokin_run;
+use crate::sim::robot::Robot;
+use crate::train::trainer::autodiff_device;
+
+/// The study's settings. Presets: `paper` (the 400 test poses) and `quick` (seconds).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BodyFromImageConfig {
+    pub preset: String,
+    /// Test poses read (the first ones of the test set).
+    pub test_poses: usize,
+    /// Test poses searched without a guess (the search is the slow method).
+    pub search_poses: usize,
+    pub amortised: AmortisedConfig,
+    pub refine: PoseFitConfig,
+    pub search: PoseFitConfig,
+    pub perturbations: Vec<Perturbation>,
+    pub drift: DriftConfig,
+    pub drift_ks: Vec<usize>,
+    pub drift_trials: usize,
+    pub max_offset_deg: f64,
+    /// Share of pixels flipped in every capture (sensor noise) of the drift trials.
+    pub capture_flip: f64,
+    pub detection_k: usize,
+    pub healthy_trials: usize,
+    pub detection_offsets_deg: Vec<f64>,
+    pub detection_trials: usize,
+    pub seed: u64,
+}
+
+impl BodyFromImageConfig {
+    pub fn preset(name: &str) -> Result<Self> {
+        let paper = BodyFromImageConfig {
+            preset: "paper".into(),
+            test_poses: 400,
+            search_poses: 100,
+            amortised: AmortisedConfig::paper(),
+            refine: PoseFitConfig::refine(30),
+            search: PoseFitConfig::search(16, 100),
+            perturbations: vec![
+                Perturbation::FlipPixels(0.05),
+                Perturbation::Occlude(0.10),
+                Perturbation::Shift(1, 0),
+            ],
+            drift: DriftConfig::paper(),
+            drift_ks: vec![1, 3, 10, 30],
+            drift_trials: 10,
+            max_offset_deg: 5.0,
+            capture_flip: 0.01,
+            detection_k: 10,
+            healthy_trials: 100,
+            detection_offsets_deg: vec![0.1, 0.2, 0.5, 1.0, 2.0],
+            detection_trials: 20,
+            seed: 0,
+        };
+        match name {
+            "paper" => Ok(paper),
+            "quick" => Ok(BodyFromImageConfig {
+                preset: "quick".into(),
+                test_poses: 12,
+                search_poses: 4,
+                amortised: AmortisedConfig::quick(),
+                refine: PoseFitConfig::refine(10),
+                search: PoseFitConfig::search(4, 20),
+                drift: DriftConfig {
+                    steps: 40,
+                    ..DriftConfig::paper()
+                },
+                drift_ks: vec![1, 3],
+                drift_trials: 2,
+                detection_k: 3,
+                healthy_trials: 4,
+                detection_offsets_deg: vec![1.0, 5.0],
+                detection_trials: 2,
+                ..paper
+            }),
+            other => Err(Error::Config(format!(
+                "unknown preset \"{other}\" for body_from_image (choose paper or quick)"
+            ))),
+        }
+    }
+}
+
+/// One method on one kind of image: a row of `pose.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseRow {
+    pub method: String,
+    pub images: String,
+    pub poses: usize,
+    pub mean_joint_error_deg: f64,
+    pub median_joint_error_deg: f64,
+    /// Mean error of each joint, "j1 / j2 / ...".
+    pub per_joint_deg: String,
+    pub end_effector_mm: f64,
+    /// Poses with every joint within 2 degrees.
+    pub within_2deg_share: f64,
+    /// Milliseconds per pose, one image at a time (NaN: not timed).
+    pub ms_per_pose_b1: f64,
+    /// Milliseconds per pose over the whole batch.
+    pub ms_per_pose_batched: f64,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+/// Offset recovery against k: a row of `drift.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DriftRow {
+    pub k: usize,
+    pub trials: usize,
+    /// Mean over trials and joints of |recovered - true| with the healthy reference.
+    pub offset_error_deg: f64,
+    /// The largest over trials and joints.
+    pub max_offset_error_deg: f64,
+    /// The same without the reference (the estimate as it is).
+    pub offset_error_no_reference_deg: f64,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+/// Detection of a small offset: a row of `detection.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DetectionRow {
+    pub offset_deg: f64,
+    pub k: usize,
+    pub trials: usize,
+    /// The healthy trials' 99th percentile of max |offset| (the alarm threshold).
+    pub threshold_deg: f64,
+    pub detected_share: f64,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+/// Errors of estimated poses against the truth.
+struct Scores {
+    mean: f64,
+    median: f64,
+    per_joint: Vec<f64>,
+    end_effector_mm: f64,
+    within_2: f64,
+}
+
+fn score(robot: &Robot, found: &[Vec<f64>], truth: &[Vec<f64>]) -> Scores {
+    let dof = truth[0].len();
+    let mut all: Vec<f64> = Vec::new();
+    let mut per_joint = vec![0.0; dof];
+    let mut within = 0;
+    let mut ee = 0.0;
+    for (f, t) in found.iter().zip(truth) {
+        let e: Vec<f64> = f.iter().zip(t).map(|(a, b)| (a - b).abs()).collect();
+        for (j, v) in e.iter().enumerate() {
+            per_joint[j] += v / truth.len() as f64;
+        }
+        within += usize::from(e.iter().all(|&v| v <= 2.0));
+        all.extend(e);
+        let (pf, pt) = (
+            robot.chain.end_effector(&robot.chain.to_si(f)),
+            robot.chain.end_effector(&robot.chain.to_si(t)),
+        );
+        ee += 1000.0 * (pf - pt).norm() / truth.len() as f64;
+    }
+    Scores {
+        mean: all.iter().sum::<f64>() / all.len() as f64,
+        median: crate::core::timing::median(&all),
+        per_joint,
+        end_effector_mm: ee,
+        within_2: within as f64 / truth.len() as f64,
+    }
+}
+
+/// Everything one run shares.
+struct Bench<'a> {
+    cfg: &'a BodyFromImageConfig,
+    robot: &'a Robot,
+    renderer: &'a dyn Render,
+    differentiable: &'a dyn Render,
+    device: &'a Device,
+    autodiff: &'a Device,
+    image: [usize; 2],
+    ranges: Vec<[f64; 2]>,
+    device_name: String,
+    revision: String,
+}
+
+impl Bench<'_> {
+    #[allow(clippy::too_many_arguments)]
+    fn row(
+        &self,
+        method: &str,
+        images: &str,
+        found: &[Vec<f64>],
+        truth: &[Vec<f64>],
+        b1: f64,
+        batched: f64,
+    ) -> PoseRow {
+        let s = score(self.robot, found, truth);
+        PoseRow {
+            method: method.into(),
+            images: images.into(),
+            poses: truth.len(),
+            mean_joint_error_deg: s.mean,
+            median_joint_error_deg: s.median,
+            per_joint_deg: s
+                .per_joint
+                .iter()
+                .map(|v| format!("{v:.2}"))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            end_effector_mm: s.end_effector_mm,
+            within_2deg_share: s.within_2,
+            ms_per_pose_b1: b1,
+            ms_per_pose_batched: batched,
+            preset: self.cfg.preset.clone(),
+            device: self.device_name.clone(),
+            git_revision: self.revision.clone(),
+        }
+    }
+
+    fn refine(
+        &self,
+        observed: &Observed,
+        guesses: &[Vec<f64>],
+        cfg: &PoseFitConfig,
+    ) -> Result<Vec<Vec<f64>>> {
+        Ok(pose_from_image(
+            self.differentiable,
+            self.autodiff,
+            self.image,
+            observed,
+            &self.ranges,
+            Some(guesses),
+            cfg,
+            |_| {},
+        )?
+        .angles)
+    }
+
+    /// k captures' offsets: with the healthy reference and without.
+    fn drift_trial(
+        &self,
+        observed_healthy: &Observed,
+        observed_now: &Observed,
+        truth: &[Vec<f64>],
+        offset: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>)> {
+        let reported: Vec<Vec<f64>> = truth
+            .iter()
+            .map(|q| q.iter().zip(offset).map(|(v, o)| v + o).collect())
+            .collect();
+        let fit = |obs: &Observed, rep: &[Vec<f64>]| {
+            estimate_offsets(
+                self.differentiable,
+                self.autodiff,
+                self.image,
+                obs,
+                rep,
+                &self.cfg.drift,
+            )
+        };
+        let reference = fit(observed_healthy, truth)?;
+        let now = fit(observed_now, &reported)?;
+        let relative = now.iter().zip(&reference).map(|(a, b)| a - b).collect();
+        Ok((relative, now))
+    }
+}
+
+/// Run the study into `out`.
+pub fn run(
+    cfg: &BodyFromImageConfig,
+    out: &Path,
+    device_choice: DeviceChoice,
+    resume: bool,
+) -> Result<String> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let model_run = neurokin_run(&cfg.preset)?;
+    let fitted = fit_run(&model_run, &out.join("checkpoint"), device_choice, resume)?;
+    let device = fitted.device.clone();
+    let autodiff = autodiff_device(&device, cfg.seed);
+    let renderer = fitted.trained.renderers[0].1.as_ref();
+    let differentiable = renderer
+        .differentiable(&autodiff)
+        .ok_or_else(|| Error::Config("the self-model cannot be differentiated".into()))?;
+    let robot = model_run.data.robot.load()?;
+    let data = &fitted.data;
+    let seen = &data.angles[fitted.train_range.clone()];
+    let bench = Bench {
+        cfg,
+        robot: &robot,
+        renderer,
+        differentiable: differentiable.as_ref(),
+        device: &device,
+        autodiff: &autodiff,
+        image: [data.height, data.width],
+        ranges: trained_ranges(seen),
+        device_name: device_choice.to_string(),
+        revision: git_revision(),
+    };
+    let n = cfg.test_poses.min(fitted.test_range.len());
+    let test: Vec<usize> = fitted.test_range.clone().take(n).collect();
+    let truth: Vec<Vec<f64>> = test.iter().map(|&i| data.angles[i].clone()).collect();
+    let observed = Observed::from_dataset(data, &test);
+
+    // Pose from image.
+    let dof = truth[0].len();
+    let mean: Vec<f64> = (0..dof)
+        .map(|j| seen.iter().map(|q| q[j]).sum::<f64>() / seen.len() as f64)
+        .collect();
+    let mut rows = vec![bench.row(
+        "mean training pose",
+        "clean",
+        &vec![mean; n],
+        &truth,
+        f64::NAN,
+        f64::NAN,
+    )];
+    let estimator = train_estimator(
+        &cfg.amortised,
+        renderer,
+        &device,
+        bench.image,
+        &bench.ranges,
+        seen,
+    )?;
+    let t = std::time::Instant::now();
+    let guesses = estimator.estimate(&observed, &device, 64)?;
+    let cnn_batched = 1000.0 * t.elapsed().as_secs_f64() / n as f64;
+    let one = observed.select(0..1);
+    let cnn_b1 = 1000.0
+        * median_seconds(Repeats::exactly(2, 10), || {
+            let _ = estimator.estimate(&one, &device, 1);
+        });
+    rows.push(bench.row(
+        "amortised CNN",
+        "clean",
+        &guesses,
+        &truth,
+        cnn_b1,
+        cnn_batched,
+    ));
+    let refined_label = format!("CNN + {} refinement steps", cfg.refine.steps);
+    let t = std::time::Instant::now();
+    let refined = bench.refine(&observed, &guesses, &cfg.refine)?;
+    let refine_batched = 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched;
+    let refine_b1 = 1000.0
+        * median_seconds(Repeats::exactly(1, 3), || {
+            let g = estimator
+                .estimate(&one, &device, 1)
+                .expect("estimated above");
+            let _ = bench.refine(&one, &g, &cfg.refine);
+        });
+    rows.push(bench.row(
+        &refined_label,
+        "clean",
+        &refined,
+        &truth,
+        refine_b1,
+        refine_batched,
+    ));
+    let m = cfg.search_poses.min(n);
+    let t = std::time::Instant::now();
+    let searched = pose_from_image(
+        bench.differentiable,
+        &autodiff,
+        bench.image,
+        &observed.select(0..m),
+        &bench.ranges,
+        None,
+        &cfg.search,
+        |_| {},
+    )?;
+    let search_batched = 1000.0 * t.elapsed().as_secs_f64() / m as f64;
+    rows.push(bench.row(
+        &format!(
+            "search ({} starts, {} steps)",
+            cfg.search.starts, cfg.search.steps
+        ),
+        "clean",
+        &searched.angles,
+        &truth[..m],
+        f64::NAN,
+        search_batched,
+    ));
+    for (i, p) in cfg.perturbations.iter().enumerate() {
+        let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
+        let g = estimator.estimate(&spoiled, &device, 64)?;
+        rows.push(bench.row("amortised CNN", &p.label(), &g, &truth, f64::NAN, f64::NAN));
+        let r = bench.refine(&spoiled, &g, &cfg.refine)?;
+        rows.push(bench.row(&refined_label, &p.label(), &r, &truth, f64::NAN, f64::NAN));
+    }
+    let pose_csv = out.join("results.csv");
+    write_csv(&pose_csv, &rows)?;
+    write_markdown_report(
+        &pose_csv,
+        "Joint angles from a silhouette",
+        "The test poses' silhouettes read back through the trained NeuroKin. Errors are absolute joint \
+         errors in degrees (mean and median over every joint of every pose), the end effector's \
+         distance in mm, and the share of poses with every joint within 2 degrees. The CNN is trained \
+         on the self-model's own renderings; the refinement descends the silhouette's cross-entropy \
+         through the model from the CNN's answer; the search starts from poses drawn within the \
+         training poses' range, keeping the start with the lowest loss. Milliseconds on this \
+         machine's CPU, one image at a time (b1) and per pose over a batch.",
+    )?;
+    pose_grid(
+        &bench,
+        &observed,
+        &refined,
+        &truth,
+        &out.join("pose_grid.png"),
+    )?;
+
+    // Drift.
+    let mut rng = StdRng::seed_from_u64(cfg.seed ^ 0xD41F7);
+    let capture = |poses: &[usize], seed: u64| {
+        Observed::from_dataset(data, poses)
+            .perturbed(Perturbation::FlipPixels(cfg.capture_flip), seed)
+    };
+    let mut drift_rows = Vec::new();
+    let mut seed = 1000u64;
+    for &k in &cfg.drift_ks {
+        let k = k.min(fitted.test_range.len());
+        let (mut err, mut max, mut raw) = (0.0, 0.0f64, 0.0);
+        for _ in 0..cfg.drift_trials {
+            let poses: Vec<usize> = sample(&mut rng, fitted.test_range.len(), k)
+                .into_iter()
+                .map(|i| fitted.test_range.start + i)
+                .collect();
+            let truth: Vec<Vec<f64>> = poses.iter().map(|&i| data.angles[i].clone()).collect();
+            let offset: Vec<f64> = (0..dof)
+                .map(|_| rng.random_range(-cfg.max_offset_deg..=cfg.max_offset_deg))
+                .collect();
+            seed += 2;
+            let (rel, now) = bench.drift_trial(
+                &capture(&poses, seed),
+                &capture(&poses, seed + 1),
+                &truth,
+                &offset,
+            )?;
+            for j in 0..dof {
+                let e = (rel[j] - offset[j]).abs();
+                err += e / (dof * cfg.drift_trials) as f64;
+                max = max.max(e);
+                raw += (now[j] - offset[j]).abs() / (dof * cfg.drift_trials) as f64;
+            }
+        }
+        drift_rows.push(DriftRow {
+            k,
+            trials: cfg.drift_trials,
+            offset_error_deg: err,
+            max_offset_error_deg: max,
+            offset_error_no_reference_deg: raw,
+            preset: cfg.preset.clone(),
+            device: bench.device_name.clone(),
+            git_revision: bench.revision.clone(),
+        });
+    }
+    let drift_csv = out.join("drift.csv");
+    write_csv(&drift_csv, &drift_rows)?;
+    write_markdown_report(
+        &drift_csv,
+        "Encoder drift from k images",
+        "Constant offsets, uniform in +-5 degrees on every joint, recovered from k test poses: the \
+         difference between the estimate now and the estimate on the same poses seen while the \
+         encoders were healthy (each capture with its own 1% of pixels flipped), and the estimate \
+         taken as it is (no reference). Errors in degrees, mean over trials and joints.",
+    )?;
+    let curves: Vec<(String, Vec<(f64, f64)>)> = vec![
+        (
+            "against a healthy reference".into(),
+            drift_rows
+                .iter()
+                .map(|r| (r.k as f64, r.offset_error_deg))
+                .collect(),
+        ),
+        (
+            "estimate as it is".into(),
+            drift_rows
+                .iter()
+                .map(|r| (r.k as f64, r.offset_error_no_reference_deg))
+                .collect(),
+        ),
+    ];
+    log_log_lines(
+        &out.join("drift_vs_k.png"),
+        "Encoder offset error against the number of images",
+        "images k",
+        "offset error (degrees, log)",
+        &curves,
+    )?;
+
+    // Detection at a 1% false alarm rate.
+    let k = cfg.detection_k.min(fitted.test_range.len());
+    let mut trial = |offset: &[f64]| -> Result<f64> {
+        let poses: Vec<usize> = sample(&mut rng, fitted.test_range.len(), k)
+            .into_iter()
+            .map(|i| fitted.test_range.start + i)
+            .collect();
+        let truth: Vec<Vec<f64>> = poses.iter().map(|&i| data.angles[i].clone()).collect();
+        seed += 2;
+        let (rel, _) = bench.drift_trial(
+            &capture(&poses, seed),
+            &capture(&poses, seed + 1),
+            &truth,
+            offset,
+        )?;
+        Ok(rel.iter().fold(0.0f64, |a, v| a.max(v.abs())))
+    };
+    let mut healthy = Vec::new();
+    for _ in 0..cfg.healthy_trials {
+        healthy.push(trial(&vec![0.0; dof])?);
+    }
+    healthy.sort_by(f64::total_cmp);
+    let threshold =
+        healthy[((0.99 * healthy.len() as f64).ceil() as usize).clamp(1, healthy.len()) - 1];
+    let mut detection_rows = Vec::new();
+    for &a in &cfg.detection_offsets_deg {
+        let mut hits = 0;
+        for t in 0..cfg.detection_trials {
+            let mut offset = vec![0.0; dof];
+            offset[t % dof] = if t % 2 == 0 { a } else { -a };
+            hits += usize::from(trial(&offset)? > threshold);
+        }
+        detection_rows.push(DetectionRow {
+            offset_deg: a,
+            k,
+            trials: cfg.detection_trials,
+            threshold_deg: threshold,
+            detected_share: hits as f64 / cfg.detection_trials as f64,
+            preset: cfg.preset.clone(),
+            device: bench.device_name.clone(),
+            git_revision: bench.revision.clone(),
+        });
+    }
+    let detection_csv = out.join("detection.csv");
+    write_csv(&detection_csv, &detection_rows)?;
+    write_markdown_report(
+        &detection_csv,
+        "Detecting a small encoder offset",
+        "An offset on one joint (each joint in turn, both signs) against healthy encoders: the \
+         statistic is the largest |offset| over the joints (against a healthy reference, k images); \
+         the threshold is its 99th percentile over healthy trials (false alarms 1%).",
+    )?;
+    write_json(&out.join("config.json"), cfg)?;
+    let r = &rows[2];
+    let smallest = detection_rows
+        .iter()
+        .find(|r| r.detected_share >= 0.9)
+        .map_or("none".to_string(), |r| format!("{} deg", r.offset_deg));
+    Ok(format!(
+        "pose from image ({}): median joint error {:.2} deg, {:.0}% of poses within 2 deg, {:.1} ms/pose batched; drift from {} images: {:.2} deg; smallest offset detected in 90% of trials: {smallest}",
+        r.method,
+        r.median_joint_error_deg,
+        100.0 * r.within_2deg_share,
+        r.ms_per_pose_batched,
+        drift_rows.last().map_or(0, |d| d.k),
+        drift_rows.last().map_or(f64::NAN, |d| d.offset_error_deg),
+    ))
+}
+
+/// Observed silhouettes, the self-model's rendering at the estimate and their difference,
+/// for up to 8 test poses, each captioned with its mean joint error.
+fn pose_grid(
+    b: &Bench,
+    observed: &Observed,
+    found: &[Vec<f64>],
+    truth: &[Vec<f64>],
+    path: &Path,
+) -> Result<()> {
+    let n = observed.n.min(8);
+    let dof = found[0].len();
+    let q: Vec<f32> = found[..n].iter().flatten().map(|&v| v as f32).collect();
+    let rendered = host(
+        b.renderer
+            .render(Tensor::from_data(TensorData::new(q, [n, dof]), b.device))
+            .0,
+    )?;
+    let px = b.image[0] * b.image[1];
+    let obs: Vec<&[f32]> = (0..n).map(|i| observed.image(i)).collect();
+    let ren: Vec<&[f32]> = (0..n).map(|i| &rendered[i * px..(i + 1) * px]).collect();
+    let err: Vec<Vec<f32>> = obs
+        .iter()
+        .zip(&ren)
+        .map(|(o, r)| o.iter().zip(r.iter()).map(|(a, b)| (a - b).abs()).collect())
+        .collect();
+    let captions: Vec<String> = (0..n)
+        .map(|i| {
+            let e = found[i]
+                .iter()
+                .zip(&truth[i])
+                .map(|(a, b)| (a - b).abs())
+                .sum::<f64>()
+                / dof as f64;
+            format!("{e:.2} deg")
+        })
+        .collect();
+    image_grid(
+        path,
+        &[GridRow::Grey(obs), GridRow::Grey(ren), GridRow::Error(err)],
+        &["observed", "rendered at estimate", "|difference|"],
+        &captions,
+        b.image[1],
+        b.image[0],
+        2,
+    )
+}
