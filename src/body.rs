@@ -8,6 +8,8 @@
 //! - [`amortised`]: a small CNN trained on the self-model's own renderings that maps an image
 //!   to angles in one pass, alone and as the start of the refinement.
 //! - [`drift`]: constant encoder offsets from k images and the angles the encoders report.
+//! - [`calibration`]: link lengths from images, through a self-model that hangs on the
+//!   kinematic chain (K-3DGS), its joint origins fitted with the Gaussians frozen.
 //! - [`observations`]: the images these read, checked (size, empty silhouettes, NaN angles)
 //!   and perturbed as a real camera would (flipped pixels, an occluder, a shift).
 //!
@@ -15,6 +17,7 @@
 //! unknowns as the module's parameters and the model's weights frozen.
 
 pub mod amortised;
+pub mod calibration;
 pub mod drift;
 pub mod observations;
 pub mod pose;

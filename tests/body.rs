@@ -212,3 +212,55 @@ fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
     let m = one(Observed::new(vec![0.5, f32::NAN], 1, [1, 2]).unwrap_err());
     assert!(m.contains("NaN"), "{m}");
 }
+
+/// A tiny K-3DGS (quick preset) reads one lengthened link from images of the changed arm: the
+/// sign and size of the change on that link, more than on any other.
+#[test]
+fn visual_calibration_of_a_tiny_k3dgs_recovers_a_lengthened_link() {
+    use selfmodel::body::calibration::{VisualCalibrationConfig, fit_joint_origins};
+    use selfmodel::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+    let cfg = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha).unwrap();
+    let dir = common::tempdir();
+    let f = fit_run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
+    let robot = cfg.data.robot.load().unwrap();
+    let renderer = f.trained.renderers[0].1.as_ref();
+    let nominal = renderer.joint_origins().expect("K-3DGS hangs on the chain");
+    // The longest link grows by 5 cm.
+    let norm = |v: &[f32; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let (link, len) = nominal
+        .iter()
+        .enumerate()
+        .map(|(j, v)| (j, norm(v)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap();
+    let mut changed = robot.clone();
+    let t = &mut changed.chain.joints[link].origin.translation.vector;
+    *t *= (len as f64 + 0.05) / len as f64;
+    let poses = spread(&f, 10);
+    let angles: Vec<Vec<f64>> = poses.iter().map(|&i| f.data.angles[i].clone()).collect();
+    let mut data_cfg = cfg.data.dataset.clone();
+    data_cfg.samples = angles.len();
+    data_cfg.train = angles.len();
+    let images = selfmodel::Dataset::render(&changed, &data_cfg, angles.clone(), None).unwrap();
+    let observed = Observed::from_dataset(&images, &(0..angles.len()).collect::<Vec<_>>());
+    let autodiff = autodiff_device(&f.device, 0);
+    let differentiable = renderer.differentiable(&autodiff).unwrap();
+    let fitted = fit_joint_origins(
+        differentiable.as_ref(),
+        &autodiff,
+        [f.data.height, f.data.width],
+        &observed,
+        &angles,
+        &VisualCalibrationConfig::paper(),
+    )
+    .unwrap();
+    eprintln!(
+        "link {link} (+50 mm): recovered {:.1?} mm",
+        fitted.change_mm
+    );
+    let got = fitted.change_mm[link];
+    assert!((25.0..75.0).contains(&got), "{:.1?}", fitted.change_mm);
+    for (j, c) in fitted.change_mm.iter().enumerate() {
+        assert!(j == link || c.abs() < got, "{:.1?}", fitted.change_mm);
+    }
+}

@@ -119,6 +119,18 @@ pub trait Render {
     fn differentiable(&self, _autodiff: &Device) -> Option<Box<dyn Render>> {
         None
     }
+    /// For a model that hangs on the kinematic chain (K-3DGS): its joint origins'
+    /// translations `[J, 3]` (metres, the order of
+    /// [`crate::sim::tensor_kinematics::TensorChain::origin_rows`]). `None`: no chain.
+    fn joint_origins(&self) -> Option<Vec<[f32; 3]>> {
+        None
+    }
+    /// Silhouettes `[n, 1, H, W]` of `angles` with the chain's joint origin translations
+    /// `origin_t` `[J, 3]` instead of its own, differentiable in them (visual calibration of
+    /// link lengths, [`crate::body::calibration`]). `None`: no chain.
+    fn render_with_origins(&self, _angles: Tensor<2>, _origin_t: Tensor<2>) -> Option<Tensor<4>> {
+        None
+    }
 }
 
 /// One renderer's test predictions and inference timings.

@@ -20,7 +20,7 @@ use std::path::Path;
 
 use burn::module::Module;
 use burn::optim::GradientsParams;
-use burn::tensor::{Tensor, TensorData};
+use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
@@ -426,6 +426,38 @@ impl Render for K3dgsRenderer {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         let (s, d) = self.splat(angles, Some(self.cull_sigmas));
         (s, Some(d))
+    }
+
+    fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
+        Some(Box::new(K3dgsRenderer {
+            model: self.model.clone().fork(autodiff).freeze(),
+            chain: self.chain.clone(),
+            camera: self.camera.clone(),
+            mode: self.mode,
+            cull_sigmas: self.cull_sigmas,
+            dense_batches: self.dense_batches.clone(),
+            counts: self.counts.clone(),
+        }))
+    }
+
+    fn joint_origins(&self) -> Option<Vec<[f32; 3]>> {
+        let (_, t, _) = self.chain.origin_rows();
+        Some(t.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    fn render_with_origins(&self, angles: Tensor<2>, origin_t: Tensor<2>) -> Option<Tensor<4>> {
+        let [b, _] = angles.dims();
+        let device = angles.device();
+        let (r, _, _) = self.chain.origin_rows();
+        let joints = self.chain.joint_count();
+        let origin_r = Tensor::<3>::from_data(TensorData::new(r, [joints, 3, 3]), &device);
+        let q = angles.mul_scalar(std::f64::consts::PI / 180.0);
+        let (fr, ft) = self.chain.link_frames_with(q, origin_r, origin_t);
+        let g = self.model.project_frames(fr, ft, &self.camera);
+        let (s, _) = self
+            .model
+            .composite(g, &self.camera, self.mode, Some(self.cull_sigmas));
+        Some(s.reshape([b, 1, self.camera.height, self.camera.width]))
     }
 
     /// Depth is drawn where the Gaussians are.

@@ -108,6 +108,18 @@ impl TensorChain {
         let n = self.joints.len();
         let origin_r = Tensor::<3>::from_data(TensorData::new(r, [n, 3, 3]), &device);
         let origin_t = Tensor::<2>::from_data(TensorData::new(t, [n, 3]), &device);
+        self.link_frames_with(q, origin_r, origin_t)
+    }
+
+    /// [`TensorChain::link_frames`] with the joint origins given as tensors (learnable link
+    /// parameters, in the order of [`TensorChain::origin_rows`]): rotations `origin_r`
+    /// `[J, 3, 3]`, translations `origin_t` `[J, 3]` (metres).
+    pub fn link_frames_with(
+        &self,
+        q: Tensor<2>,
+        origin_r: Tensor<3>,
+        origin_t: Tensor<2>,
+    ) -> (Tensor<4>, Tensor<3>) {
         let (r, t) = self.frames_with(q, origin_r, origin_t);
         (Tensor::stack(r, 1), Tensor::stack(t, 1))
     }

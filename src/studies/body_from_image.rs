@@ -14,11 +14,13 @@
 //! - `detection.csv`: the smallest offset told apart from healthy encoders: a threshold at the
 //!   99th percentile of the statistic (largest |offset| over the joints) on healthy trials (a
 //!   false alarm rate of 1%), and the share of trials detected per offset size on one joint.
-//! - `figures`: `pose_grid.png` (observed, rendered at the estimate, error) and
-//!   `drift_vs_k.png`.
+//! - `calibration.csv`: link lengths from images: every link lengthened by 1, 3 or 5 cm, seen in
+//!   k test poses, read through K-3DGS with its joint origins fitted ([`crate::body::calibration`]).
+//! - `figures`: `pose_grid.png` (observed, rendered at the estimate, error), `drift_vs_k.png`
+//!   and `calibration_vs_k.png`.
 //!
-//! The self-model is NeuroKin of the same preset, trained here (checkpointed, `--resume`
-//! continues it). Visual calibration of link lengths (K-3DGS) is not in this study yet.
+//! The self-models are NeuroKin (checkpointed, `--resume` continues it) and K-3DGS (isotropic,
+//! alpha compositing) of the same preset, trained here.
 
 use std::path::Path;
 
@@ -29,6 +31,7 @@ use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::body::amortised::{AmortisedConfig, train_estimator};
+use crate::body::calibration::{VisualCalibrationConfig, fit_joint_origins};
 use crate::body::drift::{DriftConfig, estimate_offsets};
 use crate::body::observations::{Observed, Perturbation, host};
 use crate::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
@@ -40,6 +43,7 @@ use crate::core::timing::{Repeats, median_seconds};
 use crate::report::figures::{GridRow, image_grid, log_log_lines};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::harness::{Render, fit_run};
+use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
 use crate::self_models::neurokin::neurokin_run;
 use crate::sim::robot::Robot;
 use crate::train::trainer::autodiff_device;
@@ -66,6 +70,10 @@ pub struct BodyFromImageConfig {
     pub healthy_trials: usize,
     pub detection_offsets_deg: Vec<f64>,
     pub detection_trials: usize,
+    /// Visual calibration: every link lengthened by each of these (cm), read from k images.
+    pub calibration_changes_cm: Vec<f64>,
+    pub calibration_ks: Vec<usize>,
+    pub calibration: VisualCalibrationConfig,
     pub seed: u64,
 }
 
@@ -92,6 +100,9 @@ impl BodyFromImageConfig {
             healthy_trials: 100,
             detection_offsets_deg: vec![0.1, 0.2, 0.5, 1.0, 2.0],
             detection_trials: 20,
+            calibration_changes_cm: vec![1.0, 3.0, 5.0],
+            calibration_ks: vec![1, 3, 10, 30],
+            calibration: VisualCalibrationConfig::paper(),
             seed: 0,
         };
         match name {
@@ -113,6 +124,12 @@ impl BodyFromImageConfig {
                 healthy_trials: 4,
                 detection_offsets_deg: vec![1.0, 5.0],
                 detection_trials: 2,
+                calibration_changes_cm: vec![5.0],
+                calibration_ks: vec![3],
+                calibration: VisualCalibrationConfig {
+                    steps: 60,
+                    ..VisualCalibrationConfig::paper()
+                },
                 ..paper
             }),
             other => Err(Error::Config(format!(
@@ -169,6 +186,22 @@ pub struct DetectionRow {
     /// The healthy trials' 99th percentile of max |offset| (the alarm threshold).
     pub threshold_deg: f64,
     pub detected_share: f64,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
+
+/// Link lengths read from images: a row of `calibration.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationRow {
+    /// Every link lengthened by this much (cm).
+    pub change_cm: f64,
+    pub k: usize,
+    /// The change recovered on each link with a length, "l1 / l2 / ..." (mm).
+    pub recovered_mm: String,
+    /// Mean and largest |recovered - true| over those links (mm).
+    pub mean_error_mm: f64,
+    pub max_error_mm: f64,
     pub preset: String,
     pub device: String,
     pub git_revision: String,
@@ -582,14 +615,21 @@ pub fn run(
          statistic is the largest |offset| over the joints (against a healthy reference, k images); \
          the threshold is its 99th percentile over healthy trials (false alarms 1%).",
     )?;
+    let calibration_rows = visual_calibration(cfg, out, device_choice, &bench)?;
     write_json(&out.join("config.json"), cfg)?;
     let r = &rows[2];
     let smallest = detection_rows
         .iter()
         .find(|r| r.detected_share >= 0.9)
         .map_or("none".to_string(), |r| format!("{} deg", r.offset_deg));
+    let calibrated = calibration_rows.last().map_or(String::new(), |c| {
+        format!(
+            "; links +{} cm from {} images: {:.1} mm mean error",
+            c.change_cm, c.k, c.mean_error_mm
+        )
+    });
     Ok(format!(
-        "pose from image ({}): median joint error {:.2} deg, {:.0}% of poses within 2 deg, {:.1} ms/pose batched; drift from {} images: {:.2} deg; smallest offset detected in 90% of trials: {smallest}",
+        "pose from image ({}): median joint error {:.2} deg, {:.0}% of poses within 2 deg, {:.1} ms/pose batched; drift from {} images: {:.2} deg; smallest offset detected in 90% of trials: {smallest}{calibrated}",
         r.method,
         r.median_joint_error_deg,
         100.0 * r.within_2deg_share,
@@ -644,4 +684,113 @@ fn pose_grid(
         b.image[0],
         2,
     )
+}
+
+/// K-3DGS (isotropic, alpha compositing) trained on the same data, its joint origins fitted
+/// to k test poses of the arm with every link lengthened (the Table IV change).
+fn visual_calibration(
+    cfg: &BodyFromImageConfig,
+    out: &Path,
+    device_choice: DeviceChoice,
+    bench: &Bench,
+) -> Result<Vec<CalibrationRow>> {
+    let run = k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?;
+    // K-3DGS keeps no checkpoint (densification changes its shapes); it trains in about a
+    // minute on the paper preset.
+    let fitted = fit_run(&run, &out.join("k3dgs_checkpoint"), device_choice, false)?;
+    let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
+    let autodiff = autodiff_device(&fitted.device, cfg.seed);
+    let renderer = fitted.trained.renderers[0]
+        .1
+        .differentiable(&autodiff)
+        .ok_or_else(|| Error::Config("K-3DGS cannot be differentiated".into()))?;
+    let nominal = renderer
+        .joint_origins()
+        .ok_or_else(|| Error::Config("K-3DGS has no chain".into()))?;
+    let has_length: Vec<bool> = nominal
+        .iter()
+        .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() > 1e-3)
+        .collect();
+    let robot = run.data.robot.load()?;
+    let data = &fitted.data;
+    let mut rows = Vec::new();
+    let mut rng = StdRng::seed_from_u64(cfg.seed ^ 0xCA11B);
+    for &cm in &cfg.calibration_changes_cm {
+        let mut changed = robot.clone();
+        changed.chain = crate::sim::arm_change::ArmChange::Lengthen { cm }.apply(&robot.chain)?;
+        for &k in &cfg.calibration_ks {
+            let k = k.min(fitted.test_range.len());
+            let poses: Vec<usize> = sample(&mut rng, fitted.test_range.len(), k)
+                .into_iter()
+                .map(|i| fitted.test_range.start + i)
+                .collect();
+            let angles: Vec<Vec<f64>> = poses.iter().map(|&i| data.angles[i].clone()).collect();
+            let mut data_cfg = run.data.dataset.clone();
+            data_cfg.samples = k;
+            data_cfg.train = k;
+            let images =
+                crate::data::dataset::Dataset::render(&changed, &data_cfg, angles.clone(), None)?;
+            let observed = Observed::from_dataset(&images, &(0..k).collect::<Vec<_>>());
+            let fit = fit_joint_origins(
+                renderer.as_ref(),
+                &autodiff,
+                [data.height, data.width],
+                &observed,
+                &angles,
+                &cfg.calibration,
+            )?;
+            let recovered: Vec<f64> = fit
+                .change_mm
+                .iter()
+                .zip(&has_length)
+                .filter(|(_, l)| **l)
+                .map(|(c, _)| *c)
+                .collect();
+            let errors: Vec<f64> = recovered.iter().map(|c| (c - 10.0 * cm).abs()).collect();
+            rows.push(CalibrationRow {
+                change_cm: cm,
+                k,
+                recovered_mm: recovered
+                    .iter()
+                    .map(|v| format!("{v:.1}"))
+                    .collect::<Vec<_>>()
+                    .join(" / "),
+                mean_error_mm: errors.iter().sum::<f64>() / errors.len().max(1) as f64,
+                max_error_mm: errors.iter().fold(0.0, |a: f64, &b| a.max(b)),
+                preset: cfg.preset.clone(),
+                device: bench.device_name.clone(),
+                git_revision: bench.revision.clone(),
+            });
+        }
+    }
+    let csv = out.join("calibration.csv");
+    write_csv(&csv, &rows)?;
+    write_markdown_report(
+        &csv,
+        "Link lengths from images",
+        "Every link of the arm lengthened (the EMSSL paper's Table IV change), seen in k test poses; \
+         K-3DGS's joint origins fitted to the images with its Gaussians frozen. The change recovered \
+         along each link with a length (mm) and the error against the true change.",
+    )?;
+    let curves: Vec<(String, Vec<(f64, f64)>)> = cfg
+        .calibration_changes_cm
+        .iter()
+        .map(|&cm| {
+            (
+                format!("links +{cm} cm"),
+                rows.iter()
+                    .filter(|r| r.change_cm == cm)
+                    .map(|r| (r.k as f64, r.mean_error_mm))
+                    .collect(),
+            )
+        })
+        .collect();
+    log_log_lines(
+        &out.join("calibration_vs_k.png"),
+        "Link-length error against the number of images",
+        "images k",
+        "mean link error (mm, log)",
+        &curves,
+    )?;
+    Ok(rows)
 }

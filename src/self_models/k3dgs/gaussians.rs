@@ -328,6 +328,12 @@ impl KinematicGaussians {
     /// The Gaussians projected for joint values `q` `[B, dof]` (radians).
     pub fn project(&self, chain: &TensorChain, q: Tensor<2>, camera: &Camera) -> ImageGaussians {
         let (r, t) = chain.link_frames(q);
+        self.project_frames(r, t, camera)
+    }
+
+    /// The Gaussians projected for link poses `[B, links, 3, 3]`, `[B, links, 3]` (from
+    /// [`TensorChain::link_frames`] or [`TensorChain::link_frames_with`]).
+    pub fn project_frames(&self, r: Tensor<4>, t: Tensor<3>, camera: &Camera) -> ImageGaussians {
         let opacity = burn::tensor::activation::sigmoid(self.opacity_logits.val());
         let n = self.len();
         let sd = self.standard_deviations();
@@ -359,7 +365,17 @@ impl KinematicGaussians {
         mode: Compositing,
         cull_sigmas: Option<f64>,
     ) -> (Tensor<2>, Tensor<2>) {
-        let g = self.project(chain, q, camera);
+        self.composite(self.project(chain, q, camera), camera, mode, cull_sigmas)
+    }
+
+    /// Silhouettes and depth `[B, H * W]` of projected Gaussians.
+    pub fn composite(
+        &self,
+        g: ImageGaussians,
+        camera: &Camera,
+        mode: Compositing,
+        cull_sigmas: Option<f64>,
+    ) -> (Tensor<2>, Tensor<2>) {
         match cull_sigmas {
             Some(s) => render_culled(&g, camera.height, camera.width, mode, s),
             None => render_dense(&g, camera.height, camera.width, mode),

@@ -1,0 +1,136 @@
+//! Link lengths from images (visual calibration): a self-model that hangs on the kinematic
+//! chain (K-3DGS: Gaussians on the links) renders with the chain's joint origins as
+//! parameters ([`Render::render_with_origins`]); with the Gaussians frozen, Adam fits the
+//! origins' translations to k images of the changed arm at known joint angles. A link's
+//! change is the fitted translation's change along the link (mm). This is the EMSSL paper's
+//! first adaptation approach (learned link parameters, [`crate::ik::calibration`]) fed by a
+//! camera instead of measured tip positions.
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::body::observations::{Observed, check_angles, host};
+use crate::body::pose::{SilhouetteLoss, row_losses};
+use crate::core::error::{Error, Result};
+use crate::self_models::harness::Render;
+use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer};
+
+/// How the joint origins are fitted.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VisualCalibrationConfig {
+    pub steps: usize,
+    /// Adam's learning rate at the start (metres), falling along a half cosine to 1%.
+    pub learning_rate: f64,
+    pub loss: SilhouetteLoss,
+}
+
+impl VisualCalibrationConfig {
+    pub fn paper() -> Self {
+        VisualCalibrationConfig {
+            steps: 200,
+            learning_rate: 2e-3,
+            loss: SilhouetteLoss::Bce,
+        }
+    }
+}
+
+/// The joint origins' translations `[J, 3]` (metres).
+#[derive(Module, Debug)]
+struct Origins {
+    t: Param<Tensor<2>>,
+}
+
+/// The fitted chain: every joint origin's translation and its change along the link.
+#[derive(Clone, Debug)]
+pub struct FittedOrigins {
+    /// Fitted translations (metres), one per joint of the chain.
+    pub translations: Vec<[f64; 3]>,
+    /// The change of each link's length along itself (mm; 0 for a joint with no length).
+    pub change_mm: Vec<f64>,
+}
+
+/// Fit the joint origins of `renderer`'s chain (differentiable, on the autodiff `device`)
+/// to `observed` images of the robot at the known joint `angles` (degrees).
+pub fn fit_joint_origins(
+    renderer: &dyn Render,
+    device: &Device,
+    image: [usize; 2],
+    observed: &Observed,
+    angles: &[Vec<f64>],
+    cfg: &VisualCalibrationConfig,
+) -> Result<FittedOrigins> {
+    observed.check_for(image)?;
+    let nominal = renderer.joint_origins().ok_or_else(|| {
+        Error::Config("this self-model has no kinematic chain to calibrate (use K-3DGS)".into())
+    })?;
+    let dof = angles.first().map_or(0, Vec::len);
+    if angles.len() != observed.n || dof == 0 {
+        return Err(Error::Config(format!(
+            "{} joint vectors for {} images",
+            angles.len(),
+            observed.n
+        )));
+    }
+    check_angles(angles, dof, "pose")?;
+    if cfg.steps == 0 || !(cfg.learning_rate.is_finite() && cfg.learning_rate > 0.0) {
+        return Err(Error::Config(
+            "visual calibration needs steps and a positive learning rate".into(),
+        ));
+    }
+    let joints = nominal.len();
+    let start: Vec<f32> = nominal.iter().flatten().copied().collect();
+    let module = Origins {
+        t: Param::from_tensor(Tensor::from_data(
+            TensorData::new(start, [joints, 3]),
+            device,
+        )),
+    };
+    let k = observed.n;
+    let q: Vec<f32> = angles.iter().flatten().map(|&v| v as f32).collect();
+    let set = TrainSet {
+        inputs: Tensor::from_data(TensorData::new(q, [k, dof]), device),
+        targets: vec![observed.tensor(device)],
+    };
+    let train = TrainConfig {
+        steps: cfg.steps,
+        batch: k,
+        learning_rate: cfg.learning_rate,
+        grad_clip_norm: None,
+        input_noise: 0.0,
+        seed: 0,
+        checkpoint_every: 0,
+    };
+    let loss = cfg.loss;
+    let mut schedule = Schedule::cosine(cfg.steps);
+    let (fitted, _) = Trainer::new(&train, "visual calibration")
+        .quiet()
+        .hooks(&mut schedule)
+        .fit(module, &set, |m: &Origins, b| {
+            let s = renderer
+                .render_with_origins(b.inputs.clone(), m.t.val())
+                .expect("checked: the model has a chain");
+            row_losses(loss, s, b.targets[0].clone()).sum()
+        })?;
+    let t = host(fitted.t.val())?;
+    let translations: Vec<[f64; 3]> = t
+        .chunks(3)
+        .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
+        .collect();
+    let change_mm = translations
+        .iter()
+        .zip(&nominal)
+        .map(|(f, n)| {
+            let n = [n[0] as f64, n[1] as f64, n[2] as f64];
+            let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            if len < 1e-3 {
+                return 0.0;
+            }
+            let along = (0..3).map(|i| (f[i] - n[i]) * n[i] / len).sum::<f64>();
+            1000.0 * along
+        })
+        .collect();
+    Ok(FittedOrigins {
+        translations,
+        change_mm,
+    })
+}
