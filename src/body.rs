@@ -18,6 +18,7 @@
 
 pub mod amortised;
 pub mod calibration;
+pub mod descent;
 pub mod drift;
 pub mod observations;
 pub mod pose;

@@ -9,11 +9,11 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
-use crate::body::observations::{Observed, check_angles, host};
+use crate::body::descent::{check_schedule, descend, views};
+use crate::body::observations::{Observed, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::{Error, Result};
 use crate::self_models::harness::Render;
-use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer};
 
 /// How the joint origins are fitted.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -59,24 +59,11 @@ pub fn fit_joint_origins(
     angles: &[Vec<f64>],
     cfg: &VisualCalibrationConfig,
 ) -> Result<FittedOrigins> {
-    observed.check_for(image)?;
+    check_schedule(cfg.steps, cfg.learning_rate, "visual calibration")?;
     let nominal = renderer.joint_origins().ok_or_else(|| {
         Error::Config("this self-model has no kinematic chain to calibrate (use K-3DGS)".into())
     })?;
-    let dof = angles.first().map_or(0, Vec::len);
-    if angles.len() != observed.n || dof == 0 {
-        return Err(Error::Config(format!(
-            "{} joint vectors for {} images",
-            angles.len(),
-            observed.n
-        )));
-    }
-    check_angles(angles, dof, "pose")?;
-    if cfg.steps == 0 || !(cfg.learning_rate.is_finite() && cfg.learning_rate > 0.0) {
-        return Err(Error::Config(
-            "visual calibration needs steps and a positive learning rate".into(),
-        ));
-    }
+    let set = views(observed, angles, image, "pose", device)?;
     let joints = nominal.len();
     let start: Vec<f32> = nominal.iter().flatten().copied().collect();
     let module = Origins {
@@ -85,32 +72,20 @@ pub fn fit_joint_origins(
             device,
         )),
     };
-    let k = observed.n;
-    let q: Vec<f32> = angles.iter().flatten().map(|&v| v as f32).collect();
-    let set = TrainSet {
-        inputs: Tensor::from_data(TensorData::new(q, [k, dof]), device),
-        targets: vec![observed.tensor(device)],
-    };
-    let train = TrainConfig {
-        steps: cfg.steps,
-        batch: k,
-        learning_rate: cfg.learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: 0,
-        checkpoint_every: 0,
-    };
     let loss = cfg.loss;
-    let mut schedule = Schedule::cosine(cfg.steps);
-    let (fitted, _) = Trainer::new(&train, "visual calibration")
-        .quiet()
-        .hooks(&mut schedule)
-        .fit(module, &set, |m: &Origins, b| {
+    let fitted = descend(
+        module,
+        &set,
+        cfg.steps,
+        cfg.learning_rate,
+        "visual calibration",
+        |m: &Origins, b| {
             let s = renderer
                 .render_with_origins(b.inputs.clone(), m.t.val())
                 .expect("checked: the model has a chain");
             row_losses(loss, s, b.targets[0].clone()).sum()
-        })?;
+        },
+    )?;
     let t = host(fitted.t.val())?;
     let translations: Vec<[f64; 3]> = t
         .chunks(3)

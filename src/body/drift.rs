@@ -4,13 +4,13 @@
 //! `d` through the frozen model, from `d = 0`.
 
 use burn::module::{Module, Param};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Tensor};
 
-use crate::body::observations::{Observed, check_angles, host};
+use crate::body::descent::{check_schedule, descend, views};
+use crate::body::observations::{Observed, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
-use crate::core::error::{Error, Result};
+use crate::core::error::Result;
 use crate::self_models::harness::Render;
-use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer};
 
 /// How the offsets are fitted.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -48,49 +48,25 @@ pub fn estimate_offsets(
     reported: &[Vec<f64>],
     cfg: &DriftConfig,
 ) -> Result<Vec<f64>> {
-    observed.check_for(image)?;
-    let dof = reported.first().map_or(0, Vec::len);
-    if reported.len() != observed.n || dof == 0 {
-        return Err(Error::Config(format!(
-            "{} reported joint vectors for {} images",
-            reported.len(),
-            observed.n
-        )));
-    }
-    check_angles(reported, dof, "reported pose")?;
-    if cfg.steps == 0 || !(cfg.learning_rate.is_finite() && cfg.learning_rate > 0.0) {
-        return Err(Error::Config(
-            "drift estimation needs steps and a positive learning rate".into(),
-        ));
-    }
-    let k = observed.n;
-    let q: Vec<f32> = reported.iter().flatten().map(|&v| v as f32).collect();
-    let set = TrainSet {
-        inputs: Tensor::from_data(TensorData::new(q, [k, dof]), device),
-        targets: vec![observed.tensor(device)],
-    };
-    let train = TrainConfig {
-        steps: cfg.steps,
-        batch: k,
-        learning_rate: cfg.learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: 0,
-        checkpoint_every: 0,
-    };
+    check_schedule(cfg.steps, cfg.learning_rate, "drift estimation")?;
+    let set = views(observed, reported, image, "reported", device)?;
+    let dof = set.inputs.dims()[1];
     let module = Offset {
         d: Param::from_tensor(Tensor::zeros([1, dof], device)),
     };
     let loss = cfg.loss;
-    let mut schedule = Schedule::cosine(cfg.steps);
-    let (fitted, _) = Trainer::new(&train, "encoder drift")
-        .quiet()
-        .hooks(&mut schedule)
-        .fit(module, &set, |m: &Offset, b| {
+    let fitted = descend(
+        module,
+        &set,
+        cfg.steps,
+        cfg.learning_rate,
+        "encoder drift",
+        |m: &Offset, b| {
             let n = b.inputs.dims()[0];
             let q = b.inputs.clone() - m.d.val().expand([n, dof]);
             row_losses(loss, renderer.render(q).0, b.targets[0].clone()).sum()
-        })?;
+        },
+    )?;
     let d = host(fitted.d.val())?;
     Ok(d.into_iter().map(f64::from).collect())
 }

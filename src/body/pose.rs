@@ -14,10 +14,11 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 
+use crate::body::descent::{check_schedule, descend};
 use crate::body::observations::{Observed, check_angles, host};
 use crate::core::error::{Error, Result};
 use crate::self_models::harness::Render;
-use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer};
+use crate::train::trainer::TrainSet;
 
 /// What the rendered silhouette is compared with the observed one by.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -68,18 +69,12 @@ impl PoseFitConfig {
     }
 
     fn validate(&self) -> Result<()> {
-        if self.starts == 0 || self.steps == 0 || self.batch_rows == 0 {
+        if self.starts == 0 || self.batch_rows == 0 {
             return Err(Error::Config(
-                "a pose fit needs at least one start, one step and one row per batch".into(),
+                "a pose fit needs at least one start and one row per batch".into(),
             ));
         }
-        if !(self.learning_rate.is_finite() && self.learning_rate > 0.0) {
-            return Err(Error::Config(format!(
-                "learning rate {} is not a positive number",
-                self.learning_rate
-            )));
-        }
-        Ok(())
+        check_schedule(self.steps, self.learning_rate, "a pose fit")
     }
 }
 
@@ -183,15 +178,6 @@ pub fn pose_from_image(
     }
     let starts = cfg.starts;
     let images_per_batch = (cfg.batch_rows / starts).max(1);
-    let train = TrainConfig {
-        steps: cfg.steps,
-        batch: usize::MAX,
-        learning_rate: cfg.learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: cfg.seed,
-        checkpoint_every: 0,
-    };
     let mut angles = Vec::with_capacity(observed.n);
     let mut losses = Vec::with_capacity(observed.n);
     let mut first = 0;
@@ -220,16 +206,19 @@ pub fn pose_from_image(
             targets: vec![chunk.repeated(starts).tensor(device)],
         };
         let loss_kind = cfg.loss;
-        let mut schedule = Schedule::cosine(cfg.steps);
-        let (fitted, _) = Trainer::new(&train, "pose from image")
-            .quiet()
-            .hooks(&mut schedule)
-            .fit(module, &set, |m: &Angles, b| {
+        let fitted = descend(
+            module,
+            &set,
+            cfg.steps,
+            cfg.learning_rate,
+            "pose from image",
+            |m: &Angles, b| {
                 let n = b.inputs.dims()[0];
                 let rows: Tensor<1, Int> = b.inputs.clone().reshape([n]).int();
                 let q = m.q.val().select(0, rows);
                 row_losses(loss_kind, renderer.render(q).0, b.targets[0].clone()).sum()
-            })?;
+            },
+        )?;
         // Score every row at its final angles, keep each image's best start.
         let q = fitted.q.val().detach();
         let rendered = renderer.render(q.clone()).0.detach();
