@@ -3,7 +3,7 @@
 //! - `results.csv`: joint angles from silhouettes. Methods: the mean training pose (a
 //!   baseline), the amortised CNN, the CNN refined through the self-model, and a search from
 //!   random starts without a guess; the refined CNN also on spoiled images (pixels flipped,
-//!   an occluder, a 1-pixel shift). Errors per joint and overall (degrees), end effector (mm),
+//!   an occluder, a 1-pixel shift), and refined through K-3DGS instead. Errors per joint and overall (degrees), end effector (mm),
 //!   the share of poses with every joint within 2 degrees, milliseconds per pose.
 //! - `drift.csv`: encoder offsets (uniform in +-`max_offset_deg` on every joint) recovered from
 //!   k images, against k. The protocol: the robot visits k poses; the same poses seen once
@@ -297,14 +297,16 @@ impl Bench<'_> {
         }
     }
 
+    /// Refine `guesses` through `through` (a differentiable self-model on `self.autodiff`).
     fn refine(
         &self,
+        through: &dyn Render,
         observed: &Observed,
         guesses: &[Vec<f64>],
         cfg: &PoseFitConfig,
     ) -> Result<Vec<Vec<f64>>> {
         Ok(pose_from_image(
-            self.differentiable,
+            through,
             self.autodiff,
             self.image,
             observed,
@@ -350,6 +352,21 @@ pub fn run(
     let differentiable = renderer
         .differentiable(&autodiff)
         .ok_or_else(|| Error::Config("the self-model cannot be differentiated".into()))?;
+    // K-3DGS (isotropic, alpha compositing) on the same data: its Gaussians hang on the
+    // chain, so it also reads link lengths. It keeps no checkpoint (densification changes its
+    // shapes); it trains in about a minute on the paper preset.
+    let k3dgs_run = k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?;
+    let k3dgs_fitted = fit_run(
+        &k3dgs_run,
+        &out.join("k3dgs_checkpoint"),
+        device_choice,
+        false,
+    )?;
+    let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
+    let k3dgs = k3dgs_fitted.trained.renderers[0]
+        .1
+        .differentiable(&autodiff)
+        .ok_or_else(|| Error::Config("K-3DGS cannot be differentiated".into()))?;
     let robot = model_run.data.robot.load()?;
     let data = &fitted.data;
     let seen = &data.angles[fitted.train_range.clone()];
@@ -409,14 +426,14 @@ pub fn run(
     ));
     let refined_label = format!("CNN + {} refinement steps", cfg.refine.steps);
     let t = std::time::Instant::now();
-    let refined = bench.refine(&observed, &guesses, &cfg.refine)?;
+    let refined = bench.refine(bench.differentiable, &observed, &guesses, &cfg.refine)?;
     let refine_batched = 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched;
     let refine_b1 = 1000.0
         * median_seconds(Repeats::exactly(1, 3), || {
             let g = estimator
                 .estimate(&one, &device, 1)
                 .expect("estimated above");
-            let _ = bench.refine(&one, &g, &cfg.refine);
+            let _ = bench.refine(bench.differentiable, &one, &g, &cfg.refine);
         });
     rows.push(bench.row(
         &refined_label,
@@ -425,6 +442,18 @@ pub fn run(
         &truth,
         refine_b1,
         refine_batched,
+    ));
+    // The same refinement through K-3DGS (trained on the same data), from the same CNN.
+    let t = std::time::Instant::now();
+    let through_gaussians = bench.refine(k3dgs.as_ref(), &observed, &guesses, &cfg.refine)?;
+    let gaussians_batched = 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched;
+    rows.push(bench.row(
+        &format!("{refined_label}, through K-3DGS"),
+        "clean",
+        &through_gaussians,
+        &truth,
+        f64::NAN,
+        gaussians_batched,
     ));
     let m = cfg.search_poses.min(n);
     let t = std::time::Instant::now();
@@ -454,7 +483,7 @@ pub fn run(
         let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
         let g = estimator.estimate(&spoiled, &device, 64)?;
         rows.push(bench.row("amortised CNN", &p.label(), &g, &truth, f64::NAN, f64::NAN));
-        let r = bench.refine(&spoiled, &g, &cfg.refine)?;
+        let r = bench.refine(bench.differentiable, &spoiled, &g, &cfg.refine)?;
         rows.push(bench.row(&refined_label, &p.label(), &r, &truth, f64::NAN, f64::NAN));
     }
     let pose_csv = out.join("results.csv");
@@ -462,7 +491,8 @@ pub fn run(
     write_markdown_report(
         &pose_csv,
         "Joint angles from a silhouette",
-        "The test poses' silhouettes read back through the trained NeuroKin. Errors are absolute joint \
+        "The test poses' silhouettes read back through the trained NeuroKin (one row: through K-3DGS, \
+         isotropic with alpha compositing, from the same CNN answers). Errors are absolute joint \
          errors in degrees (mean and median over every joint of every pose), the end effector's \
          distance in mm, and the share of poses with every joint within 2 degrees. The CNN is trained \
          on the self-model's own renderings; the refinement descends the silhouette's cross-entropy \
@@ -609,7 +639,7 @@ pub fn run(
          reference| over the joints; the threshold is its 99th percentile over healthy trials (false \
          alarms 1%).",
     )?;
-    let calibration_rows = visual_calibration(cfg, out, device_choice, &bench)?;
+    let calibration_rows = visual_calibration(cfg, out, k3dgs.as_ref(), &bench, &fitted)?;
     write_json(&out.join("config.json"), cfg)?;
     let r = &rows[2];
     let smallest = detection_rows
@@ -680,24 +710,15 @@ fn pose_grid(
     )
 }
 
-/// K-3DGS (isotropic, alpha compositing) trained on the same data, its joint origins fitted
-/// to k test poses of the arm with every link lengthened (the Table IV change).
+/// K-3DGS (`renderer`, differentiable, trained on the same data as `fitted`), its joint
+/// origins fitted to k test poses of the arm with every link lengthened (the Table IV change).
 fn visual_calibration(
     cfg: &BodyFromImageConfig,
     out: &Path,
-    device_choice: DeviceChoice,
+    renderer: &dyn Render,
     bench: &Bench,
+    fitted: &crate::self_models::harness::Fitted,
 ) -> Result<Vec<CalibrationRow>> {
-    let run = k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?;
-    // K-3DGS keeps no checkpoint (densification changes its shapes); it trains in about a
-    // minute on the paper preset.
-    let fitted = fit_run(&run, &out.join("k3dgs_checkpoint"), device_choice, false)?;
-    let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
-    let autodiff = autodiff_device(&fitted.device, cfg.seed);
-    let renderer = fitted.trained.renderers[0]
-        .1
-        .differentiable(&autodiff)
-        .ok_or_else(|| Error::Config("K-3DGS cannot be differentiated".into()))?;
     let nominal = renderer
         .joint_origins()
         .ok_or_else(|| Error::Config("K-3DGS has no chain".into()))?;
@@ -705,7 +726,7 @@ fn visual_calibration(
         .iter()
         .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() > 1e-3)
         .collect();
-    let robot = run.data.robot.load()?;
+    let robot = bench.robot;
     let data = &fitted.data;
     let mut rows = Vec::new();
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ 0xCA11B);
@@ -719,15 +740,15 @@ fn visual_calibration(
                 .map(|i| fitted.test_range.start + i)
                 .collect();
             let angles: Vec<Vec<f64>> = poses.iter().map(|&i| data.angles[i].clone()).collect();
-            let mut data_cfg = run.data.dataset.clone();
+            let mut data_cfg = neurokin_run(&cfg.preset)?.data.dataset;
             data_cfg.samples = k;
             data_cfg.train = k;
             let images =
                 crate::data::dataset::Dataset::render(&changed, &data_cfg, angles.clone(), None)?;
             let observed = Observed::from_dataset(&images, &(0..k).collect::<Vec<_>>());
             let fit = fit_joint_origins(
-                renderer.as_ref(),
-                &autodiff,
+                renderer,
+                bench.autodiff,
                 [data.height, data.width],
                 &observed,
                 &angles,
