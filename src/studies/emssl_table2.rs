@@ -475,8 +475,9 @@ struct RangeRun<'a> {
     rows: Vec<IkRow>,
     curves: Vec<ValidationRow>,
     emssl_curve: Vec<EmsslIteration>,
-    /// Units left to another process running the same command (their rows are not here).
-    left_to_others: usize,
+    /// Units left to another process running the same command (their rows are not here):
+    /// where their rows go among `rows`, their JSON and settings, for the partial report.
+    left: Vec<(usize, PathBuf, serde_json::Value)>,
     /// Called with this range's rows and curves after every unit (the partial report).
     progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
@@ -558,7 +559,7 @@ impl RangeRun<'_> {
             self.rows.extend(done.rows);
             self.curves.extend(done.curves);
             self.emssl_curve.extend(done.emssl_curve);
-            return (self.progress)(&self.rows, &self.curves);
+            return self.report_progress();
         }
         // Another process running the same command may hold this unit: leave it to it.
         let _claim = match crate::core::atomic_file::Claim::take(&path.with_extension("claim"))? {
@@ -568,8 +569,8 @@ impl RangeRun<'_> {
                     "emssl_table2: +-{:.0} deg {unit}: left to process {pid}, which runs it",
                     self.range_deg
                 );
-                self.left_to_others += 1;
-                return Ok(());
+                self.left.push((self.rows.len(), path.clone(), settings));
+                return self.report_progress();
             }
         };
         eprintln!("emssl_table2: +-{:.0} deg {unit}", self.range_deg);
@@ -595,7 +596,37 @@ impl RangeRun<'_> {
         self.rows.extend(done.rows);
         self.curves.extend(done.curves);
         self.emssl_curve.extend(done.emssl_curve);
-        (self.progress)(&self.rows, &self.curves)
+        self.report_progress()
+    }
+
+    /// This process's rows, curves and EMSSL curve, with those of the units left to other
+    /// processes that have finished since (read from their JSON), each in its place.
+    fn merged(&self) -> (Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>) {
+        let mut rows = Vec::new();
+        let mut curves = self.curves.clone();
+        let mut emssl_curve = self.emssl_curve.clone();
+        let mut next = 0;
+        for (at, path, settings) in &self.left {
+            rows.extend_from_slice(&self.rows[next..*at]);
+            next = *at;
+            if let Some(done) = std::fs::read_to_string(path)
+                .ok()
+                .and_then(|t| serde_json::from_str::<Unit>(&t).ok())
+                .filter(|u| &u.settings == settings)
+            {
+                rows.extend(done.rows);
+                curves.extend(done.curves);
+                emssl_curve.extend(done.emssl_curve);
+            }
+        }
+        rows.extend_from_slice(&self.rows[next..]);
+        (rows, curves, emssl_curve)
+    }
+
+    /// The partial report after a unit.
+    fn report_progress(&self) -> Result<()> {
+        let (rows, curves, _) = self.merged();
+        (self.progress)(&rows, &curves)
     }
 
     fn data_settings(&self) -> (IkDataConfig, &Vec<usize>) {
@@ -687,7 +718,7 @@ pub fn run_range(
         rows: Vec::new(),
         curves: Vec::new(),
         emssl_curve: Vec::new(),
-        left_to_others: 0,
+        left: Vec::new(),
         progress,
     };
     let chain = &robot.chain;
@@ -702,14 +733,15 @@ pub fn run_range(
     // EMSSL's answers refined by the solver; where it stalls, restarts from the flow's samples
     // (closest first), then from random joints. The EMSSL variant with the lower validation
     // error is refined; its training and inference count towards the refined answers.
-    if run.left_to_others > 0 {
+    if !run.left.is_empty() {
         // What this unit starts from is still being made elsewhere.
         eprintln!(
             "emssl_table2: +-{range_deg:.0} deg EMSSL + DLS: left for when the units run \
              elsewhere are done (run the command again with --resume)"
         );
-        set_ratios(&mut run.rows);
-        return Ok((run.rows, run.curves, run.emssl_curve, true));
+        let (mut rows, curves, emssl_curve) = run.merged();
+        set_ratios(&mut rows);
+        return Ok((rows, curves, emssl_curve, true));
     }
     let emssl_rows: Vec<&IkRow> = run
         .rows
