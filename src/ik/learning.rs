@@ -32,7 +32,7 @@ use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Point3;
 
-use crate::core::error::Result;
+use crate::core::error::{Error, Result};
 use crate::ik::data::{DistanceErrors, IkData, JointOutput, distances, reach_errors};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
@@ -798,7 +798,17 @@ fn emssl_run(
             &fit_iter,
             &format!("EMSSL iteration {iteration}"),
             tdev,
-        )?;
+        )
+        .map_err(|e| match (e, checkpoint) {
+            // The fit inside an iteration keeps no checkpoint; the iterations do.
+            (Error::Interrupted(_), Some(c)) => Error::Interrupted(format!(
+                "EMSSL stopped during iteration {iteration}; its checkpoint after iteration {} \
+                 is in {}: run the same command with --resume to continue from there",
+                iteration - 1,
+                c.dir.display()
+            )),
+            (e, _) => e,
+        })?;
         let training_seconds = t0.elapsed().as_secs_f64();
         let valid = model.valid();
         // The next sampling pass's inference, and the agreement check on it.
