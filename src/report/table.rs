@@ -24,6 +24,15 @@ pub fn read_csv<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Vec<T>> {
         .map_err(|e| Error::data(path, format!("cannot read CSV rows: {e}")))
 }
 
+/// The title of a generated Markdown table (its first line, without the `# `), if it exists.
+pub fn markdown_title(path: &Path) -> Option<String> {
+    std::fs::read_to_string(path)
+        .ok()?
+        .lines()
+        .next()
+        .map(|l| l.trim_start_matches("# ").to_string())
+}
+
 /// The columns of a generated table of self-model results (`ModelResult`) that a reader needs first; the rest
 /// follow in a second table (the CSV keeps everything).
 pub const SELF_MODEL_COLUMNS: &[&str] = &[
@@ -240,12 +249,17 @@ pub fn write_training_curve(
     draw_training_curve(dir, name)
 }
 
-/// `dir/training_curve.png` from `dir/curve.csv`, titled by the model's `name`.
-pub fn draw_training_curve(dir: &Path, name: &str) -> Result<()> {
-    let points: Vec<(usize, f64)> = read_csv::<CurveRow>(&dir.join("curve.csv"))?
+/// The (step, loss) points of a `curve.csv`.
+pub fn read_curve(path: &Path) -> Result<Vec<(usize, f64)>> {
+    Ok(read_csv::<CurveRow>(path)?
         .into_iter()
         .map(|r| (r.step, r.loss))
-        .collect();
+        .collect())
+}
+
+/// `dir/training_curve.png` from `dir/curve.csv`, titled by the model's `name`.
+pub fn draw_training_curve(dir: &Path, name: &str) -> Result<()> {
+    let points = read_curve(&dir.join("curve.csv"))?;
     // A single point (a model fitted in one pass: the baselines) draws no line.
     if points.len() < 2 {
         return Ok(());

@@ -51,6 +51,18 @@ impl Ablation {
         }
     }
 
+    /// The ablation whose [`Ablation::name`] is `name`.
+    pub fn named(name: &str) -> Option<Self> {
+        [
+            Ablation::Noise,
+            Ablation::Depth,
+            Ablation::Latent,
+            Ablation::DataScale,
+        ]
+        .into_iter()
+        .find(|a| a.name() == name)
+    }
+
     pub fn title(self) -> &'static str {
         match self {
             Ablation::Noise => "NeuroKin ablation: input noise",
@@ -161,6 +173,37 @@ impl Ablation {
     }
 }
 
+impl Setting {
+    /// The folder its run writes, named for its label.
+    pub fn folder(&self) -> String {
+        self.label
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '.' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect()
+    }
+}
+
+/// `training_curves.png` in `dir`: every setting's training loss (its folder's `curve.csv`),
+/// for the preset the rows of `dir/results.csv` record.
+pub fn draw_training_curves(ablation: Ablation, dir: &Path) -> Result<()> {
+    let rows = crate::self_models::result::read_results(&dir.join("results.csv"))?;
+    let preset = rows.first().map_or("paper", |r| r.preset.as_str());
+    let mut curves = Vec::new();
+    for setting in ablation.settings(preset) {
+        let csv = dir.join(setting.folder()).join("curve.csv");
+        if csv.is_file() {
+            curves.push((setting.label.clone(), crate::report::table::read_curve(&csv)?));
+        }
+    }
+    training_curves(&dir.join("training_curves.png"), ablation.title(), &curves)
+}
+
 /// Run every setting of `ablation` into `dir/<setting>/` and write the combined table,
 /// training curves and Pareto plot into `dir`.
 pub fn run_ablation(
@@ -171,7 +214,6 @@ pub fn run_ablation(
     resume: bool,
 ) -> Result<Vec<ModelResult>> {
     let mut rows = Vec::new();
-    let mut curves = Vec::new();
     for setting in ablation.settings(&base.preset) {
         let mut cfg = base.clone();
         (setting.apply)(&mut cfg);
@@ -181,19 +223,7 @@ pub fn run_ablation(
             fps: setting.paper_fps,
             ..PaperReference::default()
         };
-        let slug: String = setting
-            .label
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '.' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        let out = run(&cfg, &dir.join(slug), device, resume)?;
-        curves.push((setting.label.clone(), out.log.curve.clone()));
+        let out = run(&cfg, &dir.join(setting.folder()), device, resume)?;
         rows.push(out.result);
     }
     if rows.is_empty() {
@@ -206,7 +236,7 @@ pub fn run_ablation(
         ablation.title(),
         "Each row is a full NeuroKin run with one setting changed (config in its folder). `paper_psnr_db` / `paper_fps` are the figures the paper printed for that setting, for reference; the paper published no code for its ablations, so ours are the first measured numbers. PSNR as the paper computes it; IoU at threshold 0.5.",
     )?;
-    training_curves(&dir.join("training_curves.png"), ablation.title(), &curves)?;
+    draw_training_curves(ablation, dir)?;
     let points = pareto_points(&rows, |m| m.to_string());
     pareto_plot(
         &dir.join("pareto.png"),

@@ -304,13 +304,7 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
         let results = dir.join("results.csv");
         if dir.join("pareto.png").is_file() && results.is_file() {
             let rows = read_results(&results)?;
-            let title = std::fs::read_to_string(dir.join("results.md"))
-                .ok()
-                .and_then(|t| {
-                    t.lines()
-                        .next()
-                        .map(|l| l.trim_start_matches("# ").to_string())
-                })
+            let title = crate::report::table::markdown_title(&dir.join("results.md"))
                 .unwrap_or_else(|| "Quality against inference speed".into());
             crate::report::figures::pareto_plot(
                 &dir.join("pareto.png"),
@@ -326,6 +320,25 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
                 draw(&dir)?;
                 drawn += 1;
             }
+        }
+        // The EMSSL learning curves (Table II's and the long curve's).
+        for csv in ["emssl_curve.csv", "results.csv"] {
+            if dir.join("learning_curve.png").is_file() && dir.join(csv).is_file() {
+                let header = std::fs::read_to_string(dir.join(csv)).unwrap_or_default();
+                if header.starts_with("robot,range_deg,iteration,") {
+                    crate::studies::emssl_table2::redraw_learning_curve(&dir, csv)?;
+                    drawn += 1;
+                }
+            }
+        }
+        // An ablation's training curves, one line per setting, from the settings' folders.
+        if dir.join("training_curves.png").is_file()
+            && let Some(ablation) = dir
+                .file_name()
+                .and_then(|n| crate::studies::ablations::Ablation::named(&n.to_string_lossy()))
+        {
+            crate::studies::ablations::draw_training_curves(ablation, &dir)?;
+            drawn += 1;
         }
         if dir.join("training_curve.png").is_file() && dir.join("curve.csv").is_file() {
             // Titled by the model the run trained (its config's name, as the run titled it),

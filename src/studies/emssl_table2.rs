@@ -885,6 +885,21 @@ pub fn write_curves(dir: &Path, file: &str, title: &str, rows: &[CurveRow]) -> R
         title,
         "Per EMSSL iteration: the exploration noise and learning rate used, the test error after it (evaluation only), the mean distance between the desired training positions and where the noise-free answers take the arm, the disagreement (the stopping criterion) and the seconds of the sampling and training phases.",
     )?;
+    draw_learning_curve(dir, title, rows)
+}
+
+/// Redraw `learning_curve.png` in `dir` from the curve rows in `dir/file` (titled by the
+/// Markdown table beside it).
+pub fn redraw_learning_curve(dir: &Path, file: &str) -> Result<()> {
+    let csv = dir.join(file);
+    let rows: Vec<CurveRow> = crate::report::table::read_csv(&csv)?;
+    let title = crate::report::table::markdown_title(&csv.with_extension("md"))
+        .unwrap_or_else(|| "EMSSL learning curve".into());
+    draw_learning_curve(dir, &title, &rows)
+}
+
+/// `learning_curve.png`: test error against iteration, one line per range.
+fn draw_learning_curve(dir: &Path, title: &str, rows: &[CurveRow]) -> Result<()> {
     let mut ranges: Vec<f64> = rows.iter().map(|r| r.range_deg).collect();
     ranges.dedup();
     let runs: Vec<(String, Vec<(usize, f64)>)> = ranges
