@@ -237,6 +237,14 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
         .filter(|p| p.is_file() && p.extension().is_some_and(|x| x == "md"))
         .collect();
     reports.sort();
+    // Table II's compact table, from its results and config.
+    for d in &dirs {
+        if d.join("table2.md").is_file()
+            && let Some(text) = crate::studies::emssl_table2::table2_markdown(d)?
+        {
+            out.push((d.join("table2.md").strip_prefix(root).unwrap_or(d).to_path_buf(), text));
+        }
+    }
     for md in reports {
         if let Some(text) = crate::report::table::regenerated_report(&md)? {
             let rel = md.strip_prefix(root).unwrap_or(&md).to_path_buf();

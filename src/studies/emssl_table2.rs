@@ -1018,10 +1018,37 @@ fn write_outputs(
 
 /// `table2.md`: the rows a reader compares, ours beside the paper's.
 fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow], partial: bool) -> Result<()> {
+    crate::core::atomic_file::write_bytes(
+        &dir.join("table2.md"),
+        table2_text(cfg, rows, partial).as_bytes(),
+    )
+}
+
+/// `table2.md` as the rows of `dir/results.csv` and the run's `dir/config.json` make it
+/// (`None` where either is missing): `reports` regenerates it, so the table follows the CSV.
+/// The run is partial until every range has its last unit (EMSSL + DLS).
+pub fn table2_markdown(dir: &Path) -> Result<Option<String>> {
+    let (config, results) = (dir.join("config.json"), dir.join("results.csv"));
+    if !config.is_file() || !results.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&config).map_err(|e| Error::io(&config, e))?;
+    let cfg: IkComparisonConfig = serde_json::from_str(&text)
+        .map_err(|e| Error::data(&config, format!("not a Table II config: {e}")))?;
+    let rows: Vec<IkRow> = crate::report::table::read_csv(&results)?;
+    let partial = !cfg.ranges_deg.iter().all(|&r| {
+        rows.iter()
+            .any(|x| x.range_deg == r && x.method == "EMSSL + DLS")
+    });
+    Ok(Some(table2_text(&cfg, &rows, partial)))
+}
+
+/// The compact Table II: ours beside the paper's, absolute and as ratios to DRL.
+fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow], partial: bool) -> String {
     let opt =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |x| format!("{x:.digits$}"));
     let mut text = format!(
-        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` by `emssl_table2`; do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | within 0.01 mm | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` (by `emssl_table2`, and by `reports` from the CSV); do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Ours / paper: our mean over the paper's (above 1: our error is larger). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | ours / paper | within 0.01 mm | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         cfg.preset,
         if partial {
             ", partial: the run has not finished"
@@ -1033,7 +1060,7 @@ fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow], partial: b
     );
     for r in rows {
         text += &format!(
-            "| +-{:.0} | {} | {:.3} | {:.3} | {} | {} | {} | {:.2}% | {:.0} | {} | {:.0} |\n",
+            "| +-{:.0} | {} | {:.3} | {:.3} | {} | {} | {} | {} | {:.2}% | {:.0} | {} | {:.0} |\n",
             r.range_deg,
             r.method,
             r.mean_cm,
@@ -1041,13 +1068,15 @@ fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow], partial: b
             opt(r.ratio_to_drl, 3),
             opt(r.paper_mean_cm, 2),
             opt(r.paper_ratio_to_drl, 3),
+            r.paper_mean_cm
+                .map_or("-".into(), |p| format!("{:.2}x", r.mean_cm / p)),
             r.within_0_01mm_pct,
             r.solutions_per_s,
             r.epochs.map_or("-".into(), |e| e.to_string()),
             r.train_seconds
         );
     }
-    crate::core::atomic_file::write_bytes(&dir.join("table2.md"), text.as_bytes())
+    text
 }
 
 /// `validation_curves_<range>.png` (and `validation_curves_<range>_wrapped.png` for the wrapped
