@@ -148,6 +148,41 @@ fn starting_poses(
     out
 }
 
+/// The loss of each pose of `angles` (degrees, one per image) against its image in
+/// `observed`, through `renderer` (no gradients), in batches of 64: what a fit minimises, so
+/// a pose with a lower loss than the true one says the model prefers it.
+pub fn pose_losses(
+    renderer: &dyn Render,
+    device: &Device,
+    observed: &Observed,
+    angles: &[Vec<f64>],
+    loss: SilhouetteLoss,
+) -> Result<Vec<f64>> {
+    if angles.len() != observed.n {
+        return Err(Error::Config(format!(
+            "{} poses for {} images",
+            angles.len(),
+            observed.n
+        )));
+    }
+    let dof = angles.first().map_or(0, Vec::len);
+    check_angles(angles, dof, "pose")?;
+    let mut out = Vec::with_capacity(observed.n);
+    for first in (0..observed.n).step_by(64) {
+        let end = (first + 64).min(observed.n);
+        let q: Vec<f32> = angles[first..end]
+            .iter()
+            .flatten()
+            .map(|&v| v as f32)
+            .collect();
+        let q = Tensor::<2>::from_data(TensorData::new(q, [end - first, dof]), device);
+        let target = observed.select(first..end).tensor(device);
+        let l = host(row_losses(loss, renderer.render(q).0, target))?;
+        out.extend(l.into_iter().map(f64::from));
+    }
+    Ok(out)
+}
+
 /// Fit joint angles to `observed` through `renderer` (differentiable, on the autodiff
 /// `device`: [`Render::differentiable`]), which renders `image`-sized silhouettes of a robot
 /// with joint `ranges` (degrees). `guesses`: one starting pose per image, or none.

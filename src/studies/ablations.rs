@@ -198,7 +198,10 @@ pub fn draw_training_curves(ablation: Ablation, dir: &Path) -> Result<()> {
     for setting in ablation.settings(preset) {
         let csv = dir.join(setting.folder()).join("curve.csv");
         if csv.is_file() {
-            curves.push((setting.label.clone(), crate::report::table::read_curve(&csv)?));
+            curves.push((
+                setting.label.clone(),
+                crate::report::table::read_curve(&csv)?,
+            ));
         }
     }
     training_curves(&dir.join("training_curves.png"), ablation.title(), &curves)

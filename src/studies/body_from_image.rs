@@ -36,7 +36,7 @@ use crate::body::amortised::{AmortisedConfig, train_estimator};
 use crate::body::calibration::{VisualCalibrationConfig, fit_joint_origins};
 use crate::body::drift::{DriftConfig, estimate_offsets};
 use crate::body::observations::{Observed, Perturbation, host};
-use crate::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
+use crate::body::pose::{PoseFitConfig, pose_from_image, pose_losses, trained_ranges};
 use crate::core::atomic_file::write_json;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
@@ -161,6 +161,10 @@ pub struct PoseRow {
     pub ms_per_pose_b1: f64,
     /// Milliseconds per pose over the whole batch.
     pub ms_per_pose_batched: f64,
+    /// Poses whose estimate the self-model scores better (a lower loss against the observed
+    /// image) than the true angles: there the model's optimum is not the truth, and no
+    /// optimiser could do better through it.
+    pub loss_below_truth_share: f64,
     pub preset: String,
     pub device: String,
     pub git_revision: String,
@@ -202,11 +206,14 @@ pub struct CalibrationRow {
     /// Every link lengthened by this much (cm).
     pub change_cm: f64,
     pub k: usize,
-    /// The change recovered on each link with a length, "l1 / l2 / ..." (mm).
+    /// The change recovered on each link with a length, "l1 / l2 / ..." (mm): the fit to the
+    /// changed arm's images less the fit to the healthy arm's images of the same poses.
     pub recovered_mm: String,
     /// Mean and largest |recovered - true| over those links (mm).
     pub mean_error_mm: f64,
     pub max_error_mm: f64,
+    /// The mean error of the fit to the changed arm taken as it is (no healthy reference).
+    pub mean_error_no_reference_mm: f64,
     pub preset: String,
     pub device: String,
     pub git_revision: String,
@@ -264,6 +271,8 @@ struct Bench<'a> {
 }
 
 impl Bench<'_> {
+    /// A row of `results.csv`: `found` against `truth` for the images `observed`, judged
+    /// through `through` (on `device`).
     #[allow(clippy::too_many_arguments)]
     fn row(
         &self,
@@ -273,9 +282,15 @@ impl Bench<'_> {
         truth: &[Vec<f64>],
         b1: f64,
         batched: f64,
-    ) -> PoseRow {
+        observed: &Observed,
+        through: (&dyn Render, &Device),
+    ) -> Result<PoseRow> {
         let s = score(self.robot, found, truth);
-        PoseRow {
+        let seen = observed.select(0..found.len());
+        let at = |q: &[Vec<f64>]| pose_losses(through.0, through.1, &seen, q, self.cfg.refine.loss);
+        let (l_found, l_truth) = (at(found)?, at(truth)?);
+        let below = l_found.iter().zip(&l_truth).filter(|(f, t)| f < t).count();
+        Ok(PoseRow {
             method: method.into(),
             images: images.into(),
             poses: truth.len(),
@@ -291,10 +306,11 @@ impl Bench<'_> {
             within_2deg_share: s.within_2,
             ms_per_pose_b1: b1,
             ms_per_pose_batched: batched,
+            loss_below_truth_share: below as f64 / found.len() as f64,
             preset: self.cfg.preset.clone(),
             device: self.device_name.clone(),
             git_revision: self.revision.clone(),
-        }
+        })
     }
 
     /// Refine `guesses` through `through` (a differentiable self-model on `self.autodiff`).
@@ -392,6 +408,7 @@ pub fn run(
     let mean: Vec<f64> = (0..dof)
         .map(|j| seen.iter().map(|q| q[j]).sum::<f64>() / seen.len() as f64)
         .collect();
+    let nk: (&dyn Render, &Device) = (renderer, &device);
     let mut rows = vec![bench.row(
         "mean training pose",
         "clean",
@@ -399,7 +416,9 @@ pub fn run(
         &truth,
         f64::NAN,
         f64::NAN,
-    )];
+        &observed,
+        nk,
+    )?];
     let estimator = train_estimator(
         &cfg.amortised,
         renderer,
@@ -423,7 +442,9 @@ pub fn run(
         &truth,
         cnn_b1,
         cnn_batched,
-    ));
+        &observed,
+        nk,
+    )?);
     let refined_label = format!("CNN + {} refinement steps", cfg.refine.steps);
     let t = std::time::Instant::now();
     let refined = bench.refine(bench.differentiable, &observed, &guesses, &cfg.refine)?;
@@ -442,7 +463,26 @@ pub fn run(
         &truth,
         refine_b1,
         refine_batched,
-    ));
+        &observed,
+        nk,
+    )?);
+    // The diagnostic: the same refinement started at the true angles. Where it walks away
+    // from them, the self-model's optimum is not the truth (its own error, or what a
+    // silhouette cannot show).
+    let from_truth = bench.refine(bench.differentiable, &observed, &truth, &cfg.refine)?;
+    rows.push(bench.row(
+        &format!(
+            "true angles + {} refinement steps (diagnostic)",
+            cfg.refine.steps
+        ),
+        "clean",
+        &from_truth,
+        &truth,
+        f64::NAN,
+        f64::NAN,
+        &observed,
+        nk,
+    )?);
     // The same refinement through K-3DGS (trained on the same data), from the same CNN.
     let t = std::time::Instant::now();
     let through_gaussians = bench.refine(k3dgs.as_ref(), &observed, &guesses, &cfg.refine)?;
@@ -454,7 +494,9 @@ pub fn run(
         &truth,
         f64::NAN,
         gaussians_batched,
-    ));
+        &observed,
+        (k3dgs.as_ref(), &autodiff),
+    )?);
     let m = cfg.search_poses.min(n);
     let t = std::time::Instant::now();
     let searched = pose_from_image(
@@ -478,13 +520,33 @@ pub fn run(
         &truth[..m],
         f64::NAN,
         search_batched,
-    ));
+        &observed,
+        nk,
+    )?);
     for (i, p) in cfg.perturbations.iter().enumerate() {
         let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
         let g = estimator.estimate(&spoiled, &device, 64)?;
-        rows.push(bench.row("amortised CNN", &p.label(), &g, &truth, f64::NAN, f64::NAN));
+        rows.push(bench.row(
+            "amortised CNN",
+            &p.label(),
+            &g,
+            &truth,
+            f64::NAN,
+            f64::NAN,
+            &spoiled,
+            nk,
+        )?);
         let r = bench.refine(bench.differentiable, &spoiled, &g, &cfg.refine)?;
-        rows.push(bench.row(&refined_label, &p.label(), &r, &truth, f64::NAN, f64::NAN));
+        rows.push(bench.row(
+            &refined_label,
+            &p.label(),
+            &r,
+            &truth,
+            f64::NAN,
+            f64::NAN,
+            &spoiled,
+            nk,
+        )?);
     }
     let pose_csv = out.join("results.csv");
     write_csv(&pose_csv, &rows)?;
@@ -497,7 +559,9 @@ pub fn run(
          distance in mm, and the share of poses with every joint within 2 degrees. The CNN is trained \
          on the self-model's own renderings; the refinement descends the silhouette's cross-entropy \
          through the model from the CNN's answer; the search starts from poses drawn within the \
-         training poses' range, keeping the start with the lowest loss. Milliseconds on this \
+         training poses' range, keeping the start with the lowest loss. The diagnostic row starts the \
+         refinement at the true angles. `loss_below_truth_share`: the poses whose estimate the model \
+         scores better than the truth (the model's optimum is elsewhere). Milliseconds on this \
          machine's CPU, one image at a time (b1) and per pose over a batch.",
     )?;
     pose_grid(
@@ -672,9 +736,21 @@ fn pose_grid(
     truth: &[Vec<f64>],
     path: &Path,
 ) -> Result<()> {
+    // Eight poses spread over the test trajectory (neighbours on it look alike).
     let n = observed.n.min(8);
+    let picks: Vec<usize> = (0..n).map(|i| i * observed.n / n).collect();
+    let observed = Observed::new(
+        picks
+            .iter()
+            .flat_map(|&i| observed.image(i).iter().copied())
+            .collect(),
+        n,
+        observed.size,
+    )?;
+    let found: Vec<Vec<f64>> = picks.iter().map(|&i| found[i].clone()).collect();
+    let truth: Vec<Vec<f64>> = picks.iter().map(|&i| truth[i].clone()).collect();
     let dof = found[0].len();
-    let q: Vec<f32> = found[..n].iter().flatten().map(|&v| v as f32).collect();
+    let q: Vec<f32> = found.iter().flatten().map(|&v| v as f32).collect();
     let rendered = host(
         b.renderer
             .render(Tensor::from_data(TensorData::new(q, [n, dof]), b.device))
@@ -743,25 +819,33 @@ fn visual_calibration(
             let mut data_cfg = neurokin_run(&cfg.preset)?.data.dataset;
             data_cfg.samples = k;
             data_cfg.train = k;
-            let images =
-                crate::data::dataset::Dataset::render(&changed, &data_cfg, angles.clone(), None)?;
-            let observed = Observed::from_dataset(&images, &(0..k).collect::<Vec<_>>());
-            let fit = fit_joint_origins(
-                renderer,
-                bench.autodiff,
-                [data.height, data.width],
-                &observed,
-                &angles,
-                &cfg.calibration,
-            )?;
-            let recovered: Vec<f64> = fit
-                .change_mm
-                .iter()
-                .zip(&has_length)
-                .filter(|(_, l)| **l)
-                .map(|(c, _)| *c)
-                .collect();
+            // The same poses seen by the healthy arm and by the changed one: the change is the
+            // difference of the two fits (K-3DGS's own error on those poses cancels).
+            let fit_to = |arm: &Robot| -> Result<Vec<f64>> {
+                let images =
+                    crate::data::dataset::Dataset::render(arm, &data_cfg, angles.clone(), None)?;
+                let observed = Observed::from_dataset(&images, &(0..k).collect::<Vec<_>>());
+                let fit = fit_joint_origins(
+                    renderer,
+                    bench.autodiff,
+                    [data.height, data.width],
+                    &observed,
+                    &angles,
+                    &cfg.calibration,
+                )?;
+                Ok(fit
+                    .change_mm
+                    .iter()
+                    .zip(&has_length)
+                    .filter(|(_, l)| **l)
+                    .map(|(c, _)| *c)
+                    .collect())
+            };
+            let (healthy, now) = (fit_to(robot)?, fit_to(&changed)?);
+            let recovered: Vec<f64> = now.iter().zip(&healthy).map(|(a, b)| a - b).collect();
             let errors: Vec<f64> = recovered.iter().map(|c| (c - 10.0 * cm).abs()).collect();
+            let raw_error =
+                now.iter().map(|c| (c - 10.0 * cm).abs()).sum::<f64>() / now.len().max(1) as f64;
             rows.push(CalibrationRow {
                 change_cm: cm,
                 k,
@@ -772,6 +856,7 @@ fn visual_calibration(
                     .join(" / "),
                 mean_error_mm: errors.iter().sum::<f64>() / errors.len().max(1) as f64,
                 max_error_mm: errors.iter().fold(0.0, |a: f64, &b| a.max(b)),
+                mean_error_no_reference_mm: raw_error,
                 preset: cfg.preset.clone(),
                 device: bench.device_name.clone(),
                 git_revision: bench.revision.clone(),
@@ -784,8 +869,10 @@ fn visual_calibration(
         &csv,
         "Link lengths from images",
         "Every link of the arm lengthened (the EMSSL paper's Table IV change), seen in k test poses; \
-         K-3DGS's joint origins fitted to the images with its Gaussians frozen. The change recovered \
-         along each link with a length (mm) and the error against the true change.",
+         K-3DGS's joint origins fitted to the images with its Gaussians frozen, and fitted again to \
+         the healthy arm's images of the same poses: the change recovered along each link with a \
+         length is the difference of the two fits (mm), its error against the true change beside \
+         the error of the changed arm's fit taken as it is.",
     )?;
     let curves: Vec<(String, Vec<(f64, f64)>)> = cfg
         .calibration_changes_cm

@@ -242,7 +242,13 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
         if d.join("table2.md").is_file()
             && let Some(text) = crate::studies::emssl_table2::table2_markdown(d)?
         {
-            out.push((d.join("table2.md").strip_prefix(root).unwrap_or(d).to_path_buf(), text));
+            out.push((
+                d.join("table2.md")
+                    .strip_prefix(root)
+                    .unwrap_or(d)
+                    .to_path_buf(),
+                text,
+            ));
         }
     }
     for md in reports {
