@@ -526,27 +526,11 @@ pub fn run(
     for (i, p) in cfg.perturbations.iter().enumerate() {
         let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
         let g = estimator.estimate(&spoiled, &device, 64)?;
-        rows.push(bench.row(
-            "amortised CNN",
-            &p.label(),
-            &g,
-            &truth,
-            f64::NAN,
-            f64::NAN,
-            &spoiled,
-            nk,
-        )?);
         let r = bench.refine(bench.differentiable, &spoiled, &g, &cfg.refine)?;
-        rows.push(bench.row(
-            &refined_label,
-            &p.label(),
-            &r,
-            &truth,
-            f64::NAN,
-            f64::NAN,
-            &spoiled,
-            nk,
-        )?);
+        for (method, found) in [("amortised CNN", &g), (refined_label.as_str(), &r)] {
+            let (b1, batched) = (f64::NAN, f64::NAN);
+            rows.push(bench.row(method, &p.label(), found, &truth, b1, batched, &spoiled, nk)?);
+        }
     }
     let pose_csv = out.join("results.csv");
     write_csv(&pose_csv, &rows)?;
