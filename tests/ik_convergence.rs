@@ -55,6 +55,7 @@ fn the_plateau_rule_halves_the_rate_then_stops() {
         lr_patience: 2,
         lr_factor: 0.5,
         min_improvement: 0.01,
+        min_epochs: 0,
     });
     // Improves twice, then a gain below 1% (not a new best), then nothing: the rate halves
     // after 2 epochs without a new best and again 2 later; the run stops at the 5th.
@@ -79,6 +80,48 @@ fn the_plateau_rule_halves_the_rate_then_stops() {
         [1.0, 1.0, 1.0, 0.5, 0.5, 0.25, 0.25]
     );
     assert_eq!(rule.best(), 9.0);
+}
+
+#[test]
+fn a_warm_up_holds_the_plateau_rule_off_then_it_counts_from_there() {
+    let mut rule = Plateau::new(&Convergence {
+        max_epochs: 100,
+        patience: 3,
+        lr_patience: 2,
+        lr_factor: 0.5,
+        min_improvement: 0.0,
+        min_epochs: 4,
+    });
+    // A best at the first score, then swings above it: during the 4 warm-up scores nothing
+    // is cut or stopped; after them the counts start from zero (cut after 2, stop after 3).
+    let scores = [10.0, 30.0, 12.0, 40.0, 11.0, 20.0, 15.0];
+    let seen: Vec<(bool, bool, f64)> = scores
+        .iter()
+        .map(|&s| {
+            let (best, stop) = rule.observe(s);
+            (best, stop, rule.scale)
+        })
+        .collect();
+    assert_eq!(
+        seen.iter().map(|s| s.1).collect::<Vec<_>>(),
+        [false, false, false, false, false, false, true]
+    );
+    assert_eq!(
+        seen.iter().map(|s| s.2).collect::<Vec<_>>(),
+        [1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.5]
+    );
+    assert_eq!(rule.best(), 10.0);
+    // Without the warm-up the same scores stop the run at the 4th.
+    let mut plain = Plateau::new(&Convergence {
+        max_epochs: 100,
+        patience: 3,
+        lr_patience: 2,
+        lr_factor: 0.5,
+        min_improvement: 0.0,
+        min_epochs: 0,
+    });
+    let stops: Vec<bool> = scores.iter().map(|&s| plain.observe(s).1).collect();
+    assert_eq!(stops[..4], [false, false, false, true]);
 }
 
 #[test]
@@ -108,6 +151,7 @@ fn a_tiny_run_to_convergence_stops_on_a_plateau_and_keeps_its_best_weights() {
             lr_patience: 2,
             lr_factor: 0.5,
             min_improvement: 1e-3,
+            min_epochs: 0,
         }),
         ..FitConfig::paper()
     };
@@ -436,6 +480,7 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
         lr_patience: 1,
         lr_factor: 0.5,
         min_improvement: 1e-3,
+        min_epochs: 0,
     };
     let fit = FitConfig {
         batch: 64,
@@ -549,6 +594,7 @@ fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
                 lr_patience: 1,
                 lr_factor: 0.5,
                 min_improvement: 1e-3,
+                min_epochs: 0,
             }),
             checkpoint: checkpoint.map(|dir| FitCheckpoint {
                 dir,

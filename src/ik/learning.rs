@@ -705,6 +705,7 @@ fn emssl_run(
             lr_patience: p.patience,
             lr_factor: p.factor,
             min_improvement: 1e-3,
+            min_epochs: 0,
         })
     });
     if let Some((c, state)) = resumed {

@@ -578,6 +578,15 @@ pub struct Convergence {
     pub lr_factor: f64,
     /// A score counts as a new best only if it is below the best by this fraction of it.
     pub min_improvement: f64,
+    /// A warm-up: for this many epochs the rate is not cut and the run not stopped (the
+    /// counts start after it; best weights are kept throughout). For learners whose
+    /// validation score swings early (the GAN); 0 for the others.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub min_epochs: usize,
+}
+
+fn is_zero(v: &usize) -> bool {
+    *v == 0
 }
 
 impl Convergence {
@@ -592,6 +601,7 @@ impl Convergence {
             lr_patience: 6,
             lr_factor: 0.5,
             min_improvement: 1e-3,
+            min_epochs: 0,
         }
     }
 }
@@ -619,6 +629,9 @@ pub struct Plateau {
     best: f64,
     since_best: usize,
     since_reduce: usize,
+    /// Scores taken in so far.
+    #[serde(default)]
+    seen: usize,
     /// The factor on the base learning rate.
     pub scale: f64,
 }
@@ -630,6 +643,7 @@ impl Plateau {
             best: f64::INFINITY,
             since_best: 0,
             since_reduce: 0,
+            seen: 0,
             scale: 1.0,
         }
     }
@@ -645,6 +659,13 @@ impl Plateau {
             self.since_best += 1;
         }
         self.since_reduce += 1;
+        self.seen += 1;
+        if self.seen <= self.cfg.min_epochs {
+            // The warm-up: nothing counts yet.
+            self.since_best = 0;
+            self.since_reduce = 0;
+            return (improved, false);
+        }
         if !improved
             && self.since_best >= self.cfg.lr_patience
             && self.since_reduce >= self.cfg.lr_patience
