@@ -269,8 +269,21 @@ pub fn stale(root: &Path) -> Result<Vec<PathBuf>> {
         .collect())
 }
 
-/// Write every generated file; returns how many changed.
+/// Write every generated file until they agree (a document may quote another generated
+/// one, Table II's `table2.md`); returns how many writes changed a file.
 pub fn write_all(root: &Path) -> Result<usize> {
+    let mut changed = 0;
+    for _ in 0..3 {
+        let pass = write_pass(root)?;
+        changed += pass;
+        if pass == 0 {
+            break;
+        }
+    }
+    Ok(changed)
+}
+
+fn write_pass(root: &Path) -> Result<usize> {
     let mut changed = 0;
     for (p, text) in generate(root)? {
         let path = root.join(&p);
