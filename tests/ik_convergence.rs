@@ -47,81 +47,54 @@ fn the_validation_split_is_carved_from_the_training_samples_and_leaves_the_test_
     );
 }
 
-#[test]
-fn the_plateau_rule_halves_the_rate_then_stops() {
+/// A plateau rule fed `scores`: per score (new best, stop, rate scale), and the best.
+fn follow(
+    patience: usize,
+    min_improvement: f64,
+    min_epochs: usize,
+    scores: &[f64],
+) -> (Vec<bool>, Vec<bool>, Vec<f64>, f64) {
     let mut rule = Plateau::new(&Convergence {
         max_epochs: 100,
-        patience: 5,
+        patience,
         lr_patience: 2,
         lr_factor: 0.5,
-        min_improvement: 0.01,
-        min_epochs: 0,
+        min_improvement,
+        min_epochs,
     });
+    let (mut best, mut stop, mut scale) = (Vec::new(), Vec::new(), Vec::new());
+    for &s in scores {
+        let (b, st) = rule.observe(s);
+        best.push(b);
+        stop.push(st);
+        scale.push(rule.scale);
+    }
+    (best, stop, scale, rule.best())
+}
+
+#[test]
+fn the_plateau_rule_halves_the_rate_then_stops() {
     // Improves twice, then a gain below 1% (not a new best), then nothing: the rate halves
     // after 2 epochs without a new best and again 2 later; the run stops at the 5th.
-    let scores = [10.0, 9.0, 8.95, 9.5, 9.2, 9.1, 9.3];
-    let seen: Vec<(bool, bool, f64)> = scores
-        .iter()
-        .map(|&s| {
-            let (best, stop) = rule.observe(s);
-            (best, stop, rule.scale)
-        })
-        .collect();
-    assert_eq!(
-        seen.iter().map(|s| s.0).collect::<Vec<_>>(),
-        [true, true, false, false, false, false, false]
-    );
-    assert_eq!(
-        seen.iter().map(|s| s.1).collect::<Vec<_>>(),
-        [false, false, false, false, false, false, true]
-    );
-    assert_eq!(
-        seen.iter().map(|s| s.2).collect::<Vec<_>>(),
-        [1.0, 1.0, 1.0, 0.5, 0.5, 0.25, 0.25]
-    );
-    assert_eq!(rule.best(), 9.0);
+    let (best, stop, scale, kept) = follow(5, 0.01, 0, &[10.0, 9.0, 8.95, 9.5, 9.2, 9.1, 9.3]);
+    assert_eq!(best, [true, true, false, false, false, false, false]);
+    assert_eq!(stop, [false, false, false, false, false, false, true]);
+    assert_eq!(scale, [1.0, 1.0, 1.0, 0.5, 0.5, 0.25, 0.25]);
+    assert_eq!(kept, 9.0);
 }
 
 #[test]
 fn a_warm_up_holds_the_plateau_rule_off_then_it_counts_from_there() {
-    let mut rule = Plateau::new(&Convergence {
-        max_epochs: 100,
-        patience: 3,
-        lr_patience: 2,
-        lr_factor: 0.5,
-        min_improvement: 0.0,
-        min_epochs: 4,
-    });
     // A best at the first score, then swings above it: during the 4 warm-up scores nothing
     // is cut or stopped; after them the counts start from zero (cut after 2, stop after 3).
     let scores = [10.0, 30.0, 12.0, 40.0, 11.0, 20.0, 15.0];
-    let seen: Vec<(bool, bool, f64)> = scores
-        .iter()
-        .map(|&s| {
-            let (best, stop) = rule.observe(s);
-            (best, stop, rule.scale)
-        })
-        .collect();
-    assert_eq!(
-        seen.iter().map(|s| s.1).collect::<Vec<_>>(),
-        [false, false, false, false, false, false, true]
-    );
-    assert_eq!(
-        seen.iter().map(|s| s.2).collect::<Vec<_>>(),
-        [1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.5]
-    );
-    assert_eq!(rule.best(), 10.0);
+    let (_, stop, scale, kept) = follow(3, 0.0, 4, &scores);
+    assert_eq!(stop, [false, false, false, false, false, false, true]);
+    assert_eq!(scale, [1.0, 1.0, 1.0, 1.0, 1.0, 0.5, 0.5]);
+    assert_eq!(kept, 10.0);
     // Without the warm-up the same scores stop the run at the 4th.
-    let mut plain = Plateau::new(&Convergence {
-        max_epochs: 100,
-        patience: 3,
-        lr_patience: 2,
-        lr_factor: 0.5,
-        min_improvement: 0.0,
-        min_epochs: 0,
-    });
-    let stops: Vec<bool> = scores.iter().map(|&s| plain.observe(s).1).collect();
-    assert_eq!(stops[..4], [false, false, false, true]);
+    let (_, stop, _, _) = follow(3, 0.0, 0, &scores);
+    assert_eq!(stop[..4], [false, false, false, true]);
 }
 
 #[test]
