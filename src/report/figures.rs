@@ -742,34 +742,52 @@ pub fn points_over_images(
     width: usize,
     height: usize,
     scale: usize,
+    caption: &str,
 ) -> Result<()> {
+    register_font();
     let gap = 2;
+    let font_px = 13;
+    let top = if caption.is_empty() { 0 } else { font_px + 8 };
     let (cw, ch) = (width * scale + gap, height * scale + gap);
-    let (w, h) = (images.len() * cw + gap, ch + gap);
-    let mut img = image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([200, 200, 200]));
+    let (w, h) = (images.len() * cw + gap, top + ch + gap);
+    let mut img = image::RgbImage::from_pixel(w as u32, h as u32, image::Rgb([255, 255, 255]));
     for (c, im) in images.iter().enumerate() {
         for y in 0..height * scale {
             for x in 0..width * scale {
                 let g = (im[(y / scale) * width + x / scale].clamp(0.0, 1.0) * 180.0) as u8;
                 img.put_pixel(
                     (gap + c * cw + x) as u32,
-                    (gap + y) as u32,
+                    (top + gap + y) as u32,
                     image::Rgb([g, g, g]),
                 );
             }
         }
+        // Each centre a 2x2 dot, inside its image.
         for &(r, col) in points.get(c).map(|v| v.as_slice()).unwrap_or(&[]) {
             let (py, px) = ((r + 0.5) * scale as f32, (col + 0.5) * scale as f32);
             if py < 0.0 || px < 0.0 || py >= (height * scale) as f32 || px >= (width * scale) as f32
             {
                 continue;
             }
-            img.put_pixel(
-                (gap + c * cw + px as usize) as u32,
-                (gap + py as usize) as u32,
-                image::Rgb([40, 220, 60]),
-            );
+            for (dy, dx) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
+                let (y, x) = (py as usize + dy, px as usize + dx);
+                if y < height * scale && x < width * scale {
+                    img.put_pixel(
+                        (gap + c * cw + x) as u32,
+                        (top + gap + y) as u32,
+                        image::Rgb([40, 220, 60]),
+                    );
+                }
+            }
         }
     }
-    save_rgb(path, img.as_raw(), w as u32, h as u32)
+    let mut buf = img.into_raw();
+    if !caption.is_empty() {
+        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let font = (FONT, font_px as f64).into_font().color(&BLACK);
+        root.draw(&Text::new(caption.to_string(), (4, 3), font))
+            .map_err(|e| draw_err(path, e))?;
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w as u32, h as u32)
 }

@@ -552,5 +552,16 @@ fn gaussians_figure(
         .map(|&i| data.image(i).iter().map(|&v| v as f32 / 255.0).collect())
         .collect();
     let refs: Vec<&[f32]> = images.iter().map(|v| v.as_slice()).collect();
-    crate::report::figures::points_over_images(path, &refs, &points, camera.width, camera.height, 3)
+    let caption = format!(
+        "{m} Gaussians: their projected centres (green) over the true silhouette (grey), six test poses"
+    );
+    crate::report::figures::points_over_images(
+        path,
+        &refs,
+        &points,
+        camera.width,
+        camera.height,
+        3,
+        &caption,
+    )
 }
