@@ -306,6 +306,22 @@ pub fn train_gan(
         if stop {
             break;
         }
+        // Ctrl-C: the epoch's checkpoint is written; stop here (the one training loop
+        // checks the same flag after every step).
+        if crate::core::interrupt::requested() {
+            bar.abandon();
+            return Err(crate::Error::Interrupted(match &checkpoint {
+                Some(c) => format!(
+                    "CGAN stopped after epoch {}; its checkpoint is in {}: run the same command with --resume to continue",
+                    epoch + 1,
+                    c.dir.display()
+                ),
+                None => format!(
+                    "CGAN stopped after epoch {}; this run keeps no checkpoint, so it starts afresh when run again",
+                    epoch + 1
+                ),
+            }));
+        }
     }
     bar.finish();
     if let Some(log) = log.as_mut() {
