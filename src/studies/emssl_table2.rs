@@ -1014,7 +1014,7 @@ fn write_outputs(
             cfg.prediction_sample_rows
         ),
     )?;
-    write_table2(dir, cfg, &rows, partial)?;
+    write_table2(dir, cfg, &rows)?;
     crate::report::table::write_csv(&dir.join("validation_curves.csv"), curves)?;
     for &r in &cfg.ranges_deg {
         validation_figure(dir, r, curves)?;
@@ -1031,16 +1031,12 @@ fn write_outputs(
 }
 
 /// `table2.md`: the rows a reader compares, ours beside the paper's.
-fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow], partial: bool) -> Result<()> {
-    crate::core::atomic_file::write_bytes(
-        &dir.join("table2.md"),
-        table2_text(cfg, rows, partial).as_bytes(),
-    )
+fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow]) -> Result<()> {
+    crate::core::atomic_file::write_bytes(&dir.join("table2.md"), table2_text(cfg, rows).as_bytes())
 }
 
 /// `table2.md` as the rows of `dir/results.csv` and the run's `dir/config.json` make it
 /// (`None` where either is missing): `reports` regenerates it, so the table follows the CSV.
-/// The run is partial until every range has its last unit (EMSSL + DLS).
 pub fn table2_markdown(dir: &Path) -> Result<Option<String>> {
     let (config, results) = (dir.join("config.json"), dir.join("results.csv"));
     if !config.is_file() || !results.is_file() {
@@ -1050,15 +1046,16 @@ pub fn table2_markdown(dir: &Path) -> Result<Option<String>> {
     let cfg: IkComparisonConfig = serde_json::from_str(&text)
         .map_err(|e| Error::data(&config, format!("not a Table II config: {e}")))?;
     let rows: Vec<IkRow> = crate::report::table::read_csv(&results)?;
+    Ok(Some(table2_text(&cfg, &rows)))
+}
+
+/// The compact Table II: ours beside the paper's, absolute and as ratios to DRL; partial
+/// until every range has its last unit (EMSSL + DLS).
+fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
     let partial = !cfg.ranges_deg.iter().all(|&r| {
         rows.iter()
             .any(|x| x.range_deg == r && x.method == "EMSSL + DLS")
     });
-    Ok(Some(table2_text(&cfg, &rows, partial)))
-}
-
-/// The compact Table II: ours beside the paper's, absolute and as ratios to DRL.
-fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow], partial: bool) -> String {
     let opt =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |x| format!("{x:.digits$}"));
     let mut text = format!(
