@@ -914,20 +914,34 @@ pub fn redraw_learning_curve(dir: &Path, file: &str) -> Result<()> {
 
 /// `learning_curve.png`: test error against iteration, one line per range.
 fn draw_learning_curve(dir: &Path, title: &str, rows: &[CurveRow]) -> Result<()> {
-    let mut ranges: Vec<f64> = rows.iter().map(|r| r.range_deg).collect();
-    ranges.dedup();
-    let runs: Vec<(String, Vec<(usize, f64)>)> = ranges
-        .iter()
-        .map(|&r| {
-            (
-                format!("+-{r:.0} deg, test mean"),
-                rows.iter()
-                    .filter(|c| c.range_deg == r)
-                    .map(|c| (c.iteration, c.test_mean_cm))
-                    .collect(),
-            )
-        })
-        .collect();
+    // One line per run: a range's rows start a new run where the iteration count starts
+    // again (Table II runs EMSSL with each joint output in a range, in the order of its
+    // methods: the sigmoid, then the wrapped).
+    let mut runs: Vec<(String, Vec<(usize, f64)>)> = Vec::new();
+    let mut last: Option<(f64, usize)> = None;
+    for c in rows {
+        let continues = last.is_some_and(|(r, i)| r == c.range_deg && c.iteration > i);
+        if !continues {
+            let earlier = runs
+                .iter()
+                .filter(|(l, _)| l.starts_with(&format!("+-{:.0} deg", c.range_deg)))
+                .count();
+            let run = if earlier > 0 {
+                format!(", run {}", earlier + 1)
+            } else {
+                String::new()
+            };
+            runs.push((
+                format!("+-{:.0} deg{run}, test mean", c.range_deg),
+                Vec::new(),
+            ));
+        }
+        runs.last_mut()
+            .expect("pushed above")
+            .1
+            .push((c.iteration, c.test_mean_cm));
+        last = Some((c.range_deg, c.iteration));
+    }
     crate::report::figures::curves(
         &dir.join("learning_curve.png"),
         title,
