@@ -44,3 +44,21 @@ fn tempfile_dir() -> std::path::PathBuf {
     std::fs::create_dir_all(&d).unwrap();
     d
 }
+
+/// The README lists `cargo run --release --bin NAME` for every experiment of the registry:
+/// each must be a binary of the package (a missing one failed a newcomer's first command).
+#[test]
+fn every_listed_experiment_is_a_binary() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
+    let missing: Vec<&str> = selfmodel::studies::registry::EXPERIMENTS
+        .iter()
+        .map(|e| e.name)
+        .filter(|name| {
+            !manifest.contains(&format!(
+                "[[bin]]\nname = \"{name}\"\npath = \"experiments/{name}.rs\""
+            )) || !root.join("experiments").join(format!("{name}.rs")).is_file()
+        })
+        .collect();
+    assert!(missing.is_empty(), "experiments without a binary: {missing:?}");
+}
