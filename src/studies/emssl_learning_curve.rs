@@ -52,6 +52,7 @@ pub fn run(
     let device = crate::core::device::select(device_choice)?;
     let mut rows = Vec::new();
     let mut summary = Vec::new();
+    let revision = crate::core::provenance::git_revision();
     for &r in &cfg.ranges_deg {
         let data = IkData::generate(&robot.chain, &cfg.data(r))?;
         let model_cfg = cfg.model(robot.dof());
@@ -77,7 +78,7 @@ pub fn run(
         rows.extend(
             curve
                 .iter()
-                .map(|c| CurveRow::new(robot_name, r, &cfg.preset, c)),
+                .map(|c| CurveRow::new(robot_name, r, &cfg.preset, &revision, c)),
         );
     }
     write_curves(

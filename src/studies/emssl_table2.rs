@@ -447,6 +447,24 @@ struct Unit {
     emssl_curve: Vec<EmsslIteration>,
 }
 
+/// An EMSSL iteration with the revision of the run that trained it (a reused unit's, not
+/// this process's).
+type RevisedIteration = (EmsslIteration, String);
+
+impl Unit {
+    /// Its EMSSL curve, each iteration stamped with the revision its rows carry.
+    fn revised_curve(&self) -> Vec<RevisedIteration> {
+        let revision = self
+            .rows
+            .first()
+            .map_or_else(crate::core::provenance::git_revision, |r| {
+                r.git_revision.clone()
+            });
+        let stamp = |c: &EmsslIteration| (c.clone(), revision.clone());
+        self.emssl_curve.iter().map(stamp).collect()
+    }
+}
+
 /// Read the joints back from a predictions CSV ([`write_predictions`]).
 pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
     let mut reader = csv::Reader::from_path(path)
@@ -488,7 +506,7 @@ struct RangeRun<'a> {
     resume: bool,
     rows: Vec<IkRow>,
     curves: Vec<ValidationRow>,
-    emssl_curve: Vec<EmsslIteration>,
+    emssl_curve: Vec<RevisedIteration>,
     /// Units left to another process running the same command (their rows are not here):
     /// where their rows go among `rows`, their JSON and settings, for the partial report.
     left: Vec<(usize, PathBuf, serde_json::Value)>,
@@ -570,9 +588,9 @@ impl RangeRun<'_> {
                 self.range_deg,
                 path.display()
             );
+            self.emssl_curve.extend(done.revised_curve());
             self.rows.extend(done.rows);
             self.curves.extend(done.curves);
-            self.emssl_curve.extend(done.emssl_curve);
             return self.report_progress();
         }
         // Another process running the same command may hold this unit: leave it to it.
@@ -607,15 +625,15 @@ impl RangeRun<'_> {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
         write_json(&path, &done)?;
+        self.emssl_curve.extend(done.revised_curve());
         self.rows.extend(done.rows);
         self.curves.extend(done.curves);
-        self.emssl_curve.extend(done.emssl_curve);
         self.report_progress()
     }
 
     /// This process's rows, curves and EMSSL curve, with those of the units left to other
     /// processes that have finished since (read from their JSON), each in its place.
-    fn merged(&self) -> (Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>) {
+    fn merged(&self) -> (Vec<IkRow>, Vec<ValidationRow>, Vec<RevisedIteration>) {
         let mut rows = Vec::new();
         let mut curves = self.curves.clone();
         let mut emssl_curve = self.emssl_curve.clone();
@@ -628,9 +646,9 @@ impl RangeRun<'_> {
                 .and_then(|t| serde_json::from_str::<Unit>(&t).ok())
                 .filter(|u| &u.settings == settings)
             {
+                emssl_curve.extend(done.revised_curve());
                 rows.extend(done.rows);
                 curves.extend(done.curves);
-                emssl_curve.extend(done.emssl_curve);
             }
         }
         rows.extend_from_slice(&self.rows[next..]);
@@ -703,7 +721,7 @@ impl RangeRun<'_> {
 
 /// What one range's run produced: rows, validation curves, EMSSL curves, and whether units
 /// were left to another process (the report then stays partial).
-type RangeOutcome = (Vec<IkRow>, Vec<ValidationRow>, Vec<EmsslIteration>, bool);
+type RangeOutcome = (Vec<IkRow>, Vec<ValidationRow>, Vec<RevisedIteration>, bool);
 
 /// Run every method in one joint range (reusing finished units when `resume`).
 #[allow(clippy::too_many_arguments)]
@@ -870,7 +888,14 @@ pub struct CurveRow {
 }
 
 impl CurveRow {
-    pub fn new(robot: &str, range_deg: f64, preset: &str, c: &EmsslIteration) -> Self {
+    /// `git_revision`: that of the run that trained the model.
+    pub fn new(
+        robot: &str,
+        range_deg: f64,
+        preset: &str,
+        git_revision: &str,
+        c: &EmsslIteration,
+    ) -> Self {
         CurveRow {
             robot: robot.into(),
             range_deg,
@@ -884,7 +909,7 @@ impl CurveRow {
             disagreement: c.disagreement,
             sampling_seconds: c.sampling_seconds,
             training_seconds: c.training_seconds,
-            git_revision: crate::core::provenance::git_revision(),
+            git_revision: git_revision.into(),
             preset: preset.into(),
         }
     }
@@ -986,7 +1011,7 @@ pub fn run(
         emssl_curves.extend(
             emssl_curve
                 .iter()
-                .map(|c| CurveRow::new(robot_name, r, &cfg.preset, c)),
+                .map(|(c, revision)| CurveRow::new(robot_name, r, &cfg.preset, revision, c)),
         );
     }
     write_outputs(
