@@ -354,3 +354,43 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
             .all(|q| q.abs() <= data.range[1] + 1e-12)
     );
 }
+
+/// A unit reused by `--resume` keeps the provenance of the run that trained it: its rows and
+/// its EMSSL curve carry that run's revision, not the reusing process's.
+#[test]
+fn reused_units_keep_the_revision_that_trained_them() {
+    use selfmodel::studies::emssl_table2::{IkComparisonConfig, run};
+    let dir = std::env::temp_dir().join(format!("selfmodel_units_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut cfg = IkComparisonConfig::named("quick").unwrap();
+    cfg.ranges_deg = vec![90.0];
+    let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
+    let device = selfmodel::core::device::DeviceChoice::Cpu;
+    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap();
+    // Stamp every unit as trained by an earlier revision.
+    let units = dir.join("units").join("90");
+    for entry in std::fs::read_dir(&units).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "json") {
+            let text = std::fs::read_to_string(&path).unwrap();
+            let stamped = text.replace(&first[0].git_revision, "earlier-revision");
+            std::fs::write(&path, stamped).unwrap();
+        }
+    }
+    let again = run(&cfg, &robot, "ur5", &dir, device, true).unwrap();
+    assert_eq!(again.len(), first.len());
+    assert!(again.iter().all(|r| r.git_revision == "earlier-revision"));
+    let curve = std::fs::read_to_string(dir.join("emssl_curve.csv")).unwrap();
+    let mut lines = curve.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = header.iter().position(|&h| h == "git_revision").unwrap();
+    let revisions: Vec<String> = lines
+        .map(|l| l.split(',').nth(col).unwrap().to_string())
+        .collect();
+    assert!(!revisions.is_empty());
+    assert!(
+        revisions.iter().all(|r| r == "earlier-revision"),
+        "{revisions:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
