@@ -72,6 +72,17 @@ fn main() -> ExitCode {
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
         }
-        selfmodel::report::table::write_csv(&args.out, &rows)
+        let cpu = selfmodel::eval::compute_peak::CpuPeak::detect().map_or_else(
+            || "an unknown CPU".into(),
+            |c| format!("{} cores of {} ({})", c.cores, c.model, c.vector_units),
+        );
+        selfmodel::report::table::write_table(
+            &args.out,
+            &rows,
+            "Decoders: selfmodel against PyTorch, same workloads, same sitting",
+            &format!(
+                "Measured on {cpu}. Images/s, median of timed repeats after a warm-up; `torch` from `../shared/bench/torch_reference.py` run right after ours on the same cores; `ratio` = ours / torch (above 1: faster than PyTorch). Absolute figures hold for this machine only."
+            ),
+        )
     })
 }
