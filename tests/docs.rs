@@ -57,8 +57,14 @@ fn every_listed_experiment_is_a_binary() {
         .filter(|name| {
             !manifest.contains(&format!(
                 "[[bin]]\nname = \"{name}\"\npath = \"experiments/{name}.rs\""
-            )) || !root.join("experiments").join(format!("{name}.rs")).is_file()
+            )) || !root
+                .join("experiments")
+                .join(format!("{name}.rs"))
+                .is_file()
         })
         .collect();
-    assert!(missing.is_empty(), "experiments without a binary: {missing:?}");
+    assert!(
+        missing.is_empty(),
+        "experiments without a binary: {missing:?}"
+    );
 }
