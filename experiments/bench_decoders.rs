@@ -72,10 +72,7 @@ fn main() -> ExitCode {
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
         }
-        let cpu = selfmodel::eval::compute_peak::CpuPeak::detect().map_or_else(
-            || "an unknown CPU".into(),
-            |c| format!("{} cores of {} ({})", c.cores, c.model, c.vector_units),
-        );
+        let cpu = selfmodel::eval::compute_peak::machine_label(true);
         selfmodel::report::table::write_table(
             &args.out,
             &rows,

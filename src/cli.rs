@@ -236,10 +236,7 @@ impl ExperimentArgs {
         let dir = self.out.clone().unwrap_or_else(|| e.dir_for(&opts.preset));
         let start = std::time::Instant::now();
         let summary = e.run_in(&opts, &dir)?;
-        let cpu = crate::eval::compute_peak::CpuPeak::detect().map_or_else(
-            || "an unknown CPU".into(),
-            |c| format!("{} cores of {}", c.cores, c.model),
-        );
+        let cpu = crate::eval::compute_peak::machine_label(false);
         let done = format!(
             "{name} ({} preset): {:.0} s on {cpu}; wrote {}/results.csv (+ results.md, figures)",
             opts.preset,

@@ -39,6 +39,18 @@ pub fn flops_per_cycle(vendor: &str, family: u32, flags: &[&str]) -> (f64, Strin
     (2.0 * lanes * 2.0, what.to_string())
 }
 
+/// This machine in words for a report: "2 cores of MODEL", with its vector units when
+/// `vector_units`; "an unknown CPU" where `/proc/cpuinfo` cannot tell.
+pub fn machine_label(vector_units: bool) -> String {
+    CpuPeak::detect().map_or_else(
+        || "an unknown CPU".into(),
+        |c| match vector_units {
+            true => format!("{} cores of {} ({})", c.cores, c.model, c.vector_units),
+            false => format!("{} cores of {}", c.cores, c.model),
+        },
+    )
+}
+
 impl CpuPeak {
     /// Read `/proc/cpuinfo` (Linux); `None` elsewhere or when it lacks what is needed.
     pub fn detect() -> Option<Self> {

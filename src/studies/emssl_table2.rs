@@ -463,6 +463,18 @@ impl Unit {
         let stamp = |c: &EmsslIteration| (c.clone(), revision.clone());
         self.emssl_curve.iter().map(stamp).collect()
     }
+
+    /// Append its rows, validation curves and (revised) EMSSL curve to a run's.
+    fn append_to(
+        self,
+        rows: &mut Vec<IkRow>,
+        curves: &mut Vec<ValidationRow>,
+        emssl_curve: &mut Vec<RevisedIteration>,
+    ) {
+        emssl_curve.extend(self.revised_curve());
+        rows.extend(self.rows);
+        curves.extend(self.curves);
+    }
 }
 
 /// Read the joints back from a predictions CSV ([`write_predictions`]).
@@ -588,9 +600,7 @@ impl RangeRun<'_> {
                 self.range_deg,
                 path.display()
             );
-            self.emssl_curve.extend(done.revised_curve());
-            self.rows.extend(done.rows);
-            self.curves.extend(done.curves);
+            done.append_to(&mut self.rows, &mut self.curves, &mut self.emssl_curve);
             return self.report_progress();
         }
         // Another process running the same command may hold this unit: leave it to it.
@@ -625,9 +635,7 @@ impl RangeRun<'_> {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
         write_json(&path, &done)?;
-        self.emssl_curve.extend(done.revised_curve());
-        self.rows.extend(done.rows);
-        self.curves.extend(done.curves);
+        done.append_to(&mut self.rows, &mut self.curves, &mut self.emssl_curve);
         self.report_progress()
     }
 
@@ -646,9 +654,7 @@ impl RangeRun<'_> {
                 .and_then(|t| serde_json::from_str::<Unit>(&t).ok())
                 .filter(|u| &u.settings == settings)
             {
-                emssl_curve.extend(done.revised_curve());
-                rows.extend(done.rows);
-                curves.extend(done.curves);
+                done.append_to(&mut rows, &mut curves, &mut emssl_curve);
             }
         }
         rows.extend_from_slice(&self.rows[next..]);
