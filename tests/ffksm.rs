@@ -614,3 +614,46 @@ fn the_step_benchmark_times_both_paths_on_the_same_step() {
         );
     }
 }
+
+/// A checkpoint's fingerprint leaves out the robot when it is the papers' arm4, so checkpoints
+/// from before the robot was recorded resume; one made for another robot is refused.
+#[test]
+fn a_checkpoint_without_a_recorded_robot_resumes_and_one_of_another_robot_is_refused() {
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
+    use selfmodel::self_models::harness::{DataSpec, run};
+    use selfmodel::sim::robots::RobotSpec;
+    let urdf = RobotSpec::Urdf {
+        path: "robot.urdf".into(),
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+    };
+    let mut other = DataSpec::paper();
+    other.robot = urdf.clone();
+    assert!(DataSpec::paper().fingerprint().get("robot").is_none());
+    assert!(other.fingerprint().get("robot").is_some());
+
+    let mut cfg = ffksm_run("quick", FfksmVariant::Original).unwrap();
+    cfg.train.steps = 4;
+    cfg.train.checkpoint_every = 2;
+    let dir = common::tempdir();
+    let out = dir.path().join("run");
+    run(&cfg, &out, DeviceChoice::Cpu, false).unwrap();
+    let state_path = out.join("checkpoint/state.json");
+    let mut state: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&state_path).unwrap()).unwrap();
+    let data = &state["fingerprint"]["data"];
+    assert!(data.get("dataset").is_some(), "{data}");
+    assert!(data.get("robot").is_none(), "{data}");
+    cfg.train.steps = 6;
+    run(&cfg, &out, DeviceChoice::Cpu, true).expect("the arm4 checkpoint resumes");
+
+    state["fingerprint"]["data"]["robot"] = serde_json::to_value(&urdf).unwrap();
+    std::fs::write(&state_path, state.to_string()).unwrap();
+    cfg.train.steps = 8;
+    let err = run(&cfg, &out, DeviceChoice::Cpu, true)
+        .err()
+        .expect("another robot's checkpoint must be refused")
+        .to_string();
+    assert!(err.contains("different configuration"), "{err}");
+}

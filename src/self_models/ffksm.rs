@@ -544,7 +544,7 @@ fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json:
     if let Some(t) = train.as_object_mut() {
         t.remove("steps");
     }
-    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": data});
+    let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": data.fingerprint()});
     // Only when it is not the default, so checkpoints from before the option still resume.
     if cfg.train_marcher != TrainMarcher::Dense {
         print["train_marcher"] = serde_json::json!(cfg.train_marcher);

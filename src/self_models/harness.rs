@@ -39,7 +39,7 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn fit(&self, fit: &Fit) -> Result<Trained>;
     /// What a checkpoint must match to be resumed.
     fn fingerprint(&self, train: &TrainConfig, data: &DataSpec) -> serde_json::Value {
-        serde_json::json!({"model": self, "train": train, "data": data})
+        serde_json::json!({"model": self, "train": train, "data": data.fingerprint()})
     }
     /// Whether it is a lower bound every model must beat (a constant), not a model.
     fn lower_bound(&self) -> bool {
@@ -174,6 +174,19 @@ pub struct DataSpec {
 }
 
 impl DataSpec {
+    /// What of the data a checkpoint's fingerprint records: all of it, except the robot when
+    /// it is the papers' arm4 (checkpoints from before the robot was recorded then still
+    /// resume; any other robot is part of the fingerprint).
+    pub fn fingerprint(&self) -> serde_json::Value {
+        let mut print = serde_json::to_value(self).expect("a DataSpec serialises");
+        if self.robot == RobotSpec::default()
+            && let Some(fields) = print.as_object_mut()
+        {
+            fields.remove("robot");
+        }
+        print
+    }
+
     /// The paper's 2,000-sample dataset (clean: no ground-plane artefact).
     pub fn paper() -> Self {
         DataSpec {
