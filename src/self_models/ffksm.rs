@@ -50,7 +50,7 @@ use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
 use crate::self_models::harness::{
-    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, host_targets,
+    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, host_targets, nth_image,
 };
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
@@ -1038,22 +1038,20 @@ fn novel_view_figure(
     size: [usize; 2],
 ) -> Result<()> {
     let px = size[0] * size[1];
+    let Some(first) = views.first() else {
+        return Ok(());
+    };
+    // The same six test poses from every view.
+    let n = first.0.len() / px;
+    let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
     let mut rows = Vec::new();
     for (truth, pred) in views {
-        let n = truth.len() / px;
-        let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
         rows.push(GridRow::Grey(
-            picks
-                .iter()
-                .map(|&i| &truth[i * px..(i + 1) * px])
-                .collect(),
+            picks.iter().map(|&i| nth_image(truth, i, px)).collect(),
         ));
         rows.push(GridRow::Grey(
-            picks.iter().map(|&i| &pred[i * px..(i + 1) * px]).collect(),
+            picks.iter().map(|&i| nth_image(pred, i, px)).collect(),
         ));
-    }
-    if rows.is_empty() {
-        return Ok(());
     }
     let titles: Vec<String> = yaws_deg
         .iter()
@@ -1065,5 +1063,24 @@ fn novel_view_figure(
         })
         .collect();
     let titles: Vec<&str> = titles.iter().map(String::as_str).collect();
-    image_grid(path, &rows, &titles, &[], size[1], size[0], 2)
+    // Under each column: that pose's PSNR and IoU from each view, a line per view.
+    let captions: Vec<String> = picks
+        .iter()
+        .map(|&i| {
+            views
+                .iter()
+                .zip(yaws_deg)
+                .map(|((truth, pred), yaw)| {
+                    let (t, p) = (nth_image(truth, i, px), nth_image(pred, i, px));
+                    format!(
+                        "{yaw:.0} deg: {:.1} dB IoU {:.2}",
+                        crate::eval::evaluation::psnr_db(p, t),
+                        crate::eval::evaluation::iou(p, t)
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        })
+        .collect();
+    image_grid(path, &rows, &titles, &captions, size[1], size[0], 2)
 }

@@ -726,13 +726,10 @@ pub(crate) fn qualitative_figure(
     let px = size[0] * size[1];
     let n = truth.len() / px;
     let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
-    fn img(v: &[f32], i: usize, px: usize) -> &[f32] {
-        &v[i * px..(i + 1) * px]
-    }
-    let gt: Vec<&[f32]> = picks.iter().map(|&i| img(truth, i, px)).collect();
+    let gt: Vec<&[f32]> = picks.iter().map(|&i| nth_image(truth, i, px)).collect();
     let pr: Vec<&[f32]> = picks
         .iter()
-        .map(|&i| img(&pred.silhouettes, i, px))
+        .map(|&i| nth_image(&pred.silhouettes, i, px))
         .collect();
     let err: Vec<Vec<f32>> = gt
         .iter()
@@ -745,8 +742,8 @@ pub(crate) fn qualitative_figure(
         Some(d) => picks
             .iter()
             .map(|&i| {
-                let sil = img(&pred.silhouettes, i, px);
-                img(d, i, px)
+                let sil = nth_image(&pred.silhouettes, i, px);
+                nth_image(d, i, px)
                     .iter()
                     .zip(sil)
                     .map(|(&d, &s)| if s >= 0.5 { d } else { 0.0 })
@@ -775,7 +772,10 @@ pub(crate) fn qualitative_figure(
         let hi = robot.iter().copied().fold(0.0, f32::max);
         let range = if lo.is_finite() { [lo, hi] } else { [0.5, 1.5] };
         rows.push(GridRow::Depth(
-            picks.iter().map(|&i| img(truth_depth, i, px)).collect(),
+            picks
+                .iter()
+                .map(|&i| nth_image(truth_depth, i, px))
+                .collect(),
             range,
         ));
         rows.push(GridRow::Depth(
@@ -785,4 +785,9 @@ pub(crate) fn qualitative_figure(
         titles.extend(["true depth", "predicted depth"]);
     }
     image_grid(path, &rows, &titles, &captions, size[1], size[0], 2)
+}
+
+/// Image `i` of a stack of `px`-pixel images.
+pub(crate) fn nth_image(v: &[f32], i: usize, px: usize) -> &[f32] {
+    &v[i * px..(i + 1) * px]
 }
