@@ -134,8 +134,8 @@ impl RobotArgs {
 /// The arguments every experiment binary shares.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ExperimentArgs {
-    /// paper (the papers' settings), short (the paper's data and models, training cut to fit
-    /// ~10 minutes of a 2-core CPU for all of table1) or quick (tiny, seconds).
+    /// paper (the papers' settings), short (the paper's data and models, training cut so all of
+    /// table1 runs in under 5 minutes on a 2-core CPU) or quick (tiny, seconds).
     #[arg(long)]
     pub preset: Option<String>,
     /// Output folder [default: the experiment's folder under reports/].

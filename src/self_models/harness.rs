@@ -278,8 +278,8 @@ pub struct SelfModelRun<M> {
 }
 
 /// The presets of the self-model runs: `paper`, `quick`, and `short` (the paper's data and
-/// models with training cut so the whole of `table1` fits well within 10 minutes of a 2-core
-/// CPU, 175 s measured at 390a332; each row says so in its note).
+/// models with training cut so the whole of `table1` runs in under 5 minutes on a 2-core CPU,
+/// `reports/table1_short/console*.txt` say how long it took; each row says so in its note).
 pub const SELF_MODEL_PRESETS: &[&str] = &["paper", "short", "quick"];
 
 /// The notebooks' training protocol: Adam 1e-3, batch 32, 3,000 steps, clip 1.0, N(0, 0.01)
