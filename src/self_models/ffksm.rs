@@ -50,7 +50,8 @@ use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
 use crate::self_models::harness::{
-    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, host_targets, nth_image,
+    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
+    host_targets, nth_image,
 };
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
@@ -1042,8 +1043,7 @@ fn novel_view_figure(
         return Ok(());
     };
     // The same six test poses from every view.
-    let n = first.0.len() / px;
-    let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
+    let picks = grid_picks(first.0.len() / px);
     let mut rows = Vec::new();
     for (truth, pred) in views {
         rows.push(GridRow::Grey(

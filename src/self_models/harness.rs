@@ -724,8 +724,7 @@ pub(crate) fn qualitative_figure(
     size: [usize; 2],
 ) -> Result<()> {
     let px = size[0] * size[1];
-    let n = truth.len() / px;
-    let picks: Vec<usize> = (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect();
+    let picks = grid_picks(truth.len() / px);
     let gt: Vec<&[f32]> = picks.iter().map(|&i| nth_image(truth, i, px)).collect();
     let pr: Vec<&[f32]> = picks
         .iter()
@@ -790,4 +789,9 @@ pub(crate) fn qualitative_figure(
 /// Image `i` of a stack of `px`-pixel images.
 pub(crate) fn nth_image(v: &[f32], i: usize, px: usize) -> &[f32] {
     &v[i * px..(i + 1) * px]
+}
+
+/// The (at most) six samples of `n` a qualitative grid shows, spread evenly.
+pub(crate) fn grid_picks(n: usize) -> Vec<usize> {
+    (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect()
 }

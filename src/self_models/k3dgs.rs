@@ -26,7 +26,9 @@ use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::table::write_table;
-use crate::self_models::harness::{Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained};
+use crate::self_models::harness::{
+    Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
+};
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
@@ -529,9 +531,9 @@ fn gaussians_figure(
     test: &std::ops::Range<usize>,
     camera: &crate::sim::camera::Camera,
 ) -> Result<()> {
-    let n = test.len();
-    let picks: Vec<usize> = (0..6.min(n))
-        .map(|k| test.start + k * n / 6.min(n).max(1))
+    let picks: Vec<usize> = grid_picks(test.len())
+        .into_iter()
+        .map(|k| test.start + k)
         .collect();
     let device = model.positions.val().device();
     let q: Vec<f32> = picks
