@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::{RobotArgs, Triple, run_main};
+use selfmodel::cli::{CameraArgs, RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
 use selfmodel::data::dataset::{DatasetConfig, build_and_save, read_angles};
 use selfmodel::sim::trajectory::SamplerKind;
@@ -39,18 +39,8 @@ struct Args {
     angles: Option<PathBuf>,
     #[command(flatten)]
     robot: RobotArgs,
-    /// Camera position, metres.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    eye: Option<Triple>,
-    /// Point the camera looks at.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    target: Option<Triple>,
-    /// Vertical field of view, degrees.
-    #[arg(long)]
-    fov: Option<f64>,
-    /// Image width and height in pixels.
-    #[arg(long)]
-    size: Option<usize>,
+    #[command(flatten)]
+    camera: CameraArgs,
     /// Reproduce the paper's dataset artefact: the ground plane below the horizon is foreground.
     #[arg(long)]
     ground_artifact: bool,
@@ -81,17 +71,10 @@ fn main() -> ExitCode {
         }
         cfg.grid_step_deg = args.grid_step.unwrap_or(cfg.grid_step_deg);
         cfg.seed = args.seed.unwrap_or(cfg.seed);
-        if let Some(e) = args.eye {
-            cfg.camera.eye = e.0;
-        }
-        if let Some(t) = args.target {
-            cfg.camera.target = t.0;
-        }
-        cfg.camera.fov_deg = args.fov.unwrap_or(cfg.camera.fov_deg);
-        if let Some(s) = args.size {
-            cfg.camera.width = s;
-            cfg.camera.height = s;
-        }
+        // The papers' arm keeps the papers' camera; any other robot is framed automatically.
+        args.camera
+            .choice()
+            .apply(&mut cfg, !args.robot.papers_scene());
         cfg.render.ground_artifact = args.ground_artifact;
         if given.as_ref().is_some_and(|rows| rows.len() != cfg.samples) {
             return Err(selfmodel::Error::Config(
@@ -104,15 +87,30 @@ fn main() -> ExitCode {
         let stats = &report.stats;
         let (render_s, write_s) = (report.render_seconds, report.write_seconds);
         println!(
-            "dataset: {} samples ({} train, {} test) of {} ({} shapes), {}x{} px, focal {:.4} px",
+            "dataset: {} samples ({} train, {} test) of {} ({} joints, {} shapes), {}x{} px, focal {:.4} px",
             data.len(),
             data.n_train,
             data.len() - data.n_train,
             args.robot.label(),
+            robot.dof(),
             robot.shape_count(),
             data.width,
             data.height,
             data.focal
+        );
+        let camera = data.camera();
+        let f = |v: [f64; 3]| format!("{:.3},{:.3},{:.3}", v[0], v[1], v[2]);
+        let (forward, _, _) = camera.basis();
+        println!(
+            "camera: eye {} looking along {} ({}; fov {} deg)",
+            f(camera.eye),
+            f(forward.into()),
+            if cfg.framing.is_some() {
+                "framed automatically"
+            } else {
+                "as given"
+            },
+            cfg.camera.fov_deg
         );
         println!(
             "render: {:.3} s ({:.0} images/s on {} threads); write: {:.3} s",
@@ -122,14 +120,29 @@ fn main() -> ExitCode {
             write_s
         );
         println!(
-            "occupancy: mean {:.2}% min {:.2}% max {:.2}%",
+            "occupancy: mean {:.2}% min {:.2}% max {:.2}%; robot on the image border in {} of {} images, out of view in {}",
             100.0 * stats.occupancy.mean,
             100.0 * stats.occupancy.min,
-            100.0 * stats.occupancy.max
+            100.0 * stats.occupancy.max,
+            stats.border_images,
+            data.len(),
+            stats.empty_images
         );
-        for j in &stats.joints {
+        let width = stats
+            .joints
+            .iter()
+            .map(|j| j.name.len())
+            .max()
+            .unwrap_or(5)
+            .max(10);
+        for (j, joint) in stats.joints.iter().zip(robot.chain.movable_joints()) {
+            let unit = if joint.kind.is_rotational() {
+                "deg"
+            } else {
+                "m"
+            };
             println!(
-                "  {:<10} {:>8.2} .. {:>7.2} deg, mean {:>7.2}, std {:>6.2}",
+                "  {:<width$} {:>8.2} .. {:>7.2} {unit}, mean {:>7.2}, std {:>6.2}",
                 j.name, j.degrees.min, j.degrees.max, j.degrees.mean, j.degrees.std
             );
         }

@@ -9,7 +9,7 @@ use crate::core::error::Result;
 pub use crate::core::provenance::git_revision;
 use crate::sim::robot::Robot;
 pub use crate::sim::robots::{BuiltinRobot, shared_arm_urdf};
-use crate::sim::urdf_loader::{load_urdf, pose_from_xyz_rpy};
+use crate::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with, pose_from_xyz_rpy};
 
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
@@ -81,7 +81,8 @@ pub struct RobotArgs {
     /// Built-in robot (ignored when --urdf is given).
     #[arg(long, value_enum, default_value = "arm4")]
     pub robot: BuiltinRobot,
-    /// Load the robot from a URDF instead (meshes: STL; `package://` resolved next to it).
+    /// Load the robot from a URDF instead (STL, COLLADA or OBJ meshes; `package://` resolved
+    /// next to it).
     #[arg(long, value_name = "PATH")]
     pub urdf: Option<PathBuf>,
     /// Scene position of a URDF's root link, metres.
@@ -103,6 +104,13 @@ pub struct RobotArgs {
     /// Place a URDF as the papers' scene places arm4: base at [0,0,-0.108], yaw -pi/2.
     #[arg(long, conflicts_with_all = ["base_xyz", "base_rpy"])]
     pub arm4_scene: bool,
+    /// The URDF's end-effector link [default: the last link of its longest chain]. The joint
+    /// vector is the chain from the root to it; joints off it are held.
+    #[arg(long, value_name = "LINK", requires = "urdf")]
+    pub tip: Option<String>,
+    /// Which of the URDF's geometry is drawn.
+    #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
+    pub geometry: GeometryKind,
 }
 
 impl RobotArgs {
@@ -117,16 +125,64 @@ impl RobotArgs {
     /// Load the chosen robot.
     pub fn load(&self) -> Result<Robot> {
         match &self.urdf {
-            Some(path) => load_urdf(path, self.base()),
+            Some(path) => load_urdf_with(
+                path,
+                &UrdfOptions {
+                    base: self.base(),
+                    tip: self.tip.clone(),
+                    geometry: self.geometry,
+                },
+            ),
             None => Ok(self.robot.load()),
         }
     }
 
     /// A short name for reports: `arm4` or the URDF path.
     pub fn label(&self) -> String {
-        match &self.urdf {
-            Some(p) => p.display().to_string(),
-            None => self.robot.name().into(),
+        match (&self.urdf, &self.tip) {
+            (Some(p), Some(t)) => format!("{} (tip {t})", p.display()),
+            (Some(p), None) => p.display().to_string(),
+            (None, _) => self.robot.name().into(),
+        }
+    }
+
+    /// Whether the papers' camera sees this robot as it is (arm4, or a URDF in its scene);
+    /// any other robot is framed automatically.
+    pub fn papers_scene(&self) -> bool {
+        self.arm4_scene || (self.urdf.is_none() && self.robot == BuiltinRobot::Arm4)
+    }
+}
+
+/// The camera options of every binary that renders.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct CameraArgs {
+    /// Camera position, metres (a fixed camera; with --target). Without it, a robot other than
+    /// the papers' arm is framed automatically.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub eye: Option<Triple>,
+    /// The point a fixed camera looks at, metres [default: the origin].
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub target: Option<Triple>,
+    /// Vertical field of view, degrees.
+    #[arg(long)]
+    pub fov: Option<f64>,
+    /// Image width and height in pixels.
+    #[arg(long)]
+    pub size: Option<usize>,
+    /// Frame the robot automatically, looking from this direction (towards the camera from
+    /// the robot) [default: 1,0.6,0.4, front right and a little above].
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true, conflicts_with_all = ["eye", "target"])]
+    pub view: Option<Triple>,
+}
+
+impl CameraArgs {
+    pub fn choice(&self) -> crate::studies::run::CameraChoice {
+        crate::studies::run::CameraChoice {
+            eye: self.eye.map(|t| t.0),
+            target: self.target.map(|t| t.0),
+            fov_deg: self.fov,
+            size: self.size,
+            view: self.view.map(|t| t.0),
         }
     }
 }
@@ -158,14 +214,31 @@ pub struct ExperimentArgs {
     /// the robot a self-model (neurokin, resneurokin_d, ...) learns [default: arm4].
     #[arg(long, value_enum)]
     pub robot: Option<BuiltinRobot>,
-    /// Load the robot from a URDF instead (meshes: STL; its root link at the origin unless
-    /// --arm4-scene; the end effector is the origin of the last link of its longest chain).
+    /// Load the robot from a URDF instead (as ROS ships it: STL, COLLADA or OBJ meshes,
+    /// `package://` paths; its root link at the origin unless --arm4-scene).
     #[arg(long, value_name = "PATH", conflicts_with = "robot")]
     pub urdf: Option<PathBuf>,
     /// Place the URDF as the papers' scene places arm4 (base at [0,0,-0.108], yaw -pi/2), so
     /// the papers' camera sees it.
     #[arg(long, requires = "urdf")]
     pub arm4_scene: bool,
+    /// The URDF's end-effector link [default: the last link of its longest chain]. The joint
+    /// vector is the chain from the root to it; movable joints off it are held (at 0, or the
+    /// limit nearest 0), as in KDL and TRAC-IK chains.
+    #[arg(long, value_name = "LINK", requires = "urdf")]
+    pub tip: Option<String>,
+    /// Which of the URDF's geometry a self-model sees.
+    #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
+    pub geometry: GeometryKind,
+    #[command(flatten)]
+    pub camera: CameraArgs,
+    /// Self-models: train and test on this dataset (.npz as `dataset` writes it, or captured
+    /// silhouettes in its format: `images` (N,H,W) uint8 0/255, `angles` (N,DOF) degrees
+    /// (metres for prismatic joints), `focal` px, `poses` (N,4,4) camera-to-world; optional
+    /// `depth` (N,H,W) metres, `n_train`) instead of rendering the robot. K-3DGS and FFKSM also
+    /// need the robot that made it (--urdf, --tip).
+    #[arg(long, value_name = "FILE.npz")]
+    pub dataset: Option<PathBuf>,
     /// emssl_sampling_speed only: the forward model's per-call latencies to measure, instead
     /// of the preset's: none, sleep:US (waiting on a real arm) or spin:US (a CPU-bound
     /// simulator), comma-separated, e.g. `--latency none,spin:200`.
@@ -196,9 +269,20 @@ impl ExperimentArgs {
                 "--reuse applies to table1 only, not {name}"
             )));
         }
-        if (self.robot.is_some() || self.urdf.is_some()) && !e.takes_robot {
+        let camera_given = self.camera.choice() != crate::studies::run::CameraChoice::default();
+        if (self.robot.is_some() || self.urdf.is_some() || camera_given || self.dataset.is_some())
+            && !e.takes_robot
+        {
             return Err(crate::Error::Config(format!(
-                "--robot and --urdf apply to the inverse-kinematics and self-model experiments, not {name}"
+                "--robot, --urdf, --dataset and the camera options apply to the inverse-kinematics and self-model experiments, not {name}"
+            )));
+        }
+        if let Some(file) = &self.dataset
+            && !file.is_file()
+        {
+            return Err(crate::Error::Config(format!(
+                "--dataset {}: no such file (make one with the dataset binary, or see its --help for the format)",
+                file.display()
             )));
         }
         if self.latency.is_some() && name != "emssl_sampling_speed" {
@@ -219,6 +303,10 @@ impl ExperimentArgs {
             robot: self.robot,
             urdf: self.urdf.clone(),
             arm4_scene: self.arm4_scene,
+            tip: self.tip.clone(),
+            geometry: self.geometry,
+            camera: self.camera.choice(),
+            dataset: self.dataset.clone(),
             latencies: self.latency.clone(),
         };
         // Everything that can be checked is checked before the run writes its first file: the
@@ -226,14 +314,30 @@ impl ExperimentArgs {
         crate::core::device::select(opts.device)?;
         if opts.urdf.is_some() {
             let spec = opts.robot_spec(crate::sim::robots::BuiltinRobot::Arm4);
-            if spec.load()?.dof() == 0 {
+            if spec.load_kinematics()?.dof() == 0 {
                 return Err(crate::Error::Config(format!(
                     "{}: this robot has no movable joints (all are fixed); a self-model or an inverse model needs at least one",
                     spec.label()
                 )));
             }
         }
-        let dir = self.out.clone().unwrap_or_else(|| e.dir_for(&opts.preset));
+        // Another robot than the experiment's own writes under reports/robots/<robot>/.
+        let own = if name.starts_with("emssl_") {
+            crate::sim::robots::BuiltinRobot::Ur5
+        } else {
+            crate::sim::robots::BuiltinRobot::Arm4
+        };
+        let dir = self
+            .out
+            .clone()
+            .unwrap_or_else(|| match opts.robot_folder(own) {
+                Some(folder) => {
+                    let default = e.dir_for(&opts.preset);
+                    let leaf = default.file_name().map_or(name.into(), |f| f.to_owned());
+                    folder.join(leaf)
+                }
+                None => e.dir_for(&opts.preset),
+            });
         let start = std::time::Instant::now();
         let summary = e.run_in(&opts, &dir)?;
         let cpu = crate::eval::compute_peak::machine_label(false);

@@ -113,8 +113,22 @@ fn switches_that_do_not_apply_fail_cleanly() {
     assert_clean_failure(&out, &["--steps", "emssl_table2"], d);
     let out = run(env!("CARGO_BIN_EXE_emssl_learning_curve"), &["--resume"]);
     assert_clean_failure(&out, &["--resume", "emssl_learning_curve"], d);
-    let out = run(env!("CARGO_BIN_EXE_k3dgs"), &["--robot", "ur5"]);
-    assert_clean_failure(&out, &["--robot", "not k3dgs"], d);
+    let out = run(env!("CARGO_BIN_EXE_ablation_noise"), &["--robot", "ur5"]);
+    assert_clean_failure(&out, &["--robot", "not ablation_noise"], d);
+    // Inverse kinematics renders nothing: the camera options and --geometry are refused.
+    let out = run(env!("CARGO_BIN_EXE_emssl_table2"), &["--eye", "1,0,0"]);
+    assert_clean_failure(&out, &["--eye", "emssl_table2"], d);
+    // --tip needs a URDF; a --tip that is no link lists the links.
+    let out = run(env!("CARGO_BIN_EXE_neurokin"), &["--tip", "hand"]);
+    assert!(!out.status.success());
+    let robots = common::tempdir();
+    let urdf = robots.path().join("arm.urdf");
+    std::fs::write(&urdf, common::arm_urdf(2, false)).unwrap();
+    let out = run(
+        env!("CARGO_BIN_EXE_neurokin"),
+        &["--urdf", urdf.to_str().unwrap(), "--tip", "hand"],
+    );
+    assert_clean_failure(&out, &["--tip \"hand\" is not a link", "l2"], d);
     let out = run(
         env!("CARGO_BIN_EXE_emssl_table2"),
         &["--urdf", d.join("nope.urdf").to_str().unwrap()],

@@ -24,8 +24,44 @@ fn lorenz_first_sample_matches_the_paper() {
 }
 
 #[test]
-fn lorenz_refuses_more_than_six_joints() {
-    assert!(lorenz(10, &[[-1.0, 1.0]; 7]).is_err());
+fn lorenz_drives_any_number_of_joints_within_asymmetric_limits() {
+    // Seven joints with the Panda's limits (degrees), and a 10-joint robot.
+    let panda = [
+        [-166.0, 166.0],
+        [-101.0, 101.0],
+        [-166.0, 166.0],
+        [-176.0, -4.0],
+        [-166.0, 166.0],
+        [-1.0, 215.0],
+        [-166.0, 166.0],
+    ];
+    let q = lorenz(2000, &panda).unwrap();
+    for row in &q {
+        assert_eq!(row.len(), 7);
+        for (v, r) in row.iter().zip(&panda) {
+            assert!(*v > r[0] && *v < r[1], "{v} outside {r:?}");
+        }
+    }
+    // The first four joints are the paper's channels, whatever the joint count.
+    let four = lorenz(2000, &[[-90.0, 90.0]; 4]).unwrap();
+    let ten = lorenz(2000, &[[-90.0, 90.0]; 10]).unwrap();
+    assert!(four.iter().zip(&ten).all(|(a, b)| a[..] == b[..4]));
+    // No two joints move alike: every pair of columns differs somewhere by 10 degrees.
+    for a in 0..10 {
+        for b in a + 1..10 {
+            assert!(
+                ten.iter().any(|q| (q[a] - q[b]).abs() > 10.0),
+                "joints {a} and {b} move together"
+            );
+        }
+    }
+    // Each joint covers much of its range.
+    for j in 0..10 {
+        let (lo, hi) = ten
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(l, h), q| (l.min(q[j]), h.max(q[j])));
+        assert!(hi - lo > 60.0, "joint {j} spans only {lo}..{hi}");
+    }
 }
 
 #[test]
@@ -48,13 +84,13 @@ fn babbling_is_seeded_and_within_range() {
 #[test]
 fn grid_has_nine_degree_steps() {
     let r = [[-90.0, 90.0]; 2];
-    let g = grid(10_000, &r, 9.0, 0).unwrap();
+    let g = grid(10_000, &r, &[9.0; 2], 0).unwrap();
     assert_eq!(g.len(), 21 * 21);
     assert_eq!(g[0], vec![-90.0, -90.0]);
     assert_eq!(g[1], vec![-90.0, -81.0]);
     assert_eq!(g[g.len() - 1], vec![90.0, 90.0]);
-    let sub = grid(100, &r, 9.0, 0).unwrap();
+    let sub = grid(100, &r, &[9.0; 2], 0).unwrap();
     assert_eq!(sub.len(), 100);
     assert!(sub.iter().all(|q| g.contains(q)));
-    assert!(grid(10, &r, 0.0, 0).is_err());
+    assert!(grid(10, &r, &[0.0; 2], 0).is_err());
 }

@@ -137,10 +137,14 @@ fn bad_urdfs_are_clear_errors() {
     let urdf = package(
         dir.path(),
         "revolute",
-        "package://pkg/meshes/cube.dae",
+        "package://pkg/meshes/cube.ply",
         true,
     );
-    expect_urdf_error(&urdf, &["only STL"]);
+    std::fs::write(dir.path().join("pkg/meshes/cube.ply"), "ply\n").unwrap();
+    expect_urdf_error(
+        &urdf,
+        &["cube.ply", "unsupported mesh format", "STL, COLLADA"],
+    );
 
     std::fs::write(&urdf, "<robot name='x'><link name='a'></robot>").unwrap();
     expect_urdf_error(&urdf, &["not a valid URDF"]);

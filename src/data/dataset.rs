@@ -45,7 +45,47 @@ pub struct DatasetConfig {
     /// Seed of the random samplers.
     pub seed: u64,
     pub camera: Camera,
+    /// Frame the robot automatically: `camera`'s eye and target are replaced by a camera
+    /// looking at the centre of the volume the robot sweeps over the sampled poses, from
+    /// `framing.view`, at the distance that fits it ([`Camera::framing`]). `None`: `camera`
+    /// as it is (the papers' arm keeps the papers' camera).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub framing: Option<Framing>,
     pub render: RenderOptions,
+}
+
+/// How a camera frames a robot automatically.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Framing {
+    /// Direction from the robot towards the camera (need not be unit length).
+    pub view: [f64; 3],
+    /// Fraction of the half-image kept free at the border.
+    pub margin: f64,
+}
+
+impl Default for Framing {
+    /// From the front right (+x, +y), a little above: an oblique view, in which fewer joint
+    /// motions are hidden than in a view along an axis; 5% margin.
+    fn default() -> Self {
+        Framing {
+            view: [1.0, 0.6, 0.4],
+            margin: 0.05,
+        }
+    }
+}
+
+/// Points a camera must keep in view for `robot` at the joint vectors `si` (SI): the corners
+/// of each link's bounding boxes two levels into its tree, at every pose.
+pub fn swept_points(robot: &Robot, si: &[Vec<f64>]) -> Vec<nalgebra::Point3<f64>> {
+    let outlines: Vec<Vec<nalgebra::Point3<f64>>> =
+        robot.geometry.iter().map(|g| g.outline(2)).collect();
+    let mut points = Vec::new();
+    for q in si {
+        for (frame, outline) in robot.link_frames(q).iter().zip(&outlines) {
+            points.extend(outline.iter().map(|p| frame * p));
+        }
+    }
+    points
 }
 
 impl Preset for DatasetConfig {
@@ -59,6 +99,7 @@ impl Preset for DatasetConfig {
             grid_step_deg: 9.0,
             seed: 0,
             camera: Camera::paper(),
+            framing: None,
             render: RenderOptions::default(),
         }
     }
@@ -75,6 +116,17 @@ impl Preset for DatasetConfig {
 }
 
 impl DatasetConfig {
+    /// The camera the dataset renders with: `camera`, or with `framing` the camera that
+    /// frames `robot` over the joint vectors `si` (SI).
+    pub fn camera_for(&self, robot: &Robot, si: &[Vec<f64>]) -> Result<Camera> {
+        match &self.framing {
+            None => Ok(self.camera.clone()),
+            Some(f) => self
+                .camera
+                .framing(&swept_points(robot, si), f.view, f.margin),
+        }
+    }
+
     /// Reject impossible settings.
     pub fn validate(&self) -> Result<()> {
         if self.samples == 0 {
@@ -131,7 +183,23 @@ pub fn sample_angles(robot: &Robot, cfg: &DatasetConfig) -> Result<Vec<Vec<f64>>
     match cfg.sampler {
         SamplerKind::Lorenz => lorenz(cfg.samples, &ranges),
         SamplerKind::Babbling => Ok(babbling(cfg.samples, &ranges, cfg.seed)),
-        SamplerKind::Grid => grid(cfg.samples, &ranges, cfg.grid_step_deg, cfg.seed),
+        SamplerKind::Grid => {
+            // Degrees for rotational joints; a prismatic joint's range in as many steps as
+            // +-90 degrees would take.
+            let steps: Vec<f64> = robot
+                .chain
+                .movable_joints()
+                .zip(&ranges)
+                .map(|(j, r)| {
+                    if j.kind.is_rotational() {
+                        cfg.grid_step_deg
+                    } else {
+                        (r[1] - r[0]).max(1e-9) * cfg.grid_step_deg / 180.0
+                    }
+                })
+                .collect();
+            grid(cfg.samples, &ranges, &steps, cfg.seed)
+        }
     }
 }
 
@@ -151,8 +219,9 @@ impl Dataset {
                 cfg.samples
             )));
         }
-        let caster = RayCaster::new(robot, cfg.camera.clone(), cfg.render.clone());
         let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+        let camera = cfg.camera_for(robot, &si)?;
+        let caster = RayCaster::new(robot, camera.clone(), cfg.render.clone());
         let frames = caster.render_batch(&si, progress);
         let (w, h) = (cfg.camera.width, cfg.camera.height);
         let mut images = Vec::with_capacity(frames.len() * w * h);
@@ -161,7 +230,7 @@ impl Dataset {
             images.extend_from_slice(&f.silhouette);
             depth.extend_from_slice(&f.depth);
         }
-        let pose = cfg.camera.pose_matrix();
+        let pose = camera.pose_matrix();
         let pose: [f64; 16] = std::array::from_fn(|i| pose[(i / 4, i % 4)]);
         Ok(Dataset {
             angles,
@@ -169,7 +238,7 @@ impl Dataset {
             depth,
             width: w,
             height: h,
-            focal: cfg.camera.focal_px(),
+            focal: camera.focal_px(),
             poses: vec![pose; cfg.samples],
             n_train: cfg.train,
         })
@@ -208,6 +277,11 @@ impl Dataset {
     pub fn depth_map(&self, i: usize) -> &[f32] {
         let n = self.width * self.height;
         &self.depth[i * n..(i + 1) * n]
+    }
+
+    /// The camera the dataset records (the first image's pose, the focal length, the size).
+    pub fn camera(&self) -> Camera {
+        Camera::from_record(&self.poses[0], self.focal, self.width, self.height)
     }
 
     /// Indices of the training and test samples.
@@ -393,7 +467,18 @@ impl Dataset {
             .filter(|&&d| d > 0.0)
             .map(|&d| d as f64)
             .collect();
+        let (w, h) = (self.width, self.height);
+        let on_border = |img: &[u8]| {
+            (0..w).any(|c| img[c] > 0 || img[(h - 1) * w + c] > 0)
+                || (0..h).any(|r| img[r * w] > 0 || img[r * w + w - 1] > 0)
+        };
+        let border_images = (0..n).filter(|&i| on_border(self.image(i))).count();
+        let empty_images = (0..n)
+            .filter(|&i| self.image(i).iter().all(|&v| v == 0))
+            .count();
         DatasetStats {
+            border_images,
+            empty_images,
             samples: n,
             train: self.n_train,
             test: n - self.n_train,
@@ -440,6 +525,12 @@ pub struct DatasetStats {
     pub joints: Vec<JointStats>,
     /// Depth of robot pixels (m).
     pub depth_m: Option<Summary>,
+    /// Images in which the robot touches the image border (it may be cut off), and those in
+    /// which it is not seen at all.
+    #[serde(default)]
+    pub border_images: usize,
+    #[serde(default)]
+    pub empty_images: usize,
 }
 
 /// The most memory a dataset's images may take (silhouettes and depth): 8 GiB.

@@ -22,7 +22,8 @@ use crate::sim::kinematics::KinematicChain;
 pub struct IkDataConfig {
     pub samples: usize,
     pub train: usize,
-    /// Every joint is drawn from `[-range_deg, range_deg]` degrees.
+    /// Every joint is drawn from its limits narrowed to `[-range_deg, range_deg]` degrees
+    /// (a rotational joint without limits: that range; a prismatic joint: its limits, metres).
     pub range_deg: f64,
     pub seed: u64,
     /// The last `validation` of the `train` samples are held out for early stopping (0: none,
@@ -96,8 +97,8 @@ pub struct IkData {
     pub n_train: usize,
     /// The last `n_validation` of the first `n_train` samples are the validation split.
     pub n_validation: usize,
-    /// Joint range (radians), the same for every joint.
-    pub range: [f64; 2],
+    /// Each joint's range (SI: radians, metres for a prismatic joint).
+    pub ranges: Vec<[f64; 2]>,
     /// Per-axis bounds of the training positions (m): the position normalisation.
     pub position_bounds: [[f64; 3]; 2],
 }
@@ -118,10 +119,31 @@ impl IkData {
                 cfg.validation, cfg.train
             )));
         }
-        let r = cfg.range_deg.to_radians();
+        if !(cfg.range_deg > 0.0 && cfg.range_deg <= 180.0) {
+            return Err(Error::Config(format!(
+                "IK data: the joint range +-{} degrees must be within (0, 180]",
+                cfg.range_deg
+            )));
+        }
+        let ranges = chain.ranges_within(cfg.range_deg.to_radians());
+        if let Some((j, _)) = chain
+            .movable_joints()
+            .zip(&ranges)
+            .find(|(_, r)| !(r[1] > r[0]))
+        {
+            return Err(Error::Config(format!(
+                "IK data: joint \"{}\" has no range to sample (a prismatic joint needs <limit lower upper>)",
+                j.name
+            )));
+        }
         let mut rng = StdRng::seed_from_u64(cfg.seed);
         let joints: Vec<Vec<f64>> = (0..cfg.samples)
-            .map(|_| (0..chain.dof()).map(|_| rng.random_range(-r..=r)).collect())
+            .map(|_| {
+                ranges
+                    .iter()
+                    .map(|&[lo, hi]| rng.random_range(lo..=hi))
+                    .collect()
+            })
             .collect();
         let positions = chain.end_effector_batch(&joints);
         let mut lo = [f64::INFINITY; 3];
@@ -137,7 +159,7 @@ impl IkData {
             positions,
             n_train: cfg.train,
             n_validation: cfg.validation,
-            range: [-r, r],
+            ranges,
             position_bounds: [lo, hi],
         })
     }
@@ -152,9 +174,26 @@ impl IkData {
         self.n_train - self.n_validation..self.n_train
     }
 
-    /// Whether the joint range is the whole circle (+-180 degrees): its ends are one pose.
+    /// Whether every joint's range is the whole circle (+-180 degrees): its ends are one pose.
     pub fn full_circle(&self) -> bool {
-        self.range[1] - self.range[0] >= 2.0 * std::f64::consts::PI - 1e-9
+        self.ranges.iter().all(|&r| whole_circle(r))
+    }
+
+    /// The ranges as the settings of a trained model record them: one `[lo, hi]` when every
+    /// joint shares it (as before per-joint ranges), else the list.
+    pub fn range_record(&self) -> serde_json::Value {
+        match self.ranges.first() {
+            Some(first) if self.ranges.iter().all(|r| r == first) => serde_json::json!(first),
+            _ => serde_json::json!(self.ranges),
+        }
+    }
+
+    /// How many of `answers` (joint vectors, SI) leave some joint's range (beyond 1e-9).
+    pub fn outside_limits(&self, answers: &[Vec<f64>]) -> usize {
+        answers
+            .iter()
+            .filter(|q| !crate::sim::kinematics::within(q, &self.ranges, 1e-9))
+            .count()
     }
 
     pub fn test(&self) -> std::ops::Range<usize> {
@@ -173,10 +212,12 @@ impl IkData {
         Point3::from([0, 1, 2].map(|k| lo[k] + v[k] as f64 * (hi[k] - lo[k])))
     }
 
-    /// A joint vector normalised to [0, 1] over the joint range.
+    /// A joint vector normalised to [0, 1] over each joint's range.
     pub fn normalise_joints(&self, q: &[f64]) -> Vec<f32> {
-        let [lo, hi] = self.range;
-        q.iter().map(|&v| ((v - lo) / (hi - lo)) as f32).collect()
+        q.iter()
+            .zip(&self.ranges)
+            .map(|(&v, &[lo, hi])| ((v - lo) / (hi - lo)) as f32)
+            .collect()
     }
 
     /// `positions` normalised, row after row (`[n * 3]`, the networks' input layout).
@@ -197,8 +238,10 @@ impl IkData {
 
     /// The inverse of [`IkData::normalise_joints`].
     pub fn joints_from_normalised(&self, q: &[f32]) -> Vec<f64> {
-        let [lo, hi] = self.range;
-        q.iter().map(|&v| lo + v as f64 * (hi - lo)).collect()
+        q.iter()
+            .zip(&self.ranges)
+            .map(|(&v, &[lo, hi])| lo + v as f64 * (hi - lo))
+            .collect()
     }
 
     /// A joint vector as a network writes it under `output`.
@@ -224,14 +267,18 @@ impl IkData {
     pub fn decode_joints(&self, v: &[f32], output: JointOutput) -> Vec<f64> {
         match output {
             JointOutput::Sigmoid => self.joints_from_normalised(v),
-            JointOutput::Wrapped => {
-                let [lo, hi] = self.range;
-                v.chunks(2)
-                    .map(|cs| (cs[1] as f64).atan2(cs[0] as f64).clamp(lo, hi))
-                    .collect()
-            }
+            JointOutput::Wrapped => v
+                .chunks(2)
+                .zip(&self.ranges)
+                .map(|(cs, &[lo, hi])| (cs[1] as f64).atan2(cs[0] as f64).clamp(lo, hi))
+                .collect(),
         }
     }
+}
+
+/// Whether a joint range is the whole circle (+-180 degrees): its ends are one pose.
+pub fn whole_circle([lo, hi]: [f64; 2]) -> bool {
+    hi - lo >= 2.0 * std::f64::consts::PI - 1e-9
 }
 
 /// Distance errors (cm) between desired positions and those the predicted joints reach.

@@ -278,7 +278,7 @@ impl crate::ik::method::IkMethod for DlsFromHome {
     ) -> crate::Result<crate::ik::method::MethodOutput> {
         use crate::ik::method::{Answers, MethodOutput, timed};
         let dof = task.chain.dof();
-        let ranges = vec![task.data.range; dof];
+        let ranges = task.data.ranges.clone();
         let home = vec![vec![0.0; dof]; task.targets.len()];
         let mut solutions = Vec::new();
         let s = timed(&mut || {

@@ -473,17 +473,16 @@ impl StopRule {
     }
 }
 
-/// Perturb `joints` (radians, within `range`) with Gaussian noise of standard deviation `sigma`
+/// Perturb `joints` (radians, each within its range of `ranges`) with Gaussian noise of standard deviation `sigma`
 /// in normalised units (1 = the whole range), clamped to the range, or wrapped around it when
 /// `wrap` (a whole-circle range under the wrapped output, where the ends are one pose).
-fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64, wrap: bool) {
+fn explore(joints: &mut [Vec<f64>], ranges: &[[f64; 2]], sigma: f64, seed: u64, wrap: bool) {
     if sigma <= 0.0 {
         return;
     }
     let noise = Normal::new(0.0, sigma).expect("finite sigma");
     let mut rng = StdRng::seed_from_u64(seed);
-    let [lo, hi] = range;
-    for v in joints.iter_mut().flatten() {
+    for (v, &[lo, hi]) in joints.iter_mut().flat_map(|q| q.iter_mut().zip(ranges)) {
         let u = (*v - lo) / (hi - lo) + noise.sample(&mut rng);
         let u = if wrap {
             u.rem_euclid(1.0)
@@ -494,21 +493,22 @@ fn explore(joints: &mut [Vec<f64>], range: [f64; 2], sigma: f64, seed: u64, wrap
     }
 }
 
-/// Motor babbling: `n` joint vectors drawn uniformly from `range` (seeded) and where `forward`
-/// takes them.
+/// Motor babbling: `n` joint vectors drawn uniformly from `ranges` (seeded) and where
+/// `forward` takes them.
 fn babble(
     forward: &KinematicChain,
     n: usize,
-    range: [f64; 2],
+    ranges: &[[f64; 2]],
     seed: u64,
 ) -> (Vec<Point3<f64>>, Vec<Vec<f64>>) {
     use rand::RngExt;
     let mut rng = StdRng::seed_from_u64(seed);
-    let [lo, hi] = range;
     let joints: Vec<Vec<f64>> = (0..n)
         .map(|_| {
-            (0..forward.dof())
-                .map(|_| rng.random_range(lo..=hi))
+            ranges
+                .iter()
+                .take(forward.dof())
+                .map(|&[lo, hi]| rng.random_range(lo..=hi))
                 .collect()
         })
         .collect();
@@ -516,12 +516,16 @@ fn babble(
 }
 
 /// Mean absolute difference of two joint sets in normalised units.
-fn disagreement(a: &[Vec<f64>], b: &[Vec<f64>], range: [f64; 2]) -> f64 {
-    let span = range[1] - range[0];
+fn disagreement(a: &[Vec<f64>], b: &[Vec<f64>], ranges: &[[f64; 2]]) -> f64 {
     let n = a.iter().map(Vec::len).sum::<usize>().max(1);
     a.iter()
         .zip(b)
-        .flat_map(|(x, y)| x.iter().zip(y).map(|(u, v)| (u - v).abs() / span))
+        .flat_map(|(x, y)| {
+            x.iter()
+                .zip(y)
+                .zip(ranges)
+                .map(|((u, v), r)| (u - v).abs() / (r[1] - r[0]))
+        })
         .sum::<f64>()
         / n as f64
 }
@@ -574,7 +578,7 @@ pub fn emssl_checkpointed(
                     ..cfg.clone()
                 },
                 "goals": data.train().len(),
-                "range": data.range,
+                "range": data.range_record(),
             }),
         });
     emssl_run(
@@ -677,7 +681,12 @@ fn emssl_run(
     let held_out = &data.positions[data.validation()];
     let wrap = model.joint_output() == JointOutput::Wrapped && data.full_circle();
     if cfg.warm_start_epochs > 0 && resumed.is_none() {
-        let (reached, tried) = babble(forward, desired.len(), data.range, fit_cfg.seed ^ 0xBABB1E);
+        let (reached, tried) = babble(
+            forward,
+            desired.len(),
+            &data.ranges,
+            fit_cfg.seed ^ 0xBABB1E,
+        );
         (model, optim) = fit(
             model,
             optim,
@@ -764,7 +773,7 @@ fn emssl_run(
         let mut tried = answers.clone();
         explore(
             &mut tried,
-            data.range,
+            &data.ranges,
             sigma,
             fit_cfg.seed ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             wrap,
@@ -824,7 +833,7 @@ fn emssl_run(
             fit_cfg.inference_batch,
             device,
         );
-        let disagreement = disagreement(&answers, &back, data.range);
+        let disagreement = disagreement(&answers, &back, &data.ranges);
         let train_reach_cm =
             DistanceErrors::from_metres(&distances(desired, &clean_reached)).mean_cm;
         let validation_reach_cm = (!held_out.is_empty()).then(|| {
@@ -961,7 +970,7 @@ fn polish(
             train_reach_cm: DistanceErrors::from_metres(&distances(desired, &clean_reached))
                 .mean_cm,
             validation_reach_cm: (!held_out.is_empty()).then_some(log.best_validation),
-            disagreement: disagreement(&clean, &back, data.range),
+            disagreement: disagreement(&clean, &back, &data.ranges),
             sampling_seconds,
             training_seconds: log.seconds,
             forward_calls: curve.last().map_or(0, |c| c.forward_calls) + 2 * desired.len() * round,

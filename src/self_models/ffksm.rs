@@ -131,6 +131,16 @@ pub struct Ffksm {
     /// `short` preset, which shows the accelerated marcher's row only.
     #[serde(default = "yes")]
     pub reference_renderers: bool,
+    /// World metres per field unit: the field learns the scene shrunk by this about the
+    /// origin (1 for the papers' arm; set by `fit` for a robot framed automatically, so the
+    /// field's inputs span what they span for the papers' arm). Derived from the data, so
+    /// neither saved nor fingerprinted.
+    #[serde(skip, default = "unit_scale")]
+    pub scene_scale: f64,
+}
+
+fn unit_scale() -> f64 {
+    1.0
 }
 
 fn yes() -> bool {
@@ -232,6 +242,7 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
         rays_per_step: None,
         image: SelfModelRun::<Ffksm>::image(preset)?,
         reference_renderers: preset != "short",
+        scene_scale: 1.0,
     };
     if quick {
         model.accelerated.grid.block = 2;
@@ -309,13 +320,10 @@ pub fn centre_crop(height: usize, width: usize, crop: usize) -> Vec<usize> {
         .collect()
 }
 
-/// Degrees to the field's radians.
-fn radians(angles_deg: &[f32]) -> [f64; 4] {
-    let mut a = [0.0; 4];
-    for (k, v) in angles_deg.iter().take(4).enumerate() {
-        a[k] = (*v as f64).to_radians();
-    }
-    a
+/// User units (degrees; metres for a prismatic joint) to the field's SI units.
+fn radians(angles_deg: &[f32], chain: &crate::sim::kinematics::KinematicChain) -> Vec<f64> {
+    let user: Vec<f64> = angles_deg.iter().map(|&v| v as f64).collect();
+    chain.to_si(&user)
 }
 
 /// The weighted MSE of `pred` `[rays]` against `truth` (host, `[rays]` in [0, 1]):
@@ -451,10 +459,11 @@ impl Rendered {
     }
 }
 
-/// Render every pose of `angles_deg` (`[n][4]`, degrees) from `camera`, densely (`None`) or
+/// Render every pose of `angles_deg` (`[n][dof]`, degrees) from `camera`, densely (`None`) or
 /// with the accelerated marcher.
 fn render_all(
     field: &OccupancyField,
+    robot: &Robot,
     camera: &Camera,
     angles_deg: &[Vec<f64>],
     cfg: &Ffksm,
@@ -462,6 +471,7 @@ fn render_all(
     device: &Device,
     label: &str,
 ) -> Rendered {
+    let camera = &cfg.field_camera(camera);
     let pixels = camera.width * camera.height;
     let all: Vec<usize> = (0..pixels).collect();
     let mut out = Rendered {
@@ -479,7 +489,8 @@ fn render_all(
     let bar = crate::core::progress::progress_bar(angles_deg.len() as u64, label, "images");
     for a in angles_deg {
         let a32: Vec<f32> = a.iter().map(|&v| v as f32).collect();
-        let view = (camera, radians(&a32));
+        let radians = radians(&a32, &robot.chain);
+        let view = (camera, radians.as_slice());
         let t0 = Instant::now();
         let (sil, depth, evals, grid, occupancy) = if let Some(acc) = accelerated {
             let img = render_accelerated(field, view, &cfg.march, acc, device);
@@ -499,7 +510,11 @@ fn render_all(
         out.seconds.push(t0.elapsed().as_secs_f64());
         out.predictions.silhouettes.extend(sil);
         if let Some(d) = out.predictions.depth.as_mut() {
-            d.extend(depth);
+            if cfg.scene_scale == 1.0 {
+                d.extend(depth);
+            } else {
+                d.extend(depth.iter().map(|&v| v * cfg.scene_scale as f32));
+            }
         }
         out.evaluations.push(evals);
         out.grid_evaluations.push(grid);
@@ -567,7 +582,7 @@ fn train_field(
     hand_written: bool,
 ) -> Result<(OccupancyField, TrainLog, usize, f64)> {
     let (train_set, plan, device, train) = (fit.train_set, fit.plan, fit.device, fit.train);
-    let camera = fit.camera.clone();
+    let camera = cfg.field_camera(fit.camera);
     let (h, w) = (camera.height, camera.width);
     let all: Vec<usize> = (0..h * w).collect();
     let crop = centre_crop(h, w, cfg.curriculum.crop);
@@ -580,6 +595,16 @@ fn train_field(
         .convert::<f32>()
         .try_to_vec::<f32>()
         .expect("float");
+    // An all-black probe is a collapse only where the truth has robot pixels in the crop (a
+    // robot framed automatically may lie outside the centre crop in that pose).
+    let probe_image: Vec<f32> = train_set.targets[0]
+        .clone()
+        .slice([0..1])
+        .into_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .expect("float");
+    let probe_sees_robot = crop.iter().any(|&p| probe_image[p] >= 0.5);
     let resume = plan.resume;
     // Restarts after collapse so far, so a resumed run reports them (and initialises the same
     // model).
@@ -628,7 +653,8 @@ fn train_field(
             };
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            let view = (&camera, radians(&a));
+            let radians = radians(&a, &fit.robot.chain);
+            let view = (&camera, radians.as_slice());
             train_steps.set(train_steps.get() + 1);
             match cfg.train_marcher {
                 TrainMarcher::Dense => {
@@ -684,14 +710,22 @@ fn train_field(
                 std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
                 write_json(&counts_path, &[train_evaluations.get(), train_steps.get()])?;
             }
-            let Some(r) = &cfg.restart else { return Ok(()) };
+            // The last try (after `max_restarts`) trains to the end whatever it draws: a robot
+            // the field cannot pick up then gets its row (and its low score), not an error.
+            let Some(r) = cfg
+                .restart
+                .as_ref()
+                .filter(|r| probe_sees_robot && restarts < r.max_restarts)
+            else {
+                return Ok(());
+            };
             if step > r.until || step % r.every.max(1) != 0 {
                 return Ok(());
             }
             let valid = m.valid();
             let probe = render_silhouette(
                 &valid,
-                (&camera, radians(&probe_truth)),
+                (&camera, &radians(&probe_truth, &fit.robot.chain)),
                 &crop,
                 &cfg.march,
                 None,
@@ -765,26 +799,48 @@ impl SelfModel for Ffksm {
         fingerprint(self, train, data)
     }
 
+    fn dof(&self) -> Option<usize> {
+        Some(self.field.dof)
+    }
+
+    fn needs_robot(&self) -> bool {
+        true
+    }
+
+    fn set_dof(&mut self, dof: usize) {
+        self.field.dof = dof;
+    }
+
     /// Train the field; it renders two ways: dense marching (the paper's) and the
     /// accelerated marcher.
     fn fit(&self, fit: &Fit) -> Result<Trained> {
-        let hand_written = self.dense_gradients == DenseGradients::HandWrittenOnCpu
+        let (this, marched) = self.fitted_to_scene(fit);
+        let this = &this;
+        let hand_written = this.dense_gradients == DenseGradients::HandWrittenOnCpu
             && matches!(fit.device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
-        let (field, log, restarts, train_evals) = train_field(self, fit.label, fit, hand_written)?;
-        let mut note = vec![format!(
+        let (field, log, restarts, train_evals) = train_field(this, fit.label, fit, hand_written)?;
+        let mut note = marched.into_iter().collect::<Vec<_>>();
+        note.push(format!(
             "trained with {} marching, {train_evals:.0} evaluations per step",
             match self.train_marcher {
                 TrainMarcher::Dense if hand_written => "dense (hand-written gradients)",
                 TrainMarcher::Dense => "dense",
                 TrainMarcher::Skipping => "skipping",
             }
-        )];
+        ));
         if restarts > 0 {
             note.push(format!("{restarts} restarts after collapse"));
         }
+        if this
+            .restart
+            .as_ref()
+            .is_some_and(|r| r.max_restarts > 0 && restarts >= r.max_restarts)
+        {
+            note.push("the last try trained without the collapse check".into());
+        }
         let shared = Rc::new(FfksmShared {
             field,
-            model: self.clone(),
+            model: this.clone(),
             camera: fit.camera.clone(),
             robot: fit.robot.clone(),
             device: fit.device.clone(),
@@ -800,11 +856,11 @@ impl SelfModel for Ffksm {
         Ok(Trained {
             parameters: shared.field.num_params(),
             renderers: [
-                self.reference_renderers
+                this.reference_renderers
                     .then(|| ("dense marching".into(), renderer(None, "dense marching"))),
                 Some((
                     "accelerated".into(),
-                    renderer(Some(self.accelerated.clone()), "accelerated"),
+                    renderer(Some(this.accelerated.clone()), "accelerated"),
                 )),
             ]
             .into_iter()
@@ -819,6 +875,81 @@ impl SelfModel for Ffksm {
         ffksm_run(preset, FfksmVariant::Reimplementation)
     }
 }
+
+impl Ffksm {
+    /// This config for the scene `fit` renders: as it is for the papers' camera; for any other
+    /// camera (a robot framed automatically), rays are marched over the depths the robot
+    /// occupies over its training poses, 5% wider each way, instead of the papers' [0.6, 1.4]
+    /// m (and the row's note says so).
+    fn fitted_to_scene(&self, fit: &Fit) -> (Ffksm, Option<String>) {
+        let paper = Camera::paper();
+        let c = fit.camera;
+        if (c.eye, c.target, c.up, c.fov_deg) == (paper.eye, paper.target, paper.up, paper.fov_deg)
+        {
+            return (self.clone(), None);
+        }
+        let [n, dof] = fit.train_set.inputs.dims();
+        let user: Vec<f32> = fit
+            .train_set
+            .inputs
+            .clone()
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("float inputs");
+        let si: Vec<Vec<f64>> = user
+            .chunks(dof.max(1))
+            .take(n)
+            .map(|q| {
+                fit.robot
+                    .chain
+                    .to_si(&q.iter().map(|&v| v as f64).collect::<Vec<_>>())
+            })
+            .collect();
+        let frame = c.frame();
+        let depths: Vec<f64> = crate::data::dataset::swept_points(fit.robot, &si)
+            .iter()
+            .filter_map(|p| frame.project(p).map(|(_, _, z)| z))
+            .collect();
+        let (lo, hi) = depths
+            .iter()
+            .fold((f64::INFINITY, 0f64), |(l, h), &z| (l.min(z), h.max(z)));
+        if !(lo.is_finite() && hi > lo) {
+            return (self.clone(), None);
+        }
+        let pad = 0.05 * (hi - lo);
+        let mut this = self.clone();
+        // The papers' arm reaches about 0.45 m from the origin: shrink the scene to that.
+        let reach = crate::data::dataset::swept_points(fit.robot, &si)
+            .iter()
+            .map(|p| p.coords.norm())
+            .fold(0f64, f64::max);
+        this.scene_scale = (reach / PAPERS_ARM_REACH_M).max(1e-6);
+        this.march.near = (lo - pad).max(1e-3) / this.scene_scale;
+        this.march.far = (hi + pad) / this.scene_scale;
+        let said = format!(
+            "rays marched over depths {:.3} to {:.3} m (where the robot is), the scene shrunk {:.2}x about the base for the field",
+            (lo - pad).max(1e-3),
+            hi + pad,
+            this.scene_scale
+        );
+        (this, Some(said))
+    }
+
+    /// `camera` in the field's units (shrunk by [`Ffksm::scene_scale`] about the origin): the
+    /// same image, every depth divided by the scale.
+    fn field_camera(&self, camera: &Camera) -> Camera {
+        let shrink = |v: [f64; 3]| v.map(|x| x / self.scene_scale);
+        Camera {
+            eye: shrink(camera.eye),
+            target: shrink(camera.target),
+            ..camera.clone()
+        }
+    }
+}
+
+/// How far the papers' arm reaches from its base (m): a framed robot's scene is shrunk to it.
+const PAPERS_ARM_REACH_M: f64 = 0.45;
 
 /// A trained field and what its renderers share: every image they render is kept.
 struct FfksmShared {
@@ -843,6 +974,7 @@ impl FfksmRenderer {
         let s = &self.shared;
         render_all(
             &s.field,
+            &s.robot,
             camera,
             angles_deg,
             &s.model,
@@ -987,9 +1119,13 @@ impl Render for FfksmRenderer {
         let mut novel = vec![view_row(0.0, &fast_q, (f64::INFINITY, 1.0))];
         let mut novel_images = Vec::new();
         for &yaw in &s.model.novel_views_deg {
+            // The simulator's view of the same poses from the orbited camera.
             let mut spec = ctx.spec.dataset.clone();
             spec.camera = s.camera.orbited(yaw);
-            let view_data = Dataset::generate(&s.robot, &spec, None)?;
+            spec.framing = None;
+            spec.samples = ctx.data.len();
+            spec.train = ctx.data.n_train;
+            let view_data = Dataset::render(&s.robot, &spec, ctx.data.angles.clone(), None)?;
             let (vt, vd) = host_targets(&view_data, ctx.test);
             let r = self.render_from(&spec.camera, &test_angles, &format!("novel view {yaw} deg"));
             let q = score_of(&r.predictions, &vt, &vd);

@@ -45,6 +45,17 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn lower_bound(&self) -> bool {
         false
     }
+    /// The number of joint values its network takes, where its config fixes one.
+    fn dof(&self) -> Option<usize> {
+        None
+    }
+    /// Take `dof` joint values (the robot's): a network's input width follows the robot.
+    fn set_dof(&mut self, _dof: usize) {}
+    /// Whether it needs the robot's kinematic chain and geometry (K-3DGS, FFKSM), not only
+    /// joint values and images.
+    fn needs_robot(&self) -> bool {
+        false
+    }
     /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
     where
@@ -171,6 +182,11 @@ pub struct DataSpec {
     pub train_samples: Option<usize>,
     /// Test on these samples instead of the test split (indices into the dataset).
     pub test: Option<Range<usize>>,
+    /// Train and test on this dataset file instead of rendering `dataset` (`--dataset`: what
+    /// the `dataset` binary writes, or silhouettes captured elsewhere in its format; the
+    /// camera comes from its `poses` and `focal`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<std::path::PathBuf>,
 }
 
 impl DataSpec {
@@ -194,6 +210,7 @@ impl DataSpec {
             dataset: DatasetConfig::paper(),
             train_samples: None,
             test: None,
+            file: None,
         }
     }
 
@@ -213,12 +230,15 @@ impl DataSpec {
             dataset,
             train_samples: None,
             test: None,
+            file: None,
         }
     }
 
-    /// `clean` or `paper_compatible`.
+    /// `clean`, `paper_compatible` or `file` (a dataset read from `--dataset`).
     pub fn label(&self) -> &'static str {
-        if self.dataset.render.ground_artifact {
+        if self.file.is_some() {
+            "file"
+        } else if self.dataset.render.ground_artifact {
             "paper_compatible"
         } else {
             "clean"
@@ -231,10 +251,23 @@ impl DataSpec {
             .map(|(_, data, train, test)| (data, train, test))
     }
 
+    /// The camera `data` was rendered (or captured) with: the config's camera, unless it was
+    /// framed automatically or read from a file (then the dataset's record of it).
+    pub fn camera(&self, data: &Dataset) -> Camera {
+        if self.file.is_none() && self.dataset.framing.is_none() {
+            self.dataset.camera.clone()
+        } else {
+            data.camera()
+        }
+    }
+
     /// [`DataSpec::load`] with the robot it rendered (loaded once: a URDF reads its meshes).
     pub fn load_with_robot(&self) -> Result<(Robot, Dataset, Range<usize>, Range<usize>)> {
         let robot = self.robot.load()?;
-        let data = Dataset::generate(&robot, &self.dataset, None)?;
+        let data = match &self.file {
+            Some(path) => Dataset::load(path)?,
+            None => Dataset::generate(&robot, &self.dataset, None)?,
+        };
         let (train, test) = data.split();
         let train = match self.train_samples {
             Some(k) if k > train.len() => {
@@ -491,13 +524,41 @@ pub fn fit_run<M: SelfModel>(
 ) -> Result<Fitted> {
     let device = crate::core::device::select(device_choice)?;
     let (robot, data, train_range, test_range) = cfg.data.load_with_robot()?;
+    if let Some(dof) = cfg.model.dof()
+        && dof != data.dof()
+    {
+        return Err(Error::Config(format!(
+            "{}: the model takes {dof} joint values but the robot has {} (a config for another robot)",
+            cfg.name,
+            data.dof()
+        )));
+    }
     let image = cfg.model.image();
     if image != [data.height, data.width] {
         return Err(Error::Config(format!(
-            "{}: the model outputs {}x{} images but the dataset has {}x{}",
-            cfg.name, image[0], image[1], data.height, data.width
+            "{}: the model outputs {}x{} images but the dataset has {}x{}{}",
+            cfg.name,
+            image[0],
+            image[1],
+            data.height,
+            data.width,
+            if cfg.data.file.is_some() {
+                " (resize the dataset's images to the preset's size: 100x100 for paper and short, 32x32 for quick)"
+            } else {
+                ""
+            }
         )));
     }
+    if cfg.model.needs_robot() && robot.dof() != data.dof() {
+        return Err(Error::Config(format!(
+            "{}: the model hangs on the robot's kinematic chain, but the robot ({}) has {} joints and the dataset {}: give the robot that made the dataset (--urdf, --tip)",
+            cfg.name,
+            cfg.data.robot.label(),
+            robot.dof(),
+            data.dof()
+        )));
+    }
+    let camera = cfg.data.camera(&data);
     let tdev = autodiff_device(&device, cfg.train.seed);
     let train_set = device_set(
         &data,
@@ -525,7 +586,7 @@ pub fn fit_run<M: SelfModel>(
         train_device: &tdev,
         device: &device,
         robot: &robot,
-        camera: &cfg.data.dataset.camera,
+        camera: &camera,
         device_choice,
     })?;
     Ok(Fitted {

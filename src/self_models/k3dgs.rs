@@ -307,6 +307,10 @@ impl SelfModel for K3dgs {
         self.image
     }
 
+    fn needs_robot(&self) -> bool {
+        true
+    }
+
     /// One image per step, the robot pixels weighted, densified and pruned between steps
     /// (no checkpoints: a run takes seconds to minutes and its Gaussians change in number).
     fn fit(&self, fit: &Fit) -> Result<Trained> {
@@ -339,7 +343,7 @@ impl SelfModel for K3dgs {
             model,
             fit.train_set,
             |m: &KinematicGaussians, b| {
-                let q = b.inputs.clone().mul_scalar(std::f64::consts::PI / 180.0);
+                let q = chain.from_user(b.inputs.clone());
                 let (sil, _) = m.render(
                     &chain,
                     q,
@@ -402,7 +406,7 @@ impl K3dgsRenderer {
     /// parts of 8 images (256 at once would hold 256 x N x P floats).
     fn splat(&self, angles: Tensor<2>, cull: Option<f64>) -> (Tensor<4>, Tensor<4>) {
         let [b, _] = angles.dims();
-        let q = angles.mul_scalar(std::f64::consts::PI / 180.0);
+        let q = self.chain.from_user(angles);
         let part = if cull.is_some() { b.max(1) } else { 8 };
         let (mut sil, mut depth) = (Vec::new(), Vec::new());
         for s in (0..b).step_by(part) {
@@ -453,7 +457,7 @@ impl Render for K3dgsRenderer {
         let (r, _, _) = self.chain.origin_rows();
         let joints = self.chain.joint_count();
         let origin_r = Tensor::<3>::from_data(TensorData::new(r, [joints, 3, 3]), &device);
-        let q = angles.mul_scalar(std::f64::consts::PI / 180.0);
+        let q = self.chain.from_user(angles);
         let (fr, ft) = self.chain.link_frames_with(q, origin_r, origin_t);
         let g = self.model.project_frames(fr, ft, &self.camera);
         let (s, _) = self
@@ -538,10 +542,13 @@ fn gaussians_figure(
     let device = model.positions.val().device();
     let q: Vec<f32> = picks
         .iter()
-        .flat_map(|&i| data.angles[i].iter().map(|a| a.to_radians() as f32))
+        .flat_map(|&i| data.angles[i].iter().map(|&a| a as f32))
         .collect();
     let dof = data.dof();
-    let q = Tensor::<2>::from_data(TensorData::new(q, [picks.len(), dof]), &device);
+    let q = chain.from_user(Tensor::<2>::from_data(
+        TensorData::new(q, [picks.len(), dof]),
+        &device,
+    ));
     let g = model.project(chain, q, camera);
     let rows = g.row.into_data().try_into_vec::<f32>().expect("float");
     let cols = g.col.into_data().try_into_vec::<f32>().expect("float");

@@ -257,6 +257,14 @@ impl SelfModel for ResNeuroKinDConfig {
         self.image
     }
 
+    fn dof(&self) -> Option<usize> {
+        Some(self.dof)
+    }
+
+    fn set_dof(&mut self, dof: usize) {
+        self.dof = dof;
+    }
+
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let model = self.init(fit.train_device, fit.train.seed)?;
         let parameters = model.trainable_params();

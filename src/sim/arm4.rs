@@ -77,6 +77,7 @@ fn joints() -> Vec<Joint> {
             origin: pose_from_xyz_rpy(*xyz, *rpy),
             axis: Unit::new_normalize(Vector3::from(*axis)),
             limits: None,
+            mimic: None,
         })
         .collect()
 }

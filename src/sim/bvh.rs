@@ -53,6 +53,28 @@ impl Bvh {
         self.shapes.is_empty()
     }
 
+    /// The corners of the tree's boxes `depth` levels below the root (or of leaves above
+    /// that), in the link frame: a hull of the link's shapes that is tighter than one box
+    /// (every shape lies inside the boxes these corners span).
+    pub fn outline(&self, depth: usize) -> Vec<nalgebra::Point3<f64>> {
+        let mut out = Vec::new();
+        let mut stack = match self.nodes.is_empty() {
+            true => vec![],
+            false => vec![(0usize, 0usize)],
+        };
+        while let Some((i, d)) = stack.pop() {
+            let node = &self.nodes[i];
+            if node.count > 0 || d == depth {
+                out.extend(node.bounds.corners());
+            } else {
+                let left = node.first as usize;
+                stack.push((left, d + 1));
+                stack.push((left + 1, d + 1));
+            }
+        }
+        out
+    }
+
     /// Bounds of everything in the link frame (empty box for no shapes).
     pub fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::empty(), |n| n.bounds)

@@ -127,6 +127,76 @@ impl Camera {
         self.frame().project(p)
     }
 
+    /// The camera a dataset records (`poses`: camera-to-world in the OpenGL convention,
+    /// `focal` in pixels, the image size), with the principal point at the image centre.
+    pub fn from_record(pose: &[f64; 16], focal: f64, width: usize, height: usize) -> Self {
+        let column = |c: usize| Vector3::new(pose[c], pose[4 + c], pose[8 + c]);
+        let eye = column(3);
+        let fwd = -column(2);
+        Camera {
+            eye: eye.into(),
+            target: (eye + fwd).into(),
+            up: column(1).into(),
+            fov_deg: 2.0 * (height as f64 / 2.0 / focal).atan().to_degrees(),
+            width,
+            height,
+        }
+    }
+
+    /// A camera that frames `points` (world): it looks at the centre of their bounding box
+    /// from `direction` (from the target towards the eye), with `up` up, at the distance
+    /// where every point projects inside the image with `margin` (a fraction of the
+    /// half-width) to spare. `fov_deg`, `width` and `height` are this camera's.
+    pub fn framing(
+        &self,
+        points: &[Point3<f64>],
+        direction: [f64; 3],
+        margin: f64,
+    ) -> Result<Self> {
+        let dir = Vector3::from(direction);
+        if points.is_empty() {
+            return Err(Error::Config(
+                "nothing to frame: the robot has no geometry (give --eye and --target)".into(),
+            ));
+        }
+        if !(dir.norm() > 1e-12) || !dir.iter().all(|v| v.is_finite()) {
+            return Err(Error::Config(format!(
+                "--view {direction:?}: the direction to look from must be a non-zero vector"
+            )));
+        }
+        if !(0.0..0.9).contains(&margin) {
+            return Err(Error::Config(format!(
+                "framing margin {margin} must be in [0, 0.9)"
+            )));
+        }
+        let bounds = crate::sim::shape::Aabb::from_points(points);
+        let target = bounds.center();
+        let probe = Camera {
+            eye: (target + dir.normalize()).into(),
+            target: target.into(),
+            ..self.clone()
+        };
+        probe.validate()?;
+        let (fwd, right, up) = probe.basis();
+        let back = -fwd;
+        let ty = (self.fov_deg.to_radians() / 2.0).tan() * (1.0 - margin);
+        let tx = ty * self.width as f64 / self.height as f64;
+        // At distance d from the target, a point `along` towards the camera is at depth
+        // d - along: it is inside when |x| <= tx (d - along) and |y| <= ty (d - along).
+        let mut distance: f64 = 0.0;
+        for p in points {
+            let rel = p - target;
+            let along = rel.dot(&back);
+            let need = along + (rel.dot(&right).abs() / tx).max(rel.dot(&up).abs() / ty);
+            distance = distance.max(need).max(along + 1e-3);
+        }
+        Ok(Camera {
+            eye: (target + back * distance).into(),
+            target: target.into(),
+            ..self.clone()
+        })
+    }
+
     /// Camera-to-world matrix in the NeRF/OpenGL convention (columns right, up, backward, eye),
     /// as stored under `poses` in the papers' datasets.
     pub fn pose_matrix(&self) -> Matrix4<f64> {

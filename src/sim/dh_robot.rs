@@ -13,6 +13,8 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use crate::sim::bvh::Bvh;
 use crate::sim::kinematics::{Joint, JointKind, KinematicChain};
 use crate::sim::robot::Robot;
+use crate::sim::shape::Shape;
+use std::f64::consts::PI;
 
 /// One joint's standard DH parameters (metres, radians).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -88,6 +90,7 @@ pub fn chain_from_dh(params: &[DhJoint], range: [f64; 2]) -> KinematicChain {
             },
             axis: Unit::new_normalize(Vector3::z()),
             limits: Some(range),
+            mimic: None,
         })
         .collect();
     let last = &params[n - 1];
@@ -100,10 +103,56 @@ pub fn chain_from_dh(params: &[DhJoint], range: [f64; 2]) -> KinematicChain {
     .expect("a DH chain is a valid chain")
 }
 
-/// The UR5 with every joint in `range` (radians), no geometry (kinematics only).
+/// A cylinder of `radius` from `a` to `b` (in a link's frame); `None` when they coincide.
+fn segment(a: Vector3<f64>, b: Vector3<f64>, radius: f64) -> Option<Shape> {
+    let along = b - a;
+    let length = along.norm();
+    (length > 1e-9).then(|| Shape::Cylinder {
+        pose: Isometry3::from_parts(
+            Translation3::from((a + b) / 2.0),
+            UnitQuaternion::rotation_between(&Vector3::z(), &along)
+                .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI)),
+        ),
+        radius,
+        half_length: length / 2.0,
+    })
+}
+
+/// Geometry for a DH chain: on every link a joint housing (a cylinder along its joint's
+/// axis) and the link itself, cylinders along `d` then `a` to the next joint (to the end
+/// effector on the last link), with the base a wider cylinder. The UR5's proportions: housing
+/// radius 0.05 m and length 0.12 m, links of radius 0.04 m.
+pub fn dh_geometry(params: &[DhJoint]) -> Vec<Bvh> {
+    let (housing_r, housing_l, link_r) = (0.05, 0.12, 0.04);
+    let mut links = vec![Bvh::new(vec![Shape::Cylinder {
+        pose: Isometry3::translation(0.0, 0.0, -0.02),
+        radius: 0.075,
+        half_length: 0.04,
+    }])];
+    for p in params {
+        let mut shapes = vec![Shape::Cylinder {
+            pose: Isometry3::identity(),
+            radius: housing_r,
+            half_length: housing_l / 2.0,
+        }];
+        let (o, up, end) = (
+            Vector3::zeros(),
+            Vector3::new(0.0, 0.0, p.d),
+            Vector3::new(p.a, 0.0, p.d),
+        );
+        shapes.extend(segment(o, up, link_r));
+        shapes.extend(segment(up, end, link_r));
+        links.push(Bvh::new(shapes));
+    }
+    links
+}
+
+/// The UR5 with every joint in `range` (radians), drawn by [`dh_geometry`] (cylinders of the
+/// UR5's proportions along its DH links: for self-models of the built-in UR5; the ROS UR5's
+/// meshes load with `--urdf`).
 pub fn ur5(range: [f64; 2]) -> Robot {
     let chain = chain_from_dh(&ur5_parameters(), range);
-    let geometry = chain.links.iter().map(|_| Bvh::new(Vec::new())).collect();
+    let geometry = dh_geometry(&ur5_parameters());
     Robot {
         name: "ur5".into(),
         chain,

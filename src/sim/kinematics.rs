@@ -45,6 +45,50 @@ pub struct Joint {
     pub axis: Unit<Vector3<f64>>,
     /// Position limits in SI units, where the robot states them.
     pub limits: Option<[f64; 2]>,
+    /// A URDF `<mimic>`: this joint's value is `multiplier * leader + offset`, not an input.
+    pub mimic: Option<Mimic>,
+}
+
+/// A joint that follows another (URDF `<mimic joint multiplier offset>`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mimic {
+    /// Index of the leader joint, in the list given to [`KinematicChain::new`] (afterwards in
+    /// [`KinematicChain::joints`]).
+    pub leader: usize,
+    pub multiplier: f64,
+    pub offset: f64,
+}
+
+/// Where a joint's value comes from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum JointValue {
+    /// A fixed joint: no value.
+    Fixed,
+    /// `scale * q[index] + offset` of the joint vector `q` (an input: scale 1, offset 0; a
+    /// mimic joint of an input: its multiplier and offset).
+    Input {
+        index: usize,
+        scale: f64,
+        offset: f64,
+    },
+    /// A movable joint held still: off the chain from the root to the tip (a Panda's fingers
+    /// when the tip is its hand), or a mimic of one.
+    Held(f64),
+}
+
+impl JointValue {
+    /// The value for the joint vector `q` (SI); 0 for a fixed joint.
+    pub fn of(self, q: &[f64]) -> f64 {
+        match self {
+            JointValue::Fixed => 0.0,
+            JointValue::Input {
+                index,
+                scale,
+                offset,
+            } => scale * q[index] + offset,
+            JointValue::Held(v) => v,
+        }
+    }
 }
 
 impl Joint {
@@ -69,6 +113,30 @@ impl Joint {
 pub const DEFAULT_ROTATIONAL_RANGE: [f64; 2] =
     [-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2];
 
+/// `limits` narrowed to `[-half, half]` where that is tighter. An end the limits leave wider
+/// (within 1e-9) is exactly `-half` or `half`, so a robot without tighter limits samples the
+/// very numbers it sampled before limits were read.
+pub fn narrow(limits: [f64; 2], half: f64) -> [f64; 2] {
+    let lo = if limits[0] > -half + 1e-9 {
+        limits[0]
+    } else {
+        -half
+    };
+    let hi = if limits[1] < half - 1e-9 {
+        limits[1]
+    } else {
+        half
+    };
+    [lo, hi]
+}
+
+/// Whether `q` lies within `ranges` (with `tol` of slack, SI units).
+pub fn within(q: &[f64], ranges: &[[f64; 2]], tol: f64) -> bool {
+    q.iter()
+        .zip(ranges)
+        .all(|(&v, r)| v >= r[0] - tol && v <= r[1] + tol)
+}
+
 /// A tree of links connected by joints, placed in the scene by `base`.
 #[derive(Clone, Debug)]
 pub struct KinematicChain {
@@ -81,16 +149,22 @@ pub struct KinematicChain {
     /// The end effector: a point in the frame of a link.
     pub tip_link: usize,
     pub tip_offset: Point3<f64>,
-    /// Indices into `joints` of the movable joints, in the order of the joint vector.
+    /// Indices into `joints` of the inputs, in the order of the joint vector.
     dofs: Vec<usize>,
-    /// For each joint, its index in the joint vector (`None` for fixed joints).
-    value_index: Vec<Option<usize>>,
+    /// For each joint, where its value comes from.
+    values: Vec<JointValue>,
 }
 
 impl KinematicChain {
     /// Build a chain from links and joints given in any order. The root is the one link that
     /// is no joint's child; joints are sorted parent-first. `tip` defaults to the origin of
     /// the last link of the longest path from the root.
+    ///
+    /// The joint vector (the inputs) is the movable joints on the path from the root to the
+    /// tip that mimic no other, and the leaders of mimic joints on it, in the order given
+    /// (the URDF's), as in KDL and TRAC-IK chains.
+    /// A mimic joint follows its leader; a movable joint off that path is held at 0, or at
+    /// the limit nearest 0 when 0 is outside its limits.
     pub fn new(
         links: Vec<String>,
         joints: Vec<Joint>,
@@ -167,19 +241,115 @@ impl KinematicChain {
                 joint
             })
             .collect();
-        // The joint vector keeps the order the joints were given in (the URDF's order).
-        let mut dofs: Vec<usize> = (0..joints.len())
-            .filter(|&j| joints[j].kind.is_movable())
-            .collect();
-        dofs.sort_by_key(|&j| order_joints[j]);
-        let mut value_index = vec![None; joints.len()];
-        for (k, &j) in dofs.iter().enumerate() {
-            value_index[j] = Some(k);
-        }
         let (tip_link, tip_offset) = match tip {
             Some((l, p)) => (new_index[l], p),
             None => (new_index[deepest], Point3::origin()),
         };
+        // Joints on the path from the root to the tip (indices into the sorted joints).
+        let mut on_path = vec![false; joints.len()];
+        let mut link = tip_link;
+        while let Some(j) = joints.iter().position(|j| j.child == link) {
+            on_path[j] = true;
+            link = joints[j].parent;
+        }
+        // Where mimic leaders went in the sorted order.
+        let mut sorted_of = vec![0; joints.len()];
+        for (new, &old) in order_joints.iter().enumerate() {
+            sorted_of[old] = new;
+        }
+        let mut joints = joints;
+        for j in joints.iter_mut() {
+            if let Some(m) = &mut j.mimic {
+                if m.leader >= sorted_of.len() {
+                    return Err(Error::Config(format!(
+                        "joint \"{}\": mimics a joint index out of range",
+                        j.name
+                    )));
+                }
+                m.leader = sorted_of[m.leader];
+            }
+        }
+        // A mimic joint on the path makes its leader (followed to the joint that mimics no
+        // other) an input, wherever that leader is.
+        let mut drives_tip = on_path.clone();
+        for j in 0..joints.len() {
+            if !on_path[j] {
+                continue;
+            }
+            let mut k = j;
+            let mut hops = 0;
+            while let Some(m) = joints[k].mimic {
+                k = m.leader;
+                hops += 1;
+                if hops > joints.len() {
+                    break;
+                }
+            }
+            drives_tip[k] = true;
+        }
+        // The inputs keep the order the joints were given in (the URDF's order).
+        let mut dofs: Vec<usize> = (0..joints.len())
+            .filter(|&j| joints[j].kind.is_movable() && joints[j].mimic.is_none() && drives_tip[j])
+            .collect();
+        dofs.sort_by_key(|&j| order_joints[j]);
+        let held = |joint: &Joint| {
+            let [lo, hi] = joint.limits.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
+            0f64.clamp(lo, hi)
+        };
+        let mut values: Vec<Option<JointValue>> = joints
+            .iter()
+            .map(|j| (!j.kind.is_movable()).then_some(JointValue::Fixed))
+            .collect();
+        for (k, &j) in dofs.iter().enumerate() {
+            values[j] = Some(JointValue::Input {
+                index: k,
+                scale: 1.0,
+                offset: 0.0,
+            });
+        }
+        for j in 0..joints.len() {
+            if values[j].is_none() && joints[j].mimic.is_none() {
+                values[j] = Some(JointValue::Held(held(&joints[j])));
+            }
+        }
+        // Mimic joints, following chains of leaders (a cycle is an error).
+        for j in 0..joints.len() {
+            let mut path = vec![j];
+            while values[*path.last().unwrap()].is_none() {
+                let m = joints[*path.last().unwrap()]
+                    .mimic
+                    .expect("unset joints mimic");
+                if path.contains(&m.leader) {
+                    return Err(Error::Config(format!(
+                        "joint \"{}\": its <mimic> leaders form a cycle",
+                        joints[j].name
+                    )));
+                }
+                path.push(m.leader);
+            }
+            let mut value = values[path.pop().unwrap()].unwrap();
+            while let Some(f) = path.pop() {
+                let m = joints[f].mimic.unwrap();
+                value = match value {
+                    JointValue::Input {
+                        index,
+                        scale,
+                        offset,
+                    } => JointValue::Input {
+                        index,
+                        scale: m.multiplier * scale,
+                        offset: m.multiplier * offset + m.offset,
+                    },
+                    JointValue::Held(v) => JointValue::Held(m.multiplier * v + m.offset),
+                    JointValue::Fixed => JointValue::Held(m.offset),
+                };
+                values[f] = Some(value);
+            }
+        }
+        let values = values
+            .into_iter()
+            .map(|v| v.expect("every joint set"))
+            .collect();
         Ok(KinematicChain {
             links: order_links.iter().map(|&l| links[l].clone()).collect(),
             joints,
@@ -187,7 +357,7 @@ impl KinematicChain {
             tip_link,
             tip_offset,
             dofs,
-            value_index,
+            values,
         })
     }
 
@@ -196,21 +366,60 @@ impl KinematicChain {
         self.dofs.len()
     }
 
-    /// The index in the joint vector of joint `j` (of [`Self::joints`]); `None` when fixed.
+    /// The index in the joint vector of joint `j` (of [`Self::joints`]) when it is an input;
+    /// `None` when it is fixed, held or a mimic.
     pub fn value_index(&self, j: usize) -> Option<usize> {
-        self.value_index[j]
+        match self.values[j] {
+            JointValue::Input {
+                index,
+                scale: 1.0,
+                offset: 0.0,
+            } if self.joints[j].mimic.is_none() => Some(index),
+            _ => None,
+        }
     }
 
-    /// The movable joints, in joint-vector order.
+    /// Where joint `j`'s value comes from (of [`Self::joints`]).
+    pub fn joint_value(&self, j: usize) -> JointValue {
+        self.values[j]
+    }
+
+    /// The input joints, in joint-vector order.
     pub fn movable_joints(&self) -> impl Iterator<Item = &Joint> {
         self.dofs.iter().map(|&j| &self.joints[j])
     }
 
-    /// Sampling range of each joint value (SI): the stated limits, else
-    /// [`DEFAULT_ROTATIONAL_RANGE`] for continuous joints.
+    /// The input joints' names, in joint-vector order.
+    pub fn joint_names(&self) -> Vec<String> {
+        self.movable_joints().map(|j| j.name.clone()).collect()
+    }
+
+    /// Sampling range of each joint value (SI): the stated limits (a rotational joint's
+    /// narrowed to +-180 degrees: a wider range repeats poses), else
+    /// [`DEFAULT_ROTATIONAL_RANGE`] for rotational joints without limits. A prismatic joint
+    /// without limits has none to sample: `[0, 0]`.
     pub fn joint_ranges(&self) -> Vec<[f64; 2]> {
         self.movable_joints()
-            .map(|j| j.limits.unwrap_or(DEFAULT_ROTATIONAL_RANGE))
+            .map(|j| match (j.limits, j.kind.is_rotational()) {
+                (Some(l), true) => narrow(l, std::f64::consts::PI),
+                (Some(l), false) => l,
+                (None, true) => DEFAULT_ROTATIONAL_RANGE,
+                (None, false) => [0.0, 0.0],
+            })
+            .collect()
+    }
+
+    /// The ranges of the inverse-kinematics experiments: each joint's limits narrowed to
+    /// `+-half` (radians) where that is tighter; a rotational joint without limits gets
+    /// `[-half, half]`, a prismatic one its limits.
+    pub fn ranges_within(&self, half: f64) -> Vec<[f64; 2]> {
+        self.movable_joints()
+            .map(|j| match (j.limits, j.kind.is_rotational()) {
+                (Some(l), true) => narrow(l, half),
+                (None, true) => [-half, half],
+                (Some(l), false) => l,
+                (None, false) => [0.0, 0.0],
+            })
             .collect()
     }
 
@@ -264,9 +473,8 @@ impl KinematicChain {
             "joint vector length must equal the robot's DOF"
         );
         let mut frames = vec![self.base; self.links.len()];
-        for (joint, index) in self.joints.iter().zip(&self.value_index) {
-            let value = index.map_or(0.0, |k| q[k]);
-            frames[joint.child] = frames[joint.parent] * joint.origin * joint.motion(value);
+        for (joint, value) in self.joints.iter().zip(&self.values) {
+            frames[joint.child] = frames[joint.parent] * joint.origin * joint.motion(value.of(q));
         }
         frames
     }
@@ -290,7 +498,8 @@ impl KinematicChain {
 
     /// The end effector's position Jacobian `[3, dof]` (m per SI unit) at `q`, analytic:
     /// column k is `axis_k x (p_tip - o_k)` for a rotational joint and `axis_k` for a
-    /// prismatic one, zero for a joint that does not move the tip.
+    /// prismatic one, zero for a joint that does not move the tip; a mimic joint on the path
+    /// adds its own column, times its multiplier, to its leader's.
     pub fn position_jacobian(&self, q: &[f64]) -> nalgebra::Matrix3xX<f64> {
         let frames = self.link_frames(q);
         let tip = frames[self.tip_link] * self.tip_offset;
@@ -303,7 +512,8 @@ impl KinematicChain {
         }
         let mut jac = nalgebra::Matrix3xX::zeros(self.dof());
         for (j, joint) in self.joints.iter().enumerate() {
-            let (Some(k), true) = (self.value_index[j], moves_tip[j]) else {
+            let (JointValue::Input { index, scale, .. }, true) = (self.values[j], moves_tip[j])
+            else {
                 continue;
             };
             let f = frames[joint.parent] * joint.origin;
@@ -313,7 +523,8 @@ impl KinematicChain {
             } else {
                 axis
             };
-            jac.set_column(k, &column);
+            let sum = jac.column(index) + column * scale;
+            jac.set_column(index, &sum);
         }
         jac
     }

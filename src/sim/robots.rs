@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use crate::core::error::Result;
 use crate::sim::robot::Robot;
+use crate::sim::urdf_loader::{GeometryKind, UrdfOptions};
 
 /// Built-in robots.
 #[derive(
@@ -14,8 +15,9 @@ use crate::sim::robot::Robot;
 pub enum BuiltinRobot {
     /// The papers' 4-DOF arm with the project's fitted box geometry.
     Arm4,
-    /// The UR5 from its standard DH parameters, joints in +-90 degrees (kinematics only, no
-    /// geometry: the arm of the inverse-kinematics experiments).
+    /// The UR5 from its standard DH parameters, joints limited to +-180 degrees (the
+    /// inverse-kinematics experiments narrow them to their +-90 or +-180), drawn as cylinders
+    /// along its links: the arm of the inverse-kinematics experiments.
     Ur5,
 }
 
@@ -24,7 +26,7 @@ impl BuiltinRobot {
         match self {
             BuiltinRobot::Arm4 => crate::sim::arm4::arm4(),
             BuiltinRobot::Ur5 => {
-                crate::sim::dh_robot::ur5(crate::sim::kinematics::DEFAULT_ROTATIONAL_RANGE)
+                crate::sim::dh_robot::ur5([-std::f64::consts::PI, std::f64::consts::PI])
             }
         }
     }
@@ -52,7 +54,17 @@ pub enum RobotSpec {
         path: PathBuf,
         base_xyz: [f64; 3],
         base_rpy: [f64; 3],
+        /// The end-effector link (`--tip`); none: the last link of the longest chain.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        tip: Option<String>,
+        /// Visual or collision geometry (`--geometry`).
+        #[serde(default, skip_serializing_if = "is_visual")]
+        geometry: GeometryKind,
     },
+}
+
+fn is_visual(g: &GeometryKind) -> bool {
+    *g == GeometryKind::Visual
 }
 
 impl Default for RobotSpec {
@@ -73,28 +85,54 @@ impl RobotSpec {
             path,
             base_xyz: [t.x, t.y, t.z],
             base_rpy: [r, p, y],
+            tip: None,
+            geometry: GeometryKind::Visual,
         }
     }
 
     pub fn load(&self) -> Result<Robot> {
+        self.load_as(None)
+    }
+
+    /// Load its kinematics only (no mesh is read): for the inverse-kinematics experiments.
+    pub fn load_kinematics(&self) -> Result<Robot> {
+        self.load_as(Some(GeometryKind::None))
+    }
+
+    fn load_as(&self, geometry_override: Option<GeometryKind>) -> Result<Robot> {
         match self {
             RobotSpec::Builtin(b) => Ok(b.load()),
             RobotSpec::Urdf {
                 path,
                 base_xyz,
                 base_rpy,
-            } => crate::sim::urdf_loader::load_urdf(
+                tip,
+                geometry,
+            } => crate::sim::urdf_loader::load_urdf_with(
                 path,
-                crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
+                &UrdfOptions {
+                    base: crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
+                    tip: tip.clone(),
+                    geometry: geometry_override.unwrap_or(*geometry),
+                },
             ),
         }
+    }
+
+    /// Whether it is the papers' arm (built in, or its URDF placed in the papers' scene), which
+    /// keeps the papers' camera and reference figures.
+    pub fn is_papers_arm(&self) -> bool {
+        *self == RobotSpec::Builtin(BuiltinRobot::Arm4)
     }
 
     /// `arm4`, `ur5` or the URDF's path.
     pub fn label(&self) -> String {
         match self {
             RobotSpec::Builtin(b) => b.name().into(),
-            RobotSpec::Urdf { path, .. } => path.display().to_string(),
+            RobotSpec::Urdf { path, tip, .. } => match tip {
+                Some(t) => format!("{} (tip {t})", path.display()),
+                None => path.display().to_string(),
+            },
         }
     }
 }

@@ -12,7 +12,7 @@
 use burn::tensor::{Tensor, TensorData};
 use nalgebra::{Isometry3, Matrix3};
 
-use crate::sim::kinematics::{JointKind, KinematicChain};
+use crate::sim::kinematics::{JointKind, JointValue, KinematicChain};
 
 /// A joint's constants as tensors-to-be.
 #[derive(Clone, Debug)]
@@ -24,7 +24,7 @@ struct JointConstants {
     origin_translation: [f32; 3],
     axis: [f32; 3],
     kind: JointKind,
-    value: Option<usize>,
+    value: JointValue,
 }
 
 /// A kinematic chain ready for batched tensor forward kinematics.
@@ -36,6 +36,8 @@ pub struct TensorChain {
     dof: usize,
     tip_link: usize,
     tip_offset: [f32; 3],
+    /// Per input: whether it is an angle (degrees in user units).
+    rotational: Vec<bool>,
 }
 
 fn rotation_rows(m: &Matrix3<f64>) -> [f32; 9] {
@@ -61,7 +63,7 @@ impl TensorChain {
                 origin_translation: joint.origin.translation.vector.map(|v| v as f32).into(),
                 axis: joint.axis.into_inner().map(|v| v as f32).into(),
                 kind: joint.kind,
-                value: chain.value_index(j),
+                value: chain.joint_value(j),
             })
             .collect();
         TensorChain {
@@ -71,7 +73,28 @@ impl TensorChain {
             dof: chain.dof(),
             tip_link: chain.tip_link,
             tip_offset: chain.tip_offset.coords.map(|v| v as f32).into(),
+            rotational: chain
+                .movable_joints()
+                .map(|j| j.kind.is_rotational())
+                .collect(),
         }
+    }
+
+    /// Joint values `[B, dof]` from user units (degrees for rotational joints, metres for
+    /// prismatic ones) to SI (radians, metres).
+    pub fn from_user(&self, q: Tensor<2>) -> Tensor<2> {
+        let degrees = std::f64::consts::PI / 180.0;
+        if self.rotational.iter().all(|&r| r) {
+            return q.mul_scalar(degrees);
+        }
+        let scale: Vec<f32> = self
+            .rotational
+            .iter()
+            .map(|&r| if r { degrees as f32 } else { 1.0 })
+            .collect();
+        let n = scale.len();
+        let device = q.device();
+        q * Tensor::<2>::from_data(TensorData::new(scale, [1, n]), &device)
     }
 
     /// Every joint's origin as rows: rotations `[J * 9]` (row-major) and translations
@@ -181,9 +204,25 @@ impl TensorChain {
             // Joint frame in the world: parent · origin.
             let frame_r = parent_r.clone().matmul(own_r);
             let frame_t = parent_t + apply(parent_r, own_t);
-            let value = joint
-                .value
-                .map(|k| q.clone().slice([0..b, k..k + 1]).reshape([b, 1, 1]));
+            let value = match joint.value {
+                JointValue::Fixed => None,
+                JointValue::Input {
+                    index,
+                    scale,
+                    offset,
+                } => {
+                    let v = q.clone().slice([0..b, index..index + 1]).reshape([b, 1, 1]);
+                    Some(if scale == 1.0 && offset == 0.0 {
+                        v
+                    } else {
+                        v.mul_scalar(scale).add_scalar(offset)
+                    })
+                }
+                JointValue::Held(v) => Some(
+                    Tensor::<3>::from_data(TensorData::new(vec![v as f32], [1, 1, 1]), &device)
+                        .repeat_dim(0, b),
+                ),
+            };
             let (child_r, child_t) = match (joint.kind, value) {
                 (JointKind::Revolute | JointKind::Continuous, Some(v)) => {
                     let [x, y, z] = joint.axis;

@@ -33,6 +33,11 @@ pub const LORENZ_BETA: f64 = 8.0 / 3.0;
 /// One Lorenz trajectory: RK4 from [1, 1, 1] with step `dt`, one step per sample, each state
 /// squashed as tanh(scale * state). Returns `n` rows of 3 values in (-1, 1).
 pub fn lorenz_trajectory(n: usize, dt: f64, scale: f64) -> Vec<[f64; 3]> {
+    lorenz_trajectory_from(n, dt, scale, [1.0, 1.0, 1.0])
+}
+
+/// [`lorenz_trajectory`] from the state `start`.
+pub fn lorenz_trajectory_from(n: usize, dt: f64, scale: f64, start: [f64; 3]) -> Vec<[f64; 3]> {
     let f = |s: [f64; 3]| {
         [
             LORENZ_SIGMA * (s[1] - s[0]),
@@ -42,7 +47,7 @@ pub fn lorenz_trajectory(n: usize, dt: f64, scale: f64) -> Vec<[f64; 3]> {
     };
     let add =
         |s: [f64; 3], k: [f64; 3], h: f64| [s[0] + h * k[0], s[1] + h * k[1], s[2] + h * k[2]];
-    let mut s = [1.0, 1.0, 1.0];
+    let mut s = start;
     (0..n)
         .map(|_| {
             let k1 = f(s);
@@ -61,18 +66,25 @@ pub fn lorenz_trajectory(n: usize, dt: f64, scale: f64) -> Vec<[f64; 3]> {
 /// (dt 0.012, scale 0.022); joint channels [t1.x, t1.y, t2.x, t2.z] (then t1.z, t2.y for a
 /// 5th and 6th joint), each mapped from (-1, 1) onto the joint's range (for the papers'
 /// +-90 degree range: 90 * value). `ranges` are in user units.
+///
+/// Beyond six joints (beyond the paper), every further three joints take the x, y and z of one
+/// more trajectory, the k-th (k = 3, 4, ...) with dt 0.01 + 0.001 k and scale 0.025 started
+/// from [1, 1, 1 + k], so no two joints share a channel; a robot with n joints draws
+/// ceil(n / 3) trajectories beyond the first two only when n > 6.
 pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
-    if ranges.len() > 6 {
-        return Err(Error::Config(format!(
-            "the Lorenz sampler drives at most 6 joints, the robot has {}",
-            ranges.len()
-        )));
-    }
     let t1 = lorenz_trajectory(n, 0.01, 0.025);
     let t2 = lorenz_trajectory(n, 0.012, 0.022);
+    let extra: Vec<Vec<[f64; 3]>> = (0..ranges.len().saturating_sub(6).div_ceil(3))
+        .map(|i| {
+            let k = (i + 3) as f64;
+            lorenz_trajectory_from(n, 0.01 + 0.001 * k, 0.025, [1.0, 1.0, 1.0 + k])
+        })
+        .collect();
     Ok((0..n)
         .map(|i| {
-            let channels = [t1[i][0], t1[i][1], t2[i][0], t2[i][2], t1[i][2], t2[i][1]];
+            let channels = [t1[i][0], t1[i][1], t2[i][0], t2[i][2], t1[i][2], t2[i][1]]
+                .into_iter()
+                .chain(extra.iter().flat_map(|t| t[i]));
             ranges
                 .iter()
                 .zip(channels)
@@ -95,18 +107,19 @@ pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The grid with spacing `step` over each range (ends included), in lexicographic order
-/// (last joint fastest). If it has more than `n` points, `n` of them are drawn at random
-/// without replacement (seeded) and kept in grid order.
-pub fn grid(n: usize, ranges: &[[f64; 2]], step: f64, seed: u64) -> Result<Vec<Vec<f64>>> {
-    if !(step > 0.0) {
+/// The grid with spacing `steps[j]` over each joint's range (ends included), in
+/// lexicographic order (last joint fastest). If it has more than `n` points, `n` of them are
+/// drawn at random without replacement (seeded) and kept in grid order.
+pub fn grid(n: usize, ranges: &[[f64; 2]], steps: &[f64], seed: u64) -> Result<Vec<Vec<f64>>> {
+    if let Some(step) = steps.iter().find(|s| !(**s > 0.0)) {
         return Err(Error::Config(format!(
             "grid step must be positive, got {step}"
         )));
     }
     let axes: Vec<Vec<f64>> = ranges
         .iter()
-        .map(|r| {
+        .zip(steps)
+        .map(|(r, &step)| {
             let m = ((r[1] - r[0]) / step + 1e-9).floor() as usize;
             (0..=m).map(|i| r[0] + i as f64 * step).collect()
         })

@@ -1,11 +1,18 @@
-//! Load a [`Robot`] from a URDF file (parsed by the `urdf-rs` crate).
+//! Load a [`Robot`] from a URDF file (parsed by the `urdf-rs` crate), as ROS ships them.
 //!
 //! Supported: revolute, continuous, prismatic and fixed joints with limits, origins and
-//! axes; visual geometry as box, cylinder, sphere and STL mesh (binary or ASCII, with
-//! `scale`). Mesh paths may be relative to the URDF, absolute, `file://` or
-//! `package://NAME/...`; the last is resolved against the URDF's package folder: the nearest
-//! ancestor folder of the URDF named `NAME`, else the parent of the URDF's folder (the
-//! conventional `NAME/urdf/robot.urdf` layout). Collision geometry is ignored.
+//! axes (a fixed joint's axis is ignored, as URDF says); `<mimic>` joints, which follow their
+//! leader (`multiplier * leader + offset`) and are not inputs; geometry as box, cylinder,
+//! sphere and mesh (STL, COLLADA `.dae`, OBJ, with `scale`), visual by default or collision
+//! ([`GeometryKind`]), or none for kinematics only. Mesh paths may be relative to the URDF,
+//! absolute, `file://` or `package://NAME/...`; the last is resolved against the URDF's
+//! package folder: the nearest ancestor folder of the URDF named `NAME`, else the parent of
+//! the URDF's folder (the conventional `NAME/urdf/robot.urdf` layout). xacro files are
+//! refused with how to expand them.
+//!
+//! The end effector is the origin of a link named by `tip`, by default the last link of the
+//! longest chain; the joint vector is the chain from the root to it (see
+//! [`KinematicChain::new`]).
 
 use std::path::{Path, PathBuf};
 
@@ -13,10 +20,56 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use crate::core::error::{Error, Result};
 use crate::sim::bvh::Bvh;
-use crate::sim::kinematics::{Joint, JointKind, KinematicChain};
+use crate::sim::kinematics::{Joint, JointKind, KinematicChain, Mimic};
+use crate::sim::mesh_file::load_mesh;
 use crate::sim::robot::Robot;
 use crate::sim::shape::Shape;
-use crate::sim::stl_mesh::load_stl;
+
+/// Which of a link's geometry the robot is drawn with.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum GeometryKind {
+    /// The `<visual>` elements (what a camera sees).
+    #[default]
+    Visual,
+    /// The `<collision>` elements (usually coarser meshes: faster to render).
+    Collision,
+    /// None: kinematics only (no mesh is read).
+    None,
+}
+
+/// How a URDF is loaded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UrdfOptions {
+    /// Where the root link sits in the scene.
+    pub base: Isometry3<f64>,
+    /// The end-effector link (its origin); `None`: the last link of the longest chain.
+    pub tip: Option<String>,
+    pub geometry: GeometryKind,
+}
+
+impl Default for UrdfOptions {
+    fn default() -> Self {
+        UrdfOptions {
+            base: Isometry3::identity(),
+            tip: None,
+            geometry: GeometryKind::Visual,
+        }
+    }
+}
+
+/// Largest mesh scale factor accepted (a `scale` beyond it is a typo, not a robot).
+const MAX_SCALE: f64 = 1e3;
 
 /// A URDF `<origin xyz rpy>` as a rigid transform (rpy: fixed-axis roll, pitch, yaw).
 pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
@@ -26,14 +79,32 @@ pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
     )
 }
 
-/// Load a URDF; `base` places its root link in the scene.
+/// Load a URDF with its visual geometry and the default tip; `base` places its root link.
 pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    load_urdf_with(
+        path,
+        &UrdfOptions {
+            base,
+            ..UrdfOptions::default()
+        },
+    )
+}
+
+/// Load a URDF as `options` say.
+pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
     let urdf_err = |element: String, msg: String| Error::Urdf {
         path: path.into(),
         element,
         msg,
     };
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase());
+    if name.as_deref().is_some_and(|n| n.ends_with(".xacro")) || text.contains("<xacro:") {
+        return Err(urdf_err(
+            "robot".into(),
+            "is a xacro file: expand it into a URDF first (`xacro FILE > robot.urdf`, ROS's xacro package), then pass that".into(),
+        ));
+    }
     let urdf = urdf_rs::read_from_string(&text)
         .map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;
     if urdf.links.is_empty() {
@@ -66,13 +137,36 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
                 ));
             }
         };
-        let axis = Vector3::from(j.axis.xyz.0);
-        let axis = Unit::try_new(axis, 1e-12)
-            .ok_or_else(|| urdf_err(element.clone(), "axis has zero length".into()))?;
+        // URDF ignores a fixed joint's axis (Franka ships `0 0 0` on one).
+        let axis = if kind.is_movable() {
+            let axis = Vector3::from(j.axis.xyz.0);
+            if !axis.iter().all(|v| v.is_finite()) {
+                return Err(urdf_err(element, "axis is not finite".into()));
+            }
+            Unit::try_new(axis, 1e-12)
+                .ok_or_else(|| urdf_err(element.clone(), "axis has zero length".into()))?
+        } else {
+            Vector3::z_axis()
+        };
         let limits = match kind {
             JointKind::Revolute | JointKind::Prismatic => {
                 let (lo, hi) = (j.limit.lower, j.limit.upper);
-                (lo.is_finite() && hi.is_finite() && lo < hi).then_some([lo, hi])
+                if !lo.is_finite() || !hi.is_finite() {
+                    return Err(urdf_err(
+                        element,
+                        format!(
+                            "<limit lower=\"{lo}\" upper=\"{hi}\">: limits must be finite numbers"
+                        ),
+                    ));
+                }
+                if lo > hi {
+                    return Err(urdf_err(
+                        element,
+                        format!("<limit lower=\"{lo}\" upper=\"{hi}\">: lower is above upper"),
+                    ));
+                }
+                // lower = upper (both absent reads as 0, 0): no range stated.
+                (lo < hi).then_some([lo, hi])
             }
             _ => None,
         };
@@ -80,6 +174,33 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
         if values.clone().any(|v| !v.is_finite()) {
             return Err(urdf_err(element, "origin is not finite".into()));
         }
+        let mimic = match &j.mimic {
+            Some(m) if kind.is_movable() => {
+                let leader = urdf
+                    .joints
+                    .iter()
+                    .position(|l| l.name == m.joint)
+                    .ok_or_else(|| {
+                        urdf_err(
+                            element.clone(),
+                            format!("<mimic> names unknown joint \"{}\"", m.joint),
+                        )
+                    })?;
+                let (multiplier, offset) = (m.multiplier.unwrap_or(1.0), m.offset.unwrap_or(0.0));
+                if !multiplier.is_finite() || !offset.is_finite() {
+                    return Err(urdf_err(
+                        element,
+                        "<mimic> multiplier and offset must be finite".into(),
+                    ));
+                }
+                Some(Mimic {
+                    leader,
+                    multiplier,
+                    offset,
+                })
+            }
+            _ => None,
+        };
         joints.push(Joint {
             name: j.name.clone(),
             kind,
@@ -88,10 +209,26 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
             origin: pose_from_xyz_rpy(j.origin.xyz.0, j.origin.rpy.0),
             axis,
             limits,
+            mimic,
         });
     }
 
-    let chain = KinematicChain::new(link_names.clone(), joints, base, None)
+    let tip = match &options.tip {
+        None => None,
+        Some(tip) => match link_names.iter().position(|l| l == tip) {
+            Some(l) => Some((l, Point3::origin())),
+            None => {
+                return Err(urdf_err(
+                    "robot".into(),
+                    format!(
+                        "--tip \"{tip}\" is not a link of this robot; its links: {}",
+                        link_names.join(", ")
+                    ),
+                ));
+            }
+        },
+    };
+    let chain = KinematicChain::new(link_names.clone(), joints, options.base, tip)
         .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
 
     // Geometry, stored in the chain's link order.
@@ -103,33 +240,62 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
             .iter()
             .find(|l| &l.name == name)
             .expect("link from this URDF");
+        let element = format!("link \"{}\"", link.name);
+        let parts: Vec<(&urdf_rs::Pose, &urdf_rs::Geometry)> = match options.geometry {
+            GeometryKind::Visual => link
+                .visual
+                .iter()
+                .map(|v| (&v.origin, &v.geometry))
+                .collect(),
+            GeometryKind::Collision => link
+                .collision
+                .iter()
+                .map(|c| (&c.origin, &c.geometry))
+                .collect(),
+            GeometryKind::None => Vec::new(),
+        };
         let mut shapes = Vec::new();
-        for v in &link.visual {
-            let pose = pose_from_xyz_rpy(v.origin.xyz.0, v.origin.rpy.0);
-            let element = format!("link \"{}\"", link.name);
-            match &v.geometry {
-                urdf_rs::Geometry::Box { size } => shapes.push(Shape::Cuboid {
+        for (origin, geometry) in parts {
+            if origin
+                .xyz
+                .0
+                .iter()
+                .chain(&origin.rpy.0)
+                .any(|v| !v.is_finite())
+            {
+                return Err(urdf_err(element, "a geometry origin is not finite".into()));
+            }
+            let pose = pose_from_xyz_rpy(origin.xyz.0, origin.rpy.0);
+            let size = |v: f64, what: &str| {
+                if v.is_finite() && v > 0.0 {
+                    Ok(v)
+                } else {
+                    Err(urdf_err(
+                        element.clone(),
+                        format!("{what} must be a positive number, got {v}"),
+                    ))
+                }
+            };
+            match geometry {
+                urdf_rs::Geometry::Box { size: s } => shapes.push(Shape::Cuboid {
                     pose,
-                    half: Vector3::from(size.0) / 2.0,
+                    half: Vector3::new(
+                        size(s.0[0], "box size")?,
+                        size(s.0[1], "box size")?,
+                        size(s.0[2], "box size")?,
+                    ) / 2.0,
                 }),
                 urdf_rs::Geometry::Cylinder { radius, length } => shapes.push(Shape::Cylinder {
                     pose,
-                    radius: *radius,
-                    half_length: length / 2.0,
+                    radius: size(*radius, "cylinder radius")?,
+                    half_length: size(*length, "cylinder length")? / 2.0,
                 }),
                 urdf_rs::Geometry::Sphere { radius } => shapes.push(Shape::Sphere {
                     center: pose * Point3::origin(),
-                    radius: *radius,
+                    radius: size(*radius, "sphere radius")?,
                 }),
                 urdf_rs::Geometry::Mesh { filename, scale } => {
                     let file = resolve_mesh_path(dir, filename);
-                    let ext = file.extension().map(|e| e.to_string_lossy().to_lowercase());
-                    if ext.as_deref() != Some("stl") {
-                        return Err(urdf_err(
-                            element,
-                            format!("mesh \"{filename}\": only STL meshes are supported"),
-                        ));
-                    }
                     if !file.is_file() {
                         return Err(urdf_err(
                             element,
@@ -142,10 +308,26 @@ pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
                     let scale = scale
                         .as_ref()
                         .map_or(Vector3::repeat(1.0), |s| Vector3::from(s.0));
-                    shapes.extend(load_stl(&file, scale, &pose)?);
+                    if scale
+                        .iter()
+                        .any(|s| !s.is_finite() || *s == 0.0 || s.abs() > MAX_SCALE)
+                    {
+                        return Err(urdf_err(
+                            element,
+                            format!(
+                                "mesh \"{filename}\": scale {} {} {} must be non-zero and at most {MAX_SCALE} in size",
+                                scale.x, scale.y, scale.z
+                            ),
+                        ));
+                    }
+                    shapes.extend(load_mesh(&file, scale, &pose)?);
                 }
                 urdf_rs::Geometry::Capsule { .. } => {
-                    return Err(urdf_err(element, "capsule geometry is not supported (use box, cylinder, sphere or an STL mesh)".into()));
+                    return Err(urdf_err(
+                        element,
+                        "capsule geometry is not supported (use box, cylinder, sphere or a mesh)"
+                            .into(),
+                    ));
                 }
             }
         }

@@ -91,7 +91,7 @@ pub fn run(device_choice: DeviceChoice, quick: bool, repeats: usize) -> Result<V
                 }
             })
             .collect();
-        let view = (&camera, [0.2, -0.3, 0.5, 0.9]);
+        let view = (&camera, &[0.2, -0.3, 0.5, 0.9][..]);
         let autodiff = |seed: u64| {
             let t0 = Instant::now();
             let pred =

@@ -38,7 +38,6 @@ use crate::body::drift::{DriftConfig, estimate_offsets};
 use crate::body::observations::{Observed, Perturbation, host};
 use crate::body::pose::{PoseFitConfig, pose_from_image, pose_losses, trained_ranges};
 use crate::core::atomic_file::write_json;
-use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::core::provenance::git_revision;
 use crate::core::timing::{Repeats, median_seconds};
@@ -355,12 +354,13 @@ impl Bench<'_> {
 /// Run the study into `out`.
 pub fn run(
     cfg: &BodyFromImageConfig,
+    opts: &crate::studies::run::RunOptions,
     out: &Path,
-    device_choice: DeviceChoice,
-    resume: bool,
 ) -> Result<String> {
+    let (device_choice, resume) = (opts.device, opts.resume);
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    let model_run = neurokin_run(&cfg.preset)?;
+    // The robot and camera the options name (the papers' arm by default).
+    let model_run = opts.apply(neurokin_run(&cfg.preset)?)?;
     let fitted = fit_run(&model_run, &out.join("checkpoint"), device_choice, resume)?;
     let device = fitted.device.clone();
     let autodiff = autodiff_device(&device, cfg.seed);
@@ -371,7 +371,7 @@ pub fn run(
     // K-3DGS (isotropic, alpha compositing) on the same data: its Gaussians hang on the
     // chain, so it also reads link lengths. It keeps no checkpoint (densification changes its
     // shapes); it trains in about a minute on the paper preset.
-    let k3dgs_run = k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?;
+    let k3dgs_run = opts.apply(k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?)?;
     let k3dgs_fitted = fit_run(
         &k3dgs_run,
         &out.join("k3dgs_checkpoint"),

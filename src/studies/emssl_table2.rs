@@ -364,6 +364,10 @@ pub struct IkRow {
     pub ratio_to_drl: Option<f64>,
     /// Share of targets within 0.01 mm (the solver's rows and every row, for comparison).
     pub within_0_01mm_pct: f64,
+    /// Answers with a joint outside its range (the robot's limits, narrowed to the range):
+    /// 0 is the goal. Empty in rows from before it was counted.
+    #[serde(default)]
+    pub outside_limits: Option<usize>,
     /// Mean distance (rad) between two of a target's k answers (the many-solution rows).
     pub diversity_rad: Option<f64>,
     /// Test targets answered per second, trained model given.
@@ -692,7 +696,11 @@ impl RangeRun<'_> {
         let within = d.iter().filter(|&&e| e < 1e-5).count();
         let e = DistanceErrors::from_metres(&d);
         let base = a.method.split(" (").next().unwrap_or(&a.method);
-        let paper = if a.method.contains("best of") || a.method.contains("wrapped") {
+        // The paper's figures are for its (UR5-like) arm: beside the built-in UR5's rows only.
+        let paper = if a.method.contains("best of")
+            || a.method.contains("wrapped")
+            || self.robot_name != crate::sim::robots::BuiltinRobot::Ur5.name()
+        {
             None
         } else {
             paper_reference(base, self.range_deg)
@@ -708,6 +716,7 @@ impl RangeRun<'_> {
             targets: e.targets,
             ratio_to_drl: None,
             within_0_01mm_pct: 100.0 * within as f64 / targets.len().max(1) as f64,
+            outside_limits: Some(self.data.outside_limits(&a.joints)),
             diversity_rad: a.diversity_rad,
             solutions_per_s: targets.len() as f64 / a.solve_seconds.max(1e-12),
             train_seconds: a.train_seconds,
@@ -766,7 +775,7 @@ pub fn run_range(
         run.method(method.as_ref())?;
     }
     let flow_cfg = cfg.flow_method().cfg;
-    let ranges = vec![run.data.range; dof];
+    let ranges = run.data.ranges.clone();
 
     // EMSSL's answers refined by the solver; where it stalls, restarts from the flow's samples
     // (closest first), then from random joints. The EMSSL variant with the lower validation
@@ -1104,7 +1113,7 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
     let opt =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |x| format!("{x:.digits$}"));
     let mut text = format!(
-        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` (by `emssl_table2`, and by `reports` from the CSV); do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Ours / paper: our mean over the paper's (above 1: our error is larger). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | ours / paper | within 0.01 mm | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` (by `emssl_table2`, and by `reports` from the CSV); do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Ours / paper: our mean over the paper's (above 1: our error is larger). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | ours / paper | within 0.01 mm | outside limits | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         cfg.preset,
         if partial {
             ", partial: the run has not finished"
@@ -1116,7 +1125,7 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
     );
     for r in rows {
         text += &format!(
-            "| +-{:.0} | {} | {:.3} | {:.3} | {} | {} | {} | {} | {:.2}% | {:.0} | {} | {:.0} |\n",
+            "| +-{:.0} | {} | {:.3} | {:.3} | {} | {} | {} | {} | {:.2}% | {} | {:.0} | {} | {:.0} |\n",
             r.range_deg,
             r.method,
             r.mean_cm,
@@ -1127,6 +1136,7 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
             r.paper_mean_cm
                 .map_or("-".into(), |p| format!("{:.2}x", r.mean_cm / p)),
             r.within_0_01mm_pct,
+            r.outside_limits.map_or("-".into(), |n| n.to_string()),
             r.solutions_per_s,
             r.epochs.map_or("-".into(), |e| e.to_string()),
             r.train_seconds

@@ -54,7 +54,7 @@ fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
 /// NeuroKin-64, the paper text's variant: on the clean data it collapses to an empty image (a
 /// documented negative result, kept out of Table I); on the paper-compatible data it trains.
 pub fn run_neurokin64(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let cfg = opts.apply(neurokin64_run(&opts.preset)?);
+    let cfg = opts.apply(neurokin64_run(&opts.preset)?)?;
     let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
@@ -69,7 +69,7 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
     let dense = crate::report::table::read_csv::<crate::self_models::ffksm::RendererRow>;
     let novel_rows = crate::report::table::read_csv::<crate::self_models::ffksm::NovelViewRow>;
     for &(sub, variant) in FfksmVariant::of_preset(&opts.preset) {
-        let cfg = opts.apply(ffksm_run(&opts.preset, variant)?);
+        let cfg = opts.apply(ffksm_run(&opts.preset, variant)?)?;
         let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.extend(out.rows);
         // Without the reference renderers (the short preset) there are no comparisons.
@@ -110,7 +110,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut rows = Vec::new();
     let mut speed = Vec::new();
     for (sub, variant) in K3dgsVariant::ALL {
-        let cfg = opts.apply(k3dgs_run(&opts.preset, variant)?);
+        let cfg = opts.apply(k3dgs_run(&opts.preset, variant)?)?;
         let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.push(out.result);
         speed.extend(crate::report::table::read_csv::<RenderSpeedRow>(
@@ -134,7 +134,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
 }
 
 fn ablation(a: Ablation, opts: &RunOptions, dir: &Path) -> Result<String> {
-    let base = opts.apply(neurokin_run(&opts.preset)?);
+    let base = opts.apply(neurokin_run(&opts.preset)?)?;
     let rows = run_ablation(a, &base, dir, opts.device, opts.resume)?;
     Ok(summary(&rows))
 }
@@ -159,6 +159,15 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         (opts.paper_compatible, "--paper-compatible"),
         (opts.resume, "--resume"),
         (opts.steps.is_some(), "--steps"),
+        (
+            opts.camera != crate::studies::run::CameraChoice::default(),
+            "--eye, --target, --fov, --size and --view",
+        ),
+        (
+            opts.geometry != crate::sim::urdf_loader::GeometryKind::Visual,
+            "--geometry",
+        ),
+        (opts.dataset.is_some(), "--dataset"),
     ]
     .into_iter()
     .filter_map(|(on, flag)| on.then_some(flag))
@@ -167,7 +176,7 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         Ok(())
     } else {
         Err(crate::Error::Config(format!(
-            "{} does not apply to {name} (its presets set the iterations and epochs)",
+            "{} does not apply to {name} (inverse kinematics renders nothing; its presets set the iterations and epochs)",
             given.join(", ")
         )))
     }
@@ -253,7 +262,7 @@ fn run_body_from_image(opts: &RunOptions, dir: &Path) -> Result<String> {
         ));
     }
     let cfg = crate::studies::body_from_image::BodyFromImageConfig::preset(&opts.preset)?;
-    crate::studies::body_from_image::run(&cfg, dir, opts.device, opts.resume)
+    crate::studies::body_from_image::run(&cfg, opts, dir)
 }
 
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
@@ -337,7 +346,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/ffksm",
         presets: SELF_MODEL_PRESETS,
         in_table1: true,
-        takes_robot: false,
+        takes_robot: true,
         shares_output: false,
         run: run_ffksm,
     },
@@ -347,7 +356,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/k3dgs",
         presets: SELF_MODEL_PRESETS,
         in_table1: true,
-        takes_robot: false,
+        takes_robot: true,
         shares_output: false,
         run: run_k3dgs,
     },
@@ -447,7 +456,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/body_from_image",
         presets: &["paper", "quick"],
         in_table1: false,
-        takes_robot: false,
+        takes_robot: true,
         shares_output: false,
         run: run_body_from_image,
     },
@@ -457,7 +466,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         default_dir: "reports/table1",
         presets: SELF_MODEL_PRESETS,
         in_table1: false,
-        takes_robot: false,
+        takes_robot: true,
         shares_output: false,
         run: run_table1,
     },

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
+use crate::data::dataset::Dataset;
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
 use crate::self_models::result::ModelResult;
@@ -31,6 +32,15 @@ pub struct RunOptions {
     pub urdf: Option<std::path::PathBuf>,
     /// Place the URDF as the papers' scene places arm4 (else its root link at the origin).
     pub arm4_scene: bool,
+    /// The URDF's end-effector link (`--tip`).
+    pub tip: Option<String>,
+    /// The URDF's visual or collision geometry (`--geometry`).
+    pub geometry: crate::sim::urdf_loader::GeometryKind,
+    /// Train and test the self-models on this dataset file instead of rendering (`--dataset`).
+    pub dataset: Option<std::path::PathBuf>,
+    /// The camera the self-models' data is rendered from (`--eye`, `--target`, `--fov`,
+    /// `--size`, `--view`).
+    pub camera: CameraChoice,
     /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
     pub latencies: Option<Vec<crate::ik::sampling_pass::Latency>>,
 }
@@ -48,6 +58,10 @@ impl RunOptions {
             robot: None,
             urdf: None,
             arm4_scene: false,
+            tip: None,
+            geometry: Default::default(),
+            camera: CameraChoice::default(),
+            dataset: None,
             latencies: None,
         }
     }
@@ -55,20 +69,48 @@ impl RunOptions {
     /// The robot the options name, `default` where they name none.
     pub fn robot_spec(&self, default: BuiltinRobot) -> RobotSpec {
         match (&self.urdf, self.robot) {
-            (Some(path), _) if self.arm4_scene => RobotSpec::urdf_in_arm4_scene(path.clone()),
-            (Some(path), _) => RobotSpec::Urdf {
-                path: path.clone(),
-                base_xyz: [0.0; 3],
-                base_rpy: [0.0; 3],
-            },
+            (Some(path), _) => {
+                let mut spec = if self.arm4_scene {
+                    RobotSpec::urdf_in_arm4_scene(path.clone())
+                } else {
+                    RobotSpec::Urdf {
+                        path: path.clone(),
+                        base_xyz: [0.0; 3],
+                        base_rpy: [0.0; 3],
+                        tip: None,
+                        geometry: Default::default(),
+                    }
+                };
+                if let RobotSpec::Urdf { tip, geometry, .. } = &mut spec {
+                    *tip = self.tip.clone();
+                    *geometry = self.geometry;
+                }
+                spec
+            }
             (None, robot) => RobotSpec::Builtin(robot.unwrap_or(default)),
         }
     }
 
-    /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports.
+    /// Where a run on a robot other than the experiment's own (`default`) writes by default:
+    /// `reports/robots/<robot>/`, named by the URDF's file stem (`panda`, `ur5`), or
+    /// `<name>_dh` for a built-in robot (the built-in UR5 is drawn from its DH parameters).
+    /// `None` for the experiment's own robot.
+    pub fn robot_folder(&self, default: BuiltinRobot) -> Option<std::path::PathBuf> {
+        let name = match (&self.urdf, self.robot) {
+            (Some(path), _) => path
+                .file_stem()
+                .map_or("urdf".into(), |s| s.to_string_lossy().into_owned()),
+            (None, Some(b)) if b != default => format!("{}_dh", b.name()),
+            _ => return None,
+        };
+        Some(std::path::Path::new("reports/robots").join(name))
+    }
+
+    /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports:
+    /// its kinematics only (no mesh is read).
     pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
         let spec = self.robot_spec(BuiltinRobot::Ur5);
-        let robot = spec.load()?;
+        let robot = spec.load_kinematics()?;
         if robot.dof() == 0 {
             return Err(crate::Error::Config(format!(
                 "{}: this robot has no movable joints (all are fixed); inverse kinematics needs at least one",
@@ -78,12 +120,28 @@ impl RunOptions {
         Ok((robot, spec.label()))
     }
 
-    /// Apply the switches to a self-model run.
-    pub fn apply<M: SelfModel>(&self, cfg: SelfModelRun<M>) -> SelfModelRun<M> {
+    /// Apply the switches to a self-model run: the robot, its camera (the papers' arm, and a
+    /// URDF in its scene, keep the papers' camera; any other robot is framed automatically
+    /// unless `--eye` places the camera), the steps; paper reference figures only for the
+    /// papers' arm.
+    pub fn apply<M: SelfModel>(&self, cfg: SelfModelRun<M>) -> Result<SelfModelRun<M>> {
         let mut cfg = cfg.paper_compatible(self.paper_compatible);
         cfg.data.robot = self.robot_spec(BuiltinRobot::Arm4);
+        if let Some(file) = &self.dataset {
+            cfg.data.file = Some(file.clone());
+            // The joint count is the file's (a lab's own data needs no robot description).
+            cfg.model.set_dof(Dataset::load(file)?.dof());
+        } else if !cfg.data.robot.is_papers_arm() {
+            cfg.model.set_dof(cfg.data.robot.load_kinematics()?.dof());
+        }
+        // A URDF placed in the papers' scene (--arm4-scene) keeps the papers' camera too.
+        let papers_camera = cfg.data.robot.is_papers_arm() || self.arm4_scene;
+        self.camera.apply(&mut cfg.data.dataset, !papers_camera);
+        if !cfg.data.robot.is_papers_arm() || self.dataset.is_some() {
+            cfg.reference = Default::default();
+        }
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
-        cfg
+        Ok(cfg)
     }
 
     /// `--steps N`: set `steps` and say so in `note`; returns the override, if any.
@@ -97,6 +155,49 @@ impl RunOptions {
         };
         *steps = new;
         Some(new)
+    }
+}
+
+/// The camera options of the binaries that render: a fixed camera (`--eye`, `--target`) or
+/// automatic framing from `--view`; `--fov` and `--size` either way.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CameraChoice {
+    pub eye: Option<[f64; 3]>,
+    pub target: Option<[f64; 3]>,
+    pub fov_deg: Option<f64>,
+    pub size: Option<usize>,
+    /// The direction automatic framing looks from.
+    pub view: Option<[f64; 3]>,
+}
+
+impl CameraChoice {
+    /// Set `data`'s camera: `--eye`/`--target` fix it; otherwise a robot that is `framed`
+    /// (every robot but the papers' arm), or any robot given `--view`, is framed
+    /// automatically; `--fov` and `--size` apply either way.
+    pub fn apply(&self, data: &mut crate::data::dataset::DatasetConfig, framed: bool) {
+        use crate::data::dataset::Framing;
+        let camera = &mut data.camera;
+        if let Some(fov) = self.fov_deg {
+            camera.fov_deg = fov;
+        }
+        if let Some(size) = self.size {
+            camera.width = size;
+            camera.height = size;
+        }
+        if self.eye.is_some() || self.target.is_some() {
+            if let Some(eye) = self.eye {
+                camera.eye = eye;
+            }
+            if let Some(target) = self.target {
+                camera.target = target;
+            }
+            data.framing = None;
+        } else if framed || self.view.is_some() {
+            data.framing = Some(Framing {
+                view: self.view.unwrap_or(Framing::default().view),
+                ..Framing::default()
+            });
+        }
     }
 }
 
@@ -191,7 +292,7 @@ impl Experiment {
 
 /// One self-model on its preset run ([`SelfModel::preset_run`]) through the harness.
 pub fn run_self_model<M: SelfModel>(opts: &RunOptions, dir: &Path) -> Result<String> {
-    let cfg = opts.apply(M::preset_run(&opts.preset)?);
+    let cfg = opts.apply(M::preset_run(&opts.preset)?)?;
     let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
@@ -203,13 +304,20 @@ pub fn summary(rows: &[ModelResult]) -> String {
         Some(v) if v.is_finite() => format!("{v:.decimals$}"),
         _ => "-".into(),
     };
+    // The paper's columns only where some row has the paper's figures (the papers' arm).
+    let paper = rows
+        .iter()
+        .any(|r| r.paper_psnr_db.is_some() || r.paper_fps.is_some());
     let mut out = format!(
-        "{:width$}  {:>8}  {:>6}  {:>9}  {:>11}  {:>10}",
-        "model", "PSNR dB", "IoU", "img/s", "paper PSNR", "paper FPS*"
+        "{:width$}  {:>8}  {:>6}  {:>9}",
+        "model", "PSNR dB", "IoU", "img/s"
     );
+    if paper {
+        out += &format!("  {:>11}  {:>10}", "paper PSNR", "paper FPS*");
+    }
     for r in rows {
         out += &format!(
-            "\n{:width$}  {:>8}  {:>6}  {:>9}  {:>11}  {:>10}",
+            "\n{:width$}  {:>8}  {:>6}  {:>9}",
             r.model,
             num(Some(r.psnr_db_test), 2),
             num(Some(r.iou_test), 3),
@@ -217,9 +325,18 @@ pub fn summary(rows: &[ModelResult]) -> String {
                 Some(r.infer_b1_img_per_s),
                 if r.infer_b1_img_per_s < 10.0 { 1 } else { 0 },
             ),
-            num(r.paper_psnr_db, 2),
-            num(r.paper_fps, 1),
         );
+        if paper {
+            out += &format!(
+                "  {:>11}  {:>10}",
+                num(r.paper_psnr_db, 2),
+                num(r.paper_fps, 1)
+            );
+        }
     }
-    out + "\n(PSNR and IoU on the test set; img/s: inference at batch 1 on this machine; *the paper's FPS was training throughput on a T4)"
+    out + if paper {
+        "\n(PSNR and IoU on the test set; img/s: inference at batch 1 on this machine; *the paper's FPS was training throughput on a T4)"
+    } else {
+        "\n(PSNR and IoU on the test set; img/s: inference at batch 1 on this machine)"
+    }
 }

@@ -138,3 +138,112 @@ pub fn black_psnr(spec: &selfmodel::self_models::harness::DataSpec, n: Option<us
         .sum::<f64>()
         / test.len() as f64
 }
+
+/// A Wavefront OBJ of a cube of half size `h`.
+pub fn cube_obj(h: f64) -> String {
+    let tris = cube_triangles(h);
+    let mut s = String::from("# cube\n");
+    for t in &tris {
+        for p in t {
+            s += &format!("v {} {} {}\n", p.x, p.y, p.z);
+        }
+    }
+    for i in 0..tris.len() {
+        s += &format!("f {} {} {}\n", 3 * i + 1, 3 * i + 2, 3 * i + 3);
+    }
+    s
+}
+
+/// A COLLADA document of a cube of half size `h`, its vertices written in units of `unit`
+/// metres (`<unit meter>`), so a loader that ignores the unit draws another cube.
+pub fn cube_collada(h: f64, unit: f64) -> String {
+    let tris = cube_triangles(h);
+    let floats: Vec<String> = tris
+        .iter()
+        .flatten()
+        .flat_map(|p| [p.x, p.y, p.z].map(|v| (v / unit).to_string()))
+        .collect();
+    let n = tris.len() * 3;
+    let indices: Vec<String> = (0..n).map(|i| i.to_string()).collect();
+    format!(
+        r##"<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit name="custom" meter="{unit}"/><up_axis>Z_UP</up_axis></asset>
+  <library_geometries>
+    <geometry id="cube-mesh" name="cube">
+      <mesh>
+        <source id="cube-positions">
+          <float_array id="cube-positions-array" count="{count}">{floats}</float_array>
+          <technique_common>
+            <accessor source="#cube-positions-array" count="{n}" stride="3">
+              <param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/>
+            </accessor>
+          </technique_common>
+        </source>
+        <vertices id="cube-vertices"><input semantic="POSITION" source="#cube-positions"/></vertices>
+        <triangles count="{t}">
+          <input semantic="VERTEX" source="#cube-vertices" offset="0"/>
+          <p>{indices}</p>
+        </triangles>
+      </mesh>
+    </geometry>
+  </library_geometries>
+  <library_visual_scenes>
+    <visual_scene id="Scene" name="Scene">
+      <node id="cube" name="cube" type="NODE"><instance_geometry url="#cube-mesh" name="cube"/></node>
+    </visual_scene>
+  </library_visual_scenes>
+  <scene><instance_visual_scene url="#Scene"/></scene>
+</COLLADA>
+"##,
+        count = 3 * n,
+        floats = floats.join(" "),
+        t = tris.len(),
+        indices = indices.join(" "),
+    )
+}
+
+/// A serial arm of `joints` revolute joints as a URDF: a base box, then links of cylinders
+/// (0.35 m of arm in all, thick enough to be seen at 32x32 pixels), axes alternating z and y,
+/// each joint limited asymmetrically to [-1.2, 1.9] or [-1.9, 0.7] rad. With `gripper`, a
+/// hand on a fixed joint with a zero axis (as Franka ships one) and two prismatic fingers in
+/// [0, 0.04] m, the second a `<mimic>` of the first: tip `hand` for the arm alone.
+pub fn arm_urdf(joints: usize, gripper: bool) -> String {
+    let length = 0.35 / joints as f64;
+    let mut s = String::from(
+        "<?xml version=\"1.0\"?>\n<robot name=\"test_arm\">\n  <link name=\"base\"><visual><origin xyz=\"0 0 0.02\"/><geometry><box size=\"0.12 0.12 0.04\"/></geometry></visual></link>\n",
+    );
+    for j in 0..joints {
+        let parent = if j == 0 {
+            "base".to_string()
+        } else {
+            format!("l{j}")
+        };
+        let axis = if j % 2 == 0 { "0 0 1" } else { "0 1 0" };
+        let (lo, hi) = if j % 2 == 0 { (-1.2, 1.9) } else { (-1.9, 0.7) };
+        let z = if j == 0 { 0.04 } else { length };
+        s += &format!(
+            "  <link name=\"l{c}\"><visual><origin xyz=\"0 0 {half}\"/><geometry><cylinder radius=\"0.03\" length=\"{length}\"/></geometry></visual></link>\n  <joint name=\"j{c}\" type=\"revolute\"><parent link=\"{parent}\"/><child link=\"l{c}\"/><origin xyz=\"0 0 {z}\"/><axis xyz=\"{axis}\"/><limit lower=\"{lo}\" upper=\"{hi}\" effort=\"1\" velocity=\"1\"/></joint>\n",
+            c = j + 1,
+            half = length / 2.0,
+        );
+    }
+    if gripper {
+        s += &format!(
+            "  <link name=\"flange\"/>\n  <joint name=\"flange_joint\" type=\"fixed\"><parent link=\"l{joints}\"/><child link=\"flange\"/><origin xyz=\"0 0 {length}\"/><axis xyz=\"0 0 0\"/></joint>\n  <link name=\"hand\"><visual><origin xyz=\"0 0 0.02\"/><geometry><box size=\"0.04 0.14 0.04\"/></geometry></visual></link>\n  <joint name=\"hand_joint\" type=\"fixed\"><parent link=\"flange\"/><child link=\"hand\"/></joint>\n  <link name=\"finger_a\"><visual><origin xyz=\"0 0 0.03\"/><geometry><box size=\"0.02 0.02 0.06\"/></geometry></visual></link>\n  <link name=\"finger_b\"><visual><origin xyz=\"0 0 0.03\"/><geometry><box size=\"0.02 0.02 0.06\"/></geometry></visual></link>\n  <joint name=\"finger_a_joint\" type=\"prismatic\"><parent link=\"hand\"/><child link=\"finger_a\"/><origin xyz=\"0 0 0.04\"/><axis xyz=\"0 1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/></joint>\n  <joint name=\"finger_b_joint\" type=\"prismatic\"><parent link=\"hand\"/><child link=\"finger_b\"/><origin xyz=\"0 0 0.04\"/><axis xyz=\"0 -1 0\"/><limit lower=\"0\" upper=\"0.04\" effort=\"1\" velocity=\"1\"/><mimic joint=\"finger_a_joint\"/></joint>\n"
+        );
+    }
+    s + "</robot>\n"
+}
+
+/// Write [`arm_urdf`] into `dir` as `NAME.urdf` and return its path.
+pub fn write_arm(
+    dir: &std::path::Path,
+    name: &str,
+    joints: usize,
+    gripper: bool,
+) -> std::path::PathBuf {
+    let path = dir.join(format!("{name}.urdf"));
+    std::fs::write(&path, arm_urdf(joints, gripper)).unwrap();
+    path
+}

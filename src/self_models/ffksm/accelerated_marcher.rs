@@ -59,7 +59,7 @@ pub struct AcceleratedImage {
 /// Render the whole image of `camera` for joint angles `angles` (radians).
 pub fn render_accelerated(
     field: &OccupancyField,
-    view: (&Camera, [f64; 4]),
+    view: (&Camera, &[f64]),
     march: &MarchConfig,
     cfg: &AcceleratedConfig,
     device: &Device,
@@ -87,7 +87,7 @@ pub fn render_accelerated(
         Some(_) => cfg.round.max(1),
         None => march.samples,
     };
-    let pose = angles.map(|v| v as f32);
+    let pose = &angles.iter().map(|&v| v as f32).collect::<Vec<f32>>();
     let mut evaluations = grid.evaluations;
     while !active.is_empty() {
         // This round's samples: up to `round` per active ray.
@@ -154,7 +154,7 @@ fn chunks(n: usize, size: usize) -> impl Iterator<Item = (usize, usize)> {
 pub fn render_silhouette_skipping(
     field: &OccupancyField,
     probe: &OccupancyField,
-    (camera, angles): (&Camera, [f64; 4]),
+    (camera, angles): (&Camera, &[f64]),
     pixels: &[usize],
     march: &MarchConfig,
     grid: &GridConfig,
@@ -188,7 +188,10 @@ pub fn render_silhouette_skipping(
         return (pred, depths.len() + occupancy.evaluations);
     }
     let points = sample_points(camera, &rays, &kept_depths, device);
-    let raw = field.forward_pose(points, angles.map(|v| v as f32));
+    let raw = field.forward_pose(
+        points,
+        &angles.iter().map(|&v| v as f32).collect::<Vec<f32>>(),
+    );
     let m = rays.len();
     let density = raw.clone().slice([0..m, 0..1]).reshape([m]);
     let visibility = raw.slice([0..m, 1..2]).reshape([m]);

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::kernels::conv_gemm::{Layout, matmul};
 use crate::self_models::ffksm::encoding::{encode_into, encoded_width};
-use crate::self_models::ffksm::field::OccupancyField;
+use crate::self_models::ffksm::field::{OccupancyField, distal_of};
 use crate::self_models::ffksm::marcher::MarchConfig;
 use crate::sim::camera::Camera;
 
@@ -357,7 +357,7 @@ fn mask_by_relu(grad: &mut [f32], activated: &[f32]) {
 #[allow(clippy::too_many_arguments)]
 pub fn dense_step(
     field: &OccupancyField,
-    (camera, angles): (&Camera, [f64; 4]),
+    (camera, angles): (&Camera, &[f64]),
     pixels: &[usize],
     truth: &[f32],
     robot_weight: f64,
@@ -366,13 +366,14 @@ pub fn dense_step(
     device: &Device,
 ) -> DenseStep {
     assert_eq!(pixels.len(), truth.len());
-    let angles32 = angles.map(|v| v as f32);
+    let angles32: Vec<f32> = angles.iter().map(|&v| v as f32).collect();
     let (coordinates, kinematics, predictive) = field.layers();
     let bands = field.bands();
 
     // The kinematic encoder and the first layer's pose half, once for the pose.
-    let mut k_in = vec![0.0; encoded_width(2, bands)];
-    encode_into(&angles32[2..], bands, &mut k_in);
+    let distal = distal_of(&angles32);
+    let mut k_in = vec![0.0; encoded_width(distal.len(), bands)];
+    encode_into(&distal, bands, &mut k_in);
     let [k0, k1] = [
         HostLinear::of(&kinematics[0]),
         HostLinear::of(&kinematics[1]),
@@ -408,7 +409,7 @@ pub fn dense_step(
         ],
         predictive: host_predictive,
         pose_part,
-        rotation: field.rotation_rows(angles32),
+        rotation: field.rotation_rows(&angles32),
         bands,
     };
 

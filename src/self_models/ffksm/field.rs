@@ -36,6 +36,34 @@ pub struct OccupancyFieldConfig {
     pub virtual_frame: VirtualFrame,
     /// Initial bias of both outputs.
     pub output_bias: f32,
+    /// The robot's joint count: the first two set the virtual frame, the rest (at least one
+    /// input, zero when the robot has only two joints) go through the kinematic encoder.
+    #[serde(default = "four", skip_serializing_if = "is_four")]
+    pub dof: usize,
+}
+
+fn four() -> usize {
+    4
+}
+
+fn is_four(v: &usize) -> bool {
+    *v == 4
+}
+
+/// The kinematic encoder's inputs for `dof` joints: the joints after the first two, at least
+/// one.
+pub fn distal_width(dof: usize) -> usize {
+    dof.max(3) - 2
+}
+
+/// The kinematic encoder's input for one pose (radians): the joints after the first two, or
+/// one zero for a robot of two joints or fewer.
+pub fn distal_of(angles: &[f32]) -> Vec<f32> {
+    if angles.len() > 2 {
+        angles[2..].to_vec()
+    } else {
+        vec![0.0]
+    }
 }
 
 impl Preset for OccupancyFieldConfig {
@@ -48,6 +76,7 @@ impl Preset for OccupancyFieldConfig {
             relu_before_output: true,
             virtual_frame: VirtualFrame::Reimplementation,
             output_bias: 0.1,
+            dof: 4,
         }
     }
 
@@ -75,7 +104,7 @@ impl OccupancyFieldConfig {
     }
 
     pub fn validate(&self) -> Result<()> {
-        if self.encoder_width == 0 || self.predictive_hidden.contains(&0) {
+        if self.encoder_width == 0 || self.predictive_hidden.contains(&0) || self.dof == 0 {
             return Err(Error::Config(format!(
                 "occupancy field: layer widths must be positive ({self:?})"
             )));
@@ -112,7 +141,7 @@ impl OccupancyFieldConfig {
         }
         OccupancyField {
             coordinates: encoder(encoded_width(3, self.bands)),
-            kinematics: encoder(encoded_width(2, self.bands)),
+            kinematics: encoder(encoded_width(distal_width(self.dof), self.bands)),
             predictive,
             bands: self.bands,
             relu_before_output: self.relu_before_output,
@@ -147,10 +176,20 @@ impl OccupancyField {
     /// The general form, one pose per point; [`OccupancyField::forward_pose`] is the fast path
     /// for many points of one pose and is tested against this.
     pub fn forward(&self, points: Tensor<2>, angles: Tensor<2>) -> Tensor<2> {
-        let n = points.dims()[0];
-        let joint = |i: usize| angles.clone().slice([0..n, i..i + 1]).reshape([n]);
+        let [n, dof] = angles.dims();
+        let joint = |i: usize| {
+            if i < dof {
+                angles.clone().slice([0..n, i..i + 1]).reshape([n])
+            } else {
+                Tensor::zeros([n], &angles.device())
+            }
+        };
         let p = to_virtual(self.virtual_frame, points, joint(0), joint(1));
-        let distal = angles.clone().slice([0..n, 2..4]);
+        let distal = if dof > 2 {
+            angles.clone().slice([0..n, 2..dof])
+        } else {
+            Tensor::zeros([n, 1], &angles.device())
+        };
         let a = encoder(&self.coordinates, encode(p, self.bands));
         let b = encoder(&self.kinematics, encode(distal, self.bands));
         let x = self.predictive[0].forward(Tensor::cat(vec![a, b], 1));
@@ -163,10 +202,12 @@ impl OccupancyField {
     /// virtual frame is one 3x3 rotation, the kinematic encoder runs on one row, and its half
     /// of the predictive module's first layer (`W_b b + bias`) is added to every row. That
     /// leaves ~58k multiply-adds per point of the paper preset's ~94k.
-    pub fn forward_pose(&self, points: Tensor<2>, angles: [f32; 4]) -> Tensor<2> {
+    pub fn forward_pose(&self, points: Tensor<2>, angles: &[f32]) -> Tensor<2> {
         let device = points.device();
         let p = points.matmul(self.rotation(angles, &device));
-        let distal = Tensor::<2>::from_data(TensorData::new(angles[2..].to_vec(), [1, 2]), &device);
+        let distal = distal_of(angles);
+        let width = distal.len();
+        let distal = Tensor::<2>::from_data(TensorData::new(distal, [1, width]), &device);
         let x = self.forward_virtual(p, distal);
         self.predictive_rest(x)
     }
@@ -189,14 +230,15 @@ impl OccupancyField {
 
     /// `Mᵀ` `[3, 3]` for row vectors, where `M` takes world points into the virtual frame of
     /// `angles` (built from [`crate::self_models::ffksm::virtual_frame::to_virtual_reference`] on the unit axes).
-    fn rotation(&self, angles: [f32; 4], device: &Device) -> Tensor<2> {
+    fn rotation(&self, angles: &[f32], device: &Device) -> Tensor<2> {
         let m = self.rotation_rows(angles);
         Tensor::from_data(TensorData::new(m.to_vec(), [3, 3]), device)
     }
 
     /// [`OccupancyField::rotation`] on the host, row-major.
-    pub(crate) fn rotation_rows(&self, angles: [f32; 4]) -> [f32; 9] {
-        let (a0, a1) = (angles[0] as f64, angles[1] as f64);
+    pub(crate) fn rotation_rows(&self, angles: &[f32]) -> [f32; 9] {
+        let joint = |i: usize| angles.get(i).map_or(0.0, |&a| a as f64);
+        let (a0, a1) = (joint(0), joint(1));
         let mut m = [0f32; 9];
         for (col, e) in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
             .into_iter()

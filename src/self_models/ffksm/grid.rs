@@ -82,7 +82,7 @@ impl FrustumGrid {
     /// Probe `field` in pose `angles` (radians) from `camera` on `march`'s samples.
     pub fn build(
         field: &OccupancyField,
-        (camera, angles): (&Camera, [f64; 4]),
+        (camera, angles): (&Camera, &[f64]),
         march: &MarchConfig,
         cfg: &GridConfig,
         device: &Device,
@@ -114,7 +114,7 @@ impl FrustumGrid {
             .collect();
         let mut density = Vec::with_capacity(pixels.len() * dims[2]);
         let rays_per_chunk = (cfg.chunk / dims[2]).max(1);
-        let pose = angles.map(|v| v as f32);
+        let pose = &angles.iter().map(|&v| v as f32).collect::<Vec<f32>>();
         for part in pixels.chunks(rays_per_chunk) {
             let depths: Vec<f64> = part.iter().flat_map(|_| probe_depths.clone()).collect();
             let points = sample_points(camera, part, &depths, device);

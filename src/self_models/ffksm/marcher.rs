@@ -114,20 +114,23 @@ pub fn expected_depth(raw: Tensor<2>, depths: &[f64], samples: usize) -> Tensor<
 /// in one pose `angles` (radians).
 fn march_chunk(
     field: &OccupancyField,
-    (camera, angles): (&Camera, [f64; 4]),
+    (camera, angles): (&Camera, &[f64]),
     pixels: &[usize],
     depths: &[f64],
     device: &Device,
 ) -> Tensor<2> {
     let points = sample_points(camera, pixels, depths, device);
-    field.forward_pose(points, angles.map(|v| v as f32))
+    field.forward_pose(
+        points,
+        &angles.iter().map(|&v| v as f32).collect::<Vec<f32>>(),
+    )
 }
 
 /// The silhouette `[rays]` of `pixels` in one graph (for training: gradients reach the
 /// field), with stratified depths drawn from `jitter`.
 pub fn render_silhouette(
     field: &OccupancyField,
-    view: (&Camera, [f64; 4]),
+    view: (&Camera, &[f64]),
     pixels: &[usize],
     march: &MarchConfig,
     jitter: Option<u64>,
@@ -145,7 +148,7 @@ pub fn render_silhouette(
 /// `(silhouette [rays], expected depth [rays], network evaluations)`.
 pub fn render_dense(
     field: &OccupancyField,
-    view: (&Camera, [f64; 4]),
+    view: (&Camera, &[f64]),
     pixels: &[usize],
     march: &MarchConfig,
     jitter: Option<u64>,

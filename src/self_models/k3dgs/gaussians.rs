@@ -121,8 +121,17 @@ impl GaussianInit {
         (0..3).max_by(|&i, &j| e[i].total_cmp(&e[j])).unwrap_or(0)
     }
 
-    /// The Gaussians' link indices and initial link-frame positions, drawn from `seed`.
+    /// The Gaussians' link indices and initial link-frame positions, drawn from `seed`: on the
+    /// links `per_link` names, or, for a robot without those links (any robot but `arm4`),
+    /// seeded from each link's geometry ([`GaussianInit::positions_on_geometry`]).
     pub fn positions(&self, robot: &Robot, seed: u64) -> Result<(Vec<usize>, Vec<[f32; 3]>)> {
+        if !self
+            .per_link
+            .iter()
+            .all(|(name, _)| robot.chain.links.contains(name))
+        {
+            return self.positions_on_geometry(robot, seed);
+        }
         let mut rng = StdRng::seed_from_u64(seed);
         let mut links = Vec::new();
         let mut points = Vec::new();
@@ -148,6 +157,79 @@ impl GaussianInit {
                 let u: [f64; 3] = [rng.random(), rng.random(), rng.random()];
                 links.push(l);
                 points.push([0, 1, 2].map(|k| (b.min[k] + u[k] * (b.max[k] - b.min[k])) as f32));
+            }
+        }
+        Ok((links, points))
+    }
+}
+
+impl GaussianInit {
+    /// The same total count as `per_link`, spread over every link with geometry in proportion
+    /// to its size (the diagonal of its bounds; at least one each), each Gaussian started at a
+    /// point drawn on the link's surface: a triangle picked by area and a uniform point in it,
+    /// or a point inside a primitive's bounds.
+    pub fn positions_on_geometry(
+        &self,
+        robot: &Robot,
+        seed: u64,
+    ) -> Result<(Vec<usize>, Vec<[f32; 3]>)> {
+        use crate::sim::shape::Shape;
+        let mut rng = StdRng::seed_from_u64(seed);
+        let total: usize = self.per_link.iter().map(|(_, n)| n).sum();
+        let sized: Vec<(usize, f64)> = robot
+            .geometry
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| !g.is_empty())
+            .map(|(l, g)| {
+                let b = g.bounds();
+                (l, (b.max - b.min).norm())
+            })
+            .collect();
+        if sized.is_empty() {
+            return Err(Error::Config(
+                "K-3DGS: the robot has no geometry to place Gaussians on".into(),
+            ));
+        }
+        let sum: f64 = sized.iter().map(|(_, s)| s).sum();
+        let mut links = Vec::new();
+        let mut points = Vec::new();
+        for &(l, size) in &sized {
+            let count = ((total as f64 * size / sum).round() as usize).max(1);
+            let shapes = robot.geometry[l].shapes();
+            // Cumulative area of the triangles (a primitive counts as its bounds' surface).
+            let mut cumulative = Vec::with_capacity(shapes.len());
+            let mut acc = 0.0;
+            for shape in shapes {
+                acc += match shape {
+                    Shape::Triangle([a, b, c]) => (b - a).cross(&(c - a)).norm() / 2.0,
+                    other => {
+                        let b = other.aabb();
+                        let e = b.max - b.min;
+                        2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+                    }
+                };
+                cumulative.push(acc);
+            }
+            for _ in 0..count {
+                let r: f64 = rng.random::<f64>() * acc;
+                let i = cumulative.partition_point(|&c| c < r).min(shapes.len() - 1);
+                let p = match &shapes[i] {
+                    Shape::Triangle([a, b, c]) => {
+                        let (u, v): (f64, f64) = (rng.random(), rng.random());
+                        let su = u.sqrt();
+                        a.coords * (1.0 - su) + b.coords * (su * (1.0 - v)) + c.coords * (su * v)
+                    }
+                    other => {
+                        let b = other.aabb();
+                        let u: [f64; 3] = [rng.random(), rng.random(), rng.random()];
+                        nalgebra::Vector3::from(
+                            [0, 1, 2].map(|k| b.min[k] + u[k] * (b.max[k] - b.min[k])),
+                        )
+                    }
+                };
+                links.push(l);
+                points.push([p.x as f32, p.y as f32, p.z as f32]);
             }
         }
         Ok((links, points))

@@ -1,0 +1,65 @@
+//! Mesh files as triangles: STL (binary and ASCII), COLLADA (`.dae`, with its node transforms
+//! and `<unit>`) and Wavefront OBJ, read by the `mesh-loader` crate (from the openrr project).
+
+use std::path::Path;
+
+use nalgebra::{Isometry3, Point3, Vector3};
+
+use crate::core::error::{Error, Result};
+use crate::sim::shape::Shape;
+
+/// The mesh formats a robot description may name.
+pub const MESH_EXTENSIONS: &[&str] = &["stl", "dae", "obj"];
+
+/// Read a mesh file and return its triangles, scaled by `scale` and placed by `pose` (the
+/// URDF `<origin>` of the visual or collision element), in the link frame.
+pub fn load_mesh(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Result<Vec<Shape>> {
+    let bad = |msg: String| Error::Mesh {
+        path: path.into(),
+        msg,
+    };
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
+    if !MESH_EXTENSIONS.contains(&ext.as_str()) {
+        return Err(bad(format!(
+            "unsupported mesh format \".{ext}\" (supported: STL, COLLADA .dae, OBJ); convert it to one of them"
+        )));
+    }
+    let bytes = std::fs::read(path).map_err(|e| bad(format!("cannot open mesh: {e}")))?;
+    let scene = mesh_loader::Loader::default()
+        .load_from_slice(&bytes, path)
+        .map_err(|e| bad(format!("not a valid {} file: {e}", ext.to_uppercase())))?;
+    let mut shapes = Vec::new();
+    for mesh in &scene.meshes {
+        let vertex = |i: u32| -> Result<Point3<f64>> {
+            let v = mesh.vertices.get(i as usize).ok_or_else(|| {
+                bad(format!(
+                    "a face refers to vertex {i}, but the mesh has {}",
+                    mesh.vertices.len()
+                ))
+            })?;
+            let p = Point3::new(
+                v[0] as f64 * scale.x,
+                v[1] as f64 * scale.y,
+                v[2] as f64 * scale.z,
+            );
+            if !p.coords.iter().all(|c| c.is_finite()) {
+                return Err(bad("a vertex is NaN or infinite".into()));
+            }
+            Ok(pose * p)
+        };
+        for f in &mesh.faces {
+            shapes.push(Shape::Triangle([
+                vertex(f[0])?,
+                vertex(f[1])?,
+                vertex(f[2])?,
+            ]));
+        }
+    }
+    if shapes.is_empty() {
+        return Err(bad("the mesh has no triangles".into()));
+    }
+    Ok(shapes)
+}
