@@ -221,10 +221,15 @@ pub fn run_ablation(
         let mut cfg = base.clone();
         (setting.apply)(&mut cfg);
         cfg.name = format!("NeuroKin {}", setting.label);
-        cfg.reference = PaperReference {
-            psnr_db: setting.paper_psnr_db,
-            fps: setting.paper_fps,
-            ..PaperReference::default()
+        // The paper's figures are for its arm: none for another robot (or a dataset file).
+        cfg.reference = if base.reference == PaperReference::default() {
+            PaperReference::default()
+        } else {
+            PaperReference {
+                psnr_db: setting.paper_psnr_db,
+                fps: setting.paper_fps,
+                ..PaperReference::default()
+            }
         };
         let out = run(&cfg, &dir.join(setting.folder()), device, resume)?;
         rows.push(out.result);
