@@ -3,7 +3,8 @@
 //! (distal supervised learning), `cgan` (conditional GAN), `flow` (a normalizing flow, many
 //! solutions) and `dls` (damped least squares, numerical). Beneath them: the data (`data`),
 //! the inverse MLP (`mlp`), the fitting and EMSSL's iterations (`learning`), link
-//! calibration and EMSSL's batched sampling pass.
+//! calibration and EMSSL's batched sampling pass. `pose`: full-pose targets (position and
+//! orientation) solved exactly by Levenberg-Marquardt within the joint limits.
 
 pub mod calibration;
 pub mod cgan;
@@ -16,4 +17,5 @@ pub mod flow;
 pub mod learning;
 pub mod method;
 pub mod mlp;
+pub mod pose;
 pub mod sampling_pass;

@@ -529,6 +529,49 @@ impl KinematicChain {
         jac
     }
 
+    /// World pose of the end effector: the tip link's orientation at the tip point.
+    pub fn tip_pose(&self, q: &[f64]) -> Isometry3<f64> {
+        let frame = self.link_frames(q)[self.tip_link];
+        Isometry3::from_parts(
+            Translation3::from((frame * self.tip_offset).coords),
+            frame.rotation,
+        )
+    }
+
+    /// The end effector's pose Jacobian `[6, dof]` at `q`, analytic: rows 0-2 the position
+    /// Jacobian ([`Self::position_jacobian`]), rows 3-5 the angular velocity per unit joint
+    /// speed (the world axis of a rotational joint, zero for a prismatic one), a mimic
+    /// joint's part added to its leader's column times its multiplier.
+    pub fn pose_jacobian(&self, q: &[f64]) -> nalgebra::Matrix6xX<f64> {
+        let frames = self.link_frames(q);
+        let tip = frames[self.tip_link] * self.tip_offset;
+        let mut moves_tip = vec![false; self.joints.len()];
+        let mut link = self.tip_link;
+        while let Some(j) = self.joints.iter().position(|j| j.child == link) {
+            moves_tip[j] = true;
+            link = self.joints[j].parent;
+        }
+        let mut jac = nalgebra::Matrix6xX::zeros(self.dof());
+        for (j, joint) in self.joints.iter().enumerate() {
+            let (JointValue::Input { index, scale, .. }, true) = (self.values[j], moves_tip[j])
+            else {
+                continue;
+            };
+            let f = frames[joint.parent] * joint.origin;
+            let axis = f * joint.axis.into_inner();
+            let (linear, angular) = if joint.kind.is_rotational() {
+                (axis.cross(&(tip - f * Point3::origin())), axis)
+            } else {
+                (axis, Vector3::zeros())
+            };
+            let mut column = jac.column(index).into_owned();
+            column.fixed_rows_mut::<3>(0).axpy(scale, &linear, 1.0);
+            column.fixed_rows_mut::<3>(3).axpy(scale, &angular, 1.0);
+            jac.set_column(index, &column);
+        }
+        jac
+    }
+
     /// Link frames for a batch of joint vectors (rows of `qs`, SI), in parallel.
     pub fn link_frames_batch(&self, qs: &[Vec<f64>]) -> Vec<Vec<Isometry3<f64>>> {
         qs.par_iter().map(|q| self.link_frames(q)).collect()
