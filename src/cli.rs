@@ -137,6 +137,25 @@ impl RobotArgs {
         }
     }
 
+    /// The robot as a config records it.
+    pub fn spec(&self) -> crate::sim::robots::RobotSpec {
+        match &self.urdf {
+            Some(path) => {
+                let base = self.base();
+                let (r, p, y) = base.rotation.euler_angles();
+                let t = base.translation.vector;
+                crate::sim::robots::RobotSpec::Urdf {
+                    path: path.clone(),
+                    base_xyz: [t.x, t.y, t.z],
+                    base_rpy: [r, p, y],
+                    tip: self.tip.clone(),
+                    geometry: self.geometry,
+                }
+            }
+            None => crate::sim::robots::RobotSpec::Builtin(self.robot),
+        }
+    }
+
     /// A short name for reports: `arm4` or the URDF path.
     pub fn label(&self) -> String {
         match (&self.urdf, &self.tip) {

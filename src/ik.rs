@@ -18,4 +18,5 @@ pub mod learning;
 pub mod method;
 pub mod mlp;
 pub mod pose;
+pub mod pose_model;
 pub mod sampling_pass;

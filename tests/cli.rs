@@ -528,3 +528,97 @@ fn resume_without_a_checkpoint_says_so() {
         );
     }
 }
+
+/// `ik train`, `ik targets` and `ik solve` on a test arm, and what `ik solve` refuses.
+#[test]
+fn ik_trains_saves_and_solves_targets_of_your_own() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let urdf = common::write_arm(d, "arm", 6, true);
+    let ik = env!("CARGO_BIN_EXE_ik");
+    let model = d.join("model");
+    let run = |args: &[&str]| {
+        let o = Command::new(ik).args(args).output().unwrap();
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let said = run(&[
+        "train",
+        "--urdf",
+        urdf.to_str().unwrap(),
+        "--tip",
+        "hand",
+        "--preset",
+        "quick",
+        "--out",
+        model.to_str().unwrap(),
+    ]);
+    assert!(said.contains("6 joints (j1, j2, j3, j4, j5, j6)"), "{said}");
+    let targets = d.join("targets.csv");
+    run(&[
+        "targets",
+        "--model",
+        model.to_str().unwrap(),
+        "--n",
+        "50",
+        "--out",
+        targets.to_str().unwrap(),
+    ]);
+    let answers = d.join("answers.csv");
+    let said = run(&[
+        "solve",
+        "--model",
+        model.to_str().unwrap(),
+        "--targets",
+        targets.to_str().unwrap(),
+        "--k",
+        "2",
+        "--out",
+        answers.to_str().unwrap(),
+    ]);
+    assert!(said.contains("50 targets"), "{said}");
+    let text = std::fs::read_to_string(&answers).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "target,solution,q1,q2,q3,q4,q5,q6,pos_err_mm,rot_err_deg,exact"
+    );
+    assert_eq!(lines.count(), 100);
+    // A bad row is named by its line; nothing is written.
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, "x,y,z,qw,qx,qy,qz\n0.1,0.2,0.3,1,0,0,0\n0.1,0.2\n").unwrap();
+    let out = d.join("never.csv");
+    fails_cleanly(
+        ik,
+        &[
+            "solve",
+            "--model",
+            model.to_str().unwrap(),
+            "--targets",
+            bad.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["bad.csv", "line 3"],
+        &out,
+    );
+    // A model folder that is not one.
+    fails_cleanly(
+        ik,
+        &[
+            "solve",
+            "--model",
+            d.to_str().unwrap(),
+            "--targets",
+            targets.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["model.json"],
+        &out,
+    );
+}

@@ -122,3 +122,112 @@ fn a_redundant_arm_reaches_full_poses_and_a_target_outside_the_limits_is_not_exa
     assert!(!s.exact(&cfg) && s.position_error_m > 1.0);
     assert!(within(&s.joints, &ranges, 0.0));
 }
+
+fn quick_model(
+    dir: &std::path::Path,
+    joints: usize,
+) -> (
+    selfmodel::sim::robots::RobotSpec,
+    selfmodel::sim::robot::Robot,
+    selfmodel::ik::pose_model::PoseModel,
+) {
+    use selfmodel::core::preset::Preset;
+    let urdf = common::write_arm(dir, &format!("arm{joints}"), joints, true);
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("hand".into()),
+        geometry: GeometryKind::Visual,
+    };
+    let robot = spec.load_kinematics().unwrap();
+    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    cfg.data.samples = 1200;
+    cfg.data.train = 1100;
+    cfg.flow.fit.epochs = 2;
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let model =
+        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.join("model"), &device).unwrap();
+    (spec, robot, model)
+}
+
+#[test]
+fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
+    use selfmodel::ik::pose_model::PoseModel;
+    let dir = common::tempdir();
+    let (_spec, robot, model) = quick_model(dir.path(), 6);
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let ranges = &model.saved.ranges;
+    let qs = selfmodel::sim::trajectory::babbling(40, ranges, 5);
+    let targets: Vec<PoseTarget> = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let before = model.solve(&robot.chain, &targets, 3, &device);
+    let loaded = PoseModel::load(&dir.path().join("model"), &device).unwrap();
+    loaded.check_robot(&robot).unwrap();
+    let after = loaded.solve(&robot.chain, &targets, 3, &device);
+    assert_eq!(before, after);
+    assert_eq!(
+        model.sample(&targets, &device),
+        loaded.sample(&targets, &device)
+    );
+    // Every answer inside the limits; most targets solved exactly.
+    let cfg = &loaded.saved.config.lm;
+    assert!(
+        after
+            .iter()
+            .flatten()
+            .all(|s| within(&s.joints, ranges, 0.0))
+    );
+    let solved = after
+        .iter()
+        .filter(|s| s.iter().any(|a| a.exact(cfg)))
+        .count();
+    assert!(solved >= 30, "{solved} of 40 solved");
+    // Another robot (one joint more) is refused, naming what the model was trained for.
+    let other_dir = common::tempdir();
+    let other = common::write_arm(other_dir.path(), "other", 7, true);
+    let other = load_urdf_with(
+        &other,
+        &UrdfOptions {
+            tip: Some("hand".into()),
+            geometry: GeometryKind::None,
+            base: Isometry3::identity(),
+        },
+    )
+    .unwrap();
+    let err = loaded.check_robot(&other).unwrap_err().to_string();
+    assert!(
+        err.contains("another robot") && err.contains("ik train"),
+        "{err}"
+    );
+}
+
+#[test]
+fn malformed_target_files_fail_naming_the_line() {
+    use selfmodel::ik::pose_model::read_targets;
+    let dir = common::tempdir();
+    let path = dir.path().join("t.csv");
+    let cases = [
+        (
+            "x,y,z,qw,qx,qy,qz\n0.1,0.2,0.3,1,0,0,0\n0.1,abc,0.3,1,0,0,0\n",
+            "line 3",
+            "abc",
+        ),
+        ("x,y,z,qw,qx,qy,qz\n0.1,0.2,0.3,2,0,0,0\n", "line 2", "norm"),
+        ("x,y,z\n0.1,0.2,0.3\n", "line 1", "qw"),
+        ("x,y,z,qw,qx,qy,qz\n0.1,0.2,NaN,1,0,0,0\n", "line 2", "NaN"),
+        ("x,y,z,qw,qx,qy,qz\n", "no targets", ""),
+    ];
+    for (text, needle, also) in cases {
+        std::fs::write(&path, text).unwrap();
+        let err = read_targets(&path, false).unwrap_err().to_string();
+        assert!(err.contains(needle) && err.contains(also), "{err}");
+        assert!(err.contains("t.csv") && !err.contains('\n'), "{err}");
+    }
+    // Other columns are ignored; a position-only model reads x,y,z.
+    std::fs::write(&path, "id,x,y,z,note\n7,0.1,0.2,0.3,hello\n").unwrap();
+    let t = read_targets(&path, true).unwrap();
+    assert_eq!(t.len(), 1);
+    assert!(t[0].orientation.is_none());
+}

@@ -106,14 +106,31 @@ pub struct FlowIk {
     permutations: Vec<Vec<i64>>,
     #[module(skip)]
     clamp: f64,
+    /// Width of the condition: the target's values and the SoftFlow noise scale.
+    #[module(skip)]
+    condition: usize,
 }
 
-/// Width of the condition: the normalised position and the SoftFlow noise scale.
+/// Width of a position target's condition: the normalised position and the noise scale.
 const CONDITION: usize = 4;
 
 impl FlowIk {
-    /// A fresh flow for a `dof`-joint arm (seeded weights and permutations).
+    /// A fresh flow for a `dof`-joint arm conditioned on a normalised position (seeded
+    /// weights and permutations).
     pub fn new(cfg: &FlowConfig, dof: usize, device: &Device, seed: u64) -> Result<Self> {
+        Self::conditioned(cfg, dof, CONDITION - 1, device, seed)
+    }
+
+    /// A fresh flow conditioned on `target` values per target (3: a position; 7: a position
+    /// and a unit quaternion), plus the SoftFlow noise scale.
+    pub fn conditioned(
+        cfg: &FlowConfig,
+        dof: usize,
+        target: usize,
+        device: &Device,
+        seed: u64,
+    ) -> Result<Self> {
+        let condition = target + 1;
         if dof < 2 || cfg.couplings == 0 || cfg.hidden.contains(&0) {
             return Err(Error::Config(format!(
                 "flow: needs at least 2 joints, a coupling and positive widths ({cfg:?})"
@@ -131,7 +148,7 @@ impl FlowIk {
         let couplings = crate::core::device::seeded(device, seed, |d| {
             (0..cfg.couplings)
                 .map(|_| {
-                    let mut widths = vec![keep + CONDITION];
+                    let mut widths = vec![keep + condition];
                     widths.extend(&cfg.hidden);
                     let n = widths.len();
                     let mut layers: Vec<Linear> = widths
@@ -151,11 +168,17 @@ impl FlowIk {
             couplings,
             permutations,
             clamp: cfg.clamp,
+            condition,
         })
     }
 
-    fn dof(&self) -> usize {
+    pub fn dof(&self) -> usize {
         self.permutations[0].len()
+    }
+
+    /// The target values it is conditioned on (3 or 7), without the noise scale.
+    pub fn target_width(&self) -> usize {
+        self.condition - 1
     }
 
     fn index(&self, p: &[i64], device: &Device) -> Tensor<1, Int> {
@@ -232,18 +255,47 @@ pub fn train_flow(
     cfg: &FlowConfig,
     device: &Device,
 ) -> Result<TrainedFlow> {
+    let train = data.train();
+    let batch = cfg.fit.inference_batch;
+    fit_flow(
+        data,
+        data.position_rows(&data.positions[train]),
+        3,
+        cfg,
+        device,
+        |m: &FlowIk| {
+            let targets = &data.positions[data.validation()];
+            let q = sample(m, data, targets, 1, batch, 0x7A1, device)
+                .pop()
+                .expect("one sample");
+            DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
+        },
+    )
+}
+
+/// Train a flow on the training joints of `data` given `targets` (`width` values per
+/// training sample: the condition without the noise scale), validated by `validate` (lower
+/// is better) when `cfg.fit.converge` is set.
+pub fn fit_flow(
+    data: &IkData,
+    targets: Vec<f32>,
+    width: usize,
+    cfg: &FlowConfig,
+    device: &Device,
+    validate: impl Fn(&FlowIk) -> f64,
+) -> Result<TrainedFlow> {
     let tdev = autodiff_device(device, cfg.fit.seed);
     let dof = data.joints[0].len();
     let train = data.train();
-    // Inputs: the normalised positions; targets: the scaled joints.
+    // Inputs: the targets; targets: the scaled joints.
     let set = row_set(
-        data.position_rows(&data.positions[train.clone()]),
-        3,
+        targets,
+        width,
         scale_joints(data, &data.joints[train]),
         dof,
         &tdev,
     );
-    let model = FlowIk::new(cfg, dof, &tdev, cfg.fit.seed)?;
+    let model = FlowIk::conditioned(cfg, dof, width, &tdev, cfg.fit.seed)?;
     let softflow = cfg.softflow_max;
     let seed = cfg.fit.seed;
     let loss = move |m: &FlowIk, b: &Batch| {
@@ -269,7 +321,6 @@ pub fn train_flow(
         m.nll(x, cond)
     };
     let train_cfg = cfg.fit.train_config(set.len());
-    let batch = cfg.fit.inference_batch;
     match &cfg.fit.converge {
         Some(conv) => {
             let (model, log) = train_to_convergence(
@@ -280,13 +331,7 @@ pub fn train_flow(
                 conv,
                 "flow IK",
                 loss,
-                |m: &FlowIk| {
-                    let targets = &data.positions[data.validation()];
-                    let q = sample(&m.valid(), data, targets, 1, batch, 0x7A1, device)
-                        .pop()
-                        .expect("one sample");
-                    DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
-                },
+                |m: &FlowIk| validate(&m.valid()),
                 cfg.fit.checkpoint_for("flow IK").as_ref(),
             )?;
             Ok(TrainedFlow {
@@ -316,24 +361,46 @@ pub fn sample(
     seed: u64,
     device: &Device,
 ) -> Vec<Vec<Vec<f64>>> {
+    sample_rows(
+        model,
+        data,
+        &data.position_rows(positions),
+        k,
+        batch,
+        seed,
+        device,
+    )
+}
+
+/// [`sample`] for targets given as condition rows (`model.target_width()` values each).
+pub fn sample_rows(
+    model: &FlowIk,
+    data: &IkData,
+    targets: &[f32],
+    k: usize,
+    batch: usize,
+    seed: u64,
+    device: &Device,
+) -> Vec<Vec<Vec<f64>>> {
     let dof = model.dof();
+    let width = model.target_width();
     let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
+    let rows: Vec<&[f32]> = targets.chunks(width).collect();
     (0..k)
         .map(|s| {
-            let mut out = Vec::with_capacity(positions.len());
-            for (c, part) in positions.chunks(batch.max(1)).enumerate() {
+            let mut out = Vec::with_capacity(rows.len());
+            for (c, part) in rows.chunks(batch.max(1)).enumerate() {
                 let n = part.len();
                 let mut rng = StdRng::seed_from_u64(seed ^ ((s as u64) << 32) ^ ((c as u64) << 8));
                 let z: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng)).collect();
-                let mut cond = data.position_rows(part);
                 // Append the noise scale 0 to every row.
-                cond = cond
-                    .chunks(3)
-                    .flat_map(|r| [r[0], r[1], r[2], 0.0])
+                let cond: Vec<f32> = part
+                    .iter()
+                    .flat_map(|r| r.iter().copied().chain([0.0]))
                     .collect();
                 let x = model.inverse(
                     Tensor::from_data(TensorData::new(z, [n, dof]), device),
-                    Tensor::from_data(TensorData::new(cond, [n, CONDITION]), device),
+                    Tensor::from_data(TensorData::new(cond, [n, width + 1]), device),
                 );
                 let v = x.into_data().try_into_vec::<f32>().expect("float");
                 out.extend(v.chunks(dof).map(|r| {

@@ -1,0 +1,415 @@
+//! A learned full-pose IK model people can keep and use: a conditional flow (IKFlow-style,
+//! [`crate::ik::flow`]) conditioned on the target's position and orientation, trained on joint
+//! samples drawn within the robot's limits, saved with the robot's fingerprint, joint names
+//! and limits; answers refined to exact by Levenberg-Marquardt ([`crate::ik::pose`]).
+//!
+//! A saved model is a folder: `model.bpk` (the flow's weights), `model.json` ([`SavedModel`]:
+//! the config, the robot as given and its fingerprint, joint names, ranges, the position
+//! normalisation). The condition of a target: its position normalised per axis over the
+//! training positions' bounds, then (unless the model is position-only) its unit quaternion
+//! (w, x, y, z) with `w >= 0`.
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::tensor::Device;
+use nalgebra::Point3;
+
+use crate::core::atomic_file::write_json;
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::ik::data::{IkData, IkDataConfig};
+use crate::ik::flow::{FlowConfig, FlowIk, fit_flow, sample_rows};
+use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve};
+use crate::sim::kinematics::KinematicChain;
+use crate::sim::robot::Robot;
+use crate::sim::robots::RobotSpec;
+
+/// How a pose model is trained and answers.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PoseModelConfig {
+    pub preset: String,
+    /// Joint samples (drawn within the limits, narrowed to +-`range_deg`).
+    pub data: IkDataConfig,
+    pub flow: FlowConfig,
+    /// Condition on the position only (the EMSSL paper's setting).
+    pub position_only: bool,
+    pub lm: LmConfig,
+}
+
+impl Preset for PoseModelConfig {
+    /// 200,000 samples, the standard flow trained to a validation plateau.
+    fn paper() -> Self {
+        let mut flow = FlowConfig::standard();
+        flow.fit.converge = Some(crate::train::trainer::Convergence::standard());
+        PoseModelConfig {
+            preset: "paper".into(),
+            data: IkDataConfig {
+                samples: 210_000,
+                train: 200_000,
+                range_deg: 180.0,
+                seed: 0,
+                validation: 5_000,
+            },
+            flow,
+            position_only: false,
+            lm: LmConfig::standard(),
+        }
+    }
+
+    /// 3,000 samples, a small flow, 5 epochs: seconds.
+    fn quick() -> Self {
+        let mut flow = FlowConfig::standard();
+        flow.couplings = 4;
+        flow.hidden = vec![32, 32];
+        flow.fit.epochs = 5;
+        flow.fit.converge = None;
+        PoseModelConfig {
+            preset: "quick".into(),
+            data: IkDataConfig {
+                samples: 3_000,
+                train: 2_900,
+                range_deg: 180.0,
+                seed: 0,
+                validation: 0,
+            },
+            flow,
+            position_only: false,
+            lm: LmConfig::standard(),
+        }
+    }
+}
+
+/// What `model.json` holds.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SavedModel {
+    pub config: PoseModelConfig,
+    pub robot: RobotSpec,
+    /// [`fingerprint`] of the robot's chain: a model answers only for the robot it learned.
+    pub robot_fingerprint: String,
+    pub joint_names: Vec<String>,
+    /// Each joint's range (SI).
+    pub ranges: Vec<[f64; 2]>,
+    pub position_bounds: [[f64; 3]; 2],
+    pub git_revision: String,
+}
+
+/// A trained model ready to answer.
+pub struct PoseModel {
+    pub saved: SavedModel,
+    pub flow: FlowIk,
+    /// The data's normalisations (joints and positions), rebuilt from `saved`.
+    data: IkData,
+}
+
+/// A stable fingerprint of a chain (FNV-1a over its joints, limits and tip): the same robot
+/// description gives the same string on every machine.
+pub fn fingerprint(chain: &KinematicChain) -> String {
+    let mut text = format!(
+        "tip {} {:?};",
+        chain.links[chain.tip_link], chain.tip_offset
+    );
+    for j in &chain.joints {
+        let (r, p, y) = j.origin.rotation.euler_angles();
+        let t = j.origin.translation.vector;
+        text += &format!(
+            "{} {:?} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:?} {:?} {:?};",
+            j.name,
+            j.kind,
+            t.x,
+            t.y,
+            t.z,
+            r,
+            p,
+            y,
+            j.axis.as_slice(),
+            j.limits,
+            j.mimic.map(|m| (m.leader, m.multiplier, m.offset))
+        );
+    }
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// The condition rows of `targets` (position normalised, then the quaternion with `w >= 0`).
+fn condition_rows(data: &IkData, targets: &[PoseTarget], position_only: bool) -> Vec<f32> {
+    let mut rows = Vec::with_capacity(targets.len() * 7);
+    for t in targets {
+        rows.extend(data.normalise_position(&t.position));
+        if !position_only {
+            let q = t
+                .orientation
+                .expect("a full-pose model's targets have orientations");
+            let c = q.coords; // (x, y, z, w)
+            let sign = if c.w < 0.0 { -1.0 } else { 1.0 };
+            rows.extend([c.w, c.x, c.y, c.z].map(|v| (sign * v) as f32));
+        }
+    }
+    rows
+}
+
+/// Train a model of `robot` (as `spec` names it) and save it into `dir`.
+pub fn train(
+    spec: &RobotSpec,
+    robot: &Robot,
+    cfg: &PoseModelConfig,
+    dir: &Path,
+    device: &Device,
+) -> Result<PoseModel> {
+    let chain = &robot.chain;
+    let data = IkData::generate(chain, &cfg.data)?;
+    let targets: Vec<PoseTarget> = data.joints[data.train()]
+        .iter()
+        .map(|q| PoseTarget::of(chain, q))
+        .collect();
+    let width = if cfg.position_only { 3 } else { 7 };
+    let validation: Vec<PoseTarget> = data.joints[data.validation()]
+        .iter()
+        .map(|q| PoseTarget::of(chain, q))
+        .collect();
+    let val_rows = condition_rows(&data, &validation, cfg.position_only);
+    let batch = cfg.flow.fit.inference_batch;
+    let trained = fit_flow(
+        &data,
+        condition_rows(&data, &targets, cfg.position_only),
+        width,
+        &cfg.flow,
+        device,
+        |m: &FlowIk| {
+            // One sample per validation target: its mean position error (cm).
+            let q = sample_rows(m, &data, &val_rows, 1, batch, 0x7A1, device)
+                .pop()
+                .unwrap_or_default();
+            let n = q.len().max(1) as f64;
+            q.iter()
+                .zip(&validation)
+                .map(|(q, t)| 100.0 * pose_error(chain, q, t).0)
+                .sum::<f64>()
+                / n
+        },
+    )?;
+    let saved = SavedModel {
+        config: cfg.clone(),
+        robot: spec.clone(),
+        robot_fingerprint: fingerprint(chain),
+        joint_names: chain.joint_names(),
+        ranges: data.ranges.clone(),
+        position_bounds: data.position_bounds,
+        git_revision: crate::core::provenance::git_revision(),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::train::trainer::save_module(&trained.model, &dir.join("model.bpk"))?;
+    write_json(&dir.join("model.json"), &saved)?;
+    Ok(PoseModel {
+        saved,
+        flow: trained.model,
+        data,
+    })
+}
+
+impl PoseModel {
+    /// Load a saved model from `dir`.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let json = dir.join("model.json");
+        let text = std::fs::read_to_string(&json).map_err(|e| Error::io(&json, e))?;
+        let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
+            Error::data(
+                &json,
+                format!("not a saved IK model ({e}); make one with `ik train`"),
+            )
+        })?;
+        let dof = saved.joint_names.len();
+        let width = if saved.config.position_only { 3 } else { 7 };
+        let file = dir.join("model.bpk");
+        let flow = FlowIk::conditioned(&saved.config.flow, dof, width, device, 0)?
+            .try_load_file(&file)
+            .map_err(|e| {
+                Error::data(
+                    &file,
+                    format!(
+                        "the model's weights cannot be read ({e}); train it again with `ik train`"
+                    ),
+                )
+            })?;
+        let data = IkData {
+            joints: Vec::new(),
+            positions: Vec::new(),
+            n_train: 0,
+            n_validation: 0,
+            ranges: saved.ranges.clone(),
+            position_bounds: saved.position_bounds,
+        };
+        Ok(PoseModel { saved, flow, data })
+    }
+
+    /// Refuse `robot` unless it is the robot the model learned.
+    pub fn check_robot(&self, robot: &Robot) -> Result<()> {
+        let print = fingerprint(&robot.chain);
+        if print != self.saved.robot_fingerprint {
+            return Err(Error::Config(format!(
+                "this model was trained for another robot ({}, joints {}; fingerprint {} against {}): train one for this robot with `ik train`",
+                self.saved.robot.label(),
+                self.saved.joint_names.join(", "),
+                self.saved.robot_fingerprint,
+                print
+            )));
+        }
+        Ok(())
+    }
+
+    /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
+    /// (with random restarts where the samples stall, for `k = 1`), in target order.
+    pub fn solve(
+        &self,
+        chain: &KinematicChain,
+        targets: &[PoseTarget],
+        k: usize,
+        device: &Device,
+    ) -> Vec<Vec<PoseSolution>> {
+        let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
+        let k = k.max(1);
+        let samples = sample_rows(&self.flow, &self.data, &rows, k, 1024, 0x5EED, device);
+        let cfg = &self.saved.config.lm;
+        let ranges = &self.saved.ranges;
+        use rayon::prelude::*;
+        targets
+            .par_iter()
+            .enumerate()
+            .map(|(i, t)| {
+                if k == 1 {
+                    vec![solve(
+                        chain,
+                        t,
+                        &[samples[0][i].clone()],
+                        ranges,
+                        cfg,
+                        i as u64,
+                    )]
+                } else {
+                    // Each sample refined on its own: the family of answers, not one.
+                    let no_restarts = LmConfig {
+                        random_starts: 0,
+                        ..cfg.clone()
+                    };
+                    (0..k)
+                        .map(|s| {
+                            solve(
+                                chain,
+                                t,
+                                &[samples[s][i].clone()],
+                                ranges,
+                                &no_restarts,
+                                i as u64,
+                            )
+                        })
+                        .collect()
+                }
+            })
+            .collect()
+    }
+
+    /// The flow's own answers (one sample per target, no refinement).
+    pub fn sample(&self, targets: &[PoseTarget], device: &Device) -> Vec<Vec<f64>> {
+        let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
+        sample_rows(&self.flow, &self.data, &rows, 1, 1024, 0x5EED, device)
+            .pop()
+            .unwrap_or_default()
+    }
+
+    pub fn position_only(&self) -> bool {
+        self.saved.config.position_only
+    }
+
+    pub fn dof(&self) -> usize {
+        self.saved.joint_names.len()
+    }
+}
+
+/// Joint vectors more than `apart` (rad) apart in some joint, counted greedily.
+pub fn distinct(solutions: &[&[f64]], apart: f64) -> usize {
+    let mut kept: Vec<&[f64]> = Vec::new();
+    for s in solutions {
+        if kept
+            .iter()
+            .all(|k| k.iter().zip(s.iter()).any(|(a, b)| (a - b).abs() > apart))
+        {
+            kept.push(s);
+        }
+    }
+    kept.len()
+}
+
+/// A target file's rows: `x,y,z,qw,qx,qy,qz` (metres; a header names the columns, others
+/// are ignored), or `x,y,z` alone when `position_only`. A bad row fails naming its line.
+pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>> {
+    let bad = |msg: String| Error::data(path, msg);
+    let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(file);
+    let header = reader
+        .headers()
+        .map_err(|e| bad(format!("line 1: {e}")))?
+        .clone();
+    let need: &[&str] = if position_only {
+        &["x", "y", "z"]
+    } else {
+        &["x", "y", "z", "qw", "qx", "qy", "qz"]
+    };
+    let cols: Vec<usize> = need
+        .iter()
+        .map(|n| {
+            header.iter().position(|h| h == *n).ok_or_else(|| {
+                bad(format!(
+                    "line 1: no column \"{n}\" (the header must name {}{})",
+                    need.join(","),
+                    if position_only {
+                        ""
+                    } else {
+                        "; a position-only model takes x,y,z"
+                    }
+                ))
+            })
+        })
+        .collect::<Result<_>>()?;
+    let mut out = Vec::new();
+    for (i, rec) in reader.records().enumerate() {
+        let line = i + 2;
+        let rec = rec.map_err(|e| bad(format!("line {line}: {e}")))?;
+        let v: Vec<f64> = cols
+            .iter()
+            .map(|&c| {
+                let cell = rec.get(c).unwrap_or("");
+                cell.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| bad(format!("line {line}: \"{cell}\" is not a finite number")))
+            })
+            .collect::<Result<_>>()?;
+        let position = Point3::new(v[0], v[1], v[2]);
+        let orientation = if position_only {
+            None
+        } else {
+            let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
+            let norm = q.norm();
+            if !(0.9..=1.1).contains(&norm) {
+                return Err(bad(format!(
+                    "line {line}: the quaternion (qw, qx, qy, qz) has norm {norm:.4}, not 1"
+                )));
+            }
+            Some(nalgebra::UnitQuaternion::from_quaternion(q))
+        };
+        out.push(PoseTarget {
+            position,
+            orientation,
+        });
+    }
+    if out.is_empty() {
+        return Err(bad("no targets (a header and at least one row)".into()));
+    }
+    Ok(out)
+}
