@@ -16,6 +16,22 @@ use selfmodel::sim::tensor_kinematics::TensorChain;
 use selfmodel::sim::trajectory::{SamplerKind, babbling, grid, lorenz};
 use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf, load_urdf_with};
 
+/// Load `urdf` with its end effector at `tip`.
+fn tipped(
+    urdf: &Path,
+    tip: &str,
+    geometry: GeometryKind,
+) -> selfmodel::Result<selfmodel::sim::robot::Robot> {
+    load_urdf_with(
+        urdf,
+        &UrdfOptions {
+            tip: Some(tip.into()),
+            geometry,
+            ..UrdfOptions::default()
+        },
+    )
+}
+
 /// A one-link robot whose link is the mesh `file` (scaled by `scale`).
 fn mesh_robot(dir: &Path, file: &str, scale: f64) -> selfmodel::sim::robot::Robot {
     let urdf = dir.join(format!("{file}.urdf"));
@@ -93,14 +109,7 @@ fn a_fixed_joint_with_a_zero_axis_loads_and_mimic_fingers_follow_their_leader() 
     }
     // A mimic on the path adds its motion to its leader's Jacobian column: check against
     // finite differences with the tip on the mimic finger.
-    let tipped = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("finger_b".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let tipped = tipped(&urdf, "finger_b", GeometryKind::Visual).unwrap();
     // finger_b mimics finger_a, which is off the path to finger_b: its leader is still the
     // input that moves it (-1 m of tip per m of finger_a along y).
     assert_eq!(tipped.dof(), 4);
@@ -122,28 +131,15 @@ fn a_fixed_joint_with_a_zero_axis_loads_and_mimic_fingers_follow_their_leader() 
 fn tip_chooses_the_chain_and_joints_off_it_are_held() {
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 7, true);
-    let robot = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("hand".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let robot = tipped(&urdf, "hand", GeometryKind::Visual).unwrap();
     assert_eq!(robot.dof(), 7);
     let frames = robot.link_frames(&[0.1; 7]);
     let link = |name: &str| robot.chain.links.iter().position(|l| l == name).unwrap();
     let offset = frames[link("hand")].inverse() * frames[link("finger_a")];
     assert!((offset.translation.vector - Vector3::new(0.0, 0.0, 0.04)).norm() < 1e-12);
-    let err = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("gripper".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap_err()
-    .to_string();
+    let err = tipped(&urdf, "gripper", GeometryKind::Visual)
+        .unwrap_err()
+        .to_string();
     assert!(
         err.contains("--tip \"gripper\" is not a link")
             && err.contains("hand")
@@ -156,14 +152,7 @@ fn tip_chooses_the_chain_and_joints_off_it_are_held() {
 fn a_prismatic_joint_moves_the_tip_by_metres() {
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 2, true);
-    let robot = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("finger_a".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let robot = tipped(&urdf, "finger_a", GeometryKind::Visual).unwrap();
     assert_eq!(robot.dof(), 3);
     let closed = robot.end_effector(&[0.0, 0.0, 0.0]);
     let open = robot.end_effector(&[0.0, 0.0, 0.04]);
@@ -248,15 +237,7 @@ fn bad_limits_and_scales_are_errors() {
 fn samplers_learned_outputs_and_dls_stay_inside_asymmetric_limits() {
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 7, true);
-    let robot = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("hand".into()),
-            geometry: GeometryKind::None,
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let robot = tipped(&urdf, "hand", GeometryKind::None).unwrap();
     let chain = &robot.chain;
     let si = chain.joint_ranges();
     let user = chain.joint_ranges_user();
@@ -321,14 +302,7 @@ fn samplers_learned_outputs_and_dls_stay_inside_asymmetric_limits() {
 fn automatic_framing_keeps_every_sampled_pose_inside_the_image() {
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 7, true);
-    let robot = load_urdf_with(
-        &urdf,
-        &UrdfOptions {
-            tip: Some("hand".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let robot = tipped(&urdf, "hand", GeometryKind::Visual).unwrap();
     let mut cfg = DatasetConfig::quick();
     cfg.samples = 300;
     cfg.train = 240;
@@ -396,14 +370,7 @@ fn the_panda_and_the_ur5_load_as_ros_ships_them() {
         eprintln!("skipped: the shared robots are not beside the repository");
         return;
     }
-    let robot = load_urdf_with(
-        &panda,
-        &UrdfOptions {
-            tip: Some("panda_hand".into()),
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let robot = tipped(&panda, "panda_hand", GeometryKind::Visual).unwrap();
     assert_eq!(robot.dof(), 7);
     assert!(
         robot.shape_count() > 10_000,
@@ -412,22 +379,12 @@ fn the_panda_and_the_ur5_load_as_ros_ships_them() {
     );
     // Joint 4 must stay below -0.07 rad: the samplers keep it there.
     assert!(robot.chain.joint_ranges()[3][1] < -0.06);
-    let collision = load_urdf_with(
-        &panda,
-        &UrdfOptions {
-            tip: Some("panda_hand".into()),
-            geometry: GeometryKind::Collision,
-            ..UrdfOptions::default()
-        },
-    )
-    .unwrap();
+    let collision = tipped(&panda, "panda_hand", GeometryKind::Collision).unwrap();
     assert!(collision.shape_count() < robot.shape_count());
-    let ur5 = load_urdf_with(
+    let ur5 = tipped(
         &shared.join("ur_description/urdf/ur5.urdf"),
-        &UrdfOptions {
-            tip: Some("tool0".into()),
-            ..UrdfOptions::default()
-        },
+        "tool0",
+        GeometryKind::Visual,
     )
     .unwrap();
     assert_eq!(ur5.dof(), 6);

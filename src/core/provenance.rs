@@ -3,7 +3,10 @@
 /// The code a run started from: `git describe --always` of the working tree when this process
 /// first asked, with `-dirty` when the code differs from that commit (the sources, the
 /// experiments, the manifest and lock file; not `reports/`, which other runs write while this
-/// one trains), or "unknown". Read once; binaries ask at start.
+/// one trains), or "unknown". Read once; binaries ask at start. The working tree is the one
+/// the binary was built from (`CARGO_MANIFEST_DIR`): a long run from a copy of a binary while
+/// that tree moves on records the tree's revision at the run's start, not the binary's; build
+/// such a run's binary in a `git worktree` of its commit, which stays put.
 pub fn git_revision() -> String {
     static REVISION: std::sync::OnceLock<String> = std::sync::OnceLock::new();
     REVISION

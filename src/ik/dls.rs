@@ -114,12 +114,12 @@ pub fn solve(
 }
 
 /// Whether a joint range is the whole circle (its ends are one pose).
-fn wraps([lo, hi]: [f64; 2]) -> bool {
+pub(crate) fn wraps([lo, hi]: [f64; 2]) -> bool {
     hi - lo >= 2.0 * std::f64::consts::PI - 1e-9
 }
 
 /// `v` kept in `range`: wrapped around when the range is the whole circle, clamped otherwise.
-fn keep_in(v: f64, range: [f64; 2]) -> f64 {
+pub(crate) fn keep_in(v: f64, range: [f64; 2]) -> f64 {
     let [lo, hi] = range;
     if wraps(range) {
         lo + (v - lo).rem_euclid(2.0 * std::f64::consts::PI)

@@ -17,6 +17,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 
+use crate::ik::dls::keep_in;
 use crate::sim::kinematics::KinematicChain;
 
 /// An inverse-kinematics target: a position (m) and, for a full-pose target, an orientation.
@@ -109,21 +110,6 @@ impl PoseSolution {
     /// Within both tolerances.
     pub fn exact(&self, cfg: &LmConfig) -> bool {
         self.position_error_m <= cfg.tolerance_m && self.rotation_error_rad <= cfg.tolerance_rad
-    }
-}
-
-/// Whether a joint range is the whole circle (its ends are one pose).
-fn wraps([lo, hi]: [f64; 2]) -> bool {
-    hi - lo >= 2.0 * std::f64::consts::PI - 1e-9
-}
-
-/// `v` kept in `range`: wrapped when the range is the whole circle, clamped otherwise.
-fn keep_in(v: f64, range: [f64; 2]) -> f64 {
-    let [lo, hi] = range;
-    if wraps(range) {
-        lo + (v - lo).rem_euclid(2.0 * std::f64::consts::PI)
-    } else {
-        v.clamp(lo, hi)
     }
 }
 

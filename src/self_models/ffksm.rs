@@ -586,24 +586,20 @@ fn train_field(
     let (h, w) = (camera.height, camera.width);
     let all: Vec<usize> = (0..h * w).collect();
     let crop = centre_crop(h, w, cfg.curriculum.crop);
+    // The first training sample's row of a tensor, on the host.
+    fn first<const D: usize>(t: &Tensor<D>) -> Vec<f32> {
+        t.clone()
+            .slice([0..1])
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("float")
+    }
     // The first training image's angles, where collapse is probed.
-    let probe_truth: Vec<f32> = train_set
-        .inputs
-        .clone()
-        .slice([0..1])
-        .into_data()
-        .convert::<f32>()
-        .try_to_vec::<f32>()
-        .expect("float");
+    let probe_truth = first(&train_set.inputs);
     // An all-black probe is a collapse only where the truth has robot pixels in the crop (a
     // robot framed automatically may lie outside the centre crop in that pose).
-    let probe_image: Vec<f32> = train_set.targets[0]
-        .clone()
-        .slice([0..1])
-        .into_data()
-        .convert::<f32>()
-        .try_to_vec::<f32>()
-        .expect("float");
+    let probe_image = first(&train_set.targets[0]);
     let probe_sees_robot = crop.iter().any(|&p| probe_image[p] >= 0.5);
     let resume = plan.resume;
     // Restarts after collapse so far, so a resumed run reports them (and initialises the same

@@ -499,34 +499,10 @@ impl KinematicChain {
     /// The end effector's position Jacobian `[3, dof]` (m per SI unit) at `q`, analytic:
     /// column k is `axis_k x (p_tip - o_k)` for a rotational joint and `axis_k` for a
     /// prismatic one, zero for a joint that does not move the tip; a mimic joint on the path
-    /// adds its own column, times its multiplier, to its leader's.
+    /// adds its own column, times its multiplier, to its leader's. The first three rows of
+    /// [`Self::pose_jacobian`].
     pub fn position_jacobian(&self, q: &[f64]) -> nalgebra::Matrix3xX<f64> {
-        let frames = self.link_frames(q);
-        let tip = frames[self.tip_link] * self.tip_offset;
-        // Joints on the path from the root to the tip link.
-        let mut moves_tip = vec![false; self.joints.len()];
-        let mut link = self.tip_link;
-        while let Some(j) = self.joints.iter().position(|j| j.child == link) {
-            moves_tip[j] = true;
-            link = self.joints[j].parent;
-        }
-        let mut jac = nalgebra::Matrix3xX::zeros(self.dof());
-        for (j, joint) in self.joints.iter().enumerate() {
-            let (JointValue::Input { index, scale, .. }, true) = (self.values[j], moves_tip[j])
-            else {
-                continue;
-            };
-            let f = frames[joint.parent] * joint.origin;
-            let axis = f * joint.axis.into_inner();
-            let column = if joint.kind.is_rotational() {
-                axis.cross(&(tip - f * Point3::origin()))
-            } else {
-                axis
-            };
-            let sum = jac.column(index) + column * scale;
-            jac.set_column(index, &sum);
-        }
-        jac
+        self.pose_jacobian(q).fixed_rows::<3>(0).into_owned()
     }
 
     /// World pose of the end effector: the tip link's orientation at the tip point.
