@@ -6,7 +6,14 @@ Robotics Toolbox for Python (`pip install roboticstoolbox-python`): its compiled
 Levenberg-Marquardt `ets.ik_LM`, on its built-in model of the robot (its Panda; the script
 checks that model's forward kinematics against the targets' joints first).
 
-    python3 scripts/ik_reference.py panda data/ik/panda_targets.csv
+TRAC-IK through PyPI `pytracik` (`pip install pytracik`), given the URDF: its parser reads
+the Panda's `<safety_controller soft_lower_limit soft_upper_limit>` as 0, and TRAC-IK bounds
+each joint by the intersection of its hard and soft limits, so every joint is pinned to [0, 0]
+(joint 4 to the empty [0, -0.0698]) and every pose fails with -3. The script drops the
+`<safety_controller>` elements (the soft limits equal the hard ones in Franka's description)
+and prints the bounds TRAC-IK then reads.
+
+    python3 scripts/ik_reference.py panda data/ik/panda_targets.csv [URDF BASE_LINK]
 """
 import csv
 import sys
@@ -15,6 +22,7 @@ import time
 import numpy as np
 
 robot_name, path = sys.argv[1:3]
+urdf_base = sys.argv[3:5]
 try:
     import roboticstoolbox as rtb
     from spatialmath import SE3, UnitQuaternion
@@ -51,3 +59,33 @@ print(
     f"roboticstoolbox ik_LM: {len(targets)} targets, {exact} solved exactly "
     f"({100 * exact / len(targets):.2f}%), {exact / seconds:.0f} exact solutions/s on 1 thread"
 )
+
+if len(urdf_base) == 2:
+    try:
+        import pytracik
+    except ImportError:
+        print("skipped TRAC-IK: pytracik is not installed (pip install pytracik)")
+        sys.exit(0)
+    import re
+
+    text = re.sub(r"<safety_controller[^>]*/>", "", open(urdf_base[0]).read())
+    solver = pytracik.TRAC_IK(urdf_base[1], tip, text, 0.005, 1e-5, pytracik.SolveType.Speed)
+    lo = np.array(pytracik.get_joint_lower_bounds(solver))
+    hi = np.array(pytracik.get_joint_upper_bounds(solver))
+    print(f"TRAC-IK reads bounds {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()}")
+    t0 = time.perf_counter()
+    exact = 0
+    for r, t in zip(rows, targets):
+        out = pytracik.ik(solver, np.zeros(len(lo)), *[float(r[k]) for k in ("x", "y", "z", "qx", "qy", "qz", "qw")])
+        if out[0] < 0:
+            continue
+        q = np.array(out[1 : 1 + len(lo)])
+        e = ets.fkine(q)
+        dp = np.linalg.norm(e.t - t.t)
+        dr = np.linalg.norm((e.inv() * t).angvec()[0])
+        exact += dp <= 1e-3 and dr <= 0.01 and np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
+    seconds = time.perf_counter() - t0
+    print(
+        f"TRAC-IK (Speed, 5 ms): {len(targets)} targets, {exact} solved exactly "
+        f"({100 * exact / len(targets):.2f}%), {exact / seconds:.0f} exact solutions/s on 1 thread"
+    )
