@@ -624,3 +624,54 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         &out,
     );
 }
+
+/// `mesh_fidelity --pybullet` given one of our own datasets (not PyBullet's renders) refuses it
+/// in one line and writes nothing.
+#[test]
+fn mesh_fidelity_refuses_our_own_dataset_as_the_pybullet_reference() {
+    if !selfmodel::cli::shared_arm_urdf().exists() {
+        eprintln!("skipped: the shared meshes are not beside the repository");
+        return;
+    }
+    let dir = common::tempdir();
+    let d = dir.path();
+    let ours = d.join("ours.npz");
+    let made = dataset(&["--preset", "quick", "--out", ours.to_str().unwrap()]);
+    assert!(made.status.success());
+    let out = d.join("fidelity");
+    fails_cleanly(
+        env!("CARGO_BIN_EXE_mesh_fidelity"),
+        &[
+            "--preset",
+            "quick",
+            "--pybullet",
+            ours.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["ours.npz", "not PyBullet's renders"],
+        &out,
+    );
+}
+
+/// A camera that misses the robot: `dataset` refuses it with what to do, and writes nothing.
+#[test]
+fn a_dataset_with_the_robot_out_of_view_is_refused() {
+    let dir = common::tempdir();
+    let out = dir.path().join("d.npz");
+    fails_cleanly(
+        env!("CARGO_BIN_EXE_dataset"),
+        &[
+            "--preset",
+            "quick",
+            "--eye",
+            "1,0,0",
+            "--target",
+            "2,0,0",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["out of view", "--view"],
+        &out,
+    );
+}

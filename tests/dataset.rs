@@ -270,3 +270,40 @@ fn a_killed_writers_temporary_file_is_removed_by_the_next_write() {
     live.kill().unwrap();
     live.wait().unwrap();
 }
+
+/// A member whose zip64 header claims 2^62 bytes (or 2^64 - 1) is a clear error, not an
+/// allocation of that size (which aborted the process).
+#[test]
+fn an_npz_member_claiming_an_impossible_size_is_refused_without_allocating_it() {
+    use selfmodel::data::npz::{Array, read_npz, write_npz};
+    let dir = common::tempdir();
+    let path = dir.path().join("forged.npz");
+    write_npz(&path, &[("a", &Array::f64(&[3], vec![1.0, 2.0, 3.0]))]).unwrap();
+    let good = std::fs::read(&path).unwrap();
+    for claim in [1u64 << 62, u64::MAX] {
+        let mut bytes = good.clone();
+        // Every zip64 extra field (id 0x0001): its first value is the uncompressed size.
+        let mut patched = 0;
+        let mut i = 0;
+        while i + 12 <= bytes.len() {
+            if bytes[i..i + 2] == [1, 0] && bytes[i + 2] >= 8 && bytes[i + 3] == 0 {
+                let size = u64::from_le_bytes(bytes[i + 4..i + 12].try_into().unwrap());
+                if size > 0 && size < 1 << 20 {
+                    bytes[i + 4..i + 12].copy_from_slice(&claim.to_le_bytes());
+                    patched += 1;
+                }
+            }
+            i += 1;
+        }
+        assert!(patched >= 1, "no zip64 size field found");
+        std::fs::write(&path, &bytes).unwrap();
+        let start = std::time::Instant::now();
+        // Whatever the zip reader makes of the claim, the answer is a clean one (an error
+        // naming the file, or the three real values), quickly and without a huge allocation.
+        match read_npz(&path) {
+            Ok(arrays) => assert_eq!(arrays["a"].to_f64(), vec![1.0, 2.0, 3.0]),
+            Err(e) => assert!(e.to_string().contains("forged.npz"), "{e}"),
+        }
+        assert!(start.elapsed().as_secs_f64() < 5.0);
+    }
+}

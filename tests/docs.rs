@@ -68,3 +68,38 @@ fn every_listed_experiment_is_a_binary() {
         "experiments without a binary: {missing:?}"
     );
 }
+
+/// A metric that is not a number is an error naming the file, the row and the column: in a
+/// quoted value (NaN included) and in a table column of numbers.
+#[test]
+fn a_non_numeric_metric_is_an_error_naming_file_row_and_column() {
+    let dir = tempfile_dir();
+    std::fs::write(dir.join("m.csv"), "model,psnr\na,21.5\nb,abc\nc,NaN\n").unwrap();
+    let err = render(&dir, "{{table m.csv}}").unwrap_err().to_string();
+    assert!(
+        err.contains("m.csv")
+            && err.contains("row 2")
+            && err.contains("`psnr`")
+            && err.contains("abc"),
+        "{err}"
+    );
+    let err = render(&dir, "{{value m.csv | row: model=c | col: psnr}}")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("row 3") && err.contains("NaN"), "{err}");
+    // A column of text stays text; a number quoted in prose still reads.
+    std::fs::write(
+        dir.join("n.csv"),
+        "model,psnr,note\na,21.5,fine\nb,20,also fine\n",
+    )
+    .unwrap();
+    assert!(
+        render(&dir, "{{table n.csv}}")
+            .unwrap()
+            .contains("also fine")
+    );
+    assert_eq!(
+        render(&dir, "{{value n.csv | row: model=b | col: psnr}}").unwrap(),
+        "20"
+    );
+}

@@ -683,3 +683,27 @@ fn a_checkpoint_without_a_recorded_robot_resumes_and_one_of_another_robot_is_ref
         .to_string();
     assert!(err.contains("different configuration"), "{err}");
 }
+
+/// `--resume` over a damaged `evaluations.json` is an error naming it, not a run that reports
+/// "0 evaluations per step".
+#[test]
+fn a_damaged_evaluation_count_is_an_error_on_resume() {
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
+    let mut cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
+    cfg.train.steps = 20;
+    cfg.train.checkpoint_every = 10;
+    let dir = common::tempdir();
+    selfmodel::self_models::harness::run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
+    let counts = dir.path().join("checkpoint/evaluations.json");
+    assert!(counts.is_file());
+    std::fs::write(&counts, "[12, oops").unwrap();
+    let err = selfmodel::self_models::harness::run(&cfg, dir.path(), DeviceChoice::Cpu, true)
+        .err()
+        .expect("a damaged count must not pass")
+        .to_string();
+    assert!(
+        err.contains("evaluations.json") && err.contains("damaged") && !err.contains('\n'),
+        "{err}"
+    );
+}

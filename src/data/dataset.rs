@@ -244,6 +244,21 @@ impl Dataset {
         })
     }
 
+    /// Refuse a dataset in which the robot is out of view in most images (a camera that
+    /// misses the robot), with what to do about it.
+    pub fn check_in_view(&self) -> Result<()> {
+        let empty = (0..self.len())
+            .filter(|&i| self.image(i).iter().all(|&v| v == 0))
+            .count();
+        if 2 * empty > self.len() {
+            return Err(Error::Config(format!(
+                "the robot is out of view in {empty} of {} images: aim the camera at it (--eye, --target, --fov) or let it frame the robot (--view X,Y,Z)",
+                self.len()
+            )));
+        }
+        Ok(())
+    }
+
     /// Sample joint vectors with the config's sampler and render them.
     pub fn generate(
         robot: &Robot,
@@ -656,6 +671,7 @@ pub fn build_and_save(
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    data.check_in_view()?;
     let write_start = std::time::Instant::now();
     data.save(out)?;
     let write_seconds = write_start.elapsed().as_secs_f64();

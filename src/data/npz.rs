@@ -135,12 +135,20 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
     })
 }
 
+/// The most an `.npz` may decompress to (every member together): 8 GiB, what a dataset may
+/// hold in memory.
+pub const MAX_NPZ_BYTES: u64 = 8 << 30;
+
+/// The buffer a member starts with, whatever size it claims (it grows as bytes arrive).
+const INITIAL_CAPACITY: u64 = 64 << 20;
+
 /// Read every array of an `.npz` file, by key (the member name without `.npy`).
 pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut zip = zip::ZipArchive::new(BufReader::new(file))
         .map_err(|e| Error::data(path, format!("not an .npz file (bad zip: {e})")))?;
     let mut out = BTreeMap::new();
+    let mut total: u64 = 0;
     for i in 0..zip.len() {
         let mut member = zip
             .by_index(i)
@@ -150,10 +158,24 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
             .map_err(|e| Error::data(path, format!("corrupt .npz member {i}: {e}")))?
             .to_string();
         let key = name.strip_suffix(".npy").unwrap_or(&name).to_string();
-        let mut bytes = Vec::with_capacity(member.size() as usize);
-        member
+        // The size a member claims is not trusted: the buffer starts small, grows with the
+        // bytes that really arrive, and decompression stops past the limit (a zip bomb).
+        let room = MAX_NPZ_BYTES.saturating_sub(total);
+        let mut bytes = Vec::with_capacity(member.size().min(INITIAL_CAPACITY) as usize);
+        (&mut member)
+            .take(room + 1)
             .read_to_end(&mut bytes)
             .map_err(|e| Error::data(path, format!("corrupt .npz member \"{name}\": {e}")))?;
+        if bytes.len() as u64 > room {
+            return Err(Error::data(
+                path,
+                format!(
+                    "\"{key}\" decompresses to more than the {} GiB an .npz may hold here (a damaged or hostile file)",
+                    MAX_NPZ_BYTES >> 30
+                ),
+            ));
+        }
+        total += bytes.len() as u64;
         let bad = |e: std::io::Error| {
             Error::data(path, format!("\"{key}\" is not a valid .npy array: {e}"))
         };

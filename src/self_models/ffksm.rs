@@ -568,9 +568,21 @@ fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json:
     print
 }
 
-/// A count a run keeps beside its checkpoint (JSON), if the file is there and reads.
-fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
-    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
+/// A count a run keeps beside its checkpoint (JSON): `None` when the file is not there; an
+/// error naming it when it is there but damaged (a resumed run would report wrong counts).
+fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    serde_json::from_str(&text).map(Some).map_err(|e| {
+        Error::data(
+            path,
+            format!(
+                "damaged ({e}); delete the checkpoint folder it sits in and train again without --resume"
+            ),
+        )
+    })
 }
 
 /// Train the field, restarting with a fresh model on collapse when the config asks for it:
@@ -605,17 +617,19 @@ fn train_field(
     // Restarts after collapse so far, so a resumed run reports them (and initialises the same
     // model).
     let restarts_path = plan.dir.join("restarts.json");
-    let mut restarts: usize = resume
-        .then(|| read_kept(&restarts_path))
-        .flatten()
-        .unwrap_or(0);
+    let mut restarts: usize = if resume {
+        read_kept(&restarts_path)?.unwrap_or(0)
+    } else {
+        0
+    };
     // Network evaluations and steps of training, so a resumed run reports them for all its
     // steps (`[evaluations, steps]`).
     let counts_path = plan.dir.join("evaluations.json");
-    let earlier: [usize; 2] = resume
-        .then(|| read_kept(&counts_path))
-        .flatten()
-        .unwrap_or([0, 0]);
+    let earlier: [usize; 2] = if resume {
+        read_kept(&counts_path)?.unwrap_or([0, 0])
+    } else {
+        [0, 0]
+    };
     let train_evaluations = std::cell::Cell::new(earlier[0]);
     let train_steps = std::cell::Cell::new(earlier[1]);
     loop {

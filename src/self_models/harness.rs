@@ -268,6 +268,7 @@ impl DataSpec {
             Some(path) => Dataset::load(path)?,
             None => Dataset::generate(&robot, &self.dataset, None)?,
         };
+        data.check_in_view()?;
         let (train, test) = data.split();
         let train = match self.train_samples {
             Some(k) if k > train.len() => {

@@ -110,6 +110,27 @@ fn expand(root: &Path, d: &Directive) -> Result<String> {
                 heads.join(" | "),
                 "---|".repeat(cols.len())
             );
+            // A column that holds numbers holds nothing but numbers (NaN: not measured).
+            for &c in &cols {
+                let numeric = |v: &str| v.parse::<f64>().is_ok();
+                if rows.iter().any(|r| numeric(&r[c]) && !r[c].contains("NaN")) {
+                    if let Some((i, r)) = rows
+                        .iter()
+                        .enumerate()
+                        .find(|(_, r)| !r[c].is_empty() && !numeric(&r[c]))
+                    {
+                        return Err(Error::data(
+                            &path,
+                            format!(
+                                "row {} column `{}`: \"{}\" is not a number, in a column of numbers",
+                                i + 1,
+                                header[c],
+                                r[c]
+                            ),
+                        ));
+                    }
+                }
+            }
             for r in &rows {
                 if matches(&header, r, &conditions, &path)? {
                     let cells: Vec<String> = cols.iter().map(|&c| format_cell(&r[c])).collect();
@@ -128,9 +149,21 @@ fn expand(root: &Path, d: &Directive) -> Result<String> {
                 &path,
             )?;
             let mut found = None;
-            for r in &rows {
+            for (i, r) in rows.iter().enumerate() {
                 if matches(&header, r, &conditions, &path)? {
-                    found = Some(format_cell(&r[col]));
+                    // A number quoted in prose must be one.
+                    let cell = &r[col];
+                    if !cell.parse::<f64>().is_ok_and(f64::is_finite) {
+                        return Err(Error::data(
+                            &path,
+                            format!(
+                                "row {} column `{}`: \"{cell}\" is not a finite number, and the docs quote it as one",
+                                i + 1,
+                                header[col]
+                            ),
+                        ));
+                    }
+                    found = Some(format_cell(cell));
                     break;
                 }
             }

@@ -159,6 +159,14 @@ pub fn run(cfg: &FidelityConfig, out: &Path) -> Result<Vec<FidelityRow>> {
         cfg,
     )];
     if let Some(path) = cfg.pybullet.as_deref().filter(|p| p.is_file()) {
+        // Our own datasets carry depth and a split; PyBullet's renders carry neither.
+        let keys = crate::data::npz::read_npz(path)?;
+        if keys.contains_key("depth") || keys.contains_key("n_train") {
+            return Err(Error::data(
+                path,
+                "a dataset written by our own `dataset`, not PyBullet's renders: comparing our renderer with itself says nothing; make the reference with scripts/pybullet_render.py",
+            ));
+        }
         let reference = Dataset::load(path)?;
         if reference.dof() != mesh.dof() {
             return Err(Error::data(
