@@ -27,7 +27,7 @@ struct Args {
     #[arg(long)]
     quick: bool,
     /// Write the table here as CSV.
-    #[arg(long, default_value = "reports/bench_decoders/results.csv")]
+    #[arg(long, default_value = "runs/bench_decoders/results.csv")]
     out: PathBuf,
 }
 

@@ -26,7 +26,7 @@ struct Args {
     #[arg(long)]
     quick: bool,
     /// Write the table here as CSV (and its Markdown beside it).
-    #[arg(long, default_value = "reports/bench_ffksm_step/results.csv")]
+    #[arg(long, default_value = "runs/bench_ffksm_step/results.csv")]
     out: PathBuf,
 }
 

@@ -29,7 +29,7 @@ struct Args {
     #[arg(long, value_name = "NPZ")]
     pybullet: Option<PathBuf>,
     /// Output folder.
-    #[arg(long, default_value = "reports/mesh_fidelity")]
+    #[arg(long, default_value = "runs/mesh_fidelity")]
     out: PathBuf,
 }
 

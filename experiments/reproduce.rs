@@ -15,7 +15,8 @@ struct Args {
     /// paper (the papers' settings) or quick (tiny, seconds).
     #[arg(long, default_value = "paper")]
     preset: String,
-    /// Write under this folder instead of the repository's data/ and reports/.
+    /// Write each experiment into ROOT/<its committed folder> (reports/..., data/) [default:
+    /// runs/, git-ignored; `--root .` regenerates the committed reports].
     #[arg(long)]
     root: Option<PathBuf>,
     /// Run only these experiments (names as in --list).
@@ -46,7 +47,10 @@ fn main() -> ExitCode {
                 "--only {unknown}: no such experiment (reproduce --list names them)"
             )));
         }
-        let root = args.root.clone().unwrap_or_else(|| PathBuf::from("."));
+        let root = args
+            .root
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(selfmodel::studies::run::RUNS));
         for e in EXPERIMENTS
             .iter()
             .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))

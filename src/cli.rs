@@ -213,7 +213,8 @@ pub struct ExperimentArgs {
     /// table1 runs in under 5 minutes on a 2-core CPU) or quick (tiny, seconds).
     #[arg(long)]
     pub preset: Option<String>,
-    /// Output folder [default: the experiment's folder under reports/].
+    /// Output folder [default: runs/<experiment>, git-ignored; the committed results were
+    /// written with --out reports/<experiment>].
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Where to train and run the models.
@@ -340,7 +341,7 @@ impl ExperimentArgs {
                 )));
             }
         }
-        // Another robot than the experiment's own writes under reports/robots/<robot>/.
+        // Another robot than the experiment's own writes under runs/robots/<robot>/.
         let own = if name.starts_with("emssl_") {
             crate::sim::robots::BuiltinRobot::Ur5
         } else {

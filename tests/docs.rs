@@ -20,7 +20,7 @@ fn generated_documents_are_up_to_date() {
 
 #[test]
 fn directives_read_the_csv() {
-    let dir = tempfile_dir();
+    let dir = tempfile_dir("directives");
     std::fs::write(
         dir.join("t.csv"),
         "model,psnr,note\na,21.23456,x\nb,19.5,y\n",
@@ -39,8 +39,8 @@ fn directives_read_the_csv() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-fn tempfile_dir() -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("selfmodel_docs_{}", std::process::id()));
+fn tempfile_dir(tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("selfmodel_docs_{}_{tag}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
 }
@@ -73,7 +73,7 @@ fn every_listed_experiment_is_a_binary() {
 /// quoted value (NaN included) and in a table column of numbers.
 #[test]
 fn a_non_numeric_metric_is_an_error_naming_file_row_and_column() {
-    let dir = tempfile_dir();
+    let dir = tempfile_dir("metrics");
     std::fs::write(dir.join("m.csv"), "model,psnr\na,21.5\nb,abc\nc,NaN\n").unwrap();
     let err = render(&dir, "{{table m.csv}}").unwrap_err().to_string();
     assert!(
@@ -102,4 +102,43 @@ fn a_non_numeric_metric_is_an_error_naming_file_row_and_column() {
         render(&dir, "{{value n.csv | row: model=b | col: psnr}}").unwrap(),
         "20"
     );
+}
+
+/// A user's run leaves the checkout as it was: every experiment's default output is under
+/// `runs/`, which git ignores (the committed reports need an explicit `--out reports/...`).
+#[test]
+fn every_default_output_is_under_the_git_ignored_runs_folder() {
+    let ignore =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/.gitignore")).unwrap();
+    assert!(ignore.lines().any(|l| l.trim() == "/runs/"));
+    for e in selfmodel::studies::registry::EXPERIMENTS {
+        for preset in e.presets {
+            let dir = e.dir_for(preset);
+            assert!(
+                dir.starts_with("runs"),
+                "{} {preset}: {}",
+                e.name,
+                dir.display()
+            );
+        }
+    }
+    // A quick run from a clean folder writes there and nowhere else.
+    let cwd = tempfile_dir("fresh_checkout");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_mean_silhouette"))
+        .args(["--preset", "quick"])
+        .current_dir(&cwd)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let top: Vec<String> = std::fs::read_dir(&cwd)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(top, ["runs"]);
+    assert!(cwd.join("runs/mean_silhouette_quick/results.csv").is_file());
+    let _ = std::fs::remove_dir_all(&cwd);
 }

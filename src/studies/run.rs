@@ -92,7 +92,7 @@ impl RunOptions {
     }
 
     /// Where a run on a robot other than the experiment's own (`default`) writes by default:
-    /// `reports/robots/<robot>/`, named by the URDF's file stem (`panda`, `ur5`), or
+    /// `runs/robots/<robot>/`, named by the URDF's file stem (`panda`, `ur5`), or
     /// `<name>_dh` for a built-in robot (the built-in UR5 is drawn from its DH parameters).
     /// `None` for the experiment's own robot.
     pub fn robot_folder(&self, default: BuiltinRobot) -> Option<std::path::PathBuf> {
@@ -103,7 +103,7 @@ impl RunOptions {
             (None, Some(b)) if b != default => format!("{}_dh", b.name()),
             _ => return None,
         };
-        Some(std::path::Path::new("reports/robots").join(name))
+        Some(std::path::Path::new(RUNS).join("robots").join(name))
     }
 
     /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports:
@@ -201,6 +201,9 @@ impl CameraChoice {
     }
 }
 
+/// Where runs write unless told otherwise (git-ignored).
+pub const RUNS: &str = "runs";
+
 /// One experiment.
 #[derive(Clone, Copy)]
 pub struct Experiment {
@@ -259,15 +262,21 @@ impl Experiment {
         result
     }
 
-    /// Where a run on `preset` writes by default: `default_dir` for the paper preset,
-    /// `default_dir_<preset>` for any other, so a short or quick run never overwrites the
-    /// paper run's reports.
+    /// Where a run on `preset` writes by default: under `runs/` (git-ignored: a user's run
+    /// leaves the checkout as it was), the folder `default_dir` names under `reports/`, with
+    /// `_<preset>` for any preset but paper. The committed reports are regenerated only with an
+    /// explicit `--out reports/...` (or `reproduce --root .`).
     pub fn dir_for(&self, preset: &str) -> std::path::PathBuf {
-        if preset == "paper" {
-            self.default_dir.into()
+        let leaf = self
+            .default_dir
+            .strip_prefix("reports/")
+            .unwrap_or(self.default_dir);
+        let leaf = if preset == "paper" {
+            leaf.to_string()
         } else {
-            format!("{}_{preset}", self.default_dir).into()
-        }
+            format!("{leaf}_{preset}")
+        };
+        std::path::Path::new(RUNS).join(leaf)
     }
 
     /// A self-model of Table I (run by [`run_self_model`]), written into `default_dir`.
