@@ -707,3 +707,35 @@ fn a_damaged_evaluation_count_is_an_error_on_resume() {
         "{err}"
     );
 }
+
+/// `ffksm --resume` with a foreign checkpoint in its second model refuses before it rewrites
+/// anything of the first model (it checks every checkpoint first).
+#[test]
+fn a_foreign_checkpoint_in_a_later_model_is_refused_before_anything_is_written() {
+    use selfmodel::studies::registry::{RunOptions, find};
+    let dir = common::tempdir();
+    let ffksm = find("ffksm").unwrap();
+    let mut opts = RunOptions::preset("quick");
+    opts.steps = Some(30);
+    (ffksm.run)(&opts, dir.path()).unwrap();
+    // The second model's checkpoint now claims another configuration.
+    let state = dir.path().join("ffksm_original/checkpoint/state.json");
+    let text = std::fs::read_to_string(&state).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    json["fingerprint"] = serde_json::json!({"another": "model"});
+    std::fs::write(&state, json.to_string()).unwrap();
+    let first = dir.path().join("ffksm/results.csv");
+    let before = std::fs::read(&first).unwrap();
+    let modified = std::fs::metadata(&first).unwrap().modified().unwrap();
+    opts.resume = true;
+    let err = (ffksm.run)(&opts, dir.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("ffksm_original") && err.contains("different configuration"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&first).unwrap(), before);
+    assert_eq!(
+        std::fs::metadata(&first).unwrap().modified().unwrap(),
+        modified
+    );
+}

@@ -602,6 +602,21 @@ pub fn fit_run<M: SelfModel>(
     })
 }
 
+/// With `resume`: refuse a checkpoint in `dir` that another configuration made, or that does
+/// not read, before anything is written (a run of several models checks them all first).
+pub fn check_resumable<M: SelfModel>(
+    cfg: &SelfModelRun<M>,
+    dir: &Path,
+    resume: bool,
+) -> Result<()> {
+    CheckpointPlan {
+        dir: dir.join("checkpoint"),
+        resume,
+        fingerprint: cfg.model.fingerprint(&cfg.train, &cfg.data),
+    }
+    .check()
+}
+
 /// Train, evaluate, time and report one self-model into `dir`.
 pub fn run<M: SelfModel>(
     cfg: &SelfModelRun<M>,

@@ -68,8 +68,15 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut novel = Vec::new();
     let dense = crate::report::table::read_csv::<crate::self_models::ffksm::RendererRow>;
     let novel_rows = crate::report::table::read_csv::<crate::self_models::ffksm::NovelViewRow>;
-    for &(sub, variant) in FfksmVariant::of_preset(&opts.preset) {
-        let cfg = opts.apply(ffksm_run(&opts.preset, variant)?)?;
+    // Every model's checkpoint is checked before the first one writes anything.
+    let runs: Vec<_> = FfksmVariant::of_preset(&opts.preset)
+        .iter()
+        .map(|&(sub, variant)| Ok((sub, opts.apply(ffksm_run(&opts.preset, variant)?)?)))
+        .collect::<Result<_>>()?;
+    for (sub, cfg) in &runs {
+        crate::self_models::harness::check_resumable(cfg, &dir.join(sub), opts.resume)?;
+    }
+    for (sub, cfg) in runs {
         let out = crate::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.extend(out.rows);
         // Without the reference renderers (the short preset) there are no comparisons.

@@ -164,6 +164,26 @@ impl CheckpointPlan {
         self.dir.join("state.json")
     }
 
+    /// With `resume`: whether the checkpoint, if there is one, can be continued (it reads and
+    /// was made with this configuration), checked without loading it, so a run of several
+    /// models can refuse a foreign or damaged checkpoint before it writes anything.
+    pub fn check(&self) -> Result<()> {
+        let path = self.state_path();
+        if !self.resume || !path.exists() {
+            return Ok(());
+        }
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let state: CheckpointState =
+            serde_json::from_str(&text).map_err(|e| unreadable_checkpoint(&path, &self.dir, e))?;
+        if state.fingerprint != self.fingerprint {
+            return Err(Error::Config(format!(
+                "the checkpoint in {} was made with a different configuration; drop --resume or delete that folder",
+                self.dir.display()
+            )));
+        }
+        Ok(())
+    }
+
     /// Write model, optimizer and progress; each file is written to a temporary name and
     /// renamed, the progress file last, so a crash never leaves a checkpoint that claims more
     /// than it holds.
