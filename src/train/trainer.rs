@@ -168,10 +168,16 @@ impl CheckpointPlan {
     /// was made with this configuration), checked without loading it, so a run of several
     /// models can refuse a foreign or damaged checkpoint before it writes anything.
     pub fn check(&self) -> Result<()> {
-        let path = self.state_path();
-        if !self.resume || !path.exists() {
-            return Ok(());
+        if self.resume && self.state_path().exists() {
+            self.read_state()?;
         }
+        Ok(())
+    }
+
+    /// The checkpoint's progress, refused when it does not read or another configuration
+    /// made it.
+    fn read_state(&self) -> Result<CheckpointState> {
+        let path = self.state_path();
         let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
         let state: CheckpointState =
             serde_json::from_str(&text).map_err(|e| unreadable_checkpoint(&path, &self.dir, e))?;
@@ -181,7 +187,7 @@ impl CheckpointPlan {
                 self.dir.display()
             )));
         }
-        Ok(())
+        Ok(state)
     }
 
     /// Write model, optimizer and progress; each file is written to a temporary name and
@@ -226,16 +232,7 @@ impl CheckpointPlan {
             );
             return Ok((model, optim, None));
         }
-        let path = self.state_path();
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
-        let state: CheckpointState =
-            serde_json::from_str(&text).map_err(|e| unreadable_checkpoint(&path, &self.dir, e))?;
-        if state.fingerprint != self.fingerprint {
-            return Err(Error::Config(format!(
-                "the checkpoint in {} was made with a different configuration; drop --resume or delete that folder",
-                self.dir.display()
-            )));
-        }
+        let state = self.read_state()?;
         let model = model
             .try_load_file(self.model_path())
             .map_err(|e| unreadable_checkpoint(&self.model_path(), &self.dir, e))?;
