@@ -917,7 +917,9 @@ impl Ffksm {
             })
             .collect();
         let frame = c.frame();
-        let depths: Vec<f64> = crate::data::dataset::swept_points(fit.robot, &si)
+        // The robot's points over its training poses: their depths and their reach.
+        let points = crate::data::dataset::swept_points(fit.robot, &si);
+        let depths: Vec<f64> = points
             .iter()
             .filter_map(|p| frame.project(p).map(|(_, _, z)| z))
             .collect();
@@ -930,10 +932,7 @@ impl Ffksm {
         let pad = 0.05 * (hi - lo);
         let mut this = self.clone();
         // The papers' arm reaches about 0.45 m from the origin: shrink the scene to that.
-        let reach = crate::data::dataset::swept_points(fit.robot, &si)
-            .iter()
-            .map(|p| p.coords.norm())
-            .fold(0f64, f64::max);
+        let reach = points.iter().map(|p| p.coords.norm()).fold(0f64, f64::max);
         this.scene_scale = (reach / PAPERS_ARM_REACH_M).max(1e-6);
         this.march.near = (lo - pad).max(1e-3) / this.scene_scale;
         this.march.far = (hi + pad) / this.scene_scale;
