@@ -675,3 +675,46 @@ fn a_dataset_with_the_robot_out_of_view_is_refused() {
         &out,
     );
 }
+
+/// Two `emssl_table2` runs into one `--out` share its units: the one that finds a unit run by
+/// the other says its report is partial, and how many units it holds, instead of a plain
+/// "wrote results.csv".
+#[test]
+fn a_table2_run_sharing_its_folder_says_its_report_is_partial() {
+    let dir = common::tempdir();
+    let out = dir.path().join("t2");
+    let units = out.join("units").join("90");
+    std::fs::create_dir_all(&units).unwrap();
+    let mut other = Command::new("sleep").arg("60").spawn().unwrap();
+    std::fs::write(units.join("drl.claim"), other.id().to_string()).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_emssl_table2"))
+        .args(["--preset", "quick", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    other.kill().unwrap();
+    other.wait().unwrap();
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!("DRL: left to process {}", other.id())),
+        "{stderr}"
+    );
+    let note = stdout
+        .lines()
+        .find(|l| l.contains("results.csv is partial ("))
+        .unwrap_or_else(|| panic!("no partial note in: {stdout}"));
+    // Every unit of the quick preset but the one held and the refinement that waits for it.
+    let (done, of) = note
+        .split("partial (")
+        .nth(1)
+        .and_then(|r| r.split(" units").next())
+        .and_then(|r| r.split_once(" of "))
+        .map(|(a, b)| (a.parse::<usize>().unwrap(), b.parse::<usize>().unwrap()))
+        .unwrap();
+    assert_eq!(done + 2, of, "{note}");
+    let csv = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(csv.contains("partial"), "{csv}");
+}

@@ -367,7 +367,7 @@ fn reused_units_keep_the_revision_that_trained_them() {
     cfg.ranges_deg = vec![90.0];
     let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
     let device = selfmodel::core::device::DeviceChoice::Cpu;
-    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap();
+    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap().rows;
     // Stamp every unit as trained by an earlier revision.
     let units = dir.join("units").join("90");
     for entry in std::fs::read_dir(&units).unwrap() {
@@ -378,7 +378,7 @@ fn reused_units_keep_the_revision_that_trained_them() {
             std::fs::write(&path, stamped).unwrap();
         }
     }
-    let again = run(&cfg, &robot, "ur5", &dir, device, true).unwrap();
+    let again = run(&cfg, &robot, "ur5", &dir, device, true).unwrap().rows;
     assert_eq!(again.len(), first.len());
     assert!(again.iter().all(|r| r.git_revision == "earlier-revision"));
     let curve = std::fs::read_to_string(dir.join("emssl_curve.csv")).unwrap();
@@ -393,5 +393,54 @@ fn reused_units_keep_the_revision_that_trained_them() {
         revisions.iter().all(|r| r == "earlier-revision"),
         "{revisions:?}"
     );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `--resume` over a finished run whose EMSSL unit must run again from a damaged checkpoint
+/// fails with one message naming the file, and leaves the complete report as it was (it was
+/// rewritten as a partial one before the checkpoint was read).
+#[test]
+fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
+    use selfmodel::studies::emssl_table2::{IkComparisonConfig, run};
+    let dir = std::env::temp_dir().join(format!("selfmodel_damaged_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut cfg = IkComparisonConfig::named("quick").unwrap();
+    cfg.ranges_deg = vec![90.0];
+    let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
+    let device = selfmodel::core::device::DeviceChoice::Cpu;
+    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap();
+    assert_eq!(first.units_done, first.units);
+    assert!(first.partial_note().is_none());
+    let units = dir.join("units").join("90");
+    let checkpoint = std::fs::read_dir(&units)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.is_dir() && p.join("best.bpk").exists())
+        .expect("an EMSSL checkpoint with its best model");
+    let name = checkpoint
+        .file_name()
+        .unwrap()
+        .to_string_lossy()
+        .to_string();
+    let unit = units.join(format!("{}.json", name.trim_end_matches("_checkpoint")));
+    assert!(unit.exists(), "{unit:?}");
+    std::fs::remove_file(&unit).unwrap();
+    std::fs::write(checkpoint.join("best.bpk"), b"not a checkpoint").unwrap();
+    let before: Vec<(std::path::PathBuf, Vec<u8>)> = ["results.csv", "results.md", "table2.md"]
+        .iter()
+        .map(|f| (dir.join(f), std::fs::read(dir.join(f)).unwrap()))
+        .collect();
+    let err = run(&cfg, &robot, "ur5", &dir, device, true)
+        .err()
+        .expect("a damaged checkpoint is an error")
+        .to_string();
+    assert!(err.contains("best.bpk"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    for (path, bytes) in before {
+        assert!(
+            std::fs::read(&path).unwrap() == bytes,
+            "{path:?} was rewritten"
+        );
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

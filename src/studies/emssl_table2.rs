@@ -526,7 +526,13 @@ struct RangeRun<'a> {
     /// Units left to another process running the same command (their rows are not here):
     /// where their rows go among `rows`, their JSON and settings, for the partial report.
     left: Vec<(usize, PathBuf, serde_json::Value)>,
-    /// Called with this range's rows and curves after every unit (the partial report).
+    /// Units whose rows are in `rows` (run here or reused).
+    done: usize,
+    /// Whether this process has run a unit: until then the report on disk is not rewritten
+    /// (a reused unit changes nothing, and a damaged checkpoint met later must not leave a
+    /// complete report rewritten as a partial one).
+    ran: bool,
+    /// Called with this range's rows and curves after every unit it runs (the partial report).
     progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
 
@@ -605,6 +611,7 @@ impl RangeRun<'_> {
                 path.display()
             );
             done.append_to(&mut self.rows, &mut self.curves, &mut self.emssl_curve);
+            self.done += 1;
             return self.report_progress();
         }
         // Another process running the same command may hold this unit: leave it to it.
@@ -640,12 +647,16 @@ impl RangeRun<'_> {
         }
         write_json(&path, &done)?;
         done.append_to(&mut self.rows, &mut self.curves, &mut self.emssl_curve);
+        self.done += 1;
+        self.ran = true;
         self.report_progress()
     }
 
     /// This process's rows, curves and EMSSL curve, with those of the units left to other
-    /// processes that have finished since (read from their JSON), each in its place.
-    fn merged(&self) -> (Vec<IkRow>, Vec<ValidationRow>, Vec<RevisedIteration>) {
+    /// processes that have finished since (read from their JSON), each in its place, and the
+    /// number of units they come from.
+    fn merged(&self) -> (Vec<IkRow>, Vec<ValidationRow>, Vec<RevisedIteration>, usize) {
+        let mut done_units = self.done;
         let mut rows = Vec::new();
         let mut curves = self.curves.clone();
         let mut emssl_curve = self.emssl_curve.clone();
@@ -659,15 +670,19 @@ impl RangeRun<'_> {
                 .filter(|u| &u.settings == settings)
             {
                 done.append_to(&mut rows, &mut curves, &mut emssl_curve);
+                done_units += 1;
             }
         }
         rows.extend_from_slice(&self.rows[next..]);
-        (rows, curves, emssl_curve)
+        (rows, curves, emssl_curve, done_units)
     }
 
-    /// The partial report after a unit.
+    /// The partial report after a unit, once this process has run one.
     fn report_progress(&self) -> Result<()> {
-        let (rows, curves, _) = self.merged();
+        if !self.ran {
+            return Ok(());
+        }
+        let (rows, curves, _, _) = self.merged();
         (self.progress)(&rows, &curves)
     }
 
@@ -734,9 +749,16 @@ impl RangeRun<'_> {
     }
 }
 
-/// What one range's run produced: rows, validation curves, EMSSL curves, and whether units
-/// were left to another process (the report then stays partial).
-type RangeOutcome = (Vec<IkRow>, Vec<ValidationRow>, Vec<RevisedIteration>, bool);
+/// What one range's run produced.
+pub struct RangeOutcome {
+    pub rows: Vec<IkRow>,
+    pub curves: Vec<ValidationRow>,
+    pub emssl_curve: Vec<RevisedIteration>,
+    /// Units done (their rows are in `rows`) of the range's units; fewer where some were
+    /// left to another process (the report then stays partial).
+    pub units_done: usize,
+    pub units: usize,
+}
 
 /// Run every method in one joint range (reusing finished units when `resume`).
 #[allow(clippy::too_many_arguments)]
@@ -766,12 +788,17 @@ pub fn run_range(
         curves: Vec::new(),
         emssl_curve: Vec::new(),
         left: Vec::new(),
+        done: 0,
+        ran: false,
         progress,
     };
     let chain = &robot.chain;
     let dof = robot.dof();
     let batch = cfg.fit.inference_batch;
-    for method in cfg.methods(range_deg, dof) {
+    let methods = cfg.methods(range_deg, dof);
+    // Every method's unit and the refinement's.
+    let units = methods.len() + 1;
+    for method in methods {
         run.method(method.as_ref())?;
     }
     let flow_cfg = cfg.flow_method().cfg;
@@ -786,9 +813,15 @@ pub fn run_range(
             "emssl_table2: +-{range_deg:.0} deg EMSSL + DLS: left for when the units run \
              elsewhere are done (run the command again with --resume)"
         );
-        let (mut rows, curves, emssl_curve) = run.merged();
+        let (mut rows, curves, emssl_curve, units_done) = run.merged();
         set_ratios(&mut rows);
-        return Ok((rows, curves, emssl_curve, true));
+        return Ok(RangeOutcome {
+            rows,
+            curves,
+            emssl_curve,
+            units_done,
+            units,
+        });
     }
     let emssl_rows: Vec<&IkRow> = run
         .rows
@@ -864,7 +897,13 @@ pub fn run_range(
     })?;
 
     set_ratios(&mut run.rows);
-    Ok((run.rows, run.curves, run.emssl_curve, false))
+    Ok(RangeOutcome {
+        units_done: run.done,
+        units,
+        rows: run.rows,
+        curves: run.curves,
+        emssl_curve: run.emssl_curve,
+    })
 }
 
 /// Every row's ratio to the sigmoid DRL of its range (where that row exists).
@@ -1002,13 +1041,13 @@ pub fn run(
     dir: &Path,
     device: DeviceChoice,
     resume: bool,
-) -> Result<Vec<IkRow>> {
+) -> Result<Table2Outcome> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
     let mut rows = Vec::new();
     let mut curves = Vec::new();
     let mut emssl_curves = Vec::new();
-    let mut left_to_others = false;
+    let (mut units_done, mut units) = (0, 0);
     for &r in &cfg.ranges_deg {
         // After every unit: the report so far (a killed or unfinished run leaves one).
         let partial = |range_rows: &[IkRow], range_curves: &[ValidationRow]| {
@@ -1018,26 +1057,54 @@ pub fn run(
             all_curves.extend_from_slice(range_curves);
             write_outputs(cfg, robot_name, dir, all, &all_curves, &emssl_curves, true).map(|_| ())
         };
-        let (range_rows, range_curves, emssl_curve, left) =
-            run_range(cfg, robot, robot_name, r, dir, device, resume, &partial)?;
-        left_to_others |= left;
-        rows.extend(range_rows);
-        curves.extend(range_curves);
+        let range = run_range(cfg, robot, robot_name, r, dir, device, resume, &partial)?;
+        units_done += range.units_done;
+        units += range.units;
+        rows.extend(range.rows);
+        curves.extend(range.curves);
         emssl_curves.extend(
-            emssl_curve
+            range
+                .emssl_curve
                 .iter()
                 .map(|(c, revision)| CurveRow::new(robot_name, r, &cfg.preset, revision, c)),
         );
     }
-    write_outputs(
+    let rows = write_outputs(
         cfg,
         robot_name,
         dir,
         rows,
         &curves,
         &emssl_curves,
-        left_to_others,
-    )
+        units_done < units,
+    )?;
+    Ok(Table2Outcome {
+        rows,
+        units_done,
+        units,
+    })
+}
+
+/// What Table II's run wrote: its rows, from how many of its units (fewer where units were
+/// left to another process running the same command: the report is then partial).
+pub struct Table2Outcome {
+    pub rows: Vec<IkRow>,
+    pub units_done: usize,
+    pub units: usize,
+}
+
+impl Table2Outcome {
+    /// "partial (N of M units): ..." where it is, for the end of the printout.
+    pub fn partial_note(&self) -> Option<String> {
+        (self.units_done < self.units).then(|| {
+            format!(
+                "results.csv is partial ({} of {} units, {} rows): the others are run by another process with the same --out, or wait for them; run the command again with --resume when it has finished",
+                self.units_done,
+                self.units,
+                self.rows.len()
+            )
+        })
+    }
 }
 
 /// Write the tables, curves and figures of `rows` (`partial`: the run has not finished).

@@ -200,9 +200,10 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
     )?;
     let cfg = IkComparisonConfig::named(&opts.preset)?;
     let (robot, name) = opts.ik_robot()?;
-    let rows =
+    let outcome =
         crate::studies::emssl_table2::run(&cfg, &robot, &name, dir, opts.device, opts.resume)?;
-    Ok(rows
+    let rows = outcome
+        .rows
         .iter()
         .map(|r| {
             format!(
@@ -211,7 +212,11 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
             )
         })
         .collect::<Vec<_>>()
-        .join("; "))
+        .join("; ");
+    Ok(match outcome.partial_note() {
+        Some(note) => format!("{rows}\n{note}"),
+        None => rows,
+    })
 }
 
 /// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
