@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use selfmodel::cli::{RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
-use selfmodel::ik::pose_model::{PoseModel, PoseModelConfig, distinct, read_targets, train};
+use selfmodel::ik::pose_model::{PoseModel, PoseModelConfig, SolveStats, read_targets, train};
 
 #[derive(Parser)]
 #[command(
@@ -151,7 +151,6 @@ fn main() -> ExitCode {
                     text += &format!(",q{i}");
                 }
                 text += ",pos_err_mm,rot_err_deg,exact\n";
-                let (mut exact_targets, mut exact_answers, mut families) = (0, 0, 0);
                 for (t, sols) in answers.iter().enumerate() {
                     for (s, a) in sols.iter().enumerate() {
                         text += &format!("{t},{s}");
@@ -165,24 +164,19 @@ fn main() -> ExitCode {
                             a.exact(cfg)
                         );
                     }
-                    let exact: Vec<&[f64]> = sols
-                        .iter()
-                        .filter(|a| a.exact(cfg))
-                        .map(|a| a.joints.as_slice())
-                        .collect();
-                    exact_answers += exact.len();
-                    exact_targets += usize::from(!exact.is_empty());
-                    families += distinct(&exact, 0.1);
                 }
+                let stats = SolveStats::of(&answers, cfg, &model.saved.ranges);
                 selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
                 println!(
-                    "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {:.0} exact solutions/s on {} threads; wrote {}",
-                    targets.len(),
-                    exact_targets,
-                    100.0 * exact_targets as f64 / targets.len() as f64,
-                    exact_answers,
-                    families as f64 / targets.len() as f64,
-                    exact_answers as f64 / seconds,
+                    "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {} threads; wrote {}",
+                    stats.targets,
+                    stats.exact_targets,
+                    stats.exact_pct(),
+                    stats.exact_answers,
+                    stats.distinct_mean,
+                    stats.iterations_mean,
+                    stats.starts_mean,
+                    stats.exact_answers as f64 / seconds,
                     rayon::current_num_threads(),
                     out.display()
                 );

@@ -397,3 +397,41 @@ fn the_panda_and_the_ur5_load_as_ros_ships_them() {
     );
     let _ = Vector3::<f64>::zeros();
 }
+
+/// The IK solvers' fast path (`TipPath`: one pass over the movable joints to the tip, constant
+/// transforms folded) gives the reference's tip pose and pose Jacobian: on a mimic-tipped
+/// arm, the Panda as Franka ships it (fingers held, a fixed joint after joint 7) and the UR5.
+#[test]
+fn the_tip_path_matches_the_full_chain_pose_and_jacobian() {
+    use rand::{RngExt, SeedableRng};
+    let dir = common::tempdir();
+    let urdf = common::write_arm(dir.path(), "arm", 3, true);
+    let mut robots = vec![tipped(&urdf, "finger_b", GeometryKind::Visual).unwrap()];
+    let panda = std::path::Path::new("../shared/robots/franka_description/urdf/panda.urdf");
+    if panda.exists() {
+        robots.push(tipped(panda, "panda_hand", GeometryKind::None).unwrap());
+    }
+    robots.push(selfmodel::sim::dh_robot::ur5([-3.0, 3.0]));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    for robot in robots {
+        let chain = &robot.chain;
+        let path = chain.tip_path();
+        let ranges = chain.joint_ranges();
+        let mut jac = nalgebra::Matrix6xX::zeros(0);
+        for _ in 0..50 {
+            let q: Vec<f64> = ranges
+                .iter()
+                .map(|&[lo, hi]| rng.random_range(lo..=hi))
+                .collect();
+            let (fast, slow) = (path.pose_and_jacobian(&q, &mut jac), chain.tip_pose(&q));
+            assert!((fast.translation.vector - slow.translation.vector).norm() < 1e-12);
+            assert!(fast.rotation.angle_to(&slow.rotation) < 1e-9);
+            assert!((path.pose(&q).translation.vector - slow.translation.vector).norm() < 1e-12);
+            let reference = chain.pose_jacobian(&q);
+            assert!(
+                (&jac - &reference).norm() < 1e-12,
+                "{jac} against {reference}"
+            );
+        }
+    }
+}

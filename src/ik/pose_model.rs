@@ -275,6 +275,7 @@ impl PoseModel {
         let samples = sample_rows(&self.flow, &self.data, &rows, k, 1024, 0x5EED, device);
         let cfg = &self.saved.config.lm;
         let ranges = &self.saved.ranges;
+        let path = chain.tip_path();
         use rayon::prelude::*;
         targets
             .par_iter()
@@ -282,7 +283,7 @@ impl PoseModel {
             .map(|(i, t)| {
                 if k == 1 {
                     vec![solve(
-                        chain,
+                        &path,
                         t,
                         &[samples[0][i].clone()],
                         ranges,
@@ -298,7 +299,7 @@ impl PoseModel {
                     (0..k)
                         .map(|s| {
                             solve(
-                                chain,
+                                &path,
                                 t,
                                 &[samples[s][i].clone()],
                                 ranges,
@@ -326,6 +327,65 @@ impl PoseModel {
 
     pub fn dof(&self) -> usize {
         self.saved.joint_names.len()
+    }
+}
+
+/// What a batch of answers amounts to (one entry of `answers` per target, its k answers).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SolveStats {
+    pub targets: usize,
+    /// Targets with at least one exact answer (every joint is inside its limits by
+    /// construction; `outside_limits` counts the answers that are not, as a check).
+    pub exact_targets: usize,
+    pub exact_answers: usize,
+    /// Mean over targets of the distinct exact answers (more than 0.1 rad apart in a joint).
+    pub distinct_mean: f64,
+    /// Share of targets (%) with at least 5 distinct exact answers.
+    pub distinct_5_pct: f64,
+    /// Mean Levenberg-Marquardt iterations and starts per answer.
+    pub iterations_mean: f64,
+    pub starts_mean: f64,
+    pub outside_limits: usize,
+}
+
+impl SolveStats {
+    pub fn of(answers: &[Vec<PoseSolution>], cfg: &LmConfig, ranges: &[[f64; 2]]) -> Self {
+        let (mut exact_targets, mut exact_answers, mut families, mut five) = (0, 0, 0, 0);
+        let (mut iterations, mut starts, mut n, mut outside) = (0, 0, 0, 0);
+        for sols in answers {
+            let exact: Vec<&[f64]> = sols
+                .iter()
+                .filter(|a| a.exact(cfg))
+                .map(|a| a.joints.as_slice())
+                .collect();
+            exact_answers += exact.len();
+            exact_targets += usize::from(!exact.is_empty());
+            let d = distinct(&exact, 0.1);
+            families += d;
+            five += usize::from(d >= 5);
+            for a in sols {
+                iterations += a.iterations;
+                starts += a.starts;
+                n += 1;
+                outside += usize::from(!crate::sim::kinematics::within(&a.joints, ranges, 1e-12));
+            }
+        }
+        let t = answers.len().max(1) as f64;
+        SolveStats {
+            targets: answers.len(),
+            exact_targets,
+            exact_answers,
+            distinct_mean: families as f64 / t,
+            distinct_5_pct: 100.0 * five as f64 / t,
+            iterations_mean: iterations as f64 / n.max(1) as f64,
+            starts_mean: starts as f64 / n.max(1) as f64,
+            outside_limits: outside,
+        }
+    }
+
+    /// Share of targets solved exactly (%).
+    pub fn exact_pct(&self) -> f64 {
+        100.0 * self.exact_targets as f64 / self.targets.max(1) as f64
     }
 }
 
