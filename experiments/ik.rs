@@ -105,22 +105,13 @@ fn main() -> ExitCode {
                 let model = PoseModel::load(&model, &device)?;
                 let robot = model.saved.robot.load_kinematics()?;
                 model.check_robot(&robot)?;
-                let qs = selfmodel::sim::trajectory::babbling(n, &model.saved.ranges, seed);
-                let mut text = String::from("x,y,z,qw,qx,qy,qz");
-                for i in 1..=model.dof() {
-                    text += &format!(",q{i}");
-                }
-                text += "\n";
-                for q in &qs {
-                    let t = selfmodel::ik::pose::PoseTarget::of(&robot.chain, q);
-                    let o = t.orientation.expect("a pose").coords;
-                    let p = t.position;
-                    text += &format!("{},{},{},{},{},{},{}", p.x, p.y, p.z, o.w, o.x, o.y, o.z);
-                    for v in q {
-                        text += &format!(",{v}");
-                    }
-                    text += "\n";
-                }
+                let (targets, joints) = selfmodel::studies::bench_ik::random_targets(
+                    &robot,
+                    &model.saved.ranges,
+                    n,
+                    seed,
+                );
+                let text = selfmodel::studies::bench_ik::targets_csv(&targets, &joints);
                 selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
                 println!(
                     "ik targets: {n} reachable poses of {}; wrote {}",

@@ -1,91 +1,180 @@
-"""The reference IK solvers on the targets `ik targets` writes, for side-by-side ratios with
-`ik solve` (run in the same sitting). Reports the share of targets solved exactly (within
-1 mm and 0.572 degrees, every joint inside its limits) and solves per second on one thread.
+"""The reference IK solvers on the targets `bench_ik` (or `ik targets`) writes, in the same
+sitting as ours: how many targets each solves exactly (within 1 mm and 0.572 degrees, every
+joint inside the URDF's limits) and in how many seconds, at several time budgets.
 
-Robotics Toolbox for Python (`pip install roboticstoolbox-python`): its compiled
-Levenberg-Marquardt `ets.ik_LM`, on its built-in model of the robot (its Panda; the script
-checks that model's forward kinematics against the targets' joints first).
+- Robotics Toolbox for Python (`pip install roboticstoolbox-python`): its compiled
+  Levenberg-Marquardt `ets.ik_LM` on the chain it reads from the same URDF, 30 iterations a
+  search, the budget being its number of searches (random restarts; 100 is its default).
+- TRAC-IK through PyPI `pytracik` (`pip install pytracik`), given the URDF, in its Speed mode,
+  the budget being its timeout (5 ms is its default). Its parser reads Franka's
+  `<safety_controller soft_lower_limit soft_upper_limit>` as 0 and TRAC-IK bounds each joint by
+  the intersection of its hard and soft limits, so every Panda joint is pinned to [0, 0]
+  (joint 4 to the empty [0, -0.0698]) and every pose fails with -3: the script drops the
+  `<safety_controller>` elements (Franka's soft limits equal its hard ones) and prints the
+  bounds TRAC-IK then reads.
 
-TRAC-IK through PyPI `pytracik` (`pip install pytracik`), given the URDF: its parser reads
-the Panda's `<safety_controller soft_lower_limit soft_upper_limit>` as 0, and TRAC-IK bounds
-each joint by the intersection of its hard and soft limits, so every joint is pinned to [0, 0]
-(joint 4 to the empty [0, -0.0698]) and every pose fails with -3. The script drops the
-`<safety_controller>` elements (the soft limits equal the hard ones in Franka's description)
-and prints the bounds TRAC-IK then reads.
+Each solver runs in `--processes` worker processes (the targets split between them; seconds are
+the wall time of the whole batch, pool start-up excluded). Writes CSV to `--out`:
+solver,budget,standard,processes,targets,exact,outside_limits,seconds. A solver whose package is
+absent is skipped with a line saying so.
 
-    python3 scripts/ik_reference.py panda data/ik/panda_targets.csv [URDF BASE_LINK]
+    python3 scripts/ik_reference.py --targets T.csv --urdf panda.urdf --base panda_link0 \
+        --tip panda_hand --processes 2 --out reference.csv
 """
+import argparse
 import csv
+import multiprocessing as mp
+import re
 import sys
 import time
 
 import numpy as np
 
-robot_name, path = sys.argv[1:3]
-urdf_base = sys.argv[3:5]
-try:
+RTB_SEARCHES = [1, 3, 10, 30, 100]
+RTB_STANDARD = 100
+TRACIK_TIMEOUTS_MS = [0.5, 1, 2, 5, 20]
+TRACIK_STANDARD = 5
+
+
+def register_packages(urdf):
+    """Let the Robotics Toolbox's xacro step find `package://` paths next to the URDF."""
+    import os
+
+    import xacrodoc.packages
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(urdf)))
+    xacrodoc.packages.update_package_cache({os.path.basename(root): root})
+
+
+def load_ets(urdf, tip):
+    import os
+
+    import warnings
+
     import roboticstoolbox as rtb
-    from spatialmath import SE3, UnitQuaternion
-except ImportError:
-    print("skipped: roboticstoolbox-python is not installed (pip install roboticstoolbox-python)")
-    sys.exit(0)
 
-models = {"panda": (rtb.models.Panda, "panda_hand"), "ur5": (rtb.models.UR5, "tool0")}
-make, tip = models[robot_name]
-ets = make().ets(end=tip)
-rows = list(csv.DictReader(open(path)))
-targets = [
-    SE3.Rt(
-        UnitQuaternion([float(r[k]) for k in ("qw", "qx", "qy", "qz")]).R,
-        [float(r[k]) for k in "xyz"],
-    )
-    for r in rows
-]
-qs = [[float(r[f"q{i}"]) for i in range(1, ets.n + 1)] for r in rows]
-fk = max(np.linalg.norm(ets.fkine(q).t - t.t) for q, t in zip(qs, targets))
-print(f"Robotics Toolbox's {robot_name} model against the targets' joints: {fk:.1e} m")
-lo, hi = ets.qlim
-t0 = time.perf_counter()
-exact = 0
-for t in targets:
-    s = ets.ik_LM(t.A, ilimit=30, slimit=100, joint_limits=True)
-    e = ets.fkine(s.q)
-    dp = np.linalg.norm(e.t - t.t)
-    dr = np.linalg.norm((e.inv() * t).angvec()[0])
-    inside = np.all(s.q >= lo - 1e-9) and np.all(s.q <= hi + 1e-9)
-    exact += bool(s.success) and dp <= 1e-3 and dr <= 0.01 and inside
-seconds = time.perf_counter() - t0
-print(
-    f"roboticstoolbox ik_LM: {len(targets)} targets, {exact} solved exactly "
-    f"({100 * exact / len(targets):.2f}%), {exact / seconds:.0f} exact solutions/s on 1 thread"
-)
+    register_packages(urdf)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return rtb.Robot.URDF(os.path.abspath(urdf)).ets(end=tip)
 
-if len(urdf_base) == 2:
+
+STATE = {}
+
+
+def init_worker(kind, urdf, base, tip, budget):
+    if kind == "rtb":
+        STATE["ets"] = load_ets(urdf, tip)
+    else:
+        import pytracik
+
+        text = re.sub(r"<safety_controller[^>]*/>", "", open(urdf).read())
+        STATE["solver"] = pytracik.TRAC_IK(
+            base, tip, text, budget / 1000.0, 1e-5, pytracik.SolveType.Speed
+        )
+    STATE["kind"], STATE["budget"] = kind, budget
+
+
+def solve_chunk(rows):
+    """Answers (None where the solver gave up) for rows of x,y,z,qw,qx,qy,qz."""
+    out = []
+    if STATE["kind"] == "rtb":
+        from spatialmath import SE3, UnitQuaternion
+
+        ets = STATE["ets"]
+        for r in rows:
+            t = SE3.Rt(UnitQuaternion(r[3:7]).R, r[0:3])
+            s = ets.ik_LM(t.A, ilimit=30, slimit=STATE["budget"], joint_limits=True)
+            out.append(list(s.q) if s.success else None)
+    else:
+        import pytracik
+
+        solver = STATE["solver"]
+        n = len(pytracik.get_joint_lower_bounds(solver))
+        for r in rows:
+            x, y, z, qw, qx, qy, qz = r
+            res = pytracik.ik(solver, np.zeros(n), x, y, z, qx, qy, qz, qw)
+            out.append(list(res[1 : 1 + n]) if res[0] >= 0 else None)
+    return out
+
+
+def run(kind, budget, args, rows):
+    chunks = [rows[i :: args.processes] for i in range(args.processes)]
+    with mp.Pool(args.processes, init_worker, (kind, args.urdf, args.base, args.tip, budget)) as pool:
+        pool.map(solve_chunk, [rows[:2]] * args.processes)  # start-up and warm-up
+        t0 = time.perf_counter()
+        parts = pool.map(solve_chunk, chunks)
+        seconds = time.perf_counter() - t0
+    answers = [None] * len(rows)
+    for i, part in enumerate(parts):
+        answers[i :: args.processes] = part
+    return answers, seconds
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--targets", required=True)
+    p.add_argument("--urdf", required=True)
+    p.add_argument("--base", required=True)
+    p.add_argument("--tip", required=True)
+    p.add_argument("--processes", type=int, default=2)
+    p.add_argument("--out", required=True)
+    p.add_argument("--standard-only", action="store_true", help="each solver's default budget only")
+    args = p.parse_args()
+    rows = [
+        [float(r[k]) for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
+        for r in csv.DictReader(open(args.targets))
+    ]
+    try:
+        from spatialmath import SE3, UnitQuaternion
+    except ImportError:
+        print("skipped: roboticstoolbox-python is not installed (pip install roboticstoolbox-python); it also checks the answers")
+        return
+    ets = load_ets(args.urdf, args.tip)
+    lo, hi = ets.qlim
+
+    def score(answers):
+        exact = outside = 0
+        for r, q in zip(rows, answers):
+            if q is None:
+                continue
+            q = np.array(q)
+            t = SE3.Rt(UnitQuaternion(r[3:7]).R, r[0:3])
+            e = ets.fkine(q)
+            dp = np.linalg.norm(e.t - t.t)
+            dr = np.linalg.norm((e.inv() * t).angvec()[0])
+            # 1e-6 rad: TRAC-IK keeps its bounds in float32 (2.8973 becomes 2.8973000049).
+            inside = np.all(q >= lo - 1e-6) and np.all(q <= hi + 1e-6)
+            outside += not inside
+            exact += bool(dp <= 1e-3 and dr <= 0.01 and inside)
+        return exact, outside
+
+    solvers = [("Robotics Toolbox ik_LM", "rtb", RTB_SEARCHES, RTB_STANDARD, "searches")]
     try:
         import pytracik
+
+        text = re.sub(r"<safety_controller[^>]*/>", "", open(args.urdf).read())
+        s = pytracik.TRAC_IK(args.base, args.tip, text, 0.005, 1e-5, pytracik.SolveType.Speed)
+        b = (pytracik.get_joint_lower_bounds(s), pytracik.get_joint_upper_bounds(s))
+        print(f"TRAC-IK reads bounds {np.round(b[0], 4).tolist()} .. {np.round(b[1], 4).tolist()}")
+        solvers.append(("TRAC-IK (Speed)", "tracik", TRACIK_TIMEOUTS_MS, TRACIK_STANDARD, "ms"))
     except ImportError:
         print("skipped TRAC-IK: pytracik is not installed (pip install pytracik)")
-        sys.exit(0)
-    import re
+    with open(args.out, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["solver", "budget", "standard", "processes", "targets", "exact", "outside_limits", "seconds"])
+        for name, kind, budgets, standard, unit in solvers:
+            for budget in [standard] if args.standard_only else budgets:
+                answers, seconds = run(kind, budget, args, rows)
+                exact, outside = score(answers)
+                w.writerow([name, f"{budget} {unit}", budget == standard, args.processes, len(rows), exact, outside, seconds])
+                f.flush()
+                print(
+                    f"{name}, {budget} {unit}: {exact} of {len(rows)} exact ({100 * exact / len(rows):.2f}%), "
+                    f"{exact / seconds:.0f} exact/s on {args.processes} processes",
+                    flush=True,
+                )
 
-    text = re.sub(r"<safety_controller[^>]*/>", "", open(urdf_base[0]).read())
-    solver = pytracik.TRAC_IK(urdf_base[1], tip, text, 0.005, 1e-5, pytracik.SolveType.Speed)
-    lo = np.array(pytracik.get_joint_lower_bounds(solver))
-    hi = np.array(pytracik.get_joint_upper_bounds(solver))
-    print(f"TRAC-IK reads bounds {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()}")
-    t0 = time.perf_counter()
-    exact = 0
-    for r, t in zip(rows, targets):
-        out = pytracik.ik(solver, np.zeros(len(lo)), *[float(r[k]) for k in ("x", "y", "z", "qx", "qy", "qz", "qw")])
-        if out[0] < 0:
-            continue
-        q = np.array(out[1 : 1 + len(lo)])
-        e = ets.fkine(q)
-        dp = np.linalg.norm(e.t - t.t)
-        dr = np.linalg.norm((e.inv() * t).angvec()[0])
-        exact += dp <= 1e-3 and dr <= 0.01 and np.all(q >= lo - 1e-9) and np.all(q <= hi + 1e-9)
-    seconds = time.perf_counter() - t0
-    print(
-        f"TRAC-IK (Speed, 5 ms): {len(targets)} targets, {exact} solved exactly "
-        f"({100 * exact / len(targets):.2f}%), {exact / seconds:.0f} exact solutions/s on 1 thread"
-    )
+
+if __name__ == "__main__":
+    sys.exit(main())

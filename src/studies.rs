@@ -5,6 +5,7 @@
 pub mod ablations;
 pub mod bench_decoders;
 pub mod bench_ffksm_step;
+pub mod bench_ik;
 pub mod body_from_image;
 pub mod docs;
 pub mod emssl_adaptation;

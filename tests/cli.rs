@@ -608,6 +608,45 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         &["bad.csv", "line 3"],
         &out,
     );
+    // The benchmark on the same model: every budget's row, the family, the model alone;
+    // every answer inside the limits, and the largest budget solves (nearly) every target.
+    let bench = d.join("bench");
+    let o = Command::new(env!("CARGO_BIN_EXE_bench_ik"))
+        .args(["--model", model.to_str().unwrap(), "--preset", "quick"])
+        .args([
+            "--no-references",
+            "--k",
+            "4",
+            "--out",
+            bench.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows: Vec<selfmodel::studies::bench_ik::BenchIkRow> =
+        selfmodel::report::table::read_csv(&bench.join("results.csv")).unwrap();
+    assert!(
+        rows.iter()
+            .all(|r| r.outside_limits == 0 && r.targets == 200)
+    );
+    let best = rows
+        .iter()
+        .filter(|r| r.solver == "selfmodel flow + LM" && r.k == 1)
+        .max_by_key(|r| {
+            r.budget
+                .split(' ')
+                .next()
+                .unwrap()
+                .parse::<usize>()
+                .unwrap()
+        })
+        .unwrap();
+    assert!(best.exact_pct >= 99.0, "{best:?}");
+    let family = rows.iter().find(|r| r.k == 4).unwrap();
+    assert!(family.distinct_mean.unwrap() > 1.0, "{family:?}");
+    let alone = rows.iter().find(|r| r.solver.contains("alone")).unwrap();
+    assert!(alone.pos_err_mm_mean.unwrap() > 1.0);
+    assert!(bench.join("success_against_time.png").exists());
     // A model folder that is not one.
     fails_cleanly(
         ik,

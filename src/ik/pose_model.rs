@@ -289,10 +289,21 @@ impl PoseModel {
         k: usize,
         device: &Device,
     ) -> Vec<Vec<PoseSolution>> {
+        self.solve_with(chain, targets, k, &self.saved.config.lm, device)
+    }
+
+    /// [`Self::solve`] with other solver settings (a budget of random starts, tolerances).
+    pub fn solve_with(
+        &self,
+        chain: &KinematicChain,
+        targets: &[PoseTarget],
+        k: usize,
+        cfg: &LmConfig,
+        device: &Device,
+    ) -> Vec<Vec<PoseSolution>> {
         let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
         let k = k.max(1);
         let samples = sample_rows(&self.flow, &self.data, &rows, k, 1024, 0x5EED, device);
-        let cfg = &self.saved.config.lm;
         let ranges = &self.saved.ranges;
         let path = chain.tip_path();
         use rayon::prelude::*;

@@ -485,6 +485,29 @@ pub fn log_log_lines(
     y_desc: &str,
     runs: &[(String, Vec<(f64, f64)>)],
 ) -> Result<()> {
+    marked_lines(path, title, x_desc, y_desc, runs, true)
+}
+
+/// [`log_log_lines`] with a linear y axis (a share in percent against a time, say), its
+/// range padded around the points.
+pub fn lines_log_x(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    marked_lines(path, title, x_desc, y_desc, runs, false)
+}
+
+fn marked_lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+    log_y: bool,
+) -> Result<()> {
     register_font();
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -494,7 +517,7 @@ pub fn log_log_lines(
             let pts = c
                 .iter()
                 .copied()
-                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+                .filter(|p| p.0 > 0.0 && (p.1 > 0.0 || !log_y))
                 .collect();
             (l.clone(), pts)
         })
@@ -503,60 +526,82 @@ pub fn log_log_lines(
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let points = runs.iter().flat_map(|(_, c)| c.iter());
-        let range = |f: fn(&(f64, f64)) -> f64| {
+        let bounds = |f: fn(&(f64, f64)) -> f64| {
             let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
             let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
-            if lo.is_finite() && hi.is_finite() {
+            (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+        };
+        let log_range = |b: Option<(f64, f64)>| match b {
+            Some((lo, hi)) => {
                 let pad = ((hi / lo).powf(0.06)).max(1.15);
                 (lo / pad, hi * pad)
-            } else {
-                (1.0, 10.0)
             }
+            None => (1.0, 10.0),
         };
-        let (x_lo, x_hi) = range(|p| p.0);
-        let (y_lo, y_hi) = range(|p| p.1);
+        let (x_lo, x_hi) = log_range(bounds(|p| p.0));
         let mut xs: Vec<f64> = points.clone().map(|p| p.0).collect();
         xs.sort_by(f64::total_cmp);
         xs.dedup();
         if xs.len() > 12 {
             xs = log_ticks(x_lo, x_hi);
         }
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FONT, 20))
-            .margin(15)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(
-                (x_lo..x_hi).log_scale().with_key_points(xs),
+        let x_spec = (x_lo..x_hi).log_scale().with_key_points(xs);
+        // The same chart on either y axis.
+        macro_rules! draw_on {
+            ($y_spec:expr) => {{
+                let mut chart = ChartBuilder::on(&root)
+                    .caption(title, (FONT, 20))
+                    .margin(15)
+                    .x_label_area_size(40)
+                    .y_label_area_size(70)
+                    .build_cartesian_2d(x_spec, $y_spec)
+                    .map_err(|e| draw_err(path, e))?;
+                chart
+                    .configure_mesh()
+                    .x_desc(x_desc)
+                    .y_desc(y_desc)
+                    .x_label_formatter(&|v| tick_label(*v))
+                    .y_label_formatter(&|v| tick_label(*v))
+                    .label_style((FONT, 14))
+                    .light_line_style(TRANSPARENT)
+                    .draw()
+                    .map_err(|e| draw_err(path, e))?;
+                for (i, (label, pts)) in runs.iter().enumerate() {
+                    let color = Palette99::pick(i).to_rgba();
+                    chart
+                        .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                        .map_err(|e| draw_err(path, e))?
+                        .label(label.clone())
+                        .legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                        });
+                    chart
+                        .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                        .map_err(|e| draw_err(path, e))?;
+                }
+                draw_legend(
+                    &mut chart,
+                    path,
+                    if log_y {
+                        SeriesLabelPosition::UpperRight
+                    } else {
+                        SeriesLabelPosition::LowerRight
+                    },
+                )?;
+            }};
+        }
+        if log_y {
+            let (y_lo, y_hi) = log_range(bounds(|p| p.1));
+            draw_on!(
                 (nice_floor(y_lo)..nice_ceil(y_hi))
                     .log_scale()
-                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi))),
-            )
-            .map_err(|e| draw_err(path, e))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_desc)
-            .y_desc(y_desc)
-            .x_label_formatter(&|v| tick_label(*v))
-            .y_label_formatter(&|v| tick_label(*v))
-            .label_style((FONT, 14))
-            .light_line_style(TRANSPARENT)
-            .draw()
-            .map_err(|e| draw_err(path, e))?;
-        for (i, (label, pts)) in runs.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
-            chart
-                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-                .map_err(|e| draw_err(path, e))?
-                .label(label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-                .map_err(|e| draw_err(path, e))?;
+                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi)))
+            );
+        } else {
+            let (lo, hi) = bounds(|p| p.1).unwrap_or((0.0, 1.0));
+            let pad = ((hi - lo) * 0.08).max(0.5);
+            draw_on!((lo - pad)..(hi + pad));
         }
-        draw_legend(&mut chart, path, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)

@@ -1,0 +1,84 @@
+//! Our learned full-pose IK beside the Robotics Toolbox's ik_LM and TRAC-IK, on the same
+//! random reachable targets in the same sitting.
+//!
+//! `cargo run --release --bin bench_ik -- --model runs/ik_models/panda --out reports/ik_pose/panda`
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use selfmodel::cli::run_main;
+use selfmodel::studies::bench_ik::{BenchIkConfig, default_out, run};
+
+/// Benchmark a model `ik train` saved: share of targets solved exactly (1 mm, 0.572 degrees,
+/// inside the limits) and exact solutions/s at several budgets, the family of k answers, the
+/// model alone; with the references (scripts/ik_reference.py) on the same targets.
+#[derive(Parser)]
+#[command(version)]
+struct Args {
+    /// A folder `ik train` wrote (full pose, not --position-only).
+    #[arg(long)]
+    model: PathBuf,
+    /// paper (10,000 targets) or quick (200).
+    #[arg(long, default_value = "paper")]
+    preset: String,
+    /// Samples a target for the family of answers.
+    #[arg(long, default_value_t = 10)]
+    k: usize,
+    /// The Python that runs the references (roboticstoolbox-python, pytracik).
+    #[arg(long, default_value = "python3")]
+    python: PathBuf,
+    /// Leave the references out.
+    #[arg(long)]
+    no_references: bool,
+    /// Output folder [default: runs/bench_ik/<model folder>; the committed results were
+    /// written with --out reports/ik_pose/<robot>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    selfmodel::cli::git_revision();
+    run_main(|| {
+        if args.k == 0 {
+            return Err(selfmodel::Error::Config("--k must be at least 1".into()));
+        }
+        let cfg = BenchIkConfig::named(&args.preset, args.k)?;
+        let device = selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
+        let out = args.out.clone().unwrap_or_else(|| default_out(&args.model));
+        let python = (!args.no_references).then_some(args.python.as_path());
+        let rows = run(&cfg, &args.model, &out, python, &device)?;
+        println!(
+            "{:<34} {:<30} {:>7} {:>8} {:>10} {:>9}",
+            "solver", "budget", "threads", "exact %", "exact/s", "distinct"
+        );
+        for r in rows.iter().filter(|r| r.standard) {
+            println!(
+                "{:<34} {:<30} {:>7} {:>8.2} {:>10.0} {:>9}",
+                r.solver,
+                r.budget,
+                r.threads,
+                r.exact_pct,
+                r.exact_per_s,
+                r.distinct_mean.map_or("-".into(), |d| format!("{d:.1}"))
+            );
+        }
+        if let Some(a) = rows.iter().find(|r| r.solver.contains("alone")) {
+            println!(
+                "the model alone: {:.1} mm, {:.2} degrees mean ({:.1} mm, {:.2} degrees median)",
+                a.pos_err_mm_mean.unwrap_or(f64::NAN),
+                a.rot_err_deg_mean.unwrap_or(f64::NAN),
+                a.pos_err_mm_median.unwrap_or(f64::NAN),
+                a.rot_err_deg_median.unwrap_or(f64::NAN)
+            );
+        }
+        println!(
+            "bench_ik ({} preset, {} targets): wrote {}/results.csv (+ results.md, success_against_time.png)",
+            cfg.preset,
+            cfg.targets,
+            out.display()
+        );
+        Ok(())
+    })
+}

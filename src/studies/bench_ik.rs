@@ -1,0 +1,551 @@
+//! Our learned full-pose IK beside the solvers robotics users pick, on the same random reachable
+//! targets in the same sitting (as `bench_decoders` sits beside PyTorch): the share of targets
+//! solved exactly (1 mm and 0.572 degrees, every joint inside its limits) and exact solutions
+//! per second, at several time budgets (the success-against-time figure, IKFlow's runtime
+//! curve), the family of answers for k samples a target, and the learned model alone beside
+//! IKFlow's published Panda errors.
+//!
+//! Ours: the saved model's flow samples refined by Levenberg-Marquardt ([`PoseModel::solve`]),
+//! the budget being the random starts allowed where the samples stall; the same solver from
+//! random starts only (no model), the model's slow reference. The references come from
+//! `scripts/ik_reference.py` (the Robotics Toolbox's compiled `ik_LM` and TRAC-IK through
+//! PyPI `pytracik`, on the same URDF), run as a child process on the targets file written here;
+//! skipped, with the reason printed, when Python or the packages are absent.
+
+use std::path::{Path, PathBuf};
+
+use burn::tensor::Device;
+
+use crate::core::error::{Error, Result};
+use crate::core::timing::{Repeats, median_seconds};
+use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
+use crate::ik::pose_model::{PoseModel, SolveStats};
+use crate::sim::robot::Robot;
+use crate::sim::robots::RobotSpec;
+
+/// IKFlow's published Panda model (`panda_full_tpm`, trained on 25M poses on a GPU): mean
+/// position and rotation errors of its samples without refinement, from jstmn/ikflow's
+/// `model_performances.md` (500 test targets, 2023-03-28). A reference column, not ours.
+pub const IKFLOW_PANDA_MM_DEG: (f64, f64) = (10.6033, 4.60678);
+
+/// What the benchmark runs.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct BenchIkConfig {
+    pub preset: String,
+    /// Random reachable targets: the tip's pose at joints drawn uniformly within the model's
+    /// ranges.
+    pub targets: usize,
+    pub seed: u64,
+    /// Random starts allowed after the model's sample stalls (the budgets of the curve).
+    pub random_starts: Vec<usize>,
+    /// Random starts of the solver without a model (its curve).
+    pub random_only_starts: Vec<usize>,
+    /// Samples a target for the family of answers.
+    pub k: usize,
+}
+
+impl BenchIkConfig {
+    pub fn named(preset: &str, k: usize) -> Result<Self> {
+        let targets = match preset {
+            "paper" => 10_000,
+            "quick" => 200,
+            other => {
+                return Err(Error::Config(format!(
+                    "unknown preset \"{other}\" (paper or quick)"
+                )));
+            }
+        };
+        Ok(BenchIkConfig {
+            preset: preset.into(),
+            targets,
+            seed: 1,
+            random_starts: vec![0, 1, 3, 10, 100],
+            random_only_starts: vec![1, 3, 10, 100],
+            k,
+        })
+    }
+}
+
+/// One measured configuration.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct BenchIkRow {
+    pub robot: String,
+    pub solver: String,
+    pub budget: String,
+    /// The solver's default budget (the table's rows; the others draw the curve).
+    pub standard: bool,
+    /// Threads (ours) or processes (the references).
+    pub threads: usize,
+    /// Answers a target.
+    pub k: usize,
+    pub targets: usize,
+    pub exact_pct: f64,
+    pub exact_per_s: f64,
+    /// Wall milliseconds a target (the whole batch's time over the targets).
+    pub ms_per_target: f64,
+    pub outside_limits: usize,
+    pub iterations_mean: Option<f64>,
+    pub starts_mean: Option<f64>,
+    /// Distinct exact answers a target (more than 0.1 rad apart in a joint), and the share
+    /// of targets with at least 5.
+    pub distinct_mean: Option<f64>,
+    pub distinct_5_pct: Option<f64>,
+    /// Errors of the answers (the learned model alone: its samples without refinement).
+    pub pos_err_mm_mean: Option<f64>,
+    pub pos_err_mm_median: Option<f64>,
+    pub rot_err_deg_mean: Option<f64>,
+    pub rot_err_deg_median: Option<f64>,
+    pub cpu: String,
+    pub model_preset: String,
+    pub preset: String,
+    pub git_revision: String,
+}
+
+/// The random reachable targets of `robot` for `model` and the joints that reach them.
+pub fn random_targets(
+    robot: &Robot,
+    ranges: &[[f64; 2]],
+    n: usize,
+    seed: u64,
+) -> (Vec<PoseTarget>, Vec<Vec<f64>>) {
+    let qs = crate::sim::trajectory::babbling(n, ranges, seed);
+    let targets = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    (targets, qs)
+}
+
+/// The targets as `x,y,z,qw,qx,qy,qz,q1..qN` CSV (what `ik solve` and the reference script
+/// read).
+pub fn targets_csv(targets: &[PoseTarget], joints: &[Vec<f64>]) -> String {
+    let dof = joints.first().map_or(0, Vec::len);
+    let mut text = String::from("x,y,z,qw,qx,qy,qz");
+    for i in 1..=dof {
+        text += &format!(",q{i}");
+    }
+    text += "\n";
+    for (t, q) in targets.iter().zip(joints) {
+        let p = t.position;
+        let o = t.orientation.expect("a pose target").coords;
+        text += &format!("{},{},{},{},{},{},{}", p.x, p.y, p.z, o.w, o.x, o.y, o.z);
+        for v in q {
+            text += &format!(",{v}");
+        }
+        text += "\n";
+    }
+    text
+}
+
+struct Sitting<'a> {
+    cfg: &'a BenchIkConfig,
+    robot_name: String,
+    cpu: String,
+    model_preset: String,
+    rows: Vec<BenchIkRow>,
+}
+
+impl Sitting<'_> {
+    /// A row of ours from answers and the median seconds of the batch.
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        solver: &str,
+        budget: String,
+        standard: bool,
+        threads: usize,
+        answers: &[Vec<PoseSolution>],
+        lm: &LmConfig,
+        ranges: &[[f64; 2]],
+        seconds: f64,
+    ) {
+        let s = SolveStats::of(answers, lm, ranges);
+        let k = answers.first().map_or(1, Vec::len);
+        let family = k > 1;
+        eprintln!(
+            "bench_ik: {solver}, {budget}, {threads} threads: {:.2}% exact, {:.0} exact/s",
+            s.exact_pct(),
+            s.exact_answers as f64 / seconds
+        );
+        self.rows.push(BenchIkRow {
+            robot: self.robot_name.clone(),
+            solver: solver.into(),
+            budget,
+            standard,
+            threads,
+            k,
+            targets: s.targets,
+            exact_pct: s.exact_pct(),
+            exact_per_s: s.exact_answers as f64 / seconds,
+            ms_per_target: 1000.0 * seconds / s.targets.max(1) as f64,
+            outside_limits: s.outside_limits,
+            iterations_mean: Some(s.iterations_mean),
+            starts_mean: Some(s.starts_mean),
+            distinct_mean: family.then_some(s.distinct_mean),
+            distinct_5_pct: family.then_some(s.distinct_5_pct),
+            pos_err_mm_mean: None,
+            pos_err_mm_median: None,
+            rot_err_deg_mean: None,
+            rot_err_deg_median: None,
+            cpu: self.cpu.clone(),
+            model_preset: self.model_preset.clone(),
+            preset: self.cfg.preset.clone(),
+            git_revision: crate::core::provenance::git_revision(),
+        });
+    }
+}
+
+/// Median seconds of `f` (one warm-up, three timed runs) and its last result.
+fn timed<T>(mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut out = None;
+    let s = median_seconds(Repeats::exactly(1, 3), || out = Some(f()));
+    (s, out.expect("ran"))
+}
+
+/// Run `f` on a pool of `threads` threads.
+fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::Config(format!("a pool of {threads} threads: {e}")))?;
+    Ok(pool.install(f))
+}
+
+/// Benchmark the model saved in `model_dir` on its robot; write `results.csv` (+ Markdown),
+/// `targets.csv`, `reference.csv` and `success_against_time.png` into `out`. `python`: the
+/// interpreter for the reference script (None: skipped).
+pub fn run(
+    cfg: &BenchIkConfig,
+    model_dir: &Path,
+    out: &Path,
+    python: Option<&Path>,
+    device: &Device,
+) -> Result<Vec<BenchIkRow>> {
+    let model = PoseModel::load(model_dir, device)?;
+    let robot = model.saved.robot.load_kinematics()?;
+    model.check_robot(&robot)?;
+    if model.position_only() {
+        return Err(Error::Config(
+            "bench_ik measures full-pose IK: train the model without --position-only".into(),
+        ));
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
+    let ranges = model.saved.ranges.clone();
+    let (targets, joints) = random_targets(&robot, &ranges, cfg.targets, cfg.seed);
+    let targets_file = out.join("targets.csv");
+    crate::core::atomic_file::write_bytes(
+        &targets_file,
+        targets_csv(&targets, &joints).as_bytes(),
+    )?;
+    let threads = rayon::current_num_threads();
+    let mut sitting = Sitting {
+        cfg,
+        robot_name: model.saved.robot.label(),
+        cpu: crate::eval::compute_peak::machine_label(false),
+        model_preset: model.saved.config.preset.clone(),
+        rows: Vec::new(),
+    };
+    let chain = &robot.chain;
+    let standard = model.saved.config.lm.clone();
+    // The model alone: one sample a target, no refinement.
+    let (seconds, samples) = timed(|| model.sample(&targets, device));
+    let errors: Vec<(f64, f64)> = samples
+        .iter()
+        .zip(&targets)
+        .map(|(q, t)| {
+            let (p, r) = pose_error(chain, q, t);
+            (1000.0 * p, r.to_degrees())
+        })
+        .collect();
+    let alone: Vec<Vec<PoseSolution>> = samples
+        .iter()
+        .zip(&errors)
+        .map(|(q, &(p, r))| {
+            vec![PoseSolution {
+                joints: q.clone(),
+                position_error_m: p / 1000.0,
+                rotation_error_rad: r.to_radians(),
+                iterations: 0,
+                starts: 0,
+            }]
+        })
+        .collect();
+    sitting.push(
+        "selfmodel flow alone",
+        "1 sample".into(),
+        true,
+        threads,
+        &alone,
+        &standard,
+        &ranges,
+        seconds,
+    );
+    let stats = |v: Vec<f64>| (v.iter().sum::<f64>() / v.len().max(1) as f64, median(v));
+    let (pm, pmed) = stats(errors.iter().map(|e| e.0).collect());
+    let (rm, rmed) = stats(errors.iter().map(|e| e.1).collect());
+    if let Some(row) = sitting.rows.last_mut() {
+        row.pos_err_mm_mean = Some(pm);
+        row.pos_err_mm_median = Some(pmed);
+        row.rot_err_deg_mean = Some(rm);
+        row.rot_err_deg_median = Some(rmed);
+        row.iterations_mean = None;
+        row.starts_mean = None;
+    }
+    // Ours at every budget (and the model's own), on all threads; the model's own budget on
+    // one thread too.
+    let mut budgets = cfg.random_starts.clone();
+    budgets.push(standard.random_starts);
+    budgets.sort_unstable();
+    budgets.dedup();
+    for &starts in &budgets {
+        let lm = LmConfig {
+            random_starts: starts,
+            ..standard.clone()
+        };
+        let (s, answers) = timed(|| model.solve_with(chain, &targets, 1, &lm, device));
+        let is_standard = starts == standard.random_starts;
+        sitting.push(
+            "selfmodel flow + LM",
+            format!("{starts} random starts"),
+            is_standard,
+            threads,
+            &answers,
+            &lm,
+            &ranges,
+            s,
+        );
+        if is_standard && threads > 1 {
+            let (s, answers) = on_threads(1, || {
+                timed(|| model.solve_with(chain, &targets, 1, &lm, device))
+            })?;
+            sitting.push(
+                "selfmodel flow + LM",
+                format!("{starts} random starts"),
+                true,
+                1,
+                &answers,
+                &lm,
+                &ranges,
+                s,
+            );
+        }
+    }
+    // The family: k samples a target, each refined.
+    let (s, answers) = timed(|| model.solve(chain, &targets, cfg.k, device));
+    sitting.push(
+        "selfmodel flow + LM",
+        format!("k = {} samples, each refined", cfg.k),
+        true,
+        threads,
+        &answers,
+        &standard,
+        &ranges,
+        s,
+    );
+    // The same solver without a model: random starts only.
+    for &starts in &cfg.random_only_starts {
+        let lm = LmConfig {
+            random_starts: starts,
+            ..standard.clone()
+        };
+        let (s, answers) = timed(|| solve_batch(chain, &targets, &[], &ranges, &lm));
+        let answers: Vec<Vec<PoseSolution>> = answers.into_iter().map(|a| vec![a]).collect();
+        sitting.push(
+            "selfmodel LM, random starts only",
+            format!("{starts} random starts"),
+            starts == standard.random_starts,
+            threads,
+            &answers,
+            &lm,
+            &ranges,
+            s,
+        );
+    }
+    // The references, on the same targets file.
+    let reference = out.join("reference.csv");
+    if let (Some(py), RobotSpec::Urdf { path, tip, .. }) = (python, &model.saved.robot) {
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ik_reference.py");
+        let tip = tip
+            .clone()
+            .unwrap_or_else(|| chain.links[chain.tip_link].clone());
+        let run = |processes: usize, file: &Path, standard_only: bool| -> Result<()> {
+            let mut cmd = std::process::Command::new(py);
+            cmd.arg(&script)
+                .args(["--targets", &targets_file.to_string_lossy()])
+                .args(["--urdf", &path.to_string_lossy()])
+                .args(["--base", &chain.links[0]])
+                .args(["--tip", &tip])
+                .args(["--processes", &processes.to_string()])
+                .args(["--out", &file.to_string_lossy()]);
+            if standard_only {
+                cmd.arg("--standard-only");
+            }
+            let o = match cmd.output() {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!(
+                        "bench_ik: the references skipped ({} cannot run: {e})",
+                        py.display()
+                    );
+                    return Ok(());
+                }
+            };
+            let stdout = String::from_utf8_lossy(&o.stdout);
+            for line in stdout.lines() {
+                eprintln!("bench_ik: {line}");
+            }
+            if !o.status.success() {
+                return Err(Error::Config(format!(
+                    "{} failed: {}",
+                    script.display(),
+                    String::from_utf8_lossy(&o.stderr)
+                        .lines()
+                        .last()
+                        .unwrap_or("")
+                )));
+            }
+            Ok(())
+        };
+        run(threads, &reference, false)?;
+        let one = out.join("reference_1_process.csv");
+        if threads > 1 {
+            run(1, &one, true)?;
+        }
+        for file in [reference.as_path(), one.as_path()] {
+            if file.exists() {
+                let rows = read_reference(file, &sitting)?;
+                sitting.rows.extend(rows);
+            }
+        }
+    } else {
+        eprintln!(
+            "bench_ik: the references skipped ({})",
+            if python.is_none() {
+                "no --python given"
+            } else {
+                "they read a URDF; this model's robot is built in"
+            }
+        );
+    }
+    let rows = sitting.rows;
+    write_report(out, &rows)?;
+    Ok(rows)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+/// What `scripts/ik_reference.py` wrote.
+#[derive(serde::Deserialize)]
+struct ReferenceRow {
+    solver: String,
+    budget: String,
+    standard: String,
+    processes: usize,
+    targets: usize,
+    exact: usize,
+    outside_limits: usize,
+    seconds: f64,
+}
+
+fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
+    let rows: Vec<ReferenceRow> = crate::report::table::read_csv(path)?;
+    Ok(rows
+        .into_iter()
+        .map(|r| BenchIkRow {
+            robot: s.robot_name.clone(),
+            solver: r.solver,
+            budget: r.budget,
+            standard: r.standard == "True",
+            threads: r.processes,
+            k: 1,
+            targets: r.targets,
+            exact_pct: 100.0 * r.exact as f64 / r.targets.max(1) as f64,
+            exact_per_s: r.exact as f64 / r.seconds,
+            ms_per_target: 1000.0 * r.seconds / r.targets.max(1) as f64,
+            outside_limits: r.outside_limits,
+            iterations_mean: None,
+            starts_mean: None,
+            distinct_mean: None,
+            distinct_5_pct: None,
+            pos_err_mm_mean: None,
+            pos_err_mm_median: None,
+            rot_err_deg_mean: None,
+            rot_err_deg_median: None,
+            cpu: s.cpu.clone(),
+            model_preset: s.model_preset.clone(),
+            preset: s.cfg.preset.clone(),
+            git_revision: crate::core::provenance::git_revision(),
+        })
+        .collect())
+}
+
+/// `results.csv` and its Markdown, and the success-against-time figure.
+pub fn write_report(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
+    let robot = rows.first().map_or("", |r| r.robot.as_str());
+    crate::report::table::write_table(
+        &out.join("results.csv"),
+        rows,
+        &format!(
+            "Full-pose inverse kinematics on {robot}: ours beside the references, same targets, same sitting"
+        ),
+        &format!(
+            "Random reachable targets (the tip's pose at joints drawn within the limits). Exact: within 1 mm and 0.572 degrees with every joint inside its limits. `threads`: our threads or the references' processes; `ms_per_target`: the batch's wall time over its targets. `standard` marks each solver's default budget; the other budgets draw `success_against_time.png`. The learned model alone is the flow's one sample without refinement: IKFlow's published Panda model (panda_full_tpm, 25M training poses, GPU) has {:.1} mm and {:.2} degrees mean errors (jstmn/ikflow model_performances.md).",
+            IKFLOW_PANDA_MM_DEG.0, IKFLOW_PANDA_MM_DEG.1
+        ),
+    )?;
+    draw(out, rows)
+}
+
+/// Success (%) against wall milliseconds a target, one line per solver (on the most threads).
+fn draw(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
+    let most = rows.iter().map(|r| r.threads).max().unwrap_or(1);
+    let mut lines: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in rows.iter().filter(|r| r.threads == most && r.k == 1) {
+        if r.solver.contains("alone") {
+            continue;
+        }
+        let label = format!(
+            "{} ({} {})",
+            r.solver,
+            most,
+            if r.solver.starts_with("selfmodel") {
+                "threads"
+            } else {
+                "processes"
+            }
+        );
+        match lines.iter_mut().find(|(l, _)| *l == label) {
+            Some((_, pts)) => pts.push((r.ms_per_target, r.exact_pct)),
+            None => lines.push((label, vec![(r.ms_per_target, r.exact_pct)])),
+        }
+    }
+    // Each line joins its budgets in increasing order (not sorted by time: a noisy timing
+    // shows as a step back, not a reordering).
+    let robot = rows.first().map_or("", |r| r.robot.as_str());
+    let name = Path::new(robot)
+        .file_stem()
+        .map_or(robot.to_string(), |s| s.to_string_lossy().to_string());
+    crate::report::figures::lines_log_x(
+        &out.join("success_against_time.png"),
+        &format!("{name}: targets solved exactly against time a target"),
+        "wall milliseconds a target (log)",
+        "targets solved exactly (%)",
+        &lines,
+    )
+}
+
+/// Where `bench_ik` writes by default: `runs/bench_ik/<model folder name>`.
+pub fn default_out(model_dir: &Path) -> PathBuf {
+    PathBuf::from(crate::studies::run::RUNS)
+        .join("bench_ik")
+        .join(
+            model_dir
+                .file_name()
+                .map_or("model".into(), |n| n.to_string_lossy().to_string()),
+        )
+}
