@@ -49,13 +49,13 @@ fn main() -> ExitCode {
         let out = args.out.clone().unwrap_or_else(|| default_out(&args.model));
         let python = (!args.no_references).then_some(args.python.as_path());
         let rows = run(&cfg, &args.model, &out, python, &device)?;
-        println!(
-            "{:<34} {:<30} {:>7} {:>8} {:>10} {:>9}",
+        let mut text = format!(
+            "{:<34} {:<30} {:>7} {:>8} {:>10} {:>9}\n",
             "solver", "budget", "threads", "exact %", "exact/s", "distinct"
         );
         for r in rows.iter().filter(|r| r.standard) {
-            println!(
-                "{:<34} {:<30} {:>7} {:>8.2} {:>10.0} {:>9}",
+            text += &format!(
+                "{:<34} {:<30} {:>7} {:>8.2} {:>10.0} {:>9}\n",
                 r.solver,
                 r.budget,
                 r.threads,
@@ -65,20 +65,24 @@ fn main() -> ExitCode {
             );
         }
         if let Some(a) = rows.iter().find(|r| r.solver.contains("alone")) {
-            println!(
-                "the model alone: {:.1} mm, {:.2} degrees mean ({:.1} mm, {:.2} degrees median)",
+            text += &format!(
+                "the model alone: {:.1} mm, {:.2} degrees mean ({:.1} mm, {:.2} degrees median)\n",
                 a.pos_err_mm_mean.unwrap_or(f64::NAN),
                 a.rot_err_deg_mean.unwrap_or(f64::NAN),
                 a.pos_err_mm_median.unwrap_or(f64::NAN),
                 a.rot_err_deg_median.unwrap_or(f64::NAN)
             );
         }
-        println!(
-            "bench_ik ({} preset, {} targets): wrote {}/results.csv (+ results.md, success_against_time.png)",
+        text += &format!(
+            "bench_ik ({} preset, {} targets, {}): wrote {}/results.csv (+ results.md, success_against_time.png)\n",
             cfg.preset,
             cfg.targets,
+            rows.first().map_or("", |r| r.cpu.as_str()),
             out.display()
         );
+        print!("{text}");
+        // What the command printed, for the docs (which include it, not a typed copy).
+        selfmodel::core::atomic_file::write_bytes(&out.join("console.txt"), text.as_bytes())?;
         Ok(())
     })
 }

@@ -281,7 +281,7 @@ impl PoseModel {
     }
 
     /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
-    /// (with random restarts where the samples stall, for `k = 1`), in target order.
+    /// (from random starts where it stalls), in target order.
     pub fn solve(
         &self,
         chain: &KinematicChain,
@@ -307,38 +307,24 @@ impl PoseModel {
         let ranges = &self.saved.ranges;
         let path = chain.tip_path();
         use rayon::prelude::*;
+        // Each sample refined on its own (the family of answers, not one), from random starts
+        // where it stalls; the random starts differ between samples and targets.
         targets
             .par_iter()
             .enumerate()
             .map(|(i, t)| {
-                if k == 1 {
-                    vec![solve(
-                        &path,
-                        t,
-                        &[samples[0][i].clone()],
-                        ranges,
-                        cfg,
-                        i as u64,
-                    )]
-                } else {
-                    // Each sample refined on its own: the family of answers, not one.
-                    let no_restarts = LmConfig {
-                        random_starts: 0,
-                        ..cfg.clone()
-                    };
-                    (0..k)
-                        .map(|s| {
-                            solve(
-                                &path,
-                                t,
-                                &[samples[s][i].clone()],
-                                ranges,
-                                &no_restarts,
-                                i as u64,
-                            )
-                        })
-                        .collect()
-                }
+                (0..k)
+                    .map(|s| {
+                        solve(
+                            &path,
+                            t,
+                            &[samples[s][i].clone()],
+                            ranges,
+                            cfg,
+                            (i * k + s) as u64,
+                        )
+                    })
+                    .collect()
             })
             .collect()
     }
