@@ -232,6 +232,23 @@ pub fn run(
     }
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
+    // The model's training curve beside its benchmark (principle: show the curve).
+    let curve_file = model_dir.join("validation_curve.csv");
+    if curve_file.exists() {
+        let curve: Vec<crate::train::trainer::ValidationPoint> =
+            crate::report::table::read_csv(&curve_file)?;
+        crate::report::table::write_csv(&out.join("flow_validation_curve.csv"), &curve)?;
+        crate::report::figures::curves(
+            &out.join("flow_validation_curve.png"),
+            "the flow's validation error (one sample a target, before refinement)",
+            "epoch",
+            "mean position error, cm (log)",
+            &[(
+                "validation".to_string(),
+                curve.iter().map(|p| (p.epoch, p.validation)).collect(),
+            )],
+        )?;
+    }
     let ranges = model.saved.ranges.clone();
     let (targets, joints) = random_targets(&robot, &ranges, cfg.targets, cfg.seed);
     let targets_file = out.join("targets.csv");
@@ -353,7 +370,7 @@ pub fn run(
         let (s, answers) = timed(|| solve_batch(chain, &targets, &[], &ranges, &lm));
         let answers: Vec<Vec<PoseSolution>> = answers.into_iter().map(|a| vec![a]).collect();
         sitting.push(
-            "selfmodel LM, random starts only",
+            "selfmodel LM from random starts",
             format!("{starts} random starts"),
             starts == standard.random_starts,
             threads,
