@@ -40,6 +40,10 @@ fn distance_error_statistics_are_in_centimetres() {
     assert!((e.mean_cm - 4.0).abs() < 1e-9);
     assert!((e.median_cm - 3.0).abs() < 1e-9);
     assert!((e.max_cm - 10.0).abs() < 1e-9);
+    // 10 cm is not above 10 cm; 10.5 is.
+    assert_eq!(e.above_10cm_pct, 0.0);
+    let tail = DistanceErrors::from_metres(&[0.01, 0.105, 0.30, 0.02]);
+    assert!((tail.above_10cm_pct - 50.0).abs() < 1e-9);
     assert_eq!(e.targets, 5);
 }
 

@@ -288,6 +288,9 @@ pub struct DistanceErrors {
     pub median_cm: f64,
     pub p95_cm: f64,
     pub max_cm: f64,
+    /// Share of targets (%) more than 10 cm off: the tail a mean hides (a joint-space
+    /// regression averaging across two solution branches lands between them).
+    pub above_10cm_pct: f64,
     pub targets: usize,
 }
 
@@ -308,6 +311,8 @@ impl DistanceErrors {
             median_cm: at(0.5),
             p95_cm: at(0.95),
             max_cm: e.last().copied().unwrap_or(f64::NAN),
+            above_10cm_pct: 100.0 * e.iter().filter(|&&v| v > 10.0).count() as f64
+                / e.len().max(1) as f64,
             targets: e.len(),
         }
     }

@@ -359,6 +359,10 @@ pub struct IkRow {
     pub median_cm: f64,
     pub p95_cm: f64,
     pub max_cm: f64,
+    /// Share of targets (%) more than 10 cm off; empty on rows from runs before it was
+    /// counted.
+    #[serde(default)]
+    pub above_10cm_pct: Option<f64>,
     pub targets: usize,
     /// Mean error over DRL's (the sigmoid DRL of the same range and run).
     pub ratio_to_drl: Option<f64>,
@@ -728,6 +732,7 @@ impl RangeRun<'_> {
             median_cm: e.median_cm,
             p95_cm: e.p95_cm,
             max_cm: e.max_cm,
+            above_10cm_pct: Some(e.above_10cm_pct),
             targets: e.targets,
             ratio_to_drl: None,
             within_0_01mm_pct: 100.0 * within as f64 / targets.len().max(1) as f64,
