@@ -1143,7 +1143,7 @@ fn write_outputs(
     write_table2(dir, cfg, &rows)?;
     crate::report::table::write_csv(&dir.join("validation_curves.csv"), curves)?;
     for &r in &cfg.ranges_deg {
-        validation_figure(dir, r, curves)?;
+        validation_figure(dir, robot_name, r, curves)?;
     }
     if !emssl_curves.is_empty() || !partial {
         write_curves(
@@ -1219,7 +1219,12 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
 
 /// `validation_curves_<range>.png` (and `validation_curves_<range>_wrapped.png` for the wrapped
 /// variants): every method's validation error against epoch (EMSSL: iteration), log-y.
-fn validation_figure(dir: &Path, range_deg: f64, curves: &[ValidationRow]) -> Result<()> {
+fn validation_figure(
+    dir: &Path,
+    robot_name: &str,
+    range_deg: f64,
+    curves: &[ValidationRow],
+) -> Result<()> {
     for (wrapped, suffix) in [(false, ""), (true, "_wrapped")] {
         let mut methods: Vec<&str> = Vec::new();
         for c in curves.iter().filter(|c| c.range_deg == range_deg) {
@@ -1246,7 +1251,8 @@ fn validation_figure(dir: &Path, range_deg: f64, curves: &[ValidationRow]) -> Re
         crate::report::figures::curves(
             &dir.join(format!("validation_curves_{range_deg:.0}{suffix}.png")),
             &format!(
-                "Validation error while training, UR5 +-{range_deg:.0} deg{}",
+                "Validation error while training, {} +-{range_deg:.0} deg{}",
+                short_name(robot_name),
                 if wrapped { ", wrapped output" } else { "" }
             ),
             "epoch (EMSSL: iteration)",
@@ -1255,4 +1261,15 @@ fn validation_figure(dir: &Path, range_deg: f64, curves: &[ValidationRow]) -> Re
         )?;
     }
     Ok(())
+}
+
+/// A robot's name for a figure title: a built-in's in capitals (`UR5`), a URDF's file stem
+/// (`panda`).
+fn short_name(robot_name: &str) -> String {
+    let first = robot_name.split_whitespace().next().unwrap_or(robot_name);
+    let path = Path::new(first);
+    match (path.extension(), path.file_stem()) {
+        (Some(_), Some(stem)) => stem.to_string_lossy().to_string(),
+        _ => robot_name.to_uppercase(),
+    }
 }
