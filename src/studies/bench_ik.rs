@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use crate::core::error::{Error, Result};
-use crate::core::timing::{Repeats, median_seconds};
+use crate::core::timing::{Repeats, median, median_seconds};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
 use crate::ik::pose_model::{PoseModel, SolveStats};
 use crate::sim::robot::Robot;
@@ -299,7 +299,7 @@ pub fn run(
         &ranges,
         seconds,
     );
-    let stats = |v: Vec<f64>| (v.iter().sum::<f64>() / v.len().max(1) as f64, median(v));
+    let stats = |v: Vec<f64>| (v.iter().sum::<f64>() / v.len().max(1) as f64, median(&v));
     let (pm, pmed) = stats(errors.iter().map(|e| e.0).collect());
     let (rm, rmed) = stats(errors.iter().map(|e| e.1).collect());
     if let Some(row) = sitting.rows.last_mut() {
@@ -461,15 +461,6 @@ pub fn run(
     }
     write_report(out, &rows)?;
     Ok(rows)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[v.len() / 2]
-    }
 }
 
 /// What `scripts/ik_reference.py` wrote.
