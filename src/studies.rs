@@ -11,6 +11,7 @@ pub mod docs;
 pub mod emssl_adaptation;
 pub mod emssl_learning_curve;
 pub mod emssl_sampling_speed;
+pub mod emssl_seeds;
 pub mod emssl_study;
 pub mod emssl_table2;
 pub mod mesh_fidelity;

@@ -427,6 +427,10 @@ pub struct EmsslIteration {
     /// iteration): with a real arm as the forward model, the moves it made.
     #[serde(default)]
     pub forward_calls: usize,
+    /// Optimiser steps (batches) this iteration took (the warm start's counted in the first):
+    /// their sum is the run's training budget (0 in curves from before it was recorded).
+    #[serde(default)]
+    pub steps: usize,
 }
 
 impl EmsslIteration {
@@ -680,7 +684,10 @@ fn emssl_run(
     let desired = &data.positions[data.train()];
     let held_out = &data.positions[data.validation()];
     let wrap = model.joint_output() == JointOutput::Wrapped && data.full_circle();
+    let mut warm_steps = 0;
     if cfg.warm_start_epochs > 0 && resumed.is_none() {
+        warm_steps =
+            TrainConfig::steps_for_epochs(cfg.warm_start_epochs, desired.len(), fit_cfg.batch);
         let (reached, tried) = babble(
             forward,
             desired.len(),
@@ -820,6 +827,8 @@ fn emssl_run(
             (e, _) => e,
         })?;
         let training_seconds = t0.elapsed().as_secs_f64();
+        let steps = TrainConfig::steps_for_epochs(fit_iter.epochs, reached.len(), fit_iter.batch)
+            + std::mem::take(&mut warm_steps);
         let valid = model.valid();
         // The next sampling pass's inference, and the agreement check on it.
         let t0 = std::time::Instant::now();
@@ -852,6 +861,7 @@ fn emssl_run(
             sampling_seconds,
             training_seconds,
             forward_calls: 2 * desired.len() * iteration,
+            steps,
         });
         let last = curve.last().expect("just pushed");
         if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
@@ -974,6 +984,7 @@ fn polish(
             sampling_seconds,
             training_seconds: log.seconds,
             forward_calls: curve.last().map_or(0, |c| c.forward_calls) + 2 * desired.len() * round,
+            steps: log.epochs * set.len().div_ceil(fit_round.batch),
         };
         eprintln!(
             "EMSSL polishing round {round}: selection {:.4} cm (before {best_cm:.4}), test {:.4} cm, {}",

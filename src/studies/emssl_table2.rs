@@ -132,6 +132,8 @@ impl IkComparisonConfig {
                 forward_hidden: vec![1024, 512, 256, 128],
                 forward_epochs: 20,
                 inverse_epochs: 20,
+                forward: Default::default(),
+                inverse_steps: None,
             },
             gan: GanConfig {
                 noise: 3,
@@ -219,6 +221,8 @@ impl Preset for IkComparisonConfig {
                 forward_hidden: vec![128, 64],
                 forward_epochs: 20,
                 inverse_epochs: 10,
+                forward: Default::default(),
+                inverse_steps: None,
             },
             gan: GanConfig {
                 generator_hidden: vec![128, 64],
@@ -304,12 +308,12 @@ impl IkComparisonConfig {
                 fit: self.baseline_fit(&self.fit, self.drl_epochs),
                 fixed_epochs: self.drl_epochs,
             }));
-            methods.push(Box::new(DslMethod {
-                name: format!("DSL{sfx}"),
-                model,
-                fit: self.baseline_fit(&self.fit, self.dsl.inverse_epochs),
-                dsl: self.dsl.clone(),
-            }));
+            methods.push(Box::new(self.dsl_method(
+                &format!("DSL{sfx}"),
+                dof,
+                output,
+                self.dsl.clone(),
+            )));
             let mut gan_fit = self.baseline_fit(&self.gan.fit, self.gan.fit.epochs);
             if let Some(c) = gan_fit.converge.as_mut() {
                 c.min_epochs = self.gan_warmup_epochs;
@@ -328,14 +332,35 @@ impl IkComparisonConfig {
             cfg: self.dls.clone(),
         }));
         for output in self.outputs(range_deg) {
-            methods.push(Box::new(EmsslMethod {
-                name: format!("EMSSL{}", output.suffix()),
-                model: self.model_as(dof, output),
-                fit: self.fit.clone(),
-                emssl: self.emssl.clone(),
-            }));
+            methods.push(Box::new(self.emssl_method(dof, output)));
         }
         methods
+    }
+
+    /// Table II's EMSSL under `output`.
+    pub fn emssl_method(&self, dof: usize, output: JointOutput) -> EmsslMethod {
+        EmsslMethod {
+            name: format!("EMSSL{}", output.suffix()),
+            model: self.model_as(dof, output),
+            fit: self.fit.clone(),
+            emssl: self.emssl.clone(),
+        }
+    }
+
+    /// Table II's DSL under `output`, named `name`, with the forward model and phases of `dsl`.
+    pub fn dsl_method(
+        &self,
+        name: &str,
+        dof: usize,
+        output: JointOutput,
+        dsl: DistalConfig,
+    ) -> DslMethod {
+        DslMethod {
+            name: name.into(),
+            model: self.model_as(dof, output),
+            fit: self.baseline_fit(&self.fit, dsl.inverse_epochs),
+            dsl,
+        }
     }
 
     /// The flow, whose samples also restart EMSSL + DLS where it stalls.
@@ -457,7 +482,7 @@ struct Unit {
 
 /// An EMSSL iteration with the revision of the run that trained it (a reused unit's, not
 /// this process's).
-type RevisedIteration = (EmsslIteration, String);
+pub type RevisedIteration = (EmsslIteration, String);
 
 impl Unit {
     /// Its EMSSL curve, each iteration stamped with the revision its rows carry.
@@ -513,8 +538,11 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
         .collect()
 }
 
-/// One range's run: the data, the folders and the rows so far.
-struct RangeRun<'a> {
+/// One range's run: the data, the folders and the rows so far. Table II's mechanism (a unit
+/// per method, reused by `--resume`, a partial report after each); other studies
+/// (`emssl_seeds`) drive it with methods of their own through [`RangeRun::start`] and
+/// [`RangeRun::method`].
+pub struct RangeRun<'a> {
     cfg: &'a IkComparisonConfig,
     robot: &'a Robot,
     robot_name: &'a str,
@@ -540,7 +568,59 @@ struct RangeRun<'a> {
     progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 }
 
-impl RangeRun<'_> {
+impl<'a> RangeRun<'a> {
+    /// The data of `range_deg` (Table II's test set for the config's data seed) and the
+    /// folders under `dir`; no unit run yet.
+    #[allow(clippy::too_many_arguments)]
+    pub fn start(
+        cfg: &'a IkComparisonConfig,
+        robot: &'a Robot,
+        robot_name: &'a str,
+        range_deg: f64,
+        dir: &Path,
+        device_choice: DeviceChoice,
+        resume: bool,
+        progress: &'a dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
+    ) -> Result<Self> {
+        Ok(RangeRun {
+            cfg,
+            robot,
+            robot_name,
+            range_deg,
+            data: IkData::generate(&robot.chain, &cfg.data(range_deg))?,
+            device: crate::core::device::select(device_choice)?,
+            device_choice,
+            dir: dir.to_path_buf(),
+            resume,
+            rows: Vec::new(),
+            curves: Vec::new(),
+            emssl_curve: Vec::new(),
+            left: Vec::new(),
+            done: 0,
+            ran: false,
+            progress,
+        })
+    }
+
+    /// The rows of the units run or reused so far, in order.
+    pub fn rows(&self) -> &[IkRow] {
+        &self.rows
+    }
+
+    /// The EMSSL iterations of the units so far (with the revision that trained them).
+    pub fn emssl_curve(&self) -> &[RevisedIteration] {
+        &self.emssl_curve
+    }
+
+    pub fn data(&self) -> &IkData {
+        &self.data
+    }
+
+    /// The validation curves of the units so far.
+    pub fn curves(&self) -> &[ValidationRow] {
+        &self.curves
+    }
+
     fn targets(&self) -> &[Point3<f64>] {
         &self.data.positions[self.data.test()]
     }
@@ -566,7 +646,7 @@ impl RangeRun<'_> {
     }
 
     /// What a method works with in this range.
-    fn task<'a>(&'a self, files: &'a Path, predictions: &'a Path) -> IkTask<'a> {
+    fn task<'t>(&'t self, files: &'t Path, predictions: &'t Path) -> IkTask<'t> {
         IkTask {
             chain: &self.robot.chain,
             data: &self.data,
@@ -580,7 +660,7 @@ impl RangeRun<'_> {
     }
 
     /// Run one method as a unit (reused where it is done with the same settings).
-    fn method(&mut self, method: &dyn IkMethod) -> Result<()> {
+    pub fn method(&mut self, method: &dyn IkMethod) -> Result<()> {
         let (files, predictions) = (self.files(), self.predictions_dir());
         let required = method.required(&self.task(&files, &predictions));
         self.unit(&method.name(), &method.settings(), &required, |r| {
@@ -701,16 +781,18 @@ impl RangeRun<'_> {
         let path = self.predictions_path(&a.method);
         write_predictions(&path, targets, &a.joints, &reached)?;
         let k = self.cfg.prediction_sample_rows.min(targets.len());
-        write_predictions(
-            &self
-                .dir
-                .join("predictions_sample")
-                .join(format!("{:.0}", self.range_deg))
-                .join(format!("{}.csv", file_name(&a.method))),
-            &targets[..k],
-            &a.joints[..k],
-            &reached[..k],
-        )?;
+        if k > 0 {
+            write_predictions(
+                &self
+                    .dir
+                    .join("predictions_sample")
+                    .join(format!("{:.0}", self.range_deg))
+                    .join(format!("{}.csv", file_name(&a.method))),
+                &targets[..k],
+                &a.joints[..k],
+                &reached[..k],
+            )?;
+        }
         let d = distances(targets, &reached);
         let within = d.iter().filter(|&&e| e < 1e-5).count();
         let e = DistanceErrors::from_metres(&d);
@@ -777,26 +859,16 @@ pub fn run_range(
     resume: bool,
     progress: &dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 ) -> Result<RangeOutcome> {
-    let device = crate::core::device::select(device_choice)?;
-    let data = IkData::generate(&robot.chain, &cfg.data(range_deg))?;
-    let mut run = RangeRun {
+    let mut run = RangeRun::start(
         cfg,
         robot,
         robot_name,
         range_deg,
-        data,
-        device,
+        dir,
         device_choice,
-        dir: dir.to_path_buf(),
         resume,
-        rows: Vec::new(),
-        curves: Vec::new(),
-        emssl_curve: Vec::new(),
-        left: Vec::new(),
-        done: 0,
-        ran: false,
         progress,
-    };
+    )?;
     let chain = &robot.chain;
     let dof = robot.dof();
     let batch = cfg.fit.inference_batch;

@@ -219,6 +219,21 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
     })
 }
 
+/// EMSSL against DSL over seeds, with DSL at EMSSL's budget and through the exact forward
+/// kinematics (reports/emssl_seeds).
+pub fn run_emssl_seeds(opts: &RunOptions, dir: &Path) -> Result<String> {
+    reject_self_model_switches(
+        &RunOptions {
+            resume: false,
+            ..opts.clone()
+        },
+        "emssl_seeds",
+    )?;
+    let cfg = crate::studies::emssl_seeds::SeedsConfig::preset(&opts.preset)?;
+    let (robot, name) = opts.ik_robot()?;
+    crate::studies::emssl_seeds::run(&cfg, &robot, &name, dir, opts.device, opts.resume)
+}
+
 /// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
 pub fn run_emssl_study(opts: &RunOptions, dir: &Path) -> Result<String> {
     reject_self_model_switches(
@@ -421,6 +436,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: true,
         run: run_emssl_table2,
+    },
+    Experiment {
+        name: "emssl_seeds",
+        about: "Table II settled: EMSSL and DSL over 3 seeds at +-90 deg, DSL at EMSSL's optimiser steps and through the exact forward kinematics (--resume continues)",
+        default_dir: "reports/emssl_seeds",
+        presets: IK_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_emssl_seeds,
     },
     Experiment {
         name: "emssl_learning_curve",
