@@ -192,6 +192,9 @@ fn a_tiny_emssl_beats_direct_regression_on_a_redundant_arm() {
         .map(|c| c.train_reach_cm)
         .fold(f64::INFINITY, f64::min);
     assert!(best < 0.5 * curve[0].train_reach_cm, "{curve:?}");
+    // Each iteration counts its optimiser steps: 5 epochs of the training goals in batches of 64.
+    let per_iteration = 5 * data.train().len().div_ceil(64);
+    assert!(curve.iter().all(|c| c.steps == per_iteration), "{curve:?}");
     // Seeded: the same run again gives the same curve.
     let (_, again) = emssl(&robot.chain, &data, &model, &fit, &rule, &device).unwrap();
     assert_eq!(
@@ -218,6 +221,8 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
             forward_hidden: vec![128, 64],
             forward_epochs: 20,
             inverse_epochs: 10,
+            forward: Default::default(),
+            inverse_steps: None,
         },
         &device,
     )
@@ -447,4 +452,88 @@ fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
         );
     }
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn dsl_through_the_exact_forward_kinematics_beats_a_learned_forward_model() {
+    let (robot, data) = ur5_data(4000, 90.0);
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let ignorant = ignorant_cm(&robot, &data);
+    let fit = FitConfig {
+        batch: 64,
+        ..FitConfig::paper()
+    };
+    let learned = DistalConfig {
+        forward_hidden: vec![128, 64],
+        forward_epochs: 20,
+        inverse_epochs: 10,
+        forward: selfmodel::ik::dsl::DistalForward::Learned,
+        inverse_steps: None,
+    };
+    let exact = DistalConfig {
+        forward: selfmodel::ik::dsl::DistalForward::Exact,
+        ..learned.clone()
+    };
+    let model = InverseModelConfig::quick(6);
+    let errors = |cfg: &DistalConfig| {
+        let d = dsl(&robot.chain, &data, &model, &fit, cfg, &device).unwrap();
+        assert_eq!(
+            d.forward.is_none(),
+            cfg.forward == selfmodel::ik::dsl::DistalForward::Exact
+        );
+        test_errors(&d.inverse, &robot.chain, &data, 512, &device)
+            .0
+            .mean_cm
+    };
+    let (through_network, through_arm) = (errors(&learned), errors(&exact));
+    eprintln!(
+        "DSL {through_network:.2} cm, through the exact forward kinematics {through_arm:.2} cm, input-blind {ignorant:.2} cm"
+    );
+    assert!(through_arm < 0.5 * ignorant);
+    assert!(
+        through_arm < through_network,
+        "exact {through_arm:.2} cm, learned {through_network:.2} cm"
+    );
+}
+
+#[test]
+fn a_matched_budget_trains_the_inverse_network_for_exactly_its_steps() {
+    let robot = selfmodel::sim::dh_robot::ur5([-1.5, 1.5]);
+    let data = IkData::generate(
+        &robot.chain,
+        &IkDataConfig {
+            samples: 1500,
+            train: 1000,
+            range_deg: 90.0,
+            seed: 3,
+            validation: 200,
+        },
+    )
+    .unwrap();
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let fit = FitConfig {
+        batch: 100,
+        converge: Some(selfmodel::train::trainer::Convergence {
+            max_epochs: 3,
+            ..selfmodel::train::trainer::Convergence::standard()
+        }),
+        ..FitConfig::paper()
+    };
+    // 800 training goals in batches of 100: 8 steps an epoch; 60 steps round up to 8 epochs,
+    // whatever the convergence rule's cap of 3 says.
+    let cfg = DistalConfig {
+        forward_hidden: vec![32],
+        forward_epochs: 2,
+        inverse_epochs: 2,
+        forward: selfmodel::ik::dsl::DistalForward::Exact,
+        inverse_steps: Some(60),
+    };
+    let model = InverseModelConfig {
+        hidden: vec![32],
+        ..InverseModelConfig::quick(6)
+    };
+    let d = dsl(&robot.chain, &data, &model, &fit, &cfg, &device).unwrap();
+    let log = d.inverse_log.expect("a run to a budget keeps its curve");
+    assert_eq!(log.epochs, 8);
+    assert_eq!(log.curve.len(), 8);
 }

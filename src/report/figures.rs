@@ -892,12 +892,13 @@ pub fn scatter_panels(
                 .configure_mesh()
                 .x_desc(x_desc)
                 .y_desc(y_desc)
+                .x_label_formatter(&|v| format!("{v:.0}"))
                 .y_label_formatter(&|v| tick_label(*v))
                 .label_style((FONT, 12))
                 .light_line_style(TRANSPARENT)
                 .draw()
                 .map_err(|e| draw_err(path, e))?;
-            let dot = Palette99::pick(0).to_rgba().mix(0.35);
+            let dot = BLUE.mix(0.3);
             chart
                 .draw_series(
                     panel

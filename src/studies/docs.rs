@@ -381,6 +381,13 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
                 drawn += 1;
             }
         }
+        // Table II's error against the base angle at +-180 degrees, from its answers.
+        if dir.join("table2.md").is_file()
+            && dir.join("error_by_base_angle_180.png").is_file()
+            && crate::studies::emssl_table2::draw_error_by_base_angle(&dir, 180.0)?
+        {
+            drawn += 1;
+        }
         // The EMSSL learning curves (Table II's and the long curve's).
         for csv in ["emssl_curve.csv", "results.csv"] {
             if dir.join("learning_curve.png").is_file() && dir.join(csv).is_file() {

@@ -1216,6 +1216,9 @@ fn write_outputs(
     crate::report::table::write_csv(&dir.join("validation_curves.csv"), curves)?;
     for &r in &cfg.ranges_deg {
         validation_figure(dir, robot_name, r, curves)?;
+        if r >= 180.0 {
+            draw_error_by_base_angle(dir, r)?;
+        }
     }
     if !emssl_curves.is_empty() || !partial {
         write_curves(
@@ -1230,7 +1233,10 @@ fn write_outputs(
 
 /// `table2.md`: the rows a reader compares, ours beside the paper's.
 fn write_table2(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow]) -> Result<()> {
-    crate::core::atomic_file::write_bytes(&dir.join("table2.md"), table2_text(cfg, rows).as_bytes())
+    crate::core::atomic_file::write_bytes(
+        &dir.join("table2.md"),
+        table2_text(dir, cfg, rows)?.as_bytes(),
+    )
 }
 
 /// `table2.md` as the rows of `dir/results.csv` and the run's `dir/config.json` make it
@@ -1244,20 +1250,115 @@ pub fn table2_markdown(dir: &Path) -> Result<Option<String>> {
     let cfg: IkComparisonConfig = serde_json::from_str(&text)
         .map_err(|e| Error::data(&config, format!("not a Table II config: {e}")))?;
     let rows: Vec<IkRow> = crate::report::table::read_csv(&results)?;
-    Ok(Some(table2_text(&cfg, &rows)))
+    Ok(Some(table2_text(dir, &cfg, &rows)?))
 }
 
-/// The compact Table II: ours beside the paper's, absolute and as ratios to DRL; partial
-/// until every range has its last unit (EMSSL + DLS).
-fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
+/// The columns of `emssl_seeds`' `summary.csv` Table II reads (that study builds on this one,
+/// so the file, not its type, is what they share).
+#[derive(serde::Deserialize)]
+struct SeedSpread {
+    method: String,
+    range: f64,
+    seeds: usize,
+    spread_pct: f64,
+    robot: String,
+    preset: String,
+}
+
+/// Where `emssl_seeds` writes its summary, beside Table II's folder (`reports/emssl_seeds`).
+fn seeds_summary(dir: &Path) -> Option<PathBuf> {
+    let path = dir.parent()?.join("emssl_seeds").join("summary.csv");
+    path.is_file().then_some(path)
+}
+
+/// Targets and the positions the answers reached, from a predictions CSV
+/// ([`write_predictions`]).
+pub fn read_reached(path: &Path) -> Result<Vec<(Point3<f64>, Point3<f64>)>> {
+    let (header, cells) = crate::report::table::read_cells(path)?;
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| Error::data(path, format!("no column {name}")))
+    };
+    let cols = [
+        "target_x",
+        "target_y",
+        "target_z",
+        "reached_x",
+        "reached_y",
+        "reached_z",
+    ]
+    .map(col);
+    let mut idx = [0; 6];
+    for (i, c) in cols.into_iter().enumerate() {
+        idx[i] = c?;
+    }
+    cells
+        .iter()
+        .map(|r| {
+            let v: Vec<f64> = idx
+                .iter()
+                .map(|&i| {
+                    r[i].parse::<f64>()
+                        .map_err(|e| Error::data(path, format!("bad number {}: {e}", r[i])))
+                })
+                .collect::<Result<_>>()?;
+            Ok((Point3::new(v[0], v[1], v[2]), Point3::new(v[3], v[4], v[5])))
+        })
+        .collect()
+}
+
+/// A row's answers as this checkout has them: all of them (`predictions_<range>/`, where the
+/// run was made here), else the committed sample; with whether it is the sample.
+fn answers_file(dir: &Path, range_deg: f64, method: &str) -> Option<(PathBuf, bool)> {
+    let file = format!("{}.csv", file_name(method));
+    let all = dir.join(format!("predictions_{range_deg:.0}")).join(&file);
+    let sample = dir
+        .join("predictions_sample")
+        .join(format!("{range_deg:.0}"))
+        .join(&file);
+    if all.is_file() {
+        Some((all, false))
+    } else if sample.is_file() {
+        Some((sample, true))
+    } else {
+        None
+    }
+}
+
+/// The share of targets more than 10 cm off, for a row from before the share was recorded:
+/// from its answers in this checkout (`Some((share %, answers, from the sample))`).
+fn tail_from_answers(dir: &Path, r: &IkRow) -> Result<Option<(f64, usize, bool)>> {
+    let Some((path, sample)) = answers_file(dir, r.range_deg, &r.method) else {
+        return Ok(None);
+    };
+    let pairs = read_reached(&path)?;
+    let above = pairs.iter().filter(|(t, q)| (t - q).norm() > 0.1).count();
+    Ok(Some((
+        100.0 * above as f64 / pairs.len().max(1) as f64,
+        pairs.len(),
+        sample,
+    )))
+}
+
+/// The compact Table II: ours beside the paper's, absolute and as ratios to DRL, with the
+/// tail (95th percentile, share above 10 cm) and, where `emssl_seeds` has run beside it on
+/// the same robot, range and preset, the seed spread of its methods; partial until every range
+/// has its last unit (EMSSL + DLS).
+fn table2_text(dir: &Path, cfg: &IkComparisonConfig, rows: &[IkRow]) -> Result<String> {
     let partial = !cfg.ranges_deg.iter().all(|&r| {
         rows.iter()
             .any(|x| x.range_deg == r && x.method == "EMSSL + DLS")
     });
+    let seeds: Vec<SeedSpread> = match seeds_summary(dir) {
+        Some(p) => crate::report::table::read_csv(&p)?,
+        None => Vec::new(),
+    };
     let opt =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |x| format!("{x:.digits$}"));
     let mut text = format!(
-        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` (by `emssl_table2`, and by `reports` from the CSV); do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm). Ours / paper: our mean over the paper's (above 1: our error is larger). Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | ratio to DRL | paper mean cm | paper ratio | ours / paper | within 0.01 mm | outside limits | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "# Table II ({} preset{}): mean distance error on {} test targets\n\nGenerated from `results.csv` (by `emssl_table2`, and by `reports` from the CSV); do not edit by hand. Ratio: the mean over the sigmoid DRL's of the same range (the paper's arm is unnamed, so its absolute numbers are for another arm: absolute centimetres scale with the arm's size, ratios compare). Ours / paper: our mean over the paper's (above 1: our error is larger). p95: the 95th percentile of the error; > 10 cm: the share of targets more than 10 cm off{}. Seed sd: the standard deviation of the mean over seeds as a share of it (`reports/emssl_seeds`, its own protocol; the number of seeds in brackets), where that study has run. Epochs: DRL, DSL (inverse), CGAN and the flow stop on a {}-target validation split when `converge` is set; EMSSL counts iterations.\n\n| range | method | ours mean cm | median cm | p95 cm | > 10 cm | seed sd | ratio to DRL | paper mean cm | paper ratio | ours / paper | within 0.01 mm | outside limits | answers/s | epochs | train s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         cfg.preset,
         if partial {
             ", partial: the run has not finished"
@@ -1265,15 +1366,43 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
             ""
         },
         cfg.samples - cfg.train,
+        if rows.iter().any(|r| r.above_10cm_pct.is_none()) {
+            " (marked ~: a row from before the share was recorded, counted on the first answers committed under `predictions_sample/`, their number in brackets)"
+        } else {
+            ""
+        },
         cfg.validation
     );
     for r in rows {
+        let above = match r.above_10cm_pct {
+            Some(v) => format!("{v:.2}%"),
+            None => match tail_from_answers(dir, r)? {
+                Some((v, n, true)) => format!("~{v:.1}% ({n})"),
+                Some((v, _, false)) => format!("{v:.2}%"),
+                None => "-".into(),
+            },
+        };
+        let spread = seeds
+            .iter()
+            .find(|s| {
+                s.method == r.method.to_lowercase()
+                    && s.range == r.range_deg
+                    && s.robot == r.robot
+                    && s.preset == r.preset
+                    && s.seeds > 1
+            })
+            .map_or("-".into(), |s| {
+                format!("{:.1}% ({})", s.spread_pct, s.seeds)
+            });
         text += &format!(
-            "| +-{:.0} | {} | {:.3} | {:.3} | {} | {} | {} | {} | {:.2}% | {} | {:.0} | {} | {:.0} |\n",
+            "| +-{:.0} | {} | {:.3} | {:.3} | {:.2} | {} | {} | {} | {} | {} | {} | {:.2}% | {} | {:.0} | {} | {:.0} |\n",
             r.range_deg,
             r.method,
             r.mean_cm,
             r.median_cm,
+            r.p95_cm,
+            above,
+            spread,
             opt(r.ratio_to_drl, 3),
             opt(r.paper_mean_cm, 2),
             opt(r.paper_ratio_to_drl, 3),
@@ -1286,7 +1415,63 @@ fn table2_text(cfg: &IkComparisonConfig, rows: &[IkRow]) -> String {
             r.train_seconds
         );
     }
-    text
+    Ok(text)
+}
+
+/// `error_by_base_angle_<range>.png`: each learned method's error against the target's angle
+/// about the base's vertical axis (atan2(y, x)), one panel per method, with the median per
+/// 10-degree bin: at +-180 degrees a joint-space regression must jump between solution
+/// branches somewhere, and the seam shows as a band of large errors at one angle. From every
+/// answer where the run was made in this checkout, else the committed sample. Returns whether
+/// there was anything to draw.
+pub fn draw_error_by_base_angle(dir: &Path, range_deg: f64) -> Result<bool> {
+    let methods = ["EMSSL", "DSL", "EMSSL (wrapped)", "DSL (wrapped)"];
+    let mut panels = Vec::new();
+    let mut sampled = false;
+    for m in methods {
+        let Some((path, sample)) = answers_file(dir, range_deg, m) else {
+            continue;
+        };
+        sampled |= sample;
+        let points: Vec<(f64, f64)> = read_reached(&path)?
+            .iter()
+            .map(|(t, q)| (t.y.atan2(t.x).to_degrees(), 100.0 * (t - q).norm()))
+            .collect();
+        let line: Vec<(f64, f64)> = (0..36)
+            .filter_map(|b| {
+                let lo = -180.0 + 10.0 * b as f64;
+                let mut v: Vec<f64> = points
+                    .iter()
+                    .filter(|p| p.0 >= lo && p.0 < lo + 10.0)
+                    .map(|p| p.1)
+                    .collect();
+                (!v.is_empty()).then(|| {
+                    v.sort_by(f64::total_cmp);
+                    (lo + 5.0, v[v.len() / 2])
+                })
+            })
+            .collect();
+        panels.push(crate::report::figures::ScatterPanel {
+            title: format!("{m}, {} targets", points.len()),
+            points,
+            line,
+        });
+    }
+    if panels.is_empty() {
+        return Ok(false);
+    }
+    crate::report::figures::scatter_panels(
+        &dir.join(format!("error_by_base_angle_{range_deg:.0}.png")),
+        &format!(
+            "Error against the target's base angle, +-{range_deg:.0} deg{} (red: median per 10 deg)",
+            if sampled { ", committed sample" } else { "" }
+        ),
+        "target's angle about the base axis (deg)",
+        "distance error (cm, log)",
+        -180.0..180.0,
+        &panels,
+    )?;
+    Ok(true)
 }
 
 /// `validation_curves_<range>.png` (and `validation_curves_<range>_wrapped.png` for the wrapped
