@@ -1,0 +1,122 @@
+//! Damage in the simulator: a damaged arm renders differently from a healthy one where the
+//! damaged link (and what it carries) is, and nowhere else.
+
+use selfmodel::sim::arm_change::Damage;
+use selfmodel::sim::bvh::Bvh;
+use selfmodel::sim::camera::Camera;
+use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+use selfmodel::sim::robot::Robot;
+
+fn silhouette(robot: &Robot, q: &[f64]) -> Vec<u8> {
+    RayCaster::new(robot, Camera::paper(), RenderOptions::default())
+        .render(q)
+        .silhouette
+}
+
+/// The robot with only the links in `keep` drawn.
+fn only(robot: &Robot, keep: &[usize]) -> Robot {
+    let mut r = robot.clone();
+    for (l, g) in r.geometry.iter_mut().enumerate() {
+        if !keep.contains(&l) {
+            *g = Bvh::new(Vec::new());
+        }
+    }
+    r
+}
+
+/// The link `link` and every link below it in the tree.
+fn subtree(robot: &Robot, link: usize) -> Vec<usize> {
+    let mut out = vec![link];
+    let mut i = 0;
+    while i < out.len() {
+        let l = out[i];
+        out.extend(
+            robot
+                .chain
+                .joints
+                .iter()
+                .filter(|j| j.parent == l)
+                .map(|j| j.child),
+        );
+        i += 1;
+    }
+    out
+}
+
+#[test]
+fn a_damaged_arm_renders_differently_where_the_link_is_and_nowhere_else() {
+    let healthy = selfmodel::sim::arm4::arm4();
+    let poses = [
+        vec![0.3, -0.5, 0.8, 0.2],
+        vec![-0.7, 0.4, -0.3, 1.0],
+        vec![1.2, 0.9, 0.6, -0.8],
+    ];
+    let damages = [
+        Damage::Bend { link: 1, deg: 10.0 },
+        Damage::Length { link: 1, cm: 3.0 },
+        Damage::Length { link: 2, cm: -3.0 },
+        Damage::Truncate {
+            link: 3,
+            fraction: 0.5,
+        },
+    ];
+    for d in damages {
+        let damaged = d.apply(&healthy).unwrap();
+        // Link k of the joint vector is chain link k + 1 on arm4 (link 0 is the base).
+        let link = d.link() + 1;
+        let region: Vec<usize> = match d {
+            Damage::Truncate { .. } => vec![link],
+            _ => subtree(&healthy, link),
+        };
+        let mut changed_total = 0;
+        for q in &poses {
+            let (h, x) = (silhouette(&healthy, q), silhouette(&damaged, q));
+            let (mh, mx) = (
+                silhouette(&only(&healthy, &region), q),
+                silhouette(&only(&damaged, &region), q),
+            );
+            let changed: Vec<usize> = (0..h.len()).filter(|&i| h[i] != x[i]).collect();
+            let outside = changed
+                .iter()
+                .filter(|&&i| mh[i] == 0 && mx[i] == 0)
+                .count();
+            assert_eq!(
+                outside,
+                0,
+                "{}: {outside} changed pixels away from the link",
+                d.label()
+            );
+            changed_total += changed.len();
+        }
+        assert!(
+            changed_total >= 20,
+            "{}: only {changed_total} pixels changed",
+            d.label()
+        );
+    }
+    // A change of nothing (the geometry tessellated, stretched by 0) renders the healthy arm.
+    let same = Damage::Length { link: 2, cm: 0.0 }.apply(&healthy).unwrap();
+    for q in &poses {
+        let (h, x) = (silhouette(&healthy, q), silhouette(&same, q));
+        let differ = (0..h.len()).filter(|&i| h[i] != x[i]).count();
+        assert!(
+            differ <= 2,
+            "{differ} pixels differ after a change of nothing"
+        );
+    }
+}
+
+#[test]
+fn damage_is_refused_where_it_cannot_apply() {
+    let arm = selfmodel::sim::arm4::arm4();
+    assert!(Damage::Bend { link: 4, deg: 3.0 }.apply(&arm).is_err());
+    assert!(Damage::Length { link: 0, cm: -50.0 }.apply(&arm).is_err());
+    assert!(
+        Damage::Truncate {
+            link: 3,
+            fraction: 1.5
+        }
+        .apply(&arm)
+        .is_err()
+    );
+}
