@@ -10,6 +10,8 @@
 //! - [`drift`]: constant encoder offsets from k images and the angles the encoders report.
 //! - [`calibration`]: link lengths from images, through a self-model that hangs on the
 //!   kinematic chain (K-3DGS), its joint origins fitted with the Gaussians frozen.
+//! - [`damage`]: damage detected and localised from k images at commanded poses, by the
+//!   residual between the self-model and what the camera sees.
 //! - [`observations`]: the images these read, checked (size, empty silhouettes, NaN angles)
 //!   and perturbed as a real camera would (flipped pixels, an occluder, a shift).
 //!
@@ -18,6 +20,7 @@
 
 pub mod amortised;
 pub mod calibration;
+pub mod damage;
 pub mod descent;
 pub mod drift;
 pub mod observations;

@@ -7,6 +7,7 @@ pub mod bench_decoders;
 pub mod bench_ffksm_step;
 pub mod bench_ik;
 pub mod body_from_image;
+pub mod damage;
 pub mod docs;
 pub mod emssl_adaptation;
 pub mod emssl_learning_curve;

@@ -1,6 +1,8 @@
 //! Damage in the simulator: a damaged arm renders differently from a healthy one where the
 //! damaged link (and what it carries) is, and nowhere else.
 
+mod common;
+
 use selfmodel::sim::arm_change::Damage;
 use selfmodel::sim::bvh::Bvh;
 use selfmodel::sim::camera::Camera;
@@ -119,4 +121,42 @@ fn damage_is_refused_where_it_cannot_apply() {
         .apply(&arm)
         .is_err()
     );
+}
+
+#[test]
+fn the_roc_area_is_one_for_separated_scores_and_a_half_for_equal_ones() {
+    use selfmodel::body::damage::{roc_auc, threshold_at};
+    assert_eq!(roc_auc(&[0.1, 0.2, 0.3], &[0.4, 0.5]), 1.0);
+    assert_eq!(roc_auc(&[0.4, 0.5], &[0.1, 0.2, 0.3]), 0.0);
+    assert_eq!(roc_auc(&[0.2; 4], &[0.2; 3]), 0.5);
+    // 1 of 100 healthy scores is above the 1% threshold at most.
+    let healthy: Vec<f64> = (0..100).map(|i| i as f64).collect();
+    let t = threshold_at(&healthy, 0.01);
+    assert!(
+        healthy.iter().filter(|&&s| s > t).count() <= 1,
+        "threshold {t}"
+    );
+}
+
+#[test]
+fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model() {
+    let dir = common::tempdir();
+    let opts = selfmodel::studies::registry::RunOptions::preset("quick");
+    let cfg =
+        <selfmodel::studies::damage::DamageConfig as selfmodel::core::preset::Preset>::quick();
+    selfmodel::studies::damage::run(&cfg, &opts, dir.path()).unwrap();
+    let rows: Vec<selfmodel::studies::damage::DetectionRow> =
+        selfmodel::report::table::read_csv(&dir.path().join("detection.csv")).unwrap();
+    let bend = rows
+        .iter()
+        .find(|r| r.damage == "bend" && r.size == 10.0 && r.k == 10)
+        .expect("a 10-degree bend at k = 10");
+    assert!(bend.auc >= 0.95, "AUC {}", bend.auc);
+    assert!(bend.damaged_score > bend.healthy_score);
+    // One image tells less than ten.
+    let one = rows
+        .iter()
+        .find(|r| r.damage == "bend" && r.size == 10.0 && r.k == 1)
+        .unwrap();
+    assert!(one.auc < bend.auc + 1e-12);
 }

@@ -921,3 +921,60 @@ pub fn scatter_panels(
     }
     save_rgb(path, &buf, w, h)
 }
+
+/// Lines of `(x, y)` points, one per run, both axes linear over the points' range (a ROC
+/// curve's unit square, say).
+pub fn lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    register_font();
+    let (w, h) = (800u32, 600u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
+        let points = runs.iter().flat_map(|(_, c)| c.iter());
+        let span = |f: fn(&(f64, f64)) -> f64| {
+            let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
+            let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
+            if lo.is_finite() && hi > lo {
+                let pad = 0.02 * (hi - lo);
+                (lo - pad)..(hi + pad)
+            } else {
+                0.0..1.0
+            }
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(span(|p| p.0), span(|p| p.1))
+            .map_err(|e| draw_err(path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
+            .draw()
+            .map_err(|e| draw_err(path, e))?;
+        for (i, (label, pts)) in runs.iter().enumerate() {
+            let color = Palette99::pick(i).to_rgba();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                .map_err(|e| draw_err(path, e))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
+        }
+        draw_legend(&mut chart, path, SeriesLabelPosition::LowerRight)?;
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w, h)
+}

@@ -292,6 +292,16 @@ fn run_body_from_image(opts: &RunOptions, dir: &Path) -> Result<String> {
     crate::studies::body_from_image::run(&cfg, opts, dir)
 }
 
+fn run_damage(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if opts.paper_compatible || opts.steps.is_some() {
+        return Err(crate::Error::Config(
+            "--paper-compatible and --steps do not apply to damage (its presets set the self-model it reads through)".into(),
+        ));
+    }
+    let cfg = crate::studies::damage::DamageConfig::preset(&opts.preset)?;
+    crate::studies::damage::run(&cfg, opts, dir)
+}
+
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
     let rows = crate::studies::table1::run(opts, dir, EXPERIMENTS)?;
     Ok(summary(&rows))
@@ -496,6 +506,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_body_from_image,
+    },
+    Experiment {
+        name: "damage",
+        about: "damage to the arm (a link bent, longer, shorter, part missing) detected and localised from k images through NeuroKin trained on the healthy arm",
+        default_dir: "reports/damage",
+        presets: &["paper", "quick"],
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_damage,
     },
     Experiment {
         name: "table1",
