@@ -1,5 +1,7 @@
 //! The one training loop every model uses (seeded, Adam, clipping, checkpoints, progress, to
-//! convergence on a validation score) and the losses.
+//! convergence on a validation score), the losses, and Elastic Weight Consolidation (a penalty
+//! that keeps an old task while training a new one).
 
+pub mod ewc;
 pub mod losses;
 pub mod trainer;

@@ -160,3 +160,50 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
         .unwrap();
     assert!(one.auc < bend.auc + 1e-12);
 }
+
+#[test]
+fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
+    use burn::module::Module;
+    use burn::tensor::{Tensor, TensorData};
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::neurokin::NeuroKinConfig;
+    use selfmodel::train::trainer::{TrainConfig, TrainSet, Trainer, autodiff_device};
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let tdev = autodiff_device(&device, 3);
+    let cfg = NeuroKinConfig::quick();
+    let model = cfg.init(&tdev, 3).unwrap();
+    let n = 16;
+    let angles: Vec<f32> = (0..n * 4).map(|i| ((i * 37) % 90) as f32 - 45.0).collect();
+    let images: Vec<f32> = (0..n * 32 * 32).map(|i| ((i / 7) % 2) as f32).collect();
+    let set = TrainSet {
+        inputs: Tensor::from_data(TensorData::new(angles, [n, 4]), &tdev),
+        targets: vec![Tensor::from_data(
+            TensorData::new(images, [n, 1, 32, 32]),
+            &tdev,
+        )],
+    };
+    let set = cfg.training_set(&set);
+    let train = TrainConfig {
+        steps: 3,
+        batch: 8,
+        learning_rate: 1e-3,
+        grad_clip_norm: None,
+        input_noise: 0.0,
+        seed: 1,
+        checkpoint_every: 0,
+    };
+    let loss = cfg.training_loss();
+    let ewc = selfmodel::train::ewc::Ewc::new(&model, &set, &train, 2, &loss, 100.0).unwrap();
+    assert!(!ewc.is_empty());
+    let at_old: f32 = ewc.penalty(&model).into_scalar();
+    assert_eq!(at_old, 0.0);
+    // Training with the penalty runs, and moves the weights away from the anchor.
+    let (moved, _) = Trainer::new(&train, "EWC test")
+        .quiet()
+        .fit(model.clone(), &set, |m, b| loss(m, b) + ewc.penalty(m))
+        .unwrap();
+    let away: f32 = ewc.penalty(&moved).into_scalar();
+    assert!(away > 0.0, "penalty {away} after training");
+    let _ = moved.valid();
+}

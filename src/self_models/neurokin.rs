@@ -33,7 +33,7 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
 use crate::train::losses::{bce_with_logits, mse};
-use crate::train::trainer::{TrainConfig, Trainer};
+use crate::train::trainer::{Batch, TrainConfig, TrainSet, Trainer};
 
 /// Which of the two published NeuroKin architectures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -120,6 +120,29 @@ impl NeuroKinConfig {
 
     /// Resolution the network is trained at (`image`, except 64x64-style native outputs of
     /// the text variant, which are `4 * 2^layers`).
+    /// A training set (silhouettes at the evaluation size) as the decoder trains on it: the
+    /// targets at its native size.
+    pub fn training_set(&self, set: &TrainSet) -> TrainSet {
+        let mut set = set.clone();
+        let native = self.native_size();
+        if native != self.image {
+            set.targets[0] = resize_bilinear(set.targets[0].clone(), native);
+        }
+        set
+    }
+
+    /// The loss a batch of [`NeuroKinConfig::training_set`] trains with (the config's).
+    pub fn training_loss(&self) -> impl Fn(&NeuroKin, &Batch) -> Tensor<1> + use<> {
+        let loss = self.loss;
+        move |m: &NeuroKin, b: &Batch| {
+            let z = m.forward(b.inputs.clone());
+            match loss {
+                NeuroKinLoss::Mse => mse(sigmoid(z), b.targets[0].clone()),
+                NeuroKinLoss::Bce => bce_with_logits(z, b.targets[0].clone()),
+            }
+        }
+    }
+
     pub fn native_size(&self) -> [usize; 2] {
         match self.arch {
             NeuroKinArch::Code => self.image,
@@ -320,21 +343,11 @@ impl SelfModel for NeuroKinConfig {
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let model = self.init(fit.train_device, fit.train.seed)?;
         let parameters = model.trainable_params();
-        let native = self.native_size();
-        let mut train_set = fit.train_set.clone();
-        if native != self.image {
-            train_set.targets[0] = resize_bilinear(train_set.targets[0].clone(), native);
-        }
-        let loss = self.loss;
+        let train_set = self.training_set(fit.train_set);
+        let loss = self.training_loss();
         let (model, log) = Trainer::new(fit.train, fit.label)
             .checkpoint(Some(fit.plan))
-            .fit(model, &train_set, |m, b| {
-                let z = m.forward(b.inputs.clone());
-                match loss {
-                    NeuroKinLoss::Mse => mse(sigmoid(z), b.targets[0].clone()),
-                    NeuroKinLoss::Bce => bce_with_logits(z, b.targets[0].clone()),
-                }
-            })?;
+            .fit(model, &train_set, loss)?;
         Ok(Trained::one(model.valid(), parameters, log))
     }
 

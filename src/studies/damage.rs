@@ -77,6 +77,31 @@ pub struct DamageConfig {
     pub z_threshold: f64,
     pub false_alarms: f64,
     pub seed: u64,
+    pub recovery: RecoveryConfig,
+}
+
+/// Updating the self-model after damage, from n images of the damaged arm.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecoveryConfig {
+    pub damages: Vec<Damage>,
+    /// Images of the damaged arm (at training poses) each update sees.
+    pub ns: Vec<usize>,
+    /// Each update's optimiser steps, batch and learning rate (Adam, from the healthy weights;
+    /// the healthy model's clipping and input noise).
+    pub steps: usize,
+    pub batch: usize,
+    pub learning_rate: f64,
+    /// EWC's weight and the healthy batches its Fisher information is estimated on.
+    pub ewc_lambda: f64,
+    pub fisher_batches: usize,
+    /// Replay: healthy training images mixed in, as many as damaged ones in every epoch.
+    pub replay: bool,
+    /// Images the gate of the gated experts scores (the detection score, its threshold at
+    /// the study's false-alarm rate on healthy trials of as many images).
+    pub gate_k: usize,
+    /// Also train from scratch on the damaged arm's whole training set (the healthy model's
+    /// schedule): the reference a recovery is measured against.
+    pub from_scratch: bool,
 }
 
 impl Preset for DamageConfig {
@@ -112,6 +137,21 @@ impl Preset for DamageConfig {
             z_threshold: 4.0,
             false_alarms: 0.01,
             seed: 0,
+            recovery: RecoveryConfig {
+                damages: vec![
+                    Damage::Bend { link: 1, deg: 5.0 },
+                    Damage::Length { link: 2, cm: 2.0 },
+                ],
+                ns: vec![10, 50, 200],
+                steps: 600,
+                batch: 32,
+                learning_rate: 5e-4,
+                ewc_lambda: 1e4,
+                fisher_batches: 50,
+                replay: true,
+                gate_k: 10,
+                from_scratch: true,
+            },
         }
     }
 
@@ -135,6 +175,13 @@ impl Preset for DamageConfig {
             ks: vec![1, 10],
             trials: 40,
             pool: 100,
+            recovery: RecoveryConfig {
+                damages: vec![Damage::Bend { link: 1, deg: 10.0 }],
+                ns: vec![10, 50],
+                steps: 60,
+                fisher_batches: 5,
+                ..Self::paper().recovery
+            },
             ..Self::paper()
         }
     }
@@ -172,6 +219,32 @@ pub struct LocalisationRow {
     /// The link named most often (1-based).
     pub most_named: usize,
     pub trials: usize,
+    pub git_revision: String,
+    pub device: String,
+    pub preset: String,
+}
+
+/// One update of the self-model after one damage, from n images.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RecoveryRow {
+    pub method: String,
+    pub n: usize,
+    /// On the test poses, the damaged arm's images: PSNR (dB) and IoU, means over images.
+    pub psnr_damaged_db: f64,
+    pub iou_damaged: f64,
+    /// On the test poses, the healthy arm's images (forgetting).
+    pub psnr_healthy_db: f64,
+    pub iou_healthy: f64,
+    /// Seconds the update took (training; the Fisher information for EWC).
+    pub seconds: f64,
+    pub damage: String,
+    pub size: f64,
+    pub link: usize,
+    /// PSNR on the damaged test poses farther (in joint space) from the n images than the
+    /// median test pose (none for an update from every training pose).
+    pub psnr_damaged_far_db: Option<f64>,
+    pub steps: usize,
+    pub detail: String,
     pub git_revision: String,
     pub device: String,
     pub preset: String,
@@ -390,6 +463,41 @@ pub fn run(
         "detection rate",
         &roc,
     )?;
+    let gate_threshold = {
+        let (scores, _) = healthy.trials(cfg.recovery.gate_k, cfg.trials, cfg.seed ^ 0x6A7E);
+        threshold_at(&scores, cfg.false_alarms)
+    };
+    let recovery = recover(
+        cfg,
+        &Recovering {
+            model_run: &model_run,
+            fitted: &fitted,
+            robot: &robot,
+            camera: &camera,
+            out,
+            gate_threshold,
+            device: &device,
+            revision: &revision,
+        },
+    )?;
+    if !recovery.is_empty() {
+        write_table(
+            &out.join("recovery.csv"),
+            &recovery,
+            "Recovery: the self-model updated from n images of the damaged arm",
+            &format!(
+                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {}, Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
+                cfg.model_preset,
+                cfg.recovery.steps,
+                cfg.recovery.batch,
+                cfg.recovery.learning_rate,
+                cfg.recovery.ewc_lambda,
+                cfg.recovery.fisher_batches,
+                cfg.recovery.gate_k
+            ),
+        )?;
+        draw_recovery(out, &recovery)?;
+    }
     let summary = detection
         .iter()
         .filter(|r| r.k == roc_k)
@@ -397,4 +505,438 @@ pub fn run(
         .collect::<Vec<_>>()
         .join("; ");
     Ok(summary)
+}
+
+/// What the recovery runs with.
+struct Recovering<'a> {
+    model_run:
+        &'a crate::self_models::harness::SelfModelRun<crate::self_models::neurokin::NeuroKinConfig>,
+    fitted: &'a crate::self_models::harness::Fitted,
+    robot: &'a crate::sim::robot::Robot,
+    camera: &'a crate::sim::camera::Camera,
+    out: &'a Path,
+    gate_threshold: f64,
+    device: &'a str,
+    revision: &'a str,
+}
+
+/// Silhouettes (`[n, H*W]` in [0, 1]) of `robot` at `angles` (degrees) from the study's camera.
+fn render(r: &Recovering, robot: &crate::sim::robot::Robot, angles: &[Vec<f64>]) -> Vec<f32> {
+    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    RayCaster::new(
+        robot,
+        r.camera.clone(),
+        r.model_run.data.dataset.render.clone(),
+    )
+    .render_batch(&si, None)
+    .iter()
+    .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
+    .collect()
+}
+
+/// A training set of `angles` (degrees) and their silhouettes, on `device`.
+fn set_of(
+    angles: &[Vec<f64>],
+    silhouettes: Vec<f32>,
+    size: [usize; 2],
+    device: &burn::tensor::Device,
+) -> crate::train::trainer::TrainSet {
+    use burn::tensor::{Tensor, TensorData};
+    let (n, dof) = (angles.len(), angles.first().map_or(0, Vec::len));
+    let q: Vec<f32> = angles.iter().flatten().map(|&v| v as f32).collect();
+    crate::train::trainer::TrainSet {
+        inputs: Tensor::from_data(TensorData::new(q, [n, dof]), device),
+        targets: vec![Tensor::from_data(
+            TensorData::new(silhouettes, [n, 1, size[0], size[1]]),
+            device,
+        )],
+    }
+}
+
+/// Per image of `truth`: PSNR (dB) and IoU of `model`'s silhouettes at `angles`.
+fn scores(
+    model: &crate::self_models::neurokin::NeuroKin,
+    r: &Recovering,
+    angles: &[Vec<f64>],
+    truth: &[f32],
+) -> Result<(Vec<f64>, Vec<f64>)> {
+    use burn::module::Module;
+    let valid = model.valid();
+    let pred = predicted(&valid, &r.fitted.device, angles, 64)?;
+    let px = truth.len() / angles.len().max(1);
+    let psnr = (0..angles.len())
+        .map(|i| {
+            crate::eval::evaluation::psnr_db(
+                &pred[i * px..(i + 1) * px],
+                &truth[i * px..(i + 1) * px],
+            )
+        })
+        .collect();
+    let iou = (0..angles.len())
+        .map(|i| {
+            crate::eval::evaluation::iou(&pred[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px])
+        })
+        .collect();
+    Ok((psnr, iou))
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// Every recovery method for every damage and n.
+fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
+    use crate::train::trainer::{TrainConfig, Trainer, autodiff_device};
+    use burn::module::Module;
+    let rc = &cfg.recovery;
+    if rc.damages.is_empty() {
+        return Ok(Vec::new());
+    }
+    let nk = &r.model_run.model;
+    let data = &r.fitted.data;
+    let size = [data.height, data.width];
+    let tdev = autodiff_device(&r.fitted.device, cfg.seed);
+    let checkpoint = r.out.join("checkpoint").join("model.bpk");
+    // A fresh copy for every update: clones of a burn module share its BatchNorm running
+    // statistics, which training one would move in all.
+    let load = || -> Result<crate::self_models::neurokin::NeuroKin> {
+        nk.init(&tdev, r.model_run.train.seed)?
+            .try_load_file(&checkpoint)
+            .map_err(|e| {
+                Error::data(
+                    &checkpoint,
+                    format!(
+                        "the healthy NeuroKin cannot be read ({e}); run again without --resume"
+                    ),
+                )
+            })
+    };
+    let healthy = load()?;
+    let loss = nk.training_loss();
+    let train_angles: Vec<Vec<f64>> = r
+        .fitted
+        .train_range
+        .clone()
+        .map(|i| data.angles[i].clone())
+        .collect();
+    let test_angles: Vec<Vec<f64>> = r
+        .fitted
+        .test_range
+        .clone()
+        .map(|i| data.angles[i].clone())
+        .collect();
+    let healthy_train: Vec<f32> = r
+        .fitted
+        .train_range
+        .clone()
+        .flat_map(|i| data.image(i).iter().map(|&v| v as f32 / 255.0))
+        .collect();
+    let healthy_set = nk.training_set(&set_of(&train_angles, healthy_train.clone(), size, &tdev));
+    let train_cfg = |steps: usize, seed: u64| TrainConfig {
+        steps,
+        batch: rc.batch,
+        learning_rate: rc.learning_rate,
+        seed,
+        checkpoint_every: 0,
+        ..r.model_run.train.clone()
+    };
+    // The healthy arm's test images, and the gate's view of the healthy arm.
+    let healthy_truth = &r.fitted.truth;
+    let px = size[0] * size[1];
+    let gate_score =
+        |model: &crate::self_models::neurokin::NeuroKin, truth: &[f32], seed: u64| -> Result<f64> {
+            use burn::module::Module;
+            let mut rng = StdRng::seed_from_u64(seed);
+            let pick = sample(
+                &mut rng,
+                test_angles.len(),
+                rc.gate_k.min(test_angles.len()),
+            )
+            .into_vec();
+            let angles: Vec<Vec<f64>> = pick.iter().map(|&i| test_angles[i].clone()).collect();
+            let obs: Vec<f32> = pick
+                .iter()
+                .flat_map(|&i| truth[i * px..(i + 1) * px].iter().copied())
+                .collect();
+            let pred = predicted(&model.valid(), &r.fitted.device, &angles, 64)?;
+            Ok(mean(
+                &(0..pick.len())
+                    .map(|i| residual(&pred[i * px..(i + 1) * px], &obs[i * px..(i + 1) * px]))
+                    .collect::<Vec<_>>(),
+            ))
+        };
+    let mut rows = Vec::new();
+    for damage in &rc.damages {
+        let damaged_robot = damage.apply(r.robot)?;
+        let damaged_test = render(r, &damaged_robot, &test_angles);
+        let damaged_train = render(r, &damaged_robot, &train_angles);
+        let mut order: Vec<usize> = (0..train_angles.len()).collect();
+        rand::seq::SliceRandom::shuffle(
+            order.as_mut_slice(),
+            &mut StdRng::seed_from_u64(cfg.seed ^ 0x5EED),
+        );
+        let row = |method: &str,
+                   n: usize,
+                   model: &crate::self_models::neurokin::NeuroKin,
+                   seconds: f64,
+                   steps: usize,
+                   far: &[bool],
+                   detail: String|
+         -> Result<RecoveryRow> {
+            let (pd, idam) = scores(model, r, &test_angles, &damaged_test)?;
+            let (ph, ih) = scores(model, r, &test_angles, healthy_truth)?;
+            let far_psnr: Vec<f64> = pd
+                .iter()
+                .zip(far)
+                .filter(|(_, f)| **f)
+                .map(|(p, _)| *p)
+                .collect();
+            Ok(RecoveryRow {
+                method: method.into(),
+                n,
+                psnr_damaged_db: mean(&pd),
+                iou_damaged: mean(&idam),
+                psnr_healthy_db: mean(&ph),
+                iou_healthy: mean(&ih),
+                seconds,
+                damage: damage.kind().into(),
+                size: damage.size(),
+                link: damage.link() + 1,
+                psnr_damaged_far_db: (!far_psnr.is_empty()).then(|| mean(&far_psnr)),
+                steps,
+                detail,
+                git_revision: r.revision.into(),
+                device: r.device.into(),
+                preset: cfg.preset.clone(),
+            })
+        };
+        for &n in &rc.ns {
+            let n = n.min(order.len());
+            let picked: Vec<usize> = order[..n].to_vec();
+            let angles: Vec<Vec<f64>> = picked.iter().map(|&i| train_angles[i].clone()).collect();
+            let sil: Vec<f32> = picked
+                .iter()
+                .flat_map(|&i| damaged_train[i * px..(i + 1) * px].iter().copied())
+                .collect();
+            // Test poses far from the n images (joint space, degrees).
+            let nearest: Vec<f64> = test_angles
+                .iter()
+                .map(|t| {
+                    angles
+                        .iter()
+                        .map(|a| {
+                            a.iter()
+                                .zip(t)
+                                .map(|(x, y)| (x - y).powi(2))
+                                .sum::<f64>()
+                                .sqrt()
+                        })
+                        .fold(f64::INFINITY, f64::min)
+                })
+                .collect();
+            let mut sorted = nearest.clone();
+            sorted.sort_by(f64::total_cmp);
+            let median = sorted[sorted.len() / 2];
+            let far: Vec<bool> = nearest.iter().map(|&d| d > median).collect();
+            let set = nk.training_set(&set_of(&angles, sil.clone(), size, &tdev));
+            let seed = cfg.seed ^ (n as u64) << 8;
+            rows.push(row("unchanged", n, &healthy, 0.0, 0, &far, String::new())?);
+            let label = format!("fine-tune ({}, n = {n})", damage.label());
+            let t = std::time::Instant::now();
+            let (tuned, _) =
+                Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &set, &loss)?;
+            let tuned_s = t.elapsed().as_secs_f64();
+            rows.push(row(
+                "fine-tune",
+                n,
+                &tuned,
+                tuned_s,
+                rc.steps,
+                &far,
+                String::new(),
+            )?);
+            if rc.replay {
+                // Every epoch: the n damaged images repeated to as many as the healthy ones.
+                let m = train_angles.len().min(n.max(400));
+                let reps = m.div_ceil(n.max(1));
+                let mut q: Vec<Vec<f64>> = Vec::new();
+                let mut px_all: Vec<f32> = Vec::new();
+                for _ in 0..reps {
+                    q.extend(angles.iter().cloned());
+                    px_all.extend_from_slice(&sil);
+                }
+                for &i in order.iter().rev().take(m) {
+                    q.push(train_angles[i].clone());
+                    px_all.extend(
+                        data.image(r.fitted.train_range.start + i)
+                            .iter()
+                            .map(|&v| v as f32 / 255.0),
+                    );
+                }
+                let mixed = nk.training_set(&set_of(&q, px_all, size, &tdev));
+                let label = format!("replay ({}, n = {n})", damage.label());
+                let t = std::time::Instant::now();
+                let (m_model, _) =
+                    Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &mixed, &loss)?;
+                rows.push(row(
+                    "replay",
+                    n,
+                    &m_model,
+                    t.elapsed().as_secs_f64(),
+                    rc.steps,
+                    &far,
+                    format!("{m} healthy images mixed in"),
+                )?);
+            }
+            let t = std::time::Instant::now();
+            let anchor = load()?;
+            let ewc = crate::train::ewc::Ewc::new(
+                &anchor,
+                &healthy_set,
+                &train_cfg(rc.fisher_batches, cfg.seed),
+                rc.fisher_batches,
+                &loss,
+                rc.ewc_lambda,
+            )?;
+            let label = format!("EWC ({}, n = {n})", damage.label());
+            let (e_model, _) =
+                Trainer::new(&train_cfg(rc.steps, seed), &label)
+                    .fit(anchor, &set, |m, b| loss(m, b) + ewc.penalty(m))?;
+            rows.push(row(
+                "EWC",
+                n,
+                &e_model,
+                t.elapsed().as_secs_f64(),
+                rc.steps,
+                &far,
+                String::new(),
+            )?);
+            // Gated experts: the healthy model and the fine-tuned one, the gate scoring what the
+            // arm looks like now through the healthy model.
+            let gated = |truth: &[f32], seed: u64| -> Result<bool> {
+                Ok(gate_score(&healthy, truth, seed)? > r.gate_threshold)
+            };
+            let (on_damaged, on_healthy) = (
+                gated(&damaged_test, seed ^ 1)?,
+                gated(healthy_truth, seed ^ 2)?,
+            );
+            let pick = |damaged: bool| if damaged { &tuned } else { &healthy };
+            let (pd, idam) = scores(pick(on_damaged), r, &test_angles, &damaged_test)?;
+            let (ph, ih) = scores(pick(on_healthy), r, &test_angles, healthy_truth)?;
+            let far_psnr: Vec<f64> = pd
+                .iter()
+                .zip(&far)
+                .filter(|(_, f)| **f)
+                .map(|(p, _)| *p)
+                .collect();
+            rows.push(RecoveryRow {
+                method: "gated experts".into(),
+                psnr_damaged_db: mean(&pd),
+                iou_damaged: mean(&idam),
+                psnr_healthy_db: mean(&ph),
+                iou_healthy: mean(&ih),
+                psnr_damaged_far_db: (!far_psnr.is_empty()).then(|| mean(&far_psnr)),
+                seconds: tuned_s,
+                detail: format!(
+                    "gate on the damaged arm: {}; on the healthy arm: {}",
+                    if on_damaged {
+                        "damage (fine-tuned expert)"
+                    } else {
+                        "healthy (healthy expert)"
+                    },
+                    if on_healthy {
+                        "damage (fine-tuned expert)"
+                    } else {
+                        "healthy (healthy expert)"
+                    }
+                ),
+                ..row(
+                    "gated experts",
+                    n,
+                    &healthy,
+                    tuned_s,
+                    rc.steps,
+                    &far,
+                    String::new(),
+                )?
+            });
+        }
+        if rc.from_scratch {
+            let all = nk.training_set(&set_of(&train_angles, damaged_train.clone(), size, &tdev));
+            let label = format!("from scratch ({})", damage.label());
+            let plan = crate::train::trainer::CheckpointPlan {
+                dir: r.out.join(format!(
+                    "scratch_{}",
+                    crate::core::atomic_file::file_name(&damage.label())
+                )),
+                resume: true,
+                fingerprint: serde_json::json!({"damage": damage, "model": nk, "train": r.model_run.train}),
+            };
+            let t = std::time::Instant::now();
+            let (scratch, log) = Trainer::new(&r.model_run.train, &label)
+                .checkpoint(Some(&plan))
+                .fit(nk.init(&tdev, r.model_run.train.seed)?, &all, &loss)?;
+            let all_far = vec![false; test_angles.len()];
+            rows.push(row(
+                "from scratch",
+                train_angles.len(),
+                &scratch,
+                t.elapsed().as_secs_f64().max(log.train_seconds),
+                r.model_run.train.steps,
+                &all_far,
+                "every training pose of the damaged arm".into(),
+            )?);
+        }
+    }
+    Ok(rows)
+}
+
+/// `recovery_damaged.png` and `recovery_healthy.png`: PSNR against n per method.
+fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
+    let first = &rows[0];
+    let same =
+        |r: &&RecoveryRow| r.damage == first.damage && r.size == first.size && r.link == first.link;
+    let mut methods: Vec<&str> = Vec::new();
+    for r in rows.iter().filter(same) {
+        if r.method != "from scratch" && !methods.contains(&r.method.as_str()) {
+            methods.push(&r.method);
+        }
+    }
+    for (file, what, f) in [
+        (
+            "recovery_damaged.png",
+            "the damaged arm",
+            (|r: &RecoveryRow| r.psnr_damaged_db) as fn(&RecoveryRow) -> f64,
+        ),
+        (
+            "recovery_healthy.png",
+            "the healthy arm (forgetting)",
+            |r: &RecoveryRow| r.psnr_healthy_db,
+        ),
+    ] {
+        let runs: Vec<(String, Vec<(f64, f64)>)> = methods
+            .iter()
+            .map(|m| {
+                (
+                    m.to_string(),
+                    rows.iter()
+                        .filter(same)
+                        .filter(|r| r.method == *m)
+                        .map(|r| (r.n as f64, f(r)))
+                        .collect(),
+                )
+            })
+            .collect();
+        crate::report::figures::lines_log_x(
+            &out.join(file),
+            &format!(
+                "PSNR on {what} after recovery from n images ({} {}, link {})",
+                first.damage, first.size, first.link
+            ),
+            "images of the damaged arm (n)",
+            "PSNR (dB)",
+            &runs,
+        )?;
+    }
+    Ok(())
 }
