@@ -159,6 +159,28 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
         .find(|r| r.damage == "bend" && r.size == 10.0 && r.k == 1)
         .unwrap();
     assert!(one.auc < bend.auc + 1e-12);
+    // Every recovery method ran, and fine-tuning on the damaged arm's images moved the model
+    // towards it.
+    let recovery: Vec<selfmodel::studies::damage::RecoveryRow> =
+        selfmodel::report::table::read_csv(&dir.path().join("recovery.csv")).unwrap();
+    for m in [
+        "unchanged",
+        "fine-tune",
+        "replay",
+        "EWC",
+        "gated experts",
+        "from scratch",
+    ] {
+        assert!(recovery.iter().any(|r| r.method == m), "no {m} row");
+    }
+    let at = |m: &str| {
+        recovery
+            .iter()
+            .find(|r| r.method == m && r.n == 50)
+            .unwrap()
+            .psnr_damaged_db
+    };
+    assert!(at("fine-tune") > at("unchanged"));
 }
 
 #[test]

@@ -11,6 +11,11 @@
 //!   shares of k images averaged and standardised against healthy images, the damaged link is
 //!   the one nearest the base whose share stands out ([`localise`]): a bend or a change of
 //!   length moves the link and everything it carries, a missing part only the link.
+//! - Localisation by synthesis: the robot's description damaged in each way we can name
+//!   (every link bent either way, longer, shorter, its far part missing: [`hypotheses`])
+//!   says which pixels each damage would change at the commanded poses ([`change_masks`]);
+//!   the hypothesis whose pixels the residual covers most, against healthy trials, names
+//!   the link ([`best_hypothesis`]).
 
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -109,6 +114,77 @@ pub fn link_masks(robot: &Robot, camera: &Camera, angles: &[Vec<f64>]) -> Vec<Ve
                 .collect()
         })
         .collect()
+}
+
+/// The damages localisation by synthesis weighs, for a robot with `links` links that joints
+/// move: each link bent 4 degrees either way, 2 cm longer and shorter, 40% of it missing
+/// (their sizes stand for any: the pixels they change are where any size changes them).
+pub fn hypotheses(links: usize) -> Vec<crate::sim::arm_change::Damage> {
+    use crate::sim::arm_change::Damage;
+    (0..links)
+        .flat_map(|link| {
+            [
+                Damage::Bend { link, deg: 4.0 },
+                Damage::Bend { link, deg: -4.0 },
+                Damage::Length { link, cm: 2.0 },
+                Damage::Length { link, cm: -2.0 },
+                Damage::Truncate {
+                    link,
+                    fraction: 0.4,
+                },
+            ]
+        })
+        .collect()
+}
+
+/// Per pose, per hypothesis: the pixels the damage would change (healthy render against the
+/// damaged one), grown by 1 pixel: `[pose][hypothesis][pixel]`. A hypothesis that cannot
+/// apply to the robot (a link too short to shorten) changes nothing.
+pub fn change_masks(
+    robot: &Robot,
+    camera: &Camera,
+    angles: &[Vec<f64>],
+    hypotheses: &[crate::sim::arm_change::Damage],
+) -> Vec<Vec<Vec<bool>>> {
+    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    let render = |r: &Robot| {
+        RayCaster::new(r, camera.clone(), RenderOptions::default()).render_batch(&si, None)
+    };
+    let healthy = render(robot);
+    let (w, h) = (camera.width, camera.height);
+    let per_hypothesis: Vec<Vec<Vec<bool>>> = hypotheses
+        .iter()
+        .map(|d| match d.apply(robot) {
+            Ok(damaged) => render(&damaged)
+                .iter()
+                .zip(&healthy)
+                .map(|(a, b)| {
+                    let diff: Vec<u8> = a
+                        .silhouette
+                        .iter()
+                        .zip(&b.silhouette)
+                        .map(|(x, y)| u8::from(x != y))
+                        .collect();
+                    dilate(&diff, w, h, 1)
+                })
+                .collect(),
+            Err(_) => vec![vec![false; w * h]; angles.len()],
+        })
+        .collect();
+    (0..angles.len())
+        .map(|i| per_hypothesis.iter().map(|m| m[i].clone()).collect())
+        .collect()
+}
+
+/// The hypothesis (index) whose change the residual covers most, in standard scores against
+/// healthy trials.
+pub fn best_hypothesis(shares: &[f64], baseline: &ShareBaseline) -> usize {
+    baseline
+        .z(shares)
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i)
 }
 
 /// `mask` (non-zero: set) grown by `px` pixels (a square neighbourhood).
