@@ -361,11 +361,33 @@ impl ExperimentArgs {
         let start = std::time::Instant::now();
         let summary = e.run_in(&opts, &dir)?;
         let cpu = crate::eval::compute_peak::machine_label(false);
+        // The tables it wrote (each with its Markdown), as they are in the folder.
+        let mut tables: Vec<String> = std::fs::read_dir(&dir)
+            .map(|entries| {
+                entries
+                    .flatten()
+                    .map(|e| e.file_name().to_string_lossy().to_string())
+                    .filter(|f| f.ends_with(".csv"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        tables.sort();
+        if let Some(i) = tables.iter().position(|t| t == "results.csv") {
+            let r = tables.remove(i);
+            tables.insert(0, r);
+        }
         let done = format!(
-            "{name} ({} preset): {:.0} s on {cpu}; wrote {}/results.csv (+ results.md, figures)",
+            "{name} ({} preset): {:.0} s on {cpu}; wrote {}/{} (+ Markdown, figures)",
             opts.preset,
             start.elapsed().as_secs_f64(),
-            dir.display()
+            dir.display(),
+            if tables.is_empty() {
+                String::new()
+            } else if tables.len() == 1 {
+                tables[0].clone()
+            } else {
+                format!("{{{}}}", tables.join(", "))
+            }
         );
         println!("{summary}\n{done}");
         // What the command printed, for the README (which includes it, not a typed copy).
