@@ -197,6 +197,99 @@ impl Camera {
         })
     }
 
+    /// The camera's pose as 9 numbers a network reads: the eye (metres), then the image's
+    /// right and up axes in the world, the first two columns of its camera-to-world rotation.
+    /// This 6-D rotation (Zhou et al., CVPR 2019) is continuous, unlike Euler angles and
+    /// quaternions (whose double cover puts one pose at two places), and the third column is
+    /// their cross product, so nothing is lost. The field of view and image size are the
+    /// camera's own, not part of the vector.
+    pub fn to_vector(&self) -> [f64; 9] {
+        let (_, right, up) = self.basis();
+        [
+            self.eye[0],
+            self.eye[1],
+            self.eye[2],
+            right.x,
+            right.y,
+            right.z,
+            up.x,
+            up.y,
+            up.z,
+        ]
+    }
+
+    /// The camera of [`Camera::to_vector`]'s `v` (its rotation columns made orthonormal by
+    /// Gram-Schmidt), looking one metre ahead, with `fov_deg` and the image size of `like`.
+    pub fn from_vector(v: &[f64; 9], like: &Camera) -> Result<Self> {
+        let eye = Vector3::new(v[0], v[1], v[2]);
+        let a = Vector3::new(v[3], v[4], v[5]);
+        let b = Vector3::new(v[6], v[7], v[8]);
+        if !(a.norm() > 1e-9) || !v.iter().all(|x| x.is_finite()) {
+            return Err(Error::Config(format!("{v:?} is not a camera pose")));
+        }
+        let right = a.normalize();
+        let up = b - right * right.dot(&b);
+        if !(up.norm() > 1e-9) {
+            return Err(Error::Config(format!(
+                "{v:?}: the camera's up axis is parallel to its right axis"
+            )));
+        }
+        let up = up.normalize();
+        let fwd = up.cross(&right);
+        Ok(Camera {
+            eye: eye.into(),
+            target: (eye + fwd).into(),
+            up: up.into(),
+            ..like.clone()
+        })
+    }
+
+    /// `n` cameras on a sphere of `radius` around `target`, looking at it: yaws evenly spaced
+    /// from `yaw0_deg`, elevations (above the horizontal plane through the target) spread
+    /// over `elevation_deg` (alternately its ends, for several cameras; its middle for one),
+    /// with this camera's field of view, image size and up.
+    pub fn on_sphere(
+        &self,
+        target: [f64; 3],
+        radius: f64,
+        n: usize,
+        yaw0_deg: f64,
+        elevation_deg: [f64; 2],
+    ) -> Vec<Camera> {
+        let [lo, hi] = elevation_deg;
+        (0..n)
+            .map(|i| {
+                let yaw = (yaw0_deg + 360.0 * i as f64 / n as f64).to_radians();
+                let elevation = if n == 1 {
+                    0.5 * (lo + hi)
+                } else if i % 2 == 0 {
+                    lo
+                } else {
+                    hi
+                }
+                .to_radians();
+                self.looking_from(target, radius, yaw, elevation)
+            })
+            .collect()
+    }
+
+    /// This camera moved to look at `target` from `radius` away, at `yaw` about the world z
+    /// axis (0: along +x, the papers' view) and `elevation` above the horizontal (radians).
+    pub fn looking_from(&self, target: [f64; 3], radius: f64, yaw: f64, elevation: f64) -> Self {
+        let t = Vector3::from(target);
+        let dir = Vector3::new(
+            elevation.cos() * yaw.cos(),
+            elevation.cos() * yaw.sin(),
+            elevation.sin(),
+        );
+        Camera {
+            eye: (t + dir * radius).into(),
+            target,
+            up: [0.0, 0.0, 1.0],
+            ..self.clone()
+        }
+    }
+
     /// Camera-to-world matrix in the NeRF/OpenGL convention (columns right, up, backward, eye),
     /// as stored under `poses` in the papers' datasets.
     pub fn pose_matrix(&self) -> Matrix4<f64> {

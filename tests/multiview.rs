@@ -1,0 +1,71 @@
+//! More than one camera: camera poses as vectors a network reads, cameras on a sphere around
+//! the robot.
+
+use selfmodel::sim::camera::Camera;
+use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+
+#[test]
+fn a_camera_pose_round_trips_through_its_vector() {
+    let base = Camera::paper();
+    let mut cameras = vec![base.clone()];
+    cameras.extend(base.on_sphere([0.0, 0.05, 0.1], 1.3, 8, 15.0, [-20.0, 45.0]));
+    // Neither looking at the origin nor upright.
+    cameras.push(Camera {
+        eye: [0.3, -0.8, 0.5],
+        target: [0.1, 0.2, -0.1],
+        up: [0.2, 0.1, 1.0],
+        ..base.clone()
+    });
+    for c in &cameras {
+        let v = c.to_vector();
+        let back = Camera::from_vector(&v, c).unwrap();
+        let (a, b) = (c.pose_matrix(), back.pose_matrix());
+        assert!((a - b).abs().max() < 1e-9, "{c:?} came back as {back:?}");
+        let again = back.to_vector();
+        assert!(v.iter().zip(&again).all(|(x, y)| (x - y).abs() < 1e-12));
+        // The same image: same rays.
+        for (row, col) in [(0.0, 0.0), (50.0, 20.0), (99.0, 99.0)] {
+            let (r1, r2) = (c.ray(row, col), back.ray(row, col));
+            assert!((r1.dir - r2.dir).norm() < 1e-9 && (r1.origin - r2.origin).norm() < 1e-12);
+        }
+    }
+    assert!(Camera::from_vector(&[0.0; 9], &base).is_err());
+    assert!(Camera::from_vector(&[0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0], &base).is_err());
+}
+
+#[test]
+fn a_held_out_camera_sees_what_no_training_camera_sees() {
+    let arm = selfmodel::sim::arm4::arm4();
+    let base = Camera::paper();
+    let training = base.on_sphere([0.0, 0.0, 0.0], 1.0, 4, 0.0, [0.0, 20.0]);
+    let held_out = base.looking_from([0.0, 0.0, 0.0], 1.0, 30f64.to_radians(), 10f64.to_radians());
+    let q = [0.4, -0.3, 0.7, 0.2];
+    let render = |c: &Camera| {
+        RayCaster::new(&arm, c.clone(), RenderOptions::default())
+            .render(&q)
+            .silhouette
+    };
+    let seen = render(&held_out);
+    assert!(seen.iter().any(|&v| v > 0), "the robot is in view");
+    for c in &training {
+        let other = render(c);
+        let inter = seen
+            .iter()
+            .zip(&other)
+            .filter(|(a, b)| **a > 0 && **b > 0)
+            .count();
+        let union = seen
+            .iter()
+            .zip(&other)
+            .filter(|(a, b)| **a > 0 || **b > 0)
+            .count();
+        let iou = inter as f64 / union.max(1) as f64;
+        assert!(
+            iou < 0.9,
+            "held-out view too like the training camera at {:?}: IoU {iou:.3}",
+            c.eye
+        );
+    }
+    // The first training camera is the papers' view.
+    assert!((training[0].pose_matrix() - base.pose_matrix()).abs().max() < 1e-12);
+}
