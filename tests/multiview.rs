@@ -69,3 +69,52 @@ fn a_held_out_camera_sees_what_no_training_camera_sees() {
     // The first training camera is the papers' view.
     assert!((training[0].pose_matrix() - base.pose_matrix()).abs().max() < 1e-12);
 }
+
+#[test]
+fn a_multi_view_dataset_holds_every_pose_from_every_camera_and_records_each_camera() {
+    let arm = selfmodel::sim::arm4::arm4();
+    let base = Camera {
+        width: 32,
+        height: 32,
+        ..Camera::paper()
+    };
+    let cameras = base.on_sphere([0.0, 0.0, 0.0], 1.0, 4, 0.0, [0.0, 20.0]);
+    let angles: Vec<Vec<f64>> = (0..5)
+        .map(|i| vec![10.0 * i as f64, -15.0, 20.0, 5.0 * i as f64])
+        .collect();
+    let data = selfmodel::data::dataset::Dataset::render_views(
+        &arm,
+        &angles,
+        &cameras,
+        3,
+        &RenderOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(data.len(), 20);
+    assert_eq!(data.split(), (0..12, 12..20));
+    for p in 0..5 {
+        for (c, camera) in cameras.iter().enumerate() {
+            let i = p * 4 + c;
+            assert_eq!(data.angles[i], angles[p]);
+            let recorded = data.camera_of(i);
+            assert!((recorded.pose_matrix() - camera.pose_matrix()).abs().max() < 1e-9);
+            let direct = RayCaster::new(&arm, camera.clone(), RenderOptions::default())
+                .render(&arm.chain.to_si(&angles[p]))
+                .silhouette;
+            assert_eq!(data.image(i), direct.as_slice());
+        }
+    }
+    // A camera of another size is refused.
+    let mut odd = cameras.clone();
+    odd[1].width = 48;
+    assert!(
+        selfmodel::data::dataset::Dataset::render_views(
+            &arm,
+            &angles,
+            &odd,
+            3,
+            &RenderOptions::default()
+        )
+        .is_err()
+    );
+}

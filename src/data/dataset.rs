@@ -244,6 +244,75 @@ impl Dataset {
         })
     }
 
+    /// Every pose of `angles` (user units) seen by every camera of `cameras`: sample
+    /// `pose * cameras.len() + c` is pose `pose` from camera `c`, its camera recorded under
+    /// `poses` (as every dataset records its camera); the first `train_poses` poses, each from
+    /// every camera, are the training samples. The cameras share one focal length and image
+    /// size (the first's).
+    pub fn render_views(
+        robot: &Robot,
+        angles: &[Vec<f64>],
+        cameras: &[Camera],
+        train_poses: usize,
+        render: &RenderOptions,
+    ) -> Result<Self> {
+        let Some(first) = cameras.first() else {
+            return Err(Error::Config("a multi-view dataset needs a camera".into()));
+        };
+        if let Some(c) = cameras.iter().find(|c| {
+            c.width != first.width || c.height != first.height || c.fov_deg != first.fov_deg
+        }) {
+            return Err(Error::Config(format!(
+                "every camera of a dataset has one image size and field of view: {}x{} at {} deg and {}x{} at {} deg",
+                first.width, first.height, first.fov_deg, c.width, c.height, c.fov_deg
+            )));
+        }
+        if train_poses > angles.len() {
+            return Err(Error::Config(format!(
+                "{train_poses} training poses of {}",
+                angles.len()
+            )));
+        }
+        for c in cameras {
+            c.validate()?;
+        }
+        let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+        let frames: Vec<Vec<crate::sim::ray_caster::Frame>> = cameras
+            .iter()
+            .map(|c| RayCaster::new(robot, c.clone(), render.clone()).render_batch(&si, None))
+            .collect();
+        let (w, h) = (first.width, first.height);
+        let n = angles.len() * cameras.len();
+        let (mut images, mut depth) =
+            (Vec::with_capacity(n * w * h), Vec::with_capacity(n * w * h));
+        let (mut all_angles, mut poses) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for (p, q) in angles.iter().enumerate() {
+            for (c, camera) in cameras.iter().enumerate() {
+                let f = &frames[c][p];
+                images.extend_from_slice(&f.silhouette);
+                depth.extend_from_slice(&f.depth);
+                all_angles.push(q.clone());
+                let m = camera.pose_matrix();
+                poses.push(std::array::from_fn(|i| m[(i / 4, i % 4)]));
+            }
+        }
+        Ok(Dataset {
+            angles: all_angles,
+            images,
+            depth,
+            width: w,
+            height: h,
+            focal: first.focal_px(),
+            poses,
+            n_train: train_poses * cameras.len(),
+        })
+    }
+
+    /// The camera that took sample `i` (its recorded pose, the focal length, the size).
+    pub fn camera_of(&self, i: usize) -> Camera {
+        Camera::from_record(&self.poses[i], self.focal, self.width, self.height)
+    }
+
     /// Refuse a dataset in which the robot is out of view in most images (a camera that
     /// misses the robot), with what to do about it.
     pub fn check_in_view(&self) -> Result<()> {
