@@ -13,7 +13,9 @@
 //!   forward kinematics instead of a learned forward model: DSL's ceiling.
 //!
 //! Each run is a unit of Table II's mechanism ([`RangeRun`]) under `runs/seed_<s>/`, so a
-//! killed study continues with `--resume`. Writes `results.csv` (`method,range,seed,mean_cm,
+//! killed study continues with `--resume`, and a second process started with the same
+//! command takes the units nobody holds (both cores train; a last `--resume` gathers every
+//! row). Writes `results.csv` (`method,range,seed,mean_cm,
 //! median_cm,p95_cm`, then the share above 10 cm, the optimiser steps and provenance),
 //! `summary.csv` (per method: mean and spread over the seeds) and `validation_curves.png`.
 
@@ -325,7 +327,7 @@ fn write_outputs(cfg: &SeedsConfig, dir: &Path, runs: &[RangeRun]) -> Result<Vec
             TrainConfig::steps_for_epochs(1, run.data().train().len(), cfg.table.fit.batch);
         let steps: usize = run.emssl_curve().iter().map(|(c, _)| c.steps).sum();
         rows.extend(
-            run.rows()
+            run.rows_with_others()
                 .iter()
                 .map(|r| seed_row(r, seed, per_epoch, steps)),
         );

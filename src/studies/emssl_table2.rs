@@ -607,6 +607,12 @@ impl<'a> RangeRun<'a> {
         &self.rows
     }
 
+    /// [`RangeRun::rows`] with those of the units left to another process that has finished
+    /// them since, each in its place.
+    pub fn rows_with_others(&self) -> Vec<IkRow> {
+        self.merged().0
+    }
+
     /// The EMSSL iterations of the units so far (with the revision that trained them).
     pub fn emssl_curve(&self) -> &[RevisedIteration] {
         &self.emssl_curve

@@ -454,7 +454,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         presets: IK_PRESETS,
         in_table1: false,
         takes_robot: true,
-        shares_output: false,
+        shares_output: true,
         run: run_emssl_seeds,
     },
     Experiment {
