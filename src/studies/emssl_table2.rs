@@ -1315,8 +1315,8 @@ pub fn read_reached(path: &Path) -> Result<Vec<(Point3<f64>, Point3<f64>)>> {
         .collect()
 }
 
-/// A row's answers as this checkout has them: all of them (`predictions_<range>/`, where the
-/// run was made here), else the committed sample; with whether it is the sample.
+/// A row's answers: the committed sample, else all of them (`predictions_<range>/`, where
+/// the run was made here and keeps no sample); with whether it is the sample.
 fn answers_file(dir: &Path, range_deg: f64, method: &str) -> Option<(PathBuf, bool)> {
     let file = format!("{}.csv", file_name(method));
     let all = dir.join(format!("predictions_{range_deg:.0}")).join(&file);
@@ -1324,10 +1324,11 @@ fn answers_file(dir: &Path, range_deg: f64, method: &str) -> Option<(PathBuf, bo
         .join("predictions_sample")
         .join(format!("{range_deg:.0}"))
         .join(&file);
-    if all.is_file() {
-        Some((all, false))
-    } else if sample.is_file() {
+    // The committed sample first: what is generated from it is the same in every checkout.
+    if sample.is_file() {
         Some((sample, true))
+    } else if all.is_file() {
+        Some((all, false))
     } else {
         None
     }
