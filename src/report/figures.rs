@@ -59,6 +59,32 @@ where
         .map_err(|e| draw_err(path, e))
 }
 
+/// One line per run, each in its palette colour with its label in the legend.
+fn draw_line_runs<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    path: &Path,
+    runs: impl IntoIterator<Item = (String, Vec<(X::ValueType, Y::ValueType)>)>,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    X: plotters::coord::ranged1d::Ranged,
+    Y: plotters::coord::ranged1d::Ranged,
+    X::ValueType: Clone + 'static,
+    Y::ValueType: Clone + 'static,
+{
+    for (i, (label, points)) in runs.into_iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(LineSeries::new(points, color.stroke_width(2)))
+            .map_err(|e| draw_err(path, e))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+    }
+    Ok(())
+}
+
 /// One point of the Pareto plot.
 #[derive(Clone, Debug)]
 pub struct ParetoPoint {
@@ -454,19 +480,16 @@ pub fn curves(
             .light_line_style(TRANSPARENT)
             .draw()
             .map_err(|e| draw_err(path, e))?;
-        for (i, (label, curve)) in runs.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
-            chart
-                .draw_series(LineSeries::new(
-                    curve.iter().filter(|p| p.1 > 0.0).map(|&(s, v)| (s, v)),
-                    color.stroke_width(2),
-                ))
-                .map_err(|e| draw_err(path, e))?
-                .label(label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-        }
+        draw_line_runs(
+            &mut chart,
+            path,
+            runs.iter().map(|(label, curve)| {
+                (
+                    label.clone(),
+                    curve.iter().copied().filter(|p| p.1 > 0.0).collect(),
+                )
+            }),
+        )?;
         // Falling curves leave the upper right empty.
         draw_legend(&mut chart, path, SeriesLabelPosition::UpperRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
@@ -566,15 +589,9 @@ fn marked_lines(
                     .light_line_style(TRANSPARENT)
                     .draw()
                     .map_err(|e| draw_err(path, e))?;
-                for (i, (label, pts)) in runs.iter().enumerate() {
+                draw_line_runs(&mut chart, path, runs.iter().cloned())?;
+                for (i, (_, pts)) in runs.iter().enumerate() {
                     let color = Palette99::pick(i).to_rgba();
-                    chart
-                        .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-                        .map_err(|e| draw_err(path, e))?
-                        .label(label.clone())
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                        });
                     chart
                         .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
                         .map_err(|e| draw_err(path, e))?;
@@ -963,16 +980,7 @@ pub fn lines(
             .light_line_style(TRANSPARENT)
             .draw()
             .map_err(|e| draw_err(path, e))?;
-        for (i, (label, pts)) in runs.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
-            chart
-                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-                .map_err(|e| draw_err(path, e))?
-                .label(label.clone())
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-        }
+        draw_line_runs(&mut chart, path, runs.iter().cloned())?;
         draw_legend(&mut chart, path, SeriesLabelPosition::LowerRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }

@@ -394,7 +394,6 @@ pub fn run(
     } else {
         cfg.links.clone()
     };
-    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
     let render_options = model_run.data.dataset.render.clone();
     let (device, preset, revision) = (opts.device.to_string(), cfg.preset.clone(), git_revision());
     // Healthy trials per k: the detection threshold and the localisation baseline.
@@ -427,12 +426,7 @@ pub fn run(
             for &link in &links {
                 let damage = sizes.damage(link, size)?;
                 let damaged_robot = damage.apply(&robot)?;
-                let frames = RayCaster::new(&damaged_robot, camera.clone(), render_options.clone())
-                    .render_batch(&si, None);
-                let observed: Vec<f32> = frames
-                    .iter()
-                    .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
-                    .collect();
+                let observed = silhouettes(&damaged_robot, &camera, &render_options, &angles);
                 let scores = PoolScores::new(&pred, &observed, &masks, &changes, px);
                 for (ki, &k) in cfg.ks.iter().enumerate() {
                     let h_scores = &healthy_trials[ki].scores;
@@ -598,18 +592,19 @@ struct Recovering<'a> {
     revision: &'a str,
 }
 
-/// Silhouettes (`[n, H*W]` in [0, 1]) of `robot` at `angles` (degrees) from the study's camera.
-fn render(r: &Recovering, robot: &crate::sim::robot::Robot, angles: &[Vec<f64>]) -> Vec<f32> {
+/// Silhouettes (`[n, H*W]` in [0, 1]) of `robot` at `angles` (degrees) from `camera`.
+fn silhouettes(
+    robot: &crate::sim::robot::Robot,
+    camera: &crate::sim::camera::Camera,
+    options: &crate::sim::ray_caster::RenderOptions,
+    angles: &[Vec<f64>],
+) -> Vec<f32> {
     let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
-    RayCaster::new(
-        robot,
-        r.camera.clone(),
-        r.model_run.data.dataset.render.clone(),
-    )
-    .render_batch(&si, None)
-    .iter()
-    .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
-    .collect()
+    RayCaster::new(robot, camera.clone(), options.clone())
+        .render_batch(&si, None)
+        .iter()
+        .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
+        .collect()
 }
 
 /// A training set of `angles` (degrees) and their silhouettes, on `device`.
@@ -709,7 +704,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
         .clone()
         .flat_map(|i| data.image(i).iter().map(|&v| v as f32 / 255.0))
         .collect();
-    let healthy_set = nk.training_set(&set_of(&train_angles, healthy_train.clone(), size, &tdev));
+    let healthy_set = nk.training_set(&set_of(&train_angles, healthy_train, size, &tdev));
     let train_cfg = |steps: usize, seed: u64| TrainConfig {
         steps,
         batch: rc.batch,
@@ -746,23 +741,35 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
     let mut rows = Vec::new();
     for damage in &rc.damages {
         let damaged_robot = damage.apply(r.robot)?;
-        let damaged_test = render(r, &damaged_robot, &test_angles);
-        let damaged_train = render(r, &damaged_robot, &train_angles);
+        let render = |angles: &[Vec<f64>]| {
+            silhouettes(
+                &damaged_robot,
+                r.camera,
+                &r.model_run.data.dataset.render,
+                angles,
+            )
+        };
+        let (damaged_test, damaged_train) = (render(&test_angles), render(&train_angles));
         let mut order: Vec<usize> = (0..train_angles.len()).collect();
         rand::seq::SliceRandom::shuffle(
             order.as_mut_slice(),
             &mut StdRng::seed_from_u64(cfg.seed ^ 0x5EED),
         );
+        // `models`: the model scored on the damaged arm's images and the one on the healthy
+        // arm's (the same but for the gated experts).
         let row = |method: &str,
                    n: usize,
-                   model: &crate::self_models::neurokin::NeuroKin,
+                   models: (
+            &crate::self_models::neurokin::NeuroKin,
+            &crate::self_models::neurokin::NeuroKin,
+        ),
                    seconds: f64,
                    steps: usize,
                    far: &[bool],
                    detail: String|
          -> Result<RecoveryRow> {
-            let (pd, idam) = scores(model, r, &test_angles, &damaged_test)?;
-            let (ph, ih) = scores(model, r, &test_angles, healthy_truth)?;
+            let (pd, idam) = scores(models.0, r, &test_angles, &damaged_test)?;
+            let (ph, ih) = scores(models.1, r, &test_angles, healthy_truth)?;
             let far_psnr: Vec<f64> = pd
                 .iter()
                 .zip(far)
@@ -818,7 +825,15 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             let far: Vec<bool> = nearest.iter().map(|&d| d > median).collect();
             let set = nk.training_set(&set_of(&angles, sil.clone(), size, &tdev));
             let seed = cfg.seed ^ (n as u64) << 8;
-            rows.push(row("unchanged", n, &healthy, 0.0, 0, &far, String::new())?);
+            rows.push(row(
+                "unchanged",
+                n,
+                (&healthy, &healthy),
+                0.0,
+                0,
+                &far,
+                String::new(),
+            )?);
             let label = format!("fine-tune ({}, n = {n})", damage.label());
             let t = std::time::Instant::now();
             let (tuned, _) =
@@ -827,7 +842,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             rows.push(row(
                 "fine-tune",
                 n,
-                &tuned,
+                (&tuned, &tuned),
                 tuned_s,
                 rc.steps,
                 &far,
@@ -859,7 +874,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 rows.push(row(
                     "replay",
                     n,
-                    &m_model,
+                    (&m_model, &m_model),
                     t.elapsed().as_secs_f64(),
                     rc.steps,
                     &far,
@@ -883,7 +898,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             rows.push(row(
                 "EWC",
                 n,
-                &e_model,
+                (&e_model, &e_model),
                 t.elapsed().as_secs_f64(),
                 rc.steps,
                 &far,
@@ -899,45 +914,26 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 gated(healthy_truth, seed ^ 2)?,
             );
             let pick = |damaged: bool| if damaged { &tuned } else { &healthy };
-            let (pd, idam) = scores(pick(on_damaged), r, &test_angles, &damaged_test)?;
-            let (ph, ih) = scores(pick(on_healthy), r, &test_angles, healthy_truth)?;
-            let far_psnr: Vec<f64> = pd
-                .iter()
-                .zip(&far)
-                .filter(|(_, f)| **f)
-                .map(|(p, _)| *p)
-                .collect();
-            rows.push(RecoveryRow {
-                method: "gated experts".into(),
-                psnr_damaged_db: mean(&pd),
-                iou_damaged: mean(&idam),
-                psnr_healthy_db: mean(&ph),
-                iou_healthy: mean(&ih),
-                psnr_damaged_far_db: (!far_psnr.is_empty()).then(|| mean(&far_psnr)),
-                seconds: tuned_s,
-                detail: format!(
+            let expert = |damaged: bool| {
+                if damaged {
+                    "damage (fine-tuned expert)"
+                } else {
+                    "healthy (healthy expert)"
+                }
+            };
+            rows.push(row(
+                "gated experts",
+                n,
+                (pick(on_damaged), pick(on_healthy)),
+                tuned_s,
+                rc.steps,
+                &far,
+                format!(
                     "gate on the damaged arm: {}; on the healthy arm: {}",
-                    if on_damaged {
-                        "damage (fine-tuned expert)"
-                    } else {
-                        "healthy (healthy expert)"
-                    },
-                    if on_healthy {
-                        "damage (fine-tuned expert)"
-                    } else {
-                        "healthy (healthy expert)"
-                    }
+                    expert(on_damaged),
+                    expert(on_healthy)
                 ),
-                ..row(
-                    "gated experts",
-                    n,
-                    &healthy,
-                    tuned_s,
-                    rc.steps,
-                    &far,
-                    String::new(),
-                )?
-            });
+            )?);
         }
         if rc.from_scratch {
             let all = nk.training_set(&set_of(&train_angles, damaged_train.clone(), size, &tdev));
@@ -958,7 +954,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             rows.push(row(
                 "from scratch",
                 train_angles.len(),
-                &scratch,
+                (&scratch, &scratch),
                 t.elapsed().as_secs_f64().max(log.train_seconds),
                 r.model_run.train.steps,
                 &all_far,

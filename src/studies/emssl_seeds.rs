@@ -281,13 +281,18 @@ pub fn run(
 
 /// The optimiser steps of the EMSSL run in `run` (its iterations and polishing rounds).
 fn emssl_steps(run: &RangeRun) -> Result<usize> {
-    let steps: usize = run.emssl_curve().iter().map(|(c, _)| c.steps).sum();
+    let steps = steps_so_far(run);
     if steps == 0 {
         return Err(Error::Training(
             "emssl_seeds: the EMSSL run records no optimiser steps (a unit from before they were counted): run without --resume".into(),
         ));
     }
     Ok(steps)
+}
+
+/// The optimiser steps of the EMSSL iterations `run` holds (0 before its EMSSL unit).
+fn steps_so_far(run: &RangeRun) -> usize {
+    run.emssl_curve().iter().map(|(c, _)| c.steps).sum()
 }
 
 /// A Table II row of one seed's run as a row of this study.
@@ -325,7 +330,7 @@ fn write_outputs(cfg: &SeedsConfig, dir: &Path, runs: &[RangeRun]) -> Result<Vec
     for (run, &seed) in runs.iter().zip(&cfg.seeds) {
         let per_epoch =
             TrainConfig::steps_for_epochs(1, run.data().train().len(), cfg.table.fit.batch);
-        let steps: usize = run.emssl_curve().iter().map(|(c, _)| c.steps).sum();
+        let steps = steps_so_far(run);
         rows.extend(
             run.rows_with_others()
                 .iter()
