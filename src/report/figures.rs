@@ -85,6 +85,33 @@ where
     Ok(())
 }
 
+/// A dot of `radius` pixels at every point of every run, in the run's colour.
+fn draw_markers<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    path: &Path,
+    runs: &[(String, Vec<(X::ValueType, Y::ValueType)>)],
+    radius: i32,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    X: plotters::coord::ranged1d::Ranged,
+    Y: plotters::coord::ranged1d::Ranged,
+    X::ValueType: Clone + 'static,
+    Y::ValueType: Clone + 'static,
+{
+    for (i, (_, points)) in runs.iter().enumerate() {
+        let color = Palette99::pick(i).to_rgba();
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .map(|p| Circle::new(p.clone(), radius, color.filled())),
+            )
+            .map_err(|e| draw_err(path, e))?;
+    }
+    Ok(())
+}
+
 /// One point of the Pareto plot.
 #[derive(Clone, Debug)]
 pub struct ParetoPoint {
@@ -590,12 +617,7 @@ fn marked_lines(
                     .draw()
                     .map_err(|e| draw_err(path, e))?;
                 draw_line_runs(&mut chart, path, runs.iter().cloned())?;
-                for (i, (_, pts)) in runs.iter().enumerate() {
-                    let color = Palette99::pick(i).to_rgba();
-                    chart
-                        .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-                        .map_err(|e| draw_err(path, e))?;
-                }
+                draw_markers(&mut chart, path, &runs, 3)?;
                 draw_legend(
                     &mut chart,
                     path,
@@ -948,6 +970,18 @@ pub fn lines(
     y_desc: &str,
     runs: &[(String, Vec<(f64, f64)>)],
 ) -> Result<()> {
+    lines_marked(path, title, x_desc, y_desc, runs, false)
+}
+
+/// [`lines`] with a dot at every point (runs of one point: a trade-off between two scores).
+pub fn lines_marked(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+    markers: bool,
+) -> Result<()> {
     register_font();
     let (w, h) = (800u32, 600u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
@@ -981,6 +1015,9 @@ pub fn lines(
             .draw()
             .map_err(|e| draw_err(path, e))?;
         draw_line_runs(&mut chart, path, runs.iter().cloned())?;
+        if markers {
+            draw_markers(&mut chart, path, runs, 5)?;
+        }
         draw_legend(&mut chart, path, SeriesLabelPosition::LowerRight)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }

@@ -99,8 +99,9 @@ pub struct RecoveryConfig {
     pub steps: usize,
     pub batch: usize,
     pub learning_rate: f64,
-    /// EWC's weight and the healthy batches its Fisher information is estimated on.
-    pub ewc_lambda: f64,
+    /// EWC's weights (one update per value: the trade-off between the damaged arm and the
+    /// healthy one) and the healthy batches its Fisher information is estimated on.
+    pub ewc_lambdas: Vec<f64>,
     pub fisher_batches: usize,
     /// Replay: healthy training images mixed in, as many as damaged ones in every epoch.
     pub replay: bool,
@@ -159,7 +160,7 @@ impl Preset for DamageConfig {
                 steps: 600,
                 batch: 32,
                 learning_rate: 5e-4,
-                ewc_lambda: 1e4,
+                ewc_lambdas: vec![1e6, 1e7, 1e8],
                 fisher_batches: 50,
                 replay: true,
                 gate_k: 10,
@@ -196,6 +197,7 @@ impl Preset for DamageConfig {
                 ns: vec![10, 50],
                 steps: 60,
                 fisher_batches: 5,
+                ewc_lambdas: vec![1e6, 1e8],
                 ..Self::paper().recovery
             },
             ..Self::paper()
@@ -550,6 +552,7 @@ pub fn run(
             gate_threshold,
             device: &device,
             revision: &revision,
+            resume: opts.resume,
         },
     )?;
     if !recovery.is_empty() {
@@ -558,12 +561,12 @@ pub fn run(
             &recovery,
             "Recovery: the self-model updated from n images of the damaged arm",
             &format!(
-                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {}, Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
+                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {:?}, the per-image empirical Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
                 cfg.model_preset,
                 cfg.recovery.steps,
                 cfg.recovery.batch,
                 cfg.recovery.learning_rate,
-                cfg.recovery.ewc_lambda,
+                cfg.recovery.ewc_lambdas,
                 cfg.recovery.fisher_batches,
                 cfg.recovery.gate_k
             ),
@@ -590,6 +593,7 @@ struct Recovering<'a> {
     gate_threshold: f64,
     device: &'a str,
     revision: &'a str,
+    resume: bool,
 }
 
 /// Silhouettes (`[n, H*W]` in [0, 1]) of `robot` at `angles` (degrees) from `camera`.
@@ -738,6 +742,25 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     .collect::<Vec<_>>(),
             ))
         };
+    // Finished groups of rows (one damage at one n, or its model from scratch), kept in the
+    // checkpoint folder so that a killed run resumes where it stopped.
+    let cache_path = r.out.join("checkpoint").join("recovery_rows.json");
+    let fingerprint = serde_json::json!({"recovery": rc, "run": r.model_run, "seed": cfg.seed});
+    let mut cache = RowCache {
+        fingerprint: fingerprint.clone(),
+        groups: Default::default(),
+    };
+    if r.resume && cache_path.exists() {
+        let text = std::fs::read_to_string(&cache_path).map_err(|e| Error::io(&cache_path, e))?;
+        if let Ok(old) = serde_json::from_str::<RowCache>(&text)
+            && old.fingerprint == fingerprint
+        {
+            cache = old;
+        }
+    }
+    // EWC's Fisher information, from the healthy model on healthy batches: once for every
+    // update (its seconds are counted in each EWC update's).
+    let mut fisher: Option<(crate::train::ewc::Ewc, f64)> = None;
     let mut rows = Vec::new();
     for damage in &rc.damages {
         let damaged_robot = damage.apply(r.robot)?;
@@ -797,6 +820,12 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
         };
         for &n in &rc.ns {
             let n = n.min(order.len());
+            let key = format!("{} n={n}", damage.label());
+            if let Some(done) = cache.groups.get(&key) {
+                rows.extend(done.iter().cloned());
+                continue;
+            }
+            let mut group = Vec::new();
             let picked: Vec<usize> = order[..n].to_vec();
             let angles: Vec<Vec<f64>> = picked.iter().map(|&i| train_angles[i].clone()).collect();
             let sil: Vec<f32> = picked
@@ -825,7 +854,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             let far: Vec<bool> = nearest.iter().map(|&d| d > median).collect();
             let set = nk.training_set(&set_of(&angles, sil.clone(), size, &tdev));
             let seed = cfg.seed ^ (n as u64) << 8;
-            rows.push(row(
+            group.push(row(
                 "unchanged",
                 n,
                 (&healthy, &healthy),
@@ -839,7 +868,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             let (tuned, _) =
                 Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &set, &loss)?;
             let tuned_s = t.elapsed().as_secs_f64();
-            rows.push(row(
+            group.push(row(
                 "fine-tune",
                 n,
                 (&tuned, &tuned),
@@ -871,7 +900,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 let t = std::time::Instant::now();
                 let (m_model, _) =
                     Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &mixed, &loss)?;
-                rows.push(row(
+                group.push(row(
                     "replay",
                     n,
                     (&m_model, &m_model),
@@ -881,29 +910,42 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     format!("{m} healthy images mixed in"),
                 )?);
             }
-            let t = std::time::Instant::now();
-            let anchor = load()?;
-            let ewc = crate::train::ewc::Ewc::new(
-                &anchor,
-                &healthy_set,
-                &train_cfg(rc.fisher_batches, cfg.seed),
-                rc.fisher_batches,
-                &loss,
-                rc.ewc_lambda,
-            )?;
-            let label = format!("EWC ({}, n = {n})", damage.label());
-            let (e_model, _) =
-                Trainer::new(&train_cfg(rc.steps, seed), &label)
-                    .fit(anchor, &set, |m, b| loss(m, b) + ewc.penalty(m))?;
-            rows.push(row(
-                "EWC",
-                n,
-                (&e_model, &e_model),
-                t.elapsed().as_secs_f64(),
-                rc.steps,
-                &far,
-                String::new(),
-            )?);
+            if fisher.is_none() {
+                let t = std::time::Instant::now();
+                // A fresh copy: a training-mode pass moves BatchNorm's running statistics.
+                let ewc = crate::train::ewc::Ewc::new(
+                    &load()?,
+                    &healthy_set,
+                    &train_cfg(rc.fisher_batches, cfg.seed),
+                    rc.fisher_batches,
+                    &loss,
+                    1.0,
+                )?;
+                fisher = Some((ewc, t.elapsed().as_secs_f64()));
+            }
+            let (ewc, fisher_s) = fisher.as_mut().expect("computed above");
+            for &lambda in &rc.ewc_lambdas {
+                ewc.lambda = lambda;
+                let method = if rc.ewc_lambdas.len() == 1 {
+                    "EWC".to_string()
+                } else {
+                    format!("EWC (lambda {lambda:e})")
+                };
+                let label = format!("{method} ({}, n = {n})", damage.label());
+                let t = std::time::Instant::now();
+                let ewc = &*ewc;
+                let (e_model, _) = Trainer::new(&train_cfg(rc.steps, seed), &label)
+                    .fit(load()?, &set, |m, b| loss(m, b) + ewc.penalty(m))?;
+                group.push(row(
+                    &method,
+                    n,
+                    (&e_model, &e_model),
+                    t.elapsed().as_secs_f64() + *fisher_s,
+                    rc.steps,
+                    &far,
+                    format!("lambda {lambda:e}; Fisher from {} healthy batches", rc.fisher_batches),
+                )?);
+            }
             // Gated experts: the healthy model and the fine-tuned one, the gate scoring what the
             // arm looks like now through the healthy model.
             let gated = |truth: &[f32], seed: u64| -> Result<bool> {
@@ -921,7 +963,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     "healthy (healthy expert)"
                 }
             };
-            rows.push(row(
+            group.push(row(
                 "gated experts",
                 n,
                 (pick(on_damaged), pick(on_healthy)),
@@ -934,12 +976,18 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     expert(on_healthy)
                 ),
             )?);
+            rows.extend(group.iter().cloned());
+            cache.groups.insert(key, group);
+            write_json(&cache_path, &cache)?;
         }
-        if rc.from_scratch {
+        let key = format!("{} from scratch", damage.label());
+        if let Some(done) = cache.groups.get(&key) {
+            rows.extend(done.iter().cloned());
+        } else if rc.from_scratch {
             let all = nk.training_set(&set_of(&train_angles, damaged_train.clone(), size, &tdev));
             let label = format!("from scratch ({})", damage.label());
             let plan = crate::train::trainer::CheckpointPlan {
-                dir: r.out.join(format!(
+                dir: r.out.join("checkpoint").join(format!(
                     "scratch_{}",
                     crate::core::atomic_file::file_name(&damage.label())
                 )),
@@ -951,7 +999,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 .checkpoint(Some(&plan))
                 .fit(nk.init(&tdev, r.model_run.train.seed)?, &all, &loss)?;
             let all_far = vec![false; test_angles.len()];
-            rows.push(row(
+            let group = vec![row(
                 "from scratch",
                 train_angles.len(),
                 (&scratch, &scratch),
@@ -959,13 +1007,25 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 r.model_run.train.steps,
                 &all_far,
                 "every training pose of the damaged arm".into(),
-            )?);
+            )?];
+            rows.extend(group.iter().cloned());
+            cache.groups.insert(key, group);
+            write_json(&cache_path, &cache)?;
         }
     }
     Ok(rows)
 }
 
-/// `recovery_damaged.png` and `recovery_healthy.png`: PSNR against n per method.
+/// Finished recovery rows by group, and what they were computed for.
+#[derive(Serialize, Deserialize)]
+struct RowCache {
+    fingerprint: serde_json::Value,
+    groups: std::collections::BTreeMap<String, Vec<RecoveryRow>>,
+}
+
+/// `recovery_damaged.png` and `recovery_healthy.png`: PSNR against n per method, the first
+/// damage; `recovery_tradeoff_<damage>.png` per damage: at the n nearest 50, each method's PSNR
+/// on the healthy arm against the damaged one's (EWC's weights joined, as a path).
 fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
     let first = &rows[0];
     let same =
@@ -1010,6 +1070,54 @@ fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
             "images of the damaged arm (n)",
             "PSNR (dB)",
             &runs,
+        )?;
+    }
+    let mut damages: Vec<(&str, f64, usize)> = Vec::new();
+    for r in rows {
+        let d = (r.damage.as_str(), r.size, r.link);
+        if !damages.contains(&d) {
+            damages.push(d);
+        }
+    }
+    for (damage, size, link) in damages {
+        let of: Vec<&RecoveryRow> = rows
+            .iter()
+            .filter(|r| (r.damage.as_str(), r.size, r.link) == (damage, size, link))
+            .collect();
+        let Some(n) = of
+            .iter()
+            .filter(|r| r.method != "from scratch")
+            .map(|r| r.n)
+            .min_by_key(|n| n.abs_diff(50))
+        else {
+            continue;
+        };
+        let point = |r: &RecoveryRow| (r.psnr_healthy_db, r.psnr_damaged_db);
+        let mut runs: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+        let ewc: Vec<(f64, f64)> = of
+            .iter()
+            .filter(|r| r.n == n && r.method.starts_with("EWC"))
+            .map(|r| point(r))
+            .collect();
+        for r in &of {
+            if r.method.starts_with("EWC") || (r.n != n && r.method != "from scratch") {
+                continue;
+            }
+            runs.push((r.method.clone(), vec![point(r)]));
+        }
+        if !ewc.is_empty() {
+            runs.push(("EWC, weight rising".into(), ewc));
+        }
+        crate::report::figures::lines_marked(
+            &out.join(format!(
+                "recovery_tradeoff_{}.png",
+                crate::core::atomic_file::file_name(&format!("{damage} {size} link {link}"))
+            )),
+            &format!("Damaged arm against healthy arm, {damage} {size} link {link}, n = {n} images"),
+            "PSNR on the healthy arm (dB)",
+            "PSNR on the damaged arm (dB)",
+            &runs,
+            true,
         )?;
     }
     Ok(())

@@ -3,8 +3,16 @@
 //! proportion to how much the old task's loss depends on it: `lambda / 2 * sum_i F_i (w_i -
 //! w*_i)^2`, with `F` the diagonal of the Fisher information at the old weights `w*`.
 //!
-//! `F` is estimated as the mean over batches of the old task of the squared gradient of its
-//! loss (the empirical Fisher on mini-batch gradients, as common implementations do).
+//! `F` is the empirical Fisher of one image: the old task's loss per image (as the trainer
+//! computes it) has gradients `g_s`, and `F = E[g_s^2]`. It is estimated from mini-batches:
+//! a batch of `B` images has the gradient `g_B = mean_s g_s`; at the old optimum the `g_s` have
+//! mean ~0 and are independent, so `E[g_B^2] = E[g_s^2] / B`, and `F = B * mean(g_B^2)` over
+//! the batches drawn. (Without the factor `B` the penalty is `B` times weaker than its `lambda`
+//! says.) With `F` per image, `lambda = 1` weighs the old task's mean loss, in the quadratic
+//! approximation `F` gives of it, as much as the new task's; where one image's loss is a mean
+//! over many correlated outputs (a silhouette's pixels), the empirical Fisher underestimates
+//! the curvature by up to the number of outputs, so useful values of `lambda` run far above 1:
+//! sweep it.
 
 use std::collections::HashMap;
 
@@ -102,7 +110,7 @@ impl Ewc {
         }
         let mut anchor = Anchor {
             fisher: &sums,
-            scale: 1.0 / batches as f32,
+            scale: cfg.batch.max(1) as f32 / batches as f32,
             out: HashMap::new(),
             device: None,
         };
