@@ -16,6 +16,7 @@ pub mod emssl_seeds;
 pub mod emssl_study;
 pub mod emssl_table2;
 pub mod mesh_fidelity;
+pub mod multiview;
 pub mod registry;
 pub mod run;
 pub mod table1;

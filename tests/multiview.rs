@@ -1,6 +1,8 @@
 //! More than one camera: camera poses as vectors a network reads, cameras on a sphere around
 //! the robot.
 
+mod common;
+
 use selfmodel::sim::camera::Camera;
 use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
 
@@ -117,4 +119,83 @@ fn a_multi_view_dataset_holds_every_pose_from_every_camera_and_records_each_came
         )
         .is_err()
     );
+}
+
+/// Camera-conditioned and multi-head NeuroKin on four cameras: on held-out poses seen from
+/// the trained cameras, each beats the best constant of each camera (its mean training
+/// image), so it reads both the joints and the camera.
+#[test]
+fn a_tiny_camera_conditioned_model_renders_a_trained_camera_better_than_a_constant() {
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::eval::evaluation::{iou, psnr_db};
+    use selfmodel::self_models::harness::{camera_input, fit_run};
+    use selfmodel::self_models::neurokin::{CameraUse, neurokin_run};
+    let cameras = 4;
+    let mut base = neurokin_run("quick").unwrap();
+    base.data.dataset.views = Some(selfmodel::data::dataset::Views {
+        cameras,
+        radius: None,
+        elevation_deg: [0.0, 30.0],
+    });
+    base.train.steps = 1000;
+    let robot = base.data.robot.load().unwrap();
+    let placed = base.data.dataset.cameras(&robot).unwrap();
+    assert_eq!(placed.len(), cameras);
+    assert!(
+        (placed[0].pose_matrix() - Camera::paper().pose_matrix())
+            .abs()
+            .max()
+            < 1e-9
+    );
+    for camera_use in [
+        CameraUse::Input,
+        CameraUse::Heads(placed.iter().map(camera_input).collect()),
+    ] {
+        let mut run = base.clone();
+        run.model.camera = camera_use.clone();
+        let dir = common::tempdir();
+        let fitted = fit_run(&run, dir.path(), DeviceChoice::Cpu, false).unwrap();
+        let data = &fitted.data;
+        let px = data.width * data.height;
+        // Per camera: the mean training image.
+        let mut mean = vec![vec![0f32; px]; cameras];
+        let mut count = vec![0f32; cameras];
+        for i in fitted.train_range.clone() {
+            let c = i % cameras;
+            count[c] += 1.0;
+            for (m, &v) in mean[c].iter_mut().zip(data.image(i)) {
+                *m += v as f32 / 255.0;
+            }
+        }
+        for (m, n) in mean.iter_mut().zip(&count) {
+            m.iter_mut().for_each(|v| *v /= n);
+        }
+        let pred: Vec<f32> = fitted.trained.renderers[0]
+            .1
+            .render(fitted.test_set.inputs.clone())
+            .0
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .unwrap();
+        let (mut model, mut constant) = ((0.0, 0.0), (0.0, 0.0));
+        let n = fitted.test_range.len();
+        for (k, i) in fitted.test_range.clone().enumerate() {
+            let truth = &fitted.truth[k * px..(k + 1) * px];
+            let p = &pred[k * px..(k + 1) * px];
+            let m = &mean[i % cameras];
+            model.0 += psnr_db(p, truth) / n as f64;
+            model.1 += iou(p, truth) / n as f64;
+            constant.0 += psnr_db(m, truth) / n as f64;
+            constant.1 += iou(m, truth) / n as f64;
+        }
+        eprintln!(
+            "{camera_use:?}: {:.2} dB IoU {:.3}; per-camera constant {:.2} dB IoU {:.3}",
+            model.0, model.1, constant.0, constant.1
+        );
+        assert!(
+            model.0 > constant.0 + 0.5 && model.1 > constant.1,
+            "{camera_use:?}: {model:?} against the constant's {constant:?}"
+        );
+    }
 }

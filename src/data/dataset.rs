@@ -52,6 +52,46 @@ pub struct DatasetConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub framing: Option<Framing>,
     pub render: RenderOptions,
+    /// Every pose seen from several cameras around the robot ([`Views::cameras`]; `samples`
+    /// and `train` then count poses, each giving one image per camera). `None`: `camera`
+    /// alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub views: Option<Views>,
+}
+
+/// Cameras on a sphere around what a camera looks at, for multi-view datasets.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Views {
+    /// How many cameras.
+    pub cameras: usize,
+    /// Their distance from the target (`None`: the camera's own).
+    #[serde(default)]
+    pub radius: Option<f64>,
+    /// Elevations above the horizontal plane through the target (degrees): even-numbered
+    /// cameras at the first, odd-numbered at the second.
+    pub elevation_deg: [f64; 2],
+}
+
+impl Views {
+    /// `self.cameras` copies of `camera` at yaws `360 i / n` degrees from `camera`'s own
+    /// about the world z axis through its target, camera `i` at elevation
+    /// `elevation_deg[i % 2]`, all looking at `camera`'s target: with `elevation_deg[0]` the
+    /// camera's own elevation, camera 0 is `camera` (for an upright camera).
+    pub fn around(&self, camera: &Camera) -> Vec<Camera> {
+        let (yaw0, _, distance) = camera.spherical();
+        let radius = self.radius.unwrap_or(distance);
+        (0..self.cameras)
+            .map(|i| {
+                let yaw = yaw0 + std::f64::consts::TAU * i as f64 / self.cameras as f64;
+                camera.looking_from(
+                    camera.target,
+                    radius,
+                    yaw,
+                    self.elevation_deg[i % 2].to_radians(),
+                )
+            })
+            .collect()
+    }
 }
 
 /// How a camera frames a robot automatically.
@@ -100,6 +140,7 @@ impl Preset for DatasetConfig {
             seed: 0,
             camera: Camera::paper(),
             framing: None,
+            views: None,
             render: RenderOptions::default(),
         }
     }
@@ -127,6 +168,18 @@ impl DatasetConfig {
         }
     }
 
+    /// The cameras [`Dataset::generate`] renders `robot` with, in the order it records them
+    /// (one; or with `views`, one per view), without rendering.
+    pub fn cameras(&self, robot: &Robot) -> Result<Vec<Camera>> {
+        let angles = sample_angles(robot, self)?;
+        let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+        let camera = self.camera_for(robot, &si)?;
+        Ok(match &self.views {
+            Some(views) => views.around(&camera),
+            None => vec![camera],
+        })
+    }
+
     /// Reject impossible settings.
     pub fn validate(&self) -> Result<()> {
         if self.samples == 0 {
@@ -137,11 +190,17 @@ impl DatasetConfig {
         // Silhouettes (1 byte) and depth (4 bytes) per pixel are held in memory while the
         // dataset is built: bound them by what a 24 GiB machine holds with room to spare.
         let pixels = (self.camera.width as u128) * (self.camera.height as u128);
-        let bytes = pixels * 5 * self.samples as u128;
+        if self.views.as_ref().is_some_and(|v| v.cameras == 0) {
+            return Err(Error::Config(
+                "a multi-view dataset needs at least 1 camera (--cameras)".into(),
+            ));
+        }
+        let images = self.samples * self.views.as_ref().map_or(1, |v| v.cameras);
+        let bytes = pixels * 5 * images as u128;
         if bytes > MAX_DATASET_BYTES as u128 {
             return Err(Error::Config(format!(
-                "{} samples of {}x{} pixels need {:.1} GiB of images in memory, above the {} GiB limit; lower --samples or --size",
-                self.samples,
+                "{} images of {}x{} pixels need {:.1} GiB in memory, above the {} GiB limit; lower --samples or --size",
+                images,
                 self.camera.width,
                 self.camera.height,
                 bytes as f64 / (1u64 << 30) as f64,
@@ -221,6 +280,15 @@ impl Dataset {
         }
         let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
         let camera = cfg.camera_for(robot, &si)?;
+        if let Some(views) = &cfg.views {
+            return Self::render_views(
+                robot,
+                &angles,
+                &views.around(&camera),
+                cfg.train,
+                &cfg.render,
+            );
+        }
         let caster = RayCaster::new(robot, camera.clone(), cfg.render.clone());
         let frames = caster.render_batch(&si, progress);
         let (w, h) = (cfg.camera.width, cfg.camera.height);

@@ -1030,6 +1030,16 @@ impl Render for FfksmRenderer {
         DepthPixels::Drawn
     }
 
+    fn render_view(&self, camera: &Camera, angles: Tensor<2>) -> Option<Tensor<4>> {
+        let rows = angle_rows(angles);
+        let shape = [rows.len(), 1, camera.height, camera.width];
+        let r = self.render_from(camera, &rows, &self.label);
+        Some(Tensor::<4>::from_data(
+            TensorData::new(r.predictions.silhouettes, shape),
+            &self.shared.device,
+        ))
+    }
+
     fn note(&self, test_images: usize) -> String {
         let evals = self
             .shared

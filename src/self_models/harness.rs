@@ -56,6 +56,11 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn needs_robot(&self) -> bool {
         false
     }
+    /// Whether it takes the camera as input: each sample's inputs are then its joint angles
+    /// followed by its camera's [`camera_input`] (`[n, dof + 9]`).
+    fn camera_input(&self) -> bool {
+        false
+    }
     /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
     where
@@ -119,6 +124,12 @@ pub trait Render {
     /// Said first in its row's note, once the `test_images` are rendered (empty: nothing).
     fn note(&self, _test_images: usize) -> String {
         String::new()
+    }
+    /// Silhouettes `[n, 1, H, W]` of `angles` seen from `camera` (same image size) instead
+    /// of the camera it was trained with: a 3-D model renders any view. `None`: a model of
+    /// the views it was trained on (a camera-conditioned one takes the camera as input).
+    fn render_view(&self, _camera: &Camera, _angles: Tensor<2>) -> Option<Tensor<4>> {
+        None
     }
     /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
@@ -447,23 +458,43 @@ pub(crate) fn host_targets(data: &Dataset, range: &Range<usize>) -> (Vec<f32>, V
     (sil, depth)
 }
 
+/// What a camera-conditioned model reads of a camera: its pose as 9 numbers, the eye
+/// position and the first two columns of its rotation (right and up: the continuous 6-D
+/// representation of a rotation, Zhou et al., CVPR 2019; Euler angles and quaternions jump),
+/// times [`CAMERA_INPUT_SCALE`] so that they span what the joint angles in degrees span.
+pub fn camera_input(camera: &Camera) -> [f32; 9] {
+    camera.to_vector().map(|v| (v * CAMERA_INPUT_SCALE) as f32)
+}
+
+/// Camera inputs are the pose vector times this (eye in centimetres, rotation entries in
+/// [-100, 100]): the joint angles' scale in degrees.
+pub const CAMERA_INPUT_SCALE: f64 = 100.0;
+
 /// Upload samples `range` with their host targets (from [`host_targets`]): angles
-/// `[n, dof]` (degrees), silhouettes and depth `[n, 1, H, W]`.
+/// `[n, dof]` (degrees), followed by each sample's [`camera_input`] where `with_camera`
+/// (`[n, dof + 9]`); silhouettes and depth `[n, 1, H, W]`.
 pub(crate) fn device_set(
     data: &Dataset,
     range: &Range<usize>,
     (sil, depth): (Vec<f32>, Vec<f32>),
     device: &Device,
+    with_camera: bool,
 ) -> TrainSet {
     let n = range.len();
-    let dof = data.dof();
+    let width = data.dof() + if with_camera { 9 } else { 0 };
     let (h, w) = (data.height, data.width);
-    let angles: Vec<f32> = range
+    let inputs: Vec<f32> = range
         .clone()
-        .flat_map(|i| data.angles[i].iter().map(|&a| a as f32))
+        .flat_map(|i| {
+            let mut row: Vec<f32> = data.angles[i].iter().map(|&a| a as f32).collect();
+            if with_camera {
+                row.extend(camera_input(&data.camera_of(i)));
+            }
+            row
+        })
         .collect();
     TrainSet {
-        inputs: Tensor::from_data(TensorData::new(angles, [n, dof]), device),
+        inputs: Tensor::from_data(TensorData::new(inputs, [n, width]), device),
         targets: vec![
             Tensor::from_data(TensorData::new(sil, [n, 1, h, w]), device),
             Tensor::from_data(TensorData::new(depth, [n, 1, h, w]), device),
@@ -566,6 +597,7 @@ pub fn fit_run<M: SelfModel>(
         &train_range,
         host_targets(&data, &train_range),
         &tdev,
+        cfg.model.camera_input(),
     );
     let (truth, truth_depth) = host_targets(&data, &test_range);
     let test_set = device_set(
@@ -573,6 +605,7 @@ pub fn fit_run<M: SelfModel>(
         &test_range,
         (truth.clone(), truth_depth.clone()),
         &device,
+        cfg.model.camera_input(),
     );
     let plan = CheckpointPlan {
         dir: checkpoint_dir.to_path_buf(),

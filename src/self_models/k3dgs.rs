@@ -405,6 +405,16 @@ impl K3dgsRenderer {
     /// Silhouettes `[b, 1, H, W]` of `angles` (degrees), culled (`cull`) or dense, dense in
     /// parts of 8 images (256 at once would hold 256 x N x P floats).
     fn splat(&self, angles: Tensor<2>, cull: Option<f64>) -> (Tensor<4>, Tensor<4>) {
+        self.splat_from(&self.camera, angles, cull)
+    }
+
+    /// [`K3dgsRenderer::splat`] seen from `camera`.
+    fn splat_from(
+        &self,
+        camera: &Camera,
+        angles: Tensor<2>,
+        cull: Option<f64>,
+    ) -> (Tensor<4>, Tensor<4>) {
         let [b, _] = angles.dims();
         let q = self.chain.from_user(angles);
         let part = if cull.is_some() { b.max(1) } else { 8 };
@@ -413,14 +423,14 @@ impl K3dgsRenderer {
             let (si, de) = self.model.render(
                 &self.chain,
                 q.clone().slice([s..(s + part).min(b)]),
-                &self.camera,
+                camera,
                 self.mode,
                 cull,
             );
             sil.push(si);
             depth.push(de);
         }
-        let shape = [b, 1, self.camera.height, self.camera.width];
+        let shape = [b, 1, camera.height, camera.width];
         (
             Tensor::cat(sil, 0).reshape(shape),
             Tensor::cat(depth, 0).reshape(shape),
@@ -432,6 +442,10 @@ impl Render for K3dgsRenderer {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         let (s, d) = self.splat(angles, Some(self.cull_sigmas));
         (s, Some(d))
+    }
+
+    fn render_view(&self, camera: &Camera, angles: Tensor<2>) -> Option<Tensor<4>> {
+        Some(self.splat_from(camera, angles, Some(self.cull_sigmas)).0)
     }
 
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {

@@ -65,6 +65,32 @@ pub struct NeuroKinConfig {
     /// The training loss (the notebook's BCE; the paper text's MSE).
     #[serde(default)]
     pub loss: NeuroKinLoss,
+    /// How the camera enters, on a multi-view dataset (the paper's NeuroKin: not at all).
+    #[serde(default, skip_serializing_if = "CameraUse::is_none")]
+    pub camera: CameraUse,
+}
+
+/// How a NeuroKin sees the camera (the self-modeling paper's Section VI-D1 proposals).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraUse {
+    /// One camera, the one it was trained on (the paper's).
+    #[default]
+    None,
+    /// Camera conditioning, f(theta, c): the camera's pose vector
+    /// ([`crate::self_models::harness::camera_input`]) joins the joint angles at the encoder's
+    /// input; any camera renders.
+    Input,
+    /// Multi-head: one output channel per fixed camera (these, as their pose vectors), the
+    /// encoder and decoder shared and blind to the camera; a sample's image is the channel of
+    /// the camera nearest its own (a camera not trained on gets the nearest trained view).
+    Heads(Vec<[f32; 9]>),
+}
+
+impl CameraUse {
+    pub fn is_none(&self) -> bool {
+        *self == CameraUse::None
+    }
 }
 
 /// NeuroKin's training loss on the silhouette.
@@ -89,6 +115,7 @@ impl Preset for NeuroKinConfig {
             upsampling_layers: 4,
             image: [100, 100],
             loss: NeuroKinLoss::Bce,
+            camera: CameraUse::None,
         }
     }
 
@@ -115,6 +142,7 @@ impl NeuroKinConfig {
             upsampling_layers: 4,
             image: [100, 100],
             loss: NeuroKinLoss::Mse,
+            camera: CameraUse::None,
         }
     }
 
@@ -166,6 +194,11 @@ impl NeuroKinConfig {
                 self.upsampling_layers
             )));
         }
+        if matches!(&self.camera, CameraUse::Heads(h) if h.is_empty()) {
+            return Err(Error::Config(
+                "neurokin: a multi-head decoder needs at least one camera".into(),
+            ));
+        }
         if self.arch == NeuroKinArch::Code && self.upsampling_layers < 2 {
             return Err(Error::Config(
                 "neurokin: the code architecture needs at least 2 upsampling layers".into(),
@@ -196,8 +229,25 @@ impl NeuroKinConfig {
         Ok(crate::core::device::seeded(device, seed, |d| self.build(d)))
     }
 
+    /// Input values the network reads: the joints, and the camera's 9 where it is an input.
+    fn input_width(&self) -> usize {
+        self.dof
+            + match self.camera {
+                CameraUse::Input => 9,
+                _ => 0,
+            }
+    }
+
+    /// Output channels: one, or one per head.
+    fn outputs(&self) -> usize {
+        match &self.camera {
+            CameraUse::Heads(h) => h.len(),
+            _ => 1,
+        }
+    }
+
     fn build(&self, device: &Device) -> NeuroKin {
-        let mut widths = vec![self.dof];
+        let mut widths = vec![self.input_width()];
         widths.extend(&self.encoder_hidden);
         widths.push(self.latent);
         let encoder = widths
@@ -227,9 +277,11 @@ impl NeuroKinConfig {
                 Conv2dConfig::new([cin, 8], [3, 3])
                     .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
                     .init(device),
-                Conv2dConfig::new([8, 1], [1, 1]).init(device),
+                Conv2dConfig::new([8, self.outputs()], [1, 1]).init(device),
             ],
-            NeuroKinArch::Text64 => vec![Conv2dConfig::new([cin, 1], [1, 1]).init(device)],
+            NeuroKinArch::Text64 => {
+                vec![Conv2dConfig::new([cin, self.outputs()], [1, 1]).init(device)]
+            }
         };
         NeuroKin {
             encoder,
@@ -240,6 +292,11 @@ impl NeuroKinConfig {
             seed_channels: self.seed_channels,
             arch: self.arch,
             image: self.image,
+            dof: self.dof,
+            heads: match &self.camera {
+                CameraUse::Heads(h) => h.clone(),
+                _ => Vec::new(),
+            },
         }
     }
 }
@@ -258,6 +315,12 @@ pub struct NeuroKin {
     arch: NeuroKinArch,
     #[module(skip)]
     image: [usize; 2],
+    /// Joints (the inputs' first columns).
+    #[module(skip)]
+    dof: usize,
+    /// The multi-head decoder's cameras (pose vectors); empty: one output.
+    #[module(skip)]
+    heads: Vec<[f32; 9]>,
 }
 
 /// Bilinear resize with align_corners false (PyTorch's `F.interpolate(..., "bilinear")`).
@@ -284,8 +347,34 @@ impl NeuroKin {
         x
     }
 
-    /// Silhouette logits at the training resolution: `[batch, dof]` -> `[batch, 1, H, W]`.
+    /// Silhouette logits at the training resolution: `[batch, dof]` (joint angles in degrees,
+    /// then the camera's input where it takes one) -> `[batch, 1, H, W]`.
     pub fn forward(&self, angles: Tensor<2>) -> Tensor<4> {
+        if self.heads.is_empty() {
+            return self.decode(angles);
+        }
+        // Multi-head: the joints decode to one image per head; each sample takes the head
+        // whose camera is nearest its own.
+        let [b, _] = angles.dims();
+        let (v, dof) = (self.heads.len(), self.dof);
+        let device = angles.device();
+        let camera = angles.clone().slice([0..b, dof..dof + 9]);
+        let heads = Tensor::<2>::from_data(
+            burn::tensor::TensorData::new(self.heads.concat(), [v, 9]),
+            &device,
+        );
+        let nearest = (camera.unsqueeze_dim::<3>(1) - heads.unsqueeze_dim::<3>(0))
+            .powi_scalar(2)
+            .sum_dim(2)
+            .reshape([b, v])
+            .argmin(1);
+        let logits = self.decode(angles.slice([0..b, 0..dof]));
+        let [_, _, h, w] = logits.dims();
+        logits.gather(1, nearest.reshape([b, 1, 1, 1]).expand([b, 1, h, w]))
+    }
+
+    /// The decoder's logits, one channel per head: `[batch, inputs]` -> `[batch, heads, H, W]`.
+    fn decode(&self, angles: Tensor<2>) -> Tensor<4> {
         let z = self.encode(angles);
         let [b, _] = z.dims();
         let mut x = relu(self.seed.forward(z)).reshape([b, self.seed_channels, 4, 4]);
@@ -338,6 +427,10 @@ impl SelfModel for NeuroKinConfig {
 
     fn set_dof(&mut self, dof: usize) {
         self.dof = dof;
+    }
+
+    fn camera_input(&self) -> bool {
+        !self.camera.is_none()
     }
 
     fn fit(&self, fit: &Fit) -> Result<Trained> {

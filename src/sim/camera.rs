@@ -290,6 +290,25 @@ impl Camera {
         }
     }
 
+    /// Where the eye sits seen from the target: yaw about the world z axis (0: along +x),
+    /// elevation above the horizontal (radians) and distance ([`Camera::looking_from`]'s
+    /// arguments).
+    pub fn spherical(&self) -> (f64, f64, f64) {
+        let d = Vector3::from(self.eye) - Vector3::from(self.target);
+        let r = d.norm();
+        (
+            d.y.atan2(d.x),
+            (d.z / r.max(1e-300)).clamp(-1.0, 1.0).asin(),
+            r,
+        )
+    }
+
+    /// The angle (degrees) between the directions this camera and `other` look along.
+    pub fn angle_to(&self, other: &Camera) -> f64 {
+        let (a, b) = (self.basis().0, other.basis().0);
+        a.dot(&b).clamp(-1.0, 1.0).acos().to_degrees()
+    }
+
     /// Camera-to-world matrix in the NeRF/OpenGL convention (columns right, up, backward, eye),
     /// as stored under `poses` in the papers' datasets.
     pub fn pose_matrix(&self) -> Matrix4<f64> {

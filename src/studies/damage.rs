@@ -934,8 +934,11 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 let label = format!("{method} ({}, n = {n})", damage.label());
                 let t = std::time::Instant::now();
                 let ewc = &*ewc;
-                let (e_model, _) = Trainer::new(&train_cfg(rc.steps, seed), &label)
-                    .fit(load()?, &set, |m, b| loss(m, b) + ewc.penalty(m))?;
+                let (e_model, _) = Trainer::new(&train_cfg(rc.steps, seed), &label).fit(
+                    load()?,
+                    &set,
+                    |m, b| loss(m, b) + ewc.penalty(m),
+                )?;
                 group.push(row(
                     &method,
                     n,
@@ -943,7 +946,10 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     t.elapsed().as_secs_f64() + *fisher_s,
                     rc.steps,
                     &far,
-                    format!("lambda {lambda:e}; Fisher from {} healthy batches", rc.fisher_batches),
+                    format!(
+                        "lambda {lambda:e}; Fisher from {} healthy batches",
+                        rc.fisher_batches
+                    ),
                 )?);
             }
             // Gated experts: the healthy model and the fine-tuned one, the gate scoring what the
@@ -1113,7 +1119,9 @@ fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
                 "recovery_tradeoff_{}.png",
                 crate::core::atomic_file::file_name(&format!("{damage} {size} link {link}"))
             )),
-            &format!("Damaged arm against healthy arm, {damage} {size} link {link}, n = {n} images"),
+            &format!(
+                "Damaged arm against healthy arm, {damage} {size} link {link}, n = {n} images"
+            ),
             "PSNR on the healthy arm (dB)",
             "PSNR on the damaged arm (dB)",
             &runs,

@@ -302,6 +302,16 @@ fn run_damage(opts: &RunOptions, dir: &Path) -> Result<String> {
     crate::studies::damage::run(&cfg, opts, dir)
 }
 
+fn run_multiview(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if opts.paper_compatible || opts.steps.is_some() {
+        return Err(crate::Error::Config(
+            "--paper-compatible and --steps do not apply to multiview (its presets set the self-models' training)".into(),
+        ));
+    }
+    let cfg = crate::studies::multiview::MultiviewConfig::preset(&opts.preset)?;
+    crate::studies::multiview::run(&cfg, opts, dir)
+}
+
 fn run_table1(opts: &RunOptions, dir: &Path) -> Result<String> {
     let rows = crate::studies::table1::run(opts, dir, EXPERIMENTS)?;
     Ok(summary(&rows))
@@ -516,6 +526,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_damage,
+    },
+    Experiment {
+        name: "multiview",
+        about: "beyond one camera: NeuroKin camera-conditioned and multi-head on N cameras, tested on cameras never trained on against FFKSM, K-3DGS and the view-blind bound",
+        default_dir: "reports/multiview",
+        presets: &["paper", "quick"],
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_multiview,
     },
     Experiment {
         name: "table1",

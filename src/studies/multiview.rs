@@ -1,0 +1,672 @@
+//! `multiview`: beyond one camera (the self-modeling paper's Section VI-D1). NeuroKin learns
+//! one view; here it learns N views, two ways: **camera-conditioned** (f(theta, c): the
+//! camera's pose joins the joint angles at the input, so any camera renders) and
+//! **multi-head** (one output per trained camera). Both train through the one harness on a
+//! multi-view dataset (every pose from N cameras on a sphere around the robot) and are tested
+//! on held-out poses, from the trained cameras and from cameras never trained on (yawed and
+//! raised away from the first). Against: FFKSM (the original model) and K-3DGS, trained on
+//! the first camera and rendering the held-out cameras in 3-D, and the view-blind bound (the
+//! nearest trained camera's true image of the same pose: the best a model of the trained
+//! views can show). Writes `reports/multiview/`:
+//! - `results.csv`: `model,cameras_trained,camera,held_out,psnr_db,iou,img_per_s`, the
+//!   angle to the nearest trained camera, and the provenance;
+//! - `grid.png`: one held-out pose, truth and each model (columns: the held-out cameras);
+//! - `psnr_vs_angle.png`: PSNR against the angle to the nearest trained camera;
+//! - `psnr_vs_cameras.png`: the camera-conditioned model's PSNR against N.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor, TensorData};
+use serde::{Deserialize, Serialize};
+
+use crate::core::atomic_file::write_json;
+use crate::core::error::{Error, Result};
+use crate::core::preset::Preset;
+use crate::core::provenance::git_revision;
+use crate::data::dataset::Views;
+use crate::eval::evaluation::{iou, psnr_db};
+use crate::report::figures::{GridRow, image_grid, lines_log_x, lines_marked};
+use crate::report::table::write_table;
+use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
+use crate::self_models::harness::{camera_input, fit_run};
+use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+use crate::self_models::neurokin::{CameraUse, neurokin_run};
+use crate::sim::camera::Camera;
+use crate::sim::ray_caster::RayCaster;
+
+/// A camera never trained on, placed relative to the first trained camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HeldOutCamera {
+    /// Yaw about the world z axis through the target, from the first camera's (degrees).
+    pub yaw_deg: f64,
+    /// Elevation above the horizontal plane through the target (degrees).
+    pub elevation_deg: f64,
+}
+
+impl HeldOutCamera {
+    fn label(&self) -> String {
+        format!("yaw {} elevation {}", self.yaw_deg, self.elevation_deg)
+    }
+
+    fn camera(&self, first: &Camera) -> Camera {
+        let (yaw, _, radius) = first.spherical();
+        first.looking_from(
+            first.target,
+            radius,
+            yaw + self.yaw_deg.to_radians(),
+            self.elevation_deg.to_radians(),
+        )
+    }
+}
+
+/// The study's settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MultiviewConfig {
+    pub preset: String,
+    /// The self-model preset: data (poses, image size), NeuroKin, FFKSM and K-3DGS.
+    pub model_preset: String,
+    /// Trained cameras, one run per count (the first camera is the dataset's own).
+    pub cameras: Vec<usize>,
+    /// Elevations of the even- and odd-numbered trained cameras ([`Views`]).
+    pub elevation_deg: [f64; 2],
+    pub held_out: Vec<HeldOutCamera>,
+    /// NeuroKin's optimiser steps for every N (`None`: the preset's): one budget, however
+    /// many views it is spread over.
+    pub steps: Option<usize>,
+    /// Also the multi-head NeuroKin (for N > 1; at N = 1 it is NeuroKin).
+    pub multi_head: bool,
+    /// Also FFKSM (the original model) and K-3DGS, trained on the first camera.
+    pub three_d: bool,
+    /// Test poses scored (the first of the test split; `None`: all).
+    pub test_poses: Option<usize>,
+}
+
+impl Preset for MultiviewConfig {
+    /// The paper's 2,000 Lorenz poses (1,600 to train, 400 to test) from 1, 4, 8 and 16
+    /// cameras at the paper camera's distance, even-numbered at its elevation (0 degrees),
+    /// odd-numbered 30 degrees up; NeuroKin's paper network for 6,000 steps of 32 images at
+    /// every N; held out: yawed 30 and 60 degrees, and raised to 50 degrees.
+    fn paper() -> Self {
+        MultiviewConfig {
+            preset: "paper".into(),
+            model_preset: "paper".into(),
+            cameras: vec![1, 4, 8, 16],
+            elevation_deg: [0.0, 30.0],
+            held_out: vec![
+                HeldOutCamera {
+                    yaw_deg: 30.0,
+                    elevation_deg: 0.0,
+                },
+                HeldOutCamera {
+                    yaw_deg: 60.0,
+                    elevation_deg: 0.0,
+                },
+                HeldOutCamera {
+                    yaw_deg: 0.0,
+                    elevation_deg: 50.0,
+                },
+            ],
+            steps: Some(6000),
+            multi_head: true,
+            three_d: true,
+            test_poses: None,
+        }
+    }
+
+    /// The quick self-models (32x32, 200 steps), 1 and 4 cameras, 16 test poses: seconds.
+    fn quick() -> Self {
+        MultiviewConfig {
+            preset: "quick".into(),
+            model_preset: "quick".into(),
+            cameras: vec![1, 4],
+            steps: None,
+            test_poses: Some(16),
+            ..Self::paper()
+        }
+    }
+}
+
+/// One model on one camera (or the trained cameras together).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct MultiviewRow {
+    pub model: String,
+    pub cameras_trained: usize,
+    /// `trained` (every trained camera, held-out poses) or the held-out camera.
+    pub camera: String,
+    pub held_out: bool,
+    /// Means over the test images.
+    pub psnr_db: f64,
+    pub iou: f64,
+    /// Images rendered per second (one pass over the test images, in batches of 64, after a
+    /// warm-up batch; `None`: the view-blind bound renders nothing).
+    pub img_per_s: Option<f64>,
+    /// The angle between this camera's view direction and the nearest trained camera's
+    /// (degrees; 0 for the trained cameras).
+    pub angle_to_nearest_deg: f64,
+    pub images: usize,
+    pub git_revision: String,
+    pub device: String,
+    pub preset: String,
+}
+
+/// Host silhouettes `[n, H * W]` in [0, 1] of `renderer` over `inputs` (`n` rows of `width`),
+/// rendered in batches of 64, and the images per second of the pass (after a warm-up batch).
+fn rendered(
+    render: &dyn Fn(Tensor<2>) -> Tensor<4>,
+    inputs: &[f32],
+    width: usize,
+    device: &Device,
+) -> (Vec<f32>, f64) {
+    let n = inputs.len() / width.max(1);
+    let batch = 64;
+    let tensor = |a: usize, b: usize| {
+        Tensor::<2>::from_data(
+            TensorData::new(inputs[a * width..b * width].to_vec(), [b - a, width]),
+            device,
+        )
+    };
+    let _ = render(tensor(0, n.min(batch)));
+    let t = std::time::Instant::now();
+    let mut out = Vec::new();
+    for a in (0..n).step_by(batch) {
+        let y = render(tensor(a, (a + batch).min(n)));
+        out.extend(
+            y.into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .expect("float"),
+        );
+    }
+    (out, n as f64 / t.elapsed().as_secs_f64().max(1e-9))
+}
+
+/// Silhouettes `[n, H * W]` in [0, 1] of `robot` at `angles` (degrees) from `camera`.
+fn truth(
+    robot: &crate::sim::robot::Robot,
+    camera: &Camera,
+    render: &crate::sim::ray_caster::RenderOptions,
+    angles: &[Vec<f64>],
+) -> Vec<f32> {
+    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    RayCaster::new(robot, camera.clone(), render.clone())
+        .render_batch(&si, None)
+        .iter()
+        .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
+        .collect()
+}
+
+/// Mean PSNR and IoU of `pred` against `truth`, image by image.
+fn quality(pred: &[f32], truth: &[f32], px: usize) -> (f64, f64) {
+    let n = truth.len() / px;
+    let (mut p, mut q) = (0.0, 0.0);
+    for i in 0..n {
+        let (a, b) = (&pred[i * px..(i + 1) * px], &truth[i * px..(i + 1) * px]);
+        p += psnr_db(a, b);
+        q += iou(a, b);
+    }
+    (p / n.max(1) as f64, q / n.max(1) as f64)
+}
+
+/// Joint angles followed, where `camera` is given, by its input vector, one row per pose.
+fn inputs(angles: &[Vec<f64>], camera: Option<&Camera>) -> (Vec<f32>, usize) {
+    let c = camera.map(camera_input);
+    let width = angles.first().map_or(0, Vec::len) + if c.is_some() { 9 } else { 0 };
+    let rows = angles
+        .iter()
+        .flat_map(|q| {
+            let mut row: Vec<f32> = q.iter().map(|&v| v as f32).collect();
+            if let Some(c) = c {
+                row.extend(c);
+            }
+            row
+        })
+        .collect();
+    (rows, width)
+}
+
+/// Run the study into `out`.
+pub fn run(
+    cfg: &MultiviewConfig,
+    opts: &crate::studies::run::RunOptions,
+    out: &Path,
+) -> Result<String> {
+    if cfg.cameras.is_empty() || cfg.cameras.contains(&0) {
+        return Err(Error::Config(
+            "multiview: every run needs at least one camera".into(),
+        ));
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    write_json(&out.join("config.json"), cfg)?;
+    let (device_name, revision) = (opts.device.to_string(), git_revision());
+    let mut rows: Vec<MultiviewRow> = Vec::new();
+    // Grid: per model, the first test pose from every held-out camera.
+    let mut grid: Vec<(String, Vec<Vec<f32>>)> = Vec::new();
+    let mut grid_truth: Vec<Vec<f32>> = Vec::new();
+    let mut size = [0usize; 2];
+    let (three_d_rows, three_d_grid) = three_d(cfg, opts, out, &revision, &device_name)?;
+    let largest = *cfg.cameras.iter().max().expect("checked above");
+    for &n in &cfg.cameras {
+        let mut base = opts.apply(neurokin_run(&cfg.model_preset)?)?;
+        base.data.dataset.views = Some(Views {
+            cameras: n,
+            radius: None,
+            elevation_deg: cfg.elevation_deg,
+        });
+        if let Some(steps) = cfg.steps {
+            base.train.steps = steps;
+        }
+        let mut variants = vec![(
+            format!("NeuroKin, camera input"),
+            "camera_input",
+            CameraUse::Input,
+        )];
+        if cfg.multi_head && n > 1 {
+            variants.push((
+                "NeuroKin, multi-head".into(),
+                "multi_head",
+                CameraUse::Heads(Vec::new()),
+            ));
+        }
+        for (name, dir, camera_use) in variants {
+            let mut run = base.clone();
+            run.name = format!("{name} ({n} cameras)");
+            run.model.camera = camera_use;
+            if let CameraUse::Heads(heads) = &mut run.model.camera {
+                // The heads' cameras: the dataset's, as it places them.
+                let robot = base.data.robot.load()?;
+                *heads = base
+                    .data
+                    .dataset
+                    .cameras(&robot)?
+                    .iter()
+                    .map(camera_input)
+                    .collect();
+            }
+            let fitted = fit_run(
+                &run,
+                &out.join(format!("{dir}_{n}")).join("checkpoint"),
+                opts.device,
+                opts.resume,
+            )?;
+            let data = &fitted.data;
+            let px = data.width * data.height;
+            size = [data.height, data.width];
+            let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
+            let renderer = fitted.trained.renderers[0].1.as_ref();
+            let render = |q: Tensor<2>| renderer.render(q).0;
+            // The trained cameras at the held-out poses: the harness's test set.
+            let test: Vec<usize> = fitted
+                .test_range
+                .clone()
+                .take(cfg.test_poses.map_or(usize::MAX, |p| p * n))
+                .collect();
+            let test_inputs: Vec<f32> = {
+                let all = fitted
+                    .test_set
+                    .inputs
+                    .clone()
+                    .into_data()
+                    .convert::<f32>()
+                    .try_into_vec::<f32>()
+                    .expect("float");
+                let width = all.len() / fitted.test_range.len();
+                all[..test.len() * width].to_vec()
+            };
+            let width = test_inputs.len() / test.len().max(1);
+            let (pred, speed) = rendered(&render, &test_inputs, width, &fitted.device);
+            let (p, q) = quality(&pred, &fitted.truth[..test.len() * px], px);
+            let row = |camera: String,
+                       held_out: bool,
+                       (p, q): (f64, f64),
+                       speed: Option<f64>,
+                       angle: f64,
+                       images: usize| MultiviewRow {
+                model: name.clone(),
+                cameras_trained: n,
+                camera,
+                held_out,
+                psnr_db: p,
+                iou: q,
+                img_per_s: speed,
+                angle_to_nearest_deg: angle,
+                images,
+                git_revision: revision.clone(),
+                device: device_name.clone(),
+                preset: cfg.preset.clone(),
+            };
+            rows.push(row(
+                "trained".into(),
+                false,
+                (p, q),
+                Some(speed),
+                0.0,
+                test.len(),
+            ));
+            // Held-out cameras at the held-out poses.
+            let poses: Vec<Vec<f64>> = test
+                .iter()
+                .step_by(n)
+                .map(|&i| data.angles[i].clone())
+                .collect();
+            let robot = run.data.robot.load()?;
+            let first = &trained_cameras[0];
+            let mut grid_row = Vec::new();
+            for h in &cfg.held_out {
+                let camera = h.camera(first);
+                let seen = truth(&robot, &camera, &run.data.dataset.render, &poses);
+                let (x, width) = inputs(&poses, Some(&camera));
+                let (pred, speed) = rendered(&render, &x, width, &fitted.device);
+                let angle = trained_cameras
+                    .iter()
+                    .map(|c| camera.angle_to(c))
+                    .fold(f64::INFINITY, f64::min);
+                rows.push(row(
+                    h.label(),
+                    true,
+                    quality(&pred, &seen, px),
+                    Some(speed),
+                    angle,
+                    poses.len(),
+                ));
+                if n == largest {
+                    grid_row.push(pred[..px].to_vec());
+                }
+                // The view-blind bound: the nearest trained camera's true image of the pose
+                // (once per N, under the camera-conditioned model's turn).
+                if matches!(run.model.camera, CameraUse::Input) {
+                    let nearest = trained_cameras
+                        .iter()
+                        .min_by(|a, b| camera.angle_to(a).total_cmp(&camera.angle_to(b)))
+                        .expect("a camera");
+                    let blind = truth(&robot, nearest, &run.data.dataset.render, &poses);
+                    rows.push(MultiviewRow {
+                        model: "view-blind bound".into(),
+                        img_per_s: None,
+                        ..row(
+                            h.label(),
+                            true,
+                            quality(&blind, &seen, px),
+                            None,
+                            angle,
+                            poses.len(),
+                        )
+                    });
+                    if n == largest {
+                        grid_truth.push(seen[..px].to_vec());
+                    }
+                }
+            }
+            if n == largest {
+                grid.push((format!("{name} ({n})"), grid_row));
+            }
+        }
+    }
+    rows.extend(three_d_rows);
+    grid.extend(three_d_grid);
+    let note = format!(
+        "Trained on every pose of the training split from N cameras at the first camera's distance from its target, yaws 360 i / N degrees from it, elevations {} (even i) and {} (odd i) degrees; tested on the held-out poses{}: `trained`, from the trained cameras; the rest, from cameras never trained on (yaw and elevation relative to the first camera). NeuroKin ({} preset) {} steps at every N. FFKSM (original model) and K-3DGS: trained on the first camera alone (N = 1), rendering the held-out cameras in 3-D. View-blind bound: the nearest trained camera's true image of the same pose. img_per_s: one pass over the test images in batches of 64 after a warm-up batch, on {}.",
+        cfg.elevation_deg[0],
+        cfg.elevation_deg[1],
+        cfg.test_poses
+            .map_or(String::new(), |p| format!(" (the first {p})")),
+        cfg.model_preset,
+        cfg.steps
+            .map_or("the preset's".to_string(), |s| s.to_string()),
+        device_name
+    );
+    write_table(
+        &out.join("results.csv"),
+        &rows,
+        "Beyond one camera: held-out views",
+        &note,
+    )?;
+    draw(out, cfg, &rows, &grid_truth, &grid, size)?;
+    let summary = rows
+        .iter()
+        .filter(|r| {
+            r.held_out && r.cameras_trained == largest
+                || r.cameras_trained == 1 && r.held_out && r.model.contains("FFKSM")
+        })
+        .map(|r| format!("{} on {}: {:.2} dB", r.model, r.camera, r.psnr_db))
+        .collect::<Vec<_>>()
+        .join("; ");
+    Ok(summary)
+}
+
+/// FFKSM (the original model) and K-3DGS trained on the first camera: their rows and grid
+/// rows (first, so that a checkpoint that cannot be resumed is refused before hours of
+/// training).
+#[allow(clippy::type_complexity)]
+fn three_d(
+    cfg: &MultiviewConfig,
+    opts: &crate::studies::run::RunOptions,
+    out: &Path,
+    revision: &str,
+    device_name: &str,
+) -> Result<(Vec<MultiviewRow>, Vec<(String, Vec<Vec<f32>>)>)> {
+    let (mut rows, mut grid) = (Vec::new(), Vec::new());
+    if !cfg.three_d {
+        return Ok((rows, grid));
+    }
+    let ffksm =
+        || -> Result<_> { opts.apply(ffksm_run(&cfg.model_preset, FfksmVariant::Original)?) };
+    let k3dgs =
+        || -> Result<_> { opts.apply(k3dgs_run(&cfg.model_preset, K3dgsVariant::Anisotropic)?) };
+    let mut three: Vec<(
+        String,
+        crate::self_models::harness::Fitted,
+        crate::sim::robot::Robot,
+        crate::sim::ray_caster::RenderOptions,
+    )> = Vec::new();
+    {
+        let run = ffksm()?;
+        let dir = out.join("ffksm_original").join("checkpoint");
+        // The committed FFKSM (original model) of `ffksm`, where this preset trained it:
+        // continued from its checkpoint instead of hours of training again.
+        let carried = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("reports/ffksm/ffksm_original/checkpoint_carried");
+        if cfg.model_preset == "paper" && !dir.exists() && carried.exists() {
+            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
+            for f in std::fs::read_dir(&carried).map_err(|e| Error::io(&carried, e))? {
+                let f = f.map_err(|e| Error::io(&carried, e))?.path();
+                if let Some(name) = f.file_name() {
+                    std::fs::copy(&f, dir.join(name)).map_err(|e| Error::io(&f, e))?;
+                }
+            }
+        }
+        let resume = opts.resume || dir.exists();
+        let robot = run.data.robot.load()?;
+        three.push((
+            run.name.clone(),
+            fit_run(&run, &dir, opts.device, resume)?,
+            robot,
+            run.data.dataset.render.clone(),
+        ));
+        let run = k3dgs()?;
+        let robot = run.data.robot.load()?;
+        three.push((
+            run.name.clone(),
+            fit_run(
+                &run,
+                &out.join("k3dgs").join("checkpoint"),
+                opts.device,
+                opts.resume,
+            )?,
+            robot,
+            run.data.dataset.render.clone(),
+        ));
+    }
+    for (name, fitted, robot, options) in &three {
+        let data = &fitted.data;
+        let px = data.width * data.height;
+        let first = data.camera_of(0);
+        let renderer = fitted
+            .trained
+            .renderers
+            .last()
+            .expect("a renderer")
+            .1
+            .as_ref();
+        let test: Vec<usize> = fitted
+            .test_range
+            .clone()
+            .take(cfg.test_poses.unwrap_or(usize::MAX))
+            .collect();
+        let poses: Vec<Vec<f64>> = test.iter().map(|&i| data.angles[i].clone()).collect();
+        let row = |camera: String, held_out: bool, (p, q): (f64, f64), speed: f64, angle: f64| {
+            MultiviewRow {
+                model: name.clone(),
+                cameras_trained: 1,
+                camera,
+                held_out,
+                psnr_db: p,
+                iou: q,
+                img_per_s: Some(speed),
+                angle_to_nearest_deg: angle,
+                images: poses.len(),
+                git_revision: revision.to_string(),
+                device: device_name.to_string(),
+                preset: cfg.preset.clone(),
+            }
+        };
+        let (x, width) = inputs(&poses, None);
+        let own = |q: Tensor<2>| renderer.render(q).0;
+        let (pred, speed) = rendered(&own, &x, width, &fitted.device);
+        rows.push(row(
+            "trained".into(),
+            false,
+            quality(&pred, &fitted.truth[..poses.len() * px], px),
+            speed,
+            0.0,
+        ));
+        let mut grid_row = Vec::new();
+        for h in &cfg.held_out {
+            let camera = h.camera(&first);
+            let seen = truth(robot, &camera, options, &poses);
+            let view = |q: Tensor<2>| {
+                renderer
+                    .render_view(&camera, q)
+                    .expect("a 3-D model renders any camera")
+            };
+            let (pred, speed) = rendered(&view, &x, width, &fitted.device);
+            rows.push(row(
+                h.label(),
+                true,
+                quality(&pred, &seen, px),
+                speed,
+                camera.angle_to(&first),
+            ));
+            grid_row.push(pred[..px].to_vec());
+        }
+        grid.push((format!("{name} (1)"), grid_row));
+    }
+    Ok((rows, grid))
+}
+
+/// The grid, PSNR against the angle to the nearest trained camera, and PSNR against N.
+fn draw(
+    out: &Path,
+    cfg: &MultiviewConfig,
+    rows: &[MultiviewRow],
+    grid_truth: &[Vec<f32>],
+    grid: &[(String, Vec<Vec<f32>>)],
+    [h, w]: [usize; 2],
+) -> Result<()> {
+    if !grid_truth.is_empty() {
+        let mut grid_rows = vec![GridRow::Grey(
+            grid_truth.iter().map(Vec::as_slice).collect(),
+        )];
+        let mut titles = vec!["truth".to_string()];
+        for (name, images) in grid {
+            grid_rows.push(GridRow::Grey(images.iter().map(Vec::as_slice).collect()));
+            titles.push(name.clone());
+        }
+        let titles: Vec<&str> = titles.iter().map(String::as_str).collect();
+        let captions: Vec<String> = cfg.held_out.iter().map(HeldOutCamera::label).collect();
+        image_grid(
+            &out.join("grid.png"),
+            &grid_rows,
+            &titles,
+            &captions,
+            w,
+            h,
+            if w < 64 { 4 } else { 2 },
+        )?;
+    }
+    let mut models: Vec<String> = Vec::new();
+    for r in rows {
+        let key = if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound"
+        {
+            format!(
+                "{} (N = {})",
+                r.model.split(" (").next().unwrap_or(&r.model),
+                r.cameras_trained
+            )
+        } else {
+            r.model.split(" (").next().unwrap_or(&r.model).to_string()
+        };
+        if !models.contains(&key) {
+            models.push(key);
+        }
+    }
+    let key_of = |r: &MultiviewRow| {
+        if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound" {
+            format!(
+                "{} (N = {})",
+                r.model.split(" (").next().unwrap_or(&r.model),
+                r.cameras_trained
+            )
+        } else {
+            r.model.split(" (").next().unwrap_or(&r.model).to_string()
+        }
+    };
+    let runs: Vec<(String, Vec<(f64, f64)>)> = models
+        .iter()
+        .filter(|m| !m.starts_with("view-blind") || m.ends_with("(N = 1)"))
+        .map(|m| {
+            let mut pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| &key_of(r) == m && r.psnr_db.is_finite())
+                .map(|r| (r.angle_to_nearest_deg, r.psnr_db))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (m.clone(), pts)
+        })
+        .collect();
+    lines_marked(
+        &out.join("psnr_vs_angle.png"),
+        "PSNR on held-out poses against the angle to the nearest trained camera",
+        "angle to the nearest trained camera (degrees)",
+        "PSNR (dB)",
+        &runs,
+        true,
+    )?;
+    if cfg.cameras.len() > 1 {
+        let mut cams = vec!["trained".to_string()];
+        cams.extend(cfg.held_out.iter().map(HeldOutCamera::label));
+        let runs: Vec<(String, Vec<(f64, f64)>)> = cams
+            .iter()
+            .map(|c| {
+                (
+                    if c == "trained" {
+                        "trained cameras".to_string()
+                    } else {
+                        c.clone()
+                    },
+                    rows.iter()
+                        .filter(|r| r.model.starts_with("NeuroKin, camera input") && &r.camera == c)
+                        .map(|r| (r.cameras_trained as f64, r.psnr_db))
+                        .collect(),
+                )
+            })
+            .collect();
+        lines_log_x(
+            &out.join("psnr_vs_cameras.png"),
+            "Camera-conditioned NeuroKin: PSNR on held-out poses against trained cameras",
+            "trained cameras (N)",
+            "PSNR (dB)",
+            &runs,
+        )?;
+    }
+    Ok(())
+}
