@@ -229,3 +229,26 @@ fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
     assert!(away > 0.0, "penalty {away} after training");
     let _ = moved.valid();
 }
+
+/// The paper preset's healthy model is NeuroKin's named `large` preset (the checkpoint one
+/// trains is the other's).
+#[test]
+fn the_damage_studys_model_is_neurokins_large_preset() {
+    use selfmodel::core::preset::Preset;
+    use selfmodel::self_models::harness::SelfModel;
+    let opts = selfmodel::studies::run::RunOptions::preset("paper");
+    let ours = selfmodel::studies::damage::model_run(
+        &selfmodel::studies::damage::DamageConfig::paper(),
+        &opts,
+    )
+    .unwrap();
+    let large = opts
+        .apply(selfmodel::self_models::neurokin::neurokin_run("large").unwrap())
+        .unwrap();
+    assert_eq!(
+        ours.model.fingerprint(&ours.train, &ours.data),
+        large.model.fingerprint(&large.train, &large.data)
+    );
+    assert_eq!(large.data.dataset.train, 12_000);
+    assert_eq!(large.train.steps, 9_000);
+}

@@ -118,6 +118,8 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
     let quick = preset == "quick";
     let steps = match preset {
         "paper" => 3000,
+        // One image a step: a pass over most of the large preset's 12,000.
+        "large" => 9000,
         "short" => 300,
         _ => 300,
     };
@@ -147,7 +149,7 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
         cull_sigmas: 3.0,
         // A dense batch of 256 takes about a minute: timed in the paper preset only.
         dense_batches: match preset {
-            "paper" => vec![1, 256],
+            "paper" | "large" => vec![1, 256],
             "short" => vec![1],
             _ => vec![1, 8],
         },

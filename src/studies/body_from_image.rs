@@ -111,6 +111,11 @@ impl BodyFromImageConfig {
         };
         match name {
             "paper" => Ok(paper),
+            // The same, reading through the self-models of the `large` preset (12,000 images).
+            "large" => Ok(BodyFromImageConfig {
+                preset: "large".into(),
+                ..paper
+            }),
             "quick" => Ok(BodyFromImageConfig {
                 preset: "quick".into(),
                 test_poses: 12,
@@ -137,7 +142,7 @@ impl BodyFromImageConfig {
                 ..paper
             }),
             other => Err(Error::Config(format!(
-                "unknown preset \"{other}\" for body_from_image (choose paper or quick)"
+                "unknown preset \"{other}\" for body_from_image (choose paper, large or quick)"
             ))),
         }
     }

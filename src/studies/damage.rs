@@ -40,6 +40,15 @@ pub struct DamageSizes {
 }
 
 impl DamageSizes {
+    /// The unit of the sizes.
+    fn unit(&self) -> &'static str {
+        match self.kind.as_str() {
+            "bend" => "deg",
+            "lengthen" | "shorten" => "cm",
+            _ => "missing",
+        }
+    }
+
     fn damage(&self, link: usize, size: f64) -> Result<Damage> {
         Ok(match self.kind.as_str() {
             "bend" => Damage::Bend { link, deg: size },
@@ -347,14 +356,13 @@ struct Trials {
     hypotheses: Vec<Vec<f64>>,
 }
 
-/// Run the study into `out`.
-pub fn run(
+/// The NeuroKin run the study trains on the healthy arm (the paper preset's is NeuroKin's
+/// `large` preset: 12,000 training images, 9,000 steps).
+pub fn model_run(
     cfg: &DamageConfig,
     opts: &crate::studies::run::RunOptions,
-    out: &Path,
-) -> Result<String> {
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    write_json(&out.join("config.json"), cfg)?;
+) -> Result<crate::self_models::harness::SelfModelRun<crate::self_models::neurokin::NeuroKinConfig>>
+{
     let mut model_run = opts.apply(neurokin_run(&cfg.model_preset)?)?;
     if let Some(n) = cfg.samples {
         let test = cfg.test_samples.unwrap_or(n / 5).min(n - 1);
@@ -364,6 +372,18 @@ pub fn run(
     if let Some(steps) = cfg.steps {
         model_run.train.steps = steps;
     }
+    Ok(model_run)
+}
+
+/// Run the study into `out`.
+pub fn run(
+    cfg: &DamageConfig,
+    opts: &crate::studies::run::RunOptions,
+    out: &Path,
+) -> Result<String> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    write_json(&out.join("config.json"), cfg)?;
+    let model_run = model_run(cfg, opts)?;
     let fitted = fit_run(
         &model_run,
         &out.join("checkpoint"),
@@ -501,7 +521,7 @@ pub fn run(
                 }
             }
             roc.push((
-                format!("{} {size}", sizes.kind),
+                format!("{} {size} {}", sizes.kind, sizes.unit()),
                 roc_curve(&roc_healthy, &roc_damaged),
             ));
         }
