@@ -169,7 +169,7 @@ impl Preset for DamageConfig {
                 steps: 600,
                 batch: 32,
                 learning_rate: 5e-4,
-                ewc_lambdas: vec![1e6, 1e7, 1e8],
+                ewc_lambdas: vec![1e6, 1e7, 1e8, 1e9, 1e10],
                 fisher_batches: 50,
                 replay: true,
                 gate_k: 10,
@@ -762,13 +762,19 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     .collect::<Vec<_>>(),
             ))
         };
-    // Finished groups of rows (one damage at one n, or its model from scratch), kept in the
-    // checkpoint folder so that a killed run resumes where it stopped.
+    // Finished rows (one method on one damage at one n), kept in the checkpoint folder so
+    // that a killed run resumes where it stopped, and a run with more EWC weights computes
+    // only theirs.
     let cache_path = r.out.join("checkpoint").join("recovery_rows.json");
-    let fingerprint = serde_json::json!({"recovery": rc, "run": r.model_run, "seed": cfg.seed});
+    let mut recovery = serde_json::to_value(rc).map_err(|e| Error::Training(e.to_string()))?;
+    if let Some(fields) = recovery.as_object_mut() {
+        fields.remove("ewc_lambdas");
+    }
+    let fingerprint =
+        serde_json::json!({"recovery": recovery, "run": r.model_run, "seed": cfg.seed});
     let mut cache = RowCache {
         fingerprint: fingerprint.clone(),
-        groups: Default::default(),
+        rows: Default::default(),
     };
     if r.resume && cache_path.exists() {
         let text = std::fs::read_to_string(&cache_path).map_err(|e| Error::io(&cache_path, e))?;
@@ -778,6 +784,11 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             cache = old;
         }
     }
+    let keep = |cache: &mut RowCache, key: String, row: RecoveryRow| -> Result<RecoveryRow> {
+        cache.rows.insert(key, row.clone());
+        write_json(&cache_path, cache)?;
+        Ok(row)
+    };
     // EWC's Fisher information, from the healthy model on healthy batches: once for every
     // update (its seconds are counted in each EWC update's).
     let mut fisher: Option<(crate::train::ewc::Ewc, f64)> = None;
@@ -840,9 +851,22 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
         };
         for &n in &rc.ns {
             let n = n.min(order.len());
-            let key = format!("{} n={n}", damage.label());
-            if let Some(done) = cache.groups.get(&key) {
-                rows.extend(done.iter().cloned());
+            let key = |method: &str| format!("{} n={n} {method}", damage.label());
+            let ewc_method = |lambda: f64| {
+                if rc.ewc_lambdas.len() == 1 {
+                    "EWC".to_string()
+                } else {
+                    format!("EWC (lambda {lambda:e})")
+                }
+            };
+            let mut methods = vec!["unchanged".to_string(), "fine-tune".into()];
+            if rc.replay {
+                methods.push("replay".into());
+            }
+            methods.extend(rc.ewc_lambdas.iter().map(|&l| ewc_method(l)));
+            methods.push("gated experts".into());
+            if methods.iter().all(|m| cache.rows.contains_key(&key(m))) {
+                rows.extend(methods.iter().map(|m| cache.rows[&key(m)].clone()));
                 continue;
             }
             let mut group = Vec::new();
@@ -874,30 +898,57 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             let far: Vec<bool> = nearest.iter().map(|&d| d > median).collect();
             let set = nk.training_set(&set_of(&angles, sil.clone(), size, &tdev));
             let seed = cfg.seed ^ (n as u64) << 8;
-            group.push(row(
-                "unchanged",
-                n,
-                (&healthy, &healthy),
-                0.0,
-                0,
-                &far,
-                String::new(),
-            )?);
-            let label = format!("fine-tune ({}, n = {n})", damage.label());
-            let t = std::time::Instant::now();
-            let (tuned, _) =
-                Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &set, &loss)?;
-            let tuned_s = t.elapsed().as_secs_f64();
-            group.push(row(
-                "fine-tune",
-                n,
-                (&tuned, &tuned),
-                tuned_s,
-                rc.steps,
-                &far,
-                String::new(),
-            )?);
-            if rc.replay {
+            group.push(match cache.rows.get(&key("unchanged")) {
+                Some(done) => done.clone(),
+                None => keep(
+                    &mut cache,
+                    key("unchanged"),
+                    row(
+                        "unchanged",
+                        n,
+                        (&healthy, &healthy),
+                        0.0,
+                        0,
+                        &far,
+                        String::new(),
+                    )?,
+                )?,
+            });
+            // The fine-tuned model (also the gated experts' damage expert), where a row needs it.
+            let fine_tuned = || -> Result<(crate::self_models::neurokin::NeuroKin, f64)> {
+                let label = format!("fine-tune ({}, n = {n})", damage.label());
+                let t = std::time::Instant::now();
+                let (tuned, _) =
+                    Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &set, &loss)?;
+                Ok((tuned, t.elapsed().as_secs_f64()))
+            };
+            let tuned = if cache.rows.contains_key(&key("fine-tune"))
+                && cache.rows.contains_key(&key("gated experts"))
+            {
+                None
+            } else {
+                Some(fine_tuned()?)
+            };
+            group.push(match (cache.rows.get(&key("fine-tune")), &tuned) {
+                (Some(done), _) => done.clone(),
+                (None, Some((tuned, tuned_s))) => keep(
+                    &mut cache,
+                    key("fine-tune"),
+                    row(
+                        "fine-tune",
+                        n,
+                        (tuned, tuned),
+                        *tuned_s,
+                        rc.steps,
+                        &far,
+                        String::new(),
+                    )?,
+                )?,
+                (None, None) => unreachable!("trained above"),
+            });
+            if let Some(done) = cache.rows.get(&key("replay")).filter(|_| rc.replay) {
+                group.push(done.clone());
+            } else if rc.replay {
                 // Every epoch: the n damaged images repeated to as many as the healthy ones.
                 let m = train_angles.len().min(n.max(400));
                 let reps = m.div_ceil(n.max(1));
@@ -920,37 +971,41 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 let t = std::time::Instant::now();
                 let (m_model, _) =
                     Trainer::new(&train_cfg(rc.steps, seed), &label).fit(load()?, &mixed, &loss)?;
-                group.push(row(
-                    "replay",
-                    n,
-                    (&m_model, &m_model),
-                    t.elapsed().as_secs_f64(),
-                    rc.steps,
-                    &far,
-                    format!("{m} healthy images mixed in"),
+                group.push(keep(
+                    &mut cache,
+                    key("replay"),
+                    row(
+                        "replay",
+                        n,
+                        (&m_model, &m_model),
+                        t.elapsed().as_secs_f64(),
+                        rc.steps,
+                        &far,
+                        format!("{m} healthy images mixed in"),
+                    )?,
                 )?);
             }
-            if fisher.is_none() {
-                let t = std::time::Instant::now();
-                // A fresh copy: a training-mode pass moves BatchNorm's running statistics.
-                let ewc = crate::train::ewc::Ewc::new(
-                    &load()?,
-                    &healthy_set,
-                    &train_cfg(rc.fisher_batches, cfg.seed),
-                    rc.fisher_batches,
-                    &loss,
-                    1.0,
-                )?;
-                fisher = Some((ewc, t.elapsed().as_secs_f64()));
-            }
-            let (ewc, fisher_s) = fisher.as_mut().expect("computed above");
             for &lambda in &rc.ewc_lambdas {
+                let method = ewc_method(lambda);
+                if let Some(done) = cache.rows.get(&key(&method)) {
+                    group.push(done.clone());
+                    continue;
+                }
+                if fisher.is_none() {
+                    let t = std::time::Instant::now();
+                    // A fresh copy: a training-mode pass moves BatchNorm's running statistics.
+                    let ewc = crate::train::ewc::Ewc::new(
+                        &load()?,
+                        &healthy_set,
+                        &train_cfg(rc.fisher_batches, cfg.seed),
+                        rc.fisher_batches,
+                        &loss,
+                        1.0,
+                    )?;
+                    fisher = Some((ewc, t.elapsed().as_secs_f64()));
+                }
+                let (ewc, fisher_s) = fisher.as_mut().expect("computed above");
                 ewc.lambda = lambda;
-                let method = if rc.ewc_lambdas.len() == 1 {
-                    "EWC".to_string()
-                } else {
-                    format!("EWC (lambda {lambda:e})")
-                };
                 let label = format!("{method} ({}, n = {n})", damage.label());
                 let t = std::time::Instant::now();
                 let ewc = &*ewc;
@@ -959,7 +1014,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     &set,
                     |m, b| loss(m, b) + ewc.penalty(m),
                 )?;
-                group.push(row(
+                let done = row(
                     &method,
                     n,
                     (&e_model, &e_model),
@@ -970,7 +1025,8 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                         "lambda {lambda:e}; Fisher from {} healthy batches",
                         rc.fisher_batches
                     ),
-                )?);
+                )?;
+                group.push(keep(&mut cache, key(&method), done)?);
             }
             // Gated experts: the healthy model and the fine-tuned one, the gate scoring what the
             // arm looks like now through the healthy model.
@@ -981,7 +1037,6 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 gated(&damaged_test, seed ^ 1)?,
                 gated(healthy_truth, seed ^ 2)?,
             );
-            let pick = |damaged: bool| if damaged { &tuned } else { &healthy };
             let expert = |damaged: bool| {
                 if damaged {
                     "damage (fine-tuned expert)"
@@ -989,26 +1044,32 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                     "healthy (healthy expert)"
                 }
             };
-            group.push(row(
-                "gated experts",
-                n,
-                (pick(on_damaged), pick(on_healthy)),
-                tuned_s,
-                rc.steps,
-                &far,
-                format!(
-                    "gate on the damaged arm: {}; on the healthy arm: {}",
-                    expert(on_damaged),
-                    expert(on_healthy)
-                ),
-            )?);
-            rows.extend(group.iter().cloned());
-            cache.groups.insert(key, group);
-            write_json(&cache_path, &cache)?;
+            group.push(match (cache.rows.get(&key("gated experts")), &tuned) {
+                (Some(done), _) => done.clone(),
+                (None, Some((tuned, tuned_s))) => {
+                    let pick = |damaged: bool| if damaged { tuned } else { &healthy };
+                    let done = row(
+                        "gated experts",
+                        n,
+                        (pick(on_damaged), pick(on_healthy)),
+                        *tuned_s,
+                        rc.steps,
+                        &far,
+                        format!(
+                            "gate on the damaged arm: {}; on the healthy arm: {}",
+                            expert(on_damaged),
+                            expert(on_healthy)
+                        ),
+                    )?;
+                    keep(&mut cache, key("gated experts"), done)?
+                }
+                (None, None) => unreachable!("trained above"),
+            });
+            rows.extend(group);
         }
         let key = format!("{} from scratch", damage.label());
-        if let Some(done) = cache.groups.get(&key) {
-            rows.extend(done.iter().cloned());
+        if let Some(done) = cache.rows.get(&key).filter(|_| rc.from_scratch) {
+            rows.push(done.clone());
         } else if rc.from_scratch {
             let all = nk.training_set(&set_of(&train_angles, damaged_train.clone(), size, &tdev));
             let label = format!("from scratch ({})", damage.label());
@@ -1025,7 +1086,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 .checkpoint(Some(&plan))
                 .fit(nk.init(&tdev, r.model_run.train.seed)?, &all, &loss)?;
             let all_far = vec![false; test_angles.len()];
-            let group = vec![row(
+            let done = row(
                 "from scratch",
                 train_angles.len(),
                 (&scratch, &scratch),
@@ -1033,20 +1094,18 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 r.model_run.train.steps,
                 &all_far,
                 "every training pose of the damaged arm".into(),
-            )?];
-            rows.extend(group.iter().cloned());
-            cache.groups.insert(key, group);
-            write_json(&cache_path, &cache)?;
+            )?;
+            rows.push(keep(&mut cache, key, done)?);
         }
     }
     Ok(rows)
 }
 
-/// Finished recovery rows by group, and what they were computed for.
+/// Finished recovery rows by damage, n and method, and what they were computed for.
 #[derive(Serialize, Deserialize)]
 struct RowCache {
     fingerprint: serde_json::Value,
-    groups: std::collections::BTreeMap<String, Vec<RecoveryRow>>,
+    rows: std::collections::BTreeMap<String, RecoveryRow>,
 }
 
 /// `recovery_damaged.png` and `recovery_healthy.png`: PSNR against n per method, the first
