@@ -519,7 +519,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
     },
     Experiment {
         name: "damage",
-        about: "damage to the arm (a link bent, longer, shorter, part missing) detected and localised from k images through NeuroKin trained on the healthy arm",
+        about: "damage to the arm detected, localised and recovered from (a link bent, longer, shorter, part missing; k images through NeuroKin trained on the healthy arm; fine-tuning, replay, EWC and gated experts against a model from scratch)",
         default_dir: "reports/damage",
         presets: &["paper", "quick"],
         in_table1: false,
@@ -529,7 +529,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
     },
     Experiment {
         name: "multiview",
-        about: "beyond one camera: NeuroKin camera-conditioned and multi-head on N cameras, tested on cameras never trained on against FFKSM, K-3DGS and the view-blind bound",
+        about: "beyond one camera: NeuroKin camera-conditioned and multi-head on N cameras (tested on cameras never trained on, against FFKSM, K-3DGS and the view-blind bound)",
         default_dir: "reports/multiview",
         presets: &["paper", "quick"],
         in_table1: false,
