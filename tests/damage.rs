@@ -169,10 +169,13 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
         "replay",
         "EWC",
         "gated experts",
+        "re-simulated",
         "from scratch",
     ] {
         assert!(
-            recovery.iter().any(|r| r.method.split(" (").next() == Some(m)),
+            recovery
+                .iter()
+                .any(|r| r.method.split(" (").next() == Some(m)),
             "no {m} row"
         );
     }
@@ -204,7 +207,10 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
             .iter()
             .find(|a| a.method == r.method && a.n == r.n)
             .unwrap();
-        assert_eq!((same.psnr_damaged_db, same.seconds), (r.psnr_damaged_db, r.seconds));
+        assert_eq!(
+            (same.psnr_damaged_db, same.seconds),
+            (r.psnr_damaged_db, r.seconds)
+        );
     }
     assert!(again.iter().any(|r| r.method == "EWC (lambda 1e10)"));
 }

@@ -16,6 +16,9 @@
 //!   says which pixels each damage would change at the commanded poses ([`change_masks`]);
 //!   the hypothesis whose pixels the residual covers most, against healthy trials, names
 //!   the link ([`best_hypothesis`]).
+//! - Identification: the damage of that family, over a grid of sizes, whose renders match
+//!   the observed silhouettes best ([`identify`]): the robot's description repaired, from
+//!   which the simulator renders as many images of the damaged arm as training wants.
 
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -174,6 +177,65 @@ pub fn change_masks(
     (0..angles.len())
         .map(|i| per_hypothesis.iter().map(|m| m[i].clone()).collect())
         .collect()
+}
+
+/// The damages [`identify`] tries on each link of `links`: bent by 1 to 12 degrees either way,
+/// longer or shorter by 0.5 to 6 cm, its far 10 to 60% missing.
+pub fn candidates(links: usize) -> Vec<crate::sim::arm_change::Damage> {
+    use crate::sim::arm_change::Damage;
+    (0..links)
+        .flat_map(|link| {
+            let bends = (1..=12).flat_map(move |d| {
+                [-1.0, 1.0].map(|s| Damage::Bend {
+                    link,
+                    deg: s * d as f64,
+                })
+            });
+            let lengths = (1..=12).flat_map(move |c| {
+                [-1.0, 1.0].map(|s| Damage::Length {
+                    link,
+                    cm: s * 0.5 * c as f64,
+                })
+            });
+            let cuts = (1..=6).map(move |f| Damage::Truncate {
+                link,
+                fraction: 0.1 * f as f64,
+            });
+            bends.chain(lengths).chain(cuts)
+        })
+        .collect()
+}
+
+/// The candidate damage ([`candidates`] of every link) whose silhouettes of `robot` at
+/// `angles` (degrees) from `camera` match `observed` (`[n, H * W]` in [0, 1]) best, by mean
+/// IoU, and that IoU. `None` if no candidate applies to the robot.
+pub fn identify(
+    robot: &Robot,
+    camera: &Camera,
+    options: &RenderOptions,
+    angles: &[Vec<f64>],
+    observed: &[f32],
+) -> Option<(crate::sim::arm_change::Damage, f64)> {
+    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    let px = camera.width * camera.height;
+    candidates(robot.dof())
+        .into_iter()
+        .filter_map(|d| {
+            let damaged = d.apply(robot).ok()?;
+            let frames =
+                RayCaster::new(&damaged, camera.clone(), options.clone()).render_batch(&si, None);
+            let iou: f64 = frames
+                .iter()
+                .enumerate()
+                .map(|(i, f)| {
+                    let pred: Vec<f32> = f.silhouette.iter().map(|&v| v as f32 / 255.0).collect();
+                    crate::eval::evaluation::iou(&pred, &observed[i * px..(i + 1) * px])
+                })
+                .sum::<f64>()
+                / frames.len().max(1) as f64;
+            Some((d, iou))
+        })
+        .max_by(|a, b| a.1.total_cmp(&b.1))
 }
 
 /// The hypothesis (index) whose change the residual covers most, in standard scores against

@@ -120,6 +120,12 @@ pub struct RecoveryConfig {
     /// Also train from scratch on the damaged arm's whole training set (the healthy model's
     /// schedule): the reference a recovery is measured against.
     pub from_scratch: bool,
+    /// Re-simulation: identify the damage from the n images ([`crate::body::damage::identify`]),
+    /// render the training poses with the robot's description so damaged, and fine-tune on
+    /// them (and the n images) for this many steps; also as the damage expert of the gated
+    /// experts. `None`: not run.
+    #[serde(default)]
+    pub resimulate_steps: Option<usize>,
 }
 
 impl Preset for DamageConfig {
@@ -174,6 +180,7 @@ impl Preset for DamageConfig {
                 replay: true,
                 gate_k: 10,
                 from_scratch: true,
+                resimulate_steps: Some(1500),
             },
         }
     }
@@ -207,6 +214,7 @@ impl Preset for DamageConfig {
                 steps: 60,
                 fisher_batches: 5,
                 ewc_lambdas: vec![1e6, 1e8],
+                resimulate_steps: Some(100),
                 ..Self::paper().recovery
             },
             ..Self::paper()
@@ -581,7 +589,7 @@ pub fn run(
             &recovery,
             "Recovery: the self-model updated from n images of the damaged arm",
             &format!(
-                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {:?}, the per-image empirical Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
+                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {:?}, the per-image empirical Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `re-simulated` (the damage identified from the n images by matching rendered silhouettes over a family of damages to every link, the training poses rendered with the robot's description so damaged and the healthy model fine-tuned on them and the n images), `gated experts, re-simulated` (the gate choosing between the healthy and the re-simulated model), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
                 cfg.model_preset,
                 cfg.recovery.steps,
                 cfg.recovery.batch,
@@ -768,7 +776,9 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
     let cache_path = r.out.join("checkpoint").join("recovery_rows.json");
     let mut recovery = serde_json::to_value(rc).map_err(|e| Error::Training(e.to_string()))?;
     if let Some(fields) = recovery.as_object_mut() {
+        // Rows that depend on these name them in their keys.
         fields.remove("ewc_lambdas");
+        fields.remove("resimulate_steps");
     }
     let fingerprint =
         serde_json::json!({"recovery": recovery, "run": r.model_run, "seed": cfg.seed});
@@ -865,6 +875,13 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             }
             methods.extend(rc.ewc_lambdas.iter().map(|&l| ewc_method(l)));
             methods.push("gated experts".into());
+            let resimulated = rc.resimulate_steps.map(|steps| {
+                [
+                    format!("re-simulated/{steps}"),
+                    format!("gated experts, re-simulated/{steps}"),
+                ]
+            });
+            methods.extend(resimulated.iter().flatten().cloned());
             if methods.iter().all(|m| cache.rows.contains_key(&key(m))) {
                 rows.extend(methods.iter().map(|m| cache.rows[&key(m)].clone()));
                 continue;
@@ -1065,6 +1082,73 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                 }
                 (None, None) => unreachable!("trained above"),
             });
+            if let (Some(steps), Some([rkey, gkey])) = (rc.resimulate_steps, &resimulated) {
+                if let (Some(a), Some(b)) = (cache.rows.get(&key(rkey)), cache.rows.get(&key(gkey)))
+                {
+                    group.extend([a.clone(), b.clone()]);
+                } else {
+                    let t = std::time::Instant::now();
+                    let options = &r.model_run.data.dataset.render;
+                    let (found, fit) =
+                        crate::body::damage::identify(r.robot, r.camera, options, &angles, &sil)
+                            .ok_or_else(|| {
+                                Error::Config(
+                                    "re-simulation: no candidate damage applies to the robot"
+                                        .into(),
+                                )
+                            })?;
+                    let resim_robot = found.apply(r.robot)?;
+                    let mut q = train_angles.clone();
+                    let mut pixels = silhouettes(&resim_robot, r.camera, options, &train_angles);
+                    q.extend(angles.iter().cloned());
+                    pixels.extend_from_slice(&sil);
+                    let resim_set = nk.training_set(&set_of(&q, pixels, size, &tdev));
+                    let label = format!("re-simulated ({}, n = {n})", damage.label());
+                    let (resim, _) = Trainer::new(&train_cfg(steps, seed), &label).fit(
+                        load()?,
+                        &resim_set,
+                        &loss,
+                    )?;
+                    let seconds = t.elapsed().as_secs_f64();
+                    let detail = format!(
+                        "identified: {} (mean IoU {fit:.3} on the n images); fine-tuned on its {} rendered training poses and the n images",
+                        found.label(),
+                        train_angles.len()
+                    );
+                    let done = row(
+                        "re-simulated",
+                        n,
+                        (&resim, &resim),
+                        seconds,
+                        steps,
+                        &far,
+                        detail.clone(),
+                    )?;
+                    group.push(keep(&mut cache, key(rkey), done)?);
+                    let pick = |damaged: bool| if damaged { &resim } else { &healthy };
+                    let resim_expert = |damaged: bool| {
+                        if damaged {
+                            "damage (re-simulated expert)"
+                        } else {
+                            "healthy (healthy expert)"
+                        }
+                    };
+                    let done = row(
+                        "gated experts, re-simulated",
+                        n,
+                        (pick(on_damaged), pick(on_healthy)),
+                        seconds,
+                        steps,
+                        &far,
+                        format!(
+                            "gate on the damaged arm: {}; on the healthy arm: {}; {detail}",
+                            resim_expert(on_damaged),
+                            resim_expert(on_healthy)
+                        ),
+                    )?;
+                    group.push(keep(&mut cache, key(gkey), done)?);
+                }
+            }
             rows.extend(group);
         }
         let key = format!("{} from scratch", damage.label());
