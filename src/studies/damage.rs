@@ -589,7 +589,7 @@ pub fn run(
             &recovery,
             "Recovery: the self-model updated from n images of the damaged arm",
             &format!(
-                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {:?}, the per-image empirical Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `re-simulated` (the damage identified from the n images by matching rendered silhouettes over a family of damages to every link, the training poses rendered with the robot's description so damaged and the healthy model fine-tuned on them and the n images), `gated experts, re-simulated` (the gate choosing between the healthy and the re-simulated model), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
+                "NeuroKin ({} preset) trained on the healthy arm, then updated from n images of the damaged arm at training poses: `unchanged` (no update), `fine-tune` ({} Adam steps, batch {}, rate {}), `replay` (the same, every epoch as many healthy training images as damaged ones), `EWC` (fine-tuning with Elastic Weight Consolidation, lambda {:?}, the per-image empirical Fisher from {} healthy batches), `gated experts` (the healthy model and the fine-tuned one; the detection score of {} images of the arm picks one), `re-simulated` (the damage identified from the n images by matching rendered silhouettes over a family of damages to every link, the training poses rendered with the robot's description so damaged and the healthy model fine-tuned on them and the n images), `gated experts (re-simulated)` (the gate choosing between the healthy and the re-simulated model), `from scratch` (a new NeuroKin on the damaged arm's whole training set, the healthy model's schedule: the reference). PSNR and IoU on the test poses, of the damaged arm and of the healthy arm (forgetting); far: the damaged test poses farther from the n images than the median.",
                 cfg.model_preset,
                 cfg.recovery.steps,
                 cfg.recovery.batch,
@@ -878,7 +878,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
             let resimulated = rc.resimulate_steps.map(|steps| {
                 [
                     format!("re-simulated/{steps}"),
-                    format!("gated experts, re-simulated/{steps}"),
+                    format!("gated experts (re-simulated)/{steps}"),
                 ]
             });
             methods.extend(resimulated.iter().flatten().cloned());
@@ -1134,7 +1134,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
                         }
                     };
                     let done = row(
-                        "gated experts, re-simulated",
+                        "gated experts (re-simulated)",
                         n,
                         (pick(on_damaged), pick(on_healthy)),
                         seconds,
