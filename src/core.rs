@@ -6,6 +6,7 @@ pub mod atomic_file;
 pub mod device;
 pub mod error;
 pub mod interrupt;
+pub mod json_diff;
 pub mod preset;
 pub mod progress;
 pub mod provenance;

@@ -289,9 +289,20 @@ pub struct DistanceErrors {
     pub p95_cm: f64,
     pub max_cm: f64,
     /// Share of targets (%) more than 10 cm off: the tail a mean hides (a joint-space
-    /// regression averaging across two solution branches lands between them).
+    /// regression averaging across two solution branches lands between them). NaN where
+    /// not recorded (saved before it was; JSON writes it as null).
+    #[serde(default = "not_recorded", deserialize_with = "nan_if_null")]
     pub above_10cm_pct: f64,
     pub targets: usize,
+}
+
+fn not_recorded() -> f64 {
+    f64::NAN
+}
+
+fn nan_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 impl DistanceErrors {

@@ -689,6 +689,19 @@ impl<'a> RangeRun<'a> {
             .map_err(|e| Error::Config(format!("settings of {unit}: {e}")))?;
         let path = self.unit_path(unit);
         if self.resume
+            && let Some(old) = std::fs::read_to_string(&path)
+                .ok()
+                .and_then(|t| serde_json::from_str::<Unit>(&t).ok())
+                .filter(|u| u.settings != settings)
+        {
+            eprintln!(
+                "emssl_table2: +-{:.0} deg {unit}: {} was made with other settings ({}); running it again",
+                self.range_deg,
+                path.display(),
+                crate::core::json_diff::differences(&old.settings, &settings).join("; ")
+            );
+        }
+        if self.resume
             && let Some(done) = std::fs::read_to_string(&path)
                 .ok()
                 .and_then(|t| serde_json::from_str::<Unit>(&t).ok())
