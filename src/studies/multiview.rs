@@ -593,33 +593,22 @@ fn draw(
             if w < 64 { 4 } else { 2 },
         )?;
     }
+    // One line per model, the camera-conditioned model and the view-blind bound per N.
+    let key_of = |r: &MultiviewRow| {
+        let name = r.model.split(" (").next().unwrap_or(&r.model);
+        if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound" {
+            format!("{name} (N = {})", r.cameras_trained)
+        } else {
+            name.to_string()
+        }
+    };
     let mut models: Vec<String> = Vec::new();
     for r in rows {
-        let key = if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound"
-        {
-            format!(
-                "{} (N = {})",
-                r.model.split(" (").next().unwrap_or(&r.model),
-                r.cameras_trained
-            )
-        } else {
-            r.model.split(" (").next().unwrap_or(&r.model).to_string()
-        };
+        let key = key_of(r);
         if !models.contains(&key) {
             models.push(key);
         }
     }
-    let key_of = |r: &MultiviewRow| {
-        if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound" {
-            format!(
-                "{} (N = {})",
-                r.model.split(" (").next().unwrap_or(&r.model),
-                r.cameras_trained
-            )
-        } else {
-            r.model.split(" (").next().unwrap_or(&r.model).to_string()
-        }
-    };
     let runs: Vec<(String, Vec<(f64, f64)>)> = models
         .iter()
         .filter(|m| !m.starts_with("view-blind") || m.ends_with("(N = 1)"))
