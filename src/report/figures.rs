@@ -989,12 +989,19 @@ pub fn lines_marked(
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let points = runs.iter().flat_map(|(_, c)| c.iter());
-        let span = |f: fn(&(f64, f64)) -> f64| {
+        // Scattered points leave no corner free: with markers, the legend gets room of its
+        // own above them.
+        let headroom = if markers {
+            0.08 * runs.len() as f64
+        } else {
+            0.02
+        };
+        let span = |f: fn(&(f64, f64)) -> f64, top: f64| {
             let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
             let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
             if lo.is_finite() && hi > lo {
                 let pad = 0.02 * (hi - lo);
-                (lo - pad)..(hi + pad)
+                (lo - pad)..(hi + top * (hi - lo))
             } else {
                 0.0..1.0
             }
@@ -1004,7 +1011,7 @@ pub fn lines_marked(
             .margin(15)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(span(|p| p.0), span(|p| p.1))
+            .build_cartesian_2d(span(|p| p.0, 0.02), span(|p| p.1, headroom))
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
@@ -1018,7 +1025,12 @@ pub fn lines_marked(
         if markers {
             draw_markers(&mut chart, path, runs, 5)?;
         }
-        draw_legend(&mut chart, path, SeriesLabelPosition::LowerRight)?;
+        let corner = if markers {
+            SeriesLabelPosition::UpperMiddle
+        } else {
+            SeriesLabelPosition::LowerRight
+        };
+        draw_legend(&mut chart, path, corner)?;
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
