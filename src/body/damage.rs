@@ -216,23 +216,21 @@ pub fn identify(
     angles: &[Vec<f64>],
     observed: &[f32],
 ) -> Option<(crate::sim::arm_change::Damage, f64)> {
-    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
     let px = camera.width * camera.height;
     candidates(robot.dof())
         .into_iter()
         .filter_map(|d| {
             let damaged = d.apply(robot).ok()?;
-            let frames =
-                RayCaster::new(&damaged, camera.clone(), options.clone()).render_batch(&si, None);
-            let iou: f64 = frames
-                .iter()
-                .enumerate()
-                .map(|(i, f)| {
-                    let pred: Vec<f32> = f.silhouette.iter().map(|&v| v as f32 / 255.0).collect();
-                    crate::eval::evaluation::iou(&pred, &observed[i * px..(i + 1) * px])
+            let seen = crate::sim::ray_caster::silhouettes(&damaged, camera, options, angles);
+            let iou: f64 = (0..angles.len())
+                .map(|i| {
+                    crate::eval::evaluation::iou(
+                        &seen[i * px..(i + 1) * px],
+                        &observed[i * px..(i + 1) * px],
+                    )
                 })
                 .sum::<f64>()
-                / frames.len().max(1) as f64;
+                / angles.len().max(1) as f64;
             Some((d, iou))
         })
         .max_by(|a, b| a.1.total_cmp(&b.1))

@@ -57,6 +57,22 @@ pub struct RayCaster<'a> {
     pub options: RenderOptions,
 }
 
+/// Silhouettes `[n, H * W]` in [0, 1] of `robot` at `angles` (user units: degrees, metres)
+/// from `camera`: what a self-model is scored against.
+pub fn silhouettes(
+    robot: &Robot,
+    camera: &Camera,
+    options: &RenderOptions,
+    angles: &[Vec<f64>],
+) -> Vec<f32> {
+    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
+    RayCaster::new(robot, camera.clone(), options.clone())
+        .render_batch(&si, None)
+        .iter()
+        .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
+        .collect()
+}
+
 impl<'a> RayCaster<'a> {
     pub fn new(robot: &'a Robot, camera: Camera, options: RenderOptions) -> Self {
         RayCaster {

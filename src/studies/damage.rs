@@ -29,7 +29,7 @@ use crate::report::table::write_table;
 use crate::self_models::harness::fit_run;
 use crate::self_models::neurokin::neurokin_run;
 use crate::sim::arm_change::Damage;
-use crate::sim::ray_caster::RayCaster;
+use crate::sim::ray_caster::silhouettes;
 
 /// A kind of damage and its sizes (degrees for `bend`, centimetres for `lengthen` and
 /// `shorten`, the share missing for `truncate`).
@@ -622,21 +622,6 @@ struct Recovering<'a> {
     device: &'a str,
     revision: &'a str,
     resume: bool,
-}
-
-/// Silhouettes (`[n, H*W]` in [0, 1]) of `robot` at `angles` (degrees) from `camera`.
-fn silhouettes(
-    robot: &crate::sim::robot::Robot,
-    camera: &crate::sim::camera::Camera,
-    options: &crate::sim::ray_caster::RenderOptions,
-    angles: &[Vec<f64>],
-) -> Vec<f32> {
-    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
-    RayCaster::new(robot, camera.clone(), options.clone())
-        .render_batch(&si, None)
-        .iter()
-        .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
-        .collect()
 }
 
 /// A training set of `angles` (degrees) and their silhouettes, on `device`.

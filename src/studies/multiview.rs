@@ -32,7 +32,7 @@ use crate::self_models::harness::{camera_input, fit_run};
 use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
 use crate::self_models::neurokin::{CameraUse, neurokin_run};
 use crate::sim::camera::Camera;
-use crate::sim::ray_caster::RayCaster;
+use crate::sim::ray_caster::silhouettes as truth;
 
 /// A camera never trained on, placed relative to the first trained camera.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -178,21 +178,6 @@ fn rendered(
         );
     }
     (out, n as f64 / t.elapsed().as_secs_f64().max(1e-9))
-}
-
-/// Silhouettes `[n, H * W]` in [0, 1] of `robot` at `angles` (degrees) from `camera`.
-fn truth(
-    robot: &crate::sim::robot::Robot,
-    camera: &Camera,
-    render: &crate::sim::ray_caster::RenderOptions,
-    angles: &[Vec<f64>],
-) -> Vec<f32> {
-    let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
-    RayCaster::new(robot, camera.clone(), render.clone())
-        .render_batch(&si, None)
-        .iter()
-        .flat_map(|f| f.silhouette.iter().map(|&v| v as f32 / 255.0))
-        .collect()
 }
 
 /// Mean PSNR and IoU of `pred` against `truth`, image by image.
