@@ -51,7 +51,7 @@ use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
 use crate::self_models::harness::{
     DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
-    host_targets, nth_image,
+    host_targets, nth_image, views_of_rows,
 };
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
@@ -607,8 +607,9 @@ fn train_field(
             .try_to_vec::<f32>()
             .expect("float")
     }
-    // The first training image's angles, where collapse is probed.
-    let probe_truth = first(&train_set.inputs);
+    // The first training image's angles (from the first camera), where collapse is probed.
+    let dof = fit.robot.dof();
+    let probe_truth = first(&train_set.inputs)[..dof].to_vec();
     // An all-black probe is a collapse only where the truth has robot pixels in the crop (a
     // robot framed automatically may lie outside the centre crop in that pose).
     let probe_image = first(&train_set.targets[0]);
@@ -663,8 +664,14 @@ fn train_field(
             };
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            let radians = radians(&a, &fit.robot.chain);
-            let view = (&camera, radians.as_slice());
+            // One image per step: its joint angles, then (multi-view data) its camera.
+            let own = views_of_rows(&a, a.len(), dof, fit.camera)
+                .expect("the harness built the camera inputs from valid cameras")
+                .remove(0)
+                .1;
+            let own = cfg.field_camera(&own);
+            let radians = radians(&a[..dof], &fit.robot.chain);
+            let view = (&own, radians.as_slice());
             train_steps.set(train_steps.get() + 1);
             match cfg.train_marcher {
                 TrainMarcher::Dense => {
@@ -814,6 +821,10 @@ impl SelfModel for Ffksm {
     }
 
     fn needs_robot(&self) -> bool {
+        true
+    }
+
+    fn renders_any_view(&self) -> bool {
         true
     }
 
@@ -1008,22 +1019,37 @@ fn angle_rows(angles: Tensor<2>) -> Vec<Vec<f64>> {
 }
 
 impl Render for FfksmRenderer {
+    /// Inputs of `dof + 9` columns (trained on several views): each row from its camera.
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
-        let rows = angle_rows(angles);
+        let dof = self.shared.robot.dof();
         let camera = &self.shared.camera;
+        let rows = angle_rows(angles);
+        let flat: Vec<f32> = rows.iter().flatten().map(|&v| v as f32).collect();
+        let width = rows.first().map_or(dof, Vec::len);
+        let views =
+            views_of_rows(&flat, width, dof, camera).expect("camera inputs of valid cameras");
+        let (mut sil, mut depth) = (Vec::new(), Some(Vec::new()));
+        for (run, view) in views {
+            let angles: Vec<Vec<f64>> = rows[run].iter().map(|r| r[..dof].to_vec()).collect();
+            let r = self.render_from(&view, &angles, &self.label);
+            sil.extend_from_slice(&r.predictions.silhouettes);
+            depth = depth
+                .zip(r.predictions.depth.as_ref())
+                .map(|(mut d, more)| {
+                    d.extend_from_slice(more);
+                    d
+                });
+            self.shared
+                .stats
+                .borrow_mut()
+                .entry(self.label.clone())
+                .or_insert_with(Rendered::empty)
+                .extend(r);
+        }
         let shape = [rows.len(), 1, camera.height, camera.width];
-        let r = self.render_from(camera, &rows, &self.label);
         let tensor =
             |v: Vec<f32>| Tensor::<4>::from_data(TensorData::new(v, shape), &self.shared.device);
-        let sil = tensor(r.predictions.silhouettes.clone());
-        let depth = r.predictions.depth.clone().map(tensor);
-        self.shared
-            .stats
-            .borrow_mut()
-            .entry(self.label.clone())
-            .or_insert_with(Rendered::empty)
-            .extend(r);
-        (sil, depth)
+        (tensor(sil), depth.map(tensor))
     }
 
     fn depth_pixels(&self) -> DepthPixels {

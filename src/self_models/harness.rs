@@ -61,6 +61,12 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn camera_input(&self) -> bool {
         false
     }
+    /// Whether it is a 3-D model that renders any camera (FFKSM, K-3DGS): trained on a
+    /// multi-view dataset, it reads each sample's camera from its inputs (as a
+    /// camera-conditioned model does, [`SelfModel::camera_input`]) and renders from it.
+    fn renders_any_view(&self) -> bool {
+        false
+    }
     /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
     where
@@ -85,6 +91,10 @@ pub struct Fit<'a> {
     pub camera: &'a Camera,
     /// The device as chosen (`--device`): CPU-only fast paths check it.
     pub device_choice: DeviceChoice,
+    /// Whether each sample's inputs end with its camera's [`camera_input`] (a
+    /// camera-conditioned model, or a 3-D model on a multi-view dataset): split them with
+    /// [`views_of_rows`].
+    pub cameras_in_inputs: bool,
 }
 
 /// A trained self-model.
@@ -488,6 +498,66 @@ pub fn camera_input(camera: &Camera) -> [f32; 9] {
     camera.to_vector().map(|v| (v * CAMERA_INPUT_SCALE) as f32)
 }
 
+/// The camera a [`camera_input`] describes (its rotation made orthonormal again), with the
+/// field of view and image size of `like`.
+pub fn camera_from_input(v: &[f32], like: &Camera) -> Result<Camera> {
+    let v: [f64; 9] = std::array::from_fn(|i| f64::from(v[i]) / CAMERA_INPUT_SCALE);
+    Camera::from_vector(&v, like)
+}
+
+/// Host input rows `[n, width]` split into runs of consecutive rows seen from one camera:
+/// `width = dof + 9` rows end with their camera's [`camera_input`]; `width = dof` rows are
+/// all seen from `own` (one run). How a 3-D model renders a multi-view batch.
+pub fn views_of_rows(
+    inputs: &[f32],
+    width: usize,
+    dof: usize,
+    own: &Camera,
+) -> Result<Vec<(Range<usize>, Camera)>> {
+    let n = inputs.len() / width.max(1);
+    if width == dof {
+        return Ok(vec![(0..n, own.clone())]);
+    }
+    if width != dof + 9 {
+        return Err(Error::Config(format!(
+            "inputs of {width} values per sample: expected the robot's {dof} joint values, optionally followed by 9 of a camera"
+        )));
+    }
+    let camera_of = |i: usize| &inputs[i * width + dof..(i + 1) * width];
+    let mut runs: Vec<(Range<usize>, Camera)> = Vec::new();
+    let mut start = 0;
+    for i in 1..=n {
+        if i == n || camera_of(i) != camera_of(start) {
+            runs.push((start..i, camera_from_input(camera_of(start), own)?));
+            start = i;
+        }
+    }
+    Ok(runs)
+}
+
+/// [`views_of_rows`] on a device batch: each run's joint angles `[rows, dof]` with its camera
+/// (`inputs` of `dof` columns: one run, seen from `own`, read without leaving the device).
+pub fn split_views(
+    inputs: &Tensor<2>,
+    dof: usize,
+    own: &Camera,
+) -> Result<Vec<(Tensor<2>, Camera)>> {
+    let [_, width] = inputs.dims();
+    if width == dof {
+        return Ok(vec![(inputs.clone(), own.clone())]);
+    }
+    let host = inputs
+        .clone()
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .map_err(|e| Error::Config(format!("camera inputs: {e:?}")))?;
+    Ok(views_of_rows(&host, width, dof, own)?
+        .into_iter()
+        .map(|(rows, camera)| (inputs.clone().slice([rows, 0..dof]), camera))
+        .collect())
+}
+
 /// Camera inputs are the pose vector times this (eye in centimetres, rotation entries in
 /// [-100, 100]): the joint angles' scale in degrees.
 pub const CAMERA_INPUT_SCALE: f64 = 100.0;
@@ -614,12 +684,15 @@ pub fn fit_run<M: SelfModel>(
     }
     let camera = cfg.data.camera(&data);
     let tdev = autodiff_device(&device, cfg.train.seed);
+    // A 3-D model reads the camera where the dataset has several (or one placed by `views`).
+    let cameras_in_inputs = cfg.model.camera_input()
+        || (cfg.model.renders_any_view() && cfg.data.dataset.views.is_some());
     let train_set = device_set(
         &data,
         &train_range,
         host_targets(&data, &train_range),
         &tdev,
-        cfg.model.camera_input(),
+        cameras_in_inputs,
     );
     let (truth, truth_depth) = host_targets(&data, &test_range);
     let test_set = device_set(
@@ -627,7 +700,7 @@ pub fn fit_run<M: SelfModel>(
         &test_range,
         (truth.clone(), truth_depth.clone()),
         &device,
-        cfg.model.camera_input(),
+        cameras_in_inputs,
     );
     let plan = CheckpointPlan {
         dir: checkpoint_dir.to_path_buf(),
@@ -644,6 +717,7 @@ pub fn fit_run<M: SelfModel>(
         robot: &robot,
         camera: &camera,
         device_choice,
+        cameras_in_inputs,
     })?;
     Ok(Fitted {
         trained,

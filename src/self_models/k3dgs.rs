@@ -27,7 +27,7 @@ use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::table::write_table;
 use crate::self_models::harness::{
-    Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
+    Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks, split_views,
 };
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
@@ -313,6 +313,10 @@ impl SelfModel for K3dgs {
         true
     }
 
+    fn renders_any_view(&self) -> bool {
+        true
+    }
+
     /// One image per step, the robot pixels weighted, densified and pruned between steps
     /// (no checkpoints: a run takes seconds to minutes and its Gaussians change in number).
     fn fit(&self, fit: &Fit) -> Result<Trained> {
@@ -341,19 +345,31 @@ impl SelfModel for K3dgs {
         };
         let pixels = camera.width * camera.height;
         let steps = fit.train.steps;
+        let dof = robot.dof();
         let (model, log) = Trainer::new(fit.train, fit.label).hooks(&mut hooks).fit(
             model,
             fit.train_set,
             |m: &KinematicGaussians, b| {
-                let q = chain.from_user(b.inputs.clone());
-                let (sil, _) = m.render(
-                    &chain,
-                    q,
-                    &camera,
-                    self.mode_at(b.step, steps),
-                    Some(self.cull_sigmas),
+                // Each run of the batch from its camera (one, unless the data is multi-view).
+                let views = split_views(&b.inputs, dof, &camera)
+                    .expect("the harness built the camera inputs from valid cameras");
+                let sil = Tensor::cat(
+                    views
+                        .into_iter()
+                        .map(|(angles, view)| {
+                            m.render(
+                                &chain,
+                                chain.from_user(angles),
+                                &view,
+                                self.mode_at(b.step, steps),
+                                Some(self.cull_sigmas),
+                            )
+                            .0
+                        })
+                        .collect(),
+                    0,
                 );
-                let y = b.targets[0].clone().reshape([1, pixels]);
+                let y = b.targets[0].clone().reshape([b.inputs.dims()[0], pixels]);
                 let w = y
                     .clone()
                     .mul_scalar(self.robot_weight - 1.0)
@@ -406,8 +422,15 @@ pub struct K3dgsRenderer {
 impl K3dgsRenderer {
     /// Silhouettes `[b, 1, H, W]` of `angles` (degrees), culled (`cull`) or dense, dense in
     /// parts of 8 images (256 at once would hold 256 x N x P floats).
+    /// Inputs of `dof + 9` columns (trained on several views): each row from its camera.
     fn splat(&self, angles: Tensor<2>, cull: Option<f64>) -> (Tensor<4>, Tensor<4>) {
-        self.splat_from(&self.camera, angles, cull)
+        let views = split_views(&angles, self.chain.dof(), &self.camera)
+            .expect("camera inputs of valid cameras");
+        let (sil, depth): (Vec<_>, Vec<_>) = views
+            .into_iter()
+            .map(|(angles, view)| self.splat_from(&view, angles, cull))
+            .unzip();
+        (Tensor::cat(sil, 0), Tensor::cat(depth, 0))
     }
 
     /// [`K3dgsRenderer::splat`] seen from `camera`.

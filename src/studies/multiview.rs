@@ -5,7 +5,9 @@
 //! multi-view dataset (every pose from N cameras on a sphere around the robot) and are tested
 //! on held-out poses, from the trained cameras and from cameras never trained on (yawed and
 //! raised away from the first). Against: FFKSM (the original model) and K-3DGS, trained on
-//! the first camera and rendering the held-out cameras in 3-D, and the view-blind bound (the
+//! the first camera and on the same N cameras (reading each image's camera from its inputs,
+//! [`crate::self_models::harness::SelfModel::renders_any_view`]) and rendering the held-out
+//! cameras in 3-D, and the view-blind bound (the
 //! nearest trained camera's true image of the same pose: the best a model of the trained
 //! views can show). Writes `reports/multiview/`:
 //! - `results.csv`: `model,cameras_trained,camera,held_out,psnr_db,iou,img_per_s`, the
@@ -59,6 +61,10 @@ impl HeldOutCamera {
     }
 }
 
+fn one_camera() -> Vec<usize> {
+    vec![1]
+}
+
 /// The study's settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct MultiviewConfig {
@@ -77,6 +83,10 @@ pub struct MultiviewConfig {
     pub multi_head: bool,
     /// Also FFKSM (the original model) and K-3DGS, trained on the first camera.
     pub three_d: bool,
+    /// The 3-D models are also trained on each of these camera counts above 1 (the same
+    /// cameras as NeuroKin's, their preset's steps: one budget over all views).
+    #[serde(default = "one_camera")]
+    pub three_d_cameras: Vec<usize>,
     /// Test poses scored (the first of the test split; `None`: all).
     pub test_poses: Option<usize>,
 }
@@ -109,6 +119,7 @@ impl Preset for MultiviewConfig {
             steps: Some(6000),
             multi_head: true,
             three_d: true,
+            three_d_cameras: vec![1, 4],
             test_poses: None,
         }
     }
@@ -389,7 +400,7 @@ pub fn run(
     rows.extend(three_d_rows);
     grid.extend(three_d_grid);
     let note = format!(
-        "Trained on every pose of the training split from N cameras at the first camera's distance from its target, yaws 360 i / N degrees from it, elevations {} (even i) and {} (odd i) degrees; tested on the held-out poses{}: `trained`, from the trained cameras; the rest, from cameras never trained on (yaw and elevation relative to the first camera). NeuroKin ({} preset) {} steps at every N. FFKSM (original model) and K-3DGS: trained on the first camera alone (N = 1), rendering the held-out cameras in 3-D. View-blind bound: the nearest trained camera's true image of the same pose. img_per_s: one pass over the test images in batches of 64 after a warm-up batch, on {}.",
+        "Trained on every pose of the training split from N cameras at the first camera's distance from its target, yaws 360 i / N degrees from it, elevations {} (even i) and {} (odd i) degrees; tested on the held-out poses{}: `trained`, from the trained cameras; the rest, from cameras never trained on (yaw and elevation relative to the first camera). NeuroKin ({} preset) {} steps at every N. FFKSM (original model) and K-3DGS ({} preset steps at every N): trained on the first camera alone (N = 1){}, rendering the held-out cameras in 3-D. View-blind bound: the nearest trained camera's true image of the same pose. img_per_s: one pass over the test images in batches of 64 after a warm-up batch, on {}.",
         cfg.elevation_deg[0],
         cfg.elevation_deg[1],
         cfg.test_poses
@@ -397,6 +408,20 @@ pub fn run(
         cfg.model_preset,
         cfg.steps
             .map_or("the preset's".to_string(), |s| s.to_string()),
+        cfg.model_preset,
+        {
+            let more: Vec<String> = cfg
+                .three_d_cameras
+                .iter()
+                .filter(|&&n| n > 1)
+                .map(|n| n.to_string())
+                .collect();
+            if more.is_empty() {
+                String::new()
+            } else {
+                format!(" and on N = {} of the same cameras", more.join(", "))
+            }
+        },
         device_name
     );
     write_table(
@@ -418,9 +443,9 @@ pub fn run(
     Ok(summary)
 }
 
-/// FFKSM (the original model) and K-3DGS trained on the first camera: their rows and grid
-/// rows (first, so that a checkpoint that cannot be resumed is refused before hours of
-/// training).
+/// FFKSM (the original model) and K-3DGS trained on the first camera, and on each N of
+/// `three_d_cameras` above 1: their rows and grid rows (first, so that a checkpoint that
+/// cannot be resumed is refused before hours of training).
 #[allow(clippy::type_complexity)]
 fn three_d(
     cfg: &MultiviewConfig,
@@ -433,24 +458,39 @@ fn three_d(
     if !cfg.three_d {
         return Ok((rows, grid));
     }
-    let ffksm =
-        || -> Result<_> { opts.apply(ffksm_run(&cfg.model_preset, FfksmVariant::Original)?) };
-    let k3dgs =
-        || -> Result<_> { opts.apply(k3dgs_run(&cfg.model_preset, K3dgsVariant::Anisotropic)?) };
+    // On N cameras (N = 1: the dataset's own camera, as `ffksm` and `k3dgs` train).
+    let views = |n: usize| {
+        (n > 1).then_some(Views {
+            cameras: n,
+            radius: None,
+            elevation_deg: cfg.elevation_deg,
+        })
+    };
+    let suffix = |n: usize| {
+        if n > 1 {
+            format!("_{n}")
+        } else {
+            String::new()
+        }
+    };
     let mut three: Vec<(
         String,
+        usize,
         crate::self_models::harness::Fitted,
         crate::sim::robot::Robot,
         crate::sim::ray_caster::RenderOptions,
     )> = Vec::new();
-    {
-        let run = ffksm()?;
-        let dir = out.join("ffksm_original").join("checkpoint");
+    for &n in &cfg.three_d_cameras {
+        let mut run = opts.apply(ffksm_run(&cfg.model_preset, FfksmVariant::Original)?)?;
+        run.data.dataset.views = views(n);
+        let dir = out
+            .join(format!("ffksm_original{}", suffix(n)))
+            .join("checkpoint");
         // The committed FFKSM (original model) of `ffksm`, where this preset trained it:
         // continued from its checkpoint instead of hours of training again.
         let carried = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("reports/ffksm/ffksm_original/checkpoint_carried");
-        if cfg.model_preset == "paper" && !dir.exists() && carried.exists() {
+        if n == 1 && cfg.model_preset == "paper" && !dir.exists() && carried.exists() {
             std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             for f in std::fs::read_dir(&carried).map_err(|e| Error::io(&carried, e))? {
                 let f = f.map_err(|e| Error::io(&carried, e))?.path();
@@ -459,21 +499,24 @@ fn three_d(
                 }
             }
         }
-        let resume = opts.resume || dir.exists();
+        let resume = opts.resume || (n == 1 && dir.exists());
         let robot = run.data.robot.load()?;
         three.push((
             run.name.clone(),
+            n,
             fit_run(&run, &dir, opts.device, resume)?,
             robot,
             run.data.dataset.render.clone(),
         ));
-        let run = k3dgs()?;
+        let mut run = opts.apply(k3dgs_run(&cfg.model_preset, K3dgsVariant::Anisotropic)?)?;
+        run.data.dataset.views = views(n);
         let robot = run.data.robot.load()?;
         three.push((
             run.name.clone(),
+            n,
             fit_run(
                 &run,
-                &out.join("k3dgs").join("checkpoint"),
+                &out.join(format!("k3dgs{}", suffix(n))).join("checkpoint"),
                 opts.device,
                 opts.resume,
             )?,
@@ -481,10 +524,12 @@ fn three_d(
             run.data.dataset.render.clone(),
         ));
     }
-    for (name, fitted, robot, options) in &three {
+    for (name, n, fitted, robot, options) in &three {
+        let n = *n;
         let data = &fitted.data;
         let px = data.width * data.height;
-        let first = data.camera_of(0);
+        let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
+        let first = &trained_cameras[0];
         let renderer = fitted
             .trained
             .renderers
@@ -492,41 +537,64 @@ fn three_d(
             .expect("a renderer")
             .1
             .as_ref();
+        // The trained cameras at the held-out poses (n images a pose).
         let test: Vec<usize> = fitted
             .test_range
             .clone()
-            .take(cfg.test_poses.unwrap_or(usize::MAX))
+            .take(cfg.test_poses.map_or(usize::MAX, |p| p * n))
             .collect();
-        let poses: Vec<Vec<f64>> = test.iter().map(|&i| data.angles[i].clone()).collect();
-        let row = |camera: String, held_out: bool, (p, q): (f64, f64), speed: f64, angle: f64| {
-            MultiviewRow {
-                model: name.clone(),
-                cameras_trained: 1,
-                camera,
-                held_out,
-                psnr_db: p,
-                iou: q,
-                img_per_s: Some(speed),
-                angle_to_nearest_deg: angle,
-                images: poses.len(),
-                git_revision: revision.to_string(),
-                device: device_name.to_string(),
-                preset: cfg.preset.clone(),
-            }
+        let poses: Vec<Vec<f64>> = test
+            .iter()
+            .step_by(n)
+            .map(|&i| data.angles[i].clone())
+            .collect();
+        let row = |camera: String,
+                   held_out: bool,
+                   (p, q): (f64, f64),
+                   speed: f64,
+                   angle: f64,
+                   images: usize| MultiviewRow {
+            model: name.clone(),
+            cameras_trained: n,
+            camera,
+            held_out,
+            psnr_db: p,
+            iou: q,
+            img_per_s: Some(speed),
+            angle_to_nearest_deg: angle,
+            images,
+            git_revision: revision.to_string(),
+            device: device_name.to_string(),
+            preset: cfg.preset.clone(),
         };
-        let (x, width) = inputs(&poses, None);
+        let test_inputs: Vec<f32> = fitted
+            .test_set
+            .inputs
+            .clone()
+            .into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .expect("float");
+        let width = test_inputs.len() / fitted.test_range.len().max(1);
         let own = |q: Tensor<2>| renderer.render(q).0;
-        let (pred, speed) = rendered(&own, &x, width, &fitted.device);
+        let (pred, speed) = rendered(
+            &own,
+            &test_inputs[..test.len() * width],
+            width,
+            &fitted.device,
+        );
         rows.push(row(
             "trained".into(),
             false,
-            quality(&pred, &fitted.truth[..poses.len() * px], px),
+            quality(&pred, &fitted.truth[..test.len() * px], px),
             speed,
             0.0,
+            test.len(),
         ));
+        let (x, width) = inputs(&poses, None);
         let mut grid_row = Vec::new();
         for h in &cfg.held_out {
-            let camera = h.camera(&first);
+            let camera = h.camera(first);
             let seen = truth(robot, &camera, options, &poses);
             let view = |q: Tensor<2>| {
                 renderer
@@ -534,16 +602,21 @@ fn three_d(
                     .expect("a 3-D model renders any camera")
             };
             let (pred, speed) = rendered(&view, &x, width, &fitted.device);
+            let angle = trained_cameras
+                .iter()
+                .map(|c| camera.angle_to(c))
+                .fold(f64::INFINITY, f64::min);
             rows.push(row(
                 h.label(),
                 true,
                 quality(&pred, &seen, px),
                 speed,
-                camera.angle_to(&first),
+                angle,
+                poses.len(),
             ));
             grid_row.push(pred[..px].to_vec());
         }
-        grid.push((format!("{name} (1)"), grid_row));
+        grid.push((format!("{name} ({n})"), grid_row));
     }
     Ok((rows, grid))
 }
@@ -581,7 +654,7 @@ fn draw(
     // One line per model, the camera-conditioned model and the view-blind bound per N.
     let key_of = |r: &MultiviewRow| {
         let name = r.model.split(" (").next().unwrap_or(&r.model);
-        if r.model.starts_with("NeuroKin, camera input") || r.model == "view-blind bound" {
+        if !r.model.starts_with("NeuroKin, multi-head") {
             format!("{name} (N = {})", r.cameras_trained)
         } else {
             name.to_string()
