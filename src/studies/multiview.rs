@@ -252,13 +252,13 @@ pub fn run(
             base.train.steps = steps;
         }
         let mut variants = vec![(
-            format!("NeuroKin, camera input"),
+            "NeuroKin camera-conditioned".to_string(),
             "camera_input",
             CameraUse::Input,
         )];
         if cfg.multi_head && n > 1 {
             variants.push((
-                "NeuroKin, multi-head".into(),
+                "NeuroKin multi-head".into(),
                 "multi_head",
                 CameraUse::Heads(Vec::new()),
             ));
@@ -512,7 +512,8 @@ fn three_d(
         run.data.dataset.views = views(n);
         let robot = run.data.robot.load()?;
         three.push((
-            run.name.clone(),
+            // No comma: the docs pick rows by name.
+            "K-3DGS (anisotropic)".into(),
             n,
             fit_run(
                 &run,
@@ -654,7 +655,7 @@ fn draw(
     // One line per model, the camera-conditioned model and the view-blind bound per N.
     let key_of = |r: &MultiviewRow| {
         let name = r.model.split(" (").next().unwrap_or(&r.model);
-        if !r.model.starts_with("NeuroKin, multi-head") {
+        if !r.model.starts_with("NeuroKin multi-head") {
             format!("{name} (N = {})", r.cameras_trained)
         } else {
             name.to_string()
@@ -701,7 +702,7 @@ fn draw(
                         c.clone()
                     },
                     rows.iter()
-                        .filter(|r| r.model.starts_with("NeuroKin, camera input") && &r.camera == c)
+                        .filter(|r| r.model.starts_with("NeuroKin camera-conditioned") && &r.camera == c)
                         .map(|r| (r.cameras_trained as f64, r.psnr_db))
                         .collect(),
                 )
