@@ -284,116 +284,30 @@ pub fn run(
                 opts.device,
                 opts.resume,
             )?;
-            let data = &fitted.data;
-            let px = data.width * data.height;
-            size = [data.height, data.width];
-            let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
-            let renderer = fitted.trained.renderers[0].1.as_ref();
-            let render = |q: Tensor<2>| renderer.render(q).0;
-            // The trained cameras at the held-out poses: the harness's test set.
-            let test: Vec<usize> = fitted
-                .test_range
-                .clone()
-                .take(cfg.test_poses.map_or(usize::MAX, |p| p * n))
-                .collect();
-            let test_inputs: Vec<f32> = {
-                let all = fitted
-                    .test_set
-                    .inputs
-                    .clone()
-                    .into_data()
-                    .convert::<f32>()
-                    .try_into_vec::<f32>()
-                    .expect("float");
-                let width = all.len() / fitted.test_range.len();
-                all[..test.len() * width].to_vec()
-            };
-            let width = test_inputs.len() / test.len().max(1);
-            let (pred, speed) = rendered(&render, &test_inputs, width, &fitted.device);
-            let (p, q) = quality(&pred, &fitted.truth[..test.len() * px], px);
-            let row = |camera: String,
-                       held_out: bool,
-                       (p, q): (f64, f64),
-                       speed: Option<f64>,
-                       angle: f64,
-                       images: usize| MultiviewRow {
-                model: name.clone(),
-                cameras_trained: n,
-                camera,
-                held_out,
-                psnr_db: p,
-                iou: q,
-                img_per_s: speed,
-                angle_to_nearest_deg: angle,
-                images,
-                git_revision: revision.clone(),
-                device: device_name.clone(),
-                preset: cfg.preset.clone(),
-            };
-            rows.push(row(
-                "trained".into(),
-                false,
-                (p, q),
-                Some(speed),
-                0.0,
-                test.len(),
-            ));
-            // Held-out cameras at the held-out poses.
-            let poses: Vec<Vec<f64>> = test
-                .iter()
-                .step_by(n)
-                .map(|&i| data.angles[i].clone())
-                .collect();
+            size = [fitted.data.height, fitted.data.width];
             let robot = run.data.robot.load()?;
-            let first = &trained_cameras[0];
-            let mut grid_row = Vec::new();
-            for h in &cfg.held_out {
-                let camera = h.camera(first);
-                let seen = truth(&robot, &camera, &run.data.dataset.render, &poses);
-                let (x, width) = inputs(&poses, Some(&camera));
-                let (pred, speed) = rendered(&render, &x, width, &fitted.device);
-                let angle = trained_cameras
-                    .iter()
-                    .map(|c| camera.angle_to(c))
-                    .fold(f64::INFINITY, f64::min);
-                rows.push(row(
-                    h.label(),
-                    true,
-                    quality(&pred, &seen, px),
-                    Some(speed),
-                    angle,
-                    poses.len(),
-                ));
-                if n == largest {
-                    grid_row.push(pred[..px].to_vec());
-                }
-                // The view-blind bound: the nearest trained camera's true image of the pose
-                // (once per N, under the camera-conditioned model's turn).
-                if matches!(run.model.camera, CameraUse::Input) {
-                    let nearest = trained_cameras
-                        .iter()
-                        .min_by(|a, b| camera.angle_to(a).total_cmp(&camera.angle_to(b)))
-                        .expect("a camera");
-                    let blind = truth(&robot, nearest, &run.data.dataset.render, &poses);
-                    rows.push(MultiviewRow {
-                        model: "view-blind bound".into(),
-                        img_per_s: None,
-                        ..row(
-                            h.label(),
-                            true,
-                            quality(&blind, &seen, px),
-                            None,
-                            angle,
-                            poses.len(),
-                        )
-                    });
-                    if n == largest {
-                        grid_truth.push(seen[..px].to_vec());
-                    }
-                }
-            }
+            let renderer = fitted.trained.renderers[0].1.as_ref();
+            let scored = score(
+                &Scoring {
+                    cfg,
+                    name: &name,
+                    n,
+                    fitted: &fitted,
+                    robot: &robot,
+                    options: &run.data.dataset.render,
+                    revision: &revision,
+                    device_name: &device_name,
+                },
+                &|camera, poses| {
+                    let (x, width) = inputs(poses, Some(camera));
+                    rendered(&|q| renderer.render(q).0, &x, width, &fitted.device)
+                },
+                matches!(run.model.camera, CameraUse::Input),
+            );
+            rows.extend(scored.rows);
             if n == largest {
-                grid.push((format!("{name} ({n})"), grid_row));
+                grid.push((format!("{name} ({n})"), scored.grid_row));
+                grid_truth.extend(scored.grid_truth);
             }
         }
     }
@@ -526,11 +440,6 @@ fn three_d(
         ));
     }
     for (name, n, fitted, robot, options) in &three {
-        let n = *n;
-        let data = &fitted.data;
-        let px = data.width * data.height;
-        let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
-        let first = &trained_cameras[0];
         let renderer = fitted
             .trained
             .renderers
@@ -538,88 +447,172 @@ fn three_d(
             .expect("a renderer")
             .1
             .as_ref();
-        // The trained cameras at the held-out poses (n images a pose).
-        let test: Vec<usize> = fitted
-            .test_range
-            .clone()
-            .take(cfg.test_poses.map_or(usize::MAX, |p| p * n))
-            .collect();
-        let poses: Vec<Vec<f64>> = test
-            .iter()
-            .step_by(n)
-            .map(|&i| data.angles[i].clone())
-            .collect();
-        let row = |camera: String,
-                   held_out: bool,
-                   (p, q): (f64, f64),
-                   speed: f64,
-                   angle: f64,
-                   images: usize| MultiviewRow {
-            model: name.clone(),
-            cameras_trained: n,
-            camera,
-            held_out,
-            psnr_db: p,
-            iou: q,
-            img_per_s: Some(speed),
-            angle_to_nearest_deg: angle,
-            images,
-            git_revision: revision.to_string(),
-            device: device_name.to_string(),
-            preset: cfg.preset.clone(),
-        };
-        let test_inputs: Vec<f32> = fitted
-            .test_set
-            .inputs
-            .clone()
-            .into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
-            .expect("float");
-        let width = test_inputs.len() / fitted.test_range.len().max(1);
-        let own = |q: Tensor<2>| renderer.render(q).0;
-        let (pred, speed) = rendered(
-            &own,
-            &test_inputs[..test.len() * width],
-            width,
-            &fitted.device,
+        let scored = score(
+            &Scoring {
+                cfg,
+                name,
+                n: *n,
+                fitted,
+                robot,
+                options,
+                revision,
+                device_name,
+            },
+            &|camera, poses| {
+                let (x, width) = inputs(poses, None);
+                let view = |q: Tensor<2>| {
+                    renderer
+                        .render_view(camera, q)
+                        .expect("a 3-D model renders any camera")
+                };
+                rendered(&view, &x, width, &fitted.device)
+            },
+            false,
         );
-        rows.push(row(
+        rows.extend(scored.rows);
+        grid.push((format!("{name} ({n})"), scored.grid_row));
+    }
+    Ok((rows, grid))
+}
+
+/// What scoring one trained model needs.
+struct Scoring<'a> {
+    cfg: &'a MultiviewConfig,
+    name: &'a str,
+    /// Trained cameras.
+    n: usize,
+    fitted: &'a crate::self_models::harness::Fitted,
+    robot: &'a crate::sim::robot::Robot,
+    options: &'a crate::sim::ray_caster::RenderOptions,
+    revision: &'a str,
+    device_name: &'a str,
+}
+
+/// One model's rows, its grid row (the first held-out pose from each held-out camera) and,
+/// where it carries the view-blind bound, the true images of that row.
+struct Scored {
+    rows: Vec<MultiviewRow>,
+    grid_row: Vec<Vec<f32>>,
+    grid_truth: Vec<Vec<f32>>,
+}
+
+/// Score a trained model on the held-out poses: from its trained cameras (the harness's test
+/// set, rendered by the model's own `render`), and from each held-out camera (`held_out`
+/// renders poses from a camera: images and images per second); with `view_blind`, also the
+/// view-blind bound's rows.
+fn score(
+    s: &Scoring,
+    held_out: &dyn Fn(&Camera, &[Vec<f64>]) -> (Vec<f32>, f64),
+    view_blind: bool,
+) -> Scored {
+    let (fitted, n) = (s.fitted, s.n);
+    let data = &fitted.data;
+    let px = data.width * data.height;
+    let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
+    let renderer = fitted
+        .trained
+        .renderers
+        .last()
+        .expect("a renderer")
+        .1
+        .as_ref();
+    // The trained cameras at the held-out poses (n images a pose): the harness's test set.
+    let test: Vec<usize> = fitted
+        .test_range
+        .clone()
+        .take(s.cfg.test_poses.map_or(usize::MAX, |p| p * n))
+        .collect();
+    let poses: Vec<Vec<f64>> = test
+        .iter()
+        .step_by(n)
+        .map(|&i| data.angles[i].clone())
+        .collect();
+    let row = |camera: String,
+               held_out: bool,
+               (p, q): (f64, f64),
+               speed: Option<f64>,
+               angle: f64,
+               images: usize| MultiviewRow {
+        model: s.name.to_string(),
+        cameras_trained: n,
+        camera,
+        held_out,
+        psnr_db: p,
+        iou: q,
+        img_per_s: speed,
+        angle_to_nearest_deg: angle,
+        images,
+        git_revision: s.revision.to_string(),
+        device: s.device_name.to_string(),
+        preset: s.cfg.preset.clone(),
+    };
+    let test_inputs: Vec<f32> = fitted
+        .test_set
+        .inputs
+        .clone()
+        .into_data()
+        .convert::<f32>()
+        .try_into_vec::<f32>()
+        .expect("float");
+    let width = test_inputs.len() / fitted.test_range.len().max(1);
+    let own = |q: Tensor<2>| renderer.render(q).0;
+    let (pred, speed) = rendered(
+        &own,
+        &test_inputs[..test.len() * width],
+        width,
+        &fitted.device,
+    );
+    let mut out = Scored {
+        rows: vec![row(
             "trained".into(),
             false,
             quality(&pred, &fitted.truth[..test.len() * px], px),
-            speed,
+            Some(speed),
             0.0,
             test.len(),
+        )],
+        grid_row: Vec::new(),
+        grid_truth: Vec::new(),
+    };
+    for h in &s.cfg.held_out {
+        let camera = h.camera(&trained_cameras[0]);
+        let seen = truth(s.robot, &camera, s.options, &poses);
+        let (pred, speed) = held_out(&camera, &poses);
+        let angle = trained_cameras
+            .iter()
+            .map(|c| camera.angle_to(c))
+            .fold(f64::INFINITY, f64::min);
+        out.rows.push(row(
+            h.label(),
+            true,
+            quality(&pred, &seen, px),
+            Some(speed),
+            angle,
+            poses.len(),
         ));
-        let (x, width) = inputs(&poses, None);
-        let mut grid_row = Vec::new();
-        for h in &cfg.held_out {
-            let camera = h.camera(first);
-            let seen = truth(robot, &camera, options, &poses);
-            let view = |q: Tensor<2>| {
-                renderer
-                    .render_view(&camera, q)
-                    .expect("a 3-D model renders any camera")
-            };
-            let (pred, speed) = rendered(&view, &x, width, &fitted.device);
-            let angle = trained_cameras
+        out.grid_row.push(pred[..px].to_vec());
+        // The view-blind bound: the nearest trained camera's true image of the pose.
+        if view_blind {
+            let nearest = trained_cameras
                 .iter()
-                .map(|c| camera.angle_to(c))
-                .fold(f64::INFINITY, f64::min);
-            rows.push(row(
-                h.label(),
-                true,
-                quality(&pred, &seen, px),
-                speed,
-                angle,
-                poses.len(),
-            ));
-            grid_row.push(pred[..px].to_vec());
+                .min_by(|a, b| camera.angle_to(a).total_cmp(&camera.angle_to(b)))
+                .expect("a camera");
+            let blind = truth(s.robot, nearest, s.options, &poses);
+            out.rows.push(MultiviewRow {
+                model: "view-blind bound".into(),
+                ..row(
+                    h.label(),
+                    true,
+                    quality(&blind, &seen, px),
+                    None,
+                    angle,
+                    poses.len(),
+                )
+            });
+            out.grid_truth.push(seen[..px].to_vec());
         }
-        grid.push((format!("{name} ({n})"), grid_row));
     }
-    Ok((rows, grid))
+    out
 }
 
 /// The grid, PSNR against the angle to the nearest trained camera, and PSNR against N.
@@ -702,7 +695,9 @@ fn draw(
                         c.clone()
                     },
                     rows.iter()
-                        .filter(|r| r.model.starts_with("NeuroKin camera-conditioned") && &r.camera == c)
+                        .filter(|r| {
+                            r.model.starts_with("NeuroKin camera-conditioned") && &r.camera == c
+                        })
                         .map(|r| (r.cameras_trained as f64, r.psnr_db))
                         .collect(),
                 )
