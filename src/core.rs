@@ -11,3 +11,4 @@ pub mod preset;
 pub mod progress;
 pub mod provenance;
 pub mod timing;
+pub mod unit_cache;

@@ -316,3 +316,43 @@ fn a_tiny_3d_model_trains_on_several_cameras_and_renders_each_sample_from_its_ow
         false,
     );
 }
+
+/// A finished multiview run resumed where its git-ignored checkpoints are gone (a fresh
+/// clone of a committed run) trains nothing again: each model's kept unit gives the same
+/// table (its measured speeds included, which a second measurement would change) and grid.
+#[test]
+fn a_multiview_run_resumed_without_its_checkpoints_reuses_every_kept_unit() {
+    use selfmodel::core::preset::Preset;
+    let dir = common::tempdir();
+    let mut cfg = selfmodel::studies::multiview::MultiviewConfig::quick();
+    cfg.cameras = vec![2];
+    cfg.three_d_cameras = vec![1];
+    cfg.steps = Some(20);
+    let mut opts = selfmodel::studies::registry::RunOptions::preset("quick");
+    selfmodel::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
+    let read = |f: &str| std::fs::read(dir.path().join(f)).unwrap();
+    let (table, grid) = (read("results.csv"), read("grid.png"));
+    let mut units = 0;
+    for unit in std::fs::read_dir(dir.path()).unwrap() {
+        let unit = unit.unwrap().path();
+        if unit.join("checkpoint").is_dir() {
+            std::fs::remove_dir_all(unit.join("checkpoint")).unwrap();
+        }
+        if unit.is_dir() {
+            assert!(unit.join("unit.json").is_file(), "{unit:?} kept no unit");
+            units += 1;
+        }
+    }
+    // Camera-conditioned and multi-head NeuroKin, FFKSM, K-3DGS.
+    assert_eq!(units, 4);
+    opts.resume = true;
+    selfmodel::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
+    assert!(read("results.csv") == table, "the resumed table differs");
+    assert!(read("grid.png") == grid, "the resumed grid differs");
+    for unit in std::fs::read_dir(dir.path()).unwrap() {
+        assert!(
+            !unit.unwrap().path().join("checkpoint").exists(),
+            "trained again"
+        );
+    }
+}

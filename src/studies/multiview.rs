@@ -239,7 +239,6 @@ pub fn run(
     let mut grid: Vec<(String, Vec<Vec<f32>>)> = Vec::new();
     let mut grid_truth: Vec<Vec<f32>> = Vec::new();
     let mut size = [0usize; 2];
-    let (three_d_rows, three_d_grid) = three_d(cfg, opts, out, &revision, &device_name)?;
     let largest = *cfg.cameras.iter().max().expect("checked above");
     for &n in &cfg.cameras {
         let mut base = opts.apply(neurokin_run(&cfg.model_preset)?)?;
@@ -278,32 +277,32 @@ pub fn run(
                     .map(camera_input)
                     .collect();
             }
-            let fitted = fit_run(
-                &run,
-                &out.join(format!("{dir}_{n}")).join("checkpoint"),
-                opts.device,
-                opts.resume,
-            )?;
-            size = [fitted.data.height, fitted.data.width];
-            let robot = run.data.robot.load()?;
-            let renderer = fitted.trained.renderers[0].1.as_ref();
-            let scored = score(
-                &Scoring {
-                    cfg,
-                    name: &name,
-                    n,
-                    fitted: &fitted,
-                    robot: &robot,
-                    options: &run.data.dataset.render,
-                    revision: &revision,
-                    device_name: &device_name,
-                },
-                &|camera, poses| {
-                    let (x, width) = inputs(poses, Some(camera));
-                    rendered(&|q| renderer.render(q).0, &x, width, &fitted.device)
-                },
-                matches!(run.model.camera, CameraUse::Input),
-            );
+            let unit = out.join(format!("{dir}_{n}"));
+            let (scored, image_size) =
+                kept_unit(&unit, &unit_fingerprint(cfg, &run)?, opts.resume, || {
+                    let fitted = fit_run(&run, &unit.join("checkpoint"), opts.device, opts.resume)?;
+                    let robot = run.data.robot.load()?;
+                    let renderer = fitted.trained.renderers[0].1.as_ref();
+                    let scored = score(
+                        &Scoring {
+                            cfg,
+                            name: &name,
+                            n,
+                            fitted: &fitted,
+                            robot: &robot,
+                            options: &run.data.dataset.render,
+                            revision: &revision,
+                            device_name: &device_name,
+                        },
+                        &|camera, poses| {
+                            let (x, width) = inputs(poses, Some(camera));
+                            rendered(&|q| renderer.render(q).0, &x, width, &fitted.device)
+                        },
+                        matches!(run.model.camera, CameraUse::Input),
+                    );
+                    Ok((scored, [fitted.data.height, fitted.data.width]))
+                })?;
+            size = image_size;
             rows.extend(scored.rows);
             if n == largest {
                 grid.push((format!("{name} ({n})"), scored.grid_row));
@@ -311,6 +310,8 @@ pub fn run(
             }
         }
     }
+    // The 3-D models after NeuroKin: FFKSM on several cameras trains for hours.
+    let (three_d_rows, three_d_grid) = three_d(cfg, opts, out, &revision, &device_name)?;
     rows.extend(three_d_rows);
     grid.extend(three_d_grid);
     let note = format!(
@@ -358,8 +359,7 @@ pub fn run(
 }
 
 /// FFKSM (the original model) and K-3DGS trained on the first camera, and on each N of
-/// `three_d_cameras` above 1: their rows and grid rows (first, so that a checkpoint that
-/// cannot be resumed is refused before hours of training).
+/// `three_d_cameras` above 1: their rows and grid rows, each model kept as a unit.
 #[allow(clippy::type_complexity)]
 fn three_d(
     cfg: &MultiviewConfig,
@@ -387,24 +387,61 @@ fn three_d(
             String::new()
         }
     };
-    let mut three: Vec<(
-        String,
-        usize,
-        crate::self_models::harness::Fitted,
-        crate::sim::robot::Robot,
-        crate::sim::ray_caster::RenderOptions,
-    )> = Vec::new();
+    // One 3-D model on `n` cameras: trained (or continued from `checkpoint`), then scored on
+    // the held-out cameras, rendering them in 3-D; kept as a unit in `unit`.
+    let mut three_d_unit =
+        |name: &str, n: usize, run: &dyn ThreeDRun, unit: &Path, resume: bool| -> Result<()> {
+            let (scored, _) = kept_unit(unit, &run.fingerprint(cfg)?, opts.resume, || {
+                let (fitted, robot, options) =
+                    run.fit(&unit.join("checkpoint"), opts.device, resume)?;
+                let renderer = fitted
+                    .trained
+                    .renderers
+                    .last()
+                    .expect("a renderer")
+                    .1
+                    .as_ref();
+                let scored = score(
+                    &Scoring {
+                        cfg,
+                        name,
+                        n,
+                        fitted: &fitted,
+                        robot: &robot,
+                        options: &options,
+                        revision,
+                        device_name,
+                    },
+                    &|camera, poses| {
+                        let (x, width) = inputs(poses, None);
+                        let view = |q: Tensor<2>| {
+                            renderer
+                                .render_view(camera, q)
+                                .expect("a 3-D model renders any camera")
+                        };
+                        rendered(&view, &x, width, &fitted.device)
+                    },
+                    false,
+                );
+                Ok((scored, [fitted.data.height, fitted.data.width]))
+            })?;
+            rows.extend(scored.rows);
+            grid.push((format!("{name} ({n})"), scored.grid_row));
+            Ok(())
+        };
     for &n in &cfg.three_d_cameras {
         let mut run = opts.apply(ffksm_run(&cfg.model_preset, FfksmVariant::Original)?)?;
         run.data.dataset.views = views(n);
-        let dir = out
-            .join(format!("ffksm_original{}", suffix(n)))
-            .join("checkpoint");
+        let unit = out.join(format!("ffksm_original{}", suffix(n)));
+        let dir = unit.join("checkpoint");
         // The committed FFKSM (original model) of `ffksm`, where this preset trained it:
         // continued from its checkpoint instead of hours of training again.
         let carried = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("reports/ffksm/ffksm_original/checkpoint_carried");
-        if n == 1 && cfg.model_preset == "paper" && !dir.exists() && carried.exists() {
+        let fingerprint = run.fingerprint(cfg)?;
+        let kept = opts.resume
+            && crate::core::unit_cache::load::<KeptUnit>(&unit.join(UNIT), &fingerprint).is_some();
+        if n == 1 && cfg.model_preset == "paper" && !dir.exists() && carried.exists() && !kept {
             std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
             for f in std::fs::read_dir(&carried).map_err(|e| Error::io(&carried, e))? {
                 let f = f.map_err(|e| Error::io(&carried, e))?.path();
@@ -414,65 +451,181 @@ fn three_d(
             }
         }
         let resume = opts.resume || (n == 1 && dir.exists());
-        let robot = run.data.robot.load()?;
-        three.push((
-            run.name.clone(),
-            n,
-            fit_run(&run, &dir, opts.device, resume)?,
-            robot,
-            run.data.dataset.render.clone(),
-        ));
+        let name = run.name.clone();
+        three_d_unit(&name, n, &run, &unit, resume)?;
         let mut run = opts.apply(k3dgs_run(&cfg.model_preset, K3dgsVariant::Anisotropic)?)?;
         run.data.dataset.views = views(n);
-        let robot = run.data.robot.load()?;
-        three.push((
-            // No comma: the docs pick rows by name.
-            "K-3DGS (anisotropic)".into(),
+        // No comma: the docs pick rows by name.
+        three_d_unit(
+            "K-3DGS (anisotropic)",
             n,
-            fit_run(
-                &run,
-                &out.join(format!("k3dgs{}", suffix(n))).join("checkpoint"),
-                opts.device,
-                opts.resume,
-            )?,
-            robot,
-            run.data.dataset.render.clone(),
-        ));
-    }
-    for (name, n, fitted, robot, options) in &three {
-        let renderer = fitted
-            .trained
-            .renderers
-            .last()
-            .expect("a renderer")
-            .1
-            .as_ref();
-        let scored = score(
-            &Scoring {
-                cfg,
-                name,
-                n: *n,
-                fitted,
-                robot,
-                options,
-                revision,
-                device_name,
-            },
-            &|camera, poses| {
-                let (x, width) = inputs(poses, None);
-                let view = |q: Tensor<2>| {
-                    renderer
-                        .render_view(camera, q)
-                        .expect("a 3-D model renders any camera")
-                };
-                rendered(&view, &x, width, &fitted.device)
-            },
-            false,
-        );
-        rows.extend(scored.rows);
-        grid.push((format!("{name} ({n})"), scored.grid_row));
+            &run,
+            &out.join(format!("k3dgs{}", suffix(n))),
+            opts.resume,
+        )?;
     }
     Ok((rows, grid))
+}
+
+/// A 3-D model's run, whichever model it is.
+trait ThreeDRun {
+    /// Train (or continue from `checkpoint`): the fitted model, its robot and render options.
+    fn fit(
+        &self,
+        checkpoint: &Path,
+        device: crate::core::device::DeviceChoice,
+        resume: bool,
+    ) -> Result<(
+        crate::self_models::harness::Fitted,
+        crate::sim::robot::Robot,
+        crate::sim::ray_caster::RenderOptions,
+    )>;
+    /// What its kept unit must have been made with.
+    fn fingerprint(&self, cfg: &MultiviewConfig) -> Result<serde_json::Value>;
+}
+
+impl<M: crate::self_models::harness::SelfModel> ThreeDRun
+    for crate::self_models::harness::SelfModelRun<M>
+{
+    fn fit(
+        &self,
+        checkpoint: &Path,
+        device: crate::core::device::DeviceChoice,
+        resume: bool,
+    ) -> Result<(
+        crate::self_models::harness::Fitted,
+        crate::sim::robot::Robot,
+        crate::sim::ray_caster::RenderOptions,
+    )> {
+        Ok((
+            fit_run(self, checkpoint, device, resume)?,
+            self.data.robot.load()?,
+            self.data.dataset.render.clone(),
+        ))
+    }
+    fn fingerprint(&self, cfg: &MultiviewConfig) -> Result<serde_json::Value> {
+        unit_fingerprint(cfg, self)
+    }
+}
+
+/// The file a scored unit is kept in, inside its folder; its grid images beside it.
+const UNIT: &str = "unit.json";
+const UNIT_GRID: &str = "unit_grid.png";
+
+/// A scored unit as kept: its rows, and how many grid images (then true images) its
+/// `unit_grid.png` holds side by side.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct KeptUnit {
+    rows: Vec<MultiviewRow>,
+    size: [usize; 2],
+    grid_images: usize,
+    truth_images: usize,
+}
+
+/// What a kept unit must have been made with: the model's run and how it is scored.
+fn unit_fingerprint<T: Serialize>(cfg: &MultiviewConfig, run: &T) -> Result<serde_json::Value> {
+    crate::core::unit_cache::fingerprint(&serde_json::json!({
+        "run": crate::core::unit_cache::fingerprint(run)?,
+        "held_out": cfg.held_out,
+        "test_poses": cfg.test_poses,
+        "preset": cfg.preset,
+    }))
+}
+
+/// A unit's scores and image size: with `resume`, the ones kept in `unit` if made with
+/// `fingerprint`; otherwise `make`'s, then kept. Grid images are kept at 8 bits, and a run
+/// draws them from what it kept, so a resumed run draws the same figure.
+fn kept_unit(
+    unit: &Path,
+    fingerprint: &serde_json::Value,
+    resume: bool,
+    make: impl FnOnce() -> Result<(Scored, [usize; 2])>,
+) -> Result<(Scored, [usize; 2])> {
+    let (json, png) = (unit.join(UNIT), unit.join(UNIT_GRID));
+    if resume
+        && let Some(kept) = crate::core::unit_cache::load::<KeptUnit>(&json, fingerprint)
+        && let Some(images) = read_strip(&png, kept.size, kept.grid_images + kept.truth_images)
+    {
+        let model = kept.rows.first().map_or("a unit", |r| r.model.as_str());
+        eprintln!("multiview: {model} kept from {}", json.display());
+        let mut images = images;
+        let grid_truth = images.split_off(kept.grid_images);
+        return Ok((
+            Scored {
+                rows: kept.rows,
+                grid_row: images,
+                grid_truth,
+            },
+            kept.size,
+        ));
+    }
+    let (scored, size) = make()?;
+    let images: Vec<Vec<f32>> = scored
+        .grid_row
+        .iter()
+        .chain(&scored.grid_truth)
+        .cloned()
+        .collect();
+    write_strip(&png, size, &images)?;
+    let kept = KeptUnit {
+        rows: scored.rows,
+        size,
+        grid_images: scored.grid_row.len(),
+        truth_images: scored.grid_truth.len(),
+    };
+    crate::core::unit_cache::save(&json, fingerprint, &kept)?;
+    let mut images = read_strip(&png, size, images.len())
+        .ok_or_else(|| Error::data(&png, "cannot read back the grid images just written"))?;
+    let grid_truth = images.split_off(kept.grid_images);
+    Ok((
+        Scored {
+            rows: kept.rows,
+            grid_row: images,
+            grid_truth,
+        },
+        size,
+    ))
+}
+
+/// `images` (each `[h, w]`, values in [0, 1]) side by side in one 8-bit grey PNG.
+fn write_strip(path: &Path, [h, w]: [usize; 2], images: &[Vec<f32>]) -> Result<()> {
+    let k = images.len();
+    let mut buf = vec![0u8; k.max(1) * w * h];
+    for (i, im) in images.iter().enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                buf[y * k * w + i * w + x] = (im[y * w + x].clamp(0.0, 1.0) * 255.0).round() as u8;
+            }
+        }
+    }
+    let mut png = Vec::new();
+    image::ImageEncoder::write_image(
+        image::codecs::png::PngEncoder::new(&mut png),
+        &buf,
+        (k.max(1) * w) as u32,
+        h as u32,
+        image::ExtendedColorType::L8,
+    )
+    .map_err(|e| Error::data(path, format!("cannot encode PNG: {e}")))?;
+    crate::core::atomic_file::write_bytes(path, &png)
+}
+
+/// The `k` images of a strip [`write_strip`] wrote, if it reads and has their size.
+fn read_strip(path: &Path, [h, w]: [usize; 2], k: usize) -> Option<Vec<Vec<f32>>> {
+    let img = image::open(path).ok()?.to_luma8();
+    if img.height() as usize != h || img.width() as usize != k.max(1) * w {
+        return None;
+    }
+    let raw = img.into_raw();
+    Some(
+        (0..k)
+            .map(|i| {
+                (0..h * w)
+                    .map(|p| raw[(p / w) * k * w + i * w + p % w] as f32 / 255.0)
+                    .collect()
+            })
+            .collect(),
+    )
 }
 
 /// What scoring one trained model needs.
