@@ -757,3 +757,95 @@ fn a_table2_run_sharing_its_folder_says_its_report_is_partial() {
     let csv = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(csv.contains("partial"), "{csv}");
 }
+
+/// A run too long for one sitting, whose checkpoint is small, is carried in git: a copy of
+/// `checkpoint/` committed as `checkpoint_carried/` is where `--resume` continues from in a
+/// fresh clone (the git-ignored `checkpoint/` gone).
+#[test]
+fn resume_continues_from_a_carried_checkpoint_where_the_checkpoint_is_gone() {
+    let dir = common::tempdir();
+    let out = dir.path().join("nk");
+    let o = out.to_str().unwrap();
+    let run = |resume: bool| {
+        let mut args = vec!["--preset", "quick", "--steps", "40", "--out", o];
+        if resume {
+            args.push("--resume");
+        }
+        Command::new(env!("CARGO_BIN_EXE_neurokin"))
+            .args(&args)
+            .output()
+            .unwrap()
+    };
+    assert!(run(false).status.success());
+    let table = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    let psnr = |t: &str| {
+        let (head, row) = t.split_once('\n').unwrap();
+        let col = head.split(',').position(|c| c == "psnr_db_test").unwrap();
+        row.split(',').nth(col).unwrap().to_string()
+    };
+    std::fs::rename(out.join("checkpoint"), out.join("checkpoint_carried")).unwrap();
+    let again = run(true);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(err.contains("carried checkpoint"), "{err}");
+    assert!(err.contains("continuing from step 40"), "{err}");
+    let resumed = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(psnr(&resumed), psnr(&table));
+    assert!(
+        out.join("checkpoint_carried").is_dir(),
+        "the carried copy stays"
+    );
+}
+
+/// `table1 --resume` where every model has finished (its table written) but the checkpoints
+/// are gone (a fresh clone of a committed run) reads each model's rows and trains nothing.
+#[test]
+fn table1_resumed_reads_the_models_it_finished_and_trains_nothing() {
+    let dir = common::tempdir();
+    let o = dir.path().to_str().unwrap();
+    let run = |resume: bool| {
+        let mut args = vec!["--preset", "quick", "--out", o];
+        if resume {
+            args.push("--resume");
+        }
+        Command::new(env!("CARGO_BIN_EXE_table1"))
+            .args(&args)
+            .output()
+            .unwrap()
+    };
+    let first = run(false);
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let table = std::fs::read(dir.path().join("results.csv")).unwrap();
+    fn checkpoints(d: &std::path::Path) -> Vec<std::path::PathBuf> {
+        let mut found = Vec::new();
+        for e in std::fs::read_dir(d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                if p.file_name().unwrap() == "checkpoint" {
+                    found.push(p);
+                } else {
+                    found.extend(checkpoints(&p));
+                }
+            }
+        }
+        found
+    }
+    for c in checkpoints(dir.path()) {
+        std::fs::remove_dir_all(c).unwrap();
+    }
+    let again = run(true);
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(again.status.success(), "{err}");
+    assert!(err.contains("rows of the finished run"), "{err}");
+    // Measured speeds are in the table: a model trained or timed again would change them.
+    assert!(
+        std::fs::read(dir.path().join("results.csv")).unwrap() == table,
+        "{err}"
+    );
+    let left = checkpoints(dir.path());
+    assert!(left.is_empty(), "trained again: {left:?}");
+}

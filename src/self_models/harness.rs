@@ -11,7 +11,7 @@
 //! continues).
 
 use std::ops::Range;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use burn::tensor::{Device, Tensor, TensorData};
 
@@ -702,6 +702,9 @@ pub fn fit_run<M: SelfModel>(
         &device,
         cameras_in_inputs,
     );
+    if resume {
+        carry_in(checkpoint_dir)?;
+    }
     let plan = CheckpointPlan {
         dir: checkpoint_dir.to_path_buf(),
         resume,
@@ -731,6 +734,34 @@ pub fn fit_run<M: SelfModel>(
     })
 }
 
+/// The committed copy of a checkpoint, beside its git-ignored folder `checkpoint`: a run too
+/// long for one sitting whose checkpoint is small (FFKSM's and K-3DGS's, about a megabyte)
+/// is carried to the next in git by copying `checkpoint/` to `checkpoint_carried/`.
+pub fn carried(checkpoint_dir: &Path) -> PathBuf {
+    let name = checkpoint_dir
+        .file_name()
+        .map_or("checkpoint".into(), |n| n.to_string_lossy().into_owned());
+    checkpoint_dir.with_file_name(format!("{name}_carried"))
+}
+
+/// Resuming where `checkpoint_dir` is absent (a fresh clone) but its carried copy is
+/// committed beside it: copy it in, so training continues from there.
+fn carry_in(checkpoint_dir: &Path) -> Result<()> {
+    let from = carried(checkpoint_dir);
+    if checkpoint_dir.exists() || !from.is_dir() {
+        return Ok(());
+    }
+    std::fs::create_dir_all(checkpoint_dir).map_err(|e| Error::io(checkpoint_dir, e))?;
+    for f in std::fs::read_dir(&from).map_err(|e| Error::io(&from, e))? {
+        let f = f.map_err(|e| Error::io(&from, e))?.path();
+        if let Some(name) = f.file_name() {
+            std::fs::copy(&f, checkpoint_dir.join(name)).map_err(|e| Error::io(&f, e))?;
+        }
+    }
+    eprintln!("resuming from the carried checkpoint {}", from.display());
+    Ok(())
+}
+
 /// With `resume`: refuse a checkpoint in `dir` that another configuration made, or that does
 /// not read, before anything is written (a run of several models checks them all first).
 pub fn check_resumable<M: SelfModel>(
@@ -738,6 +769,9 @@ pub fn check_resumable<M: SelfModel>(
     dir: &Path,
     resume: bool,
 ) -> Result<()> {
+    if resume {
+        carry_in(&dir.join("checkpoint"))?;
+    }
     CheckpointPlan {
         dir: dir.join("checkpoint"),
         resume,

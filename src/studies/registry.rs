@@ -69,7 +69,11 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
     let dense = crate::report::table::read_csv::<crate::self_models::ffksm::RendererRow>;
     let novel_rows = crate::report::table::read_csv::<crate::self_models::ffksm::NovelViewRow>;
     // Every model's checkpoint is checked before the first one writes anything.
-    let runs: Vec<_> = FfksmVariant::of_preset(&opts.preset)
+    let papers_arm = opts.dataset.is_none()
+        && opts
+            .robot_spec(crate::sim::robots::BuiltinRobot::Arm4)
+            .is_papers_arm();
+    let runs: Vec<_> = FfksmVariant::of_run(&opts.preset, papers_arm)
         .iter()
         .map(|&(sub, variant)| Ok((sub, opts.apply(ffksm_run(&opts.preset, variant)?)?)))
         .collect::<Result<_>>()?;

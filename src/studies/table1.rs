@@ -19,6 +19,22 @@ use crate::studies::run::{Experiment, RunOptions, write_rows};
 pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<Vec<ModelResult>> {
     let mut rows = Vec::new();
     for e in experiments.iter().filter(|e| e.in_table1) {
+        let sub = dir.join(e.name);
+        // Resumed: an experiment that finished in this folder (its table written) is read,
+        // not trained again; one still running continues from its checkpoints.
+        if opts.resume
+            && let Some(found) = finished_rows(opts, &sub.join("results.csv"))?
+        {
+            eprintln!(
+                "table1: {} ({} preset): {} rows of the finished run in {}",
+                e.name,
+                opts.preset,
+                found.len(),
+                sub.display()
+            );
+            rows.extend(found);
+            continue;
+        }
         if let Some(found) = reusable_rows(opts, e.default_dir)? {
             eprintln!(
                 "table1: {} ({} preset): {} rows reused from {}",
@@ -30,7 +46,6 @@ pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<
             rows.extend(found);
             continue;
         }
-        let sub = dir.join(e.name);
         eprintln!("table1: {} ({} preset)", e.name, opts.preset);
         (e.run)(opts, &sub)?;
         rows.extend(read_results(&sub.join("results.csv"))?);
@@ -64,6 +79,34 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
     let Some(root) = &opts.reuse_root else {
         return Ok(None);
     };
+    let dir = root.join(default_dir);
+    if let Some(rows) = finished_rows(opts, &dir.join("results.csv"))? {
+        return Ok(Some(rows));
+    }
+    if dir.join("results.csv").is_file() {
+        return Ok(None);
+    }
+    let mut subdirs: Vec<std::path::PathBuf> = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries.filter_map(|e| e.ok().map(|e| e.path())).collect(),
+        Err(_) => return Ok(None),
+    };
+    subdirs.sort();
+    let mut rows = Vec::new();
+    for sub in subdirs {
+        if let Some(found) = finished_rows(opts, &sub.join("results.csv"))? {
+            rows.extend(found);
+        }
+    }
+    Ok((!rows.is_empty()).then_some(rows))
+}
+
+/// The rows of the table at `path`, if it exists, has rows, and every row has this run's
+/// preset, dataset and step count (`--steps N`: N steps; none: the preset's, so a shortened
+/// run is never taken for a full one).
+fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResult>>> {
+    if !path.is_file() {
+        return Ok(None);
+    }
     let dataset = if opts.paper_compatible {
         "paper_compatible"
     } else {
@@ -77,26 +120,6 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
                 None => r.steps_override.is_none(),
             }
     };
-    let dir = root.join(default_dir);
-    let path = dir.join("results.csv");
-    if path.is_file() {
-        let rows = read_results(&path)?;
-        return Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows));
-    }
-    let mut subdirs: Vec<std::path::PathBuf> = match std::fs::read_dir(&dir) {
-        Ok(entries) => entries.filter_map(|e| e.ok().map(|e| e.path())).collect(),
-        Err(_) => return Ok(None),
-    };
-    subdirs.sort();
-    let mut rows = Vec::new();
-    for sub in subdirs {
-        let path = sub.join("results.csv");
-        if path.is_file() {
-            let found = read_results(&path)?;
-            if !found.is_empty() && found.iter().all(matches) {
-                rows.extend(found);
-            }
-        }
-    }
-    Ok((!rows.is_empty()).then_some(rows))
+    let rows = read_results(path)?;
+    Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
 }
