@@ -366,23 +366,32 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     );
 }
 
+/// `neurokin --preset quick --steps 40 --out out` (with `--resume`).
+fn neurokin_40_steps(out: &std::path::Path, resume: bool) -> std::process::Output {
+    let mut args = vec![
+        "--preset",
+        "quick",
+        "--steps",
+        "40",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    if resume {
+        args.push("--resume");
+    }
+    Command::new(env!("CARGO_BIN_EXE_neurokin"))
+        .args(&args)
+        .output()
+        .unwrap()
+}
+
 /// A finished run resumed scores bit for bit as before; a damaged checkpoint is reported in
 /// one line that says what to do.
 #[test]
 fn a_resumed_checkpoint_scores_the_same_and_a_damaged_one_says_what_to_do() {
     let dir = common::tempdir();
     let out = dir.path().join("nk");
-    let o = out.to_str().unwrap();
-    let run = |resume: bool| {
-        let mut args = vec!["--preset", "quick", "--steps", "40", "--out", o];
-        if resume {
-            args.push("--resume");
-        }
-        Command::new(env!("CARGO_BIN_EXE_neurokin"))
-            .args(&args)
-            .output()
-            .unwrap()
-    };
+    let run = |resume: bool| neurokin_40_steps(&out, resume);
     assert!(run(false).status.success());
     // An untouched finished run, resumed, scores exactly as it did (BatchNorm included).
     let scores = || {
@@ -765,17 +774,7 @@ fn a_table2_run_sharing_its_folder_says_its_report_is_partial() {
 fn resume_continues_from_a_carried_checkpoint_where_the_checkpoint_is_gone() {
     let dir = common::tempdir();
     let out = dir.path().join("nk");
-    let o = out.to_str().unwrap();
-    let run = |resume: bool| {
-        let mut args = vec!["--preset", "quick", "--steps", "40", "--out", o];
-        if resume {
-            args.push("--resume");
-        }
-        Command::new(env!("CARGO_BIN_EXE_neurokin"))
-            .args(&args)
-            .output()
-            .unwrap()
-    };
+    let run = |resume: bool| neurokin_40_steps(&out, resume);
     assert!(run(false).status.success());
     let table = std::fs::read_to_string(out.join("results.csv")).unwrap();
     let psnr = |t: &str| {

@@ -751,14 +751,20 @@ fn carry_in(checkpoint_dir: &Path) -> Result<()> {
     if checkpoint_dir.exists() || !from.is_dir() {
         return Ok(());
     }
-    std::fs::create_dir_all(checkpoint_dir).map_err(|e| Error::io(checkpoint_dir, e))?;
-    for f in std::fs::read_dir(&from).map_err(|e| Error::io(&from, e))? {
-        let f = f.map_err(|e| Error::io(&from, e))?.path();
+    copy_checkpoint(&from, checkpoint_dir)?;
+    eprintln!("resuming from the carried checkpoint {}", from.display());
+    Ok(())
+}
+
+/// Copy the checkpoint's files in `from` into the folder `to` (made if absent).
+pub fn copy_checkpoint(from: &Path, to: &Path) -> Result<()> {
+    std::fs::create_dir_all(to).map_err(|e| Error::io(to, e))?;
+    for f in std::fs::read_dir(from).map_err(|e| Error::io(from, e))? {
+        let f = f.map_err(|e| Error::io(from, e))?.path();
         if let Some(name) = f.file_name() {
-            std::fs::copy(&f, checkpoint_dir.join(name)).map_err(|e| Error::io(&f, e))?;
+            std::fs::copy(&f, to.join(name)).map_err(|e| Error::io(&f, e))?;
         }
     }
-    eprintln!("resuming from the carried checkpoint {}", from.display());
     Ok(())
 }
 

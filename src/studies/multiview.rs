@@ -442,13 +442,7 @@ fn three_d(
         let kept = opts.resume
             && crate::core::unit_cache::load::<KeptUnit>(&unit.join(UNIT), &fingerprint).is_some();
         if n == 1 && cfg.model_preset == "paper" && !dir.exists() && carried.exists() && !kept {
-            std::fs::create_dir_all(&dir).map_err(|e| Error::io(&dir, e))?;
-            for f in std::fs::read_dir(&carried).map_err(|e| Error::io(&carried, e))? {
-                let f = f.map_err(|e| Error::io(&carried, e))?.path();
-                if let Some(name) = f.file_name() {
-                    std::fs::copy(&f, dir.join(name)).map_err(|e| Error::io(&f, e))?;
-                }
-            }
+            crate::self_models::harness::copy_checkpoint(&carried, &dir)?;
         }
         let resume = opts.resume || (n == 1 && dir.exists());
         let name = run.name.clone();
@@ -467,19 +461,22 @@ fn three_d(
     Ok((rows, grid))
 }
 
+/// A trained 3-D model with its robot and render options.
+type FittedScene = (
+    crate::self_models::harness::Fitted,
+    crate::sim::robot::Robot,
+    crate::sim::ray_caster::RenderOptions,
+);
+
 /// A 3-D model's run, whichever model it is.
 trait ThreeDRun {
-    /// Train (or continue from `checkpoint`): the fitted model, its robot and render options.
+    /// Train (or continue from `checkpoint`).
     fn fit(
         &self,
         checkpoint: &Path,
         device: crate::core::device::DeviceChoice,
         resume: bool,
-    ) -> Result<(
-        crate::self_models::harness::Fitted,
-        crate::sim::robot::Robot,
-        crate::sim::ray_caster::RenderOptions,
-    )>;
+    ) -> Result<FittedScene>;
     /// What its kept unit must have been made with.
     fn fingerprint(&self, cfg: &MultiviewConfig) -> Result<serde_json::Value>;
 }
@@ -492,11 +489,7 @@ impl<M: crate::self_models::harness::SelfModel> ThreeDRun
         checkpoint: &Path,
         device: crate::core::device::DeviceChoice,
         resume: bool,
-    ) -> Result<(
-        crate::self_models::harness::Fitted,
-        crate::sim::robot::Robot,
-        crate::sim::ray_caster::RenderOptions,
-    )> {
+    ) -> Result<FittedScene> {
         Ok((
             fit_run(self, checkpoint, device, resume)?,
             self.data.robot.load()?,
