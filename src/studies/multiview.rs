@@ -394,13 +394,7 @@ fn three_d(
             let (scored, _) = kept_unit(unit, &run.fingerprint(cfg)?, opts.resume, || {
                 let (fitted, robot, options) =
                     run.fit(&unit.join("checkpoint"), opts.device, resume)?;
-                let renderer = fitted
-                    .trained
-                    .renderers
-                    .last()
-                    .expect("a renderer")
-                    .1
-                    .as_ref();
+                let renderer = scored_renderer(&fitted);
                 let scored = score(
                     &Scoring {
                         cfg,
@@ -535,22 +529,22 @@ fn kept_unit(
     make: impl FnOnce() -> Result<(Scored, [usize; 2])>,
 ) -> Result<(Scored, [usize; 2])> {
     let (json, png) = (unit.join(UNIT), unit.join(UNIT_GRID));
-    if resume
-        && let Some(kept) = crate::core::unit_cache::load::<KeptUnit>(&json, fingerprint)
-        && let Some(images) = read_strip(&png, kept.size, kept.grid_images + kept.truth_images)
-    {
-        let model = kept.rows.first().map_or("a unit", |r| r.model.as_str());
+    // A unit as kept: its rows, and its images split into the grid's and the truth's.
+    let read = || {
+        let kept = crate::core::unit_cache::load::<KeptUnit>(&json, fingerprint)?;
+        let mut grid_row = read_strip(&png, kept.size, kept.grid_images + kept.truth_images)?;
+        let grid_truth = grid_row.split_off(kept.grid_images);
+        let scored = Scored {
+            rows: kept.rows,
+            grid_row,
+            grid_truth,
+        };
+        Some((scored, kept.size))
+    };
+    if resume && let Some((scored, size)) = read() {
+        let model = scored.rows.first().map_or("a unit", |r| r.model.as_str());
         eprintln!("multiview: {model} kept from {}", json.display());
-        let mut images = images;
-        let grid_truth = images.split_off(kept.grid_images);
-        return Ok((
-            Scored {
-                rows: kept.rows,
-                grid_row: images,
-                grid_truth,
-            },
-            kept.size,
-        ));
+        return Ok((scored, size));
     }
     let (scored, size) = make()?;
     let images: Vec<Vec<f32>> = scored
@@ -567,17 +561,8 @@ fn kept_unit(
         truth_images: scored.grid_truth.len(),
     };
     crate::core::unit_cache::save(&json, fingerprint, &kept)?;
-    let mut images = read_strip(&png, size, images.len())
-        .ok_or_else(|| Error::data(&png, "cannot read back the grid images just written"))?;
-    let grid_truth = images.split_off(kept.grid_images);
-    Ok((
-        Scored {
-            rows: kept.rows,
-            grid_row: images,
-            grid_truth,
-        },
-        size,
-    ))
+    // Read back as a resumed run would: the same 8-bit images either way.
+    read().ok_or_else(|| Error::data(&json, "cannot read back the unit just written"))
 }
 
 /// `images` (each `[h, w]`, values in [0, 1]) side by side in one 8-bit grey PNG.
@@ -621,6 +606,20 @@ fn read_strip(path: &Path, [h, w]: [usize; 2], k: usize) -> Option<Vec<Vec<f32>>
     )
 }
 
+/// The renderer a trained model is scored with: its last (the accelerated one, where a
+/// model has two).
+fn scored_renderer(
+    fitted: &crate::self_models::harness::Fitted,
+) -> &dyn crate::self_models::harness::Render {
+    fitted
+        .trained
+        .renderers
+        .last()
+        .expect("a renderer")
+        .1
+        .as_ref()
+}
+
 /// What scoring one trained model needs.
 struct Scoring<'a> {
     cfg: &'a MultiviewConfig,
@@ -655,13 +654,7 @@ fn score(
     let data = &fitted.data;
     let px = data.width * data.height;
     let trained_cameras: Vec<Camera> = (0..n).map(|c| data.camera_of(c)).collect();
-    let renderer = fitted
-        .trained
-        .renderers
-        .last()
-        .expect("a renderer")
-        .1
-        .as_ref();
+    let renderer = scored_renderer(fitted);
     // The trained cameras at the held-out poses (n images a pose): the harness's test set.
     let test: Vec<usize> = fitted
         .test_range
