@@ -784,14 +784,12 @@ fn draw(
             if w < 64 { 4 } else { 2 },
         )?;
     }
-    // One line per model, the camera-conditioned model and the view-blind bound per N.
+    // One line per model and N: the multi-head model at the largest N only, the view-blind
+    // bound at N = 1 only (lines of several N would join unrelated points).
+    let largest = cfg.cameras.iter().copied().max().unwrap_or(1);
     let key_of = |r: &MultiviewRow| {
         let name = r.model.split(" (").next().unwrap_or(&r.model);
-        if !r.model.starts_with("NeuroKin multi-head") {
-            format!("{name} (N = {})", r.cameras_trained)
-        } else {
-            name.to_string()
-        }
+        format!("{name} (N = {})", r.cameras_trained)
     };
     let mut models: Vec<String> = Vec::new();
     for r in rows {
@@ -803,6 +801,9 @@ fn draw(
     let runs: Vec<(String, Vec<(f64, f64)>)> = models
         .iter()
         .filter(|m| !m.starts_with("view-blind") || m.ends_with("(N = 1)"))
+        .filter(|m| {
+            !m.starts_with("NeuroKin multi-head") || m.ends_with(&format!("(N = {largest})"))
+        })
         .map(|m| {
             let mut pts: Vec<(f64, f64)> = rows
                 .iter()
