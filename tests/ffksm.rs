@@ -8,7 +8,7 @@ use selfmodel::self_models::ffksm::encoding::{
     encode, encode_into, encode_reference, encoded_width,
 };
 use selfmodel::self_models::ffksm::virtual_frame::{
-    VirtualFrame, to_virtual, to_virtual_reference,
+    JointsFrame, VirtualFrame, to_virtual, to_virtual_reference,
 };
 
 fn values(n: usize, seed: u32, scale: f64) -> Vec<f64> {
@@ -20,6 +20,18 @@ fn values(n: usize, seed: u32, scale: f64) -> Vec<f64> {
             scale * ((v >> 8) as f64 / (1 << 23) as f64 - 1.0)
         })
         .collect()
+}
+
+/// A test arm of `joints` joints whose shoulder sits above its base (the first joint turns
+/// about z 0.04 m up, the second about y one link higher), and its virtual frame for a scene
+/// shrunk `scale` times.
+fn offset_arm(joints: usize, scale: f64) -> (selfmodel::sim::robot::Robot, VirtualFrame) {
+    let dir = common::tempdir();
+    let urdf = common::write_arm(dir.path(), "arm", joints, false);
+    let robot =
+        selfmodel::sim::urdf_loader::load_urdf(&urdf, nalgebra::Isometry3::identity()).unwrap();
+    let frame = JointsFrame::of_chain(&robot.chain, scale).unwrap();
+    (robot, VirtualFrame::Joints(frame))
 }
 
 fn tensor(v: &[f64], dims: [usize; 2], dev: &Device) -> Tensor<2> {
@@ -85,7 +97,13 @@ fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
             &dev,
         )
     };
-    for frame in [VirtualFrame::Reimplementation, VirtualFrame::Original] {
+    let (robot, joints) = offset_arm(5, 1.7);
+    for frame in [
+        VirtualFrame::Reimplementation,
+        VirtualFrame::Original,
+        joints.clone(),
+    ] {
+        let frame = &frame;
         let ours = to_virtual(frame, tensor(&p, [n, 3], &dev), angles(&a0), angles(&a1))
             .into_data()
             .try_to_vec::<f32>()
@@ -109,11 +127,40 @@ fn virtual_frames_match_nalgebra_and_undo_the_first_two_joints() {
         let rz = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), a0);
         let ry = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::y_axis(), a1);
         let world = ry * (rz * nalgebra::Vector3::from(v));
-        let back = to_virtual_reference(VirtualFrame::Reimplementation, world.into(), a0, a1);
+        let back = to_virtual_reference(&VirtualFrame::Reimplementation, world.into(), a0, a1);
         for k in 0..3 {
             assert!((back[k] - v[k]).abs() < 1e-12);
         }
     }
+    // The robot's own frame undoes its first two joints, pivots included, in the shrunk
+    // scene: a point on the third link (distal joints still) keeps its virtual coordinates,
+    // while the paper's frame, turning about the origin, lets it move.
+    let scale = 1.7;
+    let on_link = nalgebra::Point3::new(0.02, -0.01, 0.05);
+    let seen = |frame: &VirtualFrame, a0: f64, a1: f64| {
+        let q = [a0, a1, 0.0, 0.0, 0.0];
+        let world = robot.chain.link_frames(&q)[robot.chain.joints[2].child] * on_link;
+        to_virtual_reference(frame, (world.coords / scale).into(), a0, a1)
+    };
+    let rest = seen(&joints, 0.0, 0.0);
+    for (a0, a1) in [(0.7, -0.4), (-2.0, 1.3), (1.1, 0.6)] {
+        let moved = seen(&joints, a0, a1);
+        for k in 0..3 {
+            assert!((moved[k] - rest[k]).abs() < 1e-12, "{moved:?} vs {rest:?}");
+        }
+    }
+    let (paper_rest, paper_moved) = (
+        seen(&VirtualFrame::Original, 0.0, 0.0),
+        seen(&VirtualFrame::Original, 0.7, -0.4),
+    );
+    let drift: f64 = (0..3)
+        .map(|k| (paper_rest[k] - paper_moved[k]).powi(2))
+        .sum();
+    assert!(
+        drift.sqrt() > 0.01,
+        "the paper's frame drifts {}",
+        drift.sqrt()
+    );
 }
 
 #[test]
@@ -263,9 +310,14 @@ fn the_one_pose_fast_path_is_the_general_forward() {
     let points = tensor(&values(n * 3, 4, 0.4), [n, 3], &dev);
     let pose = [0.4f32, -0.9, 1.3, -0.2];
     let repeated: Vec<f64> = (0..n).flat_map(|_| pose.map(|v| v as f64)).collect();
+    let joints = OccupancyFieldConfig {
+        virtual_frame: offset_arm(4, 2.3).1,
+        ..OccupancyFieldConfig::original()
+    };
     for cfg in [
         OccupancyFieldConfig::paper(),
         OccupancyFieldConfig::original(),
+        joints,
     ] {
         let field = cfg.init(&dev, 2).unwrap();
         let general = field
@@ -420,7 +472,7 @@ fn a_field_that_renders_black_is_restarted_then_trained_once_without_the_check()
 
 /// The hand-written dense training step against burn's autodiff through the dense marcher and
 /// the weighted MSE: the same loss and the same gradient for every parameter, for both
-/// architectures (with and without the ReLU before the output, both virtual frames), on the
+/// architectures (with and without the ReLU before the output, the three virtual frames), on the
 /// curriculum's crop and with the robot-pixel weight; and the same numbers bit for bit on one
 /// thread as on all of them.
 #[test]
@@ -455,11 +507,17 @@ fn the_hand_written_dense_step_matches_autodiff() {
         predictive_hidden: vec![20, 12],
         ..original
     };
-    let fields = [OccupancyFieldConfig::quick(), small_original];
+    // The robot's own frame adds a shift to the paper's rotation.
+    let small_joints = OccupancyFieldConfig {
+        virtual_frame: offset_arm(4, 2.0).1,
+        ..small_original.clone()
+    };
+    let fields = [OccupancyFieldConfig::quick(), small_original, small_joints];
     for (f, field_cfg) in fields.iter().enumerate() {
         let dev = Device::flex();
         let tdev = dev.clone().autodiff();
-        let field = field_cfg.init(&tdev, 3 + f as u64).unwrap();
+        // The third field starts as the second, only its frame differs.
+        let field = field_cfg.init(&tdev, [3, 4, 4][f]).unwrap();
         let angles = [0.3, -0.4, 0.7, 1.1];
         for (robot_weight, jitter) in [(1.0, Some(11u64)), (5.0, None)] {
             let reference = {

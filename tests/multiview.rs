@@ -36,6 +36,35 @@ fn a_camera_pose_round_trips_through_its_vector() {
 }
 
 #[test]
+fn an_orbited_camera_turns_about_its_target_and_keeps_looking_at_it() {
+    // A framed camera looks at a target off the origin (as for a URDF robot).
+    let framed = Camera::paper().looking_from([0.1, -0.2, 0.4], 1.7, 0.3, 0.2);
+    let (yaw, elevation, radius) = framed.spherical();
+    let turned = framed.orbited(40.0);
+    assert_eq!(turned.target, framed.target);
+    let (yaw2, elevation2, radius2) = turned.spherical();
+    assert!((yaw2 - yaw - 40f64.to_radians()).abs() < 1e-9);
+    assert!((elevation2 - elevation).abs() < 1e-9 && (radius2 - radius).abs() < 1e-9);
+    // A camera read back from a dataset's record has lost its target (it sits 1 m ahead of
+    // the eye); the point on its axis nearest the robot's centre is the pivot to turn about.
+    let pose = framed.pose_matrix();
+    let recorded = Camera::from_record(
+        &std::array::from_fn(|i| pose[(i / 4, i % 4)]),
+        framed.focal_px(),
+        framed.width,
+        framed.height,
+    );
+    let pivot = recorded.axis_point_nearest(framed.target.into());
+    assert!((0..3).all(|k| (pivot[k] - framed.target[k]).abs() < 1e-9));
+    let (a, b) = (recorded.orbited_about(pivot, 40.0), framed.orbited(40.0));
+    assert!((0..3).all(|k| (a.eye[k] - b.eye[k]).abs() < 1e-9));
+    assert!(a.angle_to(&b) < 1e-6, "they look along the same axis");
+    // The papers' camera (target at the origin) turns about the world z axis.
+    let paper = Camera::paper().orbited(90.0);
+    assert!((paper.eye[0]).abs() < 1e-12 && (paper.eye[1] - 1.0).abs() < 1e-12);
+}
+
+#[test]
 fn a_held_out_camera_sees_what_no_training_camera_sees() {
     let arm = selfmodel::sim::arm4::arm4();
     let base = Camera::paper();

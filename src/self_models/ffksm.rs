@@ -13,7 +13,7 @@
 //! A run writes into its folder: `config.json`, `results.csv`/`results.md` (one row per
 //! renderer: dense marching and the accelerated marcher, the same trained model),
 //! `renderers.csv` (evaluations per image, images/s, PSNR, and the accelerated image's PSNR
-//! against the dense one), `novel_views.csv` (cameras orbited about z, against the
+//! against the dense one), `novel_views.csv` (cameras turned about the vertical through the target, against the
 //! simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
 //! `novel_views.png`, and `checkpoint/`.
 
@@ -49,6 +49,7 @@ use crate::self_models::ffksm::accelerated_marcher::{
 use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
+use crate::self_models::ffksm::virtual_frame::{JointsFrame, VirtualFrame};
 use crate::self_models::harness::{
     DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
     host_targets, nth_image, views_of_rows,
@@ -564,6 +565,15 @@ fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json:
         t.remove("steps");
     }
     let mut print = serde_json::json!({"field": cfg.field, "march": cfg.march, "train": train, "curriculum": cfg.curriculum, "robot_weight": cfg.robot_weight, "data": data.fingerprint()});
+    // A scene other than the papers' gets the robot's own virtual frame (`fitted_to_scene`):
+    // checkpoints trained before with the paper's frame must not resume into it.
+    let papers_scene = data.robot == crate::sim::robots::RobotSpec::default()
+        && data.file.is_none()
+        && data.dataset.framing.is_none()
+        && data.dataset.camera == Camera::paper();
+    if !papers_scene {
+        print["virtual_frame"] = serde_json::json!("the robot's first two joints");
+    }
     // Only when it is not the default, so checkpoints from before the option still resume.
     if cfg.train_marcher != TrainMarcher::Dense {
         print["train_marcher"] = serde_json::json!(cfg.train_marcher);
@@ -950,12 +960,23 @@ impl Ffksm {
         this.scene_scale = (reach / PAPERS_ARM_REACH_M).max(1e-6);
         this.march.near = (lo - pad).max(1e-3) / this.scene_scale;
         this.march.far = (hi + pad) / this.scene_scale;
-        let said = format!(
+        let mut said = format!(
             "rays marched over depths {:.3} to {:.3} m (where the robot is), the scene shrunk {:.2}x about the base for the field",
             (lo - pad).max(1e-3),
             hi + pad,
             this.scene_scale
         );
+        // The robot's own first two joints, with their axes and pivots, set the virtual frame.
+        match JointsFrame::of_chain(&fit.robot.chain, this.scene_scale) {
+            Some(frame) => {
+                this.field.virtual_frame = VirtualFrame::Joints(frame);
+                said += "; the virtual frame is the robot's first two joints'";
+            }
+            None => {
+                said +=
+                    "; the paper's virtual frame (the first two joints do not alone place a link)"
+            }
+        }
         (this, Some(said))
     }
 
@@ -1166,10 +1187,26 @@ impl Render for FfksmRenderer {
         };
         let mut novel = vec![view_row(0.0, &fast_q, (f64::INFINITY, 1.0))];
         let mut novel_images = Vec::new();
+        // The cameras turn about the vertical through the point they look at: the configured
+        // target, or for a framed or recorded camera (whose record keeps no target) the point
+        // on its axis nearest the centre of the robot's poses.
+        let pivot = if ctx.spec.file.is_none() && ctx.spec.dataset.framing.is_none() {
+            s.camera.target
+        } else {
+            let si: Vec<Vec<f64>> = ctx
+                .data
+                .angles
+                .iter()
+                .map(|q| s.robot.chain.to_si(q))
+                .collect();
+            let points = crate::data::dataset::swept_points(&s.robot, &si);
+            s.camera
+                .axis_point_nearest(crate::sim::shape::Aabb::from_points(&points).center())
+        };
         for &yaw in &s.model.novel_views_deg {
             // The simulator's view of the same poses from the orbited camera.
             let mut spec = ctx.spec.dataset.clone();
-            spec.camera = s.camera.orbited(yaw);
+            spec.camera = s.camera.orbited_about(pivot, yaw);
             spec.framing = None;
             spec.samples = ctx.data.len();
             spec.train = ctx.data.n_train;
@@ -1210,7 +1247,7 @@ fn write_reports(
         &dir.join("novel_views.csv"),
         novel,
         &format!("{name}: views it was never trained on"),
-        "The training camera orbited about the world z axis; the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
+        "The training camera turned about the vertical through the point it looks at (the papers' camera: the world z axis); the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
     )
 }
 

@@ -48,14 +48,35 @@ impl Camera {
         }
     }
 
-    /// The same camera moved around the world z axis by `yaw_deg` (for novel views).
+    /// The same camera turned by `yaw_deg` about the vertical (world z) axis through its
+    /// target (for novel views); [`Camera::orbited_about`] with the target as the pivot. For
+    /// the papers' camera the target is the origin, so this is a turn about the world z axis.
     pub fn orbited(&self, yaw_deg: f64) -> Self {
+        self.orbited_about(self.target, yaw_deg)
+    }
+
+    /// The same camera turned by `yaw_deg` about the vertical (world z) axis through `pivot`:
+    /// eye, target and up turn together, so a pivot on the camera's axis stays where the
+    /// camera looks.
+    pub fn orbited_about(&self, pivot: [f64; 3], yaw_deg: f64) -> Self {
         let r = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw_deg.to_radians());
-        let eye = r * Point3::from(self.eye);
+        let pivot = Vector3::from(pivot);
+        let turn = |p: [f64; 3]| -> [f64; 3] { (pivot + r * (Vector3::from(p) - pivot)).into() };
         Camera {
-            eye: eye.into(),
+            eye: turn(self.eye),
+            target: turn(self.target),
+            up: (r * Vector3::from(self.up)).into(),
             ..self.clone()
         }
+    }
+
+    /// The point on the camera's axis (ahead of the eye) nearest `p`. A camera read from a
+    /// dataset's record has its target 1 m ahead of the eye, wherever the robot is: this is
+    /// where it looks at the robot.
+    pub fn axis_point_nearest(&self, p: Point3<f64>) -> [f64; 3] {
+        let (fwd, _, _) = self.basis();
+        let along = (p - self.eye_point()).dot(&fwd).max(0.0);
+        (self.eye_point() + fwd * along).into()
     }
 
     /// Check the camera is usable.

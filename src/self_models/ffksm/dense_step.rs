@@ -17,7 +17,7 @@
 //!
 //! The step, for rays `r` with truth `t_r` and weight `w_r` (the robot-pixel weight or 1):
 //! - points `p` (world, metres) at the stratified depths of [`MarchConfig::depths`], taken into
-//!   the virtual frame `p' = p Mᵀ` and encoded ([`crate::self_models::ffksm::encoding`]);
+//!   the virtual frame `p' = p Mᵀ + t` and encoded ([`crate::self_models::ffksm::encoding`]);
 //! - coordinate encoder `a = relu(E W₁ + b₁) W₂ + b₂`; the kinematic encoder `k` and its half
 //!   of the first predictive layer are computed once per pose: `x₀ = a W_a + (k W_b + b)`;
 //! - predictive layers with their ReLUs, output `[density d, visibility v]` per point;
@@ -183,6 +183,8 @@ struct HostField<'a> {
     /// `k W_b + b` of the first predictive layer, the same for every point of the pose.
     pose_part: Vec<f32>,
     rotation: [f32; 9],
+    /// The virtual frame's shift `t` (`p' = p Mᵀ + t`).
+    shift: [f32; 3],
     bands: usize,
 }
 
@@ -248,9 +250,9 @@ impl HostField<'_> {
         // Virtual frame and positional encoding:
         // [x, sin(2⁰x), cos(2⁰x), …] with each term a 3-vector.
         let width = encoded_width(3, self.bands);
-        let m = &self.rotation;
+        let (m, t) = (&self.rotation, &self.shift);
         for (p, e) in points.chunks(3).zip(s.encoded.chunks_mut(width)) {
-            let v = [0, 1, 2].map(|j| p[0] * m[j] + p[1] * m[3 + j] + p[2] * m[6 + j]);
+            let v = [0, 1, 2].map(|j| p[0] * m[j] + p[1] * m[3 + j] + p[2] * m[6 + j] + t[j]);
             encode_into(&v, self.bands, e);
         }
         // Coordinate encoder.
@@ -401,6 +403,7 @@ pub fn dense_step(
         outputs: first.outputs,
     }];
     host_predictive.extend(predictive[1..].iter().map(HostLinear::of));
+    let (rotation, shift) = field.affine_rows(&angles32);
     let host = HostField {
         field,
         coordinates: [
@@ -409,7 +412,8 @@ pub fn dense_step(
         ],
         predictive: host_predictive,
         pose_part,
-        rotation: field.rotation_rows(&angles32),
+        rotation,
+        shift,
         bands,
     };
 

@@ -145,7 +145,7 @@ impl OccupancyFieldConfig {
             predictive,
             bands: self.bands,
             relu_before_output: self.relu_before_output,
-            virtual_frame: self.virtual_frame,
+            virtual_frame: self.virtual_frame.clone(),
         }
     }
 }
@@ -184,7 +184,7 @@ impl OccupancyField {
                 Tensor::zeros([n], &angles.device())
             }
         };
-        let p = to_virtual(self.virtual_frame, points, joint(0), joint(1));
+        let p = to_virtual(&self.virtual_frame, points, joint(0), joint(1));
         let distal = if dof > 2 {
             angles.clone().slice([0..n, 2..dof])
         } else {
@@ -199,12 +199,16 @@ impl OccupancyField {
     /// `[density, visibility]` `[n, 2]` of points `[n, 3]` (metres, world frame) all seen in
     /// one pose `angles` (radians). The same function as [`OccupancyField::forward`] with the
     /// angles repeated, computed once per pose where it does not depend on the point: the
-    /// virtual frame is one 3x3 rotation, the kinematic encoder runs on one row, and its half
+    /// virtual frame is one rigid map (a 3x3 rotation and a shift), the kinematic encoder runs on one row, and its half
     /// of the predictive module's first layer (`W_b b + bias`) is added to every row. That
     /// leaves ~58k multiply-adds per point of the paper preset's ~94k.
     pub fn forward_pose(&self, points: Tensor<2>, angles: &[f32]) -> Tensor<2> {
         let device = points.device();
-        let p = points.matmul(self.rotation(angles, &device));
+        let (rotation, shift) = self.affine_rows(angles);
+        let p = points.matmul(Tensor::from_data(
+            TensorData::new(rotation.to_vec(), [3, 3]),
+            &device,
+        )) + Tensor::<2>::from_data(TensorData::new(shift.to_vec(), [1, 3]), &device);
         let distal = distal_of(angles);
         let width = distal.len();
         let distal = Tensor::<2>::from_data(TensorData::new(distal, [1, width]), &device);
@@ -228,34 +232,34 @@ impl OccupancyField {
         a.matmul(w.slice([0..half, 0..outputs])) + pose_part
     }
 
-    /// `Mᵀ` `[3, 3]` for row vectors, where `M` takes world points into the virtual frame of
-    /// `angles` (built from [`crate::self_models::ffksm::virtual_frame::to_virtual_reference`] on the unit axes).
-    fn rotation(&self, angles: &[f32], device: &Device) -> Tensor<2> {
-        let m = self.rotation_rows(angles);
-        Tensor::from_data(TensorData::new(m.to_vec(), [3, 3]), device)
-    }
-
-    /// [`OccupancyField::rotation`] on the host, row-major.
-    pub(crate) fn rotation_rows(&self, angles: &[f32]) -> [f32; 9] {
+    /// The virtual frame of one pose as a rigid map on row vectors, `p' = p Mᵀ + t`: `Mᵀ`
+    /// row-major and `t`, built from
+    /// [`crate::self_models::ffksm::virtual_frame::to_virtual_reference`] on the origin and
+    /// the unit axes.
+    pub(crate) fn affine_rows(&self, angles: &[f32]) -> ([f32; 9], [f32; 3]) {
         let joint = |i: usize| angles.get(i).map_or(0.0, |&a| a as f64);
         let (a0, a1) = (joint(0), joint(1));
+        let map = |p: [f64; 3]| {
+            crate::self_models::ffksm::virtual_frame::to_virtual_reference(
+                &self.virtual_frame,
+                p,
+                a0,
+                a1,
+            )
+        };
+        let t = map([0.0; 3]);
         let mut m = [0f32; 9];
         for (col, e) in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
             .into_iter()
             .enumerate()
         {
-            let v = crate::self_models::ffksm::virtual_frame::to_virtual_reference(
-                self.virtual_frame,
-                e,
-                a0,
-                a1,
-            );
-            // Row `col` of Mᵀ is column `col` of M, the image of axis `col`.
-            for (k, value) in v.iter().enumerate() {
-                m[3 * col + k] = *value as f32;
+            let v = map(e);
+            // Row `col` of Mᵀ is column `col` of M, the image of axis `col` less the shift.
+            for k in 0..3 {
+                m[3 * col + k] = (v[k] - t[k]) as f32;
             }
         }
-        m
+        (m, t.map(|v| v as f32))
     }
 
     /// The layers: the coordinate encoder's two, the kinematic encoder's two, then the
