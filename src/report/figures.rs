@@ -345,6 +345,10 @@ pub fn pareto_plot(
         let ours_style = BLUE.filled();
         let paper_style = BLACK.stroke_width(2);
         for (reference, name) in [(false, "ours (this CPU)"), (true, "paper (T4 GPU)")] {
+            // No key entry for the paper's points where there are none (another robot).
+            if !points.iter().any(|p| p.reference == reference) {
+                continue;
+            }
             let style = if reference { paper_style } else { ours_style };
             chart
                 .draw_series(
@@ -376,7 +380,12 @@ pub fn pareto_plot(
             })
             .collect();
         // The legend goes in the corner where it covers the fewest points.
-        let entries = 3 + floors.len();
+        let entries = 1
+            + floors.len()
+            + [false, true]
+                .iter()
+                .filter(|&&r| points.iter().any(|p| p.reference == r))
+                .count();
         let legend_w = 50
             + char_w
                 * floors

@@ -140,12 +140,17 @@ pub fn markdown_from_csv(path: &Path) -> Result<String> {
     let (header, rows) = read_cells(path)?;
     let main = main_columns(&header);
     let is_provenance = |c: &usize| PROVENANCE.contains(&header[*c].as_str());
-    let all: Vec<usize> = (0..header.len()).collect();
+    // A paper reference column with no figure in any row (another robot, a setting the paper
+    // never ran) is left out of the Markdown; the CSV keeps it.
+    let all: Vec<usize> = (0..header.len())
+        .filter(|&c| !header[c].starts_with("paper_") || rows.iter().any(|r| !r[c].is_empty()))
+        .collect();
     let main_cols: Vec<usize> = if main.is_empty() {
         all.iter().copied().filter(|c| !is_provenance(c)).collect()
     } else {
         main.iter()
             .filter_map(|m| header.iter().position(|h| h == m))
+            .filter(|c| all.contains(c))
             .collect()
     };
     let key = main_cols.first().copied().unwrap_or(0);

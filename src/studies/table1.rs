@@ -13,6 +13,7 @@ use std::path::Path;
 use crate::core::error::Result;
 use crate::report::figures::pareto_plot;
 use crate::self_models::result::{ModelResult, pareto_floors, pareto_points, read_results};
+use crate::sim::robots::BuiltinRobot;
 use crate::studies::run::{Experiment, RunOptions, write_rows};
 
 /// Run the zoo (the `experiments` marked `in_table1`) on `opts` into `dir` and write the table and the Pareto plot.
@@ -53,7 +54,14 @@ pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<
     write_rows(
         dir,
         &rows,
-        "Table I: self-models of the 4-DOF arm, quality against speed",
+        &format!(
+            "Table I: self-models of {}, quality against speed",
+            match opts.robot_spec(BuiltinRobot::Arm4) {
+                r if r.is_papers_arm() && opts.dataset.is_none() => "the 4-DOF arm".to_string(),
+                _ if opts.dataset.is_some() => "the robot of the given dataset".to_string(),
+                r => r.label(),
+            }
+        ),
         &format!(
             "All models trained and tested on the same dataset ({} preset). PSNR as the paper computes it (per image, then averaged) on the first 100 test images and on the whole test set; IoU of silhouettes thresholded at 0.5. Inference speed: median of synchronised timed calls after warm-up, at batch 1 (latency) and batch 256. `train_img_per_s` is training throughput, which is what the paper's \"FPS\" column measured; the paper's figures (`paper_*`) were taken on an NVIDIA T4 and are shown for reference only. Each model's folder holds its config, training curve and qualitative figure.",
             opts.preset
