@@ -13,8 +13,8 @@
 //! A run writes into its folder: `config.json`, `results.csv`/`results.md` (one row per
 //! renderer: dense marching and the accelerated marcher, the same trained model),
 //! `renderers.csv` (evaluations per image, images/s, PSNR, and the accelerated image's PSNR
-//! against the dense one), `novel_views.csv` (cameras turned about the vertical through the target, against the
-//! simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
+//! against the dense one), `novel_views.csv` (cameras turned about the vertical through the
+//! point they look at, against the simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
 //! `novel_views.png`, and `checkpoint/`.
 
 pub mod accelerated_marcher;
@@ -568,9 +568,7 @@ fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json:
     // A scene other than the papers' gets the robot's own virtual frame (`fitted_to_scene`):
     // checkpoints trained before with the paper's frame must not resume into it.
     let papers_scene = data.robot == crate::sim::robots::RobotSpec::default()
-        && data.file.is_none()
-        && data.dataset.framing.is_none()
-        && data.dataset.camera == Camera::paper();
+        && data.configured_camera() == Some(&Camera::paper());
     if !papers_scene {
         print["virtual_frame"] = serde_json::json!("the robot's first two joints");
     }
@@ -1190,8 +1188,8 @@ impl Render for FfksmRenderer {
         // The cameras turn about the vertical through the point they look at: the configured
         // target, or for a framed or recorded camera (whose record keeps no target) the point
         // on its axis nearest the centre of the robot's poses.
-        let pivot = if ctx.spec.file.is_none() && ctx.spec.dataset.framing.is_none() {
-            s.camera.target
+        let pivot = if let Some(configured) = ctx.spec.configured_camera() {
+            configured.target
         } else {
             let si: Vec<Vec<f64>> = ctx
                 .data

@@ -285,11 +285,16 @@ impl DataSpec {
     /// The camera `data` was rendered (or captured) with: the config's camera, unless it was
     /// framed automatically or read from a file (then the dataset's record of it).
     pub fn camera(&self, data: &Dataset) -> Camera {
-        if self.file.is_none() && self.dataset.framing.is_none() {
-            self.dataset.camera.clone()
-        } else {
-            data.camera()
-        }
+        self.configured_camera()
+            .cloned()
+            .unwrap_or_else(|| data.camera())
+    }
+
+    /// The config's camera when the data is rendered from it as it stands: `None` when it is
+    /// framed automatically or the data is read from a file (then only the dataset's record
+    /// says where the camera was).
+    pub fn configured_camera(&self) -> Option<&Camera> {
+        (self.file.is_none() && self.dataset.framing.is_none()).then_some(&self.dataset.camera)
     }
 
     /// [`DataSpec::load`] with the robot it rendered (loaded once: a URDF reads its meshes).
