@@ -1,5 +1,6 @@
 //! Results are data: CSV rows and the Markdown tables made from them, figures (plotters) and
 //! image previews. Nothing here is typed by hand.
 
+pub mod canvas;
 pub mod figures;
 pub mod table;

@@ -1,8 +1,6 @@
 //! Figures generated from results (never drawn by hand): the speed-quality Pareto plot,
 //! training curves (plotters, PNG) and the qualitative grid of predictions (image crate).
-//!
-//! Text uses DejaVu Sans Mono, embedded (assets/fonts, with its licence), so figures render
-//! the same on any machine without system fonts.
+//! Every figure draws on a `Canvas` (`report::canvas`: the embedded font, glyphs placed right).
 
 use std::path::Path;
 use std::sync::Once;
@@ -11,6 +9,7 @@ use image::ImageEncoder;
 use plotters::coord::combinators::BindKeyPoints;
 use plotters::prelude::*;
 
+use super::canvas::{Canvas, FONT_BYTES};
 use crate::core::atomic_file::write_bytes;
 use crate::core::error::{Error, Result};
 
@@ -19,8 +18,7 @@ static FONT_ONCE: Once = Once::new();
 
 fn register_font() {
     FONT_ONCE.call_once(|| {
-        let bytes: &'static [u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
-        plotters::style::register_font(FONT, FontStyle::Normal, bytes)
+        plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES)
             .unwrap_or_else(|_| panic!("embedded font is valid"));
     });
 }
@@ -269,7 +267,7 @@ pub fn pareto_plot(
     let (w, h) = (1000u32, 650u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let fps_min = points
             .iter()
@@ -302,9 +300,11 @@ pub fn pareto_plot(
             .map_err(|e| draw_err(path, e))?;
         chart
             .configure_mesh()
-            .x_desc(
-                "inference images/s at batch 1 (log): ours on this CPU, the paper's on a T4 GPU",
-            )
+            .x_desc(if points.iter().any(|p| p.reference) {
+                "inference images/s at batch 1 (log): ours on this CPU, the paper's on a T4 GPU"
+            } else {
+                "inference images/s at batch 1 (log), on this CPU"
+            })
             .y_desc(y_label)
             .x_label_formatter(&|v| tick_label(*v))
             .label_style((FONT, 14))
@@ -487,7 +487,7 @@ pub fn curves(
     let (w, h) = (900u32, 500u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let all = runs.iter().flat_map(|(_, c)| c.iter());
         let max_step = all.clone().map(|p| p.0).max().unwrap_or(1).max(1);
@@ -582,7 +582,7 @@ fn marked_lines(
         })
         .collect();
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let points = runs.iter().flat_map(|(_, c)| c.iter());
         let bounds = |f: fn(&(f64, f64)) -> f64| {
@@ -792,7 +792,7 @@ pub fn image_grid(
     }
     let mut buf = img.into_raw();
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
         let font = (FONT, font_px as f64).into_font().color(&BLACK);
         for (r, title) in titles.iter().enumerate().take(rows.len()) {
             let y = (gap + r * ch + height * scale / 2) as i32 - font_px as i32 / 2;
@@ -876,7 +876,7 @@ pub fn points_over_images(
     }
     let mut buf = img.into_raw();
     if !caption.is_empty() {
-        let root = BitMapBackend::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w as u32, h as u32)).into_drawing_area();
         let font = (FONT, font_px as f64).into_font().color(&BLACK);
         root.draw(&Text::new(caption.to_string(), (4, 3), font))
             .map_err(|e| draw_err(path, e))?;
@@ -909,7 +909,7 @@ pub fn scatter_panels(
     let (w, h) = (520 * cols as u32, 60 + 330 * rows as u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let root = root
             .titled(title, (FONT, 22))
@@ -995,7 +995,7 @@ pub fn lines_marked(
     let (w, h) = (800u32, 600u32);
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
         let points = runs.iter().flat_map(|(_, c)| c.iter());
         // Scattered points leave no corner free: with markers, the legend gets room of its
