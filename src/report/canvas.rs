@@ -182,15 +182,15 @@ mod tests {
         ink
     }
 
-    /// The widest run of blank columns between the first and the last inked column.
-    fn widest_gap(ink: &[bool]) -> usize {
+    /// The runs of blank columns between the first and the last inked column.
+    fn gaps(ink: &[bool]) -> Vec<usize> {
         let first = ink.iter().position(|&i| i).unwrap();
         let last = ink.iter().rposition(|&i| i).unwrap();
         ink[first..=last]
             .split(|&i| i)
             .map(<[bool]>::len)
-            .max()
-            .unwrap_or(0)
+            .filter(|&n| n > 0)
+            .collect()
     }
 
     #[test]
@@ -198,21 +198,12 @@ mod tests {
         // In a monospace font "1.5" has the point centred between the digits: the gaps on
         // either side of it differ by at most a pixel. Without the side bearing the point
         // hugs the "1" and leaves a gap of most of a cell before the "5".
-        let ink = ink_columns("1.5");
-        let runs: Vec<usize> = {
-            let first = ink.iter().position(|&i| i).unwrap();
-            let last = ink.iter().rposition(|&i| i).unwrap();
-            ink[first..=last]
-                .split(|&i| i)
-                .map(<[bool]>::len)
-                .filter(|&n| n > 0)
-                .collect()
-        };
+        let runs = gaps(&ink_columns("1.5"));
         assert_eq!(runs.len(), 2, "two gaps around the point: {runs:?}");
         assert!(runs[0].abs_diff(runs[1]) <= 1, "gaps {runs:?}");
         // And a word has no blank column wider than its letters' own spacing.
         assert!(
-            widest_gap(&ink_columns("depth")) <= 3,
+            gaps(&ink_columns("depth")).into_iter().max().unwrap_or(0) <= 3,
             "{:?}",
             ink_columns("depth")
         );
