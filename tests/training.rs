@@ -10,8 +10,8 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
 use selfmodel::train::losses::{bce, bce_with_logits, mse};
 use selfmodel::train::trainer::{
-    Batch, Both, CheckpointPlan, Converging, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer,
-    Watch, autodiff_device, clip_global_norm,
+    Batch, CheckpointPlan, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer, autodiff_device,
+    clip_global_norm,
 };
 
 /// The training loop with an optional checkpoint plan.
@@ -113,69 +113,6 @@ fn resuming_reproduces_an_uninterrupted_run() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("different configuration"), "{err}");
-}
-
-/// Validation every 5 steps whose score is lowest at the second call (step 10): the run
-/// returns that step's weights, not the last, with and without a resume between (through
-/// [`Both`], as FFKSM composes it with its collapse watch).
-#[test]
-fn keeping_the_best_validated_step_returns_its_weights_across_a_resume() {
-    let dev = autodiff_device(&Device::flex(), 3);
-    let set = data(&dev);
-    dev.seed(5);
-    let init = LinearConfig::new(4, 1).init(&dev);
-    let dir = common::tempdir();
-    let plan = |resume| CheckpointPlan {
-        dir: dir.path().join("ckpt"),
-        resume,
-        fingerprint: serde_json::json!({"keep": 1}),
-    };
-    // Scores by call: 2, 0, 1, 3 (calls at steps 5, 10, 15, 20); each call's weights kept.
-    let seen = std::cell::RefCell::new(Vec::<Vec<f32>>::new());
-    let run = |steps: usize, resume: Option<bool>, calls_before: usize| {
-        let calls = Cell::new(calls_before);
-        let validate = |m: &Linear| {
-            seen.borrow_mut().push(weights(m));
-            calls.set(calls.get() + 1);
-            [2.0, 0.0, 1.0, 3.0][calls.get() - 1]
-        };
-        let watched = Cell::new(0);
-        let watch = Watch(|_: &Linear, _| {
-            watched.set(watched.get() + 1);
-            Ok(())
-        });
-        let mut hooks = Both(watch, Converging::every_steps("keep", 5, 1e-2, validate));
-        let plan = resume.map(plan);
-        let (last, _) = Trainer::new(&cfg(steps), "keep")
-            .checkpoint(plan.as_ref())
-            .hooks(&mut hooks)
-            .fit(init.clone(), &set, loss)
-            .unwrap();
-        let Both(_, keep) = hooks;
-        let (best, curve) = keep.finish(last.clone());
-        (weights(&best), weights(&last), curve, watched.get())
-    };
-    let (best, last, curve, watched) = run(20, None, 0);
-    assert_eq!(watched, 20, "the first hooks ran every step");
-    assert_eq!(curve.best_epoch, 10);
-    assert_eq!(
-        curve.curve.iter().map(|p| p.epoch).collect::<Vec<_>>(),
-        [5, 10, 15, 20]
-    );
-    assert_eq!(best, seen.borrow()[1], "step 10's weights");
-    assert_ne!(best, last, "not the last step's");
-    // Stopped at 12 (checkpoints at 5, 10, 12), then resumed to 20 with fresh hooks.
-    seen.borrow_mut().clear();
-    run(12, Some(false), 0);
-    let (resumed_best, resumed_last, resumed, _) = run(20, Some(true), 2);
-    assert_eq!(resumed.best_epoch, 10);
-    assert_eq!(resumed.curve.len(), 4);
-    for (x, y) in best.iter().zip(&resumed_best) {
-        assert!((x - y).abs() < 1e-6, "{best:?} vs {resumed_best:?}");
-    }
-    for (x, y) in last.iter().zip(&resumed_last) {
-        assert!((x - y).abs() < 1e-6, "{last:?} vs {resumed_last:?}");
-    }
 }
 
 #[test]

@@ -15,9 +15,7 @@
 //! `renderers.csv` (evaluations per image, images/s, PSNR, and the accelerated image's PSNR
 //! against the dense one), `novel_views.csv` (cameras turned about the vertical through the
 //! point they look at, against the simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
-//! `novel_views.png`, and `checkpoint/`. On a robot other than the papers' arm the run keeps
-//! the step that validates best ([`HeldOut`]) and adds `validation.csv` and
-//! `validation_curve.png`.
+//! `novel_views.png`, and `checkpoint/`.
 
 pub mod accelerated_marcher;
 pub mod dense_step;
@@ -59,9 +57,7 @@ use crate::self_models::harness::{
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
-use crate::train::trainer::{
-    Both, ConvergenceLog, Converging, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer, Watch,
-};
+use crate::train::trainer::{StepLoss, TrainConfig, TrainLog, Trainer, Watch};
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -77,31 +73,6 @@ pub struct CollapseRestart {
     pub every: usize,
     pub until: usize,
     pub max_restarts: usize,
-}
-
-/// Validation on held-out training images: the weights kept are those of the step, every
-/// `every` steps, whose renderings of them (the accelerated marcher) score the highest mean
-/// PSNR. The held-out images are the training set's last `fraction` (its samples are a
-/// trajectory: its end is what lies nearest the test poses); the rest trains.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct HeldOut {
-    pub fraction: f64,
-    pub every: usize,
-}
-
-impl HeldOut {
-    /// A tenth of the training images, every 500 steps (`quick`: every 100).
-    pub fn preset(preset: &str) -> Self {
-        HeldOut {
-            fraction: 0.1,
-            every: if preset == "quick" { 100 } else { 500 },
-        }
-    }
-
-    /// Of `n` training samples, how many are held out: at least one, and one fewer than `n`.
-    fn count(&self, n: usize) -> usize {
-        ((n as f64 * self.fraction).round() as usize).clamp(1, n.saturating_sub(1).max(1))
-    }
 }
 
 /// How training renders its rays.
@@ -156,11 +127,6 @@ pub struct Ffksm {
     pub rays_per_step: Option<usize>,
     /// Output image size `[height, width]`.
     pub image: [usize; 2],
-    /// Keep the weights of the step that scores best on held-out training images (none: the
-    /// last step's, the paper's fixed schedule; what the papers' arm keeps, so that its
-    /// committed results stay the paper's. `ffksm` sets it for any other robot).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub validation: Option<HeldOut>,
     /// Also render with dense marching (the paper's renderer, the accelerated marcher's
     /// reference, ~1 s an image) and write the renderer comparison and novel views; off in the
     /// `short` preset, which shows the accelerated marcher's row only.
@@ -279,7 +245,6 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
         chunk_rays: 2048,
         rays_per_step: None,
         image: SelfModelRun::<Ffksm>::image(preset)?,
-        validation: None,
         reference_renderers: preset != "short",
         scene_scale: 1.0,
     };
@@ -607,9 +572,6 @@ fn fingerprint(cfg: &Ffksm, train: &TrainConfig, data: &DataSpec) -> serde_json:
     if !papers_scene {
         print["virtual_frame"] = serde_json::json!("the robot's first two joints");
     }
-    if let Some(v) = &cfg.validation {
-        print["validation"] = serde_json::json!(v);
-    }
     // Only when it is not the default, so checkpoints from before the option still resume.
     if cfg.train_marcher != TrainMarcher::Dense {
         print["train_marcher"] = serde_json::json!(cfg.train_marcher);
@@ -634,136 +596,15 @@ fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>> {
     })
 }
 
-/// Mean PSNR of the accelerated marcher's renderings of samples (`rows`: host inputs, `width`
-/// values each, from their cameras) against their silhouettes `truth`.
-fn held_out_psnr(
-    field: &OccupancyField,
+/// Train the field, restarting with a fresh model on collapse when the config asks for it:
+/// the field, its log, the restarts and the network evaluations per step.
+fn train_field(
     cfg: &Ffksm,
+    name: &str,
     fit: &Fit,
-    rows: &[f32],
-    width: usize,
-    truth: &[f32],
-) -> f64 {
-    let dof = fit.robot.dof();
-    let views = views_of_rows(rows, width, dof, fit.camera)
-        .expect("the harness built the camera inputs from valid cameras");
-    let mut rendered = Vec::with_capacity(truth.len());
-    for (run, camera) in views {
-        let angles: Vec<Vec<f64>> = run
-            .map(|i| {
-                rows[i * width..i * width + dof]
-                    .iter()
-                    .map(|&v| v as f64)
-                    .collect()
-            })
-            .collect();
-        let r = render_all(
-            field,
-            fit.robot,
-            &camera,
-            &angles,
-            cfg,
-            Some(&cfg.accelerated),
-            fit.device,
-            "validation",
-        );
-        rendered.extend(r.predictions.silhouettes);
-    }
-    mean_psnr(&rendered, truth, fit.camera.width * fit.camera.height)
-}
-
-/// One point of the validation curve (`validation.csv`).
-#[derive(serde::Serialize)]
-struct ValidationRow {
-    step: usize,
-    /// Mean PSNR of the held-out images (accelerated marcher).
-    psnr_db_held_out: f64,
-    /// Mean training loss since the previous point.
-    train_loss: f64,
-    kept: bool,
-}
-
-/// `validation.csv` and `validation_curve.png` in `dir`: the held-out PSNR along training,
-/// the kept step marked in the CSV.
-fn write_validation_curve(dir: &Path, name: &str, curve: &ConvergenceLog) -> Result<()> {
-    let rows: Vec<ValidationRow> = curve
-        .curve
-        .iter()
-        .map(|p| ValidationRow {
-            step: p.epoch,
-            psnr_db_held_out: -p.validation,
-            train_loss: p.train_loss,
-            kept: p.epoch == curve.best_epoch,
-        })
-        .collect();
-    write_table(
-        &dir.join("validation.csv"),
-        &rows,
-        &format!("{name}: PSNR on the held-out training images along training"),
-        "Rendered by the accelerated marcher; `kept`: the step whose weights the run keeps (the best).",
-    )?;
-    let points = rows.iter().map(|r| (r.step, r.psnr_db_held_out)).collect();
-    crate::report::figures::curves(
-        &dir.join("validation_curve.png"),
-        &format!(
-            "{name}: held-out PSNR (best kept: step {})",
-            curve.best_epoch
-        ),
-        "step",
-        "PSNR on held-out training images (dB)",
-        &[(name.to_string(), points)],
-    )
-}
-
-/// A trained field: the weights kept, the training log, the restarts after collapse, the
-/// network evaluations per step, and with [`Ffksm::validation`] the validation curve and the
-/// number of training images held out for it.
-struct TrainedField {
-    field: OccupancyField,
-    log: TrainLog,
-    restarts: usize,
-    evaluations_per_step: f64,
-    validation: Option<(ConvergenceLog, usize)>,
-}
-
-/// Train the field, restarting with a fresh model on collapse when the config asks for it.
-fn train_field(cfg: &Ffksm, name: &str, fit: &Fit, hand_written: bool) -> Result<TrainedField> {
-    let (plan, device, train) = (fit.plan, fit.device, fit.train);
-    // With validation, the training set's last images are held out (on the host) and the
-    // rest trains.
-    let n = fit.train_set.len();
-    let held = cfg.validation.as_ref().map(|v| v.count(n));
-    let fitted;
-    let train_set = match held {
-        Some(k) => {
-            fitted = TrainSet {
-                inputs: fit.train_set.inputs.clone().slice([0..n - k]),
-                targets: fit
-                    .train_set
-                    .targets
-                    .iter()
-                    .map(|t| t.clone().slice([0..n - k]))
-                    .collect(),
-            };
-            &fitted
-        }
-        None => fit.train_set,
-    };
-    let host = |t: Tensor<2>| -> Vec<f32> {
-        t.into_data()
-            .convert::<f32>()
-            .try_to_vec::<f32>()
-            .expect("float")
-    };
-    let held_out = held.map(|k| {
-        let width = fit.train_set.inputs.dims()[1];
-        let rows = host(fit.train_set.inputs.clone().slice([n - k..n]));
-        let truth = fit.train_set.targets[0]
-            .clone()
-            .slice([n - k..n])
-            .flatten::<2>(1, 3);
-        (rows, width, host(truth))
-    });
+    hand_written: bool,
+) -> Result<(OccupancyField, TrainLog, usize, f64)> {
+    let (train_set, plan, device, train) = (fit.train_set, fit.plan, fit.device, fit.train);
     let camera = cfg.field_camera(fit.camera);
     let (h, w) = (camera.height, camera.width);
     let all: Vec<usize> = (0..h * w).collect();
@@ -930,32 +771,13 @@ fn train_field(cfg: &Ffksm, name: &str, fit: &Fit, hand_written: bool) -> Result
         } else {
             format!("{name} (restart {restarts})")
         };
-        let watch = Watch(watch);
-        let trainer = Trainer::new(train, &label).checkpoint(Some(plan));
-        let trained = match (&held_out, &cfg.validation) {
-            (Some((rows, width, truth)), Some(v)) => {
-                let validate =
-                    |m: &OccupancyField| -held_out_psnr(&m.valid(), cfg, fit, rows, *width, truth);
-                let keep = Converging::every_steps(&label, v.every, train.learning_rate, validate);
-                let mut hooks = Both(watch, keep);
-                trainer
-                    .hooks(&mut hooks)
-                    .fit(field, train_set, loss)
-                    .map(|(last, log)| {
-                        let (best, curve) = hooks.1.finish(last);
-                        (best, log, Some((curve, rows.len() / width.max(&1))))
-                    })
-            }
-            _ => {
-                let mut hooks = watch;
-                trainer
-                    .hooks(&mut hooks)
-                    .fit(field, train_set, loss)
-                    .map(|(last, log)| (last, log, None))
-            }
-        };
-        match trained {
-            Ok((field, log, validation)) => {
+        let mut watch = Watch(watch);
+        match Trainer::new(train, &label)
+            .checkpoint(Some(plan))
+            .hooks(&mut watch)
+            .fit(field, train_set, loss)
+        {
+            Ok((field, log)) => {
                 let counts = [train_evaluations.get(), train_steps.get()];
                 if plan.dir.is_dir() {
                     write_json(&counts_path, &counts)?;
@@ -969,13 +791,7 @@ fn train_field(cfg: &Ffksm, name: &str, fit: &Fit, hand_written: bool) -> Result
                     }
                     TrainMarcher::Skipping => counts[0] as f64 / counts[1].max(1) as f64,
                 };
-                return Ok(TrainedField {
-                    field: field.valid(),
-                    log,
-                    restarts,
-                    evaluations_per_step: per_step,
-                    validation,
-                });
+                return Ok((field.valid(), log, restarts, per_step));
             }
             Err(Error::Collapsed { step }) => {
                 let max = cfg.restart.as_ref().map_or(0, |r| r.max_restarts);
@@ -1034,13 +850,7 @@ impl SelfModel for Ffksm {
         let this = &this;
         let hand_written = this.dense_gradients == DenseGradients::HandWrittenOnCpu
             && matches!(fit.device_choice, DeviceChoice::Cpu | DeviceChoice::Ndarray);
-        let TrainedField {
-            field,
-            log,
-            restarts,
-            evaluations_per_step: train_evals,
-            validation,
-        } = train_field(this, fit.label, fit, hand_written)?;
+        let (field, log, restarts, train_evals) = train_field(this, fit.label, fit, hand_written)?;
         let mut note = marched.into_iter().collect::<Vec<_>>();
         note.push(format!(
             "trained with {} marching, {train_evals:.0} evaluations per step",
@@ -1052,15 +862,6 @@ impl SelfModel for Ffksm {
         ));
         if restarts > 0 {
             note.push(format!("{restarts} restarts after collapse"));
-        }
-        if let Some((curve, held)) = &validation {
-            note.push(format!(
-                "the weights of step {} of {} kept: the best mean PSNR ({:.2} dB, accelerated marcher) on the last {held} training images, held out (the other {} trained)",
-                curve.best_epoch,
-                fit.train.steps,
-                -curve.best_validation,
-                fit.train_set.len() - held
-            ));
         }
         if this
             .restart
@@ -1076,7 +877,6 @@ impl SelfModel for Ffksm {
             robot: fit.robot.clone(),
             device: fit.device.clone(),
             stats: Default::default(),
-            validation: validation.map(|(curve, _)| curve),
         });
         let renderer = |accelerated: Option<AcceleratedConfig>, label: &str| -> Box<dyn Render> {
             Box::new(FfksmRenderer {
@@ -1202,8 +1002,6 @@ struct FfksmShared {
     device: Device,
     /// Per renderer label: the images rendered so far (the test set first).
     stats: RefCell<BTreeMap<String, Rendered>>,
-    /// With [`Ffksm::validation`]: the held-out images' PSNR (negated) along training.
-    validation: Option<ConvergenceLog>,
 }
 
 /// One of a trained field's renderers (dense marching, or the accelerated marcher).
@@ -1304,16 +1102,10 @@ impl Render for FfksmRenderer {
     /// `renderers.csv` (both marchers, and the accelerated one without early termination)
     /// and the novel views (`novel_views.csv`, `novel_views.png`).
     fn extra_reports(&self, ctx: &ReportContext) -> Result<()> {
-        if self.accelerated.is_none() {
+        if self.accelerated.is_none() || !self.shared.model.reference_renderers {
             return Ok(());
         }
         let s = &self.shared;
-        if let Some(curve) = &s.validation {
-            write_validation_curve(ctx.dir, ctx.name, curve)?;
-        }
-        if !s.model.reference_renderers {
-            return Ok(());
-        }
         let (truth, truth_depth) = ctx.truth;
         let pixels = s.camera.width * s.camera.height;
         let n = ctx.test.len();

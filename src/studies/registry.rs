@@ -75,16 +75,7 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
             .is_papers_arm();
     let runs: Vec<_> = FfksmVariant::of_run(&opts.preset, papers_arm)
         .iter()
-        .map(|&(sub, variant)| {
-            let mut run = ffksm_run(&opts.preset, variant)?;
-            // Beyond the papers' arm (no paper schedule to reproduce), the step kept is the
-            // one that validates best; the `short` preset's few hundred steps keep their last.
-            if !papers_arm && opts.preset != "short" {
-                run.model.validation =
-                    Some(crate::self_models::ffksm::HeldOut::preset(&opts.preset));
-            }
-            Ok((sub, opts.apply(run)?))
-        })
+        .map(|&(sub, variant)| Ok((sub, opts.apply(ffksm_run(&opts.preset, variant)?)?)))
         .collect::<Result<_>>()?;
     for (sub, cfg) in &runs {
         crate::self_models::harness::check_resumable(cfg, &dir.join(sub), opts.resume)?;

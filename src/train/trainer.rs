@@ -628,8 +628,7 @@ impl Convergence {
 /// One evaluation of a run trained to convergence.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ValidationPoint {
-    /// Epochs (or, for an iterative learner, iterations; for [`Converging::every_steps`],
-    /// steps) done.
+    /// Epochs (or, for an iterative learner, iterations) done.
     pub epoch: usize,
     pub learning_rate: f64,
     /// Mean training loss over the epoch.
@@ -744,16 +743,12 @@ impl ConvergenceLog {
     }
 }
 
-/// The hooks of a run to convergence: [`train_to_convergence`] validates after every epoch;
-/// [`Converging::every_steps`] every so many steps of a loop that keeps its own schedule.
-pub struct Converging<M, V> {
+/// The hooks of a run to convergence.
+struct Converging<M, V> {
     label: String,
     validate: V,
     rule: Plateau,
     steps_per_epoch: usize,
-    /// Whether the curve and the best counts steps (validation every `steps_per_epoch`
-    /// steps) rather than epochs.
-    counts_steps: bool,
     best: Option<M>,
     log: ConvergenceLog,
     losses: (f64, usize),
@@ -836,93 +831,6 @@ impl<M, V> Converging<M, V> {
     fn seconds(&self) -> f64 {
         self.earlier_seconds + self.started.elapsed().as_secs_f64()
     }
-
-    /// Hooks for a loop with its own schedule (its step count, its learning rate): every
-    /// `every` steps `validate` scores the model (lower is better) and the best model is
-    /// kept, with its weights beside each checkpoint; the curve's points and the best count
-    /// steps. Nothing stops the run or changes its rate (`learning_rate`, the loop's, is
-    /// recorded with each point). [`Converging::finish`] gives the best model.
-    pub fn every_steps(label: &str, every: usize, learning_rate: f64, validate: V) -> Self {
-        let keep_best = Convergence {
-            max_epochs: usize::MAX,
-            patience: usize::MAX,
-            lr_patience: usize::MAX,
-            lr_factor: 1.0,
-            min_improvement: 0.0,
-            min_epochs: 0,
-        };
-        Converging {
-            label: label.to_string(),
-            validate,
-            rule: Plateau::new(&keep_best),
-            steps_per_epoch: every.max(1),
-            counts_steps: true,
-            best: None,
-            log: ConvergenceLog::default(),
-            losses: (0.0, 0),
-            stop: false,
-            base_rate: learning_rate,
-            started: Instant::now(),
-            earlier_seconds: 0.0,
-            best_file: BestFile::default(),
-        }
-    }
-
-    /// The best model (`last` if no validation was taken) and the validation curve.
-    pub fn finish(self, last: M) -> (M, ConvergenceLog) {
-        let mut log = self.log.clone();
-        log.seconds = self.seconds();
-        (self.best.unwrap_or(last), log)
-    }
-}
-
-/// Two sets of hooks in one: every call goes to both, `self.0` first; the learning rate is
-/// `self.1`'s of `self.0`'s; training stops when either says so.
-pub struct Both<A, B>(pub A, pub B);
-
-impl<M, A: TrainHooks<M>, B: TrainHooks<M>> TrainHooks<M> for Both<A, B> {
-    fn gradients(&mut self, model: &M, grads: &GradientsParams, step: usize) {
-        self.0.gradients(model, grads, step);
-        self.1.gradients(model, grads, step);
-    }
-    fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
-        let (model, a) = self.0.after_step(model, step)?;
-        let (model, b) = self.1.after_step(model, step)?;
-        Ok((model, a || b))
-    }
-    fn loss(&mut self, value: f64, step: usize) {
-        self.0.loss(value, step);
-        self.1.loss(value, step);
-    }
-    fn learning_rate(&self, base: f64) -> f64 {
-        self.1.learning_rate(self.0.learning_rate(base))
-    }
-    fn stop(&self) -> bool {
-        self.0.stop() || self.1.stop()
-    }
-    fn save_state(&mut self, dir: &Path) -> Result<serde_json::Value> {
-        Ok(serde_json::json!([
-            self.0.save_state(dir)?,
-            self.1.save_state(dir)?
-        ]))
-    }
-    fn load_state(&mut self, dir: &Path, state: serde_json::Value, model: &M) -> Result<()> {
-        let (a, b) = match state {
-            serde_json::Value::Array(mut v) if v.len() == 2 => {
-                let b = v.pop().expect("two");
-                (v.pop().expect("two"), b)
-            }
-            _ => {
-                return Err(unreadable_checkpoint(
-                    &dir.join("state.json"),
-                    dir,
-                    "the hooks' state is not a pair",
-                ));
-            }
-        };
-        self.0.load_state(dir, a, model)?;
-        self.1.load_state(dir, b, model)
-    }
 }
 
 impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
@@ -966,11 +874,7 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         if step % self.steps_per_epoch != 0 {
             return Ok((model, false));
         }
-        let epoch = if self.counts_steps {
-            step
-        } else {
-            step / self.steps_per_epoch
-        };
+        let epoch = step / self.steps_per_epoch;
         let learning_rate = self.base_rate * self.rule.scale;
         let score = (self.validate)(&model);
         let (improved, stop) = self.rule.observe(score);
@@ -993,9 +897,8 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         // Without a terminal (a run in the background) the bar is hidden: a line per epoch.
         if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
             eprintln!(
-                "{}: {} {epoch}, validation {score:.4}{}, best {:.4} at {}, lr {learning_rate:.2e}, {:.0} s",
+                "{}: epoch {epoch}, validation {score:.4}{}, best {:.4} at {}, lr {learning_rate:.2e}, {:.0} s",
                 self.label,
-                if self.counts_steps { "step" } else { "epoch" },
                 if improved { " (best)" } else { "" },
                 self.log.best_validation,
                 self.log.best_epoch,
@@ -1076,7 +979,6 @@ where
         validate,
         rule: Plateau::new(conv),
         steps_per_epoch,
-        counts_steps: false,
         best: None,
         log: ConvergenceLog::default(),
         losses: (0.0, 0),
