@@ -230,6 +230,11 @@ pub struct ExperimentArgs {
     /// Train for this many steps instead of the preset's (the results say so).
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Self-models: train on the first N poses of a longer trajectory instead of the preset's
+    /// (paper: 1,600); the test poses are the preset's count (400) that follow them (the
+    /// results say so).
+    #[arg(long, value_name = "N", conflicts_with = "dataset")]
+    pub train_samples: Option<usize>,
     /// The robot: the arm of the inverse-kinematics experiments (emssl_*) [default: ur5], or
     /// the robot a self-model (neurokin, resneurokin_d, ...) learns [default: arm4].
     #[arg(long, value_enum)]
@@ -313,12 +318,18 @@ impl ExperimentArgs {
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
+        if self.train_samples == Some(0) {
+            return Err(crate::Error::Config(
+                "--train-samples must be at least 1".into(),
+            ));
+        }
         let opts = crate::studies::registry::RunOptions {
             preset,
             device: self.device,
             paper_compatible: self.paper_compatible,
             resume: self.resume,
             steps: self.steps,
+            train_samples: self.train_samples,
             reuse_root: self.reuse.then(|| PathBuf::from(".")),
             robot: self.robot,
             urdf: self.urdf.clone(),

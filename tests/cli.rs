@@ -113,6 +113,15 @@ fn switches_that_do_not_apply_fail_cleanly() {
     assert_clean_failure(&out, &["--steps", "emssl_table2"], d);
     let out = run(env!("CARGO_BIN_EXE_emssl_learning_curve"), &["--resume"]);
     assert_clean_failure(&out, &["--resume", "emssl_learning_curve"], d);
+    // --train-samples sizes a self-model's data: not inverse kinematics', nor the data-scale
+    // ablation's (it sets its own sizes).
+    let out = run(env!("CARGO_BIN_EXE_emssl_table2"), &["--train-samples", "50"]);
+    assert_clean_failure(&out, &["--train-samples", "emssl_table2"], d);
+    let out = run(
+        env!("CARGO_BIN_EXE_ablation_data_scale"),
+        &["--train-samples", "50"],
+    );
+    assert_clean_failure(&out, &["--train-samples", "ablation_data_scale"], d);
     // mesh_fidelity compares the papers' arm with its meshes: it has no --robot.
     let out = run(env!("CARGO_BIN_EXE_mesh_fidelity"), &["--robot", "ur5"]);
     assert!(!out.status.success());
@@ -847,4 +856,30 @@ fn table1_resumed_reads_the_models_it_finished_and_trains_nothing() {
     );
     let left = checkpoints(dir.path());
     assert!(left.is_empty(), "trained again: {left:?}");
+}
+
+/// `--train-samples N` trains on the first N poses of a longer trajectory and tests on the
+/// preset's number of poses after them; the config and the row say so.
+#[test]
+fn train_samples_lengthens_the_trajectory_and_keeps_the_test_count() {
+    let dir = common::tempdir();
+    let out_dir = dir.path().join("out");
+    let out = Command::new(env!("CARGO_BIN_EXE_mean_silhouette"))
+        .args(["--preset", "quick", "--train-samples", "150", "--out"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let config: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("config.json")).unwrap())
+            .unwrap();
+    let data = &config["data"]["dataset"];
+    let preset = selfmodel::self_models::neurokin::neurokin_run("quick").unwrap();
+    let test = preset.data.dataset.samples - preset.data.dataset.train;
+    assert_ne!(preset.data.dataset.train, 150);
+    assert_eq!(data["train"], 150);
+    assert_eq!(data["samples"], 150 + test as u64);
+    let rows = selfmodel::self_models::result::read_results(&out_dir.join("results.csv")).unwrap();
+    assert_eq!(rows[0].train_samples, 150);
+    assert!(rows[0].note.contains("first 150 samples"), "{}", rows[0].note);
 }

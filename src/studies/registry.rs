@@ -160,6 +160,11 @@ fn run_ablation_latent(opts: &RunOptions, dir: &Path) -> Result<String> {
     ablation(Ablation::Latent, opts, dir)
 }
 fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if opts.train_samples.is_some() {
+        return Err(crate::Error::Config(
+            "--train-samples does not apply to ablation_data_scale: it sets its own sizes (400, 2,000 and 12,000 samples)".into(),
+        ));
+    }
     ablation(Ablation::DataScale, opts, dir)
 }
 
@@ -170,6 +175,7 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         (opts.paper_compatible, "--paper-compatible"),
         (opts.resume, "--resume"),
         (opts.steps.is_some(), "--steps"),
+        (opts.train_samples.is_some(), "--train-samples"),
         (
             opts.camera != crate::studies::run::CameraChoice::default(),
             "--eye, --target, --fov, --size and --view",

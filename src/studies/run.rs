@@ -22,6 +22,9 @@ pub struct RunOptions {
     pub resume: bool,
     /// Override the training steps (a shortened run says so in its results).
     pub steps: Option<usize>,
+    /// Train the self-models on the first N poses of a longer trajectory, tested on the
+    /// preset's number of poses after them (`--train-samples`).
+    pub train_samples: Option<usize>,
     /// Where experiments may already have written their results (`reproduce`'s root): `table1`
     /// gathers rows found there, of the same preset, dataset and steps, instead of training
     /// the same models a second time.
@@ -54,6 +57,7 @@ impl RunOptions {
             paper_compatible: false,
             resume: false,
             steps: None,
+            train_samples: None,
             reuse_root: None,
             robot: None,
             urdf: None,
@@ -141,6 +145,23 @@ impl RunOptions {
             cfg.reference = Default::default();
         }
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
+        if let Some(n) = self.train_samples {
+            let d = &mut cfg.data.dataset;
+            if n != d.train {
+                let msg = format!(
+                    "trained on the first {n} samples of a {}-sample trajectory instead of the preset's {}",
+                    n + d.samples - d.train,
+                    d.train
+                );
+                d.samples = n + d.samples - d.train;
+                d.train = n;
+                cfg.note = if cfg.note.is_empty() {
+                    msg
+                } else {
+                    format!("{}; {msg}", cfg.note)
+                };
+            }
+        }
         Ok(cfg)
     }
 

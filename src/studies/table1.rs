@@ -127,6 +127,7 @@ fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResul
                 Some(s) => r.train_steps == s,
                 None => r.steps_override.is_none(),
             }
+            && opts.train_samples.is_none_or(|n| r.train_samples == n)
     };
     let rows = read_results(path)?;
     Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
