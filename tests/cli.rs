@@ -115,7 +115,10 @@ fn switches_that_do_not_apply_fail_cleanly() {
     assert_clean_failure(&out, &["--resume", "emssl_learning_curve"], d);
     // --train-samples sizes a self-model's data: not inverse kinematics', nor the data-scale
     // ablation's (it sets its own sizes).
-    let out = run(env!("CARGO_BIN_EXE_emssl_table2"), &["--train-samples", "50"]);
+    let out = run(
+        env!("CARGO_BIN_EXE_emssl_table2"),
+        &["--train-samples", "50"],
+    );
     assert_clean_failure(&out, &["--train-samples", "emssl_table2"], d);
     let out = run(
         env!("CARGO_BIN_EXE_ablation_data_scale"),
@@ -869,7 +872,11 @@ fn train_samples_lengthens_the_trajectory_and_keeps_the_test_count() {
         .arg(&out_dir)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("config.json")).unwrap())
             .unwrap();
@@ -881,5 +888,9 @@ fn train_samples_lengthens_the_trajectory_and_keeps_the_test_count() {
     assert_eq!(data["samples"], 150 + test as u64);
     let rows = selfmodel::self_models::result::read_results(&out_dir.join("results.csv")).unwrap();
     assert_eq!(rows[0].train_samples, 150);
-    assert!(rows[0].note.contains("first 150 samples"), "{}", rows[0].note);
+    assert!(
+        rows[0].note.contains("first 150 samples"),
+        "{}",
+        rows[0].note
+    );
 }

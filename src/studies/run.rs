@@ -145,22 +145,15 @@ impl RunOptions {
             cfg.reference = Default::default();
         }
         cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
-        if let Some(n) = self.train_samples {
+        if let Some(n) = self.train_samples.filter(|&n| n != cfg.data.dataset.train) {
             let d = &mut cfg.data.dataset;
-            if n != d.train {
-                let msg = format!(
-                    "trained on the first {n} samples of a {}-sample trajectory instead of the preset's {}",
-                    n + d.samples - d.train,
-                    d.train
-                );
-                d.samples = n + d.samples - d.train;
-                d.train = n;
-                cfg.note = if cfg.note.is_empty() {
-                    msg
-                } else {
-                    format!("{}; {msg}", cfg.note)
-                };
-            }
+            let samples = n + d.samples - d.train;
+            let msg = format!(
+                "trained on the first {n} samples of a {samples}-sample trajectory instead of the preset's {}",
+                d.train
+            );
+            (d.samples, d.train) = (samples, n);
+            add_note(&mut cfg.note, msg);
         }
         Ok(cfg)
     }
@@ -168,15 +161,19 @@ impl RunOptions {
     /// `--steps N`: set `steps` and say so in `note`; returns the override, if any.
     fn override_steps(&self, steps: &mut usize, note: &mut String) -> Option<usize> {
         let new = self.steps.filter(|s| s != steps)?;
-        let msg = format!("{new} steps instead of the preset's {steps}");
-        *note = if note.is_empty() {
-            msg
-        } else {
-            format!("{note}; {msg}")
-        };
+        add_note(note, format!("{new} steps instead of the preset's {steps}"));
         *steps = new;
         Some(new)
     }
+}
+
+/// Append `msg` to a run's note, `; `-separated.
+fn add_note(note: &mut String, msg: String) {
+    *note = if note.is_empty() {
+        msg
+    } else {
+        format!("{note}; {msg}")
+    };
 }
 
 /// The camera options of the binaries that render: a fixed camera (`--eye`, `--target`) or
