@@ -56,11 +56,7 @@ fn dataset_quick_writes_all_files() {
     let dir = common::tempdir();
     let npz = dir.path().join("q.npz");
     let out = dataset(&["--preset", "quick", "--out", npz.to_str().unwrap()]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::assert_ok(&out);
     for f in ["q.npz", "q.stats.json", "q.config.json", "q.preview.png"] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
@@ -174,11 +170,7 @@ fn render_recorded_poses_from_csv() {
         "--out",
         npz.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::assert_ok(&out);
     let d = selfmodel::data::dataset::Dataset::load(&npz).unwrap();
     assert_eq!(d.angles[1], vec![30.0, -20.0, 45.0, 10.0]);
     assert_ne!(d.image(0), d.image(1));
@@ -472,7 +464,7 @@ fn an_output_folder_in_use_is_refused_and_a_stale_lock_is_taken_over() {
     holder.kill().unwrap();
     holder.wait().unwrap();
     let o = run();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::assert_ok(&o);
     assert!(out.join("results.csv").exists());
     assert!(!out.join(".lock").exists(), "the lock outlived the run");
 }
@@ -643,7 +635,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         ])
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::assert_ok(&o);
     let rows: Vec<selfmodel::studies::bench_ik::BenchIkRow> =
         selfmodel::report::table::read_csv(&bench.join("results.csv")).unwrap();
     assert!(
@@ -825,11 +817,7 @@ fn table1_resumed_reads_the_models_it_finished_and_trains_nothing() {
             .unwrap()
     };
     let first = run(false);
-    assert!(
-        first.status.success(),
-        "{}",
-        String::from_utf8_lossy(&first.stderr)
-    );
+    common::assert_ok(&first);
     let table = std::fs::read(dir.path().join("results.csv")).unwrap();
     fn checkpoints(d: &std::path::Path) -> Vec<std::path::PathBuf> {
         let mut found = Vec::new();
@@ -872,11 +860,7 @@ fn train_samples_lengthens_the_trajectory_and_keeps_the_test_count() {
         .arg(&out_dir)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::assert_ok(&out);
     let config: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out_dir.join("config.json")).unwrap())
             .unwrap();

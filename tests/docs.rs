@@ -1,6 +1,8 @@
 //! The README, docs/ and every generated `results.md` equal what `reports` writes from the
 //! checked-in CSVs and `docs/src/` (run `cargo run --release --bin reports` after a change).
 
+mod common;
+
 use std::path::Path;
 
 use selfmodel::studies::docs::{generate, render, stale};
@@ -129,11 +131,7 @@ fn every_default_output_is_under_the_git_ignored_runs_folder() {
         .current_dir(&cwd)
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::assert_ok(&out);
     let top: Vec<String> = std::fs::read_dir(&cwd)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())

@@ -247,3 +247,12 @@ pub fn write_arm(
     std::fs::write(&path, arm_urdf(joints, gripper)).unwrap();
     path
 }
+
+/// Asserts that a finished command succeeded, showing its stderr when it did not.
+pub fn assert_ok(out: &std::process::Output) {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
