@@ -384,6 +384,11 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
     }
 }
 
+/// How many poses a preset trains on (the paper's: 1,600).
+pub fn preset_train_samples(preset: &str) -> Result<usize> {
+    Ok(preset_parts(preset)?.0.dataset.train)
+}
+
 fn preset_parts(preset: &str) -> Result<(DataSpec, SpeedConfig)> {
     match preset {
         "paper" => Ok((DataSpec::paper(), SpeedConfig::paper())),

@@ -26,7 +26,7 @@ pub struct RunOptions {
     /// preset's number of poses after them (`--train-samples`).
     pub train_samples: Option<usize>,
     /// Where experiments may already have written their results (`reproduce`'s root): `table1`
-    /// gathers rows found there, of the same preset, dataset and steps, instead of training
+    /// gathers rows found there, of the same preset, dataset, steps and training poses, instead of training
     /// the same models a second time.
     pub reuse_root: Option<std::path::PathBuf>,
     /// The robot (`--robot`, `--urdf`, `--arm4-scene`): the arm of the inverse-kinematics

@@ -12,6 +12,7 @@ use std::path::Path;
 
 use crate::core::error::Result;
 use crate::report::figures::pareto_plot;
+use crate::self_models::harness::preset_train_samples;
 use crate::self_models::result::{ModelResult, pareto_floors, pareto_points, read_results};
 use crate::sim::robots::BuiltinRobot;
 use crate::studies::run::{Experiment, RunOptions, write_rows};
@@ -79,8 +80,7 @@ pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<
 }
 
 /// The rows under `opts.reuse_root/default_dir/results.csv`, if that file exists and every row
-/// has this run's preset, dataset and step count (`--steps N`: N steps; none: the preset's,
-/// so a shortened run is never taken for a full one). Without that file (an experiment of
+/// matches this run (see `finished_rows`). Without that file (an experiment of
 /// several models still running, FFKSM's paper preset), the matching rows of its models'
 /// own `default_dir/*/results.csv`, if any: Table I then holds the models that are done.
 fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<ModelResult>>> {
@@ -109,12 +109,17 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
 }
 
 /// The rows of the table at `path`, if it exists, has rows, and every row has this run's
-/// preset, dataset and step count (`--steps N`: N steps; none: the preset's, so a shortened
-/// run is never taken for a full one).
+/// preset, dataset, step count and training-sample count (`--steps N`, `--train-samples N`:
+/// N; none: the preset's, so a shortened run, or one on more poses, is never taken for the
+/// preset's).
 fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResult>>> {
     if !path.is_file() {
         return Ok(None);
     }
+    let train_samples = match opts.train_samples {
+        Some(n) => n,
+        None => preset_train_samples(&opts.preset)?,
+    };
     let dataset = if opts.paper_compatible {
         "paper_compatible"
     } else {
@@ -127,8 +132,28 @@ fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResul
                 Some(s) => r.train_steps == s,
                 None => r.steps_override.is_none(),
             }
-            && opts.train_samples.is_none_or(|n| r.train_samples == n)
+            && r.train_samples == train_samples
     };
     let rows = read_results(path)?;
     Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A row trained on more poses (`--train-samples`) is gathered only by a run that asks
+    /// for as many, and a run that asks for none takes only the preset's.
+    #[test]
+    fn finished_rows_match_the_training_poses() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("reports/robots/panda");
+        let preset_rows = root.join("table1/neurokin/results.csv");
+        let more_rows = root.join("table1_9600/neurokin/results.csv");
+        let mut opts = RunOptions::preset("paper");
+        assert!(finished_rows(&opts, &preset_rows).unwrap().is_some());
+        assert!(finished_rows(&opts, &more_rows).unwrap().is_none());
+        opts.train_samples = Some(9600);
+        assert!(finished_rows(&opts, &more_rows).unwrap().is_some());
+        assert!(finished_rows(&opts, &preset_rows).unwrap().is_none());
+    }
 }
