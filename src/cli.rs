@@ -230,6 +230,12 @@ pub struct ExperimentArgs {
     /// Train for this many steps instead of the preset's (the results say so).
     #[arg(long)]
     pub steps: Option<usize>,
+    /// Self-models: images per training batch instead of the preset's (paper: 32 for NeuroKin);
+    /// the learning rate is scaled by sqrt(B / preset's batch) and the steps by preset's batch /
+    /// B, so the run covers the same epochs (`--steps` still sets the steps). For GPUs, whose
+    /// throughput grows with the batch.
+    #[arg(long, value_name = "B", conflicts_with = "reuse")]
+    pub batch: Option<usize>,
     /// Self-models: train on the first N poses of a longer trajectory instead of the preset's
     /// (paper: 1,600); the test poses are the preset's count (400) that follow them (the
     /// results say so).
@@ -318,6 +324,9 @@ impl ExperimentArgs {
         if self.steps == Some(0) {
             return Err(crate::Error::Config("--steps must be at least 1".into()));
         }
+        if self.batch == Some(0) {
+            return Err(crate::Error::Config("--batch must be at least 1".into()));
+        }
         if self.train_samples == Some(0) {
             return Err(crate::Error::Config(
                 "--train-samples must be at least 1".into(),
@@ -329,6 +338,7 @@ impl ExperimentArgs {
             paper_compatible: self.paper_compatible,
             resume: self.resume,
             steps: self.steps,
+            batch: self.batch,
             train_samples: self.train_samples,
             reuse_root: self.reuse.then(|| PathBuf::from(".")),
             robot: self.robot,

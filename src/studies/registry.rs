@@ -175,6 +175,7 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         (opts.paper_compatible, "--paper-compatible"),
         (opts.resume, "--resume"),
         (opts.steps.is_some(), "--steps"),
+        (opts.batch.is_some(), "--batch"),
         (opts.train_samples.is_some(), "--train-samples"),
         (
             opts.camera != crate::studies::run::CameraChoice::default(),

@@ -22,6 +22,9 @@ pub struct RunOptions {
     pub resume: bool,
     /// Override the training steps (a shortened run says so in its results).
     pub steps: Option<usize>,
+    /// Self-models: images per training batch instead of the preset's (`--batch`), with the
+    /// learning rate and steps rescaled ([`RunOptions::apply`]).
+    pub batch: Option<usize>,
     /// Train the self-models on the first N poses of a longer trajectory, tested on the
     /// preset's number of poses after them (`--train-samples`).
     pub train_samples: Option<usize>,
@@ -57,6 +60,7 @@ impl RunOptions {
             paper_compatible: false,
             resume: false,
             steps: None,
+            batch: None,
             train_samples: None,
             reuse_root: None,
             robot: None,
@@ -144,7 +148,10 @@ impl RunOptions {
         if !cfg.data.robot.is_papers_arm() || self.dataset.is_some() {
             cfg.reference = Default::default();
         }
-        cfg.steps_override = self.override_steps(&mut cfg.train.steps, &mut cfg.note);
+        let rebatched = self.override_batch(&mut cfg.train, &mut cfg.note);
+        cfg.steps_override = self
+            .override_steps(&mut cfg.train.steps, &mut cfg.note)
+            .or(rebatched);
         if let Some(n) = self.train_samples.filter(|&n| n != cfg.data.dataset.train) {
             let d = &mut cfg.data.dataset;
             let samples = n + d.samples - d.train;
@@ -156,6 +163,34 @@ impl RunOptions {
             add_note(&mut cfg.note, msg);
         }
         Ok(cfg)
+    }
+
+    /// `--batch B`: train on batches of B images instead of the preset's b. The rule (Adam's
+    /// square-root scaling, Malladi et al. 2022, "On the SDEs and Scaling Rules for Adaptive
+    /// Gradient Algorithms"): the learning rate times sqrt(B / b), and the steps times b / B
+    /// (rounded up), so the run sees the same number of epochs. `--steps` still sets the steps
+    /// outright. Schedules a model counts in steps of its own (FFKSM's curriculum, K-3DGS's
+    /// densification interval) are not rescaled. Says so in `note`; returns the new step
+    /// count, if the batch changed.
+    fn override_batch(
+        &self,
+        train: &mut crate::train::trainer::TrainConfig,
+        note: &mut String,
+    ) -> Option<usize> {
+        let new = self.batch.filter(|&b| b != train.batch)?;
+        let old = train.batch;
+        let ratio = new as f64 / old as f64;
+        train.learning_rate *= ratio.sqrt();
+        train.steps = ((train.steps as f64 / ratio).ceil() as usize).max(1);
+        train.batch = new;
+        add_note(
+            note,
+            format!(
+                "batch {new} instead of the preset's {old}: learning rate x sqrt({new}/{old}) = {:.3e}, {} steps (the same epochs)",
+                train.learning_rate, train.steps
+            ),
+        );
+        Some(train.steps)
     }
 
     /// `--steps N`: set `steps` and say so in `note`; returns the override, if any.

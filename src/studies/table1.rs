@@ -133,6 +133,7 @@ fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResul
                 None => r.steps_override.is_none(),
             }
             && r.train_samples == train_samples
+            && opts.batch.is_none_or(|b| r.batch == b)
     };
     let rows = read_results(path)?;
     Ok((!rows.is_empty() && rows.iter().all(matches)).then_some(rows))

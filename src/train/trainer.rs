@@ -249,8 +249,14 @@ impl CheckpointPlan {
 }
 
 /// Scale all gradients so their global L2 norm is at most `max_norm` (PyTorch's
-/// `clip_grad_norm_`). Returns the norm before clipping.
-pub fn clip_global_norm<M: Module>(model: &M, grads: &mut GradientsParams, max_norm: f32) -> f32 {
+/// `clip_grad_norm_`), on the device: the norm is never read to the host, so a step that
+/// clips waits for nothing. A non-finite norm leaves the gradients as they are (the loss
+/// check stops such a run). Returns the norm before clipping, as a one-element tensor.
+pub fn clip_global_norm<M: Module>(
+    model: &M,
+    grads: &mut GradientsParams,
+    max_norm: f32,
+) -> Option<Tensor<1>> {
     struct SquaredNorm<'a> {
         grads: &'a GradientsParams,
         sum: Option<Tensor<1>>,
@@ -268,7 +274,7 @@ pub fn clip_global_norm<M: Module>(model: &M, grads: &mut GradientsParams, max_n
     }
     struct Scale<'a> {
         grads: &'a mut GradientsParams,
-        scale: f32,
+        scale: Tensor<1>,
         ids: Vec<ParamId>,
     }
     impl ModuleVisitor for Scale<'_> {
@@ -277,34 +283,53 @@ pub fn clip_global_norm<M: Module>(model: &M, grads: &mut GradientsParams, max_n
                 return;
             }
             if let Some(g) = self.grads.remove::<D>(param.id) {
-                self.grads.register(param.id, g.mul_scalar(self.scale));
+                let scale = self.scale.clone().reshape([1usize; D]);
+                self.grads.register(param.id, g * scale);
                 self.ids.push(param.id);
             }
         }
     }
     let mut v = SquaredNorm { grads, sum: None };
     model.visit(&mut v);
-    let Some(sum) = v.sum else { return 0.0 };
-    let norm = sum.into_scalar::<f32>().sqrt();
-    if norm.is_finite() && norm > max_norm {
-        let mut s = Scale {
-            grads,
-            scale: max_norm / (norm + 1e-6),
-            ids: Vec::new(),
-        };
-        model.visit(&mut s);
-    }
-    norm
+    let norm = v.sum?.sqrt();
+    // max / (norm + 1e-6) where the norm is finite and above max, else 1: the same f32
+    // arithmetic the host did when it read the norm.
+    let clip = norm
+        .clone()
+        .is_finite()
+        .bool_and(norm.clone().greater_elem(max_norm));
+    let ratio = norm.zeros_like().add_scalar(max_norm) / norm.clone().add_scalar(1e-6f32);
+    let scale = norm.ones_like().mask_where(clip, ratio);
+    let mut s = Scale {
+        grads,
+        scale,
+        ids: Vec::new(),
+    };
+    model.visit(&mut s);
+    Some(norm)
 }
 
 /// Draws batches: epoch permutations seeded by `(seed, epoch)`, noise by `(seed, step)`.
+///
+/// What a batch needs from the host is uploaded once per epoch, not once per step: the
+/// epoch's permutation as one index tensor, and the epoch's input noise (each step's rows
+/// drawn from that step's own seed, as before, so the numbers are the same) as one tensor.
+/// A step then only slices them on the device.
 pub struct Batcher<'a> {
     data: &'a TrainSet,
     batch: usize,
     seed: u64,
     noise: f64,
-    /// The permutation of the epoch last asked for (drawn once per epoch, not per batch).
-    epoch_order: std::cell::RefCell<Option<(usize, Vec<usize>)>>,
+    /// The epoch last asked for: its permutation, on the host and on the device, and its
+    /// noise rows on the device (drawn once per epoch, not per batch).
+    epoch: std::cell::RefCell<Option<EpochDraw>>,
+}
+
+struct EpochDraw {
+    epoch: usize,
+    perm: Vec<usize>,
+    index: Tensor<1, burn::tensor::Int>,
+    noise: Option<Tensor<2>>,
 }
 
 impl<'a> Batcher<'a> {
@@ -314,7 +339,7 @@ impl<'a> Batcher<'a> {
             batch: cfg.batch.min(data.len()).max(1),
             seed: cfg.seed,
             noise: cfg.input_noise,
-            epoch_order: std::cell::RefCell::new(None),
+            epoch: std::cell::RefCell::new(None),
         }
     }
 
@@ -322,44 +347,76 @@ impl<'a> Batcher<'a> {
         self.data.len().div_ceil(self.batch)
     }
 
-    /// The indices of batch `step` (0-based).
-    pub fn indices(&self, step: usize) -> Vec<usize> {
-        let spe = self.steps_per_epoch();
-        let (epoch, k) = (step / spe, step % spe);
-        let mut cached = self.epoch_order.borrow_mut();
-        if cached.as_ref().is_none_or(|(e, _)| *e != epoch) {
-            let mut perm: Vec<usize> = (0..self.data.len()).collect();
+    /// The input noise of step `step`'s `n` rows: seeded by `(seed, step)`.
+    fn step_noise(&self, step: usize, n: usize, dof: usize, out: &mut Vec<f32>) {
+        let mut rng = StdRng::seed_from_u64(
+            self.seed.wrapping_add(1) ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
+        );
+        let normal = Normal::new(0.0, self.noise).expect("noise sigma is finite");
+        out.extend((0..n * dof).map(|_| normal.sample(&mut rng) as f32));
+    }
+
+    /// Draw epoch `epoch` if it is not the one held: its permutation, uploaded once, and
+    /// the noise of all its steps, uploaded once.
+    fn draw_epoch(&self, epoch: usize) -> std::cell::RefMut<'_, EpochDraw> {
+        let mut held = self.epoch.borrow_mut();
+        if held.as_ref().is_none_or(|e| e.epoch != epoch) {
+            let n = self.data.len();
+            let mut perm: Vec<usize> = (0..n).collect();
             let mut rng = StdRng::seed_from_u64(
                 self.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
             perm.shuffle(&mut rng);
-            *cached = Some((epoch, perm));
+            let device = self.data.inputs.device();
+            let index = Tensor::<1, burn::tensor::Int>::from_data(
+                TensorData::new(perm.iter().map(|&i| i as i64).collect::<Vec<_>>(), [n]),
+                &device,
+            );
+            let noise = (self.noise > 0.0).then(|| {
+                let dof = self.data.inputs.dims()[1];
+                let spe = self.steps_per_epoch();
+                let mut rows = Vec::with_capacity(n * dof);
+                for k in 0..spe {
+                    let rows_k = ((k + 1) * self.batch).min(n) - k * self.batch;
+                    self.step_noise(epoch * spe + k, rows_k, dof, &mut rows);
+                }
+                Tensor::<2>::from_data(TensorData::new(rows, [n, dof]), &device)
+            });
+            *held = Some(EpochDraw {
+                epoch,
+                perm,
+                index,
+                noise,
+            });
         }
-        let perm = &cached.as_ref().expect("just drawn").1;
-        let end = ((k + 1) * self.batch).min(perm.len());
-        perm[k * self.batch..end].to_vec()
+        std::cell::RefMut::map(held, |h| h.as_mut().expect("just drawn"))
     }
 
-    /// Batch `step` on the data's device.
+    /// The rows of batch `step` (0-based) within its epoch's permutation.
+    fn rows(&self, step: usize) -> (usize, std::ops::Range<usize>) {
+        let spe = self.steps_per_epoch();
+        let (epoch, k) = (step / spe, step % spe);
+        (
+            epoch,
+            k * self.batch..((k + 1) * self.batch).min(self.data.len()),
+        )
+    }
+
+    /// The indices of batch `step` (0-based).
+    pub fn indices(&self, step: usize) -> Vec<usize> {
+        let (epoch, rows) = self.rows(step);
+        self.draw_epoch(epoch).perm[rows].to_vec()
+    }
+
+    /// Batch `step` on the data's device: slices of the epoch's index and noise tensors, so
+    /// nothing crosses from the host within an epoch.
     pub fn batch(&self, step: usize) -> Batch {
-        let idx = self.indices(step);
-        let device = self.data.inputs.device();
-        let n = idx.len();
-        let index = Tensor::<1, burn::tensor::Int>::from_data(
-            TensorData::new(idx.iter().map(|&i| i as i64).collect::<Vec<_>>(), [n]),
-            &device,
-        );
+        let (epoch, rows) = self.rows(step);
+        let draw = self.draw_epoch(epoch);
+        let index = draw.index.clone().slice(rows.clone());
         let mut inputs = self.data.inputs.clone().select(0, index.clone());
-        if self.noise > 0.0 {
-            let dof = inputs.dims()[1];
-            let mut rng = StdRng::seed_from_u64(
-                self.seed.wrapping_add(1) ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
-            );
-            let normal = Normal::new(0.0, self.noise).expect("noise sigma is finite");
-            let noise: Vec<f32> = (0..n * dof)
-                .map(|_| normal.sample(&mut rng) as f32)
-                .collect();
-            inputs = inputs + Tensor::from_data(TensorData::new(noise, [n, dof]), &device);
+        if let Some(noise) = &draw.noise {
+            inputs = inputs + noise.clone().slice(rows);
         }
         let targets = self
             .data
@@ -394,20 +451,70 @@ impl From<Tensor<1>> for StepLoss {
 }
 
 impl StepLoss {
-    /// The loss (synchronises the device for a graph).
-    fn value(&self) -> f64 {
-        match self {
-            StepLoss::Graph(l) => l.clone().into_scalar::<f32>() as f64,
-            StepLoss::Computed { value, .. } => *value,
-        }
-    }
-
     /// The gradients of `model`'s parameters.
     fn gradients<M: Module>(self, model: &M) -> GradientsParams {
         match self {
             StepLoss::Graph(l) => GradientsParams::from_grads(l.backward(), model),
             StepLoss::Computed { gradients, .. } => gradients,
         }
+    }
+}
+
+/// The losses of the steps since they were last read: a graph's value stays on the device
+/// (without its graph) until [`PendingLosses::read`] reads them all at once, so a training
+/// step waits for nothing on a GPU.
+#[derive(Default)]
+struct PendingLosses {
+    /// `(step, value)`: on the device, or already on the host (a loss computed by hand).
+    steps: Vec<(usize, PendingLoss)>,
+}
+
+enum PendingLoss {
+    Device(Tensor<1>),
+    Host(f64),
+}
+
+impl PendingLosses {
+    fn push(&mut self, step: usize, loss: &StepLoss) {
+        self.steps.push((
+            step,
+            match loss {
+                StepLoss::Graph(l) => PendingLoss::Device(l.clone().without_autodiff()),
+                StepLoss::Computed { value, .. } => PendingLoss::Host(*value),
+            },
+        ));
+    }
+
+    /// Every pending `(step, loss)`, in step order, with one read of the device.
+    fn read(&mut self) -> Vec<(usize, f64)> {
+        let steps = std::mem::take(&mut self.steps);
+        let on_device: Vec<Tensor<1>> = steps
+            .iter()
+            .filter_map(|(_, l)| match l {
+                PendingLoss::Device(t) => Some(t.clone().reshape([1])),
+                PendingLoss::Host(_) => None,
+            })
+            .collect();
+        let mut read = if on_device.is_empty() {
+            Vec::new()
+        } else {
+            Tensor::cat(on_device, 0)
+                .into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .expect("a float tensor reads as f32")
+        }
+        .into_iter();
+        steps
+            .into_iter()
+            .map(|(step, l)| {
+                let value = match l {
+                    PendingLoss::Device(_) => read.next().expect("one value per loss") as f64,
+                    PendingLoss::Host(v) => v,
+                };
+                (step, value)
+            })
+            .collect()
     }
 }
 
@@ -560,8 +667,15 @@ pub trait TrainHooks<M> {
     fn after_step(&mut self, model: M, _step: usize) -> Result<(M, bool)> {
         Ok((model, false))
     }
-    /// Sees each step's loss (before the step is taken).
+    /// Sees each step's loss, in step order. The losses are read from the device in groups
+    /// (at log intervals, before checkpoints, and after any step where
+    /// [`TrainHooks::wants_losses`] says so), so this comes after the step was taken.
     fn loss(&mut self, _value: f64, _step: usize) {}
+    /// Whether every loss up to step `steps_done` must have reached [`TrainHooks::loss`]
+    /// before [`TrainHooks::after_step`] is called for it (a read of the device).
+    fn wants_losses(&self, _steps_done: usize) -> bool {
+        false
+    }
     /// The learning rate of the next step, given the config's (a schedule).
     fn learning_rate(&self, base: f64) -> f64 {
         base
@@ -838,6 +952,9 @@ impl<M: Module, V: FnMut(&M) -> f64> TrainHooks<M> for Converging<M, V> {
         self.losses.0 += value;
         self.losses.1 += 1;
     }
+    fn wants_losses(&self, steps_done: usize) -> bool {
+        steps_done % self.steps_per_epoch == 0
+    }
     fn learning_rate(&self, base: f64) -> f64 {
         base * self.rule.scale
     }
@@ -1044,6 +1161,7 @@ where
     };
     bar.set_position(log.step as u64);
     bar.reset_eta();
+    let mut losses = PendingLosses::default();
     let mut window = (0.0f64, 0usize);
     while log.step < cfg.steps && !hooks.stop() {
         let step = log.step;
@@ -1051,21 +1169,7 @@ where
         let batch = batcher.batch(step);
         let n = batch.inputs.dims()[0];
         let step_loss: StepLoss = loss(&model, &batch).into();
-        let value = step_loss.value();
-        if !value.is_finite() {
-            bar.abandon();
-            let kept = match checkpoint {
-                Some(plan) if plan.state_path().exists() => {
-                    format!("the last good checkpoint is in {}", plan.dir.display())
-                }
-                _ => "no checkpoint was saved".to_string(),
-            };
-            return Err(Error::Training(format!(
-                "{label}: the loss became {value} at step {}; {kept}; lower the learning rate or check the data",
-                step + 1
-            )));
-        }
-        hooks.loss(value, step);
+        losses.push(step, &step_loss);
         let mut grads = step_loss.gradients(&model);
         if let Some(max) = cfg.grad_clip_norm {
             clip_global_norm(&model, &mut grads, max);
@@ -1075,13 +1179,47 @@ where
         log.train_seconds += t0.elapsed().as_secs_f64();
         log.images += n;
         log.step += 1;
-        window.0 += value;
-        window.1 += 1;
-        if log.step % log_every == 0 || log.step == cfg.steps {
-            let mean = window.0 / window.1 as f64;
-            log.curve.push((log.step, mean));
-            bar.set_message(format!("loss {mean:.4}"));
-            window = (0.0, 0);
+        let interrupted = crate::core::interrupt::requested();
+        let save = checkpoint.is_some()
+            && (interrupted
+                || cfg.checkpoint_every > 0
+                    && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps));
+        // The losses are read where a person looks at them (log intervals), where a hook
+        // needs them, and before a checkpoint is written: one read for all the steps since
+        // the last, which also waits for the device (its time counts as training time).
+        if log.step % log_every == 0
+            || log.step == cfg.steps
+            || save
+            || interrupted
+            || hooks.wants_losses(log.step)
+        {
+            let t1 = Instant::now();
+            let values = losses.read();
+            log.train_seconds += t1.elapsed().as_secs_f64();
+            for (at, value) in values {
+                if !value.is_finite() {
+                    bar.abandon();
+                    let kept = match checkpoint {
+                        Some(plan) if plan.state_path().exists() => {
+                            format!("the last good checkpoint is in {}", plan.dir.display())
+                        }
+                        _ => "no checkpoint was saved".to_string(),
+                    };
+                    return Err(Error::Training(format!(
+                        "{label}: the loss became {value} at step {}; {kept}; lower the learning rate or check the data",
+                        at + 1
+                    )));
+                }
+                hooks.loss(value, at);
+                window.0 += value;
+                window.1 += 1;
+                if (at + 1) % log_every == 0 || at + 1 == cfg.steps {
+                    let mean = window.0 / window.1 as f64;
+                    log.curve.push((at + 1, mean));
+                    bar.set_message(format!("loss {mean:.4}"));
+                    window = (0.0, 0);
+                }
+            }
         }
         bar.inc(1);
         // Without a terminal (a run in the background, CI) the bar is hidden: a line every 5%.
@@ -1110,11 +1248,8 @@ where
                 return Err(e);
             }
         }
-        let interrupted = crate::core::interrupt::requested();
         if let Some(plan) = checkpoint
-            && (interrupted
-                || cfg.checkpoint_every > 0
-                    && (log.step % cfg.checkpoint_every == 0 || log.step == cfg.steps))
+            && save
         {
             plan.save(&model, &optim, &log, hooks)?;
         }
