@@ -2,6 +2,8 @@
 //! inference speed (warm-up, synchronised, median of repeats) and the machine's compute peak.
 
 pub mod compute_peak;
+#[cfg(feature = "wgpu")]
+pub mod device_counts;
 pub mod evaluation;
 pub mod inference_speed;
 pub mod metrics;

@@ -37,6 +37,7 @@ fn cfg(steps: usize) -> TrainConfig {
         input_noise: 0.01,
         seed: 7,
         checkpoint_every: 5,
+        log_every: 0,
     }
 }
 

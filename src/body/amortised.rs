@@ -52,6 +52,7 @@ impl AmortisedConfig {
                 input_noise: 0.0,
                 seed: 0,
                 checkpoint_every: 0,
+                log_every: 0,
             },
         }
     }

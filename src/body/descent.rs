@@ -63,6 +63,7 @@ pub fn descend<M: Module>(
         input_noise: 0.0,
         seed: 0,
         checkpoint_every: 0,
+        log_every: 0,
     };
     let mut schedule = Schedule::cosine(steps);
     let (fitted, _) = Trainer::new(&train, label)

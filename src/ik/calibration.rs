@@ -195,6 +195,7 @@ pub fn calibrate(
             input_noise: 0.0,
             seed: cfg.seed,
             checkpoint_every: 0,
+            log_every: 0,
         };
         let label = format!("link parameters, stage {}", i + 1);
         (model, optim, _) = Trainer::new(&train, &label)

@@ -102,6 +102,7 @@ impl FitConfig {
             input_noise: 0.0,
             seed: self.seed,
             checkpoint_every: 0,
+            log_every: 0,
         }
     }
 }

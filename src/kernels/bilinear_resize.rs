@@ -127,19 +127,42 @@ pub fn resize_matrix(input: usize, output: usize) -> Vec<f32> {
 
 /// Bilinear resize of `[batch, channels, h, w]` to `size` as two matrix products
 /// (`R_h · x · R_wᵀ`): any backend, differentiable wherever matmul is (burn's GPU backends
-/// have no backward for bilinear `interpolate`). Tested against the CPU kernel.
+/// have no backward for bilinear `interpolate`). Tested against the CPU kernel. The two
+/// matrices are built and uploaded once per device and shape ([`resize_matrices`]), not at
+/// every call.
 pub fn resize_matmul(x: burn::tensor::Tensor<4>, size: [usize; 2]) -> burn::tensor::Tensor<4> {
-    use burn::tensor::{Tensor, TensorData};
     let [b, c, h, w] = x.dims();
-    let device = x.device();
-    let rw: Tensor<2> = Tensor::from_data(
+    let (rh, rw_t) = resize_matrices(&x.device(), [h, w], size);
+    let rows = x.matmul(rw_t.unsqueeze::<4>().expand([b, c, w, size[1]]));
+    rh.unsqueeze::<4>().expand([b, c, size[0], h]).matmul(rows)
+}
+
+/// `R_h` (`[size[0], h]`) and `R_wᵀ` (`[w, size[1]]`) on `device`, made once per device and
+/// shape and kept for the process (a decoder resizes between the same shapes at every step).
+fn resize_matrices(
+    device: &burn::tensor::Device,
+    input: [usize; 2],
+    size: [usize; 2],
+) -> (burn::tensor::Tensor<2>, burn::tensor::Tensor<2>) {
+    use burn::tensor::{Tensor, TensorData};
+    type Key = (burn::tensor::Device, [usize; 2], [usize; 2]);
+    static CACHE: std::sync::Mutex<Vec<(Key, Tensor<2>, Tensor<2>)>> =
+        std::sync::Mutex::new(Vec::new());
+    let key = (device.clone(), input, size);
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, rh, rw_t)) = cache.iter().find(|(k, _, _)| *k == key) {
+        return (rh.clone(), rw_t.clone());
+    }
+    let [h, w] = input;
+    let rw_t: Tensor<2> = Tensor::<2>::from_data(
         TensorData::new(resize_matrix(w, size[1]), [size[1], w]),
-        &device,
-    );
+        device,
+    )
+    .transpose();
     let rh: Tensor<2> = Tensor::from_data(
         TensorData::new(resize_matrix(h, size[0]), [size[0], h]),
-        &device,
+        device,
     );
-    let rows = x.matmul(rw.transpose().unsqueeze::<4>().expand([b, c, w, size[1]]));
-    rh.unsqueeze::<4>().expand([b, c, size[0], h]).matmul(rows)
+    cache.push((key, rh.clone(), rw_t.clone()));
+    (rh, rw_t)
 }

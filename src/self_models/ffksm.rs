@@ -260,6 +260,7 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
         input_noise: 0.0,
         seed: 0,
         checkpoint_every: if quick { 100 } else { 250 },
+        log_every: 0,
     };
     // Rendering is per image: timed at batch 1 (median of 3 after one warm-up image).
     run.speed = SpeedConfig {
@@ -644,21 +645,27 @@ fn train_field(
     };
     let train_evaluations = std::cell::Cell::new(earlier[0]);
     let train_steps = std::cell::Cell::new(earlier[1]);
+    // The training set on the host, read once: a step finds its image's angles, camera and
+    // pixels here (the batch's indices) rather than reading its batch back from the device.
+    // FFKSM trains without input noise, so these are the batch's inputs.
+    debug_assert_eq!(train.input_noise, 0.0);
+    let host = |t: Tensor<2>| {
+        t.into_data()
+            .convert::<f32>()
+            .try_into_vec::<f32>()
+            .expect("float")
+    };
+    let host_inputs = host(train_set.inputs.clone());
+    let columns = train_set.inputs.dims()[1];
+    let host_targets = host(train_set.targets[0].clone().flatten::<2>(1, 3));
+    let pixels_per_image = host_targets.len() / train_set.len().max(1);
     loop {
         let seed = train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(fit.train_device, seed)?;
         let loss = |m: &OccupancyField, b: &crate::train::trainer::Batch| {
-            let a = b
-                .inputs
-                .clone()
-                .into_data()
-                .try_into_vec::<f32>()
-                .expect("float");
-            let truth = b.targets[0]
-                .clone()
-                .into_data()
-                .try_into_vec::<f32>()
-                .expect("float");
+            let i = b.indices[0];
+            let a = &host_inputs[i * columns..(i + 1) * columns];
+            let truth = &host_targets[i * pixels_per_image..(i + 1) * pixels_per_image];
             let drawn: Vec<usize>;
             let pixels = if b.step < cfg.curriculum.steps {
                 &crop
@@ -676,7 +683,7 @@ fn train_field(
             let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
             let jitter = train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
             // One image per step: its joint angles, then (multi-view data) its camera.
-            let own = views_of_rows(&a, a.len(), dof, fit.camera)
+            let own = views_of_rows(a, a.len(), dof, fit.camera)
                 .expect("the harness built the camera inputs from valid cameras")
                 .remove(0)
                 .1;

@@ -371,6 +371,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
             input_noise: 0.01,
             seed: 0,
             checkpoint_every: 50,
+            log_every: 0,
         },
         _ => TrainConfig {
             steps: 3000,
@@ -380,6 +381,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
             input_noise: 0.01,
             seed: 0,
             checkpoint_every: 250,
+            log_every: 0,
         },
     }
 }

@@ -22,6 +22,7 @@ use burn::module::Module;
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 
+use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
@@ -72,11 +73,43 @@ pub struct K3dgs {
     pub robot_weight: f64,
     /// Splat only pairs within this many standard deviations (the fast path).
     pub cull_sigmas: f64,
+    /// How training splats: culled or dense ([`TrainSplatting`]).
+    #[serde(default, skip_serializing_if = "TrainSplatting::is_auto")]
+    pub train_splatting: TrainSplatting,
     /// Batch sizes at which dense splatting, the slow reference, is timed.
     #[serde(default)]
     pub dense_batches: Vec<usize>,
     /// Output image size `[height, width]`.
     pub image: [usize; 2],
+}
+
+/// How K-3DGS splats while it trains. The culled path finds each Gaussian's pixels on the
+/// host (a read of the projected Gaussians at every step); the dense path evaluates every
+/// (Gaussian, pixel) pair on the device and reads nothing back, which a GPU does faster than
+/// it waits for a read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainSplatting {
+    /// Culled on the CPU backends, dense on a GPU.
+    #[default]
+    Auto,
+    Culled,
+    Dense,
+}
+
+impl TrainSplatting {
+    fn is_auto(&self) -> bool {
+        *self == TrainSplatting::Auto
+    }
+
+    /// The culling of training on `device` (`None`: dense).
+    pub fn cull(self, cull_sigmas: f64, device: DeviceChoice) -> Option<f64> {
+        match self {
+            TrainSplatting::Culled => Some(cull_sigmas),
+            TrainSplatting::Dense => None,
+            TrainSplatting::Auto => (device != DeviceChoice::Wgpu).then_some(cull_sigmas),
+        }
+    }
 }
 
 /// The three K-3DGS models of Table I.
@@ -147,6 +180,7 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
         },
         robot_weight: 5.0,
         cull_sigmas: 3.0,
+        train_splatting: TrainSplatting::Auto,
         // A dense batch of 256 takes about a minute: timed in the paper preset only.
         dense_batches: match preset {
             "paper" | "large" => vec![1, 256],
@@ -182,6 +216,7 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
         input_noise: 0.0,
         seed: 0,
         checkpoint_every: 0,
+        log_every: 0,
     };
     if preset == "short" {
         run.note = "short preset: 300 steps instead of 3,000 (CPU time budget)".into();
@@ -210,21 +245,44 @@ struct Densifier<'a> {
     /// Sum of positional gradient norms per Gaussian since the last change, and the steps.
     grad_sum: Vec<f64>,
     steps: usize,
+    /// The steps' gradient norms not yet added to `grad_sum`: kept on the device and read
+    /// in one go when densification needs them, not at every step.
+    pending: Vec<Tensor<1>>,
     counts: Vec<(usize, usize)>,
 }
 
+impl Densifier<'_> {
+    /// Add the pending norms to `grad_sum`, step by step in f64 (one read of the device).
+    fn gather(&mut self) {
+        if self.pending.is_empty() {
+            return;
+        }
+        let n = self.grad_sum.len();
+        let rows = Tensor::stack::<2>(std::mem::take(&mut self.pending), 0)
+            .into_data()
+            .try_into_vec::<f32>()
+            .expect("float");
+        for step in rows.chunks(n) {
+            for (s, v) in self.grad_sum.iter_mut().zip(step) {
+                *s += *v as f64;
+            }
+        }
+    }
+}
+
 impl TrainHooks<KinematicGaussians> for Densifier<'_> {
-    fn gradients(&mut self, model: &KinematicGaussians, grads: &GradientsParams, _step: usize) {
+    fn gradients(&mut self, model: &KinematicGaussians, grads: &GradientsParams, step: usize) {
         let n = model.len();
         if self.grad_sum.len() != n {
             self.grad_sum = vec![0.0; n];
+            self.pending.clear();
             self.steps = 0;
         }
-        if let Some(g) = grads.get::<2>(model.positions.id) {
-            let norms = g.square().sum_dim(1).sqrt().into_data();
-            for (s, v) in self.grad_sum.iter_mut().zip(norms.iter::<f32>()) {
-                *s += v as f64;
-            }
+        // Past the last densification nothing reads them.
+        if step < self.cfg.until
+            && let Some(g) = grads.get::<2>(model.positions.id)
+        {
+            self.pending.push(g.square().sum_dim(1).sqrt().reshape([n]));
         }
         self.steps += 1;
     }
@@ -248,6 +306,9 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
             .expect("float");
         let n = model.len();
         let mut keep: Vec<usize> = (0..n).collect();
+        if densify {
+            self.gather();
+        }
         if densify && self.steps > 0 && self.grad_sum.len() == n {
             let mut ranked: Vec<(f64, usize)> = self
                 .grad_sum
@@ -279,6 +340,7 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
         let m = keep.len();
         self.counts.push((step, m));
         self.grad_sum = vec![0.0; m];
+        self.pending.clear();
         self.steps = 0;
         Ok((rebuilt, true))
     }
@@ -341,10 +403,14 @@ impl SelfModel for K3dgs {
             cfg: &self.densification,
             grad_sum: Vec::new(),
             steps: 0,
+            pending: Vec::new(),
             counts: vec![(0, model.len())],
         };
         let pixels = camera.width * camera.height;
         let steps = fit.train.steps;
+        let cull = self
+            .train_splatting
+            .cull(self.cull_sigmas, fit.device_choice);
         let dof = robot.dof();
         let (model, log) = Trainer::new(fit.train, fit.label).hooks(&mut hooks).fit(
             model,
@@ -362,7 +428,7 @@ impl SelfModel for K3dgs {
                                 chain.from_user(angles),
                                 &view,
                                 self.mode_at(b.step, steps),
-                                Some(self.cull_sigmas),
+                                cull,
                             )
                             .0
                         })

@@ -728,6 +728,7 @@ fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<RecoveryRow>> {
         learning_rate: rc.learning_rate,
         seed,
         checkpoint_every: 0,
+        log_every: 0,
         ..r.model_run.train.clone()
     };
     // The healthy arm's test images, and the gate's view of the healthy arm.

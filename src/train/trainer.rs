@@ -41,6 +41,10 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Save a checkpoint every this many steps (and at the end); 0 disables checkpoints.
     pub checkpoint_every: usize,
+    /// Read the losses from the device (and log their mean) every this many steps; 0: every
+    /// `steps / 200` steps, at least 1 (the default; a saved config without it reads as 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub log_every: usize,
 }
 
 impl TrainConfig {
@@ -80,6 +84,10 @@ pub struct Batch {
     /// The step (0-based) this batch is drawn for: for schedules (curricula) and per-step
     /// random draws that must be the same after a resume.
     pub step: usize,
+    /// The samples of the training set in this batch, in its row order (on the host, so a
+    /// loss that needs a sample's values on the host can keep its own copy of the training
+    /// set instead of reading the batch back from the device).
+    pub indices: Vec<usize>,
 }
 
 /// Progress saved with a checkpoint, and the training curve of a finished run.
@@ -413,6 +421,7 @@ impl<'a> Batcher<'a> {
     pub fn batch(&self, step: usize) -> Batch {
         let (epoch, rows) = self.rows(step);
         let draw = self.draw_epoch(epoch);
+        let indices = draw.perm[rows.clone()].to_vec();
         let index = draw.index.clone().slice(rows.clone());
         let mut inputs = self.data.inputs.clone().select(0, index.clone());
         if let Some(noise) = &draw.noise {
@@ -428,6 +437,7 @@ impl<'a> Batcher<'a> {
             inputs,
             targets,
             step,
+            indices,
         }
     }
 }
@@ -1153,7 +1163,10 @@ where
         }
     }
     let batcher = Batcher::new(data, cfg);
-    let log_every = (cfg.steps / 200).max(1);
+    let log_every = match cfg.log_every {
+        0 => (cfg.steps / 200).max(1),
+        n => n,
+    };
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {
