@@ -29,7 +29,10 @@ impl TrainHooks<NeuroKin> for PerStep {
 
 #[test]
 fn a_neurokin_training_step_reads_nothing_back() {
-    assert!(device_counts::install(), "another tracing subscriber was installed first");
+    assert!(
+        device_counts::install(),
+        "another tracing subscriber was installed first"
+    );
     let device = select(DeviceChoice::Wgpu).expect("a wgpu adapter (lavapipe in CI)");
     let tdev = autodiff_device(&device, 7);
     let mut cfg = NeuroKinConfig::preset("quick").unwrap();

@@ -106,12 +106,7 @@ fn neurokin_trains_the_same_on_wgpu() {
 fn k3dgs_trains_the_same_on_wgpu() {
     let mut run = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha).unwrap();
     run.model.train_splatting = TrainSplatting::Dense;
-    same_on_both(
-        run,
-        6,
-        1e-3,
-        1e-3,
-    );
+    same_on_both(run, 6, 1e-3, 1e-3);
 }
 
 #[test]

@@ -22,11 +22,10 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::train::trainer::{Batch, Batcher, TrainConfig, TrainSet};
 
-/// The old weights and their Fisher information, per parameter (flattened, on the host: a
-/// constant tensor kept across steps would join every step's graph, and burn consumes a graph
-/// on the backward pass, so each penalty uploads them afresh).
+/// The old weights and their Fisher information, per parameter (flattened, on the device
+/// without autodiff: constants that join no step's graph, uploaded once).
 pub struct Ewc {
-    anchors: HashMap<ParamId, (TensorData, TensorData)>,
+    anchors: HashMap<ParamId, (Tensor<1>, Tensor<1>)>,
     /// The anchored model's device.
     device: burn::tensor::Device,
     pub lambda: f64,
@@ -76,7 +75,7 @@ impl Ewc {
         struct Anchor<'a> {
             fisher: &'a HashMap<ParamId, TensorData>,
             scale: f32,
-            out: HashMap<ParamId, (TensorData, TensorData)>,
+            out: HashMap<ParamId, (Tensor<1>, Tensor<1>)>,
             device: Option<burn::tensor::Device>,
         }
         impl ModuleVisitor for Anchor<'_> {
@@ -85,15 +84,17 @@ impl Ewc {
                     let w = param.val();
                     self.device.get_or_insert_with(|| w.device());
                     let n = w.shape().num_elements();
-                    let old = w.reshape([n]).into_data().convert::<f32>();
+                    let device = w.device();
+                    let old = w.reshape([n]).detach().without_autodiff();
                     let fisher: Vec<f32> = f
                         .try_to_vec::<f32>()
                         .expect("float")
                         .iter()
                         .map(|v| v * self.scale)
                         .collect();
-                    self.out
-                        .insert(param.id, (old, TensorData::new(fisher, [n])));
+                    let fisher = Tensor::<1>::from_data(TensorData::new(fisher, [n]), &device)
+                        .without_autodiff();
+                    self.out.insert(param.id, (old, fisher));
                 }
             }
         }
@@ -131,7 +132,7 @@ impl Ewc {
     /// the old weights.
     pub fn penalty<M: Module>(&self, model: &M) -> Tensor<1> {
         struct Sum<'a> {
-            anchors: &'a HashMap<ParamId, (TensorData, TensorData)>,
+            anchors: &'a HashMap<ParamId, (Tensor<1>, Tensor<1>)>,
             total: Option<Tensor<1>>,
         }
         impl ModuleVisitor for Sum<'_> {
@@ -139,11 +140,8 @@ impl Ewc {
                 if let Some((old, fisher)) = self.anchors.get(&param.id) {
                     let w = param.val();
                     let n = w.shape().num_elements();
-                    let device = w.device();
-                    let old = Tensor::<1>::from_data(old.clone(), &device);
-                    let fisher = Tensor::<1>::from_data(fisher.clone(), &device);
-                    let d = w.reshape([n]) - old;
-                    let term = (fisher * d.square()).sum();
+                    let d = w.reshape([n]) - old.clone();
+                    let term = (fisher.clone() * d.square()).sum();
                     self.total = Some(match self.total.take() {
                         Some(t) => t + term,
                         None => term,
