@@ -3,12 +3,12 @@
 //! `cargo run --release --bin bench_decoders -- --torch /tmp/torchref/bin/python`
 
 use std::path::PathBuf;
-use std::process::{Command, ExitCode};
+use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench_decoders::{attach_torch, run};
+use selfmodel::studies::bench_decoders::{attach_torch, console_table, run_batches, run_torch};
 
 /// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
 /// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
@@ -26,6 +26,10 @@ struct Args {
     /// Tiny models, for a smoke test.
     #[arg(long)]
     quick: bool,
+    /// Also the batches that fill a GPU: inference at 4,096, training at 1,024 (PyTorch's
+    /// script with --extra).
+    #[arg(long)]
+    fill: bool,
     /// Write the table here as CSV.
     #[arg(long, default_value = "runs/bench_decoders/results.csv")]
     out: PathBuf,
@@ -36,39 +40,13 @@ fn main() -> ExitCode {
     // The revision the run starts from, before it writes anything.
     selfmodel::cli::git_revision();
     run_main(|| {
-        let mut rows = run(args.device, args.quick)?;
+        let mut rows = run_batches(args.device, args.quick, args.fill)?;
         if let Some(py) = &args.torch {
-            let out = Command::new(py)
-                .arg(&args.torch_script)
-                .args(["--threads", &rayon::current_num_threads().to_string()])
-                .output()
-                .map_err(|e| selfmodel::Error::io(py, e))?;
-            if !out.status.success() {
-                return Err(selfmodel::Error::Config(format!(
-                    "{} failed: {}",
-                    args.torch_script.display(),
-                    String::from_utf8_lossy(&out.stderr)
-                        .lines()
-                        .last()
-                        .unwrap_or("")
-                )));
-            }
-            attach_torch(&mut rows, &String::from_utf8_lossy(&out.stdout));
+            let threads = rayon::current_num_threads();
+            let out = run_torch(py, &args.torch_script, threads, args.fill, None)?;
+            attach_torch(&mut rows, &out);
         }
-        println!(
-            "{:<11} {:<22} {:>10} {:>10} {:>8}",
-            "model", "figure", "selfmodel", "pytorch", "ratio"
-        );
-        for r in &rows {
-            let (t, ratio) = match r.torch {
-                Some(t) => (format!("{t:.1}"), format!("{:.2}x", r.ours / t)),
-                None => ("-".into(), "-".into()),
-            };
-            println!(
-                "{:<11} {:<22} {:>10.1} {:>10} {:>8}",
-                r.model, r.figure, r.ours, t, ratio
-            );
-        }
+        print!("{}", console_table(&rows));
         if let Some(dir) = args.out.parent() {
             std::fs::create_dir_all(dir).map_err(|e| selfmodel::Error::io(dir, e))?;
         }

@@ -15,7 +15,7 @@ use crate::train::losses::{bce_with_logits, mse};
 use crate::train::trainer::autodiff_device;
 
 /// One measured figure, named as torch_reference.py names it.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BenchRow {
     pub model: String,
     pub figure: String,
@@ -83,8 +83,15 @@ fn train_rate(
     Ok(batch as f64 / seconds)
 }
 
-/// Measure both NeuroKin architectures on `choice`.
+/// Measure both NeuroKin architectures on `choice` (the paper's batches; with `fill`, also
+/// inference at batch 4,096 and training at 1,024: batches that fill a GPU, as
+/// `torch_gpu_reference.py --extra` measures them).
 pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
+    run_batches(choice, quick, false)
+}
+
+/// [`run`], with the batches that fill a GPU when `fill`.
+pub fn run_batches(choice: DeviceChoice, quick: bool, fill: bool) -> Result<Vec<BenchRow>> {
     let device = &crate::core::device::select(choice)?;
     let speed = if quick {
         SpeedConfig::quick()
@@ -110,7 +117,11 @@ pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
             cfg.dof,
             device,
             &SpeedConfig {
-                batches: vec![1, 256],
+                batches: if fill {
+                    vec![1, 256, 4096]
+                } else {
+                    vec![1, 256]
+                },
                 ..speed.clone()
             },
         ) {
@@ -123,15 +134,72 @@ pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
             ));
         }
         let (w, r) = if quick { (1, 2) } else { (3, 10) };
-        rows.push(BenchRow::new(
-            name,
-            format!("train_b{batch}_img_per_s"),
-            train_rate(&cfg, batch, device, w, r)?,
-            quick,
-            choice,
-        ));
+        let batches = if fill { vec![batch, 1024] } else { vec![batch] };
+        for b in batches {
+            rows.push(BenchRow::new(
+                name,
+                format!("train_b{b}_img_per_s"),
+                train_rate(&cfg, b, device, w, r)?,
+                quick,
+                choice,
+            ));
+        }
     }
     Ok(rows)
+}
+
+/// Run a PyTorch reference script (`torch_reference.py` on the CPU, `torch_gpu_reference.py`
+/// on a GPU) with `python` at `threads` threads (`extra`: the batches that fill a GPU;
+/// `seconds`: how long it times each figure, else the script's default) and return its
+/// `model figure value` lines.
+pub fn run_torch(
+    python: &std::path::Path,
+    script: &std::path::Path,
+    threads: usize,
+    extra: bool,
+    seconds: Option<f64>,
+) -> Result<String> {
+    let mut command = std::process::Command::new(python);
+    command
+        .arg(script)
+        .args(["--threads", &threads.to_string()]);
+    if extra {
+        command.arg("--extra");
+    }
+    if let Some(s) = seconds {
+        command.args(["--seconds", &s.to_string()]);
+    }
+    let out = command.output().map_err(|e| crate::Error::io(python, e))?;
+    if !out.status.success() {
+        return Err(crate::Error::Config(format!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        )));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The rows as the console shows them: model, figure, ours, PyTorch's, ratio.
+pub fn console_table(rows: &[BenchRow]) -> String {
+    let mut text = format!(
+        "{:<11} {:<22} {:>10} {:>10} {:>8}\n",
+        "model", "figure", "selfmodel", "pytorch", "ratio"
+    );
+    for r in rows {
+        let (t, ratio) = match r.torch {
+            Some(t) => (format!("{t:.1}"), format!("{:.2}x", r.ours / t)),
+            None => ("-".into(), "-".into()),
+        };
+        text += &format!(
+            "{:<11} {:<22} {:>10.1} {:>10} {:>8}\n",
+            r.model, r.figure, r.ours, t, ratio
+        );
+    }
+    text
 }
 
 /// Fill the `torch` column from torch_reference.py's output lines (`model figure value`).

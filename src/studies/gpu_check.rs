@@ -1,0 +1,400 @@
+//! The GPU check: everything issue 48 measures on a GPU machine, in one binary and one run
+//! of a few minutes (a GPU machine here has no Rust toolchain: the binary is built on a CPU
+//! machine with `--features wgpu` and carried; `scripts/gpu_check.sh` packs and runs it).
+//!
+//! Parts, in order (`--parts` picks some):
+//! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU;
+//! - `decoders`: `bench_decoders` on the GPU at the paper's batches and at batches that fill
+//!   it, beside PyTorch on the same GPU (`torch_gpu_reference.py --extra`);
+//! - `neurokin`: `neurokin --preset paper --device wgpu` end to end at the paper's batch (32) and
+//!   at one that fills the GPU (`--batch 256`), with the quality each reaches;
+//! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
+//!   CPU threads of the same machine (the 5x target);
+//! - `equivalence`: NeuroKin, K-3DGS and FFKSM trained from the same seed on the CPU and the
+//!   GPU ([`crate::studies::device_equivalence`]);
+//! - `cpu`: `bench_decoders` on the CPU at each of `--threads`, beside PyTorch at as many
+//!   threads (`torch_reference.py --threads N`).
+//!
+//! Each part appends to `console.txt` and writes its CSV as it finishes, so a run stopped by
+//! the machine's time limit keeps what it measured.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::core::device::DeviceChoice;
+use crate::core::error::{Error, Result};
+use crate::report::table::write_csv;
+use crate::studies::bench_decoders::{
+    BenchRow, attach_torch, console_table, run_batches, run_torch,
+};
+use crate::studies::run::RunOptions;
+
+/// The parts of the check.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Part {
+    Counts,
+    Decoders,
+    Neurokin,
+    K3dgs,
+    Equivalence,
+    Cpu,
+}
+
+impl Part {
+    pub const ALL: [Part; 6] = [
+        Part::Counts,
+        Part::Decoders,
+        Part::Neurokin,
+        Part::K3dgs,
+        Part::Equivalence,
+        Part::Cpu,
+    ];
+}
+
+/// How to run the check.
+#[derive(Clone, Debug)]
+pub struct GpuCheck {
+    /// Where its output goes (`reports/gpu/<gpu name>`).
+    pub out: PathBuf,
+    /// A Python with torch (CUDA) installed, for PyTorch's side; none: ours only.
+    pub python: Option<PathBuf>,
+    /// The folder of `torch_reference.py` and `torch_gpu_reference.py`.
+    pub bench_dir: PathBuf,
+    /// CPU thread counts of the `cpu` part.
+    pub threads: Vec<usize>,
+    pub parts: Vec<Part>,
+    /// Tiny models and the quick presets: a smoke test of the check itself (lavapipe).
+    pub quick: bool,
+    /// This binary, run again for what needs its own thread count (`cpu`, K-3DGS on 2 CPU
+    /// threads): rayon's pool is sized once per process.
+    pub exe: PathBuf,
+}
+
+/// One line of the CPU sweep: a figure at a thread count.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct ThreadRow {
+    pub threads: usize,
+    pub model: String,
+    pub figure: String,
+    pub ours: f64,
+    pub torch: Option<f64>,
+    pub ratio: Option<f64>,
+    pub git_revision: String,
+}
+
+/// Kernel launches, host reads and uploads of one training step.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StepCounts {
+    pub model: String,
+    pub batch: usize,
+    pub launches_per_step: f64,
+    pub reads_per_step: f64,
+    pub uploads_per_step: f64,
+    pub steps: usize,
+    pub log_every: usize,
+}
+
+/// The check's console: printed, and kept in `console.txt` as it grows.
+struct Console {
+    path: PathBuf,
+    text: String,
+}
+
+impl Console {
+    fn say(&mut self, line: impl AsRef<str>) -> Result<()> {
+        let line = line.as_ref();
+        println!("{line}");
+        self.text += line;
+        self.text += "\n";
+        crate::core::atomic_file::write_bytes(&self.path, self.text.as_bytes())
+    }
+}
+
+/// Run the check's parts in order.
+pub fn run(check: &GpuCheck) -> Result<()> {
+    std::fs::create_dir_all(&check.out).map_err(|e| Error::io(&check.out, e))?;
+    let mut console = Console {
+        path: check.out.join("console.txt"),
+        text: String::new(),
+    };
+    let preset = if check.quick { "quick" } else { "paper" };
+    console.say(format!(
+        "gpu_check at {} ({preset}), CPU: {}",
+        crate::core::provenance::git_revision(),
+        crate::eval::compute_peak::machine_label(true)
+    ))?;
+    for &part in &check.parts {
+        let t0 = Instant::now();
+        console.say(format!("== {part:?}"))?;
+        let done = match part {
+            Part::Counts => counts(check, &mut console),
+            Part::Decoders => decoders(check, &mut console),
+            Part::Neurokin => neurokin(check, &mut console),
+            Part::K3dgs => k3dgs(check, &mut console),
+            Part::Equivalence => equivalence(check, &mut console),
+            Part::Cpu => cpu(check, &mut console),
+        };
+        // A part that fails is reported and the check goes on to the next.
+        if let Err(e) = done {
+            console.say(format!("{part:?} failed: {e}"))?;
+        }
+        console.say(format!("({part:?}: {:.0} s)", t0.elapsed().as_secs_f64()))?;
+    }
+    Ok(())
+}
+
+#[cfg(feature = "wgpu")]
+fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    use crate::core::preset::Preset;
+    use crate::eval::device_counts;
+    use crate::self_models::neurokin::NeuroKinConfig;
+    use crate::train::trainer::{TrainConfig, TrainSet, Trainer, Watch, autodiff_device};
+    use burn::tensor::{Distribution, Tensor};
+    if !device_counts::install() {
+        return Err(Error::Device(
+            "another tracing subscriber is installed".into(),
+        ));
+    }
+    let device = crate::core::device::select(DeviceChoice::Wgpu)?;
+    let tdev = autodiff_device(&device, 0);
+    let mut rows = Vec::new();
+    let mut cfg = NeuroKinConfig::preset(if check.quick { "quick" } else { "paper" })?;
+    cfg.dof = 4;
+    for batch in [32, 256] {
+        let n = 4 * batch;
+        let set = crate::core::device::with_seed(&tdev, 1, || TrainSet {
+            inputs: Tensor::<2>::random([n, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
+            targets: vec![Tensor::<4>::random(
+                [n, 1, cfg.image[0], cfg.image[1]],
+                Distribution::Bernoulli(0.1),
+                &tdev,
+            )],
+        });
+        let set = cfg.training_set(&set);
+        let (steps, log_every) = (24, 8);
+        let train = TrainConfig {
+            steps,
+            batch,
+            learning_rate: 1e-3,
+            grad_clip_norm: Some(1.0),
+            input_noise: 0.01,
+            seed: 0,
+            checkpoint_every: 0,
+            log_every,
+        };
+        // Counted from the end of the first epoch (kernels compiled and tuned by then).
+        let start = std::cell::RefCell::new(None);
+        let mut watch = Watch(|_: &crate::self_models::neurokin::NeuroKin, step: usize| {
+            if step == 4 {
+                *start.borrow_mut() = Some(device_counts::snapshot());
+            }
+            Ok(())
+        });
+        let model = cfg.init(&tdev, 0)?;
+        Trainer::new(&train, "counts")
+            .quiet()
+            .hooks(&mut watch)
+            .fit(model, &set, cfg.training_loss())?;
+        let _ = device.sync();
+        let c = device_counts::snapshot().since(&start.borrow().clone().unwrap_or_default());
+        let counted = (steps - 4) as f64;
+        let row = StepCounts {
+            model: "NeuroKin".into(),
+            batch,
+            launches_per_step: c.launches as f64 / counted,
+            reads_per_step: c.reads as f64 / counted,
+            uploads_per_step: c.uploads as f64 / counted,
+            steps: steps - 4,
+            log_every,
+        };
+        console.say(format!(
+            "NeuroKin training step, batch {batch}: {:.1} kernel launches, {:.3} host reads ({} in {} steps: the loss, every {log_every}), {:.2} uploads (the epoch's indices and noise)",
+            row.launches_per_step, row.reads_per_step, c.reads, row.steps, row.uploads_per_step
+        ))?;
+        let mut kernels: Vec<_> = c.kernels.into_iter().collect();
+        kernels.sort_by(|a, b| b.1.cmp(&a.1));
+        for (name, k) in kernels.iter().take(8) {
+            console.say(format!("  {:>6.1} x {name}", *k as f64 / counted))?;
+        }
+        rows.push(row);
+    }
+    write_csv(&check.out.join("counts.csv"), &rows)
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn counts(_: &GpuCheck, _: &mut Console) -> Result<()> {
+    Err(Error::Device(
+        "counting needs the wgpu feature (rebuild with --features wgpu)".into(),
+    ))
+}
+
+fn decoders(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, true)?;
+    if let Some(py) = &check.python {
+        let script = check.bench_dir.join("torch_gpu_reference.py");
+        attach_torch(&mut rows, &run_torch(py, &script, 0, true, None)?);
+    }
+    console.say(console_table(&rows))?;
+    write_csv(&check.out.join("decoders_gpu.csv"), &rows)
+}
+
+/// Run a registry experiment into `out/<leaf>` with `opts`, and say its summary.
+fn experiment(
+    name: &str,
+    opts: &RunOptions,
+    out: &Path,
+    leaf: &str,
+    console: &mut Console,
+) -> Result<()> {
+    let e = crate::studies::registry::find(name)?;
+    let dir = out.join(leaf);
+    let t0 = Instant::now();
+    let summary = e.run_in(opts, &dir)?;
+    console.say(format!(
+        "{name} {leaf}: {summary} ({:.0} s end to end)",
+        t0.elapsed().as_secs_f64()
+    ))
+}
+
+fn gpu_options(check: &GpuCheck) -> RunOptions {
+    let mut opts = RunOptions::preset(if check.quick { "quick" } else { "paper" });
+    opts.device = DeviceChoice::Wgpu;
+    opts
+}
+
+fn neurokin(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    let opts = gpu_options(check);
+    experiment("neurokin", &opts, &check.out, "neurokin_b32", console)?;
+    let big = RunOptions {
+        batch: Some(256),
+        ..opts
+    };
+    experiment("neurokin", &big, &check.out, "neurokin_b256", console)
+}
+
+fn k3dgs(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    experiment("k3dgs", &gpu_options(check), &check.out, "k3dgs", console)?;
+    // The isotropic model on 2 CPU threads of this machine, in a process of its own.
+    let t0 = Instant::now();
+    let out = child(check, "k3dgs-cpu", 2)?;
+    console.say(format!(
+        "K-3DGS (isotropic) on 2 CPU threads: {} ({:.0} s end to end)",
+        out.trim(),
+        t0.elapsed().as_secs_f64()
+    ))
+}
+
+/// K-3DGS (isotropic) on the CPU, in this process (run as a child with 2 threads).
+pub fn k3dgs_cpu(check: &GpuCheck) -> Result<String> {
+    use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+    let cfg = k3dgs_run(
+        if check.quick { "quick" } else { "paper" },
+        K3dgsVariant::Isotropic,
+    )?;
+    let dir = check.out.join("k3dgs_cpu_2threads");
+    let out = crate::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false)?;
+    Ok(format!(
+        "{:.2} dB, IoU {:.3}, trained in {:.1} s ({:.0} images/s)",
+        out.result.psnr_db_test,
+        out.result.iou_test,
+        out.result.train_time_s,
+        out.result.train_img_per_s
+    ))
+}
+
+fn equivalence(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
+    use crate::self_models::k3dgs::{K3dgsVariant, TrainSplatting, k3dgs_run};
+    use crate::self_models::neurokin::neurokin_run;
+    use crate::studies::device_equivalence::compare;
+    let dir = check.out.join("equivalence_runs");
+    let mut k3dgs = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha)?;
+    k3dgs.model.train_splatting = TrainSplatting::Dense;
+    let rows = vec![
+        compare(
+            neurokin_run("quick")?,
+            6,
+            DeviceChoice::Wgpu,
+            &dir.join("neurokin"),
+        )?,
+        compare(k3dgs, 6, DeviceChoice::Wgpu, &dir.join("k3dgs"))?,
+        compare(
+            ffksm_run("quick", FfksmVariant::Reimplementation)?,
+            6,
+            DeviceChoice::Wgpu,
+            &dir.join("ffksm"),
+        )?,
+    ];
+    for e in &rows {
+        let pass = e.max_loss_rel <= 1e-3 && e.max_image_abs <= 1e-3;
+        console.say(format!(
+            "{}: losses within {:.1e} (relative), images within {:.1e} ({}): {}",
+            e.model,
+            e.max_loss_rel,
+            e.max_image_abs,
+            e.worst_image,
+            if pass {
+                "pass"
+            } else {
+                "FAIL (tolerance 1e-3)"
+            }
+        ))?;
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    write_csv(&check.out.join("equivalence.csv"), &rows)
+}
+
+/// This binary again, as `--child WHAT` with `threads` rayon threads; its standard output.
+fn child(check: &GpuCheck, what: &str, threads: usize) -> Result<String> {
+    let mut command = std::process::Command::new(&check.exe);
+    command
+        .env("RAYON_NUM_THREADS", threads.to_string())
+        .args(["--child", what, "--out"])
+        .arg(&check.out);
+    if check.quick {
+        command.arg("--quick");
+    }
+    let out = command.output().map_err(|e| Error::io(&check.exe, e))?;
+    if !out.status.success() {
+        return Err(Error::Config(format!(
+            "{what} on {threads} threads failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        )));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// The CPU decoder figures of this process (run as a child at a thread count), as JSON.
+pub fn cpu_decoders(check: &GpuCheck) -> Result<String> {
+    let rows = run_batches(DeviceChoice::Cpu, check.quick, false)?;
+    serde_json::to_string(&rows).map_err(|e| Error::Config(e.to_string()))
+}
+
+fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    let mut all = Vec::new();
+    for &t in &check.threads {
+        let json = child(check, "cpu-decoders", t)?;
+        let mut rows: Vec<BenchRow> = serde_json::from_str(json.trim())
+            .map_err(|e| Error::Config(format!("the CPU child's rows: {e}")))?;
+        if let Some(py) = &check.python {
+            let script = check.bench_dir.join("torch_reference.py");
+            attach_torch(&mut rows, &run_torch(py, &script, t, false, Some(2.0))?);
+        }
+        console.say(format!("{t} CPU threads (ours and PyTorch's):"))?;
+        console.say(console_table(&rows))?;
+        all.extend(rows.into_iter().map(|r| ThreadRow {
+            threads: t,
+            model: r.model,
+            figure: r.figure,
+            ours: r.ours,
+            torch: r.torch,
+            ratio: r.ratio,
+            git_revision: r.git_revision,
+        }));
+        write_csv(&check.out.join("cpu_threads.csv"), &all)?;
+    }
+    Ok(())
+}
