@@ -186,6 +186,31 @@ fn xacro_files_are_refused_with_how_to_expand_them() {
     )
     .unwrap();
     assert!(load_urdf(&expanded, Isometry3::identity()).is_ok());
+    // As ROS packages ship expanded descriptions: the namespace, a commented-out macro, an
+    // empty texture (urdfdom ignores it). It loads; the same file with a live macro does not.
+    let shipped = r#"<?xml version="1.0"?>
+<robot name="a" xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <!-- <xacro:macro name="leg" params="side"> ${side} </xacro:macro> -->
+  <material name="m"><color rgba="1 1 1 1"/><texture/></material>
+  <link name="b"><visual><geometry><box size="0.1 0.1 0.1"/></geometry><material name="m"/></visual></link>
+</robot>"#;
+    std::fs::write(&expanded, shipped).unwrap();
+    let robot = load_urdf(&expanded, Isometry3::identity());
+    assert!(robot.is_ok(), "{:?}", robot.err());
+    std::fs::write(
+        &expanded,
+        shipped
+            .replace("<!-- <xacro:macro", "<xacro:macro")
+            .replace("</xacro:macro> -->", "</xacro:macro>"),
+    )
+    .unwrap();
+    let err = load_urdf(&expanded, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("xacro:macro") && err.contains("expand"),
+        "{err}"
+    );
 }
 
 #[test]

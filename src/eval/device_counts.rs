@@ -74,6 +74,25 @@ impl tracing::field::Visit for KernelName {
     }
 }
 
+/// A kernel's name without its module path and type parameters:
+/// `cubek_reduce::launch::base::reduce_kernel::ReduceKernel<..>` -> `ReduceKernel`, and
+/// `..::KernelBinop<..::MulOp>` -> `KernelBinop<MulOp>` (one parameter that names an
+/// operation is kept).
+pub fn short_name(full: &str) -> String {
+    let last = |path: &str| path.rsplit("::").next().unwrap_or(path).to_string();
+    match full.split_once('<') {
+        None => last(full),
+        Some((head, params)) => {
+            let params = params.trim_end_matches('>');
+            if params.contains(',') || params.contains('<') {
+                last(head)
+            } else {
+                format!("{}<{}>", last(head), last(params))
+            }
+        }
+    }
+}
+
 fn counted(metadata: &Metadata<'_>) -> bool {
     metadata.is_span() && matches!(metadata.name(), LAUNCH | READ | UPLOAD)
 }
@@ -96,7 +115,7 @@ impl Subscriber for &'static Counter {
                 self.launches.fetch_add(1, Ordering::Relaxed);
                 let mut name = KernelName(None);
                 span.record(&mut name);
-                let name = name.0.unwrap_or_else(|| "?".into());
+                let name = short_name(name.0.as_deref().unwrap_or("?"));
                 *self
                     .kernels
                     .lock()
@@ -105,20 +124,39 @@ impl Subscriber for &'static Counter {
                     .or_default() += 1;
             }
             READ => {
-                self.reads.fetch_add(1, Ordering::Relaxed);
+                // A read asks the backend below it to read (burn's fusion layer reads through
+                // the cubecl backend, two spans for one read): only the outermost counts.
+                if READ_DEPTH.with(|d| d.get()) == 0 {
+                    self.reads.fetch_add(1, Ordering::Relaxed);
+                }
+                let id = (self.next_id.fetch_add(1, Ordering::Relaxed) + 1) * 2 + 1;
+                return Id::from_u64(id);
             }
             UPLOAD => {
                 self.uploads.fetch_add(1, Ordering::Relaxed);
             }
             _ => {}
         }
-        Id::from_u64(self.next_id.fetch_add(1, Ordering::Relaxed) + 1)
+        Id::from_u64((self.next_id.fetch_add(1, Ordering::Relaxed) + 1) * 2)
     }
     fn record(&self, _: &Id, _: &Record<'_>) {}
     fn record_follows_from(&self, _: &Id, _: &Id) {}
     fn event(&self, _: &Event<'_>) {}
-    fn enter(&self, _: &Id) {}
-    fn exit(&self, _: &Id) {}
+    fn enter(&self, span: &Id) {
+        if span.into_u64() % 2 == 1 {
+            READ_DEPTH.with(|d| d.set(d.get() + 1));
+        }
+    }
+    fn exit(&self, span: &Id) {
+        if span.into_u64() % 2 == 1 {
+            READ_DEPTH.with(|d| d.set(d.get().saturating_sub(1)));
+        }
+    }
+}
+
+thread_local! {
+    /// Read spans entered on this thread and not yet left (odd span ids are reads).
+    static READ_DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
 }
 
 static COUNTER: OnceLock<&'static Counter> = OnceLock::new();

@@ -7,8 +7,10 @@
 //! ([`GeometryKind`]), or none for kinematics only. Mesh paths may be relative to the URDF,
 //! absolute, `file://` or `package://NAME/...`; the last is resolved against the URDF's
 //! package folder: the nearest ancestor folder of the URDF named `NAME`, else the parent of
-//! the URDF's folder (the conventional `NAME/urdf/robot.urdf` layout). xacro files are
-//! refused with how to expand them.
+//! the URDF's folder (the conventional `NAME/urdf/robot.urdf` layout). xacro files (xacro
+//! elements, `${...}` or `$(...)` outside comments) are refused with how to expand them; a file
+//! that only declares the xacro namespace, as expanded ROS descriptions do, loads. What ROS's
+//! urdfdom tolerates and urdf-rs refuses (a `<texture/>` without a filename) loads too.
 //!
 //! The end effector is the origin of a link named by `tip`, by default the last link of the
 //! longest chain; the joint vector is the chain from the root to it (see
@@ -79,6 +81,63 @@ pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
     )
 }
 
+/// The text outside XML comments.
+fn without_comments(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(start) = rest.find("<!--") {
+        out.push_str(&rest[..start]);
+        rest = match rest[start + 4..].find("-->") {
+            Some(end) => &rest[start + 4 + end + 3..],
+            None => "",
+        };
+    }
+    out.push_str(rest);
+    out
+}
+
+/// The first xacro construct outside comments (`<xacro:...`, `${...}`, `$(...)`), if any: a
+/// file that only declares the xacro namespace, as ROS packages ship expanded descriptions,
+/// or mentions xacro in a comment, is the URDF it looks like.
+fn xacro_construct(text: &str) -> Option<String> {
+    let text = without_comments(text);
+    ["<xacro:", "${", "$("].iter().find_map(|needle| {
+        let at = text.find(needle)?;
+        let end = text[at..]
+            .find(|c: char| c.is_whitespace() || c == '>' || c == '"')
+            .map_or(text.len(), |e| at + e.max(needle.len()));
+        Some(text[at..end.min(at + 40)].to_string())
+    })
+}
+
+/// What ROS's own parser (urdfdom) tolerates and urdf-rs refuses, made readable: `<texture>`
+/// elements without a filename (urdfdom ignores them) are dropped.
+fn as_urdfdom_reads(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.contains("<texture") {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(start) = rest.find("<texture") {
+        out.push_str(&rest[..start]);
+        let tail = &rest[start..];
+        // The element: self-closing, or up to its closing tag.
+        let open_end = tail.find('>').map_or(tail.len(), |e| e + 1);
+        let end = if tail[..open_end].ends_with("/>") {
+            open_end
+        } else {
+            tail.find("</texture>")
+                .map_or(open_end, |e| e + "</texture>".len())
+        };
+        if tail[..open_end].contains("filename") {
+            out.push_str(&tail[..end]);
+        }
+        rest = &tail[end..];
+    }
+    out.push_str(rest);
+    std::borrow::Cow::Owned(out)
+}
+
 /// Load a URDF with its visual geometry and the default tip; `base` places its root link.
 pub fn load_urdf(path: &Path, base: Isometry3<f64>) -> Result<Robot> {
     load_urdf_with(
@@ -98,13 +157,15 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         msg,
     };
     let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase());
-    if name.as_deref().is_some_and(|n| n.ends_with(".xacro")) || text.contains("<xacro:") {
+    if let Some(found) = xacro_construct(&text) {
         return Err(urdf_err(
             "robot".into(),
-            "is a xacro file: expand it into a URDF first (`xacro FILE > robot.urdf`, ROS's xacro package), then pass that".into(),
+            format!(
+                "is a xacro file (it has `{found}`): expand it into a URDF first (`xacro FILE > robot.urdf`, ROS's xacro package), then pass that"
+            ),
         ));
     }
+    let text = as_urdfdom_reads(&text);
     let urdf = urdf_rs::read_from_string(&text)
         .map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;
     if urdf.links.is_empty() {
