@@ -460,3 +460,41 @@ fn the_tip_path_matches_the_full_chain_pose_and_jacobian() {
         }
     }
 }
+
+/// The joint vector runs root to tip whatever order the file lists the joints in (a hobby arm
+/// that lists them tip first): the same names, order and forward kinematics as the same robot
+/// listed root first.
+#[test]
+fn joints_listed_tip_first_are_ordered_root_to_tip() {
+    let dir = common::tempdir();
+    let text = common::arm_urdf(4, false);
+    let root_first = dir.path().join("root_first.urdf");
+    std::fs::write(&root_first, &text).unwrap();
+    // The same elements, the joints in reverse order.
+    let lines: Vec<&str> = text.lines().collect();
+    let (joints, others): (Vec<&str>, Vec<&str>) = lines
+        .iter()
+        .partition(|l| l.trim_start().starts_with("<link name=\"l"));
+    let mut reversed: Vec<String> = others
+        .iter()
+        .filter(|l| !l.contains("</robot>"))
+        .map(|l| l.to_string())
+        .collect();
+    reversed.extend(joints.iter().rev().map(|l| l.to_string()));
+    reversed.push("</robot>".into());
+    let tip_first = dir.path().join("tip_first.urdf");
+    std::fs::write(&tip_first, reversed.join("\n")).unwrap();
+    let a = load_urdf(&root_first, Isometry3::identity()).unwrap();
+    let b = load_urdf(&tip_first, Isometry3::identity()).unwrap();
+    assert_eq!(a.chain.joint_names(), ["j1", "j2", "j3", "j4"]);
+    assert_eq!(b.chain.joint_names(), a.chain.joint_names());
+    assert_eq!(b.chain.joint_ranges(), a.chain.joint_ranges());
+    for q in [[0.3, -0.5, 1.1, 0.2], [-1.0, 0.4, -0.7, 1.5]] {
+        let (pa, pb) = (a.chain.tip_pose(&q), b.chain.tip_pose(&q));
+        assert!(
+            (pa.translation.vector - pb.translation.vector).norm() < 1e-12
+                && pa.rotation.angle_to(&pb.rotation) < 1e-12,
+            "{pa} vs {pb}"
+        );
+    }
+}

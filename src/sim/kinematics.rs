@@ -137,6 +137,27 @@ pub fn within(q: &[f64], ranges: &[[f64; 2]], tol: f64) -> bool {
         .all(|(&v, r)| v >= r[0] - tol && v <= r[1] + tol)
 }
 
+/// Each joint's place in a depth-first walk of the tree from the root (link 0), a link's
+/// child joints taken in the order they were given (`given[j]`: joint `j`'s index as given).
+fn depth_first_rank(joints: &[Joint], given: &[usize]) -> Vec<usize> {
+    let children = |link: usize| {
+        let mut c: Vec<usize> = (0..joints.len())
+            .filter(|&j| joints[j].parent == link)
+            .collect();
+        c.sort_by_key(|&j| given[j]);
+        c
+    };
+    let mut rank = vec![usize::MAX; joints.len()];
+    let mut stack: Vec<usize> = children(0).into_iter().rev().collect();
+    let mut next = 0;
+    while let Some(j) = stack.pop() {
+        rank[j] = next;
+        next += 1;
+        stack.extend(children(joints[j].child).into_iter().rev());
+    }
+    rank
+}
+
 /// A tree of links connected by joints, placed in the scene by `base`.
 #[derive(Clone, Debug)]
 pub struct KinematicChain {
@@ -161,8 +182,9 @@ impl KinematicChain {
     /// the last link of the longest path from the root.
     ///
     /// The joint vector (the inputs) is the movable joints on the path from the root to the
-    /// tip that mimic no other, and the leaders of mimic joints on it, in the order given
-    /// (the URDF's), as in KDL and TRAC-IK chains.
+    /// tip that mimic no other, and the leaders of mimic joints on it, in depth-first order
+    /// from the root with each link's children in the order given (root to tip along a chain,
+    /// whatever order the URDF lists them in), as Pinocchio, KDL and TRAC-IK order them.
     /// A mimic joint follows its leader; a movable joint off that path is held at 0, or at
     /// the limit nearest 0 when 0 is outside its limits.
     pub fn new(
@@ -287,11 +309,14 @@ impl KinematicChain {
             }
             drives_tip[k] = true;
         }
-        // The inputs keep the order the joints were given in (the URDF's order).
+        // The inputs in depth-first order from the root, children in the order the joints
+        // were given in (as Pinocchio and KDL order a tree): root to tip along a chain, however
+        // the file lists them.
+        let rank = depth_first_rank(&joints, &order_joints);
         let mut dofs: Vec<usize> = (0..joints.len())
             .filter(|&j| joints[j].kind.is_movable() && joints[j].mimic.is_none() && drives_tip[j])
             .collect();
-        dofs.sort_by_key(|&j| order_joints[j]);
+        dofs.sort_by_key(|&j| rank[j]);
         let held = |joint: &Joint| {
             let [lo, hi] = joint.limits.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
             0f64.clamp(lo, hi)
