@@ -8,7 +8,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use selfmodel::cli::{RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
-use selfmodel::ik::pose_model::{PoseModel, PoseModelConfig, SolveStats, read_targets, train};
+use selfmodel::ik::pose_model::{
+    PoseModel, PoseModelConfig, SolveStats, joint_columns, read_targets, train,
+};
 
 #[derive(Parser)]
 #[command(
@@ -111,7 +113,11 @@ fn main() -> ExitCode {
                     n,
                     seed,
                 );
-                let text = selfmodel::studies::bench_ik::targets_csv(&targets, &joints);
+                let text = selfmodel::studies::bench_ik::targets_csv(
+                    &targets,
+                    &joints,
+                    &model.saved.joint_names,
+                );
                 selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
                 println!(
                     "ik targets: {n} reachable poses of {}; wrote {}",
@@ -138,8 +144,9 @@ fn main() -> ExitCode {
                 let seconds = start.elapsed().as_secs_f64();
                 let cfg = &model.saved.config.lm;
                 let mut text = String::from("target,solution");
-                for i in 1..=model.dof() {
-                    text += &format!(",q{i}");
+                let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];
+                for c in joint_columns(&model.saved.joint_names, &taken) {
+                    text += &format!(",{c}");
                 }
                 text += ",pos_err_mm,rot_err_deg,exact\n";
                 for (t, sols) in answers.iter().enumerate() {

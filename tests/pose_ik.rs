@@ -198,7 +198,30 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
     .unwrap();
     let err = loaded.check_robot(&other).unwrap_err().to_string();
     assert!(
-        err.contains("another robot") && err.contains("ik train"),
+        err.contains("j1, j2, j3, j4, j5, j6]")
+            && err.contains("j6, j7]")
+            && err.contains("ik train"),
+        "{err}"
+    );
+    // The same robot with one joint renamed: refused, both lists shown.
+    let renamed = other_dir.path().join("renamed.urdf");
+    std::fs::write(
+        &renamed,
+        common::arm_urdf(6, true).replace("name=\"j2\"", "name=\"shoulder\""),
+    )
+    .unwrap();
+    let renamed = load_urdf_with(
+        &renamed,
+        &UrdfOptions {
+            tip: Some("hand".into()),
+            geometry: GeometryKind::None,
+            base: Isometry3::identity(),
+        },
+    )
+    .unwrap();
+    let err = loaded.check_robot(&renamed).unwrap_err().to_string();
+    assert!(
+        err.contains("[j1, j2, j3, j4, j5, j6]") && err.contains("[j1, shoulder, j3, j4, j5, j6]"),
         "{err}"
     );
 }

@@ -265,8 +265,17 @@ impl PoseModel {
         Ok(PoseModel { saved, flow, data })
     }
 
-    /// Refuse `robot` unless it is the robot the model learned.
+    /// Refuse `robot` unless it is the robot the model learned: the same joints, named and
+    /// ordered alike (the message shows both lists), and the same kinematics.
     pub fn check_robot(&self, robot: &Robot) -> Result<()> {
+        let names = robot.chain.joint_names();
+        if names != self.saved.joint_names {
+            return Err(Error::Config(format!(
+                "this model answers for the joints [{}] but the robot description has [{}]: train one for this description with `ik train`",
+                self.saved.joint_names.join(", "),
+                names.join(", ")
+            )));
+        }
         let print = fingerprint(&robot.chain);
         if print != self.saved.robot_fingerprint {
             return Err(Error::Config(format!(
@@ -421,6 +430,22 @@ pub fn distinct(solutions: &[&[f64]], apart: f64) -> usize {
 
 /// A target file's rows: `x,y,z,qw,qx,qy,qz` (metres; a header names the columns, others
 /// are ignored), or `x,y,z` alone when `position_only`. A bad row fails naming its line.
+/// The CSV columns of a joint vector: the joints' names, or `q1..qN` where two share a name
+/// or a name is one of `taken` (the file's other columns).
+pub fn joint_columns(names: &[String], taken: &[&str]) -> Vec<String> {
+    let clash = names.iter().enumerate().any(|(i, n)| {
+        n.is_empty()
+            || n.contains([',', '"', '\n'])
+            || taken.contains(&n.as_str())
+            || names[..i].contains(n)
+    });
+    if clash {
+        (1..=names.len()).map(|i| format!("q{i}")).collect()
+    } else {
+        names.to_vec()
+    }
+}
+
 pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>> {
     let bad = |msg: String| Error::data(path, msg);
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;

@@ -116,13 +116,12 @@ pub fn random_targets(
     (targets, qs)
 }
 
-/// The targets as `x,y,z,qw,qx,qy,qz,q1..qN` CSV (what `ik solve` and the reference script
-/// read).
-pub fn targets_csv(targets: &[PoseTarget], joints: &[Vec<f64>]) -> String {
-    let dof = joints.first().map_or(0, Vec::len);
+/// The targets as `x,y,z,qw,qx,qy,qz` CSV followed by the joints that reach them, in
+/// columns named after the joints (what `ik solve` and the reference script read).
+pub fn targets_csv(targets: &[PoseTarget], joints: &[Vec<f64>], names: &[String]) -> String {
     let mut text = String::from("x,y,z,qw,qx,qy,qz");
-    for i in 1..=dof {
-        text += &format!(",q{i}");
+    for c in crate::ik::pose_model::joint_columns(names, &["x", "y", "z", "qw", "qx", "qy", "qz"]) {
+        text += &format!(",{c}");
     }
     text += "\n";
     for (t, q) in targets.iter().zip(joints) {
@@ -254,7 +253,7 @@ pub fn run(
     let targets_file = out.join("targets.csv");
     crate::core::atomic_file::write_bytes(
         &targets_file,
-        targets_csv(&targets, &joints).as_bytes(),
+        targets_csv(&targets, &joints, &model.saved.joint_names).as_bytes(),
     )?;
     let threads = rayon::current_num_threads();
     let mut sitting = Sitting {
