@@ -600,7 +600,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "target,solution,q1,q2,q3,q4,q5,q6,pos_err_mm,rot_err_deg,exact"
+        "target,solution,j1,j2,j3,j4,j5,j6,pos_err_mm,rot_err_deg,exact"
     );
     assert_eq!(lines.count(), 100);
     // A bad row is named by its line; nothing is written.
