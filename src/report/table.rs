@@ -62,7 +62,8 @@ pub const PROVENANCE: &[&str] = &[
 ];
 
 /// A number as a table shows it: 4 significant digits, no more than 4 decimals, none at
-/// 1,000 and above; anything else as written.
+/// 1,000 and above, two significant digits in scientific notation below 0.001 (where four
+/// decimals would show 0.0000); anything else as written.
 pub fn format_cell(cell: &str) -> String {
     let Ok(v) = cell.parse::<f64>() else {
         return cell.to_string();
@@ -75,6 +76,9 @@ pub fn format_cell(cell: &str) -> String {
         return cell.to_string();
     }
     let a = v.abs();
+    if a > 0.0 && a < 1e-3 {
+        return format!("{v:.1e}");
+    }
     let decimals = if a >= 1000.0 || a == 0.0 {
         0
     } else {

@@ -44,9 +44,9 @@ fn images(f: &Fitted) -> Vec<(String, Vec<f32>)> {
         .iter()
         .flat_map(|(label, r)| {
             let (s, d) = r.render(q.clone());
-            let mut v = vec![(format!("{label} silhouette"), host(s))];
+            let mut v = vec![(format!("{label} silhouette").trim().to_string(), host(s))];
             if let Some(d) = d {
-                v.push((format!("{label} depth"), host(d)));
+                v.push((format!("{label} depth").trim().to_string(), host(d)));
             }
             v
         })
