@@ -3,6 +3,7 @@
 # and no registry (../shared/notes/gpu.md).
 #
 #   scripts/gpu_check.sh pack          # here, on a CPU machine with Rust: ~25 min clean, ~3 min after
+#                                      # (honours CARGO_TARGET_DIR)
 #   scripts/gpu_check.sh run [ARGS]    # there, from the repository root, target/gpu_check carried
 #
 # `pack` builds the one binary with --features wgpu, strips and compresses it (~20 MB with xz),
@@ -19,7 +20,7 @@ case "${1:-}" in
 pack)
   cargo build --release --features wgpu --bin gpu_check
   rm -rf "$PACK" && mkdir -p "$PACK/debs" "$PACK/bench"
-  strip -o "$PACK/gpu_check" target/release/gpu_check
+  strip -o "$PACK/gpu_check" "${CARGO_TARGET_DIR:-target}/release/gpu_check"
   xz -6 -T2 "$PACK/gpu_check"
   (cd "$PACK/debs" && apt-get download libvulkan1 >/dev/null)
   cp ../shared/bench/torch_reference.py ../shared/bench/torch_gpu_reference.py "$PACK/bench/"

@@ -232,10 +232,22 @@ fn decoders(check: &GpuCheck, console: &mut Console) -> Result<()> {
     let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, true)?;
     if let Some(py) = &check.python {
         let script = check.bench_dir.join("torch_gpu_reference.py");
-        attach_torch(&mut rows, &run_torch(py, &script, 0, true, None)?);
+        torch_side(&mut rows, run_torch(py, &script, 0, true, None), console)?;
     }
     console.say(console_table(&rows))?;
     write_csv(&check.out.join("decoders_gpu.csv"), &rows)
+}
+
+/// PyTorch's figures beside ours; where PyTorch could not run, ours are kept and the console
+/// says why.
+fn torch_side(rows: &mut [BenchRow], torch: Result<String>, console: &mut Console) -> Result<()> {
+    match torch {
+        Ok(out) => {
+            attach_torch(rows, &out);
+            Ok(())
+        }
+        Err(e) => console.say(format!("PyTorch's side did not run: {e}")),
+    }
 }
 
 /// Run a registry experiment into `out/<leaf>` with `opts`, and say its summary.
@@ -381,7 +393,11 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
             .map_err(|e| Error::Config(format!("the CPU child's rows: {e}")))?;
         if let Some(py) = &check.python {
             let script = check.bench_dir.join("torch_reference.py");
-            attach_torch(&mut rows, &run_torch(py, &script, t, false, Some(2.0))?);
+            torch_side(
+                &mut rows,
+                run_torch(py, &script, t, false, Some(2.0)),
+                console,
+            )?;
         }
         console.say(format!("{t} CPU threads (ours and PyTorch's):"))?;
         console.say(console_table(&rows))?;
