@@ -186,16 +186,18 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
     assert!(solved >= 30, "{solved} of 40 solved");
     // Another robot (one joint more) is refused, naming what the model was trained for.
     let other_dir = common::tempdir();
-    let other = common::write_arm(other_dir.path(), "other", 7, true);
-    let other = load_urdf_with(
-        &other,
-        &UrdfOptions {
-            tip: Some("hand".into()),
-            geometry: GeometryKind::None,
-            base: Isometry3::identity(),
-        },
-    )
-    .unwrap();
+    let load = |path: &std::path::Path| {
+        load_urdf_with(
+            path,
+            &UrdfOptions {
+                tip: Some("hand".into()),
+                geometry: GeometryKind::None,
+                base: Isometry3::identity(),
+            },
+        )
+        .unwrap()
+    };
+    let other = load(&common::write_arm(other_dir.path(), "other", 7, true));
     let err = loaded.check_robot(&other).unwrap_err().to_string();
     assert!(
         err.contains("j1, j2, j3, j4, j5, j6]")
@@ -210,15 +212,7 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
         common::arm_urdf(6, true).replace("name=\"j2\"", "name=\"shoulder\""),
     )
     .unwrap();
-    let renamed = load_urdf_with(
-        &renamed,
-        &UrdfOptions {
-            tip: Some("hand".into()),
-            geometry: GeometryKind::None,
-            base: Isometry3::identity(),
-        },
-    )
-    .unwrap();
+    let renamed = load(&renamed);
     let err = loaded.check_robot(&renamed).unwrap_err().to_string();
     assert!(
         err.contains("[j1, j2, j3, j4, j5, j6]") && err.contains("[j1, shoulder, j3, j4, j5, j6]"),
@@ -253,4 +247,67 @@ fn malformed_target_files_fail_naming_the_line() {
     let t = read_targets(&path, true).unwrap();
     assert_eq!(t.len(), 1);
     assert!(t[0].orientation.is_none());
+}
+
+/// An arm whose limits are offset around pi (as some makers state them: 0.82 to 5.46 rad) with
+/// continuous joints beside them: the solver's ranges keep the limits as stated (they were cut
+/// at pi, and poses that need the rest went unanswered), and random reachable poses over the
+/// whole limits are answered exactly.
+#[test]
+fn limits_offset_around_pi_are_kept_and_answered() {
+    use selfmodel::core::preset::Preset;
+    use std::f64::consts::PI;
+    let dir = common::tempdir();
+    let text = common::arm_urdf(6, true)
+        .replace(
+            "name=\"j1\" type=\"revolute\"",
+            "name=\"j1\" type=\"continuous\"",
+        )
+        .replace(
+            "name=\"j4\" type=\"revolute\"",
+            "name=\"j4\" type=\"continuous\"",
+        );
+    // j2 and j3 (odd joints: -1.9..0.7) and j5 offset around pi.
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    for (joint, lo, hi) in [("j2", 0.82, 5.46), ("j3", 0.33, 5.95), ("j5", 0.52, 5.76)] {
+        let line = lines
+            .iter_mut()
+            .find(|l| l.contains(&format!("name=\"{joint}\"")))
+            .unwrap();
+        let at = line.find("lower=").unwrap();
+        let end = line[at..].find(" effort").unwrap() + at;
+        line.replace_range(at..end, &format!("lower=\"{lo}\" upper=\"{hi}\""));
+    }
+    let path = dir.path().join("offset.urdf");
+    std::fs::write(&path, lines.join("\n")).unwrap();
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("hand".into()),
+        geometry: GeometryKind::None,
+    };
+    let robot = spec.load_kinematics().unwrap();
+    let ranges = robot.chain.ranges_within(PI);
+    assert_eq!(ranges[1], [0.82, 5.46]);
+    assert_eq!(ranges[2], [0.33, 5.95]);
+    assert_eq!(ranges[4], [0.52, 5.76]);
+    assert_eq!(ranges[0], [-PI, PI]);
+    let cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let model =
+        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.path().join("model"), &device)
+            .unwrap();
+    assert_eq!(model.saved.ranges, ranges);
+    // Poses over the whole limits.
+    let qs = selfmodel::sim::trajectory::babbling(300, &ranges, 11);
+    assert!(qs.iter().filter(|q| q[1] > PI).count() > 100);
+    let targets: Vec<PoseTarget> = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let answers = model.solve(&robot.chain, &targets, 1, &device);
+    let exact = answers
+        .iter()
+        .filter(|a| a.iter().any(|s| s.exact(&model.saved.config.lm)))
+        .count();
+    assert!(exact >= 297, "{exact} of 300 answered exactly");
 }

@@ -130,6 +130,20 @@ pub fn narrow(limits: [f64; 2], half: f64) -> [f64; 2] {
     [lo, hi]
 }
 
+/// A rotational joint's limits as one turn of values: as stated when they span a turn or
+/// less; wider, `[-pi, pi]` where they hold it (a wider range repeats poses), else the turn
+/// from the lower limit.
+pub fn one_turn(limits: [f64; 2]) -> [f64; 2] {
+    use std::f64::consts::PI;
+    if limits[1] - limits[0] <= 2.0 * PI + 1e-9 {
+        limits
+    } else if limits[0] <= -PI + 1e-9 && limits[1] >= PI - 1e-9 {
+        [-PI, PI]
+    } else {
+        [limits[0], limits[0] + 2.0 * PI]
+    }
+}
+
 /// Whether `q` lies within `ranges` (with `tol` of slack, SI units).
 pub fn within(q: &[f64], ranges: &[[f64; 2]], tol: f64) -> bool {
     q.iter()
@@ -436,10 +450,15 @@ impl KinematicChain {
 
     /// The ranges of the inverse-kinematics experiments: each joint's limits narrowed to
     /// `+-half` (radians) where that is tighter; a rotational joint without limits gets
-    /// `[-half, half]`, a prismatic one its limits.
+    /// `[-half, half]`, a prismatic one its limits. At `half` of a half turn or more (every
+    /// pose the joint can take) a rotational joint keeps limits within one turn as stated,
+    /// wherever they lie ([`one_turn`]): limits offset around pi, `[0.82, 5.46]`, are not cut
+    /// at pi.
     pub fn ranges_within(&self, half: f64) -> Vec<[f64; 2]> {
+        let full_turn = half >= std::f64::consts::PI - 1e-12;
         self.movable_joints()
             .map(|j| match (j.limits, j.kind.is_rotational()) {
+                (Some(l), true) if full_turn => one_turn(l),
                 (Some(l), true) => narrow(l, half),
                 (None, true) => [-half, half],
                 (Some(l), false) => l,
