@@ -64,7 +64,8 @@ enum Command {
         /// Answers per target (k > 1: the flow's k samples, each refined: the family).
         #[arg(long, default_value_t = 1)]
         k: usize,
-        /// Where the answers go (CSV: target,solution,q1..qN,pos_err_mm,rot_err_deg,exact).
+        /// Where the answers go (CSV: target,solution, one column per joint named after it,
+        /// pos_err_mm,rot_err_deg,exact).
         #[arg(long)]
         out: PathBuf,
     },
@@ -84,7 +85,12 @@ fn main() -> ExitCode {
             } => {
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
-                let spec = robot.spec();
+                if robot.group.tips.as_ref().is_some_and(|t| t.len() > 1) {
+                    return Err(selfmodel::Error::Config(
+                        "ik train answers the pose of one tip (--tip); several tips (--tips) are not built yet".into(),
+                    ));
+                }
+                let spec = robot.spec()?;
                 let loaded = spec.load_kinematics()?;
                 let start = std::time::Instant::now();
                 let model = train(&spec, &loaded, &cfg, &out, &device)?;

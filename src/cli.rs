@@ -9,7 +9,7 @@ use crate::core::error::Result;
 pub use crate::core::provenance::git_revision;
 use crate::sim::robot::Robot;
 pub use crate::sim::robots::{BuiltinRobot, shared_arm_urdf};
-use crate::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with, pose_from_xyz_rpy};
+use crate::sim::urdf_loader::{GeometryKind, pose_from_xyz_rpy};
 
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
@@ -111,6 +111,39 @@ pub struct RobotArgs {
     /// Which of the URDF's geometry is drawn.
     #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
     pub geometry: GeometryKind,
+    #[command(flatten)]
+    pub group: JointGroupArgs,
+}
+
+/// `--joints` / `--tips`: which movable joints of a URDF's tree are the joint vector.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct JointGroupArgs {
+    /// The joint vector: `all` (every movable joint of the tree) or joints by name
+    /// (`--joints a,b,c`); the others are held (at 0, or the limit nearest 0). Joints are
+    /// ordered depth-first from the root whatever order they are named in.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "all|NAMES",
+        requires = "urdf"
+    )]
+    pub joints: Option<Vec<String>>,
+    /// The joint vector is the union of the chains from the root to these links (both hands
+    /// of a humanoid, with the waist they share): `--tips left_hand,right_hand`.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "LINKS",
+        requires = "urdf",
+        conflicts_with = "joints"
+    )]
+    pub tips: Option<Vec<String>>,
+}
+
+impl JointGroupArgs {
+    pub fn group(&self) -> Result<crate::sim::kinematics::JointGroup> {
+        crate::sim::kinematics::JointGroup::from_args(self.joints.as_deref(), self.tips.as_deref())
+    }
 }
 
 impl RobotArgs {
@@ -124,22 +157,12 @@ impl RobotArgs {
 
     /// Load the chosen robot.
     pub fn load(&self) -> Result<Robot> {
-        match &self.urdf {
-            Some(path) => load_urdf_with(
-                path,
-                &UrdfOptions {
-                    base: self.base(),
-                    tip: self.tip.clone(),
-                    geometry: self.geometry,
-                },
-            ),
-            None => Ok(self.robot.load()),
-        }
+        self.spec()?.load()
     }
 
     /// The robot as a config records it.
-    pub fn spec(&self) -> crate::sim::robots::RobotSpec {
-        match &self.urdf {
+    pub fn spec(&self) -> Result<crate::sim::robots::RobotSpec> {
+        Ok(match &self.urdf {
             Some(path) => {
                 let base = self.base();
                 let (r, p, y) = base.rotation.euler_angles();
@@ -150,10 +173,11 @@ impl RobotArgs {
                     base_rpy: [r, p, y],
                     tip: self.tip.clone(),
                     geometry: self.geometry,
+                    joints: self.group.group()?,
                 }
             }
             None => crate::sim::robots::RobotSpec::Builtin(self.robot),
-        }
+        })
     }
 
     /// A short name for reports: `arm4` or the URDF path.
@@ -262,6 +286,8 @@ pub struct ExperimentArgs {
     #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
     pub geometry: GeometryKind,
     #[command(flatten)]
+    pub group: JointGroupArgs,
+    #[command(flatten)]
     pub camera: CameraArgs,
     /// Self-models: train and test on this dataset (.npz as `dataset` writes it, or captured
     /// silhouettes in its format: `images` (N,H,W) uint8 0/255, `angles` (N,DOF) degrees
@@ -346,6 +372,7 @@ impl ExperimentArgs {
             arm4_scene: self.arm4_scene,
             tip: self.tip.clone(),
             geometry: self.geometry,
+            joints: self.group.group()?,
             camera: self.camera.choice(),
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),

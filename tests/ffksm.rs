@@ -711,6 +711,7 @@ fn a_checkpoint_without_a_recorded_robot_resumes_and_one_of_another_robot_is_ref
         base_rpy: [0.0; 3],
         tip: None,
         geometry: Default::default(),
+        joints: Default::default(),
     };
     let mut other = DataSpec::paper();
     other.robot = urdf.clone();

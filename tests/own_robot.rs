@@ -498,3 +498,148 @@ fn joints_listed_tip_first_are_ordered_root_to_tip() {
         );
     }
 }
+
+/// A torso with two arms, the right arm listed first, and a finger on the left hand.
+fn two_armed_urdf() -> String {
+    let link = |n: &str| {
+        format!(
+            "<link name=\"{n}\"><visual><geometry><box size=\"0.05 0.05 0.1\"/></geometry></visual></link>"
+        )
+    };
+    let joint = |n: &str, kind: &str, parent: &str, child: &str, xyz: &str, axis: &str| {
+        format!(
+            "<joint name=\"{n}\" type=\"{kind}\"><parent link=\"{parent}\"/><child link=\"{child}\"/><origin xyz=\"{xyz}\"/><axis xyz=\"{axis}\"/><limit lower=\"-1.5\" upper=\"1.5\" effort=\"1\" velocity=\"1\"/></joint>"
+        )
+    };
+    let mut s = String::from("<robot name=\"two_arms\">");
+    for l in [
+        "base",
+        "torso",
+        "r_upper",
+        "r_fore",
+        "right_hand",
+        "l_upper",
+        "l_fore",
+        "left_hand",
+        "finger",
+    ] {
+        s += &link(l);
+    }
+    s += &joint("waist", "revolute", "base", "torso", "0 0 0.1", "0 0 1");
+    s += &joint("r1", "revolute", "torso", "r_upper", "0 -0.2 0.3", "0 1 0");
+    s += &joint("r2", "revolute", "r_upper", "r_fore", "0 0 -0.25", "0 1 0");
+    s += &joint(
+        "r_wrist",
+        "fixed",
+        "r_fore",
+        "right_hand",
+        "0 0 -0.2",
+        "0 0 1",
+    );
+    s += &joint("l1", "revolute", "torso", "l_upper", "0 0.2 0.3", "0 1 0");
+    s += &joint("l2", "revolute", "l_upper", "l_fore", "0 0 -0.25", "0 1 0");
+    s += &joint(
+        "l_wrist",
+        "fixed",
+        "l_fore",
+        "left_hand",
+        "0 0 -0.2",
+        "0 0 1",
+    );
+    s += &joint(
+        "grip",
+        "prismatic",
+        "left_hand",
+        "finger",
+        "0 0 -0.05",
+        "0 1 0",
+    );
+    s + "</robot>"
+}
+
+/// Joint groups: the chains to several tips (both hands, with the waist they share), every
+/// movable joint, joints by name; each joint of the group moves what hangs from it and
+/// nothing else, and the joints keep the tree's depth-first order.
+#[test]
+fn joint_groups_drive_several_tips_and_every_joint() {
+    use selfmodel::sim::kinematics::JointGroup;
+    use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
+    let dir = common::tempdir();
+    let path = dir.path().join("two_arms.urdf");
+    std::fs::write(&path, two_armed_urdf()).unwrap();
+    let load = |joints: JointGroup| {
+        load_urdf_with(
+            &path,
+            &UrdfOptions {
+                geometry: GeometryKind::None,
+                joints,
+                ..UrdfOptions::default()
+            },
+        )
+    };
+    let both = load(JointGroup::Tips(vec![
+        "left_hand".into(),
+        "right_hand".into(),
+    ]))
+    .unwrap();
+    assert_eq!(both.chain.joint_names(), ["waist", "r1", "r2", "l1", "l2"]);
+    let hand = |robot: &selfmodel::sim::robot::Robot, q: &[f64], name: &str| {
+        let l = robot.chain.links.iter().position(|l| l == name).unwrap();
+        robot.chain.link_frames(q).remove(l).translation.vector
+    };
+    let zero = [0.0; 5];
+    for (k, moves_left, moves_right) in [
+        (0, true, true),
+        (1, false, true),
+        (2, false, true),
+        (3, true, false),
+        (4, true, false),
+    ] {
+        let mut q = zero;
+        q[k] = 0.7;
+        let dl = (hand(&both, &q, "left_hand") - hand(&both, &zero, "left_hand")).norm();
+        let dr = (hand(&both, &q, "right_hand") - hand(&both, &zero, "right_hand")).norm();
+        assert_eq!(
+            (dl > 1e-6, dr > 1e-6),
+            (moves_left, moves_right),
+            "joint {k}: {dl} {dr}"
+        );
+    }
+    let all = load(JointGroup::All).unwrap();
+    assert_eq!(
+        all.chain.joint_names(),
+        ["waist", "r1", "r2", "l1", "l2", "grip"]
+    );
+    for k in 0..6 {
+        let mut q = [0.0; 6];
+        q[k] = 0.02;
+        let before = all.chain.link_frames(&[0.0; 6]);
+        let after = all.chain.link_frames(&q);
+        assert!(
+            before
+                .iter()
+                .zip(&after)
+                .any(
+                    |(a, b)| (a.translation.vector - b.translation.vector).norm() > 1e-4
+                        || a.rotation.angle_to(&b.rotation) > 1e-4
+                ),
+            "joint {k} moves nothing"
+        );
+    }
+    let named = load(JointGroup::Named(vec!["l2".into(), "waist".into()])).unwrap();
+    assert_eq!(named.chain.joint_names(), ["waist", "l2"]);
+    let err = load(JointGroup::Tips(vec!["left_foot".into()]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("left_foot") && err.contains("right_hand"),
+        "{err}"
+    );
+    let err = load(JointGroup::Named(vec!["r_wrist".into()]))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("not a movable joint") && err.contains("grip"),
+        "{err}"
+    );
+}

@@ -17,6 +17,7 @@ fn arm(joints: usize) -> (common::TempDir, selfmodel::sim::robot::Robot) {
             tip: Some("hand".into()),
             geometry: GeometryKind::None,
             base: Isometry3::identity(),
+            joints: Default::default(),
         },
     )
     .unwrap();
@@ -139,6 +140,7 @@ fn quick_model(
         base_rpy: [0.0; 3],
         tip: Some("hand".into()),
         geometry: GeometryKind::Visual,
+        joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
     let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
@@ -193,6 +195,7 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
                 tip: Some("hand".into()),
                 geometry: GeometryKind::None,
                 base: Isometry3::identity(),
+                joints: Default::default(),
             },
         )
         .unwrap()
@@ -286,6 +289,7 @@ fn limits_offset_around_pi_are_kept_and_answered() {
         base_rpy: [0.0; 3],
         tip: Some("hand".into()),
         geometry: GeometryKind::None,
+        joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
     let ranges = robot.chain.ranges_within(PI);

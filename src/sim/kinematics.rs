@@ -151,6 +151,45 @@ pub fn within(q: &[f64], ranges: &[[f64; 2]], tol: f64) -> bool {
         .all(|(&v, r)| v >= r[0] - tol && v <= r[1] + tol)
 }
 
+/// Which movable joints of a tree make the joint vector; the others are held.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JointGroup {
+    /// The chain from the root to the tip (`--tip`; the default).
+    #[default]
+    Chain,
+    /// The union of the chains from the root to each of these links (`--tips A,B`: both
+    /// hands of a humanoid, with the waist they share).
+    Tips(Vec<String>),
+    /// Every movable joint of the tree (`--joints all`).
+    All,
+    /// These joints, by name (`--joints a,b,c`), in the tree's order whatever order they are
+    /// named in.
+    Named(Vec<String>),
+}
+
+impl JointGroup {
+    pub fn is_chain(&self) -> bool {
+        *self == JointGroup::Chain
+    }
+
+    /// `--joints` and `--tips` as given on a command line (none: the chain to the tip).
+    pub fn from_args(joints: Option<&[String]>, tips: Option<&[String]>) -> Result<Self> {
+        match (joints, tips) {
+            (Some(_), Some(_)) => Err(Error::Config(
+                "--joints and --tips name the joint vector two ways: give one".into(),
+            )),
+            (Some([all]), None) if all == "all" => Ok(JointGroup::All),
+            (Some(names), None) if !names.is_empty() => Ok(JointGroup::Named(names.to_vec())),
+            (None, Some(tips)) if !tips.is_empty() => Ok(JointGroup::Tips(tips.to_vec())),
+            (None, None) => Ok(JointGroup::Chain),
+            _ => Err(Error::Config(
+                "--joints and --tips need at least one name".into(),
+            )),
+        }
+    }
+}
+
 /// Each joint's place in a depth-first walk of the tree from the root (link 0), a link's
 /// child joints taken in the order they were given (`given[j]`: joint `j`'s index as given).
 fn depth_first_rank(joints: &[Joint], given: &[usize]) -> Vec<usize> {
@@ -206,6 +245,19 @@ impl KinematicChain {
         joints: Vec<Joint>,
         base: Isometry3<f64>,
         tip: Option<(usize, Point3<f64>)>,
+    ) -> Result<Self> {
+        Self::with_group(links, joints, base, tip, &JointGroup::Chain)
+    }
+
+    /// [`Self::new`] with the joint vector `group` names: the chain to the tip, the chains
+    /// to several links, every movable joint, or joints by name; the joint vector keeps the
+    /// depth-first order, and the movable joints outside it are held.
+    pub fn with_group(
+        links: Vec<String>,
+        joints: Vec<Joint>,
+        base: Isometry3<f64>,
+        tip: Option<(usize, Point3<f64>)>,
+        group: &JointGroup,
     ) -> Result<Self> {
         let n = links.len();
         if n == 0 {
@@ -281,12 +333,53 @@ impl KinematicChain {
             Some((l, p)) => (new_index[l], p),
             None => (new_index[deepest], Point3::origin()),
         };
-        // Joints on the path from the root to the tip (indices into the sorted joints).
+        // The group's joints (indices into the sorted joints): the joints on the path from
+        // the root to the tip, or to each of several links, every joint, or joints by name.
         let mut on_path = vec![false; joints.len()];
-        let mut link = tip_link;
-        while let Some(j) = joints.iter().position(|j| j.child == link) {
-            on_path[j] = true;
-            link = joints[j].parent;
+        let mut mark_path = |mut link: usize| {
+            while let Some(j) = joints.iter().position(|j| j.child == link) {
+                on_path[j] = true;
+                link = joints[j].parent;
+            }
+        };
+        let sorted_links: Vec<&String> = order_links.iter().map(|&l| &links[l]).collect();
+        match group {
+            JointGroup::Chain => mark_path(tip_link),
+            JointGroup::Tips(tips) => {
+                for t in tips {
+                    let l = sorted_links.iter().position(|l| *l == t).ok_or_else(|| {
+                        Error::Config(format!(
+                            "--tips: \"{t}\" is not a link of this robot; its links: {}",
+                            sorted_links
+                                .iter()
+                                .map(|l| l.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ))
+                    })?;
+                    mark_path(l);
+                }
+            }
+            JointGroup::All => on_path.iter_mut().for_each(|p| *p = true),
+            JointGroup::Named(names) => {
+                for name in names {
+                    let j = joints
+                        .iter()
+                        .position(|j| &j.name == name && j.kind.is_movable() && j.mimic.is_none())
+                        .ok_or_else(|| {
+                            Error::Config(format!(
+                                "--joints: \"{name}\" is not a movable joint of this robot (mimic joints follow their leader); its movable joints: {}",
+                                joints
+                                    .iter()
+                                    .filter(|j| j.kind.is_movable() && j.mimic.is_none())
+                                    .map(|j| j.name.as_str())
+                                    .collect::<Vec<_>>()
+                                    .join(", ")
+                            ))
+                        })?;
+                    on_path[j] = true;
+                }
+            }
         }
         // Where mimic leaders went in the sorted order.
         let mut sorted_of = vec![0; joints.len()];

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::core::error::Result;
+use crate::sim::kinematics::JointGroup;
 use crate::sim::robot::Robot;
 use crate::sim::urdf_loader::{GeometryKind, UrdfOptions};
 
@@ -60,6 +61,10 @@ pub enum RobotSpec {
         /// Visual or collision geometry (`--geometry`).
         #[serde(default, skip_serializing_if = "is_visual")]
         geometry: GeometryKind,
+        /// Which movable joints are the joint vector (`--joints`, `--tips`; the chain to the
+        /// tip by default).
+        #[serde(default, skip_serializing_if = "JointGroup::is_chain")]
+        joints: JointGroup,
     },
 }
 
@@ -87,6 +92,7 @@ impl RobotSpec {
             base_rpy: [r, p, y],
             tip: None,
             geometry: GeometryKind::Visual,
+            joints: JointGroup::Chain,
         }
     }
 
@@ -108,12 +114,14 @@ impl RobotSpec {
                 base_rpy,
                 tip,
                 geometry,
+                joints,
             } => crate::sim::urdf_loader::load_urdf_with(
                 path,
                 &UrdfOptions {
                     base: crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
                     tip: tip.clone(),
                     geometry: geometry_override.unwrap_or(*geometry),
+                    joints: joints.clone(),
                 },
             ),
         }
@@ -129,10 +137,21 @@ impl RobotSpec {
     pub fn label(&self) -> String {
         match self {
             RobotSpec::Builtin(b) => b.name().into(),
-            RobotSpec::Urdf { path, tip, .. } => match tip {
-                Some(t) => format!("{} (tip {t})", path.display()),
-                None => path.display().to_string(),
-            },
+            RobotSpec::Urdf {
+                path, tip, joints, ..
+            } => {
+                let mut label = path.display().to_string();
+                if let Some(t) = tip {
+                    label += &format!(" (tip {t})");
+                }
+                match joints {
+                    JointGroup::Chain => {}
+                    JointGroup::All => label += " (all joints)",
+                    JointGroup::Tips(t) => label += &format!(" (tips {})", t.join(",")),
+                    JointGroup::Named(n) => label += &format!(" (joints {})", n.join(",")),
+                }
+                label
+            }
         }
     }
 }

@@ -22,7 +22,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use crate::core::error::{Error, Result};
 use crate::sim::bvh::Bvh;
-use crate::sim::kinematics::{Joint, JointKind, KinematicChain, Mimic};
+use crate::sim::kinematics::{Joint, JointGroup, JointKind, KinematicChain, Mimic};
 use crate::sim::mesh_file::load_mesh;
 use crate::sim::robot::Robot;
 use crate::sim::shape::Shape;
@@ -58,6 +58,8 @@ pub struct UrdfOptions {
     /// The end-effector link (its origin); `None`: the last link of the longest chain.
     pub tip: Option<String>,
     pub geometry: GeometryKind,
+    /// Which movable joints are the joint vector (the chain to the tip by default).
+    pub joints: JointGroup,
 }
 
 impl Default for UrdfOptions {
@@ -66,6 +68,7 @@ impl Default for UrdfOptions {
             base: Isometry3::identity(),
             tip: None,
             geometry: GeometryKind::Visual,
+            joints: JointGroup::Chain,
         }
     }
 }
@@ -289,8 +292,14 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             }
         },
     };
-    let chain = KinematicChain::new(link_names.clone(), joints, options.base, tip)
-        .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
+    let chain = KinematicChain::with_group(
+        link_names.clone(),
+        joints,
+        options.base,
+        tip,
+        &options.joints,
+    )
+    .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
 
     // Geometry, stored in the chain's link order.
     let dir = path.parent().unwrap_or(Path::new("."));

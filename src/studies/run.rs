@@ -42,6 +42,8 @@ pub struct RunOptions {
     pub tip: Option<String>,
     /// The URDF's visual or collision geometry (`--geometry`).
     pub geometry: crate::sim::urdf_loader::GeometryKind,
+    /// Which movable joints are the joint vector (`--joints`, `--tips`).
+    pub joints: crate::sim::kinematics::JointGroup,
     /// Train and test the self-models on this dataset file instead of rendering (`--dataset`).
     pub dataset: Option<std::path::PathBuf>,
     /// The camera the self-models' data is rendered from (`--eye`, `--target`, `--fov`,
@@ -68,6 +70,7 @@ impl RunOptions {
             arm4_scene: false,
             tip: None,
             geometry: Default::default(),
+            joints: Default::default(),
             camera: CameraChoice::default(),
             dataset: None,
             latencies: None,
@@ -87,11 +90,19 @@ impl RunOptions {
                         base_rpy: [0.0; 3],
                         tip: None,
                         geometry: Default::default(),
+                        joints: Default::default(),
                     }
                 };
-                if let RobotSpec::Urdf { tip, geometry, .. } = &mut spec {
+                if let RobotSpec::Urdf {
+                    tip,
+                    geometry,
+                    joints,
+                    ..
+                } = &mut spec
+                {
                     *tip = self.tip.clone();
                     *geometry = self.geometry;
+                    *joints = self.joints.clone();
                 }
                 spec
             }
