@@ -621,6 +621,82 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         &["bad.csv", "line 3"],
         &out,
     );
+    // Bad input round 3: an unbounded --k, an --out that is the targets or inside the model's
+    // folder, and edited model files are refused in one line; nothing is written or replaced.
+    let solve = |targets: &Path, k: &str, out: &Path, model: &Path| {
+        vec![
+            "solve".to_string(),
+            "--model".into(),
+            model.to_str().unwrap().into(),
+            "--targets".into(),
+            targets.to_str().unwrap().into(),
+            "--k".into(),
+            k.into(),
+            "--out".into(),
+            out.to_str().unwrap().into(),
+        ]
+    };
+    let run = |args: Vec<String>, needles: &[&str], out: &Path| {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        fails_cleanly(ik, &args, needles, out)
+    };
+    run(
+        solve(&targets, "18446744073709551615", &out, &model),
+        &["--k"],
+        &out,
+    );
+    let before = std::fs::read(&targets).unwrap();
+    let o = Command::new(ik)
+        .args(solve(&targets, "1", &targets, &model))
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("the file it reads")
+    );
+    assert_eq!(
+        std::fs::read(&targets).unwrap(),
+        before,
+        "the targets were replaced"
+    );
+    let json = model.join("model.json");
+    let saved = std::fs::read_to_string(&json).unwrap();
+    let o = Command::new(ik)
+        .args(solve(&targets, "1", &json, &model))
+        .output()
+        .unwrap();
+    assert!(
+        !o.status.success()
+            && String::from_utf8_lossy(&o.stderr).contains("inside the model's folder")
+    );
+    assert_eq!(std::fs::read_to_string(&json).unwrap(), saved);
+    let edited = d.join("edited");
+    std::fs::create_dir_all(&edited).unwrap();
+    std::fs::copy(model.join("model.bpk"), edited.join("model.bpk")).unwrap();
+    let value: serde_json::Value = serde_json::from_str(&saved).unwrap();
+    for (edit, needle) in [
+        ("/ranges", "joint ranges for 6 joints"),
+        ("/ranges/1", "not finite numbers"),
+        ("/config/lm/max_iterations", "iterations a start"),
+        ("/joint_names/1", "named twice"),
+    ] {
+        let mut v = value.clone();
+        match edit {
+            "/ranges" => {
+                v["ranges"].as_array_mut().unwrap().pop();
+            }
+            "/ranges/1" => v["ranges"][1] = serde_json::json!([1e308, -1e308]),
+            "/config/lm/max_iterations" => {
+                v["config"]["lm"]["max_iterations"] = serde_json::json!(1_000_000_000_000u64)
+            }
+            _ => v["joint_names"][1] = v["joint_names"][0].clone(),
+        }
+        std::fs::write(edited.join("model.json"), v.to_string()).unwrap();
+        run(
+            solve(&targets, "1", &out, &edited),
+            &[needle, "ik train"],
+            &out,
+        );
+    }
     // The benchmark on the same model: every budget's row, the family, the model alone;
     // every answer inside the limits, and the largest budget solves (nearly) every target.
     let bench = d.join("bench");

@@ -98,6 +98,77 @@ pub struct SavedModel {
     pub git_revision: String,
 }
 
+/// The largest joint value a saved model may state (SI: radians, metres).
+const MAX_RANGE: f64 = 1e4;
+/// The most iterations and random starts a saved model may ask of its solver per answer.
+const MAX_ITERATIONS: usize = 100_000;
+const MAX_STARTS: usize = 10_000;
+
+impl SavedModel {
+    /// What a model written by `ik train` always satisfies; an edited or damaged file is
+    /// refused with what is wrong rather than answering wrongly or failing inside the solver.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let dof = self.joint_names.len();
+        if dof == 0 {
+            return Err("it names no joints".into());
+        }
+        if self.ranges.len() != dof {
+            return Err(format!(
+                "it has {} joint ranges for {dof} joints",
+                self.ranges.len()
+            ));
+        }
+        if let Some(i) = (1..dof).find(|&i| self.joint_names[..i].contains(&self.joint_names[i])) {
+            return Err(format!("joint \"{}\" is named twice", self.joint_names[i]));
+        }
+        for (name, [lo, hi]) in self.joint_names.iter().zip(&self.ranges) {
+            if !(lo.is_finite() && hi.is_finite() && lo.abs() <= MAX_RANGE && hi.abs() <= MAX_RANGE)
+            {
+                return Err(format!(
+                    "joint \"{name}\" has the range [{lo:e}, {hi:e}], not finite numbers within +-{MAX_RANGE}"
+                ));
+            }
+            if lo > hi {
+                return Err(format!(
+                    "joint \"{name}\" has the range [{lo:e}, {hi:e}], inverted"
+                ));
+            }
+        }
+        let [lo, hi] = self.position_bounds;
+        if (0..3).any(|k| !(lo[k].is_finite() && hi[k].is_finite() && lo[k] < hi[k])) {
+            return Err(format!(
+                "its position bounds {lo:?} .. {hi:?} are not finite, increasing intervals"
+            ));
+        }
+        let lm = &self.config.lm;
+        if !(lm.tolerance_m > 0.0 && lm.tolerance_m.is_finite() && lm.tolerance_m < 1.0) {
+            return Err(format!(
+                "its position tolerance {} m is not between 0 and 1 m",
+                lm.tolerance_m
+            ));
+        }
+        if !(lm.tolerance_rad > 0.0 && lm.tolerance_rad < std::f64::consts::PI) {
+            return Err(format!(
+                "its rotation tolerance {} rad is not between 0 and pi",
+                lm.tolerance_rad
+            ));
+        }
+        if !(1..=MAX_ITERATIONS).contains(&lm.max_iterations) {
+            return Err(format!(
+                "it asks {} iterations a start (1 to {MAX_ITERATIONS})",
+                lm.max_iterations
+            ));
+        }
+        if lm.random_starts > MAX_STARTS {
+            return Err(format!(
+                "it asks {} random starts (at most {MAX_STARTS})",
+                lm.random_starts
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// A trained model ready to answer.
 pub struct PoseModel {
     pub saved: SavedModel,
@@ -240,6 +311,9 @@ impl PoseModel {
                 &json,
                 format!("not a saved IK model ({e}); make one with `ik train`"),
             )
+        })?;
+        saved.check().map_err(|e| {
+            Error::data(&json, format!("{e}; train the model again with `ik train`"))
         })?;
         let dof = saved.joint_names.len();
         let width = if saved.config.position_only { 3 } else { 7 };
