@@ -225,6 +225,44 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         "table2" => env!("CARGO_BIN_EXE_emssl_table2"),
         _ => unreachable!(),
     };
+    // Unbounded work is refused before it starts (it aborted on allocation, or ran forever).
+    fails_cleanly(
+        bin("dataset"),
+        &[
+            "--preset",
+            "quick",
+            "--samples",
+            "1000000000000",
+            "--out",
+            n,
+        ],
+        &["GiB", "--samples"],
+        &npz_out,
+    );
+    fails_cleanly(
+        bin("dataset"),
+        &[
+            "--preset",
+            "quick",
+            "--sampler",
+            "grid",
+            "--grid-step",
+            "1e-9",
+            "--out",
+            n,
+        ],
+        &["grid step", "--grid-step"],
+        &npz_out,
+    );
+    // A self-model refusing its settings leaves no folder (it left config.json behind).
+    for args in [["--train-samples", "1000000000000"], ["--fov", "0"]] {
+        fails_cleanly(
+            env!("CARGO_BIN_EXE_neurokin"),
+            &["--preset", "quick", args[0], args[1], "--out", o],
+            &[],
+            &out,
+        );
+    }
     // A typo in the first row is not a header; a header is a row of names.
     let typo = write("typo.csv", "1O,20,30,40\n1,2,3,4\n");
     fails_cleanly(

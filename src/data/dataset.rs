@@ -238,6 +238,9 @@ pub struct Dataset {
 
 /// Joint vectors (user units) for a config, from its sampler.
 pub fn sample_angles(robot: &Robot, cfg: &DatasetConfig) -> Result<Vec<Vec<f64>>> {
+    // Before anything is drawn: a sample count the images could never fit is refused now,
+    // not after drawing its joint vectors.
+    cfg.validate()?;
     let ranges = robot.chain.joint_ranges_user();
     match cfg.sampler {
         SamplerKind::Lorenz => lorenz(cfg.samples, &ranges),

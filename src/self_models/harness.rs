@@ -805,6 +805,10 @@ pub fn run<M: SelfModel>(
     device_choice: DeviceChoice,
     resume: bool,
 ) -> Result<RunOutcome> {
+    // Settings that can never render are refused before anything is written.
+    if cfg.data.file.is_none() {
+        cfg.data.dataset.validate()?;
+    }
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
     // Read the revision now: a run that spans commits is the code it started with.

@@ -107,6 +107,9 @@ pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// The most grid points along one joint.
+const MAX_GRID_POINTS: usize = 1_000_000;
+
 /// The grid with spacing `steps[j]` over each joint's range (ends included), in
 /// lexicographic order (last joint fastest). If it has more than `n` points, `n` of them are
 /// drawn at random without replacement (seeded) and kept in grid order.
@@ -120,11 +123,20 @@ pub fn grid(n: usize, ranges: &[[f64; 2]], steps: &[f64], seed: u64) -> Result<V
         .iter()
         .zip(steps)
         .map(|(r, &step)| {
-            let m = ((r[1] - r[0]) / step + 1e-9).floor() as usize;
-            (0..=m).map(|i| r[0] + i as f64 * step).collect()
+            let m = ((r[1] - r[0]) / step + 1e-9).floor();
+            if !(m <= MAX_GRID_POINTS as f64) {
+                return Err(Error::Config(format!(
+                    "a grid step of {step} gives {m:.3e} points along a joint's range of {}; at most {MAX_GRID_POINTS} (raise --grid-step)",
+                    r[1] - r[0]
+                )));
+            }
+            Ok((0..=m as usize).map(|i| r[0] + i as f64 * step).collect())
         })
-        .collect();
-    let total: usize = axes.iter().map(Vec::len).product();
+        .collect::<Result<_>>()?;
+    let total: usize = axes
+        .iter()
+        .map(Vec::len)
+        .fold(1usize, |a, b| a.saturating_mul(b));
     let point = |mut i: usize| {
         let mut q = vec![0.0; axes.len()];
         for (a, axis) in axes.iter().enumerate().rev() {
