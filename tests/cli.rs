@@ -254,6 +254,13 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["grid step", "--grid-step"],
         &npz_out,
     );
+    // A camera kilometres away (its frame was NaN at 1e150 m, and 1e300 took a minute).
+    fails_cleanly(
+        bin("dataset"),
+        &["--preset", "quick", "--eye", "1e150,0,0", "--out", n],
+        &["within 1000 m"],
+        &npz_out,
+    );
     // A self-model refusing its settings leaves no folder (it left config.json behind).
     for args in [["--train-samples", "1000000000000"], ["--fov", "0"]] {
         fails_cleanly(

@@ -35,6 +35,9 @@ impl Default for Camera {
     }
 }
 
+/// How far from the origin (m) a camera's eye and target may be.
+pub const MAX_CAMERA_COORDINATE: f64 = 1e3;
+
 impl Camera {
     /// The camera of both self-modeling papers.
     pub fn paper() -> Self {
@@ -91,6 +94,18 @@ impl Camera {
             return Err(Error::Config(format!(
                 "camera fov {} must be in (0, 180) degrees",
                 self.fov_deg
+            )));
+        }
+        // A scene of robots is metres across: a camera kilometres away sees nothing, and
+        // coordinates far beyond overflow the frame's arithmetic (NaN directions).
+        if let Some(v) = self
+            .eye
+            .iter()
+            .chain(&self.target)
+            .find(|v| !(v.abs() <= MAX_CAMERA_COORDINATE))
+        {
+            return Err(Error::Config(format!(
+                "camera eye and target must be within {MAX_CAMERA_COORDINATE} m of the origin, got a coordinate of {v:e} m"
             )));
         }
         if fwd.norm() < 1e-12 || fwd.cross(&Vector3::from(self.up)).norm() < 1e-12 {
