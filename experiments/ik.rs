@@ -75,46 +75,9 @@ enum Command {
 const MAX_K: usize = 1000;
 const MAX_TARGETS: usize = 10_000_000;
 
-/// Refuse an `--out` that is one of the `inputs` or lies inside the model's folder: a run
-/// never overwrites what it reads.
-fn refuse_overwrite(
-    out: &std::path::Path,
-    inputs: &[&std::path::Path],
-    model: &std::path::Path,
-) -> selfmodel::Result<()> {
-    // The path as it will be: its folder resolved (the file may not exist yet).
-    let resolve = |p: &std::path::Path| {
-        let parent = p
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(std::path::Path::new("."));
-        std::fs::canonicalize(parent)
-            .ok()
-            .map(|d| d.join(p.file_name().unwrap_or_default()))
-    };
-    let Some(target) = resolve(out) else {
-        return Ok(());
-    };
-    for input in inputs {
-        if resolve(input).is_some_and(|i| i == target) {
-            return Err(selfmodel::Error::Config(format!(
-                "--out {} is the file it reads ({}): choose another --out",
-                out.display(),
-                input.display()
-            )));
-        }
-    }
-    if model.join("model.json").is_file()
-        && let Ok(model) = std::fs::canonicalize(model)
-        && target.starts_with(&model)
-    {
-        return Err(selfmodel::Error::Config(format!(
-            "--out {} lies inside the model's folder {}: choose another --out",
-            out.display(),
-            model.display()
-        )));
-    }
-    Ok(())
+/// `dir` when it holds a saved model (its folder is then not to be written into).
+fn saved_model(dir: &std::path::Path) -> Option<&std::path::Path> {
+    Some(dir).filter(|d| d.join("model.json").is_file())
 }
 
 fn main() -> ExitCode {
@@ -161,7 +124,7 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                refuse_overwrite(&out, &[], &model)?;
+                selfmodel::core::atomic_file::refuse_overwrite(&out, &[], saved_model(&model))?;
                 let model = PoseModel::load(&model, &device)?;
                 let robot = model.saved.robot.load_kinematics()?;
                 model.check_robot(&robot)?;
@@ -195,7 +158,11 @@ fn main() -> ExitCode {
                         "--k must be 1 to {MAX_K} (answers per target)"
                     )));
                 }
-                refuse_overwrite(&out, &[&targets], &model)?;
+                selfmodel::core::atomic_file::refuse_overwrite(
+                    &out,
+                    &[&targets],
+                    saved_model(&model),
+                )?;
                 let model = PoseModel::load(&model, &device)?;
                 let robot = model.saved.robot.load_kinematics()?;
                 model.check_robot(&robot)?;

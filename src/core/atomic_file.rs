@@ -163,3 +163,41 @@ pub fn file_name(label: &str) -> String {
         .collect::<Vec<_>>()
         .join("_")
 }
+
+/// Refuse an output path that is one of a run's `inputs` or lies inside a folder it reads
+/// from (`protected`, a saved model's): a run never overwrites what it reads. Paths are
+/// compared as they resolve (the output need not exist yet).
+pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) -> Result<()> {
+    let resolve = |p: &Path| {
+        let parent = p
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        fs::canonicalize(parent)
+            .ok()
+            .map(|d| d.join(p.file_name().unwrap_or_default()))
+    };
+    let Some(target) = resolve(out) else {
+        return Ok(());
+    };
+    if let Some(input) = inputs
+        .iter()
+        .find(|i| resolve(i).is_some_and(|i| i == target))
+    {
+        return Err(Error::Config(format!(
+            "--out {} is the file it reads ({}): choose another --out",
+            out.display(),
+            input.display()
+        )));
+    }
+    if let Some(dir) = protected.and_then(|d| fs::canonicalize(d).ok())
+        && target.starts_with(&dir)
+    {
+        return Err(Error::Config(format!(
+            "--out {} lies inside the model's folder {}: choose another --out",
+            out.display(),
+            dir.display()
+        )));
+    }
+    Ok(())
+}

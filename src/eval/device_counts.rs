@@ -30,6 +30,20 @@ pub struct DeviceCounts {
 }
 
 impl DeviceCounts {
+    /// Both counts together.
+    pub fn plus(&self, other: &DeviceCounts) -> DeviceCounts {
+        let mut kernels = self.kernels.clone();
+        for (k, n) in &other.kernels {
+            *kernels.entry(k.clone()).or_default() += n;
+        }
+        DeviceCounts {
+            launches: self.launches + other.launches,
+            reads: self.reads + other.reads,
+            uploads: self.uploads + other.uploads,
+            kernels,
+        }
+    }
+
     /// What happened between `earlier` and `self`.
     pub fn since(&self, earlier: &DeviceCounts) -> DeviceCounts {
         DeviceCounts {

@@ -143,11 +143,23 @@ pub fn run(check: &GpuCheck) -> Result<()> {
     Ok(())
 }
 
+/// What each step of a NeuroKin training run (the `preset`'s model, 4 joints, random
+/// silhouettes, the paper's clipping and input noise; an epoch every 4 steps) asks of the GPU:
+/// one [`DeviceCounts`] per step, from the end of the step before to the end of its own (its
+/// loss read included when the step is a log step), and the run's log.
 #[cfg(feature = "wgpu")]
-fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
+pub fn neurokin_step_counts(
+    preset: &str,
+    batch: usize,
+    steps: usize,
+    log_every: usize,
+) -> Result<(
+    Vec<crate::eval::device_counts::DeviceCounts>,
+    crate::train::trainer::TrainLog,
+)> {
     use crate::core::preset::Preset;
     use crate::eval::device_counts;
-    use crate::self_models::neurokin::NeuroKinConfig;
+    use crate::self_models::neurokin::{NeuroKin, NeuroKinConfig};
     use crate::train::trainer::{TrainConfig, TrainSet, Trainer, Watch, autodiff_device};
     use burn::tensor::{Distribution, Tensor};
     if !device_counts::install() {
@@ -157,54 +169,65 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
     }
     let device = crate::core::device::select(DeviceChoice::Wgpu)?;
     let tdev = autodiff_device(&device, 0);
-    let mut rows = Vec::new();
-    let mut cfg = NeuroKinConfig::preset(if check.quick { "quick" } else { "paper" })?;
+    let mut cfg = NeuroKinConfig::preset(preset)?;
     cfg.dof = 4;
+    let n = 4 * batch;
+    let set = crate::core::device::with_seed(&tdev, 1, || TrainSet {
+        inputs: Tensor::<2>::random([n, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
+        targets: vec![Tensor::<4>::random(
+            [n, 1, cfg.image[0], cfg.image[1]],
+            Distribution::Bernoulli(0.1),
+            &tdev,
+        )],
+    });
+    let set = cfg.training_set(&set);
+    let train = TrainConfig {
+        steps,
+        batch,
+        learning_rate: 1e-3,
+        grad_clip_norm: Some(1.0),
+        input_noise: 0.01,
+        seed: 0,
+        checkpoint_every: 0,
+        log_every,
+    };
+    let mut last = device_counts::snapshot();
+    let mut per_step = Vec::with_capacity(steps);
+    let mut watch = Watch(|_: &NeuroKin, _: usize| {
+        let now = device_counts::snapshot();
+        per_step.push(now.since(&last));
+        last = now;
+        Ok(())
+    });
+    let model = cfg.init(&tdev, 0)?;
+    let (_, log) = Trainer::new(&train, "counts")
+        .quiet()
+        .hooks(&mut watch)
+        .fit(model, &set, cfg.training_loss())?;
+    Ok((per_step, log))
+}
+
+#[cfg(feature = "wgpu")]
+fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    use crate::eval::device_counts::DeviceCounts;
+    let mut rows = Vec::new();
+    let (steps, log_every) = (24, 8);
     for batch in [32, 256] {
-        let n = 4 * batch;
-        let set = crate::core::device::with_seed(&tdev, 1, || TrainSet {
-            inputs: Tensor::<2>::random([n, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
-            targets: vec![Tensor::<4>::random(
-                [n, 1, cfg.image[0], cfg.image[1]],
-                Distribution::Bernoulli(0.1),
-                &tdev,
-            )],
-        });
-        let set = cfg.training_set(&set);
-        let (steps, log_every) = (24, 8);
-        let train = TrainConfig {
-            steps,
-            batch,
-            learning_rate: 1e-3,
-            grad_clip_norm: Some(1.0),
-            input_noise: 0.01,
-            seed: 0,
-            checkpoint_every: 0,
-            log_every,
-        };
+        let preset = if check.quick { "quick" } else { "paper" };
+        let (per_step, _) = neurokin_step_counts(preset, batch, steps, log_every)?;
         // Counted from the end of the first epoch (kernels compiled and tuned by then).
-        let start = std::cell::RefCell::new(None);
-        let mut watch = Watch(|_: &crate::self_models::neurokin::NeuroKin, step: usize| {
-            if step == 4 {
-                *start.borrow_mut() = Some(device_counts::snapshot());
-            }
-            Ok(())
-        });
-        let model = cfg.init(&tdev, 0)?;
-        Trainer::new(&train, "counts")
-            .quiet()
-            .hooks(&mut watch)
-            .fit(model, &set, cfg.training_loss())?;
-        let _ = device.sync();
-        let c = device_counts::snapshot().since(&start.borrow().clone().unwrap_or_default());
-        let counted = (steps - 4) as f64;
+        let counted = &per_step[4..];
+        let c = counted
+            .iter()
+            .fold(DeviceCounts::default(), |a, s| a.plus(s));
+        let k = counted.len() as f64;
         let row = StepCounts {
             model: "NeuroKin".into(),
             batch,
-            launches_per_step: c.launches as f64 / counted,
-            reads_per_step: c.reads as f64 / counted,
-            uploads_per_step: c.uploads as f64 / counted,
-            steps: steps - 4,
+            launches_per_step: c.launches as f64 / k,
+            reads_per_step: c.reads as f64 / k,
+            uploads_per_step: c.uploads as f64 / k,
+            steps: counted.len(),
             log_every,
         };
         console.say(format!(
@@ -213,8 +236,8 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
         ))?;
         let mut kernels: Vec<_> = c.kernels.into_iter().collect();
         kernels.sort_by(|a, b| b.1.cmp(&a.1));
-        for (name, k) in kernels.iter().take(8) {
-            console.say(format!("  {:>6.1} x {name}", *k as f64 / counted))?;
+        for (name, n) in kernels.iter().take(8) {
+            console.say(format!("  {:>6.1} x {name}", *n as f64 / k))?;
         }
         rows.push(row);
     }
