@@ -24,7 +24,8 @@ struct Args {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Learn a robot's inverse kinematics (a conditional flow on its poses) and save it.
+    /// Learn a robot's inverse kinematics (a conditional flow on its poses) and save it;
+    /// with --tips A,B, of several tips at once (one pose each in a target).
     Train {
         #[command(flatten)]
         robot: RobotArgs,
@@ -57,8 +58,9 @@ enum Command {
         /// A folder `ik train` wrote.
         #[arg(long)]
         model: PathBuf,
-        /// CSV with a header: x,y,z,qw,qx,qy,qz (metres; x,y,z for a position-only model;
-        /// other columns ignored).
+        /// CSV with a header: x,y,z,qw,qx,qy,qz (metres; x,y,z for a position-only model; a
+        /// model of several tips: each tip's columns prefixed, A.x,...,A.qz,B.x,...; other
+        /// columns ignored).
         #[arg(long)]
         targets: PathBuf,
         /// Answers per target (k > 1: the flow's k samples, each refined: the family).
@@ -94,17 +96,17 @@ fn main() -> ExitCode {
             } => {
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
-                if robot.group.tips.as_ref().is_some_and(|t| t.len() > 1) {
-                    return Err(selfmodel::Error::Config(
-                        "ik train answers the pose of one tip (--tip); several tips (--tips) are not built yet".into(),
-                    ));
-                }
                 let spec = robot.spec()?;
                 let loaded = spec.load_kinematics()?;
                 let start = std::time::Instant::now();
                 let model = train(&spec, &loaded, &cfg, &out, &device)?;
+                let tips = if model.tips().is_empty() {
+                    String::new()
+                } else {
+                    format!(", the poses of {}", model.tips().join(" and "))
+                };
                 println!(
-                    "ik train ({preset} preset): {} joints ({}), {} poses, {:.0} s; wrote {}/model.json (+ model.bpk)",
+                    "ik train ({preset} preset): {} joints ({}){tips}, {} poses, {:.0} s; wrote {}/model.json (+ model.bpk)",
                     model.dof(),
                     model.saved.joint_names.join(", "),
                     cfg.data.train,
@@ -138,6 +140,7 @@ fn main() -> ExitCode {
                     &targets,
                     &joints,
                     &model.saved.joint_names,
+                    model.tips(),
                 );
                 selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
                 println!(
@@ -166,7 +169,7 @@ fn main() -> ExitCode {
                 let model = PoseModel::load(&model, &device)?;
                 let robot = model.saved.robot.load_kinematics()?;
                 model.check_robot(&robot)?;
-                let targets = read_targets(&targets, model.position_only())?;
+                let targets = read_targets(&targets, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
                 let answers = model.solve(&robot.chain, &targets, k, &device);
                 let seconds = start.elapsed().as_secs_f64();

@@ -499,63 +499,6 @@ fn joints_listed_tip_first_are_ordered_root_to_tip() {
     }
 }
 
-/// A torso with two arms, the right arm listed first, and a finger on the left hand.
-fn two_armed_urdf() -> String {
-    let mut s = String::from("<robot name=\"two_arms\">");
-    for l in [
-        "base",
-        "torso",
-        "r_upper",
-        "r_fore",
-        "right_hand",
-        "l_upper",
-        "l_fore",
-        "left_hand",
-        "finger",
-    ] {
-        s += &format!(
-            "<link name=\"{l}\"><visual><geometry><box size=\"0.05 0.05 0.1\"/></geometry></visual></link>"
-        );
-    }
-    // name, type, parent, child, origin, axis
-    for (n, kind, parent, child, xyz, axis) in [
-        ("waist", "revolute", "base", "torso", "0 0 0.1", "0 0 1"),
-        ("r1", "revolute", "torso", "r_upper", "0 -0.2 0.3", "0 1 0"),
-        ("r2", "revolute", "r_upper", "r_fore", "0 0 -0.25", "0 1 0"),
-        (
-            "r_wrist",
-            "fixed",
-            "r_fore",
-            "right_hand",
-            "0 0 -0.2",
-            "0 0 1",
-        ),
-        ("l1", "revolute", "torso", "l_upper", "0 0.2 0.3", "0 1 0"),
-        ("l2", "revolute", "l_upper", "l_fore", "0 0 -0.25", "0 1 0"),
-        (
-            "l_wrist",
-            "fixed",
-            "l_fore",
-            "left_hand",
-            "0 0 -0.2",
-            "0 0 1",
-        ),
-        (
-            "grip",
-            "prismatic",
-            "left_hand",
-            "finger",
-            "0 0 -0.05",
-            "0 1 0",
-        ),
-    ] {
-        s += &format!(
-            "<joint name=\"{n}\" type=\"{kind}\"><parent link=\"{parent}\"/><child link=\"{child}\"/><origin xyz=\"{xyz}\"/><axis xyz=\"{axis}\"/><limit lower=\"-1.5\" upper=\"1.5\" effort=\"1\" velocity=\"1\"/></joint>"
-        );
-    }
-    s + "</robot>"
-}
-
 /// Joint groups: the chains to several tips (both hands, with the waist they share), every
 /// movable joint, joints by name; each joint of the group moves what hangs from it and
 /// nothing else, and the joints keep the tree's depth-first order.
@@ -565,7 +508,7 @@ fn joint_groups_drive_several_tips_and_every_joint() {
     use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
     let dir = common::tempdir();
     let path = dir.path().join("two_arms.urdf");
-    std::fs::write(&path, two_armed_urdf()).unwrap();
+    std::fs::write(&path, common::two_armed_urdf()).unwrap();
     let load = |joints: JointGroup| {
         load_urdf_with(
             &path,

@@ -28,8 +28,8 @@ fn arm(joints: usize) -> (common::TempDir, selfmodel::sim::robot::Robot) {
 fn the_pose_error_is_zero_at_the_truth_and_the_angle_of_a_known_rotation() {
     let (_dir, robot) = arm(7);
     let q = [0.3, -0.5, 0.8, -1.0, 0.4, 0.2, -0.6];
-    let truth = PoseTarget::of(&robot.chain, &q);
-    let (p, r) = pose_error(&robot.chain, &q, &truth);
+    let truth = PoseTarget::of(&robot.chain, &q)[0];
+    let (p, r) = pose_error(&robot.chain, &q, &[truth]);
     assert!(p < 1e-12 && r < 1e-12, "{p} {r}");
     // The target turned 30 degrees about some axis and moved 2 cm: errors 30 degrees, 2 cm.
     let turn = UnitQuaternion::from_axis_angle(
@@ -40,11 +40,11 @@ fn the_pose_error_is_zero_at_the_truth_and_the_angle_of_a_known_rotation() {
         position: truth.position + Vector3::new(0.0, 0.02, 0.0),
         orientation: Some(turn * truth.orientation.unwrap()),
     };
-    let (p, r) = pose_error(&robot.chain, &q, &moved);
+    let (p, r) = pose_error(&robot.chain, &q, &[moved]);
     assert!((p - 0.02).abs() < 1e-12, "{p}");
     assert!((r.to_degrees() - 30.0).abs() < 1e-9, "{}", r.to_degrees());
     // Position only: no rotation error.
-    let (_, r) = pose_error(&robot.chain, &q, &moved.position_only());
+    let (_, r) = pose_error(&robot.chain, &q, &[moved.position_only()]);
     assert_eq!(r, 0.0);
 }
 
@@ -80,7 +80,7 @@ fn levenberg_marquardt_converges_within_asymmetric_limits() {
     assert_eq!(ranges[0], [-1.2, 1.9]);
     let cfg = LmConfig::standard();
     let mut rng_q = selfmodel::sim::trajectory::babbling(200, &ranges, 7);
-    let targets: Vec<PoseTarget> = rng_q
+    let targets: Vec<Vec<PoseTarget>> = rng_q
         .iter_mut()
         .map(|q| PoseTarget::of(&robot.chain, q))
         .collect();
@@ -95,7 +95,7 @@ fn levenberg_marquardt_converges_within_asymmetric_limits() {
     }
     // From a start near a solution it takes a handful of iterations.
     let near: Vec<f64> = rng_q[0].iter().map(|v| v + 0.05).collect();
-    let s = solve_from(&robot.chain.tip_path(), &targets[0], &near, &ranges, &cfg);
+    let s = solve_from(&robot.chain.tip_paths(), &targets[0], &near, &ranges, &cfg);
     assert!(
         s.exact(&cfg) && s.iterations <= 6,
         "{} iterations",
@@ -109,17 +109,18 @@ fn a_redundant_arm_reaches_full_poses_and_a_target_outside_the_limits_is_not_exa
     let ranges = robot.chain.joint_ranges();
     let cfg = LmConfig::standard();
     let qs = selfmodel::sim::trajectory::babbling(100, &ranges, 3);
-    let targets: Vec<PoseTarget> = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let targets: Vec<Vec<PoseTarget>> =
+        qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     let solved = solve_batch(&robot.chain, &targets, &[], &ranges, &cfg);
     let exact = solved.iter().filter(|s| s.exact(&cfg)).count();
     assert!(exact >= 99, "{exact} of 100 exact");
     assert!(solved.iter().all(|s| within(&s.joints, &ranges, 0.0)));
     // A target 2 m away: its best answer, not exact, still inside the limits.
     let far = PoseTarget {
-        position: targets[0].position + Vector3::new(2.0, 0.0, 0.0),
-        orientation: targets[0].orientation,
+        position: targets[0][0].position + Vector3::new(2.0, 0.0, 0.0),
+        orientation: targets[0][0].orientation,
     };
-    let s = &solve_batch(&robot.chain, &[far], &[], &ranges, &cfg)[0];
+    let s = &solve_batch(&robot.chain, &[vec![far]], &[], &ranges, &cfg)[0];
     assert!(!s.exact(&cfg) && s.position_error_m > 1.0);
     assert!(within(&s.joints, &ranges, 0.0));
 }
@@ -163,7 +164,8 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     let ranges = &model.saved.ranges;
     let qs = selfmodel::sim::trajectory::babbling(40, ranges, 5);
-    let targets: Vec<PoseTarget> = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let targets: Vec<Vec<PoseTarget>> =
+        qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     let before = model.solve(&robot.chain, &targets, 3, &device);
     let loaded = PoseModel::load(&dir.path().join("model"), &device).unwrap();
     loaded.check_robot(&robot).unwrap();
@@ -238,18 +240,36 @@ fn malformed_target_files_fail_naming_the_line() {
         ("x,y,z\n0.1,0.2,0.3\n", "line 1", "qw"),
         ("x,y,z,qw,qx,qy,qz\n0.1,0.2,NaN,1,0,0,0\n", "line 2", "NaN"),
         ("x,y,z,qw,qx,qy,qz\n", "no targets", ""),
+        (
+            "x,y,z,qw,qx,qy,qz,x\n0.1,0.2,0.3,1,0,0,0,9\n",
+            "line 1",
+            "\"x\" appears twice",
+        ),
+        (
+            "x,y,z,qw,qx,qy,qz\n1e39,0.2,0.3,1,0,0,0\n",
+            "line 2",
+            "metres",
+        ),
     ];
     for (text, needle, also) in cases {
         std::fs::write(&path, text).unwrap();
-        let err = read_targets(&path, false).unwrap_err().to_string();
+        let err = read_targets(&path, false, &[]).unwrap_err().to_string();
         assert!(err.contains(needle) && err.contains(also), "{err}");
         assert!(err.contains("t.csv") && !err.contains('\n'), "{err}");
     }
     // Other columns are ignored; a position-only model reads x,y,z.
     std::fs::write(&path, "id,x,y,z,note\n7,0.1,0.2,0.3,hello\n").unwrap();
-    let t = read_targets(&path, true).unwrap();
+    let t = read_targets(&path, true, &[]).unwrap();
     assert_eq!(t.len(), 1);
-    assert!(t[0].orientation.is_none());
+    assert!(t[0][0].orientation.is_none());
+    // Several tips: each tip's columns prefixed with its name.
+    let tips = ["a".to_string(), "b".to_string()];
+    std::fs::write(&path, "b.x,b.y,b.z,a.x,a.y,a.z\n1,2,3,4,5,6\n").unwrap();
+    let t = read_targets(&path, true, &tips).unwrap();
+    assert_eq!(t[0][0].position, nalgebra::Point3::new(4.0, 5.0, 6.0));
+    assert_eq!(t[0][1].position, nalgebra::Point3::new(1.0, 2.0, 3.0));
+    let err = read_targets(&path, false, &tips).unwrap_err().to_string();
+    assert!(err.contains("no column \"a.qw\""), "{err}");
 }
 
 /// An arm whose limits are offset around pi (as some makers state them: 0.82 to 5.46 rad) with
@@ -307,11 +327,91 @@ fn limits_offset_around_pi_are_kept_and_answered() {
     // Poses over the whole limits.
     let qs = selfmodel::sim::trajectory::babbling(300, &ranges, 11);
     assert!(qs.iter().filter(|q| q[1] > PI).count() > 100);
-    let targets: Vec<PoseTarget> = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let targets: Vec<Vec<PoseTarget>> =
+        qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     let answers = model.solve(&robot.chain, &targets, 1, &device);
     let exact = answers
         .iter()
         .filter(|a| a.iter().any(|s| s.exact(&model.saved.config.lm)))
         .count();
     assert!(exact >= 297, "{exact} of 300 answered exactly");
+}
+
+/// IK with several tips: a model of both hands of a two-armed robot (a shared waist) answers
+/// targets giving both hands' poses, read from and written to the `A.x,...,B.x,...` columns;
+/// an answer is exact only when each hand is within the tolerances.
+#[test]
+fn two_tips_are_solved_together() {
+    use selfmodel::core::preset::Preset;
+    use selfmodel::ik::pose_model::{PoseModel, read_targets};
+    use selfmodel::sim::kinematics::JointGroup;
+    let dir = common::tempdir();
+    let path = dir.path().join("two_arms.urdf");
+    std::fs::write(&path, common::two_armed_urdf()).unwrap();
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: None,
+        geometry: GeometryKind::None,
+        joints: JointGroup::Tips(vec!["left_hand".into(), "right_hand".into()]),
+    };
+    let robot = spec.load_kinematics().unwrap();
+    assert_eq!(robot.chain.tip_names(), ["left_hand", "right_hand"]);
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let model_dir = dir.path().join("model");
+    let cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &model_dir, &device).unwrap();
+    let model = PoseModel::load(&model_dir, &device).unwrap();
+    model.check_robot(&robot).unwrap();
+    assert_eq!(model.tips(), ["left_hand", "right_hand"]);
+    let (targets, joints) =
+        selfmodel::studies::bench_ik::random_targets(&robot, &model.saved.ranges, 100, 3);
+    let text = selfmodel::studies::bench_ik::targets_csv(
+        &targets,
+        &joints,
+        &model.saved.joint_names,
+        model.tips(),
+    );
+    assert!(text.starts_with("left_hand.x,left_hand.y,left_hand.z,left_hand.qw,"));
+    assert!(
+        text.lines()
+            .next()
+            .unwrap()
+            .contains("right_hand.qz,waist,r1,r2,l1,l2")
+    );
+    let file = dir.path().join("targets.csv");
+    std::fs::write(&file, text).unwrap();
+    let read = read_targets(&file, false, model.tips()).unwrap();
+    assert_eq!(read.len(), 100);
+    let answers = model.solve(&robot.chain, &read, 1, &device);
+    let lm = &model.saved.config.lm;
+    let mut exact = 0;
+    for (a, t) in answers.iter().map(|a| &a[0]).zip(&targets) {
+        // Each hand on its own.
+        let poses = robot.chain.tip_poses(&a.joints);
+        let each: Vec<(f64, f64)> = poses
+            .iter()
+            .zip(t)
+            .map(|(p, t)| {
+                (
+                    (p.translation.vector - t.position.coords).norm(),
+                    p.rotation.angle_to(&t.orientation.unwrap()),
+                )
+            })
+            .collect();
+        let both = each
+            .iter()
+            .all(|&(p, r)| p <= lm.tolerance_m && r <= lm.tolerance_rad);
+        assert_eq!(a.exact(lm), both, "{each:?}");
+        exact += usize::from(both);
+    }
+    assert!(exact >= 98, "{exact} of 100 targets exact");
+    // The tips moved apart: a single hand's pose is not an answer to both.
+    let one = PoseTarget::of(&robot.chain, &joints[0]);
+    let mut swapped = one.clone();
+    swapped.swap(0, 1);
+    let (p, _) = pose_error(&robot.chain, &joints[0], &swapped);
+    assert!(p > 0.1, "{p}");
 }

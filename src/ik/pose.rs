@@ -1,11 +1,13 @@
-//! Full-pose inverse kinematics: a target is a position, optionally with an orientation, and an
-//! answer is exact within 1 mm and 0.572 degrees (0.01 rad), IKFlow's definition. Solved by
+//! Full-pose inverse kinematics: a target is a position, optionally with an orientation, for
+//! each tip of the chain (one, or several: both hands of a humanoid), and an answer is exact
+//! when every tip is within 1 mm and 0.572 degrees (0.01 rad), IKFlow's definition. Solved by
 //! Levenberg-Marquardt on the 6-D pose error within the joint limits, from given starts (a
 //! learned model's samples) and then from random starts when those stall.
 //!
 //! The error of joints `q` for a target `(p_t, R_t)`: position `p_t - p(q)` (m) and rotation the
 //! rotation vector of `R_t R(q)^T` (rad, world frame; its norm is the angle of `R_t^T R(q)`).
-//! Each iteration solves `(J^T W J + lambda I) dq = J^T W e` with the analytic pose Jacobian
+//! Several tips stack their rows in `e` and `J` (tips may share joints: a torso moving both
+//! hands). Each iteration solves `(J^T W J + lambda I) dq = J^T W e` with the analytic pose Jacobian
 //! ([`KinematicChain::pose_jacobian`]), `W` weighting rotation by `tolerance_m /
 //! tolerance_rad` metres per radian (so both tolerances weigh alike) and `lambda = E + 1e-6`
 //! (`E = e^T W e / 2`, Sugihara's choice: Gauss-Newton near the solution, gradient-like far
@@ -22,7 +24,9 @@ use rayon::prelude::*;
 use crate::ik::dls::keep_in;
 use crate::sim::kinematics::{KinematicChain, TipPath};
 
-/// An inverse-kinematics target: a position (m) and, for a full-pose target, an orientation.
+/// The pose of one tip an inverse-kinematics target asks for: a position (m) and, for a
+/// full-pose target, an orientation. A target is one of these per tip of the chain
+/// ([`KinematicChain::tips`]), in their order: `&[PoseTarget]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PoseTarget {
     pub position: Point3<f64>,
@@ -30,13 +34,16 @@ pub struct PoseTarget {
 }
 
 impl PoseTarget {
-    /// Where the end effector of `chain` is at `q`, with its orientation.
-    pub fn of(chain: &KinematicChain, q: &[f64]) -> Self {
-        let pose = chain.tip_pose(q);
-        PoseTarget {
-            position: Point3::from(pose.translation.vector),
-            orientation: Some(pose.rotation),
-        }
+    /// Where each tip of `chain` is at `q`, with its orientation: the target `q` reaches.
+    pub fn of(chain: &KinematicChain, q: &[f64]) -> Vec<Self> {
+        chain
+            .tip_poses(q)
+            .iter()
+            .map(|pose| PoseTarget {
+                position: Point3::from(pose.translation.vector),
+                orientation: Some(pose.rotation),
+            })
+            .collect()
     }
 
     /// The same target without its orientation.
@@ -48,20 +55,18 @@ impl PoseTarget {
     }
 }
 
-/// Position error (m) and rotation error (rad, the angle of `R_target^T R`; 0 for a
-/// position-only target) of `chain` at `q`.
-pub fn pose_error(chain: &KinematicChain, q: &[f64], target: &PoseTarget) -> (f64, f64) {
-    let (p, r) = error_vectors(chain, q, target);
-    (p.norm(), r.norm())
-}
-
-/// The position error vector and the rotation vector of `R_t R^T` (world frame).
-fn error_vectors(
-    chain: &KinematicChain,
-    q: &[f64],
-    target: &PoseTarget,
-) -> (Vector3<f64>, Vector3<f64>) {
-    errors_at(&chain.tip_pose(q), target)
+/// The largest position error (m) and rotation error (rad, the angle of `R_target^T R`; 0
+/// for a position-only target) over the tips of `chain` at `q`.
+pub fn pose_error(chain: &KinematicChain, q: &[f64], target: &[PoseTarget]) -> (f64, f64) {
+    chain
+        .tip_poses(q)
+        .iter()
+        .zip(target)
+        .map(|(pose, t)| {
+            let (p, r) = errors_at(pose, t);
+            (p.norm(), r.norm())
+        })
+        .fold((0.0, 0.0), |(p, r), (a, b)| (p.max(a), r.max(b)))
 }
 
 /// The error vectors of the tip at `pose`.
@@ -124,49 +129,77 @@ impl PoseSolution {
 /// Iterations without the error halving after which a start is given up.
 const STALL: usize = 5;
 
-/// Levenberg-Marquardt from `start` (clamped into `ranges` first), on the chain's `path` to
-/// its tip ([`KinematicChain::tip_path`]).
+/// Levenberg-Marquardt from `start` (clamped into `ranges` first), on the paths to the
+/// chain's tips ([`KinematicChain::tip_paths`]), `target` holding one pose per path: the
+/// rows of every tip stacked, exact when every tip is within the tolerances.
 pub fn solve_from(
-    path: &TipPath,
-    target: &PoseTarget,
+    paths: &[TipPath],
+    target: &[PoseTarget],
     start: &[f64],
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
 ) -> PoseSolution {
+    assert_eq!(paths.len(), target.len(), "one pose per tip");
     let n = start.len();
     let w = cfg.tolerance_m / cfg.tolerance_rad;
-    let full = target.orientation.is_some();
-    let energy =
-        |(p, r): (Vector3<f64>, Vector3<f64>)| 0.5 * (p.norm_squared() + w * w * r.norm_squared());
+    let full = target.iter().any(|t| t.orientation.is_some());
+    // Each tip's error vectors at `q` (with its Jacobian written when `jacs` is given).
+    let errors = |q: &[f64],
+                  jacs: Option<&mut [nalgebra::Matrix6xX<f64>]>|
+     -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        match jacs {
+            Some(jacs) => paths
+                .iter()
+                .zip(jacs.iter_mut())
+                .zip(target)
+                .map(|((p, jac), t)| errors_at(&p.pose_and_jacobian(q, jac), t))
+                .collect(),
+            None => paths
+                .iter()
+                .zip(target)
+                .map(|(p, t)| errors_at(&p.pose(q), t))
+                .collect(),
+        }
+    };
+    let energy = |e: &[(Vector3<f64>, Vector3<f64>)]| {
+        e.iter()
+            .map(|(p, r)| 0.5 * (p.norm_squared() + w * w * r.norm_squared()))
+            .sum::<f64>()
+    };
+    let worst = |e: &[(Vector3<f64>, Vector3<f64>)]| {
+        e.iter().fold((0f64, 0f64), |(a, b), (p, r)| {
+            (a.max(p.norm()), b.max(r.norm()))
+        })
+    };
     let mut q: Vec<f64> = start
         .iter()
         .zip(ranges)
         .map(|(&v, &r)| keep_in(v, r))
         .collect();
-    let mut jac = nalgebra::Matrix6xX::zeros(n);
+    let mut jacs = vec![nalgebra::Matrix6xX::zeros(n); paths.len()];
     let mut iterations = 0;
     let mut given_up = false;
-    // Rows: position, then the weighted rotation (left out for a position-only target).
-    let rows = if full { 6 } else { 3 };
-    let mut j = DMatrix::<f64>::zeros(rows, n);
-    let mut e = DVector::<f64>::zeros(rows);
+    // Rows per tip: position, then the weighted rotation (left out for position-only targets).
+    let per_tip = if full { 6 } else { 3 };
+    let mut j = DMatrix::<f64>::zeros(per_tip * paths.len(), n);
+    let mut e = DVector::<f64>::zeros(per_tip * paths.len());
     let mut trial = q.clone();
     // The energy at each iteration, for the stall test.
     let mut history: Vec<f64> = Vec::with_capacity(cfg.max_iterations + 1);
     loop {
-        let pose = path.pose_and_jacobian(&q, &mut jac);
-        let (p_err, r_err) = errors_at(&pose, target);
-        let done = p_err.norm() <= cfg.tolerance_m && r_err.norm() <= cfg.tolerance_rad;
+        let err = errors(&q, Some(&mut jacs));
+        let (p_worst, r_worst) = worst(&err);
+        let done = p_worst <= cfg.tolerance_m && r_worst <= cfg.tolerance_rad;
         if done || given_up || iterations >= cfg.max_iterations {
             return PoseSolution {
                 joints: q,
-                position_error_m: p_err.norm(),
-                rotation_error_rad: r_err.norm(),
+                position_error_m: p_worst,
+                rotation_error_rad: r_worst,
                 iterations,
                 starts: 1,
             };
         }
-        let e_now = energy((p_err, r_err));
+        let e_now = energy(&err);
         // A start whose error has not halved in the last STALL iterations is in a local
         // minimum or against a limit: give it up for the next start.
         if history.len() >= STALL && e_now > 0.5 * history[history.len() - STALL] {
@@ -175,12 +208,15 @@ pub fn solve_from(
         }
         history.push(e_now);
         iterations += 1;
-        for r in 0..3 {
-            j.row_mut(r).copy_from(&jac.row(r));
-            e[r] = p_err[r];
-            if full {
-                j.row_mut(3 + r).copy_from(&(jac.row(3 + r) * w));
-                e[3 + r] = r_err[r] * w;
+        for (t, (jac, (p_err, r_err))) in jacs.iter().zip(&err).enumerate() {
+            let o = t * per_tip;
+            for r in 0..3 {
+                j.row_mut(o + r).copy_from(&jac.row(r));
+                e[o + r] = p_err[r];
+                if full {
+                    j.row_mut(o + 3 + r).copy_from(&(jac.row(3 + r) * w));
+                    e[o + 3 + r] = r_err[r] * w;
+                }
             }
         }
         let jtj = j.tr_mul(&j);
@@ -199,7 +235,7 @@ pub fn solve_from(
             for (t, ((&v, &d), &r)) in trial.iter_mut().zip(q.iter().zip(dq.iter()).zip(ranges)) {
                 *t = keep_in(v + d, r);
             }
-            if energy(errors_at(&path.pose(&trial), target)) < e_now {
+            if energy(&errors(&trial, None)) < e_now {
                 std::mem::swap(&mut q, &mut trial);
                 improved = true;
                 break;
@@ -214,8 +250,8 @@ pub fn solve_from(
 /// Solve `target` from each of `starts` in turn, then from random joint vectors in `ranges`
 /// (seeded by `cfg.seed` and `salt`), until one is exact; the best answer otherwise.
 pub fn solve(
-    path: &TipPath,
-    target: &PoseTarget,
+    paths: &[TipPath],
+    target: &[PoseTarget],
     starts: &[Vec<f64>],
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
@@ -233,7 +269,7 @@ pub fn solve(
             .collect::<Vec<f64>>()
     });
     for start in starts.iter().cloned().chain(random) {
-        let s = solve_from(path, target, &start, ranges, cfg);
+        let s = solve_from(paths, target, &start, ranges, cfg);
         iterations += s.iterations;
         tried += 1;
         let exact = s.exact(cfg);
@@ -254,19 +290,19 @@ pub fn solve(
 /// empty: random starts only).
 pub fn solve_batch(
     chain: &KinematicChain,
-    targets: &[PoseTarget],
+    targets: &[Vec<PoseTarget>],
     starts: &[Vec<Vec<f64>>],
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
 ) -> Vec<PoseSolution> {
-    let path = chain.tip_path();
+    let paths = chain.tip_paths();
     targets
         .par_iter()
         .enumerate()
         .map(|(i, t)| {
             let empty = Vec::new();
             let s = starts.get(i).unwrap_or(&empty);
-            solve(&path, t, s, ranges, cfg, i as u64)
+            solve(&paths, t, s, ranges, cfg, i as u64)
         })
         .collect()
 }

@@ -92,6 +92,10 @@ pub struct SavedModel {
     /// [`fingerprint`] of the robot's chain: a model answers only for the robot it learned.
     pub robot_fingerprint: String,
     pub joint_names: Vec<String>,
+    /// The links whose poses a target gives, where there are several (`ik train --tips A,B`);
+    /// empty for one tip (the robot's tip).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tips: Vec<String>,
     /// Each joint's range (SI).
     pub ranges: Vec<[f64; 2]>,
     pub position_bounds: [[f64; 3]; 2],
@@ -120,6 +124,14 @@ impl SavedModel {
         }
         if let Some(i) = (1..dof).find(|&i| self.joint_names[..i].contains(&self.joint_names[i])) {
             return Err(format!("joint \"{}\" is named twice", self.joint_names[i]));
+        }
+        if self.tips.len() == 1 {
+            return Err(
+                "it names one tip in \"tips\" (one tip is the robot's: leave it empty)".into(),
+            );
+        }
+        if let Some(i) = (1..self.tips.len()).find(|&i| self.tips[..i].contains(&self.tips[i])) {
+            return Err(format!("tip \"{}\" is named twice", self.tips[i]));
         }
         for (name, [lo, hi]) in self.joint_names.iter().zip(&self.ranges) {
             if !(lo.is_finite() && hi.is_finite() && lo.abs() <= MAX_RANGE && hi.abs() <= MAX_RANGE)
@@ -184,6 +196,12 @@ pub fn fingerprint(chain: &KinematicChain) -> String {
         "tip {} {:?};",
         chain.links[chain.tip_link], chain.tip_offset
     );
+    let tips = chain.tips();
+    if tips.len() > 1 {
+        for (l, p) in tips {
+            text += &format!("tips {} {:?};", chain.links[l], p);
+        }
+    }
     for j in &chain.joints {
         let (r, p, y) = j.origin.rotation.euler_angles();
         let t = j.origin.translation.vector;
@@ -210,10 +228,12 @@ pub fn fingerprint(chain: &KinematicChain) -> String {
     format!("{h:016x}")
 }
 
-/// The condition rows of `targets` (position normalised, then the quaternion with `w >= 0`).
-fn condition_rows(data: &IkData, targets: &[PoseTarget], position_only: bool) -> Vec<f32> {
-    let mut rows = Vec::with_capacity(targets.len() * 7);
-    for t in targets {
+/// The condition rows of `targets` (for each tip, its position normalised, then its
+/// quaternion with `w >= 0`).
+fn condition_rows(data: &IkData, targets: &[Vec<PoseTarget>], position_only: bool) -> Vec<f32> {
+    let tips = targets.first().map_or(1, Vec::len);
+    let mut rows = Vec::with_capacity(targets.len() * tips * 7);
+    for t in targets.iter().flatten() {
         rows.extend(data.normalise_position(&t.position));
         if !position_only {
             let q = t
@@ -227,6 +247,11 @@ fn condition_rows(data: &IkData, targets: &[PoseTarget], position_only: bool) ->
     rows
 }
 
+/// The condition width of a model: 3 or 7 values a tip.
+fn condition_width(position_only: bool, tips: usize) -> usize {
+    tips.max(1) * if position_only { 3 } else { 7 }
+}
+
 /// Train a model of `robot` (as `spec` names it) and save it into `dir`.
 pub fn train(
     spec: &RobotSpec,
@@ -236,13 +261,26 @@ pub fn train(
     device: &Device,
 ) -> Result<PoseModel> {
     let chain = &robot.chain;
-    let data = IkData::generate(chain, &cfg.data)?;
-    let targets: Vec<PoseTarget> = data.joints[data.train()]
+    let mut data = IkData::generate(chain, &cfg.data)?;
+    let targets: Vec<Vec<PoseTarget>> = data.joints[data.train()]
         .iter()
         .map(|q| PoseTarget::of(chain, q))
         .collect();
-    let width = if cfg.position_only { 3 } else { 7 };
-    let validation: Vec<PoseTarget> = data.joints[data.validation()]
+    let tips = chain.tip_names();
+    if tips.len() > 1 {
+        // Several tips share one position normalisation: the box of all their positions.
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for t in targets.iter().flatten() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(t.position[k]);
+                hi[k] = hi[k].max(t.position[k]);
+            }
+        }
+        data.position_bounds = [lo, hi];
+    }
+    let width = condition_width(cfg.position_only, tips.len());
+    let validation: Vec<Vec<PoseTarget>> = data.joints[data.validation()]
         .iter()
         .map(|q| PoseTarget::of(chain, q))
         .collect();
@@ -280,6 +318,7 @@ pub fn train(
         robot: spec.clone(),
         robot_fingerprint: fingerprint(chain),
         joint_names: chain.joint_names(),
+        tips: if tips.len() > 1 { tips } else { Vec::new() },
         ranges: data.ranges.clone(),
         position_bounds: data.position_bounds,
         git_revision: crate::core::provenance::git_revision(),
@@ -316,7 +355,7 @@ impl PoseModel {
             Error::data(&json, format!("{e}; train the model again with `ik train`"))
         })?;
         let dof = saved.joint_names.len();
-        let width = if saved.config.position_only { 3 } else { 7 };
+        let width = condition_width(saved.config.position_only, saved.tips.len());
         let file = dir.join("model.bpk");
         let flow = FlowIk::conditioned(&saved.config.flow, dof, width, device, 0)?
             .try_load_file(&file)
@@ -368,7 +407,7 @@ impl PoseModel {
     pub fn solve(
         &self,
         chain: &KinematicChain,
-        targets: &[PoseTarget],
+        targets: &[Vec<PoseTarget>],
         k: usize,
         device: &Device,
     ) -> Vec<Vec<PoseSolution>> {
@@ -379,7 +418,7 @@ impl PoseModel {
     pub fn solve_with(
         &self,
         chain: &KinematicChain,
-        targets: &[PoseTarget],
+        targets: &[Vec<PoseTarget>],
         k: usize,
         cfg: &LmConfig,
         device: &Device,
@@ -388,7 +427,7 @@ impl PoseModel {
         let k = k.max(1);
         let samples = sample_rows(&self.flow, &self.data, &rows, k, 1024, 0x5EED, device);
         let ranges = &self.saved.ranges;
-        let path = chain.tip_path();
+        let paths = chain.tip_paths();
         use rayon::prelude::*;
         // Each sample refined on its own (the family of answers, not one), from random starts
         // where it stalls; the random starts differ between samples and targets.
@@ -399,7 +438,7 @@ impl PoseModel {
                 (0..k)
                     .map(|s| {
                         solve(
-                            &path,
+                            &paths,
                             t,
                             &[samples[s][i].clone()],
                             ranges,
@@ -413,7 +452,7 @@ impl PoseModel {
     }
 
     /// The flow's own answers (one sample per target, no refinement).
-    pub fn sample(&self, targets: &[PoseTarget], device: &Device) -> Vec<Vec<f64>> {
+    pub fn sample(&self, targets: &[Vec<PoseTarget>], device: &Device) -> Vec<Vec<f64>> {
         let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
         sample_rows(&self.flow, &self.data, &rows, 1, 1024, 0x5EED, device)
             .pop()
@@ -426,6 +465,11 @@ impl PoseModel {
 
     pub fn dof(&self) -> usize {
         self.saved.joint_names.len()
+    }
+
+    /// The tips a target row gives poses of (empty: the one tip, columns `x,y,z,...`).
+    pub fn tips(&self) -> &[String] {
+        &self.saved.tips
     }
 }
 
@@ -502,8 +546,6 @@ pub fn distinct(solutions: &[&[f64]], apart: f64) -> usize {
     kept.len()
 }
 
-/// A target file's rows: `x,y,z,qw,qx,qy,qz` (metres; a header names the columns, others
-/// are ignored), or `x,y,z` alone when `position_only`. A bad row fails naming its line.
 /// The CSV columns of a joint vector: the joints' names, or `q1..qN` where two share a name
 /// or a name is one of `taken` (the file's other columns).
 pub fn joint_columns(names: &[String], taken: &[&str]) -> Vec<String> {
@@ -520,7 +562,33 @@ pub fn joint_columns(names: &[String], taken: &[&str]) -> Vec<String> {
     }
 }
 
-pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>> {
+/// The columns of a target: `x,y,z,qw,qx,qy,qz` (`x,y,z` when `position_only`) for one tip,
+/// each prefixed with its tip's name (`A.x,...,B.x,...`) for several.
+pub fn target_columns(tips: &[String], position_only: bool) -> Vec<String> {
+    let axes: &[&str] = if position_only {
+        &["x", "y", "z"]
+    } else {
+        &["x", "y", "z", "qw", "qx", "qy", "qz"]
+    };
+    if tips.is_empty() {
+        return axes.iter().map(|a| a.to_string()).collect();
+    }
+    tips.iter()
+        .flat_map(|t| axes.iter().map(move |a| format!("{t}.{a}")))
+        .collect()
+}
+
+/// The farthest a target may lie from the robot's origin along an axis (m): far beyond any
+/// robot's reach, near enough that it stays finite in the network's single precision.
+pub const MAX_TARGET_COORDINATE: f64 = 1e3;
+
+/// A target file's rows: [`target_columns`] (metres; a header names the columns, others are
+/// ignored). A bad row fails naming its line.
+pub fn read_targets(
+    path: &Path,
+    position_only: bool,
+    tips: &[String],
+) -> Result<Vec<Vec<PoseTarget>>> {
     let bad = |msg: String| Error::data(path, msg);
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut reader = csv::ReaderBuilder::new()
@@ -530,15 +598,19 @@ pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>>
         .headers()
         .map_err(|e| bad(format!("line 1: {e}")))?
         .clone();
-    let need: &[&str] = if position_only {
-        &["x", "y", "z"]
-    } else {
-        &["x", "y", "z", "qw", "qx", "qy", "qz"]
-    };
+    let need = target_columns(tips, position_only);
+    if let Some(n) = need
+        .iter()
+        .find(|n| header.iter().filter(|h| h == n).count() > 1)
+    {
+        return Err(bad(format!(
+            "line 1: the column \"{n}\" appears twice; keep one"
+        )));
+    }
     let cols: Vec<usize> = need
         .iter()
         .map(|n| {
-            header.iter().position(|h| h == *n).ok_or_else(|| {
+            header.iter().position(|h| h == n).ok_or_else(|| {
                 bad(format!(
                     "line 1: no column \"{n}\" (the header must name {}{})",
                     need.join(","),
@@ -551,6 +623,7 @@ pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>>
             })
         })
         .collect::<Result<_>>()?;
+    let per_tip = if position_only { 3 } else { 7 };
     let mut out = Vec::new();
     for (i, rec) in reader.records().enumerate() {
         let line = i + 2;
@@ -565,23 +638,34 @@ pub fn read_targets(path: &Path, position_only: bool) -> Result<Vec<PoseTarget>>
                     .ok_or_else(|| bad(format!("line {line}: \"{cell}\" is not a finite number")))
             })
             .collect::<Result<_>>()?;
-        let position = Point3::new(v[0], v[1], v[2]);
-        let orientation = if position_only {
-            None
-        } else {
-            let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
-            let norm = q.norm();
-            if !(0.9..=1.1).contains(&norm) {
+        let mut row = Vec::with_capacity(v.len() / per_tip);
+        for (t, v) in v.chunks(per_tip).enumerate() {
+            let position = Point3::new(v[0], v[1], v[2]);
+            if position.coords.amax() > MAX_TARGET_COORDINATE {
                 return Err(bad(format!(
-                    "line {line}: the quaternion (qw, qx, qy, qz) has norm {norm:.4}, not 1"
+                    "line {line}: the position ({}, {}, {}) lies more than {MAX_TARGET_COORDINATE} m from the robot's origin: give targets in metres",
+                    v[0], v[1], v[2]
                 )));
             }
-            Some(nalgebra::UnitQuaternion::from_quaternion(q))
-        };
-        out.push(PoseTarget {
-            position,
-            orientation,
-        });
+            let orientation = if position_only {
+                None
+            } else {
+                let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
+                let norm = q.norm();
+                if !(0.9..=1.1).contains(&norm) {
+                    let of = tips.get(t).map_or(String::new(), |n| format!(" of {n}"));
+                    return Err(bad(format!(
+                        "line {line}: the quaternion{of} (qw, qx, qy, qz) has norm {norm:.4}, not 1"
+                    )));
+                }
+                Some(nalgebra::UnitQuaternion::from_quaternion(q))
+            };
+            row.push(PoseTarget {
+                position,
+                orientation,
+            });
+        }
+        out.push(row);
     }
     if out.is_empty() {
         return Err(bad("no targets (a header and at least one row)".into()));

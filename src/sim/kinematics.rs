@@ -223,6 +223,9 @@ pub struct KinematicChain {
     /// The end effector: a point in the frame of a link.
     pub tip_link: usize,
     pub tip_offset: Point3<f64>,
+    /// The links a [`JointGroup::Tips`] group names (their origins are its tips, see
+    /// [`Self::tips`]); empty for every other group.
+    group_tips: Vec<usize>,
     /// Indices into `joints` of the inputs, in the order of the joint vector.
     dofs: Vec<usize>,
     /// For each joint, where its value comes from.
@@ -343,6 +346,7 @@ impl KinematicChain {
             }
         };
         let sorted_links: Vec<&String> = order_links.iter().map(|&l| &links[l]).collect();
+        let mut group_tips = Vec::new();
         match group {
             JointGroup::Chain => mark_path(tip_link),
             JointGroup::Tips(tips) => {
@@ -357,7 +361,11 @@ impl KinematicChain {
                                 .join(", ")
                         ))
                     })?;
+                    if group_tips.contains(&l) {
+                        return Err(Error::Config(format!("--tips names \"{t}\" twice")));
+                    }
                     mark_path(l);
+                    group_tips.push(l);
                 }
             }
             JointGroup::All => on_path.iter_mut().for_each(|p| *p = true),
@@ -488,6 +496,7 @@ impl KinematicChain {
             base,
             tip_link,
             tip_offset,
+            group_tips,
             dofs,
             values,
         })
@@ -685,11 +694,66 @@ impl KinematicChain {
         jac
     }
 
+    /// The end effectors inverse kinematics drives, as (link, point in its frame): the links
+    /// a [`JointGroup::Tips`] group names, at their origins (the tip's own point where one is
+    /// the tip link), else the one tip.
+    pub fn tips(&self) -> Vec<(usize, Point3<f64>)> {
+        if self.group_tips.is_empty() {
+            return vec![(self.tip_link, self.tip_offset)];
+        }
+        self.group_tips
+            .iter()
+            .map(|&l| {
+                let at = if l == self.tip_link {
+                    self.tip_offset
+                } else {
+                    Point3::origin()
+                };
+                (l, at)
+            })
+            .collect()
+    }
+
+    /// The names of the links of [`Self::tips`].
+    pub fn tip_names(&self) -> Vec<String> {
+        self.tips()
+            .iter()
+            .map(|&(l, _)| self.links[l].clone())
+            .collect()
+    }
+
+    /// World pose of each tip ([`Self::tips`]): its link's orientation at its point.
+    pub fn tip_poses(&self, q: &[f64]) -> Vec<Isometry3<f64>> {
+        let frames = self.link_frames(q);
+        self.tips()
+            .iter()
+            .map(|&(l, p)| {
+                Isometry3::from_parts(
+                    Translation3::from((frames[l] * p).coords),
+                    frames[l].rotation,
+                )
+            })
+            .collect()
+    }
+
     /// The joints from the root to the tip, for the fast pose and Jacobian of
     /// [`TipPath`] (what an IK solver evaluates thousands of times a target).
     pub fn tip_path(&self) -> TipPath {
+        self.path_to(self.tip_link, self.tip_offset)
+    }
+
+    /// A [`TipPath`] to each of [`Self::tips`].
+    pub fn tip_paths(&self) -> Vec<TipPath> {
+        self.tips()
+            .into_iter()
+            .map(|(l, p)| self.path_to(l, p))
+            .collect()
+    }
+
+    /// The joints from the root to the point `at` of `link`, constant parts folded.
+    pub fn path_to(&self, link: usize, at: Point3<f64>) -> TipPath {
         let mut on_path = Vec::new();
-        let mut link = self.tip_link;
+        let mut link = link;
         while let Some(j) = self.joints.iter().position(|j| j.child == link) {
             on_path.push(j);
             link = self.joints[j].parent;
@@ -724,7 +788,7 @@ impl KinematicChain {
         }
         TipPath {
             steps,
-            tip: pending * Translation3::from(self.tip_offset.coords),
+            tip: pending * Translation3::from(at.coords),
             dof: self.dof(),
         }
     }

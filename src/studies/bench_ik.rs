@@ -19,7 +19,7 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 use crate::core::timing::{Repeats, median, median_seconds};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
-use crate::ik::pose_model::{PoseModel, SolveStats};
+use crate::ik::pose_model::{PoseModel, SolveStats, target_columns};
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
@@ -110,27 +110,40 @@ pub fn random_targets(
     ranges: &[[f64; 2]],
     n: usize,
     seed: u64,
-) -> (Vec<PoseTarget>, Vec<Vec<f64>>) {
+) -> (Vec<Vec<PoseTarget>>, Vec<Vec<f64>>) {
     let qs = crate::sim::trajectory::babbling(n, ranges, seed);
     let targets = qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     (targets, qs)
 }
 
-/// The targets as `x,y,z,qw,qx,qy,qz` CSV followed by the joints that reach them, in
-/// columns named after the joints (what `ik solve` and the reference script read).
-pub fn targets_csv(targets: &[PoseTarget], joints: &[Vec<f64>], names: &[String]) -> String {
-    let mut text = String::from("x,y,z,qw,qx,qy,qz");
-    for c in crate::ik::pose_model::joint_columns(names, &["x", "y", "z", "qw", "qx", "qy", "qz"]) {
+/// The targets as CSV ([`target_columns`]: `x,y,z,qw,qx,qy,qz`, or each tip's `A.x,...`
+/// where `tips` names several) followed by the joints that reach them, in columns named after
+/// the joints (what `ik solve` and the reference script read).
+pub fn targets_csv(
+    targets: &[Vec<PoseTarget>],
+    joints: &[Vec<f64>],
+    names: &[String],
+    tips: &[String],
+) -> String {
+    let columns = target_columns(tips, false);
+    let taken: Vec<&str> = columns.iter().map(String::as_str).collect();
+    let mut text = columns.join(",");
+    for c in crate::ik::pose_model::joint_columns(names, &taken) {
         text += &format!(",{c}");
     }
     text += "\n";
-    for (t, q) in targets.iter().zip(joints) {
-        let p = t.position;
-        let o = t.orientation.expect("a pose target").coords;
-        text += &format!("{},{},{},{},{},{},{}", p.x, p.y, p.z, o.w, o.x, o.y, o.z);
-        for v in q {
-            text += &format!(",{v}");
-        }
+    for (target, q) in targets.iter().zip(joints) {
+        let cells: Vec<String> = target
+            .iter()
+            .flat_map(|t| {
+                let p = t.position;
+                let o = t.orientation.expect("a pose target").coords;
+                [p.x, p.y, p.z, o.w, o.x, o.y, o.z]
+            })
+            .chain(q.iter().copied())
+            .map(|v| v.to_string())
+            .collect();
+        text += &cells.join(",");
         text += "\n";
     }
     text
@@ -253,7 +266,7 @@ pub fn run(
     let targets_file = out.join("targets.csv");
     crate::core::atomic_file::write_bytes(
         &targets_file,
-        targets_csv(&targets, &joints, &model.saved.joint_names).as_bytes(),
+        targets_csv(&targets, &joints, &model.saved.joint_names, model.tips()).as_bytes(),
     )?;
     let threads = rayon::current_num_threads();
     let mut sitting = Sitting {
@@ -381,7 +394,10 @@ pub fn run(
     }
     // The references, on the same targets file.
     let reference = out.join("reference.csv");
-    if let (Some(py), RobotSpec::Urdf { path, tip, .. }) = (python, &model.saved.robot) {
+    let one_tip = model.tips().is_empty();
+    if let (Some(py), RobotSpec::Urdf { path, tip, .. }, true) =
+        (python, &model.saved.robot, one_tip)
+    {
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ik_reference.py");
         let tip = tip
             .clone()
@@ -440,6 +456,8 @@ pub fn run(
             "bench_ik: the references skipped ({})",
             if python.is_none() {
                 "no --python given"
+            } else if !one_tip {
+                "they solve for one tip; this model's targets give several"
             } else {
                 "they read a URDF; this model's robot is built in"
             }

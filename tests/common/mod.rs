@@ -256,3 +256,60 @@ pub fn assert_ok(out: &std::process::Output) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// A torso with two arms, the right arm listed first, and a finger on the left hand.
+pub fn two_armed_urdf() -> String {
+    let mut s = String::from("<robot name=\"two_arms\">");
+    for l in [
+        "base",
+        "torso",
+        "r_upper",
+        "r_fore",
+        "right_hand",
+        "l_upper",
+        "l_fore",
+        "left_hand",
+        "finger",
+    ] {
+        s += &format!(
+            "<link name=\"{l}\"><visual><geometry><box size=\"0.05 0.05 0.1\"/></geometry></visual></link>"
+        );
+    }
+    // name, type, parent, child, origin, axis
+    for (n, kind, parent, child, xyz, axis) in [
+        ("waist", "revolute", "base", "torso", "0 0 0.1", "0 0 1"),
+        ("r1", "revolute", "torso", "r_upper", "0 -0.2 0.3", "0 1 0"),
+        ("r2", "revolute", "r_upper", "r_fore", "0 0 -0.25", "0 1 0"),
+        (
+            "r_wrist",
+            "fixed",
+            "r_fore",
+            "right_hand",
+            "0 0 -0.2",
+            "0 0 1",
+        ),
+        ("l1", "revolute", "torso", "l_upper", "0 0.2 0.3", "0 1 0"),
+        ("l2", "revolute", "l_upper", "l_fore", "0 0 -0.25", "0 1 0"),
+        (
+            "l_wrist",
+            "fixed",
+            "l_fore",
+            "left_hand",
+            "0 0 -0.2",
+            "0 0 1",
+        ),
+        (
+            "grip",
+            "prismatic",
+            "left_hand",
+            "finger",
+            "0 0 -0.05",
+            "0 1 0",
+        ),
+    ] {
+        s += &format!(
+            "<joint name=\"{n}\" type=\"{kind}\"><parent link=\"{parent}\"/><child link=\"{child}\"/><origin xyz=\"{xyz}\"/><axis xyz=\"{axis}\"/><limit lower=\"-1.5\" upper=\"1.5\" effort=\"1\" velocity=\"1\"/></joint>"
+        );
+    }
+    s + "</robot>"
+}
