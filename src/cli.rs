@@ -305,6 +305,11 @@ pub struct ExperimentArgs {
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]
     pub reuse: bool,
+    /// table1 only: the self-models to train and compare (registry names, e.g.
+    /// `neurokin,neurokin_tree,k3dgs,nearest_pose,mean_silhouette`) instead of every model of
+    /// Table I; `neurokin_tree` is added only this way.
+    #[arg(long, value_delimiter = ',', value_name = "NAMES")]
+    pub models: Option<Vec<String>>,
 }
 
 impl ExperimentArgs {
@@ -320,6 +325,14 @@ impl ExperimentArgs {
                 "{name} has no preset \"{preset}\" (choose {})",
                 e.presets.join(", ")
             )));
+        }
+        if self.models.is_some() && name != "table1" {
+            return Err(crate::Error::Config(format!(
+                "--models applies to table1 only, not {name}"
+            )));
+        }
+        if let Some(models) = &self.models {
+            crate::studies::table1::check_models(models, crate::studies::registry::EXPERIMENTS)?;
         }
         if self.reuse && name != "table1" {
             return Err(crate::Error::Config(format!(
@@ -376,6 +389,7 @@ impl ExperimentArgs {
             camera: self.camera.choice(),
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),
+            models: self.models.clone(),
         };
         // Everything that can be checked is checked before the run writes its first file: the
         // device is compiled in, and a robot given by URDF loads and has a joint to move.

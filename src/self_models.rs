@@ -11,3 +11,4 @@ pub mod nearest_pose;
 pub mod neurokin;
 pub mod resneurokin_d;
 pub mod result;
+pub mod tree_encoder;

@@ -568,7 +568,13 @@ fn joint_groups_drive_several_tips_and_every_joint() {
             "joint {k} moves nothing"
         );
     }
+    // The joint vector as a tree: each joint's parent joint.
+    assert_eq!(
+        all.chain.input_parents(),
+        [None, Some(0), Some(1), Some(0), Some(3), Some(4)]
+    );
     let named = load(JointGroup::Named(vec!["l2".into(), "waist".into()])).unwrap();
+    assert_eq!(named.chain.input_parents(), [None, Some(0)]);
     assert_eq!(named.chain.joint_names(), ["waist", "l2"]);
     let err = load(JointGroup::Tips(vec!["left_foot".into()]))
         .unwrap_err()

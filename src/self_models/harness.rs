@@ -51,6 +51,11 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     }
     /// Take `dof` joint values (the robot's): a network's input width follows the robot.
     fn set_dof(&mut self, _dof: usize) {}
+    /// The robot's joints as a tree (each input's parent input,
+    /// [`crate::sim::kinematics::KinematicChain::input_parents`]), for a model that follows
+    /// it (NeuroKin's tree encoder); called after [`SelfModel::set_dof`] where the robot's
+    /// description is known.
+    fn set_joint_tree(&mut self, _parents: &[Option<usize>]) {}
     /// Whether it needs the robot's kinematic chain and geometry (K-3DGS, FFKSM), not only
     /// joint values and images.
     fn needs_robot(&self) -> bool {

@@ -32,6 +32,7 @@ use crate::kernels::cpu_extension::conv2d_layer;
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
+use crate::self_models::tree_encoder::TreeEncoder;
 use crate::train::losses::{bce_with_logits, mse};
 use crate::train::trainer::{Batch, TrainConfig, TrainSet, Trainer};
 
@@ -68,6 +69,31 @@ pub struct NeuroKinConfig {
     /// How the camera enters, on a multi-view dataset (the paper's NeuroKin: not at all).
     #[serde(default, skip_serializing_if = "CameraUse::is_none")]
     pub camera: CameraUse,
+    /// The joint encoder: the paper's flat MLP, or one that follows the kinematic tree.
+    #[serde(default, skip_serializing_if = "JointEncoder::is_flat")]
+    pub encoder: JointEncoder,
+}
+
+/// How NeuroKin encodes the joints (Section VI-D4's proposal for robots of many joints).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum JointEncoder {
+    /// The paper's MLP on the joint vector (`encoder_hidden`, then `latent`).
+    #[default]
+    Flat,
+    /// Message passing down the kinematic tree ([`crate::self_models::tree_encoder`]), at
+    /// the flat MLP's parameter count: each joint's parent in the joint vector (`None`: a
+    /// root joint; filled from the robot), and the state width.
+    Tree {
+        parents: Vec<Option<usize>>,
+        width: usize,
+    },
+}
+
+impl JointEncoder {
+    pub fn is_flat(&self) -> bool {
+        *self == JointEncoder::Flat
+    }
 }
 
 /// How a NeuroKin sees the camera (the self-modeling paper's Section VI-D1 proposals).
@@ -116,6 +142,7 @@ impl Preset for NeuroKinConfig {
             image: [100, 100],
             loss: NeuroKinLoss::Bce,
             camera: CameraUse::None,
+            encoder: JointEncoder::Flat,
         }
     }
 
@@ -143,7 +170,21 @@ impl NeuroKinConfig {
             image: [100, 100],
             loss: NeuroKinLoss::Mse,
             camera: CameraUse::None,
+            encoder: JointEncoder::Flat,
         }
+    }
+
+    /// The tree encoder for the joints whose parents are `parents` (the robot's
+    /// [`crate::sim::kinematics::KinematicChain::input_parents`]), at the flat MLP's size.
+    pub fn use_tree(&mut self, parents: &[Option<usize>]) {
+        self.encoder = JointEncoder::Tree {
+            parents: parents.to_vec(),
+            width: crate::self_models::tree_encoder::matched_width(
+                parents.len(),
+                &self.encoder_hidden,
+                self.latent,
+            ),
+        };
     }
 
     /// Resolution the network is trained at (`image`, except 64x64-style native outputs of
@@ -199,6 +240,21 @@ impl NeuroKinConfig {
                 "neurokin: a multi-head decoder needs at least one camera".into(),
             ));
         }
+        if let JointEncoder::Tree { parents, .. } = &self.encoder {
+            if parents.len() != self.dof {
+                return Err(Error::Config(format!(
+                    "neurokin: the tree encoder knows {} joints' parents for {} joints: it needs the robot's description (--urdf), not only a dataset",
+                    parents.len(),
+                    self.dof
+                )));
+            }
+            if !self.camera.is_none() {
+                return Err(Error::Config(
+                    "neurokin: the tree encoder takes joints only, not a camera".into(),
+                ));
+            }
+            crate::self_models::tree_encoder::check_tree(parents)?;
+        }
         if self.arch == NeuroKinArch::Code && self.upsampling_layers < 2 {
             return Err(Error::Config(
                 "neurokin: the code architecture needs at least 2 upsampling layers".into(),
@@ -250,10 +306,25 @@ impl NeuroKinConfig {
         let mut widths = vec![self.input_width()];
         widths.extend(&self.encoder_hidden);
         widths.push(self.latent);
-        let encoder = widths
-            .windows(2)
-            .map(|w| LinearConfig::new(w[0], w[1]).init(device))
-            .collect();
+        let (encoder, tree) = match &self.encoder {
+            JointEncoder::Flat => (
+                widths
+                    .windows(2)
+                    .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                    .collect(),
+                None,
+            ),
+            JointEncoder::Tree { parents, width } => {
+                let readout = &widths[widths.len().saturating_sub(2).max(1)..];
+                (
+                    Vec::new(),
+                    Some(
+                        TreeEncoder::new(parents, *width, readout, device)
+                            .expect("a validated tree"),
+                    ),
+                )
+            }
+        };
         let seed = LinearConfig::new(self.latent, self.seed_channels * 16).init(device);
         let chans = self.decoder_channels();
         let mut ups = Vec::new();
@@ -285,6 +356,7 @@ impl NeuroKinConfig {
         };
         NeuroKin {
             encoder,
+            tree,
             seed,
             ups,
             norms,
@@ -305,6 +377,8 @@ impl NeuroKinConfig {
 #[derive(Module, Debug)]
 pub struct NeuroKin {
     encoder: Vec<Linear>,
+    /// The tree encoder, in place of `encoder` ([`JointEncoder::Tree`]).
+    tree: Option<TreeEncoder>,
     seed: Linear,
     ups: Vec<UpConv>,
     norms: Vec<BatchNorm>,
@@ -335,6 +409,9 @@ pub fn resize_bilinear(x: Tensor<4>, size: [usize; 2]) -> Tensor<4> {
 impl NeuroKin {
     /// Latent code `z`: `[batch, dof]` degrees -> `[batch, latent]`.
     pub fn encode(&self, angles: Tensor<2>) -> Tensor<2> {
+        if let Some(tree) = &self.tree {
+            return tree.forward(angles);
+        }
         let mut x = angles;
         let last = self.encoder.len() - 1;
         for (i, layer) in self.encoder.iter().enumerate() {
@@ -429,6 +506,12 @@ impl SelfModel for NeuroKinConfig {
         self.dof = dof;
     }
 
+    fn set_joint_tree(&mut self, parents: &[Option<usize>]) {
+        if !self.encoder.is_flat() {
+            self.use_tree(parents);
+        }
+    }
+
     fn camera_input(&self) -> bool {
         !self.camera.is_none()
     }
@@ -458,6 +541,17 @@ pub fn neurokin_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
         SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?
             .shorten(200, 32),
     )
+}
+
+/// NeuroKin with the tree encoder in place of the flat MLP, at its parameter count; the rest
+/// as [`neurokin_run`]. The joints' parents come from the robot ([`SelfModel::set_joint_tree`]).
+pub fn neurokin_tree_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
+    let mut cfg = neurokin_run(preset)?;
+    cfg.name = "NeuroKin (tree encoder)".into();
+    // A chain (the papers' arm) until the robot's tree replaces it.
+    let chain: Vec<Option<usize>> = (0..cfg.model.dof).map(|i| i.checked_sub(1)).collect();
+    cfg.model.use_tree(&chain);
+    Ok(cfg)
 }
 
 /// The paper text's NeuroKin: 64x64 output, MSE, batch 128, 50 epochs.

@@ -535,6 +535,24 @@ impl KinematicChain {
         self.movable_joints().map(|j| j.name.clone()).collect()
     }
 
+    /// The joint vector as a tree: for each input, the nearest input above it on the way to
+    /// the root (its index in the joint vector), `None` for one with no input above it.
+    pub fn input_parents(&self) -> Vec<Option<usize>> {
+        self.dofs
+            .iter()
+            .map(|&j| {
+                let mut link = self.joints[j].parent;
+                while let Some(p) = self.joints.iter().position(|k| k.child == link) {
+                    if let Some(i) = self.dofs.iter().position(|&d| d == p) {
+                        return Some(i);
+                    }
+                    link = self.joints[p].parent;
+                }
+                None
+            })
+            .collect()
+    }
+
     /// Sampling range of each joint value (SI): the stated limits (a rotational joint's
     /// narrowed to +-180 degrees: a wider range repeats poses), else
     /// [`DEFAULT_ROTATIONAL_RANGE`] for rotational joints without limits. A prismatic joint

@@ -9,7 +9,9 @@ use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
 use crate::self_models::harness::SELF_MODEL_PRESETS;
 use crate::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
 use crate::self_models::mean_silhouette::MeanSilhouette;
-use crate::self_models::neurokin::{NeuroKinConfig, neurokin_run, neurokin64_run};
+use crate::self_models::neurokin::{
+    NeuroKinConfig, neurokin_run, neurokin_tree_run, neurokin64_run,
+};
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::studies::ablations::{Ablation, run_ablation};
 use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
@@ -55,6 +57,14 @@ fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
 /// documented negative result, kept out of Table I); on the paper-compatible data it trains.
 pub fn run_neurokin64(opts: &RunOptions, dir: &Path) -> Result<String> {
     let cfg = opts.apply(neurokin64_run(&opts.preset)?)?;
+    let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    Ok(summary(std::slice::from_ref(&out.result)))
+}
+
+/// NeuroKin with the kinematic-tree encoder (Section VI-D4), at the flat encoder's size: for
+/// robots of many joints, beside `neurokin` (`table1 --models` adds it to a Table I).
+pub fn run_neurokin_tree(opts: &RunOptions, dir: &Path) -> Result<String> {
+    let cfg = opts.apply(neurokin_tree_run(&opts.preset)?)?;
     let out = crate::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
@@ -379,6 +389,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_neurokin64,
+    },
+    Experiment {
+        name: "neurokin_tree",
+        about: "NeuroKin with a kinematic-tree encoder (message passing down the robot's joints, at the flat encoder's parameter count; the paper's Section VI-D4 proposal for robots of many joints)",
+        default_dir: "reports/neurokin_tree",
+        presets: SELF_MODEL_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_neurokin_tree,
     },
     Experiment::self_model(
         "resneurokin_d",

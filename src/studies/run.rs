@@ -51,6 +51,8 @@ pub struct RunOptions {
     pub camera: CameraChoice,
     /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
     pub latencies: Option<Vec<crate::ik::sampling_pass::Latency>>,
+    /// `table1`'s models (registry names), instead of every one marked for Table I.
+    pub models: Option<Vec<String>>,
 }
 
 impl RunOptions {
@@ -74,6 +76,7 @@ impl RunOptions {
             camera: CameraChoice::default(),
             dataset: None,
             latencies: None,
+            models: None,
         }
     }
 
@@ -151,7 +154,9 @@ impl RunOptions {
             // The joint count is the file's (a lab's own data needs no robot description).
             cfg.model.set_dof(Dataset::load(file)?.dof());
         } else if !cfg.data.robot.is_papers_arm() {
-            cfg.model.set_dof(cfg.data.robot.load_kinematics()?.dof());
+            let robot = cfg.data.robot.load_kinematics()?;
+            cfg.model.set_dof(robot.dof());
+            cfg.model.set_joint_tree(&robot.chain.input_parents());
         }
         // A URDF placed in the papers' scene (--arm4-scene) keeps the papers' camera too.
         let papers_camera = cfg.data.robot.is_papers_arm() || self.arm4_scene;

@@ -17,10 +17,46 @@ use crate::self_models::result::{ModelResult, pareto_floors, pareto_points, read
 use crate::sim::robots::BuiltinRobot;
 use crate::studies::run::{Experiment, RunOptions, write_rows};
 
-/// Run the zoo (the `experiments` marked `in_table1`) on `opts` into `dir` and write the table and the Pareto plot.
+/// Self-models a Table I takes only when `--models` names them (beside those marked
+/// `in_table1`).
+pub const ON_REQUEST: &[&str] = &["neurokin_tree"];
+
+/// Whether Table I can hold `e` (when `--models` names it).
+fn can_hold(e: &Experiment) -> bool {
+    e.in_table1 || ON_REQUEST.contains(&e.name)
+}
+
+/// Refuse `--models` names that are not self-models of Table I, naming those that are.
+pub fn check_models(models: &[String], experiments: &[Experiment]) -> Result<()> {
+    let known: Vec<&str> = experiments
+        .iter()
+        .filter(|e| can_hold(e))
+        .map(|e| e.name)
+        .collect();
+    if models.is_empty() {
+        return Err(crate::Error::Config(format!(
+            "--models needs at least one name ({})",
+            known.join(", ")
+        )));
+    }
+    match models.iter().find(|m| !known.contains(&m.as_str())) {
+        Some(m) => Err(crate::Error::Config(format!(
+            "--models: \"{m}\" is not a self-model of Table I (choose from {})",
+            known.join(", ")
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// Run the zoo (the `experiments` marked `in_table1`, or those `opts.models` names, in the
+/// registry's order) on `opts` into `dir` and write the table and the Pareto plot.
 pub fn run(opts: &RunOptions, dir: &Path, experiments: &[Experiment]) -> Result<Vec<ModelResult>> {
     let mut rows = Vec::new();
-    for e in experiments.iter().filter(|e| e.in_table1) {
+    let chosen = |e: &&Experiment| match &opts.models {
+        Some(m) => can_hold(e) && m.iter().any(|m| m == e.name),
+        None => e.in_table1,
+    };
+    for e in experiments.iter().filter(chosen) {
         let sub = dir.join(e.name);
         // Resumed: an experiment that finished in this folder (its table written) is read,
         // not trained again; one still running continues from its checkpoints.
