@@ -27,8 +27,20 @@ fn npz_round_trip_keeps_every_array() {
     let keys: Vec<&str> = raw.keys().map(String::as_str).collect();
     assert_eq!(
         keys,
-        ["angles", "depth", "focal", "images", "n_train", "poses"]
+        [
+            "angles",
+            "depth",
+            "focal",
+            "images",
+            "joint_names",
+            "n_train",
+            "poses"
+        ]
     );
+    // The joints name the columns of `angles`, as NumPy strings.
+    assert_eq!(raw["joint_names"].dtype_name(), "unicode text");
+    assert_eq!(back.joint_names, robot.chain.joint_names());
+    assert_eq!(back.joint_names.len(), 4);
     assert_eq!(raw["images"].shape, [40, 100, 100]);
     assert_eq!(raw["images"].dtype_name(), "uint8");
     assert_eq!(raw["angles"].dtype_name(), "float64");
@@ -112,6 +124,44 @@ fn bad_dataset_files_are_clear_errors() {
         &[("images", images()), ("focal", focal()), ("poses", poses())],
     );
     expect_data_error(&p, "missing key \"angles\"");
+    let names = |v: &[&str]| Array::text(v.iter().map(|s| s.to_string()).collect());
+    for (file, joint_names, needle) in [
+        ("names3.npz", names(&["a", "b", "c"]), "must be 4 strings"),
+        (
+            "names2x.npz",
+            names(&["a", "b", "a", "d"]),
+            "names \"a\" twice",
+        ),
+        (
+            "namesf.npz",
+            Array::f64(&[4], vec![0.0; 4]),
+            "must be 4 strings",
+        ),
+    ] {
+        let p = write(
+            d,
+            file,
+            &[
+                ("images", images()),
+                ("angles", angles()),
+                ("focal", focal()),
+                ("poses", poses()),
+                ("joint_names", joint_names),
+            ],
+        );
+        expect_data_error(&p, needle);
+    }
+    let p = write(
+        d,
+        "textposes.npz",
+        &[
+            ("images", images()),
+            ("angles", angles()),
+            ("focal", focal()),
+            ("poses", Array::text(vec!["x".into(); 16])),
+        ],
+    );
+    expect_data_error(&p, "\"poses\" must be float");
     let p = write(
         d,
         "dtype.npz",

@@ -286,11 +286,24 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
     let targets = &data.positions[data.test()];
     let joints = &data.joints[..targets.len()];
     let reached = robot.chain.end_effector_batch(joints);
-    selfmodel::studies::emssl_table2::write_predictions(&path, targets, joints, &reached).unwrap();
+    let names = robot.chain.joint_names();
+    selfmodel::studies::emssl_table2::write_predictions(&path, targets, joints, &reached, &names)
+        .unwrap();
+    // The joints read back, whatever their columns are named.
+    assert_eq!(
+        selfmodel::studies::emssl_table2::read_predictions(&path).unwrap(),
+        joints
+            .iter()
+            .map(|q| q
+                .iter()
+                .map(|v| format!("{v:.9}").parse().unwrap())
+                .collect())
+            .collect::<Vec<Vec<f64>>>()
+    );
     let mut reader = csv::Reader::from_path(&path).unwrap();
     let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
     assert_eq!(header.len(), 3 + 6 + 3);
-    assert_eq!(header[3], "q1");
+    assert_eq!(header[3..9], names[..]);
     for (i, rec) in reader.records().enumerate() {
         let v: Vec<f64> = rec.unwrap().iter().map(|x| x.parse().unwrap()).collect();
         let reached = robot.chain.end_effector(&v[3..9]);

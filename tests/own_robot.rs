@@ -591,3 +591,47 @@ fn joint_groups_drive_several_tips_and_every_joint() {
         "{err}"
     );
 }
+
+/// A dataset names its joints; trained on with another description (a joint renamed), it is
+/// refused with both lists.
+#[test]
+fn a_dataset_is_read_only_with_the_robot_whose_joints_it_names() {
+    use selfmodel::core::preset::Preset;
+    use selfmodel::data::dataset::{Dataset, DatasetConfig};
+    use selfmodel::self_models::harness::DataSpec;
+    use selfmodel::sim::robots::RobotSpec;
+    let dir = common::tempdir();
+    let urdf = common::write_arm(dir.path(), "arm", 3, false);
+    let spec = |path: std::path::PathBuf| RobotSpec::Urdf {
+        path,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: None,
+        geometry: GeometryKind::Visual,
+        joints: Default::default(),
+    };
+    let robot = spec(urdf.clone()).load().unwrap();
+    let mut cfg = DatasetConfig::quick();
+    cfg.framing = Some(Default::default());
+    let data = Dataset::generate(&robot, &cfg, None).unwrap();
+    assert_eq!(data.joint_names, ["j1", "j2", "j3"]);
+    let file = dir.path().join("d.npz");
+    data.save(&file).unwrap();
+    let mut same = DataSpec::quick();
+    same.file = Some(file.clone());
+    same.robot = spec(urdf);
+    same.load_with_robot().unwrap();
+    let renamed = dir.path().join("renamed.urdf");
+    std::fs::write(
+        &renamed,
+        common::arm_urdf(3, false).replace("\"j2\"", "\"elbow\""),
+    )
+    .unwrap();
+    let mut other = same.clone();
+    other.robot = spec(renamed);
+    let err = other.load_with_robot().unwrap_err().to_string();
+    assert!(
+        err.contains("[j1, j2, j3]") && err.contains("[j1, elbow, j3]"),
+        "{err}"
+    );
+}

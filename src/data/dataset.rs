@@ -9,6 +9,9 @@
 //! - `depth` (N, H, W) float32: metres along the camera axis, 0 where empty;
 //! - `n_train` () int64: the first `n_train` samples are the training split, the rest test.
 //!   Files without `depth` or `n_train` (the papers') load with depth 0 and an 80/20 split.
+//! - `joint_names` (DOF,) unicode: the joints of the columns of `angles`, in the robot's
+//!   order (depth-first from the root); absent from the papers' files. A robot whose joints
+//!   differ in names or order is refused for a dataset that names its joints.
 //!
 //! Splits are sequential, as in the paper: with a Lorenz trajectory, the test set is the
 //! continuation of the training trajectory.
@@ -234,6 +237,8 @@ pub struct Dataset {
     pub poses: Vec<[f64; 16]>,
     /// The first `n_train` samples are the training split.
     pub n_train: usize,
+    /// The joints of the columns of `angles` (empty where the file does not say).
+    pub joint_names: Vec<String>,
 }
 
 /// Joint vectors (user units) for a config, from its sampler.
@@ -312,6 +317,7 @@ impl Dataset {
             focal: camera.focal_px(),
             poses: vec![pose; cfg.samples],
             n_train: cfg.train,
+            joint_names: robot.chain.joint_names(),
         })
     }
 
@@ -376,6 +382,7 @@ impl Dataset {
             focal: first.focal_px(),
             poses,
             n_train: train_poses * cameras.len(),
+            joint_names: robot.chain.joint_names(),
         })
     }
 
@@ -457,17 +464,19 @@ impl Dataset {
             shape: vec![],
             data: ArrayData::I64(vec![self.n_train as i64]),
         };
-        write_npz(
-            path,
-            &[
-                ("images", &images),
-                ("angles", &angles),
-                ("focal", &focal),
-                ("poses", &poses),
-                ("depth", &depth),
-                ("n_train", &n_train),
-            ],
-        )
+        let names = Array::text(self.joint_names.clone());
+        let mut arrays = vec![
+            ("images", &images),
+            ("angles", &angles),
+            ("focal", &focal),
+            ("poses", &poses),
+            ("depth", &depth),
+            ("n_train", &n_train),
+        ];
+        if !self.joint_names.is_empty() {
+            arrays.push(("joint_names", &names));
+        }
+        write_npz(path, &arrays)
     }
 
     /// Load an `.npz` dataset, ours or the papers', checking keys, shapes, dtypes and values.
@@ -485,6 +494,7 @@ impl Dataset {
         let poses = take("poses")?;
         let depth = arrays.remove("depth");
         let n_train = arrays.remove("n_train");
+        let joint_names = arrays.remove("joint_names");
 
         let [n, h, w] = images.shape[..] else {
             return Err(bad(format!(
@@ -530,6 +540,9 @@ impl Dataset {
             [f] if f.is_finite() && f > 0.0 => f,
             _ => return Err(bad("\"focal\" must be one positive number".into())),
         };
+        if matches!(poses.data, ArrayData::Text(_)) {
+            return Err(bad("\"poses\" must be float, found unicode text".into()));
+        }
         let pose_list: Vec<[f64; 16]> = match poses.shape[..] {
             [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
             [np, 4, 4] if np == n => poses
@@ -573,6 +586,25 @@ impl Dataset {
                 _ => return Err(bad(format!("\"n_train\" must be one integer in 0..={n}"))),
             },
         };
+        let joint_names = match joint_names {
+            None => Vec::new(),
+            Some(Array {
+                data: ArrayData::Text(names),
+                shape,
+            }) if shape == [dof] => {
+                if let Some(i) = (1..dof).find(|&i| names[..i].contains(&names[i])) {
+                    return Err(bad(format!("\"joint_names\" names \"{}\" twice", names[i])));
+                }
+                names
+            }
+            Some(a) => {
+                return Err(bad(format!(
+                    "\"joint_names\" must be {dof} strings (one per column of \"angles\"), found {} of shape {:?}",
+                    a.dtype_name(),
+                    a.shape
+                )));
+            }
+        };
         Ok(Dataset {
             angles,
             images,
@@ -582,6 +614,7 @@ impl Dataset {
             focal,
             poses: pose_list,
             n_train,
+            joint_names,
         })
     }
 

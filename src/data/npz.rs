@@ -20,6 +20,8 @@ pub enum ArrayData {
     F32(Vec<f32>),
     F64(Vec<f64>),
     I64(Vec<i64>),
+    /// Strings (NumPy's `<U` unicode dtype, as `np.array(["a", "bc"])` stores them).
+    Text(Vec<String>),
 }
 
 /// An n-dimensional array in C order.
@@ -48,6 +50,13 @@ impl Array {
             data: ArrayData::F64(data),
         }
     }
+    /// A 1-d array of strings.
+    pub fn text(data: Vec<String>) -> Self {
+        Array {
+            shape: vec![data.len()],
+            data: ArrayData::Text(data),
+        }
+    }
     /// A 0-d array holding one number.
     pub fn scalar(v: f64) -> Self {
         Array {
@@ -63,6 +72,7 @@ impl Array {
             ArrayData::F32(v) => v.len(),
             ArrayData::F64(v) => v.len(),
             ArrayData::I64(v) => v.len(),
+            ArrayData::Text(v) => v.len(),
         }
     }
 
@@ -77,18 +87,45 @@ impl Array {
             ArrayData::F32(_) => "float32",
             ArrayData::F64(_) => "float64",
             ArrayData::I64(_) => "int64",
+            ArrayData::Text(_) => "unicode text",
         }
     }
 
-    /// Values as f64 (any numeric type).
+    /// Values as f64 (any numeric type; none for text).
     pub fn to_f64(&self) -> Vec<f64> {
         match &self.data {
             ArrayData::U8(v) => v.iter().map(|&x| x as f64).collect(),
             ArrayData::F32(v) => v.iter().map(|&x| x as f64).collect(),
             ArrayData::F64(v) => v.clone(),
             ArrayData::I64(v) => v.iter().map(|&x| x as f64).collect(),
+            ArrayData::Text(_) => Vec::new(),
         }
     }
+}
+
+/// `.npy` bytes of strings, as NumPy's `<U{longest}` dtype.
+fn encode_text(shape: &[usize], data: &[String]) -> std::io::Result<Vec<u8>> {
+    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
+    let longest = data
+        .iter()
+        .map(|s| s.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(1);
+    let dtype = npyz::DType::Plain(
+        format!("<U{longest}")
+            .parse::<npyz::TypeStr>()
+            .map_err(|e| std::io::Error::other(e.to_string()))?,
+    );
+    let mut buf = Vec::new();
+    let mut w = npyz::WriteOptions::<String>::new()
+        .dtype(dtype)
+        .shape(&shape)
+        .writer(&mut buf)
+        .begin_nd()?;
+    w.extend(data.iter().cloned())?;
+    w.finish()?;
+    Ok(buf)
 }
 
 fn encode<T: npyz::AutoSerialize + Copy>(shape: &[usize], data: &[T]) -> std::io::Result<Vec<u8>> {
@@ -125,6 +162,7 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
                 ArrayData::F32(v) => encode(&array.shape, v),
                 ArrayData::F64(v) => encode(&array.shape, v),
                 ArrayData::I64(v) => encode(&array.shape, v),
+                ArrayData::Text(v) => encode_text(&array.shape, v),
             }
             .map_err(io)?;
             zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;
@@ -209,6 +247,7 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
             "<f4" => ArrayData::F32(npy.into_vec().map_err(bad)?),
             "<f8" => ArrayData::F64(npy.into_vec().map_err(bad)?),
             "<i8" => ArrayData::I64(npy.into_vec().map_err(bad)?),
+            d if d.starts_with("<U") => ArrayData::Text(npy.into_vec().map_err(bad)?),
             "<i4" => ArrayData::I64(
                 npy.into_vec::<i32>()
                     .map_err(bad)?
@@ -220,7 +259,7 @@ pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
                 return Err(Error::data(
                     path,
                     format!(
-                        "\"{key}\" has dtype {other}; expected uint8, float32, float64, int32 or int64"
+                        "\"{key}\" has dtype {other}; expected uint8, float32, float64, int32, int64 or unicode text"
                     ),
                 ));
             }

@@ -306,7 +306,26 @@ impl DataSpec {
     pub fn load_with_robot(&self) -> Result<(Robot, Dataset, Range<usize>, Range<usize>)> {
         let robot = self.robot.load()?;
         let data = match &self.file {
-            Some(path) => Dataset::load(path)?,
+            Some(path) => {
+                let data = Dataset::load(path)?;
+                // A dataset that names its joints is read only with the robot that made it.
+                let names = robot.chain.joint_names();
+                if !data.joint_names.is_empty()
+                    && !self.robot.is_papers_arm()
+                    && data.joint_names != names
+                {
+                    return Err(Error::data(
+                        path,
+                        format!(
+                            "its joints are [{}] but the robot description ({}) has [{}]: give the robot that made the dataset (--urdf, --tip, --joints, --tips)",
+                            data.joint_names.join(", "),
+                            self.robot.label(),
+                            names.join(", ")
+                        ),
+                    ));
+                }
+                data
+            }
             None => Dataset::generate(&robot, &self.dataset, None)?,
         };
         data.check_in_view()?;

@@ -176,7 +176,7 @@ mod tests {
 
     fn host(t: Tensor<2>) -> (Vec<f32>, usize) {
         let [_, cols] = t.dims();
-        (t.into_data().to_vec::<f32>().expect("f32"), cols)
+        (t.into_data().try_to_vec::<f32>().expect("f32"), cols)
     }
 
     fn linear(l: &Linear, x: &[f32]) -> Vec<f32> {
@@ -184,7 +184,7 @@ mod tests {
         let b = l
             .bias
             .as_ref()
-            .map(|b| b.val().into_data().to_vec::<f32>().expect("f32"))
+            .map(|b| b.val().into_data().try_to_vec::<f32>().expect("f32"))
             .unwrap_or_else(|| vec![0.0; cols]);
         (0..cols)
             .map(|o| {
@@ -239,7 +239,7 @@ mod tests {
             TensorData::new(angles.to_vec(), [1, 6]),
             &device,
         ));
-        let fast = fast.into_data().to_vec::<f32>().unwrap();
+        let fast = fast.into_data().try_to_vec::<f32>().unwrap();
         let slow = reference(&e, &parents, &angles);
         for (a, b) in fast.iter().zip(&slow) {
             assert!((a - b).abs() < 1e-4 * (1.0 + b.abs()), "{fast:?} {slow:?}");

@@ -433,18 +433,29 @@ fn paper_reference(method: &str, range_deg: f64) -> Option<f64> {
     Some(values[column])
 }
 
-/// Write answers as CSV: target x, y, z (m), joints q1.. (rad), reached x, y, z (m) (where the
-/// forward kinematics of the joints puts the end effector).
+/// The columns of a predictions CSV that are not joints.
+const PREDICTION_COLUMNS: [&str; 6] = [
+    "target_x",
+    "target_y",
+    "target_z",
+    "reached_x",
+    "reached_y",
+    "reached_z",
+];
+
+/// Write answers as CSV: target x, y, z (m), the joints (rad) in columns named after them
+/// (`names`; `q1..` where they cannot be), reached x, y, z (m) (where the forward kinematics
+/// of the joints puts the end effector).
 pub fn write_predictions(
     path: &Path,
     targets: &[Point3<f64>],
     joints: &[Vec<f64>],
     reached: &[Point3<f64>],
+    names: &[String],
 ) -> Result<()> {
-    let dof = joints.first().map_or(0, Vec::len);
     write_atomic(path, |w| {
         let io = |e| Error::io(path, e);
-        let qs: Vec<String> = (1..=dof).map(|k| format!("q{k}")).collect();
+        let qs = crate::ik::pose_model::joint_columns(names, &PREDICTION_COLUMNS);
         writeln!(
             w,
             "target_x,target_y,target_z,{},reached_x,reached_y,reached_z",
@@ -510,7 +521,8 @@ impl Unit {
     }
 }
 
-/// Read the joints back from a predictions CSV ([`write_predictions`]).
+/// Read the joints back from a predictions CSV ([`write_predictions`]): every column but the
+/// targets and the reached positions, named after the joints or `q1..`.
 pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
     let mut reader = csv::Reader::from_path(path)
         .map_err(|e| Error::data(path, format!("cannot read predictions: {e}")))?;
@@ -521,7 +533,7 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
     let cols: Vec<usize> = header
         .iter()
         .enumerate()
-        .filter(|(_, h)| h.starts_with('q'))
+        .filter(|(_, h)| !PREDICTION_COLUMNS.contains(h))
         .map(|(i, _)| i)
         .collect();
     reader
@@ -798,7 +810,8 @@ impl<'a> RangeRun<'a> {
         let targets = self.targets();
         let reached = self.robot.chain.end_effector_batch(&a.joints);
         let path = self.predictions_path(&a.method);
-        write_predictions(&path, targets, &a.joints, &reached)?;
+        let names = self.robot.chain.joint_names();
+        write_predictions(&path, targets, &a.joints, &reached, &names)?;
         let k = self.cfg.prediction_sample_rows.min(targets.len());
         if k > 0 {
             write_predictions(
@@ -810,6 +823,7 @@ impl<'a> RangeRun<'a> {
                 &targets[..k],
                 &a.joints[..k],
                 &reached[..k],
+                &names,
             )?;
         }
         let d = distances(targets, &reached);
@@ -1300,15 +1314,7 @@ pub fn read_reached(path: &Path) -> Result<Vec<(Point3<f64>, Point3<f64>)>> {
             .position(|h| h == name)
             .ok_or_else(|| Error::data(path, format!("no column {name}")))
     };
-    let cols = [
-        "target_x",
-        "target_y",
-        "target_z",
-        "reached_x",
-        "reached_y",
-        "reached_z",
-    ]
-    .map(col);
+    let cols = PREDICTION_COLUMNS.map(col);
     let mut idx = [0; 6];
     for (i, c) in cols.into_iter().enumerate() {
         idx[i] = c?;
