@@ -55,6 +55,12 @@ fn main() -> ExitCode {
     selfmodel::cli::git_revision();
     run_main(|| {
         let robot = args.robot.load()?;
+        if robot.dof() == 0 {
+            return Err(selfmodel::Error::Config(format!(
+                "{}: the robot has no movable joint (every joint is fixed, or --tip is its root): a dataset of it would hold one pose; choose a tip below a joint (--tip) or a robot that moves",
+                args.robot.spec()?.label()
+            )));
+        }
         let mut cfg = DatasetConfig::preset(&args.preset)?;
         let given = match &args.angles {
             Some(path) => Some(read_angles(path, robot.dof())?),

@@ -5,6 +5,7 @@
 pub mod atomic_file;
 pub mod device;
 pub mod error;
+pub mod input_file;
 pub mod interrupt;
 pub mod json_diff;
 pub mod preset;

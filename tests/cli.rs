@@ -254,6 +254,47 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["grid step", "--grid-step"],
         &npz_out,
     );
+    // A robot with no movable joint (40 identical images were written).
+    let arm = common::write_arm(d, "still", 2, false);
+    fails_cleanly(
+        bin("dataset"),
+        &[
+            "--preset",
+            "quick",
+            "--urdf",
+            arm.to_str().unwrap(),
+            "--tip",
+            "base",
+            "--out",
+            n,
+        ],
+        &["no movable joint", "--tip"],
+        &npz_out,
+    );
+    // A dataset without training samples (the mean silhouette scored one anyway).
+    let empty_train = d.join("no_train.npz");
+    let data = selfmodel::data::dataset::Dataset::generate(
+        &selfmodel::sim::arm4::arm4(),
+        &<selfmodel::data::dataset::DatasetConfig as selfmodel::core::preset::Preset>::quick(),
+        None,
+    )
+    .unwrap();
+    selfmodel::data::dataset::Dataset { n_train: 0, ..data }
+        .save(&empty_train)
+        .unwrap();
+    fails_cleanly(
+        env!("CARGO_BIN_EXE_mean_silhouette"),
+        &[
+            "--preset",
+            "quick",
+            "--dataset",
+            empty_train.to_str().unwrap(),
+            "--out",
+            o,
+        ],
+        &["no training samples"],
+        &out,
+    );
     // A camera kilometres away (its frame was NaN at 1e150 m, and 1e300 took a minute).
     fails_cleanly(
         bin("dataset"),
@@ -723,6 +764,9 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         ("/ranges/1", "not finite numbers"),
         ("/config/lm/max_iterations", "iterations a start"),
         ("/joint_names/1", "named twice"),
+        ("/config/flow/best_of", "best_of 0"),
+        ("/config/flow/clamp", "clamp -1"),
+        ("/config/flow/fit/inference_batch", "inference batch 0"),
     ] {
         let mut v = value.clone();
         match edit {
@@ -733,6 +777,11 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
             "/config/lm/max_iterations" => {
                 v["config"]["lm"]["max_iterations"] = serde_json::json!(1_000_000_000_000u64)
             }
+            "/config/flow/best_of" => v["config"]["flow"]["best_of"] = serde_json::json!(0),
+            "/config/flow/clamp" => v["config"]["flow"]["clamp"] = serde_json::json!(-1.0),
+            "/config/flow/fit/inference_batch" => {
+                v["config"]["flow"]["fit"]["inference_batch"] = serde_json::json!(0)
+            }
             _ => v["joint_names"][1] = v["joint_names"][0].clone(),
         }
         std::fs::write(edited.join("model.json"), v.to_string()).unwrap();
@@ -742,6 +791,40 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
             &out,
         );
     }
+    // Damaged weights: bytes flipped (the saved hash differs), or NaN weights saved with a
+    // matching hash (an edited model.json).
+    std::fs::write(edited.join("model.json"), &saved).unwrap();
+    let mut weights = std::fs::read(model.join("model.bpk")).unwrap();
+    let mid = weights.len() / 2;
+    for b in &mut weights[mid..mid + 64] {
+        *b ^= 0x5A;
+    }
+    std::fs::write(edited.join("model.bpk"), &weights).unwrap();
+    run(
+        solve(&targets, "1", &out, &edited),
+        &["differs from the weights saved", "ik train"],
+        &out,
+    );
+    let mut v = value.clone();
+    v.as_object_mut().unwrap().remove("weights_fnv");
+    std::fs::write(edited.join("model.json"), v.to_string()).unwrap();
+    let nan = f32::NAN.to_le_bytes();
+    let mut weights = std::fs::read(model.join("model.bpk")).unwrap();
+    let tail = weights.len() - 4096;
+    for c in weights[tail..].chunks_mut(4) {
+        c.copy_from_slice(&nan);
+    }
+    std::fs::write(edited.join("model.bpk"), &weights).unwrap();
+    let o = Command::new(ik)
+        .args(solve(&targets, "1", &out, &edited))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !out.exists(), "{err}");
+    assert!(
+        err.contains("not finite") || err.contains("cannot be read"),
+        "{err}"
+    );
     // The benchmark on the same model: every budget's row, the family, the model alone;
     // every answer inside the limits, and the largest budget solves (nearly) every target.
     let bench = d.join("bench");

@@ -162,6 +162,32 @@ fn bad_dataset_files_are_clear_errors() {
         ],
     );
     expect_data_error(&p, "\"poses\" must be float");
+    // A negative depth (resneurokin_d trained on it), NaN in a camera pose (k3dgs).
+    let p = write(
+        d,
+        "negdepth.npz",
+        &[
+            ("images", images()),
+            ("angles", angles()),
+            ("focal", focal()),
+            ("poses", poses()),
+            ("depth", Array::f32(&[2, 4, 4], vec![-1.0; 32])),
+        ],
+    );
+    expect_data_error(&p, "\"depth\" of sample 0 is -1");
+    let mut nan_poses = vec![0.0; 16];
+    nan_poses[3] = f64::NAN;
+    let p = write(
+        d,
+        "nanposes.npz",
+        &[
+            ("images", images()),
+            ("angles", angles()),
+            ("focal", focal()),
+            ("poses", Array::f64(&[4, 4], nan_poses)),
+        ],
+    );
+    expect_data_error(&p, "\"poses\" holds NaN");
     let p = write(
         d,
         "dtype.npz",

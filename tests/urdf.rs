@@ -181,3 +181,112 @@ fn bad_urdfs_are_clear_errors() {
         "{msg}"
     );
 }
+
+/// Bad input, round 3: descriptions and meshes that panicked, overflowed the stack, blocked
+/// or were accepted wrongly are refused with one line naming the file.
+#[test]
+fn damaged_deep_duplicate_and_unreadable_descriptions_are_refused() {
+    let dir = common::tempdir();
+    let d = dir.path();
+    let good = robot_xml("revolute", "package://pkg/meshes/cube.stl");
+    let urdf = package(d, "revolute", "package://pkg/meshes/cube.stl", true);
+    // Two joints, or two links, of one name.
+    std::fs::write(&urdf, good.replace("name=\"j1\"", "name=\"j0\"")).unwrap();
+    expect_urdf_error(&urdf, &["joint \"j0\"", "named twice"]);
+    std::fs::write(
+        &urdf,
+        good.replace("link name=\"slider\"", "link name=\"arm\""),
+    )
+    .unwrap();
+    expect_urdf_error(&urdf, &["link \"arm\"", "named twice"]);
+    // Values no robot has (poses came out infinite).
+    std::fs::write(
+        &urdf,
+        good.replace("xyz=\"0 0 0.2\"", "xyz=\"1e300 0 0.2\""),
+    )
+    .unwrap();
+    expect_urdf_error(&urdf, &["joint \"j1\"", "origin", "within"]);
+    std::fs::write(&urdf, good.replace("upper=\"0.1\"", "upper=\"1e300\"")).unwrap();
+    expect_urdf_error(
+        &urdf,
+        &["joint \"j1\"", "limits must be finite numbers within"],
+    );
+    // 200,000 nested elements (a stack overflow after 21 s).
+    let deep = format!(
+        "<robot name='x'><link name='a'/>{}{}</robot>",
+        "<g>".repeat(200_000),
+        "</g>".repeat(200_000)
+    );
+    std::fs::write(&urdf, deep).unwrap();
+    expect_urdf_error(&urdf, &["nest 200001 deep"]);
+    // A folder, and (on Unix) a FIFO or a device as the description or as a mesh.
+    let err = load_urdf(d, Isometry3::identity()).unwrap_err().to_string();
+    assert!(err.contains("a folder"), "{err}");
+    #[cfg(unix)]
+    {
+        let fifo = d.join("fifo.urdf");
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(&fifo)
+                .status()
+                .unwrap()
+                .success()
+        );
+        let err = load_urdf(&fifo, Isometry3::identity())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        std::fs::write(&urdf, &good).unwrap();
+        let mesh = d.join("pkg/meshes/cube.stl");
+        std::fs::remove_file(&mesh).unwrap();
+        std::os::unix::fs::symlink("/dev/zero", &mesh).unwrap();
+        let err = load_urdf(&urdf, Isometry3::identity())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("cube.stl") && err.contains("not a regular file"),
+            "{err}"
+        );
+        // An OBJ whose materials file is a FIFO (it blocked forever) or /dev/zero (3.7 GB
+        // read): the materials are not read (a silhouette needs none), the mesh loads.
+        let obj = d.join("pkg/meshes/cube.obj");
+        std::fs::write(&urdf, good.replace("cube.stl", "cube.obj")).unwrap();
+        assert!(
+            std::process::Command::new("mkfifo")
+                .arg(d.join("pkg/meshes/mat.mtl"))
+                .status()
+                .unwrap()
+                .success()
+        );
+        for mtl in ["mat.mtl", "/dev/zero"] {
+            std::fs::write(&obj, format!("mtllib {mtl}\n{}", common::cube_obj(0.04))).unwrap();
+            let robot = load_urdf(&urdf, Isometry3::identity()).unwrap();
+            assert_eq!(robot.geometry[3].shapes().len(), 12);
+        }
+    }
+    // A COLLADA unit of no length, and a COLLADA face pointing past its vertices (the mesh
+    // loader panicked).
+    let dae = d.join("pkg/meshes/cube.dae");
+    std::fs::write(&urdf, good.replace("cube.stl", "cube.dae")).unwrap();
+    for unit in ["0", "-1"] {
+        std::fs::write(
+            &dae,
+            common::cube_collada(0.04, 1.0).replace("meter=\"1\"", &format!("meter=\"{unit}\"")),
+        )
+        .unwrap();
+        let err = load_urdf(&urdf, Isometry3::identity())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("cube.dae") && err.contains("not a positive length"),
+            "{err}"
+        );
+    }
+    let text = common::cube_collada(0.04, 1.0);
+    let at = text.find("<p>").unwrap() + 3;
+    std::fs::write(&dae, format!("{}999999 {}", &text[..at], &text[at..])).unwrap();
+    let err = load_urdf(&urdf, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cube.dae") && !err.contains('\n'), "{err}");
+}

@@ -394,9 +394,7 @@ impl Dataset {
     /// Refuse a dataset in which the robot is out of view in most images (a camera that
     /// misses the robot), with what to do about it.
     pub fn check_in_view(&self) -> Result<()> {
-        let empty = (0..self.len())
-            .filter(|&i| self.image(i).iter().all(|&v| v == 0))
-            .count();
+        let empty = self.empty_images();
         if 2 * empty > self.len() {
             return Err(Error::Config(format!(
                 "the robot is out of view in {empty} of {} images: aim the camera at it (--eye, --target, --fov) or let it frame the robot (--view X,Y,Z)",
@@ -404,6 +402,13 @@ impl Dataset {
             )));
         }
         Ok(())
+    }
+
+    /// Images without a single robot pixel.
+    pub fn empty_images(&self) -> usize {
+        (0..self.len())
+            .filter(|&i| self.image(i).iter().all(|&v| v == 0))
+            .count()
     }
 
     /// Sample joint vectors with the config's sampler and render them.
@@ -543,6 +548,12 @@ impl Dataset {
         if matches!(poses.data, ArrayData::Text(_)) {
             return Err(bad("\"poses\" must be float, found unicode text".into()));
         }
+        if let Some(i) = poses.to_f64().iter().position(|v| !v.is_finite()) {
+            return Err(bad(format!(
+                "\"poses\" holds NaN or infinity (camera {})",
+                i / 16
+            )));
+        }
         let pose_list: Vec<[f64; 16]> = match poses.shape[..] {
             [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
             [np, 4, 4] if np == n => poses
@@ -567,7 +578,7 @@ impl Dataset {
                         d.shape
                     )));
                 }
-                match d.data {
+                let v: Vec<f32> = match d.data {
                     ArrayData::F32(v) => v,
                     ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
                     _ => {
@@ -576,7 +587,15 @@ impl Dataset {
                             d.dtype_name()
                         )));
                     }
+                };
+                if let Some(i) = v.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
+                    return Err(bad(format!(
+                        "\"depth\" of sample {} is {}: depth is metres along the camera axis, 0 where empty",
+                        i / (h * w),
+                        v[i]
+                    )));
                 }
+                v
             }
         };
         let n_train = match n_train {

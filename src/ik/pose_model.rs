@@ -12,7 +12,7 @@
 use std::path::Path;
 
 use burn::module::Module;
-use burn::tensor::Device;
+use burn::tensor::{Device, Tensor};
 use nalgebra::Point3;
 
 use crate::core::atomic_file::write_json;
@@ -96,6 +96,9 @@ pub struct SavedModel {
     /// empty for one tip (the robot's tip).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub tips: Vec<String>,
+    /// FNV-1a of `model.bpk` as saved: a damaged or replaced weights file is refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub weights_fnv: Option<String>,
     /// Each joint's range (SI).
     pub ranges: Vec<[f64; 2]>,
     pub position_bounds: [[f64; 3]; 2],
@@ -152,6 +155,34 @@ impl SavedModel {
                 "its position bounds {lo:?} .. {hi:?} are not finite, increasing intervals"
             ));
         }
+        let flow = &self.config.flow;
+        if !(1..=64).contains(&flow.couplings) {
+            return Err(format!(
+                "its flow has {} couplings (1 to 64)",
+                flow.couplings
+            ));
+        }
+        if flow.hidden.is_empty() || flow.hidden.iter().any(|&h| !(1..=8192).contains(&h)) {
+            return Err(format!(
+                "its flow's hidden widths {:?} are not 1 to 8192 each",
+                flow.hidden
+            ));
+        }
+        if !(flow.clamp > 0.0 && flow.clamp <= 100.0) {
+            return Err(format!(
+                "its flow's clamp {} is not in (0, 100]",
+                flow.clamp
+            ));
+        }
+        if !(1..=1000).contains(&flow.best_of) {
+            return Err(format!("its best_of {} is not 1 to 1000", flow.best_of));
+        }
+        if !(1..=1_000_000).contains(&flow.fit.inference_batch) {
+            return Err(format!(
+                "its inference batch {} is not 1 to 1,000,000",
+                flow.fit.inference_batch
+            ));
+        }
         let lm = &self.config.lm;
         if !(lm.tolerance_m > 0.0 && lm.tolerance_m.is_finite() && lm.tolerance_m < 1.0) {
             return Err(format!(
@@ -189,6 +220,21 @@ pub struct PoseModel {
     data: IkData,
 }
 
+/// FNV-1a (64-bit, hex) of bytes.
+fn fnv(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// [`fnv`] of a file.
+fn file_fnv(path: &Path) -> Result<String> {
+    Ok(fnv(&std::fs::read(path).map_err(|e| Error::io(path, e))?))
+}
+
 /// A stable fingerprint of a chain (FNV-1a over its joints, limits and tip): the same robot
 /// description gives the same string on every machine.
 pub fn fingerprint(chain: &KinematicChain) -> String {
@@ -220,12 +266,7 @@ pub fn fingerprint(chain: &KinematicChain) -> String {
             j.mimic.map(|m| (m.leader, m.multiplier, m.offset))
         );
     }
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in text.bytes() {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{h:016x}")
+    fnv(text.as_bytes())
 }
 
 /// The condition rows of `targets` (for each tip, its position normalised, then its
@@ -313,18 +354,20 @@ pub fn train(
                 / n
         },
     )?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    let weights = dir.join("model.bpk");
+    crate::train::trainer::save_module(&trained.model, &weights)?;
     let saved = SavedModel {
         config: cfg.clone(),
         robot: spec.clone(),
         robot_fingerprint: fingerprint(chain),
         joint_names: chain.joint_names(),
         tips: if tips.len() > 1 { tips } else { Vec::new() },
+        weights_fnv: Some(file_fnv(&weights)?),
         ranges: data.ranges.clone(),
         position_bounds: data.position_bounds,
         git_revision: crate::core::provenance::git_revision(),
     };
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    crate::train::trainer::save_module(&trained.model, &dir.join("model.bpk"))?;
     write_json(&dir.join("model.json"), &saved)?;
     if let Some(log) = &trained.log {
         // The flow's validation curve (mean position error of one sample, cm, per epoch).
@@ -357,6 +400,14 @@ impl PoseModel {
         let dof = saved.joint_names.len();
         let width = condition_width(saved.config.position_only, saved.tips.len());
         let file = dir.join("model.bpk");
+        if let Some(expected) = &saved.weights_fnv
+            && file_fnv(&file)? != *expected
+        {
+            return Err(Error::data(
+                &file,
+                "differs from the weights saved with model.json (damaged or replaced); train the model again with `ik train`",
+            ));
+        }
         let flow = FlowIk::conditioned(&saved.config.flow, dof, width, device, 0)?
             .try_load_file(&file)
             .map_err(|e| {
@@ -367,6 +418,18 @@ impl PoseModel {
                     ),
                 )
             })?;
+        // Weights that are not numbers answer NaN: refuse them here.
+        let probe = flow.inverse(
+            Tensor::<2>::zeros([1, dof], device),
+            Tensor::<2>::zeros([1, width + 1], device),
+        );
+        let finite = probe.into_data().iter::<f32>().all(f32::is_finite);
+        if !finite {
+            return Err(Error::data(
+                &file,
+                "its weights are not finite numbers; train the model again with `ik train`",
+            ));
+        }
         let data = IkData {
             joints: Vec::new(),
             positions: Vec::new(),

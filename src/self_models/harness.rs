@@ -324,12 +324,33 @@ impl DataSpec {
                         ),
                     ));
                 }
+                let empty = data.empty_images();
+                if 2 * empty > data.len() {
+                    return Err(Error::data(
+                        path,
+                        format!(
+                            "{empty} of its {} silhouettes are empty: \"images\" must show the robot (uint8, 255 where it is)",
+                            data.len()
+                        ),
+                    ));
+                }
                 data
             }
-            None => Dataset::generate(&robot, &self.dataset, None)?,
+            None => {
+                let data = Dataset::generate(&robot, &self.dataset, None)?;
+                data.check_in_view()?;
+                data
+            }
         };
-        data.check_in_view()?;
         let (train, test) = data.split();
+        if train.is_empty() {
+            return Err(Error::Config(format!(
+                "the dataset{} has no training samples (n_train 0): a self-model needs some",
+                self.file
+                    .as_ref()
+                    .map_or(String::new(), |f| format!(" {}", f.display()))
+            )));
+        }
         let train = match self.train_samples {
             Some(k) if k > train.len() => {
                 return Err(Error::Config(format!(
@@ -348,6 +369,19 @@ impl DataSpec {
             )));
         }
         Ok((robot, data, train, test))
+    }
+}
+
+/// After a run refused its input or failed before training wrote anything: remove the
+/// `config.json` it wrote (and the folder, if it made it), so a refused run leaves nothing
+/// behind. A run that wrote a checkpoint keeps it (and its config) for `--resume`.
+fn leave_as_found(dir: &Path, (new_dir, new_config): (bool, bool)) {
+    if dir.join("checkpoint").exists() || !new_config {
+        return;
+    }
+    let _ = std::fs::remove_file(dir.join("config.json"));
+    if new_dir {
+        let _ = std::fs::remove_dir(dir);
     }
 }
 
@@ -833,10 +867,16 @@ pub fn run<M: SelfModel>(
     if cfg.data.file.is_none() {
         cfg.data.dataset.validate()?;
     }
+    let config = dir.join("config.json");
+    let fresh = (!dir.exists(), !config.exists());
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    write_json(&dir.join("config.json"), cfg)?;
+    write_json(&config, cfg)?;
     // Read the revision now: a run that spans commits is the code it started with.
     let git_revision = crate::core::provenance::git_revision();
+    let fitted = fit_run(cfg, &dir.join("checkpoint"), device_choice, resume);
+    if fitted.is_err() {
+        leave_as_found(dir, fresh);
+    }
     let Fitted {
         trained,
         device,
@@ -846,7 +886,7 @@ pub fn run<M: SelfModel>(
         test_set,
         truth,
         truth_depth,
-    } = fit_run(cfg, &dir.join("checkpoint"), device_choice, resume)?;
+    } = fitted?;
     let log = &trained.log;
     let pixels = data.height * data.width;
     let git_revision = git_revision.as_str();

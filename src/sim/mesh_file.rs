@@ -6,6 +6,7 @@ use std::path::Path;
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::core::error::{Error, Result};
+use crate::core::input_file::{MAX_MESH_BYTES, catch_panic, read_regular};
 use crate::sim::shape::Shape;
 
 /// The mesh formats a robot description may name.
@@ -27,10 +28,30 @@ pub fn load_mesh(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Res
             "unsupported mesh format \".{ext}\" (supported: STL, COLLADA .dae, OBJ); convert it to one of them"
         )));
     }
-    let bytes = std::fs::read(path).map_err(|e| bad(format!("cannot open mesh: {e}")))?;
-    let scene = mesh_loader::Loader::default()
-        .load_from_slice(&bytes, path)
-        .map_err(|e| bad(format!("not a valid {} file: {e}", ext.to_uppercase())))?;
+    let read = |p: &Path| read_regular(p, "mesh", MAX_MESH_BYTES);
+    let bytes = read(path).map_err(|e| bad(format!("cannot read mesh: {e}")))?;
+    if ext == "dae"
+        && let Some(unit) = collada_unit(&bytes)
+        && !(unit.is_finite() && unit > 0.0)
+    {
+        return Err(bad(format!(
+            "its <unit meter=\"{unit}\"> is not a positive length (metres per unit of the file)"
+        )));
+    }
+    // The loader reads what the mesh names (an OBJ's `mtllib`) through the same checks, and
+    // a panic of the loader on a damaged file is an error of that file.
+    let scene = catch_panic(|| {
+        mesh_loader::Loader::default().load_from_slice_with_reader(&bytes, path, |p| {
+            read(p).map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", p.display())))
+        })
+    })
+    .map_err(|panic| {
+        bad(format!(
+            "a damaged {} file (the mesh loader failed: {panic}); export it again",
+            ext.to_uppercase()
+        ))
+    })?
+    .map_err(|e| bad(format!("not a valid {} file: {e}", ext.to_uppercase())))?;
     let mut shapes = Vec::new();
     for mesh in &scene.meshes {
         let vertex = |i: u32| -> Result<Point3<f64>> {
@@ -62,4 +83,15 @@ pub fn load_mesh(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Res
         return Err(bad("the mesh has no triangles".into()));
     }
     Ok(shapes)
+}
+
+/// The `meter` of a COLLADA file's `<unit>`, where it states one (NaN where it is no number).
+fn collada_unit(bytes: &[u8]) -> Option<f64> {
+    let text = std::str::from_utf8(bytes).ok()?;
+    let at = text.find("<unit")?;
+    let tag = &text[at..at + text[at..].find('>')?];
+    let value = tag.split("meter=").nth(1)?;
+    let value = value.trim_start_matches(['"', '\'']);
+    let end = value.find(['"', '\'']).unwrap_or(value.len());
+    Some(value[..end].trim().parse().unwrap_or(f64::NAN))
 }

@@ -84,6 +84,39 @@ pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
     )
 }
 
+/// The largest number a joint's origin, limits or mimic may hold (metres, radians): far
+/// beyond any robot, small enough that poses stay finite.
+pub const MAX_VALUE: f64 = 1e4;
+
+/// The deepest nesting of XML elements read (a URDF nests 3-4 deep; the parser recurses).
+const MAX_NESTING: usize = 1000;
+
+/// How deep the XML elements of `text` nest (comments, declarations and processing
+/// instructions aside; a rough scan, enough to refuse a file that would exhaust the stack).
+fn nesting_depth(text: &str) -> usize {
+    let (mut depth, mut deepest) = (0usize, 0usize);
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while let Some(at) = text[i..].find('<') {
+        let start = i + at;
+        let Some(len) = text[start..].find('>') else {
+            break;
+        };
+        let end = start + len;
+        match bytes.get(start + 1) {
+            Some(b'/') => depth = depth.saturating_sub(1),
+            Some(b'!' | b'?') => {}
+            _ if bytes[end - 1] == b'/' => {}
+            _ => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+        }
+        i = end + 1;
+    }
+    deepest
+}
+
 /// The text outside XML comments.
 fn without_comments(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
@@ -159,8 +192,20 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         element,
         msg,
     };
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
-    if let Some(found) = xacro_construct(&text) {
+    let bytes = crate::core::input_file::read_regular(
+        path,
+        "robot description",
+        crate::core::input_file::MAX_DESCRIPTION_BYTES,
+    )
+    .map_err(|e| Error::io(path, e))?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        urdf_err(
+            "robot".into(),
+            "is not UTF-8 text (a URDF is XML; save it as UTF-8)".into(),
+        )
+    })?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    if let Some(found) = xacro_construct(text) {
         return Err(urdf_err(
             "robot".into(),
             format!(
@@ -168,13 +213,39 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             ),
         ));
     }
-    let text = as_urdfdom_reads(&text);
+    let depth = nesting_depth(&without_comments(text));
+    if depth > MAX_NESTING {
+        return Err(urdf_err(
+            "robot".into(),
+            format!(
+                "its elements nest {depth} deep (a URDF nests a few levels; at most {MAX_NESTING} are read)"
+            ),
+        ));
+    }
+    let text = as_urdfdom_reads(text);
     let urdf = urdf_rs::read_from_string(&text)
         .map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;
     if urdf.links.is_empty() {
         return Err(urdf_err("robot".into(), "no <link> elements".into()));
     }
     let link_names: Vec<String> = urdf.links.iter().map(|l| l.name.clone()).collect();
+    let twice = |names: Vec<&String>| {
+        (1..names.len())
+            .find(|&i| names[..i].contains(&names[i]))
+            .map(|i| names[i].clone())
+    };
+    if let Some(name) = twice(link_names.iter().collect()) {
+        return Err(urdf_err(
+            format!("link \"{name}\""),
+            "is named twice: every link needs its own name".into(),
+        ));
+    }
+    if let Some(name) = twice(urdf.joints.iter().map(|j| &j.name).collect()) {
+        return Err(urdf_err(
+            format!("joint \"{name}\""),
+            "is named twice: every joint needs its own name".into(),
+        ));
+    }
     let find_link = |joint: &str, name: &str| {
         link_names.iter().position(|l| l == name).ok_or_else(|| {
             urdf_err(
@@ -215,11 +286,15 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         let limits = match kind {
             JointKind::Revolute | JointKind::Prismatic => {
                 let (lo, hi) = (j.limit.lower, j.limit.upper);
-                if !lo.is_finite() || !hi.is_finite() {
+                if !(lo.is_finite()
+                    && hi.is_finite()
+                    && lo.abs() <= MAX_VALUE
+                    && hi.abs() <= MAX_VALUE)
+                {
                     return Err(urdf_err(
                         element,
                         format!(
-                            "<limit lower=\"{lo}\" upper=\"{hi}\">: limits must be finite numbers"
+                            "<limit lower=\"{lo}\" upper=\"{hi}\">: limits must be finite numbers within +-{MAX_VALUE} (radians or metres)"
                         ),
                     ));
                 }
@@ -235,8 +310,17 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             _ => None,
         };
         let values = j.origin.xyz.0.iter().chain(&j.origin.rpy.0);
-        if values.clone().any(|v| !v.is_finite()) {
-            return Err(urdf_err(element, "origin is not finite".into()));
+        if values
+            .clone()
+            .any(|v| !(v.is_finite() && v.abs() <= MAX_VALUE))
+        {
+            return Err(urdf_err(
+                element,
+                format!(
+                    "<origin xyz=\"{:?}\" rpy=\"{:?}\">: values must be finite and within +-{MAX_VALUE} (metres, radians)",
+                    j.origin.xyz.0, j.origin.rpy.0
+                ),
+            ));
         }
         let mimic = match &j.mimic {
             Some(m) if kind.is_movable() => {
@@ -251,7 +335,11 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
                         )
                     })?;
                 let (multiplier, offset) = (m.multiplier.unwrap_or(1.0), m.offset.unwrap_or(0.0));
-                if !multiplier.is_finite() || !offset.is_finite() {
+                if !(multiplier.is_finite()
+                    && offset.is_finite()
+                    && multiplier.abs() <= MAX_VALUE
+                    && offset.abs() <= MAX_VALUE)
+                {
                     return Err(urdf_err(
                         element,
                         "<mimic> multiplier and offset must be finite".into(),
@@ -366,7 +454,8 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
                 }),
                 urdf_rs::Geometry::Mesh { filename, scale } => {
                     let file = resolve_mesh_path(dir, filename);
-                    if !file.is_file() {
+                    // Missing here; a folder, FIFO or device is refused where it is read.
+                    if std::fs::metadata(&file).is_err() {
                         return Err(urdf_err(
                             element,
                             format!(
