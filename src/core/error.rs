@@ -7,7 +7,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// Reading or writing a file failed at the operating-system level.
-    #[error("{path}: {source}")]
+    #[error("{}: {}", one_line(&path.display().to_string()), one_line(&source.to_string()))]
     Io {
         path: PathBuf,
         #[source]
@@ -15,34 +15,48 @@ pub enum Error {
     },
     /// A URDF that cannot be used: bad XML, an unsupported joint type, a broken tree.
     /// `element` names the offending element (`joint "L1_L2"`, `link "base"`, ...).
-    #[error("{path}: {element}: {msg}")]
+    #[error("{}: {}: {}", one_line(&path.display().to_string()), one_line(element), one_line(msg))]
     Urdf {
         path: PathBuf,
         element: String,
         msg: String,
     },
     /// A mesh file that is missing or cannot be parsed.
-    #[error("{path}: {msg}")]
+    #[error("{}: {}", one_line(&path.display().to_string()), one_line(msg))]
     Mesh { path: PathBuf, msg: String },
     /// A data file (npz, CSV) whose content is wrong: missing keys, shapes, dtypes, NaNs.
-    #[error("{path}: {msg}")]
+    #[error("{}: {}", one_line(&path.display().to_string()), one_line(msg))]
     Data { path: PathBuf, msg: String },
     /// An impossible configuration or argument (zero samples, a split larger than the data).
-    #[error("{0}")]
+    #[error("{}", one_line(.0))]
     Config(String),
     /// A `--device` that was not compiled in or cannot start.
-    #[error("{0}")]
+    #[error("{}", one_line(.0))]
     Device(String),
     /// Training that cannot go on (a loss that became NaN or infinite).
-    #[error("{0}")]
+    #[error("{}", one_line(.0))]
     Training(String),
     /// Training that collapsed to a trivial solution (FFKSM's all-black image) at `step`;
     /// the caller may restart with a fresh model.
     #[error("training collapsed to an all-black image at step {step}")]
     Collapsed { step: usize },
     /// Stopped by Ctrl-C: what was saved and how to continue.
-    #[error("{0}")]
+    #[error("{}", one_line(.0))]
     Interrupted(String),
+}
+
+/// `text` on one line: line breaks and other control characters (a user's file quoted in
+/// a message may hold any) escaped as `\n`, `\u{0}`, ...
+pub fn one_line(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// The library's result type.
