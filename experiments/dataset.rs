@@ -54,6 +54,10 @@ fn main() -> ExitCode {
     // The revision the run starts from, before it writes anything.
     selfmodel::cli::git_revision();
     run_main(|| {
+        selfmodel::core::atomic_file::check_out(
+            &args.out,
+            selfmodel::core::atomic_file::OutKind::File,
+        )?;
         let robot = args.robot.load()?;
         if robot.dof() == 0 {
             return Err(selfmodel::Error::Config(format!(

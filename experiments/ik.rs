@@ -96,6 +96,10 @@ fn main() -> ExitCode {
             } => {
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
+                selfmodel::core::atomic_file::check_out(
+                    &out,
+                    selfmodel::core::atomic_file::OutKind::Folder,
+                )?;
                 let spec = robot.spec()?;
                 let loaded = spec.load_kinematics()?;
                 let start = std::time::Instant::now();
@@ -126,6 +130,10 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
+                selfmodel::core::atomic_file::check_out(
+                    &out,
+                    selfmodel::core::atomic_file::OutKind::File,
+                )?;
                 selfmodel::core::atomic_file::refuse_overwrite(&out, &[], saved_model(&model))?;
                 let model = PoseModel::load(&model, &device)?;
                 let robot = model.saved.robot.load_kinematics()?;
@@ -161,6 +169,10 @@ fn main() -> ExitCode {
                         "--k must be 1 to {MAX_K} (answers per target)"
                     )));
                 }
+                selfmodel::core::atomic_file::check_out(
+                    &out,
+                    selfmodel::core::atomic_file::OutKind::File,
+                )?;
                 selfmodel::core::atomic_file::refuse_overwrite(
                     &out,
                     &[&targets],

@@ -420,6 +420,7 @@ impl ExperimentArgs {
                 }
                 None => e.dir_for(&opts.preset),
             });
+        crate::core::atomic_file::check_out(&dir, crate::core::atomic_file::OutKind::Folder)?;
         let start = std::time::Instant::now();
         let summary = e.run_in(&opts, &dir)?;
         let cpu = crate::eval::compute_peak::machine_label(false);

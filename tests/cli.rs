@@ -254,6 +254,65 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["grid step", "--grid-step"],
         &npz_out,
     );
+    // An --out that cannot be written is refused before any work (it said "File exists"
+    // after training, or "Not a directory").
+    let a_file = write("a_file", "x");
+    let under_file = format!("{a_file}/out.npz");
+    fails_cleanly(
+        bin("dataset"),
+        &["--preset", "quick", "--out", &under_file],
+        &["is a file, not a folder"],
+        Path::new(&under_file),
+    );
+    let folder = format!("{}/", d.join("folder").display());
+    fails_cleanly(
+        bin("dataset"),
+        &["--preset", "quick", "--out", &folder],
+        &["is a folder", "dataset.npz"],
+        &d.join("folder"),
+    );
+    fails_cleanly(
+        env!("CARGO_BIN_EXE_ik"),
+        &[
+            "train",
+            "--preset",
+            "quick",
+            "--out",
+            &format!("{a_file}/model"),
+        ],
+        &["is a file, not a folder"],
+        &d.join("a_file/model"),
+    );
+    fails_cleanly(
+        env!("CARGO_BIN_EXE_neurokin"),
+        &["--preset", "quick", "--out", &format!("{a_file}/run")],
+        &["is a file, not a folder"],
+        &d.join("a_file/run"),
+    );
+    // A grid too coarse for the samples asked ("1 joint vectors for 40 samples").
+    fails_cleanly(
+        bin("dataset"),
+        &[
+            "--preset",
+            "quick",
+            "--sampler",
+            "grid",
+            "--grid-step",
+            "1e6",
+            "--out",
+            n,
+        ],
+        &["gives 1 joint vectors", "--grid-step", "--samples"],
+        &npz_out,
+    );
+    // A camera looking straight down is one (it was "must span a frame").
+    let down = d.join("down.npz");
+    let looked_down = Command::new(bin("dataset"))
+        .args(["--preset", "quick", "--eye", "0,0,2", "--out"])
+        .arg(&down)
+        .output()
+        .unwrap();
+    common::assert_ok(&looked_down);
     // A robot with no movable joint (40 identical images were written).
     let arm = common::write_arm(d, "still", 2, false);
     fails_cleanly(

@@ -282,6 +282,18 @@ fn damaged_deep_duplicate_and_unreadable_descriptions_are_refused() {
             "{err}"
         );
     }
+    // An OBJ face of vertex 0 ("face index out of bounds (4294967295)").
+    let obj = d.join("pkg/meshes/zero.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n").unwrap();
+    std::fs::write(&urdf, good.replace("cube.stl", "zero.obj")).unwrap();
+    let err = load_urdf(&urdf, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("line 4") && err.contains("numbers vertices from 1"),
+        "{err}"
+    );
+    std::fs::write(&urdf, good.replace("cube.stl", "cube.dae")).unwrap();
     let text = common::cube_collada(0.04, 1.0);
     let at = text.find("<p>").unwrap() + 3;
     std::fs::write(&dae, format!("{}999999 {}", &text[..at], &text[at..])).unwrap();

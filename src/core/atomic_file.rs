@@ -164,6 +164,45 @@ pub fn file_name(label: &str) -> String {
         .join("_")
 }
 
+/// Refuse an `--out` that cannot be written, before any work: one whose nearest existing
+/// ancestor is a file (it cannot hold a folder), or, where `kind` is a file, an existing
+/// folder or a path ending in `/`.
+pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
+    let shown = out.display();
+    if kind == OutKind::File && (out.is_dir() || out.as_os_str().to_string_lossy().ends_with('/')) {
+        return Err(Error::Config(format!(
+            "--out {shown} is a folder; give a file in it (e.g. {}/dataset.npz)",
+            shown.to_string().trim_end_matches('/')
+        )));
+    }
+    if kind == OutKind::Folder && out.exists() && !out.is_dir() {
+        return Err(Error::Config(format!(
+            "--out {shown} is a file; give a folder"
+        )));
+    }
+    let mut parent = out.parent();
+    while let Some(p) = parent.filter(|p| !p.as_os_str().is_empty()) {
+        if p.exists() {
+            if !p.is_dir() {
+                return Err(Error::Config(format!(
+                    "--out {shown}: {} is a file, not a folder; choose another --out",
+                    p.display()
+                )));
+            }
+            break;
+        }
+        parent = p.parent();
+    }
+    Ok(())
+}
+
+/// What an `--out` names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutKind {
+    File,
+    Folder,
+}
+
 /// Refuse an output path that is one of a run's `inputs` or lies inside a folder it reads
 /// from (`protected`, a saved model's): a run never overwrites what it reads. Paths are
 /// compared as they resolve (the output need not exist yet).

@@ -354,6 +354,45 @@ pub fn train(
                 / n
         },
     )?;
+    let fresh = !dir.exists() || dir.read_dir().is_ok_and(|mut d| d.next().is_none());
+    let saved = save_model(
+        dir,
+        &trained,
+        cfg,
+        spec,
+        chain,
+        tips,
+        &data,
+        checkpoint.as_path(),
+    );
+    if saved.is_err() && fresh {
+        // A run that could not save (a full disk) leaves no empty or partial folder.
+        for name in ["model.bpk", "model.json", "validation_curve.csv"] {
+            let _ = std::fs::remove_file(dir.join(name));
+        }
+        let _ = std::fs::remove_dir(dir);
+    }
+    let saved = saved?;
+    Ok(PoseModel {
+        saved,
+        flow: trained.model,
+        data,
+    })
+}
+
+/// Write a trained model into `dir`: `model.bpk`, `model.json` (with the weights' hash) and
+/// the validation curve; the training checkpoint is removed.
+#[allow(clippy::too_many_arguments)]
+fn save_model(
+    dir: &Path,
+    trained: &crate::ik::flow::TrainedFlow,
+    cfg: &PoseModelConfig,
+    spec: &RobotSpec,
+    chain: &KinematicChain,
+    tips: Vec<String>,
+    data: &IkData,
+    checkpoint: &Path,
+) -> Result<SavedModel> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let weights = dir.join("model.bpk");
     crate::train::trainer::save_module(&trained.model, &weights)?;
@@ -374,13 +413,9 @@ pub fn train(
         crate::report::table::write_csv(&dir.join("validation_curve.csv"), &log.curve)?;
     }
     if checkpoint.exists() {
-        std::fs::remove_dir_all(&checkpoint).map_err(|e| Error::io(&checkpoint, e))?;
+        std::fs::remove_dir_all(checkpoint).map_err(|e| Error::io(checkpoint, e))?;
     }
-    Ok(PoseModel {
-        saved,
-        flow: trained.model,
-        data,
-    })
+    Ok(saved)
 }
 
 impl PoseModel {

@@ -108,12 +108,32 @@ impl Camera {
                 "camera eye and target must be within {MAX_CAMERA_COORDINATE} m of the origin, got a coordinate of {v:e} m"
             )));
         }
-        if fwd.norm() < 1e-12 || fwd.cross(&Vector3::from(self.up)).norm() < 1e-12 {
+        if fwd.norm() < 1e-12 {
+            return Err(Error::Config(format!(
+                "the camera's eye and target are the same point ({:?}): it looks nowhere",
+                self.eye
+            )));
+        }
+        if fwd.cross(&Vector3::from(self.up)).norm() < 1e-12 {
             return Err(Error::Config(
                 "camera eye, target and up must span a frame".into(),
             ));
         }
         Ok(())
+    }
+
+    /// The camera with an up direction it can use: unchanged, unless it looks along its up
+    /// (straight down or up, with the default up +z), then with +x up in the image.
+    pub fn upright(self) -> Self {
+        let fwd = Vector3::from(self.target) - Vector3::from(self.eye);
+        let up = Vector3::from(self.up);
+        if fwd.norm() > 1e-12 && fwd.cross(&up).norm() <= 1e-9 * fwd.norm() * up.norm() {
+            return Camera {
+                up: [1.0, 0.0, 0.0],
+                ..self
+            };
+        }
+        self
     }
 
     /// Focal length in pixels from the vertical field of view.
@@ -211,7 +231,8 @@ impl Camera {
             eye: (target + dir.normalize()).into(),
             target: target.into(),
             ..self.clone()
-        };
+        }
+        .upright();
         probe.validate()?;
         let (fwd, right, up) = probe.basis();
         let back = -fwd;
@@ -229,6 +250,7 @@ impl Camera {
         Ok(Camera {
             eye: (target + back * distance).into(),
             target: target.into(),
+            up: probe.up,
             ..self.clone()
         })
     }

@@ -38,6 +38,13 @@ pub fn load_mesh(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Res
             "its <unit meter=\"{unit}\"> is not a positive length (metres per unit of the file)"
         )));
     }
+    if ext == "obj"
+        && let Some(line) = obj_face_index_zero(&bytes)
+    {
+        return Err(bad(format!(
+            "line {line}: a face refers to vertex 0; OBJ numbers vertices from 1 (or from -1 backwards)"
+        )));
+    }
     // The loader reads what the mesh names (an OBJ's `mtllib`) through the same checks, and
     // a panic of the loader on a damaged file is an error of that file.
     let scene = catch_panic(|| {
@@ -94,4 +101,15 @@ fn collada_unit(bytes: &[u8]) -> Option<f64> {
     let value = value.trim_start_matches(['"', '\'']);
     let end = value.find(['"', '\'']).unwrap_or(value.len());
     Some(value[..end].trim().parse().unwrap_or(f64::NAN))
+}
+
+/// The first line (1-based) of an OBJ file with a face index of 0, which OBJ does not have.
+fn obj_face_index_zero(bytes: &[u8]) -> Option<usize> {
+    let text = String::from_utf8_lossy(bytes);
+    text.lines().enumerate().find_map(|(i, line)| {
+        let rest = line.trim_start().strip_prefix("f ")?;
+        rest.split_whitespace()
+            .any(|v| v.split('/').next().is_some_and(|n| n.trim() == "0"))
+            .then_some(i + 1)
+    })
 }

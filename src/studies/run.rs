@@ -260,6 +260,8 @@ impl CameraChoice {
             if let Some(target) = self.target {
                 camera.target = target;
             }
+            // Looking straight down (or up): +x is up in the image.
+            *camera = camera.clone().upright();
             data.framing = None;
         } else if framed || self.view.is_some() {
             data.framing = Some(Framing {
