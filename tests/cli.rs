@@ -823,6 +823,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         ("/ranges/1", "not finite numbers"),
         ("/config/lm/max_iterations", "iterations a start"),
         ("/joint_names/1", "named twice"),
+        ("/ranges/2", "empty"),
         ("/config/flow/best_of", "best_of 0"),
         ("/config/flow/clamp", "clamp -1"),
         ("/config/flow/fit/inference_batch", "inference batch 0"),
@@ -833,6 +834,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
                 v["ranges"].as_array_mut().unwrap().pop();
             }
             "/ranges/1" => v["ranges"][1] = serde_json::json!([1e308, -1e308]),
+            "/ranges/2" => v["ranges"][2] = serde_json::json!([0.5, 0.5]),
             "/config/lm/max_iterations" => {
                 v["config"]["lm"]["max_iterations"] = serde_json::json!(1_000_000_000_000u64)
             }

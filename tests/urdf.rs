@@ -282,6 +282,31 @@ fn damaged_deep_duplicate_and_unreadable_descriptions_are_refused() {
             "{err}"
         );
     }
+    // A 2 GB sparse mesh is refused by its size before it is read.
+    let huge = d.join("pkg/meshes/huge.stl");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(2 << 30)
+        .unwrap();
+    std::fs::write(&urdf, good.replace("cube.stl", "huge.stl")).unwrap();
+    let err = load_urdf(&urdf, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("huge.stl") && err.contains("2048 MiB, more than"),
+        "{err}"
+    );
+    std::fs::remove_file(&huge).unwrap();
+    // A COLLADA accessor claiming more data than it holds (an assertion inside the loader).
+    std::fs::write(&urdf, good.replace("cube.stl", "cube.dae")).unwrap();
+    let text = common::cube_collada(0.04, 1.0);
+    let claimed = text.replacen("count=\"", "count=\"9999", 1);
+    assert_ne!(claimed, text);
+    std::fs::write(&dae, claimed).unwrap();
+    let err = load_urdf(&urdf, Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("cube.dae") && !err.contains('\n'), "{err}");
     // An OBJ face of vertex 0 ("face index out of bounds (4294967295)").
     let obj = d.join("pkg/meshes/zero.obj");
     std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n").unwrap();

@@ -143,9 +143,11 @@ impl SavedModel {
                     "joint \"{name}\" has the range [{lo:e}, {hi:e}], not finite numbers within +-{MAX_RANGE}"
                 ));
             }
-            if lo > hi {
+            if lo >= hi {
+                // `ik train` never writes one: a joint without a range to sample is refused.
                 return Err(format!(
-                    "joint \"{name}\" has the range [{lo:e}, {hi:e}], inverted"
+                    "joint \"{name}\" has the range [{lo:e}, {hi:e}], {}",
+                    if lo > hi { "inverted" } else { "empty" }
                 ));
             }
         }
