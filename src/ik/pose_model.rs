@@ -678,6 +678,53 @@ pub fn target_columns(tips: &[String], position_only: bool) -> Vec<String> {
         .collect()
 }
 
+/// One target from its values in [`target_columns`] order (finite numbers): an error (what
+/// is wrong, for the caller to place) for a position beyond [`MAX_TARGET_COORDINATE`] or a
+/// quaternion that is not of unit norm. The one check of every way targets come in (a CSV
+/// file, the Python package).
+pub fn target_from_values(
+    v: &[f64],
+    position_only: bool,
+    tips: &[String],
+) -> std::result::Result<Vec<PoseTarget>, String> {
+    let per_tip = if position_only { 3 } else { 7 };
+    let want = per_tip * tips.len().max(1);
+    if v.len() != want {
+        return Err(format!("{} values where a target has {want}", v.len()));
+    }
+    if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+        return Err(format!("{x} is not a finite number"));
+    }
+    let mut row = Vec::with_capacity(v.len() / per_tip);
+    for (t, v) in v.chunks(per_tip).enumerate() {
+        let position = Point3::new(v[0], v[1], v[2]);
+        if position.coords.amax() > MAX_TARGET_COORDINATE {
+            return Err(format!(
+                "the position ({}, {}, {}) lies more than {MAX_TARGET_COORDINATE} m from the robot's origin: give targets in metres",
+                v[0], v[1], v[2]
+            ));
+        }
+        let orientation = if position_only {
+            None
+        } else {
+            let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
+            let norm = q.norm();
+            if !(0.9..=1.1).contains(&norm) {
+                let of = tips.get(t).map_or(String::new(), |n| format!(" of {n}"));
+                return Err(format!(
+                    "the quaternion{of} (qw, qx, qy, qz) has norm {norm:.4}, not 1"
+                ));
+            }
+            Some(nalgebra::UnitQuaternion::from_quaternion(q))
+        };
+        row.push(PoseTarget {
+            position,
+            orientation,
+        });
+    }
+    Ok(row)
+}
+
 /// The farthest a target may lie from the robot's origin along an axis (m): far beyond any
 /// robot's reach, near enough that it stays finite in the network's single precision.
 pub const MAX_TARGET_COORDINATE: f64 = 1e3;
@@ -723,7 +770,6 @@ pub fn read_targets(
             })
         })
         .collect::<Result<_>>()?;
-    let per_tip = if position_only { 3 } else { 7 };
     let mut out = Vec::new();
     for (i, rec) in reader.records().enumerate() {
         let line = i + 2;
@@ -738,33 +784,8 @@ pub fn read_targets(
                     .ok_or_else(|| bad(format!("line {line}: \"{cell}\" is not a finite number")))
             })
             .collect::<Result<_>>()?;
-        let mut row = Vec::with_capacity(v.len() / per_tip);
-        for (t, v) in v.chunks(per_tip).enumerate() {
-            let position = Point3::new(v[0], v[1], v[2]);
-            if position.coords.amax() > MAX_TARGET_COORDINATE {
-                return Err(bad(format!(
-                    "line {line}: the position ({}, {}, {}) lies more than {MAX_TARGET_COORDINATE} m from the robot's origin: give targets in metres",
-                    v[0], v[1], v[2]
-                )));
-            }
-            let orientation = if position_only {
-                None
-            } else {
-                let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
-                let norm = q.norm();
-                if !(0.9..=1.1).contains(&norm) {
-                    let of = tips.get(t).map_or(String::new(), |n| format!(" of {n}"));
-                    return Err(bad(format!(
-                        "line {line}: the quaternion{of} (qw, qx, qy, qz) has norm {norm:.4}, not 1"
-                    )));
-                }
-                Some(nalgebra::UnitQuaternion::from_quaternion(q))
-            };
-            row.push(PoseTarget {
-                position,
-                orientation,
-            });
-        }
+        let row = target_from_values(&v, position_only, tips)
+            .map_err(|e| bad(format!("line {line}: {e}")))?;
         out.push(row);
     }
     if out.is_empty() {

@@ -1,0 +1,15 @@
+"""selfmodel from Python: robots as ROS ships them, their forward kinematics, and learned
+inverse kinematics (models `ik train` saves), computed in Rust.
+
+    import numpy as np, selfmodel
+    robot = selfmodel.Robot.from_urdf("panda.urdf", tip="panda_hand")
+    poses = robot.fk(np.zeros((1, robot.dof)))          # (1, 4, 4)
+    ik = selfmodel.IkSolver.load("runs/ik_models/panda")
+    answer = ik.solve(targets)                           # targets (N, 7): x, y, z, qw, qx, qy, qz
+
+Bad input (NaN, wrong shapes, another robot's model) raises ValueError with one line.
+"""
+
+from ._selfmodel import IkSolver, Robot
+
+__all__ = ["IkSolver", "Robot"]

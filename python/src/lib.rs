@@ -1,0 +1,320 @@
+//! The Python package's native module (`selfmodel._selfmodel`): a thin layer over the crate.
+//! Arrays come in as numpy (float64, C order or not), are checked for shape and finiteness
+//! (a `ValueError` of one line, never a crash), and the GIL is released while Rust computes.
+
+use std::path::PathBuf;
+
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+use selfmodel::ik::pose::PoseTarget;
+use selfmodel::ik::pose_model::{PoseModel, target_columns, target_from_values};
+use selfmodel::sim::kinematics::JointGroup;
+use selfmodel::sim::robot::Robot;
+use selfmodel::sim::robots::RobotSpec;
+use selfmodel::sim::urdf_loader::GeometryKind;
+
+/// The library's error as Python's `ValueError` (one line).
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// The rows of a 2-D float array with `width` columns, finite: `(rows, values)`.
+fn rows(a: &PyReadonlyArray2<f64>, width: usize, what: &str) -> PyResult<(usize, Vec<f64>)> {
+    let [n, w] = [a.shape()[0], a.shape()[1]];
+    if w != width {
+        return Err(value_error(format!(
+            "{what}: expected an array of shape (N, {width}), got ({n}, {w})"
+        )));
+    }
+    let v: Vec<f64> = a.as_array().iter().copied().collect();
+    if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        return Err(value_error(format!(
+            "{what}: row {} holds {}, not a finite number",
+            i / width.max(1),
+            v[i]
+        )));
+    }
+    Ok((n, v))
+}
+
+/// A robot: its joints (names, limits, in depth-first order from the root) and forward
+/// kinematics.
+#[pyclass(name = "Robot", module = "selfmodel", frozen)]
+struct PyRobot {
+    robot: Robot,
+}
+
+#[pymethods]
+impl PyRobot {
+    /// Load a URDF as ROS ships it. `tip`: the end-effector link (default: the last link of
+    /// the longest chain); `joints`: "all" or a list of joint names; `tips`: several links
+    /// (the union of their chains); `geometry`: "visual", "collision" or "none".
+    #[staticmethod]
+    #[pyo3(signature = (path, tip=None, joints=None, tips=None, geometry="visual"))]
+    fn from_urdf(
+        py: Python<'_>,
+        path: PathBuf,
+        tip: Option<String>,
+        joints: Option<Vec<String>>,
+        tips: Option<Vec<String>>,
+        geometry: &str,
+    ) -> PyResult<Self> {
+        let geometry = match geometry {
+            "visual" => GeometryKind::Visual,
+            "collision" => GeometryKind::Collision,
+            "none" => GeometryKind::None,
+            other => {
+                return Err(value_error(format!(
+                    "geometry \"{other}\": choose visual, collision or none"
+                )));
+            }
+        };
+        let joints =
+            JointGroup::from_args(joints.as_deref(), tips.as_deref()).map_err(value_error)?;
+        let spec = RobotSpec::Urdf {
+            path,
+            base_xyz: [0.0; 3],
+            base_rpy: [0.0; 3],
+            tip,
+            geometry,
+            joints,
+        };
+        let robot = py.allow_threads(|| spec.load()).map_err(value_error)?;
+        Ok(PyRobot { robot })
+    }
+
+    /// The number of joints.
+    #[getter]
+    fn dof(&self) -> usize {
+        self.robot.dof()
+    }
+
+    /// The joints' names, in the joint vector's order.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.robot.chain.joint_names()
+    }
+
+    /// The links whose poses `fk` gives by default (the tip, or the `tips`).
+    #[getter]
+    fn tip_names(&self) -> Vec<String> {
+        self.robot.chain.tip_names()
+    }
+
+    /// Each joint's limits (dof, 2): radians, metres for a prismatic joint (a rotational
+    /// joint without limits: +-90 degrees, what the samplers draw).
+    #[getter]
+    fn limits<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let r = self.robot.chain.joint_ranges();
+        let flat: Vec<f64> = r.iter().flatten().copied().collect();
+        numpy::ndarray::Array2::from_shape_vec((r.len(), 2), flat)
+            .expect("dof x 2")
+            .into_pyarray(py)
+    }
+
+    /// World poses (N, 4, 4) of the tip (or of `link`) at joint vectors `q` (N, dof), SI.
+    #[pyo3(signature = (q, link=None))]
+    fn fk<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        link: Option<String>,
+    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let chain = &self.robot.chain;
+        let dof = chain.dof();
+        let (n, v) = rows(&q, dof, "q")?;
+        let link = match link {
+            None => None,
+            Some(name) => Some(chain.links.iter().position(|l| *l == name).ok_or_else(|| {
+                value_error(format!(
+                    "\"{name}\" is not a link of this robot; its links: {}",
+                    chain.links.join(", ")
+                ))
+            })?),
+        };
+        let out: Vec<f64> = py.allow_threads(|| {
+            use rayon::prelude::*;
+            v.par_chunks(dof.max(1))
+                .take(n)
+                .flat_map_iter(|q| {
+                    let pose = match link {
+                        Some(l) => chain.link_frames(q)[l],
+                        None => chain.tip_poses(q)[0],
+                    };
+                    let m = pose.to_homogeneous();
+                    (0..16).map(move |i| m[(i / 4, i % 4)])
+                })
+                .collect()
+        });
+        Ok(numpy::ndarray::Array3::from_shape_vec((n, 4, 4), out)
+            .expect("n x 4 x 4")
+            .into_pyarray(py))
+    }
+
+    /// The tip's pose Jacobian (N, 6, dof) at `q` (N, dof): linear rows, then angular
+    /// (world frame).
+    fn jacobian<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+        let chain = &self.robot.chain;
+        let dof = chain.dof();
+        let (n, v) = rows(&q, dof, "q")?;
+        let out: Vec<f64> = py.allow_threads(|| {
+            v.chunks(dof.max(1))
+                .take(n)
+                .flat_map(|q| {
+                    let j = chain.pose_jacobian(q);
+                    (0..6 * dof).map(move |i| j[(i / dof, i % dof)])
+                })
+                .collect()
+        });
+        Ok(numpy::ndarray::Array3::from_shape_vec((n, 6, dof), out)
+            .expect("n x 6 x dof")
+            .into_pyarray(py))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Robot({}, {} joints: {})",
+            self.robot.name,
+            self.robot.dof(),
+            self.robot.chain.joint_names().join(", ")
+        )
+    }
+}
+
+/// A learned IK model `ik train` saved, with the robot it was trained for.
+#[pyclass(name = "IkSolver", module = "selfmodel", frozen)]
+struct PyIkSolver {
+    model: PoseModel,
+    robot: Robot,
+    device: burn::tensor::Device,
+}
+
+#[pymethods]
+impl PyIkSolver {
+    /// Load the model `ik train` wrote into `model_dir` and the robot description it names
+    /// (refused, with why, when they do not match).
+    #[staticmethod]
+    fn load(py: Python<'_>, model_dir: PathBuf) -> PyResult<Self> {
+        py.allow_threads(|| {
+            let device =
+                selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
+            let model = PoseModel::load(&model_dir, &device)?;
+            let robot = model.saved.robot.load_kinematics()?;
+            model.check_robot(&robot)?;
+            Ok::<_, selfmodel::Error>(PyIkSolver {
+                model,
+                robot,
+                device,
+            })
+        })
+        .map_err(value_error)
+    }
+
+    /// The joints of an answer, in order.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.model.saved.joint_names.clone()
+    }
+
+    /// The columns of a target row: x, y, z, qw, qx, qy, qz (x, y, z for a position-only
+    /// model; each tip's, prefixed, for a model of several tips).
+    #[getter]
+    fn target_columns(&self) -> Vec<String> {
+        target_columns(self.model.tips(), self.model.position_only())
+    }
+
+    /// Answer targets (N, len(target_columns)), metres: `k` answers each. Returns a dict:
+    /// `joints` (N, k, dof), `pos_err_mm` and `rot_err_deg` (N, k, the worst tip's), `exact`
+    /// (N, k; within 1 mm and 0.572 degrees).
+    #[pyo3(signature = (targets, k=1))]
+    fn solve<'py>(
+        &self,
+        py: Python<'py>,
+        targets: PyReadonlyArray2<'py, f64>,
+        k: usize,
+    ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        if !(1..=1000).contains(&k) {
+            return Err(value_error(format!("k must be 1 to 1000, got {k}")));
+        }
+        let width = self.target_columns().len();
+        let (n, v) = rows(&targets, width, "targets")?;
+        let parsed: Vec<Vec<PoseTarget>> = v
+            .chunks(width)
+            .take(n)
+            .enumerate()
+            .map(|(i, row)| {
+                target_from_values(row, self.model.position_only(), self.model.tips())
+                    .map_err(|e| value_error(format!("targets row {i}: {e}")))
+            })
+            .collect::<PyResult<_>>()?;
+        let answers = py.allow_threads(|| {
+            self.model
+                .solve(&self.robot.chain, &parsed, k, &self.device)
+        });
+        let dof = self.model.dof();
+        let lm = &self.model.saved.config.lm;
+        let (mut joints, mut pos, mut rot, mut exact) = (
+            Vec::with_capacity(n * k * dof),
+            Vec::with_capacity(n * k),
+            Vec::with_capacity(n * k),
+            Vec::with_capacity(n * k),
+        );
+        for a in answers.iter().flatten() {
+            joints.extend_from_slice(&a.joints);
+            pos.push(1000.0 * a.position_error_m);
+            rot.push(a.rotation_error_rad.to_degrees());
+            exact.push(a.exact(lm));
+        }
+        let out = pyo3::types::PyDict::new(py);
+        let shape2 = |v: Vec<f64>| {
+            numpy::ndarray::Array2::from_shape_vec((n, k), v)
+                .expect("n x k")
+                .into_pyarray(py)
+        };
+        out.set_item(
+            "joints",
+            numpy::ndarray::Array3::from_shape_vec((n, k, dof), joints)
+                .expect("n x k x dof")
+                .into_pyarray(py),
+        )?;
+        out.set_item("pos_err_mm", shape2(pos))?;
+        out.set_item("rot_err_deg", shape2(rot))?;
+        out.set_item(
+            "exact",
+            numpy::ndarray::Array2::from_shape_vec((n, k), exact)
+                .expect("n x k")
+                .into_pyarray(py),
+        )?;
+        Ok(out)
+    }
+
+    /// One target (a sequence of len(target_columns) numbers): the joints of one answer, for
+    /// a control loop.
+    fn solve_one(&self, py: Python<'_>, target: Vec<f64>) -> PyResult<Vec<f64>> {
+        let row = target_from_values(&target, self.model.position_only(), self.model.tips())
+            .map_err(|e| value_error(format!("target: {e}")))?;
+        let mut a = py.allow_threads(|| {
+            self.model.solve(
+                &self.robot.chain,
+                std::slice::from_ref(&row),
+                1,
+                &self.device,
+            )
+        });
+        Ok(std::mem::take(&mut a[0][0].joints))
+    }
+}
+
+/// The native module.
+#[pymodule]
+fn _selfmodel(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyRobot>()?;
+    m.add_class::<PyIkSolver>()?;
+    Ok(())
+}

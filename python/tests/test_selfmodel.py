@@ -1,0 +1,139 @@
+"""The Python package against the command line on the same inputs, and bad input.
+
+Needs the `ik` binary (`cargo build --release --bin ik`, which CI's test command builds) and
+a robot description: the test arm written here.
+"""
+
+import csv
+import os
+import pathlib
+import subprocess
+
+import numpy as np
+import pytest
+
+import selfmodel
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+IK = ROOT / "target" / "release" / "ik"
+
+ARM = """<?xml version="1.0"?>
+<robot name="test_arm">
+  <link name="base"/>
+  {links}
+</robot>
+"""
+
+
+def write_arm(folder: pathlib.Path, joints: int = 6) -> pathlib.Path:
+    """A serial arm of `joints` revolute joints (alternating axes) with a hand."""
+    parts = []
+    for j in range(joints):
+        parent = "base" if j == 0 else f"l{j}"
+        axis = "0 0 1" if j % 2 == 0 else "0 1 0"
+        parts.append(
+            f'<link name="l{j + 1}"/><joint name="j{j + 1}" type="revolute"><parent link="{parent}"/>'
+            f'<child link="l{j + 1}"/><origin xyz="0 0 0.1"/><axis xyz="{axis}"/>'
+            f'<limit lower="-1.5" upper="1.5" effort="1" velocity="1"/></joint>'
+        )
+    parts.append(
+        f'<link name="hand"/><joint name="hand_joint" type="fixed"><parent link="l{joints}"/>'
+        f'<child link="hand"/><origin xyz="0 0 0.08"/></joint>'
+    )
+    path = folder / "arm.urdf"
+    path.write_text(ARM.format(links="\n  ".join(parts)))
+    return path
+
+
+def run(*args: str) -> str:
+    out = subprocess.run([str(IK), *args], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """A quick model of the test arm, 200 random reachable targets and the CLI's answers."""
+    folder = tmp_path_factory.mktemp("ik")
+    urdf = write_arm(folder)
+    model = folder / "model"
+    run("train", "--urdf", str(urdf), "--tip", "hand", "--preset", "quick", "--out", str(model))
+    targets = folder / "targets.csv"
+    run("targets", "--model", str(model), "--n", "200", "--out", str(targets))
+    answers = folder / "answers.csv"
+    run("solve", "--model", str(model), "--targets", str(targets), "--out", str(answers))
+    return urdf, model, targets, answers
+
+
+def read_csv(path):
+    with open(path) as f:
+        rows = list(csv.reader(f))
+    return rows[0], np.array([[float(x) if x not in ("true", "false") else x == "true" for x in r] for r in rows[1:]], dtype=object)
+
+
+def test_fk_gives_the_poses_the_command_line_wrote(trained):
+    urdf, _, targets, _ = trained
+    robot = selfmodel.Robot.from_urdf(str(urdf), tip="hand", geometry="none")
+    assert robot.joint_names == [f"j{i}" for i in range(1, 7)]
+    assert robot.limits.shape == (6, 2)
+    header, rows = read_csv(targets)
+    q = rows[:, 7:].astype(float)
+    poses = robot.fk(q)
+    assert poses.shape == (200, 4, 4)
+    np.testing.assert_allclose(poses[:, :3, 3], rows[:, :3].astype(float), atol=1e-9)
+    # The rotation's quaternion (w >= 0 up to sign) matches the columns qw, qx, qy, qz.
+    r = poses[:, :3, :3]
+    w = np.sqrt(np.maximum(0, 1 + r[:, 0, 0] + r[:, 1, 1] + r[:, 2, 2])) / 2
+    qw = rows[:, 3].astype(float)
+    np.testing.assert_allclose(np.abs(w), np.abs(qw), atol=1e-6)
+    jac = robot.jacobian(q[:3])
+    assert jac.shape == (3, 6, 6)
+
+
+def test_solve_answers_as_the_command_line_does(trained):
+    urdf, model, targets, answers = trained
+    ik = selfmodel.IkSolver.load(str(model))
+    assert ik.target_columns == ["x", "y", "z", "qw", "qx", "qy", "qz"]
+    _, rows = read_csv(targets)
+    out = ik.solve(rows[:, :7].astype(float))
+    assert out["joints"].shape == (200, 1, 6)
+    header, cli = read_csv(answers)
+    joints = cli[:, 2:8].astype(float)
+    np.testing.assert_allclose(out["joints"][:, 0, :], joints, atol=1e-9)
+    np.testing.assert_array_equal(out["exact"][:, 0], cli[:, -1].astype(bool))
+    assert out["exact"].mean() >= 0.95
+    one = ik.solve_one(list(rows[0, :7].astype(float)))
+    np.testing.assert_allclose(one, joints[0], atol=1e-9)
+
+
+def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
+    urdf, model, _, _ = trained
+    robot = selfmodel.Robot.from_urdf(str(urdf), tip="hand", geometry="none")
+    ik = selfmodel.IkSolver.load(str(model))
+    cases = [
+        lambda: robot.fk(np.zeros((2, 5))),
+        lambda: robot.fk(np.full((1, 6), np.nan)),
+        lambda: robot.fk(np.zeros((1, 6)), link="nope"),
+        lambda: ik.solve(np.zeros((3, 6))),
+        lambda: ik.solve(np.array([[0.1, 0.2, 0.3, 2.0, 0, 0, 0]])),
+        lambda: ik.solve(np.array([[1e39, 0.2, 0.3, 1.0, 0, 0, 0]])),
+        lambda: ik.solve(np.zeros((1, 7)), k=0),
+        lambda: ik.solve_one([0.1, 0.2]),
+        lambda: selfmodel.Robot.from_urdf(str(tmp_path / "missing.urdf")),
+        lambda: selfmodel.Robot.from_urdf(str(urdf), geometry="shiny"),
+        lambda: selfmodel.IkSolver.load(str(tmp_path)),
+    ]
+    for case in cases:
+        with pytest.raises(ValueError) as e:
+            case()
+        assert "\n" not in str(e.value), str(e.value)
+    with pytest.raises(TypeError):
+        robot.fk("not an array")
+    # A model of another robot: the description it names now has a joint renamed.
+    text = urdf.read_text()
+    urdf.write_text(text.replace('"j2"', '"elbow"'))
+    try:
+        with pytest.raises(ValueError, match="j2"):
+            selfmodel.IkSolver.load(str(model))
+    finally:
+        urdf.write_text(text)
