@@ -239,21 +239,28 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["GiB", "--samples"],
         &npz_out,
     );
-    fails_cleanly(
-        bin("dataset"),
-        &[
-            "--preset",
-            "quick",
-            "--sampler",
-            "grid",
-            "--grid-step",
-            "1e-9",
-            "--out",
-            n,
-        ],
-        &["grid step", "--grid-step"],
-        &npz_out,
-    );
+    // A grid step giving millions of points a joint, and one too coarse for the samples
+    // asked (it said "1 joint vectors for 40 samples").
+    for (step, needles) in [
+        ("1e-9", &["grid step", "--grid-step"][..]),
+        ("1e6", &["gives 1 joint vectors", "--grid-step", "--samples"][..]),
+    ] {
+        fails_cleanly(
+            bin("dataset"),
+            &[
+                "--preset",
+                "quick",
+                "--sampler",
+                "grid",
+                "--grid-step",
+                step,
+                "--out",
+                n,
+            ],
+            needles,
+            &npz_out,
+        );
+    }
     // An --out that cannot be written is refused before any work (it said "File exists"
     // after training, or "Not a directory").
     let a_file = write("a_file", "x");
@@ -288,22 +295,6 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["--preset", "quick", "--out", &format!("{a_file}/run")],
         &["is a file, not a folder"],
         &d.join("a_file/run"),
-    );
-    // A grid too coarse for the samples asked ("1 joint vectors for 40 samples").
-    fails_cleanly(
-        bin("dataset"),
-        &[
-            "--preset",
-            "quick",
-            "--sampler",
-            "grid",
-            "--grid-step",
-            "1e6",
-            "--out",
-            n,
-        ],
-        &["gives 1 joint vectors", "--grid-step", "--samples"],
-        &npz_out,
     );
     // A camera looking straight down is one (it was "must span a frame").
     let down = d.join("down.npz");
