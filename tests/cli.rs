@@ -243,7 +243,10 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     // asked (it said "1 joint vectors for 40 samples").
     for (step, needles) in [
         ("1e-9", &["grid step", "--grid-step"][..]),
-        ("1e6", &["gives 1 joint vectors", "--grid-step", "--samples"][..]),
+        (
+            "1e6",
+            &["gives 1 joint vectors", "--grid-step", "--samples"][..],
+        ),
     ] {
         fails_cleanly(
             bin("dataset"),

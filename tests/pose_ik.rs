@@ -366,6 +366,13 @@ fn two_tips_are_solved_together() {
     let model = PoseModel::load(&model_dir, &device).unwrap();
     model.check_robot(&robot).unwrap();
     assert_eq!(model.tips(), ["left_hand", "right_hand"]);
+    // Two tips, twice the solver's budget.
+    assert_eq!(
+        model.saved.config.lm,
+        LmConfig::standard().for_tips(2),
+        "the budget of two tips"
+    );
+    assert_eq!(model.saved.config.lm.max_iterations, 60);
     let (targets, joints) =
         selfmodel::studies::bench_ik::random_targets(&robot, &model.saved.ranges, 100, 3);
     let text = selfmodel::studies::bench_ik::targets_csv(

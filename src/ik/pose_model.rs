@@ -398,8 +398,11 @@ fn save_model(
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let weights = dir.join("model.bpk");
     crate::train::trainer::save_module(&trained.model, &weights)?;
+    // The solver's budget for the model's tips (one tip: the preset's).
+    let mut config = cfg.clone();
+    config.lm = config.lm.for_tips(tips.len());
     let saved = SavedModel {
-        config: cfg.clone(),
+        config,
         robot: spec.clone(),
         robot_fingerprint: fingerprint(chain),
         joint_names: chain.joint_names(),

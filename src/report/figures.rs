@@ -601,7 +601,9 @@ fn marked_lines(
         let mut xs: Vec<f64> = points.clone().map(|p| p.0).collect();
         xs.sort_by(f64::total_cmp);
         xs.dedup();
-        if xs.len() > 12 {
+        // The data's own x values as ticks, unless there are many or two sit so close that
+        // their labels would overlap: then the 1-2-5 ticks of the range.
+        if xs.len() > 12 || xs.windows(2).any(|w| w[1] < 1.3 * w[0]) {
             xs = log_ticks(x_lo, x_hi);
         }
         let x_spec = (x_lo..x_hi).log_scale().with_key_points(xs);
