@@ -4,6 +4,7 @@ inverse kinematics (models `ik train` saves), computed in Rust.
     import numpy as np, selfmodel
     robot = selfmodel.Robot.from_urdf("panda.urdf", tip="panda_hand")
     poses = robot.fk(np.zeros((1, robot.dof)))          # (1, 4, 4)
+    silhouettes, depth = robot.render(np.zeros((1, robot.dof)))
     ik = selfmodel.IkSolver.load("runs/ik_models/panda")
     answer = ik.solve(targets)                           # targets (N, 7): x, y, z, qw, qx, qy, qz
 

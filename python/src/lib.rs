@@ -177,6 +177,65 @@ impl PyRobot {
             .into_pyarray(py))
     }
 
+    /// Silhouettes (N, size, size) uint8 (255 where the robot is) and depth (N, size, size)
+    /// float32 (metres along the camera axis, 0 where empty) of the robot at `q` (N, dof),
+    /// from our ray caster, by a camera that frames every pose of `q` from `view` (default:
+    /// front right, a little above), as the command line frames a dataset (`fov`: degrees,
+    /// default the datasets' 42).
+    #[pyo3(signature = (q, size=100, view=None, fov=None))]
+    fn render<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+        size: usize,
+        view: Option<[f64; 3]>,
+        fov: Option<f64>,
+    ) -> PyResult<(Bound<'py, PyArray3<u8>>, Bound<'py, PyArray3<f32>>)> {
+        use selfmodel::Preset;
+        use selfmodel::data::dataset::{DatasetConfig, Framing, swept_points};
+        use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+        let robot = &self.robot;
+        let dof = robot.dof();
+        let (n, v) = rows(&q, dof, "q")?;
+        if !(1..=2048).contains(&size) || (n as u64) * (size * size) as u64 > 1 << 30 {
+            return Err(value_error(format!(
+                "{n} images of {size}x{size}: size must be 1 to 2048 and all images at most 2^30 pixels"
+            )));
+        }
+        let si: Vec<Vec<f64>> = v.chunks(dof.max(1)).take(n).map(<[f64]>::to_vec).collect();
+        let framing = Framing::default();
+        let mut camera = DatasetConfig::paper().camera;
+        (camera.width, camera.height) = (size, size);
+        camera.fov_deg = fov.unwrap_or(camera.fov_deg);
+        camera.validate().map_err(value_error)?;
+        let camera = camera
+            .framing(
+                &swept_points(robot, &si),
+                view.unwrap_or(framing.view),
+                framing.margin,
+            )
+            .map_err(value_error)?;
+        let frames = py.allow_threads(|| {
+            RayCaster::new(robot, camera, RenderOptions::default()).render_batch(&si, None)
+        });
+        let (mut silhouettes, mut depth) = (
+            Vec::with_capacity(n * size * size),
+            Vec::with_capacity(n * size * size),
+        );
+        for f in frames {
+            silhouettes.extend_from_slice(&f.silhouette);
+            depth.extend_from_slice(&f.depth);
+        }
+        Ok((
+            numpy::ndarray::Array3::from_shape_vec((n, size, size), silhouettes)
+                .expect("n x size x size")
+                .into_pyarray(py),
+            numpy::ndarray::Array3::from_shape_vec((n, size, size), depth)
+                .expect("n x size x size")
+                .into_pyarray(py),
+        ))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "Robot({}, {} joints: {})",

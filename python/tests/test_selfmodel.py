@@ -137,3 +137,41 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
             selfmodel.IkSolver.load(str(model))
     finally:
         urdf.write_text(text)
+
+
+def test_render_draws_what_the_command_line_renders(tmp_path):
+    """Silhouettes and depth of poses from Python equal `dataset --angles` on the same poses
+    (the same framing over them, the same ray caster)."""
+    urdf = tmp_path / "visible.urdf"
+    urdf.write_text(
+        write_arm(tmp_path).read_text().replace(
+            '<link name="l1"/>',
+            '<link name="l1"><visual><geometry><box size="0.05 0.05 0.2"/></geometry></visual></link>',
+        ).replace(
+            '<link name="l3"/>',
+            '<link name="l3"><visual><geometry><cylinder radius="0.03" length="0.2"/></geometry></visual></link>',
+        )
+    )
+    robot = selfmodel.Robot.from_urdf(str(urdf), tip="hand")
+    rng = np.random.default_rng(0)
+    lo, hi = robot.limits[:, 0], robot.limits[:, 1]
+    q = lo + (hi - lo) * rng.random((5, robot.dof))
+    silhouettes, depth = robot.render(q)
+    assert silhouettes.shape == (5, 100, 100) and silhouettes.dtype == np.uint8
+    assert depth.shape == (5, 100, 100) and depth.dtype == np.float32
+    assert (silhouettes > 0).any() and ((silhouettes > 0) == (depth > 0)).all()
+    angles = tmp_path / "angles.csv"
+    np.savetxt(angles, np.degrees(q), delimiter=",", fmt="%.17g")
+    npz = tmp_path / "d.npz"
+    out = subprocess.run(
+        [str(ROOT / "target" / "release" / "dataset"), "--urdf", str(urdf), "--tip", "hand",
+         "--angles", str(angles), "--out", str(npz)],
+        capture_output=True, text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    data = np.load(npz)
+    np.testing.assert_array_equal(data["images"], silhouettes)
+    np.testing.assert_allclose(data["depth"], depth, atol=1e-5)
+    assert list(data["joint_names"]) == robot.joint_names
+    with pytest.raises(ValueError):
+        robot.render(q, size=0)
