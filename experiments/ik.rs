@@ -77,9 +77,19 @@ enum Command {
 const MAX_K: usize = 1000;
 const MAX_TARGETS: usize = 10_000_000;
 
-/// `dir` when it holds a saved model (its folder is then not to be written into).
-fn saved_model(dir: &std::path::Path) -> Option<&std::path::Path> {
-    Some(dir).filter(|d| d.join("model.json").is_file())
+/// What `ik targets` and `ik solve` start with: `out` checked (a file it can write, neither an
+/// input nor inside the model's folder), then the model in `dir` and the robot it names.
+fn answering(
+    dir: &std::path::Path,
+    out: &std::path::Path,
+    inputs: &[&std::path::Path],
+    device: &burn::tensor::Device,
+) -> selfmodel::Result<(PoseModel, selfmodel::Robot)> {
+    use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite};
+    check_out(out, OutKind::File)?;
+    let model_folder = Some(dir).filter(|d| d.join("model.json").is_file());
+    refuse_overwrite(out, inputs, model_folder)?;
+    PoseModel::load_with_robot(dir, device)
 }
 
 fn main() -> ExitCode {
@@ -130,14 +140,7 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                selfmodel::core::atomic_file::check_out(
-                    &out,
-                    selfmodel::core::atomic_file::OutKind::File,
-                )?;
-                selfmodel::core::atomic_file::refuse_overwrite(&out, &[], saved_model(&model))?;
-                let model = PoseModel::load(&model, &device)?;
-                let robot = model.saved.robot.load_kinematics()?;
-                model.check_robot(&robot)?;
+                let (model, robot) = answering(&model, &out, &[], &device)?;
                 let (targets, joints) = selfmodel::studies::bench_ik::random_targets(
                     &robot,
                     &model.saved.ranges,
@@ -169,18 +172,7 @@ fn main() -> ExitCode {
                         "--k must be 1 to {MAX_K} (answers per target)"
                     )));
                 }
-                selfmodel::core::atomic_file::check_out(
-                    &out,
-                    selfmodel::core::atomic_file::OutKind::File,
-                )?;
-                selfmodel::core::atomic_file::refuse_overwrite(
-                    &out,
-                    &[&targets],
-                    saved_model(&model),
-                )?;
-                let model = PoseModel::load(&model, &device)?;
-                let robot = model.saved.robot.load_kinematics()?;
-                model.check_robot(&robot)?;
+                let (model, robot) = answering(&model, &out, &[&targets], &device)?;
                 let targets = read_targets(&targets, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
                 let answers = model.solve(&robot.chain, &targets, k, &device);

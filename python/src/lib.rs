@@ -263,9 +263,7 @@ impl PyIkSolver {
         py.allow_threads(|| {
             let device =
                 selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-            let model = PoseModel::load(&model_dir, &device)?;
-            let robot = model.saved.robot.load_kinematics()?;
-            model.check_robot(&robot)?;
+            let (model, robot) = PoseModel::load_with_robot(&model_dir, &device)?;
             Ok::<_, selfmodel::Error>(PyIkSolver {
                 model,
                 robot,

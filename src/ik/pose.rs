@@ -157,27 +157,24 @@ pub fn solve_from(
     let n = start.len();
     let w = cfg.tolerance_m / cfg.tolerance_rad;
     let full = target.iter().any(|t| t.orientation.is_some());
-    // Each tip's error vectors at `q` (with its Jacobian written when `jacs` is given).
-    let errors = |q: &[f64],
-                  jacs: Option<&mut [nalgebra::Matrix6xX<f64>]>|
-     -> Vec<(Vector3<f64>, Vector3<f64>)> {
-        match jacs {
-            Some(jacs) => paths
-                .iter()
-                .zip(jacs.iter_mut())
-                .zip(target)
-                .map(|((p, jac), t)| errors_at(&p.pose_and_jacobian(q, jac), t))
-                .collect(),
-            None => paths
-                .iter()
-                .zip(target)
-                .map(|(p, t)| errors_at(&p.pose(q), t))
-                .collect(),
-        }
+    // Each tip's error vectors at `q`, its Jacobian written into `jacs`.
+    let errors = |q: &[f64], jacs: &mut [nalgebra::Matrix6xX<f64>]| {
+        paths
+            .iter()
+            .zip(jacs.iter_mut())
+            .zip(target)
+            .map(|((p, jac), t)| errors_at(&p.pose_and_jacobian(q, jac), t))
+            .collect::<Vec<_>>()
     };
-    let energy = |e: &[(Vector3<f64>, Vector3<f64>)]| {
-        e.iter()
-            .map(|(p, r)| 0.5 * (p.norm_squared() + w * w * r.norm_squared()))
+    let tip_energy =
+        |(p, r): (Vector3<f64>, Vector3<f64>)| 0.5 * (p.norm_squared() + w * w * r.norm_squared());
+    let energy = |e: &[(Vector3<f64>, Vector3<f64>)]| e.iter().map(|&e| tip_energy(e)).sum::<f64>();
+    // The energy at a trial step: poses only, no Jacobian (the step loop's hot path).
+    let trial_energy = |q: &[f64]| {
+        paths
+            .iter()
+            .zip(target)
+            .map(|(p, t)| tip_energy(errors_at(&p.pose(q), t)))
             .sum::<f64>()
     };
     let worst = |e: &[(Vector3<f64>, Vector3<f64>)]| {
@@ -201,7 +198,7 @@ pub fn solve_from(
     // The energy at each iteration, for the stall test.
     let mut history: Vec<f64> = Vec::with_capacity(cfg.max_iterations + 1);
     loop {
-        let err = errors(&q, Some(&mut jacs));
+        let err = errors(&q, &mut jacs);
         let (p_worst, r_worst) = worst(&err);
         let done = p_worst <= cfg.tolerance_m && r_worst <= cfg.tolerance_rad;
         if done || given_up || iterations >= cfg.max_iterations {
@@ -249,7 +246,7 @@ pub fn solve_from(
             for (t, ((&v, &d), &r)) in trial.iter_mut().zip(q.iter().zip(dq.iter()).zip(ranges)) {
                 *t = keep_in(v + d, r);
             }
-            if energy(&errors(&trial, None)) < e_now {
+            if trial_energy(&trial) < e_now {
                 std::mem::swap(&mut q, &mut trial);
                 improved = true;
                 break;

@@ -481,6 +481,15 @@ impl PoseModel {
         Ok(PoseModel { saved, flow, data })
     }
 
+    /// [`Self::load`] with the robot description the model names, refused unless it is the
+    /// robot the model learned ([`Self::check_robot`]): what answering needs.
+    pub fn load_with_robot(dir: &Path, device: &Device) -> Result<(Self, Robot)> {
+        let model = Self::load(dir, device)?;
+        let robot = model.saved.robot.load_kinematics()?;
+        model.check_robot(&robot)?;
+        Ok((model, robot))
+    }
+
     /// Refuse `robot` unless it is the robot the model learned: the same joints, named and
     /// ordered alike (the message shows both lists), and the same kinematics.
     pub fn check_robot(&self, robot: &Robot) -> Result<()> {

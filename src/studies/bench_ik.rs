@@ -234,9 +234,7 @@ pub fn run(
     python: Option<&Path>,
     device: &Device,
 ) -> Result<Vec<BenchIkRow>> {
-    let model = PoseModel::load(model_dir, device)?;
-    let robot = model.saved.robot.load_kinematics()?;
-    model.check_robot(&robot)?;
+    let (model, robot) = PoseModel::load_with_robot(model_dir, device)?;
     if model.position_only() {
         return Err(Error::Config(
             "bench_ik measures full-pose IK: train the model without --position-only".into(),
