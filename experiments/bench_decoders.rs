@@ -8,7 +8,9 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench_decoders::{attach_torch, console_table, run_batches, run_torch};
+use selfmodel::studies::bench_decoders::{
+    Batches, attach_torch, console_table, run_batches, run_torch,
+};
 
 /// Benchmark the direct decoders (warm-up, synchronised, median of repeats) and, with
 /// --torch, PyTorch on the same workloads in the same sitting, with the ratios.
@@ -40,7 +42,12 @@ fn main() -> ExitCode {
     // The revision the run starts from, before it writes anything.
     selfmodel::cli::git_revision();
     run_main(|| {
-        let mut rows = run_batches(args.device, args.quick, args.fill)?;
+        let batches = if args.fill {
+            Batches::Both
+        } else {
+            Batches::Paper
+        };
+        let mut rows = run_batches(args.device, args.quick, batches, &mut |_| Ok(()))?;
         if let Some(py) = &args.torch {
             let threads = rayon::current_num_threads();
             let out = run_torch(py, &args.torch_script, threads, args.fill, None)?;

@@ -7,11 +7,13 @@
 #   scripts/gpu_check.sh run [ARGS]    # there, from the repository root, target/gpu_check carried
 #
 # `pack` builds the one binary with --features wgpu, strips and compresses it (~20 MB with xz),
-# downloads Debian's Vulkan loader (the GPU machines had none) and copies PyTorch's two
+# downloads Debian's Vulkan loader and the GL dispatch libraries the NVIDIA driver's Vulkan
+# library links (the GPU machines had neither) and copies PyTorch's two
 # reference scripts, all into target/gpu_check/ (git-ignored: carry it). `run` unpacks the
 # loader, points it at the NVIDIA driver's Vulkan ICD and runs the check in at most 8 minutes,
 # writing to $OUT/gpu/<GPU name>/ (or reports/gpu/<GPU name>/ without $OUT); ARGS go to the
-# binary (e.g. --parts decoders,neurokin).
+# binary (e.g. --threads 2,16); GPU_CHECK_PARTS picks the parts (default: all, in the order
+# below) and GPU_CHECK_SECONDS (default 480) bounds the run.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PACK=target/gpu_check
@@ -22,7 +24,8 @@ pack)
   rm -rf "$PACK" && mkdir -p "$PACK/debs" "$PACK/bench"
   strip -o "$PACK/gpu_check" "${CARGO_TARGET_DIR:-target}/release/gpu_check"
   xz -6 -T2 "$PACK/gpu_check"
-  (cd "$PACK/debs" && apt-get download libvulkan1 >/dev/null)
+  (cd "$PACK/debs" && apt-get download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 libopengl0 libgles2 \
+    libx11-6 libxcb1 libxau6 libxdmcp6 libbsd0 libmd0 libxext6 >/dev/null)
   cp ../shared/bench/torch_reference.py ../shared/bench/torch_gpu_reference.py "$PACK/bench/"
   du -sh "$PACK"
   ;;
@@ -30,16 +33,37 @@ run)
   shift
   for deb in "$PACK"/debs/*.deb; do dpkg -x "$deb" /; done
   ldconfig 2>/dev/null || true
-  for icd in /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json /usr/share/vulkan/icd.d/nvidia_icd.json; do
-    if [ -f "$icd" ]; then export VK_DRIVER_FILES="$icd"; break; fi
-  done
+  icd=$(ls /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd*.json /usr/share/vulkan/icd.d/nvidia_icd*.json \
+    /etc/vulkan/icd.d/nvidia_icd*.json 2>/dev/null | head -1 || true)
+  [ -n "$icd" ] || icd=$(find / -xdev -name 'nvidia_icd*.json' 2>/dev/null | head -1 || true)
+  if [ -n "$icd" ]; then export VK_DRIVER_FILES="$icd"; fi
+  echo "Vulkan ICD: ${icd:-none found}"
   xz -dkf "$PACK/gpu_check.xz" && chmod +x "$PACK/gpu_check"
   name=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 | tr -c 'A-Za-z0-9\n' '_' || true)
   name=${name:-unknown_gpu}
   out="${OUT:-reports}/gpu/$name"
   mkdir -p "$out"
   nvidia-smi > "$out/nvidia-smi.txt" 2>&1 || true
-  timeout 480 "$PACK/gpu_check" --torch python3 --bench-dir "$PACK/bench" --out "$out" "$@"
+  # One process a part, each under its own limit (at most 240 s, and what is left of the run's),
+  # so a part that hangs or aborts costs only itself; the console goes on across them.
+  rm -f "$out/console.txt"
+  deadline=$(( $(date +%s) + ${GPU_CHECK_SECONDS:-480} ))
+  for part in ${GPU_CHECK_PARTS:-decoders neurokin equivalence counts k3dgs fill cpu}; do
+    left=$(( deadline - $(date +%s) ))
+    if [ "$left" -lt 15 ]; then
+      echo "($part: not run, the check's time was spent)" | tee -a "$out/console.txt"
+      continue
+    fi
+    limit=$(( left < 240 ? left : 240 ))
+    rc=0
+    timeout "$limit" "$PACK/gpu_check" --torch python3 --bench-dir "$PACK/bench" --out "$out" \
+      --parts "$part" "$@" 2>"$out/$part.stderr" || rc=$?
+    if [ "$rc" -ne 0 ]; then
+      echo "($part: stopped, exit $rc, limit $limit s; last lines of its stderr:)" | tee -a "$out/console.txt"
+      tail -c 2000 "$out/$part.stderr" | tee -a "$out/console.txt"
+    fi
+    [ -s "$out/$part.stderr" ] || rm -f "$out/$part.stderr"
+  done
   ;;
 *)
   echo "usage: scripts/gpu_check.sh pack | run [gpu_check arguments]" >&2

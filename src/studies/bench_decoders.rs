@@ -83,15 +83,48 @@ fn train_rate(
     Ok(batch as f64 / seconds)
 }
 
-/// Measure both NeuroKin architectures on `choice` (the paper's batches; with `fill`, also
-/// inference at batch 4,096 and training at 1,024: batches that fill a GPU, as
-/// `torch_gpu_reference.py --extra` measures them).
-pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
-    run_batches(choice, quick, false)
+/// Which batches to measure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Batches {
+    /// The paper's: inference at 1 and 256, training at 32 (NeuroKin-64: 128).
+    Paper,
+    /// Those that fill a GPU, as `torch_gpu_reference.py --extra` measures them: inference at
+    /// 4,096, training at 1,024.
+    Fill,
+    Both,
 }
 
-/// [`run`], with the batches that fill a GPU when `fill`.
-pub fn run_batches(choice: DeviceChoice, quick: bool, fill: bool) -> Result<Vec<BenchRow>> {
+impl Batches {
+    fn infer(self) -> Vec<usize> {
+        match self {
+            Batches::Paper => vec![1, 256],
+            Batches::Fill => vec![4096],
+            Batches::Both => vec![1, 256, 4096],
+        }
+    }
+
+    fn train(self, paper: usize) -> Vec<usize> {
+        match self {
+            Batches::Paper => vec![paper],
+            Batches::Fill => vec![1024],
+            Batches::Both => vec![paper, 1024],
+        }
+    }
+}
+
+/// Measure both NeuroKin architectures on `choice` at the paper's batches.
+pub fn run(choice: DeviceChoice, quick: bool) -> Result<Vec<BenchRow>> {
+    run_batches(choice, quick, Batches::Paper, &mut |_| Ok(()))
+}
+
+/// [`run`] at `batches`, handing each row to `measured` as soon as it is measured (a GPU
+/// check keeps what it has when a later batch fails).
+pub fn run_batches(
+    choice: DeviceChoice,
+    quick: bool,
+    batches: Batches,
+    measured: &mut dyn FnMut(&BenchRow) -> Result<()>,
+) -> Result<Vec<BenchRow>> {
     let device = &crate::core::device::select(choice)?;
     let speed = if quick {
         SpeedConfig::quick()
@@ -112,37 +145,34 @@ pub fn run_batches(choice: DeviceChoice, quick: bool, fill: bool) -> Result<Vec<
             cfg
         };
         let model = cfg.init(device, 0)?;
-        for t in measure(
-            |q| model.predict(q),
-            cfg.dof,
-            device,
-            &SpeedConfig {
-                batches: if fill {
-                    vec![1, 256, 4096]
-                } else {
-                    vec![1, 256]
-                },
+        for b in batches.infer() {
+            let one = SpeedConfig {
+                batches: vec![b],
                 ..speed.clone()
-            },
-        ) {
-            rows.push(BenchRow::new(
-                name,
-                format!("infer_b{}_img_per_s", t.batch),
-                t.images_per_second(),
-                quick,
-                choice,
-            ));
+            };
+            for t in measure(|q| model.predict(q), cfg.dof, device, &one) {
+                let row = BenchRow::new(
+                    name,
+                    format!("infer_b{}_img_per_s", t.batch),
+                    t.images_per_second(),
+                    quick,
+                    choice,
+                );
+                measured(&row)?;
+                rows.push(row);
+            }
         }
         let (w, r) = if quick { (1, 2) } else { (3, 10) };
-        let batches = if fill { vec![batch, 1024] } else { vec![batch] };
-        for b in batches {
-            rows.push(BenchRow::new(
+        for b in batches.train(batch) {
+            let row = BenchRow::new(
                 name,
                 format!("train_b{b}_img_per_s"),
                 train_rate(&cfg, b, device, w, r)?,
                 quick,
                 choice,
-            ));
+            );
+            measured(&row)?;
+            rows.push(row);
         }
     }
     Ok(rows)

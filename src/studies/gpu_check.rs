@@ -3,20 +3,23 @@
 //! machine with `--features wgpu` and carried; `scripts/gpu_check.sh` packs and runs it).
 //!
 //! Parts, in order (`--parts` picks some):
-//! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU;
-//! - `decoders`: `bench_decoders` on the GPU at the paper's batches and at batches that fill
-//!   it, beside PyTorch on the same GPU (`torch_gpu_reference.py --extra`);
+//! - `decoders`: `bench_decoders` on the GPU at the paper's batches, beside PyTorch on the
+//!   same GPU (`torch_gpu_reference.py --extra`, its lines kept for `fill`);
 //! - `neurokin`: `neurokin --preset paper --device wgpu` end to end at the paper's batch (32) and
-//!   at one that fills the GPU (`--batch 256`), with the quality each reaches;
-//! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
-//!   CPU threads of the same machine (the 5x target);
+//!   at a larger one (`--batch 256`), with the quality each reaches;
 //! - `equivalence`: NeuroKin, K-3DGS and FFKSM trained from the same seed on the CPU and the
 //!   GPU ([`crate::studies::device_equivalence`]);
+//! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU;
+//! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
+//!   CPU threads of the same machine (the 5x target);
+//! - `fill`: `decoders` at batches that fill the GPU (inference 4,096, training 1,024), last of
+//!   the GPU parts since the first sitting hung there;
 //! - `cpu`: `bench_decoders` on the CPU at each of `--threads`, beside PyTorch at as many
 //!   threads (`torch_reference.py --threads N`).
 //!
 //! Each part appends to `console.txt` and writes its CSV as it finishes, so a run stopped by
-//! the machine's time limit keeps what it measured.
+//! the machine's time limit keeps what it measured; `scripts/gpu_check.sh run` starts one
+//! process a part, each under its own time limit.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -25,7 +28,7 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::table::write_csv;
 use crate::studies::bench_decoders::{
-    BenchRow, attach_torch, console_table, run_batches, run_torch,
+    Batches, BenchRow, attach_torch, console_table, run_batches, run_torch,
 };
 use crate::studies::run::RunOptions;
 
@@ -37,16 +40,18 @@ pub enum Part {
     Neurokin,
     K3dgs,
     Equivalence,
+    Fill,
     Cpu,
 }
 
 impl Part {
-    pub const ALL: [Part; 6] = [
-        Part::Counts,
+    pub const ALL: [Part; 7] = [
         Part::Decoders,
         Part::Neurokin,
-        Part::K3dgs,
         Part::Equivalence,
+        Part::Counts,
+        Part::K3dgs,
+        Part::Fill,
         Part::Cpu,
     ];
 }
@@ -113,10 +118,11 @@ impl Console {
 /// Run the check's parts in order.
 pub fn run(check: &GpuCheck) -> Result<()> {
     std::fs::create_dir_all(&check.out).map_err(|e| Error::io(&check.out, e))?;
-    let mut console = Console {
-        path: check.out.join("console.txt"),
-        text: String::new(),
-    };
+    // The console goes on from an earlier run into the same folder: the script runs each part
+    // in a process of its own, under its own time limit, so a part that hangs costs only itself.
+    let path = check.out.join("console.txt");
+    let text = std::fs::read_to_string(&path).unwrap_or_default();
+    let mut console = Console { path, text };
     let preset = if check.quick { "quick" } else { "paper" };
     console.say(format!(
         "gpu_check at {} ({preset}), CPU: {}",
@@ -132,6 +138,7 @@ pub fn run(check: &GpuCheck) -> Result<()> {
             Part::Neurokin => neurokin(check, &mut console),
             Part::K3dgs => k3dgs(check, &mut console),
             Part::Equivalence => equivalence(check, &mut console),
+            Part::Fill => fill(check, &mut console),
             Part::Cpu => cpu(check, &mut console),
         };
         // A part that fails is reported and the check goes on to the next.
@@ -252,13 +259,43 @@ fn counts(_: &GpuCheck, _: &mut Console) -> Result<()> {
 }
 
 fn decoders(check: &GpuCheck, console: &mut Console) -> Result<()> {
-    let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, true)?;
+    gpu_decoders(check, console, Batches::Paper, "decoders_gpu.csv")
+}
+
+/// The batches that fill a GPU, after every other GPU part: on the first H200 sitting burn's
+/// autotuned matmul asked for more workgroups than wgpu allows (65,535 a dimension) at these
+/// batches, and the process hung.
+fn fill(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    gpu_decoders(check, console, Batches::Fill, "decoders_fill.csv")
+}
+
+/// `bench_decoders` on the GPU at `batches`, each figure said as it is measured, beside
+/// PyTorch on the same GPU (run once, with `--extra`, its lines kept in `torch_gpu.txt`).
+fn gpu_decoders(
+    check: &GpuCheck,
+    console: &mut Console,
+    batches: Batches,
+    csv: &str,
+) -> Result<()> {
+    let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, batches, &mut |r| {
+        console.say(format!("  {} {}: {:.1} images/s", r.model, r.figure, r.ours))
+    })?;
     if let Some(py) = &check.python {
-        let script = check.bench_dir.join("torch_gpu_reference.py");
-        torch_side(&mut rows, run_torch(py, &script, 0, true, None), console)?;
+        let kept = check.out.join("torch_gpu.txt");
+        let torch = match std::fs::read_to_string(&kept) {
+            Ok(text) => Ok(text),
+            Err(_) => {
+                let script = check.bench_dir.join("torch_gpu_reference.py");
+                run_torch(py, &script, 0, !check.quick, None).and_then(|out| {
+                    crate::core::atomic_file::write_bytes(&kept, out.as_bytes())?;
+                    Ok(out)
+                })
+            }
+        };
+        torch_side(&mut rows, torch, console)?;
     }
     console.say(console_table(&rows))?;
-    write_csv(&check.out.join("decoders_gpu.csv"), &rows)
+    write_csv(&check.out.join(csv), &rows)
 }
 
 /// PyTorch's figures beside ours; where PyTorch could not run, ours are kept and the console
@@ -285,6 +322,13 @@ fn experiment(
     let dir = out.join(leaf);
     let t0 = Instant::now();
     let summary = e.run_in(opts, &dir)?;
+    // The results beside the console: what comes back from a GPU machine is at most two
+    // folders deep.
+    let results = dir.join("results.csv");
+    if results.is_file() {
+        std::fs::copy(&results, out.join(format!("{leaf}_results.csv")))
+            .map_err(|e| Error::io(&results, e))?;
+    }
     console.say(format!(
         "{name} {leaf}: {summary} ({:.0} s end to end)",
         t0.elapsed().as_secs_f64()
@@ -404,7 +448,7 @@ fn child(check: &GpuCheck, what: &str, threads: usize) -> Result<String> {
 
 /// The CPU decoder figures of this process (run as a child at a thread count), as JSON.
 pub fn cpu_decoders(check: &GpuCheck) -> Result<String> {
-    let rows = run_batches(DeviceChoice::Cpu, check.quick, false)?;
+    let rows = run_batches(DeviceChoice::Cpu, check.quick, Batches::Paper, &mut |_| Ok(()))?;
     serde_json::to_string(&rows).map_err(|e| Error::Config(e.to_string()))
 }
 
