@@ -11,4 +11,5 @@ pub mod nearest_pose;
 pub mod neurokin;
 pub mod resneurokin_d;
 pub mod result;
+pub mod saved;
 pub mod tree_encoder;

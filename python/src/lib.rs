@@ -368,10 +368,99 @@ impl PyIkSolver {
     }
 }
 
+/// A self-model a self-model run saved (its `model/` folder): joint values in, the robot's
+/// silhouette (and depth, for a model that predicts it) out.
+#[pyclass(name = "SelfModel", module = "selfmodel", frozen)]
+struct PySelfModel {
+    model: selfmodel::self_models::saved::LoadedSelfModel,
+}
+
+#[pymethods]
+impl PySelfModel {
+    /// Load a run's saved model: the run's folder (e.g. runs/neurokin) or its `model/`.
+    /// Refused, with why, when its weights were changed or its kind keeps none.
+    #[staticmethod]
+    fn load(py: Python<'_>, model_dir: PathBuf) -> PyResult<Self> {
+        py.allow_threads(|| {
+            let device =
+                selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
+            selfmodel::self_models::saved::load(&model_dir, &device)
+        })
+        .map(|model| PySelfModel { model })
+        .map_err(value_error)
+    }
+
+    /// Its name in the results ("NeuroKin", "ResNeuroKin-D", ...).
+    #[getter]
+    fn name(&self) -> String {
+        self.model.saved.name.clone()
+    }
+
+    /// The joints of an input row, in order.
+    #[getter]
+    fn joint_names(&self) -> Vec<String> {
+        self.model.saved.joint_names.clone()
+    }
+
+    /// (height, width) of what it predicts.
+    #[getter]
+    fn image(&self) -> (usize, usize) {
+        let [h, w] = self.model.saved.image;
+        (h, w)
+    }
+
+    /// Values of an input row (the joints; then the camera's 9 for a camera-conditioned model).
+    #[getter]
+    fn inputs(&self) -> usize {
+        self.model.saved.inputs
+    }
+
+    /// Everything its model.json says, as a dict (configuration, data, test scores, revision).
+    #[getter]
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let text = serde_json::to_string(&self.model.saved).map_err(value_error)?;
+        py.import("json")?.call_method1("loads", (text,))
+    }
+
+    /// Joint values q (N, inputs), degrees (metres for a prismatic joint) -> silhouette
+    /// probabilities (N, H, W) float32 in [0, 1], and depth (N, H, W) float32 in metres for a
+    /// model that predicts it (else None).
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        q: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<Bound<'py, PyArray3<f32>>>)> {
+        let (n, v) = rows(&q, self.model.saved.inputs, "q")?;
+        let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+        let (s, d) = py
+            .allow_threads(|| self.model.predict(&v, n))
+            .map_err(value_error)?;
+        let [h, w] = self.model.saved.image;
+        let shape = |v: Vec<f32>| {
+            numpy::ndarray::Array3::from_shape_vec((n, h, w), v)
+                .expect("n x h x w")
+                .into_pyarray(py)
+        };
+        Ok((shape(s), d.map(shape)))
+    }
+
+    fn __repr__(&self) -> String {
+        let [h, w] = self.model.saved.image;
+        format!(
+            "SelfModel({}, {} inputs -> {h}x{w}, test {:.2} dB, IoU {:.3})",
+            self.model.saved.name,
+            self.model.saved.inputs,
+            self.model.saved.psnr_db_test,
+            self.model.saved.iou_test
+        )
+    }
+}
+
 /// The native module.
 #[pymodule]
 fn _selfmodel(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRobot>()?;
     m.add_class::<PyIkSolver>()?;
+    m.add_class::<PySelfModel>()?;
     Ok(())
 }

@@ -1,7 +1,7 @@
 """The Python package against the command line on the same inputs, and bad input.
 
-Needs the `ik` binary (`cargo build --release --bin ik`, which CI's test command builds) and
-a robot description: the test arm written here.
+Needs the `ik` and `neurokin` binaries (`cargo build --release --bin ik --bin neurokin`, which
+CI's test command builds) and a robot description: the test arm written here.
 """
 
 import csv
@@ -16,6 +16,7 @@ import selfmodel
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 IK = ROOT / "target" / "release" / "ik"
+NEUROKIN = ROOT / "target" / "release" / "neurokin"
 
 ARM = """<?xml version="1.0"?>
 <robot name="test_arm">
@@ -175,3 +176,58 @@ def test_render_draws_what_the_command_line_renders(tmp_path):
     assert list(data["joint_names"]) == robot.joint_names
     with pytest.raises(ValueError):
         robot.render(q, size=0)
+
+
+@pytest.fixture(scope="module")
+def neurokin_run(tmp_path_factory):
+    """NeuroKin's quick preset trained by the command line: its folder and results row."""
+    folder = tmp_path_factory.mktemp("neurokin") / "run"
+    out = subprocess.run(
+        [str(NEUROKIN), "--preset", "quick", "--out", str(folder)], capture_output=True, text=True
+    )
+    assert out.returncode == 0, out.stderr
+    with open(folder / "results.csv", newline="") as f:
+        return folder, next(csv.DictReader(f))
+
+
+def test_a_saved_self_model_predicts_what_its_run_evaluated(neurokin_run):
+    folder, row = neurokin_run
+    model = selfmodel.SelfModel.load(folder)
+    assert model.name == "NeuroKin"
+    assert abs(model.info["psnr_db_test"] - float(row["psnr_db_test"])) < 1e-9
+    # The probe: test poses and what the command line's evaluation predicted for them.
+    probe = np.load(folder / "model" / "probe.npz")
+    silhouettes, depth = model.predict(probe["angles"].astype(np.float64))
+    assert depth is None
+    assert silhouettes.shape == probe["silhouettes"].shape and silhouettes.dtype == np.float32
+    assert np.abs(silhouettes - probe["silhouettes"]).max() < 1e-5
+    # Other poses give other images, within [0, 1].
+    moved = model.predict(probe["angles"].astype(np.float64) + 20.0)[0]
+    assert 0.0 <= moved.min() and moved.max() <= 1.0
+    assert np.abs(moved - silhouettes).max() > 0.05
+
+
+def test_a_self_model_refuses_bad_input_and_damaged_weights(neurokin_run, tmp_path):
+    import shutil
+
+    folder, _ = neurokin_run
+    model = selfmodel.SelfModel.load(folder)
+    bad = [
+        (np.zeros((2, model.inputs + 1)), "expected an array of shape"),
+        (np.full((1, model.inputs), np.nan), "not a finite number"),
+    ]
+    for q, says in bad:
+        with pytest.raises(ValueError, match=says) as e:
+            model.predict(q)
+        assert "\n" not in str(e.value)
+    with pytest.raises(TypeError):
+        model.predict(np.zeros((1, model.inputs), dtype=np.complex128))
+    with pytest.raises(ValueError, match="no saved self-model here"):
+        selfmodel.SelfModel.load(tmp_path)
+    copy = tmp_path / "copy"
+    shutil.copytree(folder / "model", copy)
+    weights = bytearray((copy / "model.bpk").read_bytes())
+    weights[len(weights) // 2] ^= 0xFF
+    (copy / "model.bpk").write_bytes(bytes(weights))
+    with pytest.raises(ValueError, match="damaged or replaced"):
+        selfmodel.SelfModel.load(copy)

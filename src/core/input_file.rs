@@ -111,3 +111,19 @@ mod tests {
         assert!(err.contains("index out of bounds"), "{err}");
     }
 }
+
+/// FNV-1a (64-bit, hex) of bytes: a saved model's fingerprint of its weights file.
+pub fn fnv(bytes: &[u8]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// [`fnv`] of a file.
+pub fn file_fnv(path: &Path) -> crate::core::error::Result<String> {
+    let bytes = std::fs::read(path).map_err(|e| crate::core::error::Error::io(path, e))?;
+    Ok(fnv(&bytes))
+}

@@ -17,6 +17,7 @@ use nalgebra::Point3;
 
 use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
+use crate::core::input_file::{file_fnv, fnv};
 use crate::core::preset::Preset;
 use crate::ik::data::{IkData, IkDataConfig};
 use crate::ik::flow::{FlowConfig, FlowIk, fit_flow, sample_rows};
@@ -220,21 +221,6 @@ pub struct PoseModel {
     pub flow: FlowIk,
     /// The data's normalisations (joints and positions), rebuilt from `saved`.
     data: IkData,
-}
-
-/// FNV-1a (64-bit, hex) of bytes.
-fn fnv(bytes: &[u8]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for &b in bytes {
-        h ^= b as u64;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
-
-/// [`fnv`] of a file.
-fn file_fnv(path: &Path) -> Result<String> {
-    Ok(fnv(&std::fs::read(path).map_err(|e| Error::io(path, e))?))
 }
 
 /// A stable fingerprint of a chain (FNV-1a over its joints, limits and tip): the same robot

@@ -826,6 +826,8 @@ fn train_field(
 }
 
 impl SelfModel for Ffksm {
+    const KIND: &'static str = "ffksm";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }

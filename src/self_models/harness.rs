@@ -33,6 +33,8 @@ use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, aut
 /// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
 /// it on the model's config; [`run`] does the rest.
 pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
+    /// Its kind in a saved model's `model.json` ([`crate::self_models::saved`]).
+    const KIND: &'static str;
     /// The image it renders, `[height, width]` (the dataset's camera must match).
     fn image(&self) -> [usize; 2];
     /// Train on `fit.train_set` and hand back what renders.
@@ -71,6 +73,15 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     /// camera-conditioned model does, [`SelfModel::camera_input`]) and renders from it.
     fn renders_any_view(&self) -> bool {
         false
+    }
+    /// The renderer whose weights its renderer saved to `weights` ([`Render::save`]), built
+    /// on `device`; `None`: this kind saves no weights that load.
+    fn load(
+        &self,
+        _weights: &Path,
+        _device: &Device,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        Ok(None)
     }
     /// Its run on a preset of [`SELF_MODEL_PRESETS`] (what the registry runs).
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
@@ -145,6 +156,10 @@ pub trait Render {
     /// the views it was trained on (a camera-conditioned one takes the camera as input).
     fn render_view(&self, _camera: &Camera, _angles: Tensor<2>) -> Option<Tensor<4>> {
         None
+    }
+    /// Write its weights to `path` for [`SelfModel::load`]; `false`: it saves none.
+    fn save(&self, _path: &Path) -> Result<bool> {
+        Ok(false)
     }
     /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
@@ -969,6 +984,22 @@ pub fn run<M: SelfModel>(
         });
     }
     write_report(dir, cfg, &rows, log)?;
+    crate::self_models::saved::save(
+        &dir.join("model"),
+        &crate::self_models::saved::ToSave {
+            model: &cfg.model,
+            name: &cfg.name,
+            renderer: trained.renderers[0].1.as_ref(),
+            data: &data,
+            data_fingerprint: cfg.data.fingerprint(),
+            test_inputs: &test_set.inputs,
+            predictions: &rendered[0].predictions,
+            psnr_db_test: rows[0].psnr_db_test,
+            iou_test: rows[0].iou_test,
+            preset: &cfg.preset,
+            git_revision,
+        },
+    )?;
     let ctx = ReportContext {
         dir,
         name: &cfg.name,

@@ -367,6 +367,8 @@ pub struct CountRow {
 }
 
 impl SelfModel for K3dgs {
+    const KIND: &'static str = "k3dgs";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }

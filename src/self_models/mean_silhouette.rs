@@ -67,6 +67,8 @@ fn best_threshold(mean: &[f32], images: &[f32]) -> f32 {
 }
 
 impl SelfModel for MeanSilhouette {
+    const KIND: &'static str = "mean_silhouette";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }

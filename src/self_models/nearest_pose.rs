@@ -75,6 +75,8 @@ impl Render for Table {
 }
 
 impl SelfModel for NearestPose {
+    const KIND: &'static str = "nearest_pose";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }

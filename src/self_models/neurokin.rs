@@ -488,12 +488,18 @@ impl Render for NeuroKin {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         (self.predict(angles), None)
     }
+    fn save(&self, path: &std::path::Path) -> Result<bool> {
+        crate::train::trainer::save_module(self, path)?;
+        Ok(true)
+    }
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
         Some(Box::new(self.clone().fork(autodiff).freeze()))
     }
 }
 
 impl SelfModel for NeuroKinConfig {
+    const KIND: &'static str = "neurokin";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }
@@ -525,6 +531,15 @@ impl SelfModel for NeuroKinConfig {
             .checkpoint(Some(fit.plan))
             .fit(model, &train_set, loss)?;
         Ok(Trained::one(model.valid(), parameters, log))
+    }
+
+    fn load(
+        &self,
+        weights: &std::path::Path,
+        device: &Device,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        let model = crate::train::trainer::load_module(self.init(device, 0)?, weights)?;
+        Ok(Some(Box::new(model)))
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

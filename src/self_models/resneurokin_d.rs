@@ -245,6 +245,10 @@ impl Render for ResNeuroKinD {
         let (s, d) = self.forward(angles);
         (s, Some(d))
     }
+    fn save(&self, path: &std::path::Path) -> Result<bool> {
+        crate::train::trainer::save_module(self, path)?;
+        Ok(true)
+    }
 }
 
 /// The robot pixels of a silhouette batch (1 where the true silhouette is >= 0.5).
@@ -253,6 +257,8 @@ fn robot_mask(silhouettes: &Tensor<4>) -> Tensor<4> {
 }
 
 impl SelfModel for ResNeuroKinDConfig {
+    const KIND: &'static str = "resneurokin_d";
+
     fn image(&self) -> [usize; 2] {
         self.image
     }
@@ -278,6 +284,15 @@ impl SelfModel for ResNeuroKinDConfig {
                 sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
             })?;
         Ok(Trained::one(model.valid(), parameters, log))
+    }
+
+    fn load(
+        &self,
+        weights: &std::path::Path,
+        device: &Device,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        let model = crate::train::trainer::load_module(self.init(device, 0)?, weights)?;
+        Ok(Some(Box::new(model)))
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

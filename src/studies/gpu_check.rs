@@ -278,7 +278,10 @@ fn gpu_decoders(
     csv: &str,
 ) -> Result<()> {
     let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, batches, &mut |r| {
-        console.say(format!("  {} {}: {:.1} images/s", r.model, r.figure, r.ours))
+        console.say(format!(
+            "  {} {}: {:.1} images/s",
+            r.model, r.figure, r.ours
+        ))
     })?;
     if let Some(py) = &check.python {
         let kept = check.out.join("torch_gpu.txt");
@@ -448,7 +451,9 @@ fn child(check: &GpuCheck, what: &str, threads: usize) -> Result<String> {
 
 /// The CPU decoder figures of this process (run as a child at a thread count), as JSON.
 pub fn cpu_decoders(check: &GpuCheck) -> Result<String> {
-    let rows = run_batches(DeviceChoice::Cpu, check.quick, Batches::Paper, &mut |_| Ok(()))?;
+    let rows = run_batches(DeviceChoice::Cpu, check.quick, Batches::Paper, &mut |_| {
+        Ok(())
+    })?;
     serde_json::to_string(&rows).map_err(|e| Error::Config(e.to_string()))
 }
 

@@ -151,6 +151,16 @@ pub fn save_module<M: Module>(model: &M, path: &Path) -> Result<()> {
     save_renamed(path, |tmp| model.clone().save_file(tmp))
 }
 
+/// `template` with the weights [`save_module`] wrote to `path`.
+pub fn load_module<M: Module>(template: M, path: &Path) -> Result<M> {
+    template.try_load_file(path).map_err(|e| {
+        Error::data(
+            path,
+            format!("the weights cannot be read ({e}); train the model again"),
+        )
+    })
+}
+
 /// Write a burnpack file to a temporary name, then rename it into place.
 pub(crate) fn save_renamed(
     path: &Path,
