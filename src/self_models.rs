@@ -6,6 +6,7 @@
 pub mod ffksm;
 pub mod harness;
 pub mod k3dgs;
+pub mod loading;
 pub mod mean_silhouette;
 pub mod nearest_pose;
 pub mod neurokin;

@@ -69,7 +69,7 @@ fn constant_predictor<M: SelfModel>(cfg: &SelfModelRun<M>) -> (f64, f64) {
         .quality;
     // Every run saves its model; a constant keeps no weights to load, and says so.
     let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
-    let e = selfmodel::self_models::saved::load(dir.path(), &device)
+    let e = selfmodel::self_models::loading::load(dir.path(), &device)
         .err()
         .unwrap()
         .to_string();
@@ -125,9 +125,9 @@ fn the_saved_model_scores_as_its_run<M: SelfModel>(
     dir: &std::path::Path,
     run: &selfmodel::eval::evaluation::Quality,
 ) {
-    use selfmodel::self_models::saved;
+    use selfmodel::self_models::loading;
     let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
-    let model = saved::load(dir, &device).unwrap();
+    let model = loading::load(dir, &device).unwrap();
     let (data, _, test) = cfg.data.load().unwrap();
     let poses: Vec<f32> = test
         .clone()
@@ -175,7 +175,7 @@ fn the_saved_model_scores_as_its_run<M: SelfModel>(
     let mid = bytes.len() / 2;
     bytes[mid] ^= 0xff;
     std::fs::write(&bpk, bytes).unwrap();
-    let e = saved::load(dir, &device).err().unwrap().to_string();
+    let e = loading::load(dir, &device).err().unwrap().to_string();
     assert!(e.contains("damaged or replaced"), "{e}");
 }
 

@@ -366,13 +366,35 @@ impl PyIkSolver {
         });
         Ok(std::mem::take(&mut a[0][0].joints))
     }
+
+    /// For the benchmark (python/bench): the median seconds of the solver's own work on one
+    /// target, timed inside Rust over `repeats` calls, to subtract from a Python call's time.
+    fn _solve_one_seconds(&self, target: Vec<f64>, repeats: usize) -> PyResult<f64> {
+        let row = target_from_values(&target, self.model.position_only(), self.model.tips())
+            .map_err(|e| value_error(format!("target: {e}")))?;
+        let mut times: Vec<f64> = (0..repeats.max(1))
+            .map(|_| {
+                let t0 = std::time::Instant::now();
+                let a = self.model.solve(
+                    &self.robot.chain,
+                    std::slice::from_ref(&row),
+                    1,
+                    &self.device,
+                );
+                std::hint::black_box(a);
+                t0.elapsed().as_secs_f64()
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        Ok(times[times.len() / 2])
+    }
 }
 
 /// A self-model a self-model run saved (its `model/` folder): joint values in, the robot's
 /// silhouette (and depth, for a model that predicts it) out.
 #[pyclass(name = "SelfModel", module = "selfmodel", frozen)]
 struct PySelfModel {
-    model: selfmodel::self_models::saved::LoadedSelfModel,
+    model: selfmodel::self_models::loading::LoadedSelfModel,
 }
 
 #[pymethods]
@@ -384,7 +406,7 @@ impl PySelfModel {
         py.allow_threads(|| {
             let device =
                 selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-            selfmodel::self_models::saved::load(&model_dir, &device)
+            selfmodel::self_models::loading::load(&model_dir, &device)
         })
         .map(|model| PySelfModel { model })
         .map_err(value_error)

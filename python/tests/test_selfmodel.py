@@ -231,3 +231,42 @@ def test_a_self_model_refuses_bad_input_and_damaged_weights(neurokin_run, tmp_pa
     (copy / "model.bpk").write_bytes(bytes(weights))
     with pytest.raises(ValueError, match="damaged or replaced"):
         selfmodel.SelfModel.load(copy)
+
+
+PANDA = ROOT.parent / "shared" / "robots" / "franka_description" / "urdf" / "panda.urdf"
+
+
+@pytest.mark.skipif(not PANDA.is_file(), reason="the Panda's description (../shared/robots) is not here")
+def test_fk_matches_pinocchio_on_the_panda():
+    pin = pytest.importorskip("pinocchio", reason="Pinocchio (PyPI pin) is not installed")
+    robot = selfmodel.Robot.from_urdf(str(PANDA), tip="panda_hand")
+    model = pin.buildModelFromUrdf(str(PANDA))
+    data = model.createData()
+    limits = robot.limits
+    q = np.random.default_rng(3).uniform(limits[:, 0], limits[:, 1], size=(200, robot.dof))
+    ours = robot.fk(q)
+    hand = model.getFrameId("panda_hand")
+    worst = 0.0
+    for qi, pose in zip(q, ours):
+        full = pin.neutral(model)
+        for name, value in zip(robot.joint_names, qi):
+            full[model.joints[model.getJointId(name)].idx_q] = value
+        pin.framesForwardKinematics(model, data, full)
+        worst = max(worst, np.abs(data.oMf[hand].homogeneous - pose).max())
+    assert worst < 1e-9, f"largest difference from Pinocchio: {worst:.2e}"
+
+
+@pytest.mark.skipif(not PANDA.is_file(), reason="the Panda's description (../shared/robots) is not here")
+def test_the_example_runs(tmp_path):
+    pytest.importorskip("matplotlib", reason="the example draws with matplotlib")
+    import sys
+
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "examples" / "python" / "panda_ik.py"), "--out", str(tmp_path / "ik.png")],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    exact = float(out.stdout.split("% exact")[0].split()[-1])
+    assert exact >= 95.0, out.stdout
+    assert (tmp_path / "ik.png").stat().st_size > 10_000

@@ -33,7 +33,8 @@ use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, aut
 /// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
 /// it on the model's config; [`run`] does the rest.
 pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
-    /// Its kind in a saved model's `model.json` ([`crate::self_models::saved`]).
+    /// Its kind in a saved model's `model.json` ([`crate::self_models::saved`]), which
+    /// picks its loader ([`crate::self_models::loading`]).
     const KIND: &'static str;
     /// The image it renders, `[height, width]` (the dataset's camera must match).
     fn image(&self) -> [usize; 2];
@@ -987,9 +988,10 @@ pub fn run<M: SelfModel>(
     crate::self_models::saved::save(
         &dir.join("model"),
         &crate::self_models::saved::ToSave {
-            model: &cfg.model,
+            kind: M::KIND,
+            model: serde_json::to_value(&cfg.model).expect("a model configuration serialises"),
             name: &cfg.name,
-            renderer: trained.renderers[0].1.as_ref(),
+            save_weights: &|path| trained.renderers[0].1.save(path),
             data: &data,
             data_fingerprint: cfg.data.fingerprint(),
             test_inputs: &test_set.inputs,

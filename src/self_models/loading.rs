@@ -1,0 +1,167 @@
+//! Loading a saved self-model ([`crate::self_models::saved`]) back: its kind's loader builds
+//! the renderer and reads its weights, and the loaded model must predict its probe poses as its
+//! run did.
+
+use std::path::Path;
+
+use burn::tensor::{Device, Tensor, TensorData};
+
+use crate::core::error::{Error, Result};
+use crate::core::input_file::file_fnv;
+use crate::data::npz::{ArrayData, read_npz};
+use crate::self_models::harness::{Render, SelfModel};
+use crate::self_models::neurokin::NeuroKinConfig;
+use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
+use crate::self_models::saved::{FORMAT, SavedSelfModel};
+
+/// The kinds whose weights load, each with its loader: one line a kind.
+fn loader(kind: &str) -> Option<Loader> {
+    match kind {
+        NeuroKinConfig::KIND => Some(load_as::<NeuroKinConfig>),
+        ResNeuroKinDConfig::KIND => Some(load_as::<ResNeuroKinDConfig>),
+        _ => None,
+    }
+}
+
+type Loader =
+    fn(&serde_json::Value, &Path, &Device) -> Result<Option<Box<dyn Render + Send + Sync>>>;
+
+fn load_as<M: SelfModel + serde::de::DeserializeOwned>(
+    config: &serde_json::Value,
+    weights: &Path,
+    device: &Device,
+) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+    let model: M = serde_json::from_value(config.clone())
+        .map_err(|e| Error::data(weights, format!("its model.json's configuration: {e}")))?;
+    model.load(weights, device)
+}
+
+/// A saved self-model, loaded.
+pub struct LoadedSelfModel {
+    pub saved: SavedSelfModel,
+    pub renderer: Box<dyn Render + Send + Sync>,
+    pub device: Device,
+}
+
+impl LoadedSelfModel {
+    /// `[n, inputs]` poses (row-major, the joints' units) -> silhouette probabilities
+    /// `[n, H, W]` and depth (metres) where the model predicts it, on the host.
+    pub fn predict(&self, poses: &[f32], n: usize) -> Result<(Vec<f32>, Option<Vec<f32>>)> {
+        let inputs = self.saved.inputs;
+        if poses.len() != n * inputs {
+            return Err(Error::Config(format!(
+                "{} values for {n} poses of {inputs} inputs",
+                poses.len()
+            )));
+        }
+        if let Some(i) = poses.iter().position(|v| !v.is_finite()) {
+            return Err(Error::Config(format!(
+                "pose {}, input {}: {} is not a finite number",
+                i / inputs,
+                i % inputs,
+                poses[i]
+            )));
+        }
+        let q = Tensor::<2>::from_data(TensorData::new(poses.to_vec(), [n, inputs]), &self.device);
+        let (s, d) = self.renderer.render(q);
+        let host = |t: Tensor<4>| t.into_data().iter::<f32>().collect::<Vec<f32>>();
+        Ok((host(s), d.map(host)))
+    }
+}
+
+/// Load `dir` (a run's `model/`, or the run's folder holding it) onto `device`.
+pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
+    let dir = if dir.join("model").join("model.json").is_file() {
+        dir.join("model")
+    } else {
+        dir.to_path_buf()
+    };
+    let json = dir.join("model.json");
+    let again = "run the self-model again to save it";
+    let bytes = crate::core::input_file::read_regular(&json, "saved self-model", 16 << 20)
+        .map_err(|e| Error::data(&json, format!("no saved self-model here ({e}); {again}")))?;
+    let text = String::from_utf8_lossy(&bytes);
+    let saved: SavedSelfModel = serde_json::from_str(&text)
+        .map_err(|e| Error::data(&json, format!("not a saved self-model ({e}); {again}")))?;
+    if saved.format != FORMAT {
+        return Err(Error::data(
+            &json,
+            format!(
+                "format {} (this build reads {FORMAT}); {again}",
+                saved.format
+            ),
+        ));
+    }
+    let Some(expected) = &saved.weights_fnv else {
+        return Err(Error::data(
+            &json,
+            format!(
+                "{} saves no weights that load (NeuroKin and ResNeuroKin-D do)",
+                saved.name
+            ),
+        ));
+    };
+    let weights = dir.join("model.bpk");
+    if file_fnv(&weights)? != *expected {
+        return Err(Error::data(
+            &weights,
+            format!(
+                "differs from the weights saved with model.json (damaged or replaced); {again}"
+            ),
+        ));
+    }
+    let renderer = loader(&saved.kind)
+        .map(|l| l(&saved.model, &weights, device))
+        .transpose()?
+        .flatten()
+        .ok_or_else(|| {
+            Error::data(
+                &json,
+                format!("a model of kind {:?} does not load", saved.kind),
+            )
+        })?;
+    let loaded = LoadedSelfModel {
+        saved,
+        renderer,
+        device: device.clone(),
+    };
+    check_probe(&loaded, &dir.join("probe.npz"))?;
+    Ok(loaded)
+}
+
+/// The loaded model must predict for the probe's poses what the run predicted.
+fn check_probe(model: &LoadedSelfModel, path: &Path) -> Result<()> {
+    let arrays = read_npz(path)?;
+    let get = |name: &str| -> Result<Vec<f32>> {
+        match arrays.get(name).map(|a| &a.data) {
+            Some(ArrayData::F32(v)) => Ok(v.clone()),
+            _ => Err(Error::data(path, format!("no float32 array {name:?}"))),
+        }
+    };
+    let angles = get("angles")?;
+    let n = angles.len() / model.saved.inputs.max(1);
+    let (s, d) = model.predict(&angles, n)?;
+    let mut worst = max_abs_diff(&s, &get("silhouettes")?);
+    if let Some(d) = d {
+        worst = worst.max(max_abs_diff(&d, &get("depth")?));
+    }
+    if !(worst <= 1e-5) {
+        return Err(Error::data(
+            path,
+            format!(
+                "the loaded model predicts its probe poses {worst:.1e} away from what its run predicted; run the self-model again to save it"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    if a.len() != b.len() {
+        return f32::INFINITY;
+    }
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max)
+}
