@@ -48,7 +48,7 @@ run)
   # so a part that hangs or aborts costs only itself; the console goes on across them.
   rm -f "$out/console.txt"
   deadline=$(( $(date +%s) + ${GPU_CHECK_SECONDS:-480} ))
-  for part in ${GPU_CHECK_PARTS:-decoders neurokin equivalence counts k3dgs fill cpu}; do
+  for part in ${GPU_CHECK_PARTS:-decoders neurokin equivalence counts profile k3dgs fill cpu}; do
     left=$(( deadline - $(date +%s) ))
     if [ "$left" -lt 15 ]; then
       echo "($part: not run, the check's time was spent)" | tee -a "$out/console.txt"
@@ -56,8 +56,25 @@ run)
     fi
     limit=$(( left < 240 ? left : 240 ))
     rc=0
-    timeout "$limit" "$PACK/gpu_check" --torch python3 --bench-dir "$PACK/bench" --out "$out" \
-      --parts "$part" "$@" 2>"$out/$part.stderr" || rc=$?
+    # At the GPU-filling batches burn's full autotune picked a matmul beyond wgpu's 65,535
+    # workgroups and hung (H200, 2026-11-26); its minimal level measured them on lavapipe.
+    env=()
+    run_part=$part
+    if [ "$part" = fill ]; then
+      env=(CUBECL_AUTOTUNE_LEVEL=minimal)
+      echo "(fill: CUBECL_AUTOTUNE_LEVEL=minimal)" >>"$out/console.txt"
+    fi
+    if [ "$part" = profile ]; then
+      # The counts' NeuroKin steps again under cubecl's profiler: each kernel's time.
+      run_part=counts
+      env=(CUBECL_DEBUG_OPTION=profile CUBECL_DEBUG_LOG=/tmp/cubecl_profile.log)
+      echo "(profile: the counts part under CUBECL_DEBUG_OPTION=profile; kernel times in profile.txt)" >>"$out/console.txt"
+    fi
+    env "${env[@]}" timeout "$limit" "$PACK/gpu_check" --torch python3 --bench-dir "$PACK/bench" \
+      --out "$out" --parts "$run_part" "$@" 2>"$out/$part.stderr" || rc=$?
+    if [ "$part" = profile ] && [ -f /tmp/cubecl_profile.log ]; then
+      grep '^|' /tmp/cubecl_profile.log | sed 's/  */ /g' | tail -c 8000000 >"$out/profile.txt" || true
+    fi
     if [ "$rc" -ne 0 ]; then
       echo "($part: stopped, exit $rc, limit $limit s; last lines of its stderr:)" | tee -a "$out/console.txt"
       tail -c 2000 "$out/$part.stderr" | tee -a "$out/console.txt"

@@ -327,3 +327,38 @@ fn damaged_deep_duplicate_and_unreadable_descriptions_are_refused() {
         .to_string();
     assert!(err.contains("cube.dae") && !err.contains('\n'), "{err}");
 }
+
+#[test]
+fn a_description_is_read_once_per_version_of_its_file() {
+    use selfmodel::sim::robots::{RobotSpec, description_reads};
+    let dir = common::tempdir();
+    let urdf = package(
+        dir.path(),
+        "revolute",
+        "package://pkg/meshes/cube.stl",
+        false,
+    );
+    let spec = RobotSpec::urdf_in_arm4_scene(urdf.clone());
+    let first = spec.load().unwrap();
+    let again = spec.load().unwrap();
+    assert_eq!(
+        description_reads(&urdf),
+        1,
+        "the second load read the file again"
+    );
+    assert_eq!(first.chain.joint_names(), again.chain.joint_names());
+    assert_eq!(first.geometry.len(), again.geometry.len());
+    // Kinematics only is another robot (no meshes), read once too.
+    assert_eq!(spec.load_kinematics().unwrap().dof(), first.dof());
+    assert_eq!(description_reads(&urdf), 2);
+    // The file edited (a prismatic joint now): read again, and the edit shows.
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    std::fs::write(
+        &urdf,
+        robot_xml("prismatic", "package://pkg/meshes/cube.stl"),
+    )
+    .unwrap();
+    let edited = spec.load().unwrap();
+    assert_eq!(description_reads(&urdf), 3);
+    assert_eq!(edited.chain.joints[0].kind, JointKind::Prismatic);
+}

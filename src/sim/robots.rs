@@ -79,6 +79,27 @@ impl Default for RobotSpec {
     }
 }
 
+/// A loaded description: its spec, geometry override and file version.
+type LoadedKey = (
+    String,
+    Option<GeometryKind>,
+    Option<(u64, Option<std::time::SystemTime>)>,
+);
+
+/// The descriptions this process has read ([`RobotSpec::load`]).
+static LOADED: std::sync::OnceLock<std::sync::Mutex<Vec<(LoadedKey, std::sync::Arc<Robot>)>>> =
+    std::sync::OnceLock::new();
+
+/// How many times this process has read each robot description from disk.
+static READS: std::sync::Mutex<Vec<(PathBuf, usize)>> = std::sync::Mutex::new(Vec::new());
+
+/// How many times this process has read the description at `path` from disk (a run reads it
+/// once).
+pub fn description_reads(path: &Path) -> usize {
+    let reads = READS.lock().unwrap_or_else(|e| e.into_inner());
+    reads.iter().find(|(p, _)| p == path).map_or(0, |(_, n)| *n)
+}
+
 impl RobotSpec {
     /// A URDF placed where the papers' scene places arm4 (base at [0, 0, -0.108], yaw -pi/2),
     /// so the papers' camera sees it as it sees arm4.
@@ -105,7 +126,50 @@ impl RobotSpec {
         self.load_as(Some(GeometryKind::None))
     }
 
+    /// A description is read from disk once per process and version of its file: every layer
+    /// of a run that asks for the robot (dataset, self-model, renderer, damage, IK, reports)
+    /// gets the same robot, and a file edited between runs of a long-lived process (Python) is
+    /// read again.
     fn load_as(&self, geometry_override: Option<GeometryKind>) -> Result<Robot> {
+        let RobotSpec::Urdf { path, .. } = self else {
+            return self.read(geometry_override);
+        };
+        let version = std::fs::metadata(path)
+            .ok()
+            .map(|m| (m.len(), m.modified().ok()));
+        let key = (
+            serde_json::to_string(self).expect("a robot spec serialises"),
+            geometry_override,
+            version,
+        );
+        let cache = LOADED.get_or_init(Default::default);
+        if let Some(robot) = cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, r)| r.clone())
+        {
+            return Ok((*robot).clone());
+        }
+        let robot = std::sync::Arc::new(self.read(geometry_override)?);
+        let mut reads = READS.lock().unwrap_or_else(|e| e.into_inner());
+        match reads.iter_mut().find(|(p, _)| p == path) {
+            Some((_, n)) => *n += 1,
+            None => reads.push((path.clone(), 1)),
+        }
+        drop(reads);
+        let mut cache = cache.lock().unwrap_or_else(|e| e.into_inner());
+        // A few descriptions a process: the oldest goes first.
+        if cache.len() >= 8 {
+            cache.remove(0);
+        }
+        cache.push((key, robot.clone()));
+        Ok((*robot).clone())
+    }
+
+    /// Read the description from disk.
+    fn read(&self, geometry_override: Option<GeometryKind>) -> Result<Robot> {
         match self {
             RobotSpec::Builtin(b) => Ok(b.load()),
             RobotSpec::Urdf {
