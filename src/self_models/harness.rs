@@ -90,6 +90,16 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
         Self: Sized;
 }
 
+/// [`SelfModel::load`] for a network: `template` (its configuration's untrained network on the
+/// device) given the weights its [`Render::save`] wrote to `weights`.
+pub fn load_network<R>(template: R, weights: &Path) -> Result<Option<Box<dyn Render + Send + Sync>>>
+where
+    R: Render + burn::module::Module + Send + Sync + 'static,
+{
+    let network = crate::train::trainer::load_module(template, weights)?;
+    Ok(Some(Box::new(network)))
+}
+
 /// What a self-model trains with.
 pub struct Fit<'a> {
     /// On the training (autodiff) device: inputs `[n, dof]` joint angles in degrees, targets

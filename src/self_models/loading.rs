@@ -145,7 +145,7 @@ fn check_probe(model: &LoadedSelfModel, path: &Path) -> Result<()> {
     if let Some(d) = d {
         worst = worst.max(max_abs_diff(&d, &get("depth")?));
     }
-    if !(worst <= 1e-5) {
+    if !(worst <= 1e-3) {
         return Err(Error::data(
             path,
             format!(

@@ -291,8 +291,7 @@ impl SelfModel for ResNeuroKinDConfig {
         weights: &std::path::Path,
         device: &Device,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        let model = crate::train::trainer::load_module(self.init(device, 0)?, weights)?;
-        Ok(Some(Box::new(model)))
+        crate::self_models::harness::load_network(self.init(device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
