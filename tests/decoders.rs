@@ -67,13 +67,8 @@ fn constant_predictor<M: SelfModel>(cfg: &SelfModelRun<M>) -> (f64, f64) {
     let q = run(&constant, dir.path(), DeviceChoice::Cpu, false)
         .unwrap()
         .quality;
-    // Every run saves its model; a constant keeps no weights to load, and says so.
-    let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
-    let e = selfmodel::self_models::loading::load(dir.path(), &device)
-        .err()
-        .unwrap()
-        .to_string();
-    assert!(e.contains("saves no weights that load"), "{e}");
+    // Every run saves its model: the constant loads and scores as its run did.
+    common::the_saved_model_scores_as_its_run(&constant, dir.path(), &q);
     (q.psnr_db_test, q.iou_test)
 }
 
@@ -115,68 +110,7 @@ fn tiny_neurokin_beats_a_constant_predictor() {
     ] {
         assert!(dir.path().join(f).is_file(), "{f} missing");
     }
-    the_saved_model_scores_as_its_run(&cfg, dir.path(), q);
-}
-
-/// The saved model (`dir/model`), loaded, predicts the run's test poses to the run's own
-/// scores; with its weights damaged it is refused.
-fn the_saved_model_scores_as_its_run<M: SelfModel>(
-    cfg: &SelfModelRun<M>,
-    dir: &std::path::Path,
-    run: &selfmodel::eval::evaluation::Quality,
-) {
-    use selfmodel::self_models::loading;
-    let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
-    let model = loading::load(dir, &device).unwrap();
-    let (data, _, test) = cfg.data.load().unwrap();
-    let poses: Vec<f32> = test
-        .clone()
-        .flat_map(|i| data.angles[i].iter().map(|&v| v as f32))
-        .collect();
-    let (silhouettes, depth) = model.predict(&poses, test.len()).unwrap();
-    let (truth, truth_depth): (Vec<f32>, Vec<f32>) = test
-        .clone()
-        .map(|i| {
-            let s: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
-            (s, data.depth_map(i).to_vec())
-        })
-        .fold((Vec::new(), Vec::new()), |(mut a, mut b), (s, d)| {
-            a.extend(s);
-            b.extend(d);
-            (a, b)
-        });
-    let predictions = Predictions {
-        silhouettes,
-        depth,
-        pixels: data.height * data.width,
-        depth_pixels: Default::default(),
-    };
-    let q = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-    assert!(
-        (q.psnr_db_test - run.psnr_db_test).abs() < 1e-4
-            && (q.iou_test - run.iou_test).abs() < 1e-5,
-        "loaded: {:.5} dB, IoU {:.5}; its run: {:.5} dB, IoU {:.5}",
-        q.psnr_db_test,
-        q.iou_test,
-        run.psnr_db_test,
-        run.iou_test
-    );
-    assert!((model.saved.psnr_db_test - run.psnr_db_test).abs() < 1e-9);
-    // Wrong shapes and values are refused in one line.
-    let dof = model.saved.inputs;
-    assert!(model.predict(&vec![0.0; dof + 1], 1).is_err());
-    let mut nan = vec![0.0; dof];
-    nan[0] = f32::NAN;
-    let e = model.predict(&nan, 1).err().unwrap().to_string();
-    assert!(e.contains("not a finite number"), "{e}");
-    // Damaged weights are refused, naming what to do.
-    let bpk = dir.join("model/model.bpk");
-    let mut bytes = std::fs::read(&bpk).unwrap();
-    let mid = bytes.len() / 2;
-    bytes[mid] ^= 0xff;
-    std::fs::write(&bpk, bytes).unwrap();
-    let e = loading::load(dir, &device).err().unwrap().to_string();
-    assert!(e.contains("damaged or replaced"), "{e}");
+    common::the_saved_model_scores_as_its_run(&cfg, dir.path(), q);
 }
 
 #[test]
@@ -211,7 +145,7 @@ fn tiny_resneurokin_d_learns_silhouette_and_metric_depth() {
         mae < 0.97 * zero_mm,
         "depth error {mae:.0} mm vs {zero_mm:.0} mm for zero"
     );
-    the_saved_model_scores_as_its_run(&cfg, dir.path(), &out.quality);
+    common::the_saved_model_scores_as_its_run(&cfg, dir.path(), &out.quality);
 }
 
 #[test]
@@ -305,6 +239,13 @@ fn the_lookup_table_answers_a_training_pose_with_its_own_images() {
     let out = run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
     assert_eq!(out.quality.iou_test, 1.0);
     assert_eq!(out.quality.depth_mae_mm, Some(0.0));
+    // Its saved model is its config only (it answers from its training set), and says so.
+    let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
+    let e = selfmodel::self_models::loading::load(dir.path(), &device)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(e.contains("saves no weights that load"), "{e}");
     // And on the held-out poses it beats the best constant image.
     let held_out = NearestPose::preset_run("quick").unwrap();
     let q = run(&held_out, dir.path(), DeviceChoice::Cpu, false)

@@ -395,7 +395,9 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
     let mut cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
     cfg.model.novel_views_deg = vec![30.0];
     let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
-    selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    // Its saved field loads with its robot and camera and renders as its run did.
+    common::the_saved_model_scores_as_its_run(&cfg, &dir, &out.quality);
     let read = selfmodel::report::table::read_csv::<RendererRow>;
     let renderers = read(&dir.join("renderers.csv")).unwrap();
     let novel_views =

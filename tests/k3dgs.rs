@@ -277,5 +277,8 @@ fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
+    // Its saved model (the Gaussians densification left, on the robot's chain) loads and
+    // scores as its run did.
+    common::the_saved_model_scores_as_its_run(&cfg, &dir, &out.quality);
     let _ = std::fs::remove_dir_all(&dir);
 }

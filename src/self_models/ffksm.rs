@@ -24,10 +24,9 @@ pub mod field;
 pub mod grid;
 pub mod marcher;
 pub mod virtual_frame;
-use std::cell::RefCell;
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::rc::Rc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use burn::module::Module;
@@ -852,6 +851,35 @@ impl SelfModel for Ffksm {
         self.field.dof = dof;
     }
 
+    /// Its field, as fitted to the scene, marched by the renderer it was saved with, on the
+    /// robot and from the camera it was trained with.
+    fn load(
+        &self,
+        weights: &std::path::Path,
+        ctx: &crate::self_models::harness::LoadContext,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        let state: FfksmState = serde_json::from_value(ctx.state.clone())
+            .map_err(|e| Error::data(weights, format!("its saved state: {e}")))?;
+        let robot = ctx
+            .robot
+            .ok_or_else(|| Error::Config("FFKSM loads with its robot".into()))?;
+        let field =
+            crate::train::trainer::load_module(state.fitted.field.init(ctx.device, 0)?, weights)?;
+        let shared = Arc::new(FfksmShared {
+            field,
+            model: state.fitted,
+            camera: ctx.camera.clone(),
+            robot: robot.clone(),
+            device: ctx.device.clone(),
+            stats: Default::default(),
+        });
+        Ok(Some(Box::new(FfksmRenderer {
+            shared,
+            accelerated: state.accelerated,
+            label: state.label,
+        })))
+    }
+
     /// Train the field; it renders two ways: dense marching (the paper's) and the
     /// accelerated marcher.
     fn fit(&self, fit: &Fit) -> Result<Trained> {
@@ -879,7 +907,7 @@ impl SelfModel for Ffksm {
         {
             note.push("the last try trained without the collapse check".into());
         }
-        let shared = Rc::new(FfksmShared {
+        let shared = Arc::new(FfksmShared {
             field,
             model: this.clone(),
             camera: fit.camera.clone(),
@@ -1010,12 +1038,12 @@ struct FfksmShared {
     robot: Robot,
     device: Device,
     /// Per renderer label: the images rendered so far (the test set first).
-    stats: RefCell<BTreeMap<String, Rendered>>,
+    stats: Mutex<BTreeMap<String, Rendered>>,
 }
 
 /// One of a trained field's renderers (dense marching, or the accelerated marcher).
 struct FfksmRenderer {
-    shared: Rc<FfksmShared>,
+    shared: Arc<FfksmShared>,
     accelerated: Option<AcceleratedConfig>,
     label: String,
 }
@@ -1049,7 +1077,28 @@ fn angle_rows(angles: Tensor<2>) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// What a saved FFKSM keeps beside its field's weights: its configuration as fitted to the
+/// scene, and which marcher renders.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct FfksmState {
+    fitted: Ffksm,
+    accelerated: Option<AcceleratedConfig>,
+    label: String,
+}
+
 impl Render for FfksmRenderer {
+    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
+        crate::train::trainer::save_module(&self.shared.field, path)?;
+        let state = FfksmState {
+            fitted: self.shared.model.clone(),
+            accelerated: self.accelerated.clone(),
+            label: self.label.clone(),
+        };
+        Ok(Some(
+            serde_json::to_value(state).expect("FFKSM's state serialises"),
+        ))
+    }
+
     /// Inputs of `dof + 9` columns (trained on several views): each row from its camera.
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         let dof = self.shared.robot.dof();
@@ -1072,7 +1121,8 @@ impl Render for FfksmRenderer {
                 });
             self.shared
                 .stats
-                .borrow_mut()
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
                 .entry(self.label.clone())
                 .or_insert_with(Rendered::empty)
                 .extend(r);
@@ -1101,7 +1151,8 @@ impl Render for FfksmRenderer {
         let evals = self
             .shared
             .stats
-            .borrow()
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
             .get(&self.label)
             .map_or(0.0, |r| r.first(test_images).mean_evaluations());
         format!("{evals:.0} network evaluations per image; tested on {test_images} images")
@@ -1127,7 +1178,8 @@ impl Render for FfksmRenderer {
             |p: &Predictions, t: &[f32], d: &[f32]| score(p, t, Some(d), ctx.paper_subset);
         let first = |label: &str| -> Result<Rendered> {
             s.stats
-                .borrow()
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
                 .get(label)
                 .map(|r| r.first(n))
                 .ok_or_else(|| Error::Training(format!("{label}: nothing rendered")))

@@ -75,12 +75,12 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn renders_any_view(&self) -> bool {
         false
     }
-    /// The renderer whose weights its renderer saved to `weights` ([`Render::save`]), built
-    /// on `device`; `None`: this kind saves no weights that load.
+    /// The renderer whose weights its renderer saved to `weights` ([`Render::save`], with the
+    /// state it returned), built on `ctx.device`; `None`: this kind saves no weights that load.
     fn load(
         &self,
         _weights: &Path,
-        _device: &Device,
+        _ctx: &LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
         Ok(None)
     }
@@ -88,6 +88,18 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
     where
         Self: Sized;
+}
+
+/// What a saved self-model is rebuilt with ([`SelfModel::load`]).
+pub struct LoadContext<'a> {
+    pub device: &'a Device,
+    /// What its renderer's [`Render::save`] returned.
+    pub state: &'a serde_json::Value,
+    /// The robot it was trained on, loaded again for a model that hangs on its chain
+    /// ([`SelfModel::needs_robot`]).
+    pub robot: Option<&'a Robot>,
+    /// The camera of its first image.
+    pub camera: &'a Camera,
 }
 
 /// [`SelfModel::load`] for a network: `template` (its configuration's untrained network on the
@@ -168,9 +180,10 @@ pub trait Render {
     fn render_view(&self, _camera: &Camera, _angles: Tensor<2>) -> Option<Tensor<4>> {
         None
     }
-    /// Write its weights to `path` for [`SelfModel::load`]; `false`: it saves none.
-    fn save(&self, _path: &Path) -> Result<bool> {
-        Ok(false)
+    /// Write its weights to `path` for [`SelfModel::load`], and return what else it needs
+    /// to be rebuilt (kept in `model.json`); `None`: it saves none.
+    fn save(&self, _path: &Path) -> Result<Option<serde_json::Value>> {
+        Ok(None)
     }
     /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
@@ -1002,6 +1015,7 @@ pub fn run<M: SelfModel>(
             model: serde_json::to_value(&cfg.model).expect("a model configuration serialises"),
             name: &cfg.name,
             save_weights: &|path| trained.renderers[0].1.save(path),
+            camera: cfg.data.camera(&data),
             data: &data,
             data_fingerprint: cfg.data.fingerprint(),
             test_inputs: &test_set.inputs,

@@ -470,9 +470,53 @@ impl SelfModel for K3dgs {
         })
     }
 
+    /// Its Gaussians (as many as densification left, on the links the state names) on the robot's
+    /// chain, seen from the saved camera.
+    fn load(
+        &self,
+        weights: &std::path::Path,
+        ctx: &crate::self_models::harness::LoadContext,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        let state: K3dgsState = serde_json::from_value(ctx.state.clone())
+            .map_err(|e| crate::Error::data(weights, format!("its saved state: {e}")))?;
+        let robot = ctx
+            .robot
+            .ok_or_else(|| crate::Error::Config("K-3DGS loads with its robot".into()))?;
+        let long_axis: Vec<usize> = (0..robot.chain.links.len())
+            .map(|l| GaussianInit::long_axis(robot, l))
+            .collect();
+        let n = state.links.len();
+        let template = KinematicGaussians::new(
+            &state.links,
+            &vec![[0.0; 3]; n],
+            &self.init,
+            &long_axis,
+            ctx.device,
+        );
+        Ok(Some(Box::new(K3dgsRenderer {
+            model: crate::train::trainer::load_module(template, weights)?,
+            chain: TensorChain::new(&robot.chain),
+            camera: ctx.camera.clone(),
+            mode: state.mode,
+            cull_sigmas: self.cull_sigmas,
+            dense_batches: self.dense_batches.clone(),
+            counts: Vec::new(),
+        })))
+    }
+
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
         k3dgs_run(preset, K3dgsVariant::Isotropic)
     }
+}
+
+/// What a saved K-3DGS model keeps beside its weights.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct K3dgsState {
+    /// The link of each Gaussian densification left (burn's record keeps the parameters, not
+    /// this constant).
+    links: Vec<usize>,
+    /// How they composite at the end of training.
+    mode: Compositing,
 }
 
 /// A trained K-3DGS model with what it renders with.
@@ -535,6 +579,24 @@ impl Render for K3dgsRenderer {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         let (s, d) = self.splat(angles, Some(self.cull_sigmas));
         (s, Some(d))
+    }
+
+    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
+        crate::train::trainer::save_module(&self.model, path)?;
+        let state = K3dgsState {
+            links: self
+                .model
+                .links
+                .clone()
+                .into_data()
+                .iter::<i64>()
+                .map(|l| l as usize)
+                .collect(),
+            mode: self.mode,
+        };
+        Ok(Some(
+            serde_json::to_value(state).expect("K-3DGS's state serialises"),
+        ))
     }
 
     fn render_view(&self, camera: &Camera, angles: Tensor<2>) -> Option<Tensor<4>> {

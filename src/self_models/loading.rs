@@ -9,7 +9,10 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::core::error::{Error, Result};
 use crate::core::input_file::file_fnv;
 use crate::data::npz::{ArrayData, read_npz};
-use crate::self_models::harness::{Render, SelfModel};
+use crate::self_models::ffksm::Ffksm;
+use crate::self_models::harness::{DataSpec, LoadContext, Render, SelfModel};
+use crate::self_models::k3dgs::K3dgs;
+use crate::self_models::mean_silhouette::MeanSilhouette;
 use crate::self_models::neurokin::NeuroKinConfig;
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::self_models::saved::{FORMAT, SavedSelfModel};
@@ -19,21 +22,37 @@ fn loader(kind: &str) -> Option<Loader> {
     match kind {
         NeuroKinConfig::KIND => Some(load_as::<NeuroKinConfig>),
         ResNeuroKinDConfig::KIND => Some(load_as::<ResNeuroKinDConfig>),
+        K3dgs::KIND => Some(load_as::<K3dgs>),
+        Ffksm::KIND => Some(load_as::<Ffksm>),
+        MeanSilhouette::KIND => Some(load_as::<MeanSilhouette>),
         _ => None,
     }
 }
 
-type Loader =
-    fn(&serde_json::Value, &Path, &Device) -> Result<Option<Box<dyn Render + Send + Sync>>>;
+type Loader = fn(&SavedSelfModel, &Path, &Device) -> Result<Option<Box<dyn Render + Send + Sync>>>;
 
 fn load_as<M: SelfModel + serde::de::DeserializeOwned>(
-    config: &serde_json::Value,
+    saved: &SavedSelfModel,
     weights: &Path,
     device: &Device,
 ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-    let model: M = serde_json::from_value(config.clone())
+    let model: M = serde_json::from_value(saved.model.clone())
         .map_err(|e| Error::data(weights, format!("its model.json's configuration: {e}")))?;
-    model.load(weights, device)
+    // A model that hangs on the robot's chain gets the robot it was trained on, read again.
+    let robot = if model.needs_robot() {
+        let data: DataSpec = serde_json::from_value(saved.data.clone())
+            .map_err(|e| Error::data(weights, format!("its model.json's data: {e}")))?;
+        Some(data.robot.load()?)
+    } else {
+        None
+    };
+    let ctx = LoadContext {
+        device,
+        state: &saved.state,
+        robot: robot.as_ref(),
+        camera: &saved.camera,
+    };
+    model.load(weights, &ctx)
 }
 
 /// A saved self-model, loaded.
@@ -96,7 +115,7 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
         return Err(Error::data(
             &json,
             format!(
-                "{} saves no weights that load (NeuroKin and ResNeuroKin-D do)",
+                "{} saves no weights that load: it answers from its training set (a lookup table); every other self-model loads",
                 saved.name
             ),
         ));
@@ -111,7 +130,7 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
         ));
     }
     let renderer = loader(&saved.kind)
-        .map(|l| l(&saved.model, &weights, device))
+        .map(|l| l(&saved, &weights, device))
         .transpose()?
         .flatten()
         .ok_or_else(|| {

@@ -5,6 +5,7 @@
 //! whose mean reaches the threshold that maximises the IoU on the training silhouettes are
 //! raised to 0.5 (counted as robot); the rest keep the mean.
 
+use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::core::error::Result;
@@ -39,15 +40,22 @@ impl Preset for MeanSilhouette {
     }
 }
 
-/// The fitted constant image, `[1, 1, H, W]`.
+/// The fitted constant image, `[1, 1, H, W]` (a parameter, so that it saves as a network's
+/// weights do).
+#[derive(Module, Debug)]
 pub struct ConstantImage {
-    image: Tensor<4>,
+    image: Param<Tensor<4>>,
 }
 
 impl Render for ConstantImage {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         let [n, _] = angles.dims();
-        (self.image.clone().repeat_dim(0, n), None)
+        (self.image.val().repeat_dim(0, n), None)
+    }
+
+    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
+        crate::train::trainer::save_module(self, path)?;
+        Ok(Some(serde_json::Value::Null))
     }
 }
 
@@ -103,7 +111,9 @@ impl SelfModel for MeanSilhouette {
         let device: &Device = fit.device;
         let image = Tensor::from_data(TensorData::new(mean, [1, 1, h, w]), device);
         Ok(Trained::one(
-            ConstantImage { image },
+            ConstantImage {
+                image: Param::from_tensor(image),
+            },
             px,
             TrainLog {
                 step: 1,
@@ -117,6 +127,18 @@ impl SelfModel for MeanSilhouette {
 
     fn lower_bound(&self) -> bool {
         true
+    }
+
+    fn load(
+        &self,
+        weights: &std::path::Path,
+        ctx: &crate::self_models::harness::LoadContext,
+    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+        let [h, w] = self.image;
+        let template = ConstantImage {
+            image: Param::from_tensor(Tensor::zeros([1, 1, h, w], ctx.device)),
+        };
+        crate::self_models::harness::load_network(template, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -488,9 +488,9 @@ impl Render for NeuroKin {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         (self.predict(angles), None)
     }
-    fn save(&self, path: &std::path::Path) -> Result<bool> {
+    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
         crate::train::trainer::save_module(self, path)?;
-        Ok(true)
+        Ok(Some(serde_json::Value::Null))
     }
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
         Some(Box::new(self.clone().fork(autodiff).freeze()))
@@ -536,9 +536,9 @@ impl SelfModel for NeuroKinConfig {
     fn load(
         &self,
         weights: &std::path::Path,
-        device: &Device,
+        ctx: &crate::self_models::harness::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::harness::load_network(self.init(device, 0)?, weights)
+        crate::self_models::harness::load_network(self.init(ctx.device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -245,9 +245,9 @@ impl Render for ResNeuroKinD {
         let (s, d) = self.forward(angles);
         (s, Some(d))
     }
-    fn save(&self, path: &std::path::Path) -> Result<bool> {
+    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
         crate::train::trainer::save_module(self, path)?;
-        Ok(true)
+        Ok(Some(serde_json::Value::Null))
     }
 }
 
@@ -289,9 +289,9 @@ impl SelfModel for ResNeuroKinDConfig {
     fn load(
         &self,
         weights: &std::path::Path,
-        device: &Device,
+        ctx: &crate::self_models::harness::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::harness::load_network(self.init(device, 0)?, weights)
+        crate::self_models::harness::load_network(self.init(ctx.device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -5,8 +5,8 @@
 //! - `model.json`: the format, the model's kind and configuration, its image size and inputs,
 //!   the robot's joints, the data it was trained on (robot, camera, dataset: the run's
 //!   fingerprint of them), the camera of its first image, its test scores, the revision;
-//! - `model.bpk`: its weights, where its kind loads (`SelfModel::load`; NeuroKin and its
-//!   variants, ResNeuroKin-D), with their FNV-1a hash in `model.json`;
+//! - `model.bpk`: its weights, where its kind loads (`SelfModel::load`: every self-model but
+//!   NearestPose, a lookup table of its training set), with their FNV-1a hash in `model.json`;
 //! - `probe.npz`: the first test poses and what the run's own evaluation predicted for them.
 //!   A loaded model must predict the same (to 1e-3: another machine sums in another order),
 //!   or it is refused.
@@ -49,6 +49,11 @@ pub struct SavedSelfModel {
     /// The camera of its first image: focal length (px) and camera-to-world matrix.
     pub focal: f64,
     pub camera_pose: [f64; 16],
+    /// The camera it renders from (the dataset's first).
+    pub camera: crate::sim::camera::Camera,
+    /// What its renderer needs beside its weights to be rebuilt (K-3DGS: its Gaussians' count).
+    #[serde(default)]
+    pub state: serde_json::Value,
     /// Whether it predicts depth (metres) beside the silhouette.
     pub predicts_depth: bool,
     /// `model.bpk`'s FNV-1a hash; `None`: this kind saves no weights that load yet.
@@ -65,8 +70,10 @@ pub struct ToSave<'a> {
     pub kind: &'a str,
     pub model: serde_json::Value,
     pub name: &'a str,
-    /// Writes the renderer's weights to the path given (`Render::save`); `false`: none.
-    pub save_weights: &'a dyn Fn(&Path) -> Result<bool>,
+    /// Writes the renderer's weights to the path given and returns its state
+    /// (`Render::save`); `None`: it saves none.
+    pub save_weights: &'a dyn Fn(&Path) -> Result<Option<serde_json::Value>>,
+    pub camera: crate::sim::camera::Camera,
     pub data: &'a crate::data::dataset::Dataset,
     pub data_fingerprint: serde_json::Value,
     /// The test inputs (on the rendering device) and the run's predictions for them.
@@ -82,10 +89,10 @@ pub struct ToSave<'a> {
 pub fn save(dir: &Path, s: &ToSave) -> Result<SavedSelfModel> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let weights = dir.join("model.bpk");
-    let weights_fnv = if (s.save_weights)(&weights)? {
-        Some(file_fnv(&weights)?)
-    } else {
-        None
+    let state = (s.save_weights)(&weights)?;
+    let weights_fnv = match state {
+        Some(_) => Some(file_fnv(&weights)?),
+        None => None,
     };
     let [n, inputs] = s.test_inputs.dims();
     let k = n.min(PROBE);
@@ -121,6 +128,8 @@ pub fn save(dir: &Path, s: &ToSave) -> Result<SavedSelfModel> {
         data: s.data_fingerprint.clone(),
         focal: s.data.focal,
         camera_pose: s.data.poses.first().copied().unwrap_or_default(),
+        camera: s.camera.clone(),
+        state: state.unwrap_or_default(),
         predicts_depth: s.predictions.depth.is_some(),
         weights_fnv,
         psnr_db_test: s.psnr_db_test,

@@ -313,3 +313,70 @@ pub fn two_armed_urdf() -> String {
     }
     s + "</robot>"
 }
+
+/// The saved model (`dir/model`), loaded, predicts the run's test poses to the run's own
+/// scores; with its weights damaged it is refused.
+pub fn the_saved_model_scores_as_its_run<M: selfmodel::self_models::harness::SelfModel>(
+    cfg: &selfmodel::self_models::harness::SelfModelRun<M>,
+    dir: &std::path::Path,
+    run: &selfmodel::eval::evaluation::Quality,
+) {
+    use selfmodel::self_models::loading;
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let model = loading::load(dir, &device).unwrap();
+    let (data, _, test) = cfg.data.load().unwrap();
+    let poses: Vec<f32> = test
+        .clone()
+        .flat_map(|i| data.angles[i].iter().map(|&v| v as f32))
+        .collect();
+    let (silhouettes, depth) = model.predict(&poses, test.len()).unwrap();
+    let (truth, truth_depth): (Vec<f32>, Vec<f32>) = test
+        .clone()
+        .map(|i| {
+            let s: Vec<f32> = data.image(i).iter().map(|&v| v as f32 / 255.0).collect();
+            (s, data.depth_map(i).to_vec())
+        })
+        .fold((Vec::new(), Vec::new()), |(mut a, mut b), (s, d)| {
+            a.extend(s);
+            b.extend(d);
+            (a, b)
+        });
+    let predictions = selfmodel::eval::evaluation::Predictions {
+        silhouettes,
+        depth,
+        pixels: data.height * data.width,
+        depth_pixels: model.renderer.depth_pixels(),
+    };
+    let q = selfmodel::eval::evaluation::score(
+        &predictions,
+        &truth,
+        Some(&truth_depth),
+        cfg.paper_subset,
+    );
+    assert!(
+        (q.psnr_db_test - run.psnr_db_test).abs() < 1e-4
+            && (q.iou_test - run.iou_test).abs() < 1e-5,
+        "loaded: {:.5} dB, IoU {:.5}; its run: {:.5} dB, IoU {:.5}",
+        q.psnr_db_test,
+        q.iou_test,
+        run.psnr_db_test,
+        run.iou_test
+    );
+    assert!((model.saved.psnr_db_test - run.psnr_db_test).abs() < 1e-9);
+    // Wrong shapes and values are refused in one line.
+    let dof = model.saved.inputs;
+    assert!(model.predict(&vec![0.0; dof + 1], 1).is_err());
+    let mut nan = vec![0.0; dof];
+    nan[0] = f32::NAN;
+    let e = model.predict(&nan, 1).err().unwrap().to_string();
+    assert!(e.contains("not a finite number"), "{e}");
+    // Damaged weights are refused, naming what to do.
+    let bpk = dir.join("model/model.bpk");
+    let mut bytes = std::fs::read(&bpk).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0xff;
+    std::fs::write(&bpk, bytes).unwrap();
+    let e = loading::load(dir, &device).err().unwrap().to_string();
+    assert!(e.contains("damaged or replaced"), "{e}");
+}
