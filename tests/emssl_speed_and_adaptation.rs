@@ -207,7 +207,7 @@ fn adaptation_recovers_most_of_the_error_a_longer_arm_causes() {
         ..AdaptationConfig::quick()
     };
     let dir = std::env::temp_dir().join(format!("selfmodel-adapt-{}", std::process::id()));
-    let (rows, curve) = adapt_robot(&cfg, &ur5(), "ur5", &dir, DeviceChoice::Cpu).unwrap();
+    let (rows, curve) = adapt_robot(&cfg, &ur5(), &dir, DeviceChoice::Cpu).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(rows.len(), 2);
     for r in &rows {

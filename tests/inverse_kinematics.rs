@@ -389,7 +389,7 @@ fn reused_units_keep_the_revision_that_trained_them() {
     cfg.ranges_deg = vec![90.0];
     let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
     let device = selfmodel::core::device::DeviceChoice::Cpu;
-    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap().rows;
+    let first = run(&cfg, &robot, &dir, device, false).unwrap().rows;
     // Stamp every unit as trained by an earlier revision.
     let units = dir.join("units").join("90");
     for entry in std::fs::read_dir(&units).unwrap() {
@@ -400,7 +400,7 @@ fn reused_units_keep_the_revision_that_trained_them() {
             std::fs::write(&path, stamped).unwrap();
         }
     }
-    let again = run(&cfg, &robot, "ur5", &dir, device, true).unwrap().rows;
+    let again = run(&cfg, &robot, &dir, device, true).unwrap().rows;
     assert_eq!(again.len(), first.len());
     assert!(again.iter().all(|r| r.git_revision == "earlier-revision"));
     let curve = std::fs::read_to_string(dir.join("emssl_curve.csv")).unwrap();
@@ -430,7 +430,7 @@ fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
     cfg.ranges_deg = vec![90.0];
     let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
     let device = selfmodel::core::device::DeviceChoice::Cpu;
-    let first = run(&cfg, &robot, "ur5", &dir, device, false).unwrap();
+    let first = run(&cfg, &robot, &dir, device, false).unwrap();
     assert_eq!(first.units_done, first.units);
     assert!(first.partial_note().is_none());
     let units = dir.join("units").join("90");
@@ -452,7 +452,7 @@ fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
         .iter()
         .map(|f| (dir.join(f), std::fs::read(dir.join(f)).unwrap()))
         .collect();
-    let err = run(&cfg, &robot, "ur5", &dir, device, true)
+    let err = run(&cfg, &robot, &dir, device, true)
         .err()
         .expect("a damaged checkpoint is an error")
         .to_string();

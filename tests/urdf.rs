@@ -348,6 +348,9 @@ fn a_description_is_read_once_per_version_of_its_file() {
     );
     assert_eq!(first.chain.joint_names(), again.chain.joint_names());
     assert_eq!(first.geometry.len(), again.geometry.len());
+    // The robot carries the name reports give it: its path (and group), as its spec's label.
+    assert_eq!(first.label, spec.label());
+    assert!(first.label.ends_with("r.urdf"), "{}", first.label);
     // Kinematics only is another robot (no meshes), read once too.
     assert_eq!(spec.load_kinematics().unwrap().dof(), first.dof());
     assert_eq!(description_reads(&urdf), 2);

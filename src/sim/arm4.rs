@@ -104,6 +104,7 @@ pub fn arm4() -> Robot {
         .collect();
     Robot {
         name: "arm4".into(),
+        label: "arm4".into(),
         chain,
         geometry,
     }

@@ -155,6 +155,7 @@ pub fn ur5(range: [f64; 2]) -> Robot {
     let geometry = dh_geometry(&ur5_parameters());
     Robot {
         name: "ur5".into(),
+        label: "ur5".into(),
         chain,
         geometry,
     }

@@ -8,7 +8,11 @@ use crate::sim::kinematics::KinematicChain;
 /// A robot the simulator can move and render.
 #[derive(Clone, Debug)]
 pub struct Robot {
+    /// The description's own name (`<robot name=...>`; `arm4`, `ur5` for the built-in ones).
     pub name: String,
+    /// How reports and result rows name it: `arm4`, `ur5`, or the description's path with its
+    /// tip or joint group ([`crate::sim::robots::RobotSpec::label`]).
+    pub label: String,
     pub chain: KinematicChain,
     /// Visual geometry of each link (index as in `chain.links`), in the link's frame.
     pub geometry: Vec<Bvh>,

@@ -179,15 +179,19 @@ impl RobotSpec {
                 tip,
                 geometry,
                 joints,
-            } => crate::sim::urdf_loader::load_urdf_with(
-                path,
-                &UrdfOptions {
-                    base: crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
-                    tip: tip.clone(),
-                    geometry: geometry_override.unwrap_or(*geometry),
-                    joints: joints.clone(),
-                },
-            ),
+            } => {
+                let mut robot = crate::sim::urdf_loader::load_urdf_with(
+                    path,
+                    &UrdfOptions {
+                        base: crate::sim::urdf_loader::pose_from_xyz_rpy(*base_xyz, *base_rpy),
+                        tip: tip.clone(),
+                        geometry: geometry_override.unwrap_or(*geometry),
+                        joints: joints.clone(),
+                    },
+                )?;
+                robot.label = self.label();
+                Ok(robot)
+            }
         }
     }
 

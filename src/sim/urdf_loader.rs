@@ -494,6 +494,7 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
     }
     Ok(Robot {
         name: urdf.name.clone(),
+        label: path.display().to_string(),
         chain,
         geometry,
     })

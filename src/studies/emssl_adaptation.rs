@@ -217,11 +217,11 @@ struct BaseState {
 fn base_model(
     cfg: &AdaptationConfig,
     robot: &Robot,
-    robot_name: &str,
     data: &IkData,
     dir: &Path,
     device: &Device,
 ) -> Result<Base> {
+    let robot_name = robot.label.as_str();
     let folder = dir.join(format!("base_{}", file_name(robot_name)));
     let file = folder.join("model.bpk");
     let state_path = folder.join("base.json");
@@ -318,13 +318,13 @@ fn changed_data(data: &IkData, changed: &KinematicChain) -> IkData {
 pub fn adapt_robot(
     cfg: &AdaptationConfig,
     robot: &Robot,
-    robot_name: &str,
     dir: &Path,
     device_choice: DeviceChoice,
 ) -> Result<(Vec<AdaptationRow>, Vec<AdaptationCurveRow>)> {
+    let robot_name = robot.label.as_str();
     let device = crate::core::device::select(device_choice)?;
     let data = IkData::generate(&robot.chain, &cfg.base.data(cfg.range_deg))?;
-    let base = base_model(cfg, robot, robot_name, &data, dir, &device)?;
+    let base = base_model(cfg, robot, &data, dir, &device)?;
     let model_cfg = cfg.base.model(robot.dof());
     let batch = cfg.base.fit.inference_batch;
     let target = base.train_reach_cm * cfg.target_factor;
@@ -477,30 +477,30 @@ fn rows_of_other_robots(
 /// config's robots when given.
 pub fn run(
     cfg: &AdaptationConfig,
-    robot: Option<(Robot, String)>,
+    robot: Option<Robot>,
     dir: &Path,
     device: DeviceChoice,
 ) -> Result<String> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
-    let robots: Vec<(Robot, String)> = match robot {
+    let robots: Vec<Robot> = match robot {
         Some(r) => vec![r],
         None => cfg
             .robots
             .iter()
             .map(|name| match name.as_str() {
-                "ur5" => Ok((crate::sim::robots::BuiltinRobot::Ur5.load(), name.clone())),
-                "arm4" => Ok((crate::sim::robots::BuiltinRobot::Arm4.load(), name.clone())),
+                "ur5" => Ok(crate::sim::robots::BuiltinRobot::Ur5.load()),
+                "arm4" => Ok(crate::sim::robots::BuiltinRobot::Arm4.load()),
                 other => Err(Error::Config(format!(
                     "adaptation: unknown robot \"{other}\" (ur5 or arm4)"
                 ))),
             })
             .collect::<Result<_>>()?,
     };
-    let names: Vec<&str> = robots.iter().map(|(_, n)| n.as_str()).collect();
+    let names: Vec<&str> = robots.iter().map(|r| r.label.as_str()).collect();
     let (mut rows, mut curves) = rows_of_other_robots(dir, &names, &cfg.preset)?;
-    for (robot, name) in &robots {
-        let (r, c) = adapt_robot(cfg, robot, name, dir, device)?;
+    for robot in &robots {
+        let (r, c) = adapt_robot(cfg, robot, dir, device)?;
         rows.extend(r);
         curves.extend(c);
     }

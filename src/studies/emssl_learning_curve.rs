@@ -43,10 +43,10 @@ pub fn run(
     cfg: &IkComparisonConfig,
     rule: &EmsslConfig,
     robot: &Robot,
-    robot_name: &str,
     dir: &Path,
     device_choice: DeviceChoice,
 ) -> Result<String> {
+    let robot_name = robot.label.as_str();
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
     let device = crate::core::device::select(device_choice)?;

@@ -221,10 +221,10 @@ impl Bench<'_> {
 pub fn run(
     cfg: &SamplingSpeedConfig,
     robot: &Robot,
-    robot_name: &str,
     dir: &Path,
     device_choice: DeviceChoice,
 ) -> Result<String> {
+    let robot_name = robot.label.as_str();
     if cfg.latencies.is_empty() || cfg.inference_batch == 0 || cfg.batch_sweep.contains(&0) {
         return Err(Error::Config(
             "sampling speed: give at least one latency and positive batch sizes".into(),

@@ -202,7 +202,6 @@ fn seeded(cfg: &SeedsConfig, seed: u64) -> IkComparisonConfig {
 pub fn run(
     cfg: &SeedsConfig,
     robot: &Robot,
-    robot_name: &str,
     dir: &Path,
     device: DeviceChoice,
     resume: bool,
@@ -220,7 +219,6 @@ pub fn run(
         runs.push(RangeRun::start(
             t,
             robot,
-            robot_name,
             cfg.range_deg,
             &dir.join("runs").join(format!("seed_{seed}")),
             device,

@@ -557,7 +557,6 @@ pub fn read_predictions(path: &Path) -> Result<Vec<Vec<f64>>> {
 pub struct RangeRun<'a> {
     cfg: &'a IkComparisonConfig,
     robot: &'a Robot,
-    robot_name: &'a str,
     range_deg: f64,
     data: IkData,
     device: burn::tensor::Device,
@@ -587,7 +586,6 @@ impl<'a> RangeRun<'a> {
     pub fn start(
         cfg: &'a IkComparisonConfig,
         robot: &'a Robot,
-        robot_name: &'a str,
         range_deg: f64,
         dir: &Path,
         device_choice: DeviceChoice,
@@ -597,7 +595,6 @@ impl<'a> RangeRun<'a> {
         Ok(RangeRun {
             cfg,
             robot,
-            robot_name,
             range_deg,
             data: IkData::generate(&robot.chain, &cfg.data(range_deg))?,
             device: crate::core::device::select(device_choice)?,
@@ -833,14 +830,14 @@ impl<'a> RangeRun<'a> {
         // The paper's figures are for its (UR5-like) arm: beside the built-in UR5's rows only.
         let paper = if a.method.contains("best of")
             || a.method.contains("wrapped")
-            || self.robot_name != crate::sim::robots::BuiltinRobot::Ur5.name()
+            || self.robot.label != crate::sim::robots::BuiltinRobot::Ur5.name()
         {
             None
         } else {
             paper_reference(base, self.range_deg)
         };
         Ok(IkRow {
-            robot: self.robot_name.to_string(),
+            robot: self.robot.label.to_string(),
             range_deg: self.range_deg,
             method: a.method.clone(),
             mean_cm: e.mean_cm,
@@ -885,7 +882,6 @@ pub struct RangeOutcome {
 pub fn run_range(
     cfg: &IkComparisonConfig,
     robot: &Robot,
-    robot_name: &str,
     range_deg: f64,
     dir: &Path,
     device_choice: DeviceChoice,
@@ -895,7 +891,6 @@ pub fn run_range(
     let mut run = RangeRun::start(
         cfg,
         robot,
-        robot_name,
         range_deg,
         dir,
         device_choice,
@@ -1147,11 +1142,11 @@ fn draw_learning_curve(dir: &Path, title: &str, rows: &[CurveRow]) -> Result<()>
 pub fn run(
     cfg: &IkComparisonConfig,
     robot: &Robot,
-    robot_name: &str,
     dir: &Path,
     device: DeviceChoice,
     resume: bool,
 ) -> Result<Table2Outcome> {
+    let robot_name = robot.label.as_str();
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     write_json(&dir.join("config.json"), cfg)?;
     let mut rows = Vec::new();
@@ -1167,7 +1162,7 @@ pub fn run(
             all_curves.extend_from_slice(range_curves);
             write_outputs(cfg, robot_name, dir, all, &all_curves, &emssl_curves, true).map(|_| ())
         };
-        let range = run_range(cfg, robot, robot_name, r, dir, device, resume, &partial)?;
+        let range = run_range(cfg, robot, r, dir, device, resume, &partial)?;
         units_done += range.units_done;
         units += range.units;
         rows.extend(range.rows);

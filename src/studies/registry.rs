@@ -220,9 +220,9 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
         "emssl_table2",
     )?;
     let cfg = IkComparisonConfig::named(&opts.preset)?;
-    let (robot, name) = opts.ik_robot()?;
+    let robot = opts.ik_robot()?;
     let outcome =
-        crate::studies::emssl_table2::run(&cfg, &robot, &name, dir, opts.device, opts.resume)?;
+        crate::studies::emssl_table2::run(&cfg, &robot, dir, opts.device, opts.resume)?;
     let rows = outcome
         .rows
         .iter()
@@ -251,8 +251,8 @@ pub fn run_emssl_seeds(opts: &RunOptions, dir: &Path) -> Result<String> {
         "emssl_seeds",
     )?;
     let cfg = crate::studies::emssl_seeds::SeedsConfig::preset(&opts.preset)?;
-    let (robot, name) = opts.ik_robot()?;
-    crate::studies::emssl_seeds::run(&cfg, &robot, &name, dir, opts.device, opts.resume)
+    let robot = opts.ik_robot()?;
+    crate::studies::emssl_seeds::run(&cfg, &robot, dir, opts.device, opts.resume)
 }
 
 /// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
@@ -265,7 +265,7 @@ pub fn run_emssl_study(opts: &RunOptions, dir: &Path) -> Result<String> {
         "emssl_study",
     )?;
     let cfg = crate::studies::emssl_study::StudyConfig::preset(&opts.preset)?;
-    let (robot, _) = opts.ik_robot()?;
+    let robot = opts.ik_robot()?;
     crate::studies::emssl_study::run(&cfg, &robot, dir, opts.device, opts.resume)
 }
 
@@ -275,8 +275,8 @@ pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String>
     let base = IkComparisonConfig::preset(&opts.preset)?;
     let iterations = if opts.preset == "quick" { 8 } else { 40 };
     let cfg = crate::studies::emssl_learning_curve::config(&base, iterations);
-    let (robot, name) = opts.ik_robot()?;
-    crate::studies::emssl_learning_curve::run(&cfg, &base.emssl, &robot, &name, dir, opts.device)
+    let robot = opts.ik_robot()?;
+    crate::studies::emssl_learning_curve::run(&cfg, &base.emssl, &robot, dir, opts.device)
 }
 
 /// Table III and Figure 7 of the EMSSL paper: the sampling phase's time under each strategy.
@@ -286,8 +286,8 @@ pub fn run_emssl_sampling_speed(opts: &RunOptions, dir: &Path) -> Result<String>
     if let Some(l) = &opts.latencies {
         cfg.latencies = l.clone();
     }
-    let (robot, name) = opts.ik_robot()?;
-    crate::studies::emssl_sampling_speed::run(&cfg, &robot, &name, dir, opts.device)
+    let robot = opts.ik_robot()?;
+    crate::studies::emssl_sampling_speed::run(&cfg, &robot, dir, opts.device)
 }
 
 /// Table IV of the EMSSL paper: adapting the inverse model to a changed arm, two approaches.

@@ -128,9 +128,9 @@ impl RunOptions {
         Some(std::path::Path::new(RUNS).join("robots").join(name))
     }
 
-    /// The arm of the inverse-kinematics experiments (default ur5) and its name for reports:
-    /// its kinematics only (no mesh is read).
-    pub fn ik_robot(&self) -> Result<(crate::sim::robot::Robot, String)> {
+    /// The arm of the inverse-kinematics experiments (default ur5), named for reports by its
+    /// `label`: its kinematics only (no mesh is read).
+    pub fn ik_robot(&self) -> Result<crate::sim::robot::Robot> {
         let spec = self.robot_spec(BuiltinRobot::Ur5);
         let robot = spec.load_kinematics()?;
         if robot.dof() == 0 {
@@ -139,7 +139,7 @@ impl RunOptions {
                 spec.label()
             )));
         }
-        Ok((robot, spec.label()))
+        Ok(robot)
     }
 
     /// Apply the switches to a self-model run: the robot, its camera (the papers' arm, and a

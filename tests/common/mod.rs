@@ -11,6 +11,7 @@ use selfmodel::sim::shape::Shape;
 pub fn static_robot(shapes: Vec<Shape>) -> Robot {
     Robot {
         name: "static".into(),
+        label: "static".into(),
         chain: KinematicChain::new(vec!["body".into()], vec![], Isometry3::identity(), None)
             .unwrap(),
         geometry: vec![Bvh::new(shapes)],
