@@ -1,6 +1,6 @@
 //! Pieces every binary shares: robot selection, the one-line error exit, the git revision.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use nalgebra::Isometry3;
@@ -138,11 +138,31 @@ pub struct JointGroupArgs {
         conflicts_with = "joints"
     )]
     pub tips: Option<Vec<String>>,
+    /// The joint vector is a planning group of the robot's SRDF file (MoveIt's format: its
+    /// joints, links, chains and subgroups; its chains' tip links are the tips): the one
+    /// `.srdf` beside the URDF, in `../config/`, or in a `*_moveit_config` package beside it.
+    #[arg(
+        long,
+        value_name = "NAME",
+        requires = "urdf",
+        conflicts_with_all = ["joints", "tips"]
+    )]
+    pub group: Option<String>,
+    /// The SRDF file `--group` reads [default: the one beside the URDF].
+    #[arg(long, value_name = "FILE", requires = "group")]
+    pub srdf: Option<PathBuf>,
 }
 
 impl JointGroupArgs {
-    pub fn group(&self) -> Result<crate::sim::kinematics::JointGroup> {
-        crate::sim::kinematics::JointGroup::from_args(self.joints.as_deref(), self.tips.as_deref())
+    /// The joint vector these switches name on the robot described at `urdf`.
+    pub fn group(&self, urdf: Option<&Path>) -> Result<crate::sim::kinematics::JointGroup> {
+        crate::sim::kinematics::JointGroup::from_args(
+            self.joints.as_deref(),
+            self.tips.as_deref(),
+            self.group.as_deref(),
+            self.srdf.as_deref(),
+            urdf,
+        )
     }
 }
 
@@ -173,7 +193,7 @@ impl RobotArgs {
                     base_rpy: [r, p, y],
                     tip: self.tip.clone(),
                     geometry: self.geometry,
-                    joints: self.group.group()?,
+                    joints: self.group.group(Some(path))?,
                 }
             }
             None => crate::sim::robots::RobotSpec::Builtin(self.robot),
@@ -385,7 +405,7 @@ impl ExperimentArgs {
             arm4_scene: self.arm4_scene,
             tip: self.tip.clone(),
             geometry: self.geometry,
-            joints: self.group.group()?,
+            joints: self.group.group(self.urdf.as_deref())?,
             camera: self.camera.choice(),
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),

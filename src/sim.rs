@@ -14,6 +14,7 @@ pub mod ray_caster;
 pub mod robot;
 pub mod robots;
 pub mod shape;
+pub mod srdf;
 pub mod tensor_kinematics;
 pub mod trajectory;
 pub mod urdf_loader;

@@ -1137,3 +1137,42 @@ fn train_samples_lengthens_the_trajectory_and_keeps_the_test_count() {
         rows[0].note
     );
 }
+
+/// `--group NAME` reads the SRDF beside the URDF: the dataset's joints are the group's; with
+/// no SRDF there, one line says to give one with --srdf and nothing is written.
+#[test]
+fn a_group_of_the_srdf_beside_the_urdf_is_the_joint_vector() {
+    let dir = common::tempdir();
+    let urdf = dir.path().join("two_arms.urdf");
+    std::fs::write(&urdf, common::two_armed_urdf()).unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    let npz = out_dir.join("g.npz");
+    let args = |group: &str| {
+        vec![
+            "--preset".to_string(),
+            "quick".into(),
+            "--urdf".into(),
+            urdf.display().to_string(),
+            "--group".into(),
+            group.into(),
+            "--out".into(),
+            npz.display().to_string(),
+        ]
+    };
+    let run = |group: &str| {
+        let a = args(group);
+        dataset(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    assert_clean_failure(&run("left_arm"), &["no SRDF file", "--srdf"], &out_dir);
+    std::fs::write(
+        dir.path().join("two_arms.srdf"),
+        r#"<robot name="two_arms"><group name="left_arm"><chain base_link="base" tip_link="left_hand"/></group></robot>"#,
+    )
+    .unwrap();
+    assert_clean_failure(&run("legs"), &["\"legs\" is not a group", "left_arm"], &out_dir);
+    let out = run("left_arm");
+    common::assert_ok(&out);
+    let data = selfmodel::data::dataset::Dataset::load(&npz).unwrap();
+    assert_eq!(data.joint_names, ["waist", "l1", "l2"]);
+}

@@ -635,3 +635,88 @@ fn a_dataset_is_read_only_with_the_robot_whose_joints_it_names() {
         "{err}"
     );
 }
+
+/// `--group NAME`: a planning group of the SRDF file beside the URDF (MoveIt's format) names
+/// the joint vector (chains, links, joints, subgroups) and its tips; the file is found beside
+/// the URDF, and a missing group, a cycle or a missing file is one line that says what to do.
+#[test]
+fn srdf_groups_name_the_joint_vector_and_its_tips() {
+    use selfmodel::sim::kinematics::JointGroup;
+    use selfmodel::sim::srdf::find_beside;
+    use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
+    let dir = common::tempdir();
+    let path = dir.path().join("two_arms.urdf");
+    std::fs::write(&path, common::two_armed_urdf()).unwrap();
+    // No SRDF yet: --group says where it looked and how to give one.
+    let err = find_beside(&path).unwrap_err().to_string();
+    assert!(err.contains("no SRDF file") && err.contains("--srdf"), "{err}");
+    let srdf = dir.path().join("two_arms.srdf");
+    std::fs::write(
+        &srdf,
+        r#"<?xml version="1.0"?>
+<robot name="two_arms">
+  <virtual_joint name="world_joint" type="fixed" parent_frame="world" child_link="base"/>
+  <group name="left_arm"><chain base_link="torso" tip_link="left_hand"/></group>
+  <group name="right_arm"><chain base_link="torso" tip_link="right_hand"/></group>
+  <group name="trunk"><joint name="world_joint"/><joint name="waist"/></group>
+  <group name="arms"><group name="right_arm"/><group name="trunk"/><group name="left_arm"/></group>
+  <group name="hand"><link name="finger"/></group>
+  <group name="loop"><group name="loop"/></group>
+  <group_state name="home" group="arms"><joint name="waist" value="0"/></group_state>
+  <disable_collisions link1="base" link2="torso" reason="Adjacent"/>
+</robot>"#,
+    )
+    .unwrap();
+    assert_eq!(find_beside(&path).unwrap(), srdf);
+    let load = |group: &str| {
+        load_urdf_with(
+            &path,
+            &UrdfOptions {
+                geometry: GeometryKind::None,
+                joints: JointGroup::Srdf {
+                    file: srdf.clone(),
+                    group: group.into(),
+                },
+                ..UrdfOptions::default()
+            },
+        )
+    };
+    // One chain: its joints (the fixed wrist skipped), its tip link the tip.
+    let left = load("left_arm").unwrap();
+    assert_eq!(left.chain.joint_names(), ["l1", "l2"]);
+    assert_eq!(left.chain.tip_names(), ["left_hand"]);
+    // Subgroups: the union in the tree's depth-first order, both chains' tips.
+    let arms = load("arms").unwrap();
+    assert_eq!(arms.chain.joint_names(), ["waist", "r1", "r2", "l1", "l2"]);
+    assert_eq!(arms.chain.tip_names(), ["right_hand", "left_hand"]);
+    // The same joints as --tips gives, and the same hands' poses.
+    let tips = load_urdf_with(
+        &path,
+        &UrdfOptions {
+            geometry: GeometryKind::None,
+            joints: JointGroup::Tips(vec!["right_hand".into(), "left_hand".into()]),
+            ..UrdfOptions::default()
+        },
+    )
+    .unwrap();
+    let q = [0.3, -0.2, 0.5, 0.1, -0.4];
+    assert_eq!(tips.chain.joint_names(), arms.chain.joint_names());
+    for ((a, pa), (b, pb)) in arms.chain.tips().into_iter().zip(tips.chain.tips()) {
+        let fa = arms.chain.link_frames(&q)[a] * pa;
+        let fb = tips.chain.link_frames(&q)[b] * pb;
+        assert!((fa - fb).norm() < 1e-12);
+    }
+    // A link: the joint that moves it.
+    assert_eq!(load("hand").unwrap().chain.joint_names(), ["grip"]);
+    let err = load("legs").unwrap_err().to_string();
+    assert!(
+        err.contains("\"legs\" is not a group") && err.contains("left_arm, right_arm, trunk"),
+        "{err}"
+    );
+    let err = load("loop").unwrap_err().to_string();
+    assert!(err.contains("cycle"), "{err}");
+    // A second SRDF beside it: the user chooses.
+    std::fs::copy(&srdf, dir.path().join("other.srdf")).unwrap();
+    let err = find_beside(&path).unwrap_err().to_string();
+    assert!(err.contains("several SRDF files") && err.contains("--srdf"), "{err}");
+}

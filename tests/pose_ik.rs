@@ -223,6 +223,22 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
         err.contains("[j1, j2, j3, j4, j5, j6]") && err.contains("[j1, shoulder, j3, j4, j5, j6]"),
         "{err}"
     );
+    // The same names in another order along the chain (j2 and j3 swapped): refused too.
+    let reordered = other_dir.path().join("reordered.urdf");
+    std::fs::write(
+        &reordered,
+        common::arm_urdf(6, true)
+            .replace("name=\"j2\"", "name=\"tmp\"")
+            .replace("name=\"j3\"", "name=\"j2\"")
+            .replace("name=\"tmp\"", "name=\"j3\""),
+    )
+    .unwrap();
+    let reordered = load(&reordered);
+    let err = loaded.check_robot(&reordered).unwrap_err().to_string();
+    assert!(
+        err.contains("[j1, j2, j3, j4, j5, j6]") && err.contains("[j1, j3, j2, j4, j5, j6]"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -50,9 +50,11 @@ struct PyRobot {
 impl PyRobot {
     /// Load a URDF as ROS ships it. `tip`: the end-effector link (default: the last link of
     /// the longest chain); `joints`: "all" or a list of joint names; `tips`: several links
-    /// (the union of their chains); `geometry`: "visual", "collision" or "none".
+    /// (the union of their chains); `geometry`: "visual", "collision" or "none"; `group`: a
+    /// planning group of the SRDF file beside the URDF (or `srdf`), as `--group` reads it.
     #[staticmethod]
-    #[pyo3(signature = (path, tip=None, joints=None, tips=None, geometry="visual"))]
+    #[pyo3(signature = (path, tip=None, joints=None, tips=None, geometry="visual", group=None, srdf=None))]
+    #[allow(clippy::too_many_arguments)]
     fn from_urdf(
         py: Python<'_>,
         path: PathBuf,
@@ -60,6 +62,8 @@ impl PyRobot {
         joints: Option<Vec<String>>,
         tips: Option<Vec<String>>,
         geometry: &str,
+        group: Option<String>,
+        srdf: Option<PathBuf>,
     ) -> PyResult<Self> {
         let geometry = match geometry {
             "visual" => GeometryKind::Visual,
@@ -71,8 +75,14 @@ impl PyRobot {
                 )));
             }
         };
-        let joints =
-            JointGroup::from_args(joints.as_deref(), tips.as_deref()).map_err(value_error)?;
+        let joints = JointGroup::from_args(
+            joints.as_deref(),
+            tips.as_deref(),
+            group.as_deref(),
+            srdf.as_deref(),
+            Some(&path),
+        )
+        .map_err(value_error)?;
         let spec = RobotSpec::Urdf {
             path,
             base_xyz: [0.0; 3],

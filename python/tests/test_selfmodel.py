@@ -270,3 +270,16 @@ def test_the_example_runs(tmp_path):
     exact = float(out.stdout.split("% exact")[0].split()[-1])
     assert exact >= 95.0, out.stdout
     assert (tmp_path / "ik.png").stat().st_size > 10_000
+
+
+def test_a_group_of_the_srdf_beside_the_urdf(tmp_path):
+    urdf = write_arm(tmp_path, 6)
+    (tmp_path / "arm.srdf").write_text(
+        '<robot name="test_arm"><group name="wrist"><joint name="j5"/><joint name="j6"/></group>'
+        '<group name="upper"><chain base_link="base" tip_link="l3"/></group></robot>'
+    )
+    assert selfmodel.Robot.from_urdf(str(urdf), group="wrist").joint_names == ["j5", "j6"]
+    upper = selfmodel.Robot.from_urdf(str(urdf), group="upper")
+    assert upper.joint_names == ["j1", "j2", "j3"]
+    with pytest.raises(ValueError, match="is not a group"):
+        selfmodel.Robot.from_urdf(str(urdf), group="legs")

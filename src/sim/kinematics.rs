@@ -166,6 +166,15 @@ pub enum JointGroup {
     /// These joints, by name (`--joints a,b,c`), in the tree's order whatever order they are
     /// named in.
     Named(Vec<String>),
+    /// A planning group of an SRDF file (`--group NAME`, MoveIt's format; the file beside
+    /// the URDF or `--srdf FILE`): the joints it lists and those of its links, chains and
+    /// subgroups; its chains' tip links are its tips. Resolved when the description is
+    /// loaded ([`crate::sim::srdf`]) into [`JointGroup::Members`].
+    Srdf { file: std::path::PathBuf, group: String },
+    /// Joints by name with these links as the tips (what an SRDF group resolves to): fixed
+    /// joints among them are skipped, a mimic joint makes its leader an input, and one tip is
+    /// the tip (unless `--tip` names another).
+    Members { joints: Vec<String>, tips: Vec<String> },
 }
 
 impl JointGroup {
@@ -173,8 +182,36 @@ impl JointGroup {
         *self == JointGroup::Chain
     }
 
-    /// `--joints` and `--tips` as given on a command line (none: the chain to the tip).
-    pub fn from_args(joints: Option<&[String]>, tips: Option<&[String]>) -> Result<Self> {
+    /// `--joints`, `--tips` and `--group` (with `--srdf`, else the SRDF file beside the
+    /// description at `urdf`) as given on a command line (none: the chain to the tip).
+    pub fn from_args(
+        joints: Option<&[String]>,
+        tips: Option<&[String]>,
+        group: Option<&str>,
+        srdf: Option<&std::path::Path>,
+        urdf: Option<&std::path::Path>,
+    ) -> Result<Self> {
+        if let Some(group) = group {
+            if joints.is_some() || tips.is_some() {
+                return Err(Error::Config(
+                    "--group, --joints and --tips name the joint vector in different ways: give one"
+                        .into(),
+                ));
+            }
+            let file = match (srdf, urdf) {
+                (Some(file), _) => file.to_path_buf(),
+                (None, Some(urdf)) => crate::sim::srdf::find_beside(urdf)?,
+                (None, None) => {
+                    return Err(Error::Config(
+                        "--group needs a robot description (--urdf)".into(),
+                    ));
+                }
+            };
+            return Ok(JointGroup::Srdf {
+                file,
+                group: group.to_string(),
+            });
+        }
         match (joints, tips) {
             (Some(_), Some(_)) => Err(Error::Config(
                 "--joints and --tips name the joint vector two ways: give one".into(),
@@ -332,7 +369,7 @@ impl KinematicChain {
                 joint
             })
             .collect();
-        let (tip_link, tip_offset) = match tip {
+        let (mut tip_link, mut tip_offset) = match tip {
             Some((l, p)) => (new_index[l], p),
             None => (new_index[deepest], Point3::origin()),
         };
@@ -387,6 +424,32 @@ impl KinematicChain {
                         })?;
                     on_path[j] = true;
                 }
+            }
+            JointGroup::Members { joints: names, tips } => {
+                for name in names {
+                    let j = joints.iter().position(|j| &j.name == name).ok_or_else(|| {
+                        Error::Config(format!("group: \"{name}\" is not a joint of this robot"))
+                    })?;
+                    on_path[j] = true;
+                }
+                for t in tips {
+                    let l = sorted_links.iter().position(|l| *l == t).ok_or_else(|| {
+                        Error::Config(format!("group: its tip \"{t}\" is not a link of this robot"))
+                    })?;
+                    group_tips.push(l);
+                }
+                if group_tips.len() == 1 {
+                    if tip.is_none() {
+                        (tip_link, tip_offset) = (group_tips[0], Point3::origin());
+                    }
+                    group_tips.clear();
+                }
+            }
+            JointGroup::Srdf { file, group } => {
+                return Err(Error::Config(format!(
+                    "group \"{group}\" of {}: an SRDF group is resolved as its description loads (urdf_loader)",
+                    file.display()
+                )));
             }
         }
         // Where mimic leaders went in the sorted order.

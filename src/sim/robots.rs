@@ -217,6 +217,10 @@ impl RobotSpec {
                     JointGroup::All => label += " (all joints)",
                     JointGroup::Tips(t) => label += &format!(" (tips {})", t.join(",")),
                     JointGroup::Named(n) => label += &format!(" (joints {})", n.join(",")),
+                    JointGroup::Srdf { group, .. } => label += &format!(" (group {group})"),
+                    JointGroup::Members { joints, .. } => {
+                        label += &format!(" (joints {})", joints.join(","))
+                    }
                 }
                 label
             }

@@ -380,12 +380,27 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             }
         },
     };
+    let group = match &options.joints {
+        JointGroup::Srdf { file, group } => {
+            let tree: Vec<crate::sim::srdf::TreeJoint> = urdf
+                .joints
+                .iter()
+                .map(|j| (j.name.clone(), j.parent.link.clone(), j.child.link.clone()))
+                .collect();
+            let members = crate::sim::srdf::Srdf::read(file)?.resolve(group, &tree)?;
+            JointGroup::Members {
+                joints: members.joints,
+                tips: members.tips,
+            }
+        }
+        other => other.clone(),
+    };
     let chain = KinematicChain::with_group(
         link_names.clone(),
         joints,
         options.base,
         tip,
-        &options.joints,
+        &group,
     )
     .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
 
