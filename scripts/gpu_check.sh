@@ -48,7 +48,7 @@ run)
   # so a part that hangs or aborts costs only itself; the console goes on across them.
   rm -f "$out/console.txt"
   deadline=$(( $(date +%s) + ${GPU_CHECK_SECONDS:-480} ))
-  for part in ${GPU_CHECK_PARTS:-decoders neurokin equivalence counts profile k3dgs fill cpu}; do
+  for part in ${GPU_CHECK_PARTS:-decoders neurokin equivalence counts profile k3dgs fill cpu split}; do
     left=$(( deadline - $(date +%s) ))
     if [ "$left" -lt 15 ]; then
       echo "($part: not run, the check's time was spent)" | tee -a "$out/console.txt"

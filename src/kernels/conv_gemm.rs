@@ -288,6 +288,37 @@ fn columns<'a>(image: &'a [f32], g: &ConvGeometry, buffer: &'a mut [f32]) -> &'a
     }
 }
 
+/// The environment variable that sets [`image_parallelism`]'s work per thread (multiply-adds;
+/// 0, the default: every thread, gemm's own rule), for the GPU check's thread sweep.
+pub const WORK_PER_THREAD_VAR: &str = "SELFMODEL_GEMM_WORK_PER_THREAD";
+
+/// How one image's GEMM of `macs` multiply-adds is split when there are fewer images
+/// (`batch`) than threads (with as many images as threads, each image's GEMM runs on one):
+/// over every thread, or, with a work per thread set ([`WORK_PER_THREAD_VAR`]), over at most
+/// `macs / work` threads, so that no thread's share is too small to pay for waking it. The
+/// split is over output rows and pixels, never over the sum: the result is the same at any
+/// thread count.
+fn image_parallelism(batch: usize, macs: usize) -> gemm::Parallelism {
+    static WORK: std::sync::OnceLock<usize> = std::sync::OnceLock::new();
+    let threads = rayon::current_num_threads();
+    if batch >= threads {
+        return gemm::Parallelism::None;
+    }
+    let work = *WORK.get_or_init(|| {
+        std::env::var(WORK_PER_THREAD_VAR)
+            .ok()
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap_or(0)
+    });
+    if work == 0 {
+        return gemm::Parallelism::Rayon(0);
+    }
+    match (macs / work).min(threads) {
+        0 | 1 => gemm::Parallelism::None,
+        n => gemm::Parallelism::Rayon(n),
+    }
+}
+
 /// Images per chunk: at most `CHUNKS` chunks, whatever the number of threads.
 const CHUNKS: usize = 8;
 
@@ -302,11 +333,7 @@ pub fn forward(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
     let image_in = g.c_in * g.input[0] * g.input[1];
     assert_eq!(x.len(), g.batch * image_in);
     assert_eq!(w.len(), g.c_out * patch);
-    let parallelism = if g.batch < rayon::current_num_threads() {
-        gemm::Parallelism::Rayon(0)
-    } else {
-        gemm::Parallelism::None
-    };
+    let parallelism = image_parallelism(g.batch, g.c_out * pixels * patch);
     let mut y = vec![0f32; g.batch * g.c_out * pixels];
     y.par_chunks_mut(g.c_out * pixels)
         .enumerate()
@@ -402,11 +429,7 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
     let image_out = g.c_in * g.input[0] * g.input[1];
     assert_eq!(x.len(), g.batch * g.c_out * pixels);
     assert_eq!(w.len(), g.c_out * patch);
-    let parallelism = if g.batch < rayon::current_num_threads() {
-        gemm::Parallelism::Rayon(0)
-    } else {
-        gemm::Parallelism::None
-    };
+    let parallelism = image_parallelism(g.batch, g.c_out * pixels * patch);
     // With few pixels, gemm's output rows (pixels) fill its 64-row microkernel poorly: write
     // `col` column-major (one pixel's patch contiguous) and transpose it for col2im. 2.4x faster
     // for NeuroKin-64's 4x4 layer (measured), the same elsewhere.

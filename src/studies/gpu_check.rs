@@ -15,7 +15,10 @@
 //! - `fill`: `decoders` at batches that fill the GPU (inference 4,096, training 1,024), last of
 //!   the GPU parts since the first sitting hung there;
 //! - `cpu`: `bench_decoders` on the CPU at each of `--threads`, beside PyTorch at as many
-//!   threads (`torch_reference.py --threads N`).
+//!   threads (`torch_reference.py --threads N`);
+//! - `split`: at the largest of `--threads`, the CPU figures again under each work per thread
+//!   of [`SPLIT_WORK`] (how a lone image's GEMM is split, `SELFMODEL_GEMM_WORK_PER_THREAD`),
+//!   beside PyTorch at as many threads: what batch 1 loses from 8 to 16 threads.
 //!
 //! Each part appends to `console.txt` and writes its CSV as it finishes, so a run stopped by
 //! the machine's time limit keeps what it measured; `scripts/gpu_check.sh run` starts one
@@ -42,10 +45,14 @@ pub enum Part {
     Equivalence,
     Fill,
     Cpu,
+    Split,
 }
 
+/// The works per thread (multiply-adds) the `split` part tries: 0 is every thread.
+pub const SPLIT_WORK: [usize; 4] = [0, 1 << 18, 1 << 20, 1 << 22];
+
 impl Part {
-    pub const ALL: [Part; 7] = [
+    pub const ALL: [Part; 8] = [
         Part::Decoders,
         Part::Neurokin,
         Part::Equivalence,
@@ -53,6 +60,7 @@ impl Part {
         Part::K3dgs,
         Part::Fill,
         Part::Cpu,
+        Part::Split,
     ];
 }
 
@@ -140,6 +148,7 @@ pub fn run(check: &GpuCheck) -> Result<()> {
             Part::Equivalence => equivalence(check, &mut console),
             Part::Fill => fill(check, &mut console),
             Part::Cpu => cpu(check, &mut console),
+            Part::Split => split(check, &mut console),
         };
         // A part that fails is reported and the check goes on to the next.
         if let Err(e) = done {
@@ -428,8 +437,19 @@ fn equivalence(check: &GpuCheck, console: &mut Console) -> Result<()> {
 
 /// This binary again, as `--child WHAT` with `threads` rayon threads; its standard output.
 fn child(check: &GpuCheck, what: &str, threads: usize) -> Result<String> {
+    child_with(check, what, threads, &[])
+}
+
+/// [`child`] with these environment variables set.
+fn child_with(
+    check: &GpuCheck,
+    what: &str,
+    threads: usize,
+    env: &[(&str, String)],
+) -> Result<String> {
     let mut command = std::process::Command::new(&check.exe);
     command
+        .envs(env.iter().map(|(k, v)| (*k, v.as_str())))
         .env("RAYON_NUM_THREADS", threads.to_string())
         .args(["--child", what, "--out"])
         .arg(&check.out);
@@ -483,6 +503,72 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
             git_revision: r.git_revision,
         }));
         write_csv(&check.out.join("cpu_threads.csv"), &all)?;
+    }
+    Ok(())
+}
+
+/// One line of the `split` part: a CPU figure under a work per thread.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SplitRow {
+    pub threads: usize,
+    /// Multiply-adds a thread must have before a lone image's GEMM takes it (0: every thread).
+    pub work_per_thread: usize,
+    pub model: String,
+    pub figure: String,
+    pub ours: f64,
+    pub torch: Option<f64>,
+    pub ratio: Option<f64>,
+    pub git_revision: String,
+}
+
+/// The CPU figures at the largest thread count under each of [`SPLIT_WORK`], beside
+/// PyTorch at as many threads (measured once, after ours).
+fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    let threads = check.threads.iter().copied().max().unwrap_or(1);
+    let mut all: Vec<SplitRow> = Vec::new();
+    let mut torch: Vec<BenchRow> = Vec::new();
+    for work in SPLIT_WORK {
+        let var = crate::kernels::conv_gemm::WORK_PER_THREAD_VAR;
+        let json = child_with(check, "cpu-decoders", threads, &[(var, work.to_string())])?;
+        let rows: Vec<BenchRow> = serde_json::from_str(json.trim())
+            .map_err(|e| Error::Config(format!("the CPU child's rows: {e}")))?;
+        console.say(format!(
+            "{threads} CPU threads, a lone image's GEMM split at {work} multiply-adds a thread (0: every thread):"
+        ))?;
+        console.say(console_table(&rows))?;
+        all.extend(rows.iter().map(|r| SplitRow {
+            threads,
+            work_per_thread: work,
+            model: r.model.clone(),
+            figure: r.figure.clone(),
+            ours: r.ours,
+            torch: None,
+            ratio: None,
+            git_revision: r.git_revision.clone(),
+        }));
+        if torch.is_empty() {
+            torch = rows;
+        }
+        write_csv(&check.out.join("gemm_split.csv"), &all)?;
+    }
+    if let Some(py) = &check.python {
+        let script = check.bench_dir.join("torch_reference.py");
+        torch_side(
+            &mut torch,
+            run_torch(py, &script, threads, false, Some(2.0)),
+            console,
+        )?;
+        for row in &mut all {
+            if let Some(t) = torch
+                .iter()
+                .find(|t| t.model == row.model && t.figure == row.figure)
+                .and_then(|t| t.torch)
+            {
+                row.torch = Some(t);
+                row.ratio = Some(row.ours / t);
+            }
+        }
+        write_csv(&check.out.join("gemm_split.csv"), &all)?;
     }
     Ok(())
 }
