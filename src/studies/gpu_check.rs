@@ -87,6 +87,10 @@ pub struct GpuCheck {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ThreadRow {
     pub threads: usize,
+    /// The `split` part's multiply-adds a thread must have before a lone image's GEMM takes
+    /// it (0: every thread); none in the `cpu` part (every thread).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub work_per_thread: Option<usize>,
     pub model: String,
     pub figure: String,
     pub ours: f64,
@@ -495,6 +499,7 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
         console.say(console_table(&rows))?;
         all.extend(rows.into_iter().map(|r| ThreadRow {
             threads: t,
+            work_per_thread: None,
             model: r.model,
             figure: r.figure,
             ours: r.ours,
@@ -507,25 +512,11 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
     Ok(())
 }
 
-/// One line of the `split` part: a CPU figure under a work per thread.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct SplitRow {
-    pub threads: usize,
-    /// Multiply-adds a thread must have before a lone image's GEMM takes it (0: every thread).
-    pub work_per_thread: usize,
-    pub model: String,
-    pub figure: String,
-    pub ours: f64,
-    pub torch: Option<f64>,
-    pub ratio: Option<f64>,
-    pub git_revision: String,
-}
-
 /// The CPU figures at the largest thread count under each of [`SPLIT_WORK`], beside
 /// PyTorch at as many threads (measured once, after ours).
 fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
     let threads = check.threads.iter().copied().max().unwrap_or(1);
-    let mut all: Vec<SplitRow> = Vec::new();
+    let mut all: Vec<ThreadRow> = Vec::new();
     let mut torch: Vec<BenchRow> = Vec::new();
     for work in SPLIT_WORK {
         let var = crate::kernels::conv_gemm::WORK_PER_THREAD_VAR;
@@ -536,9 +527,9 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
             "{threads} CPU threads, a lone image's GEMM split at {work} multiply-adds a thread (0: every thread):"
         ))?;
         console.say(console_table(&rows))?;
-        all.extend(rows.iter().map(|r| SplitRow {
+        all.extend(rows.iter().map(|r| ThreadRow {
             threads,
-            work_per_thread: work,
+            work_per_thread: Some(work),
             model: r.model.clone(),
             figure: r.figure.clone(),
             ours: r.ours,
