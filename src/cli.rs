@@ -14,6 +14,7 @@ use crate::sim::urdf_loader::{GeometryKind, pose_from_xyz_rpy};
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
     crate::core::interrupt::install();
+    crate::core::denormals::flush_everywhere();
     match body() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e @ crate::Error::Interrupted(_)) => {

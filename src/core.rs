@@ -3,6 +3,7 @@
 //! records). Imports nothing else of the crate.
 
 pub mod atomic_file;
+pub mod denormals;
 pub mod device;
 pub mod error;
 pub mod input_file;

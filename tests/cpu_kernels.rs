@@ -184,3 +184,52 @@ fn resize_bilinear_and_its_gradient_match_burn() {
         }
     }
 }
+
+/// Subnormal floats are flushed to zero where the kernels run (rayon's workers, once a device
+/// is selected) and nowhere else: the caller's thread keeps its floating-point environment.
+/// With subnormal output gradients, the weight gradient is within 1e-37 of its f64 reference
+/// (flushing changes nothing a normal float can hold).
+#[test]
+#[cfg(target_arch = "x86_64")]
+fn subnormals_are_flushed_in_the_workers_only() {
+    use selfmodel::core::denormals::flushed_on_this_thread;
+    use std::hint::black_box;
+    let caller = flushed_on_this_thread();
+    selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    assert_eq!(flushed_on_this_thread(), caller, "the caller's thread was changed");
+    // 1e-39 is subnormal in f32: read as zero (DAZ) on every worker.
+    let on_workers = rayon::broadcast(|_| {
+        (
+            flushed_on_this_thread(),
+            black_box(1e-39f32) * black_box(1.0f32) == 0.0,
+        )
+    });
+    assert!(on_workers.iter().all(|&(f, z)| f && z), "{on_workers:?}");
+    // On the caller (not flushed here), the same product is the subnormal itself.
+    if !caller {
+        assert!(black_box(1e-39f32) * black_box(1.0f32) > 0.0);
+    }
+    let g = ConvGeometry {
+        batch: 4,
+        c_in: 3,
+        input: [8, 8],
+        c_out: 2,
+        kernel: [4, 4],
+        stride: [2, 2],
+        padding: [1, 1],
+    };
+    let [oh, ow] = g.output();
+    let x = values(g.batch * g.c_in * 64, 5);
+    let tiny: Vec<f32> = values(g.batch * g.c_out * oh * ow, 6)
+        .iter()
+        .map(|v| v * 1e-39)
+        .collect();
+    let dw = weight_grad(&x, &tiny, &g);
+    let reference = weight_grad_reference(&x, &tiny, &g);
+    let worst = dw
+        .iter()
+        .zip(&reference)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0f32, f32::max);
+    assert!(worst < 1e-37, "{worst}");
+}

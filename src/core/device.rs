@@ -48,6 +48,8 @@ pub fn available() -> Vec<DeviceChoice> {
 
 /// Build the burn device for a `--device` choice, or say which features to enable.
 pub fn select(choice: DeviceChoice) -> Result<Device> {
+    // The kernels run on rayon's workers: subnormals flushed there (core::denormals).
+    crate::core::denormals::flush_in_workers();
     let missing = |feature: &str| {
         Error::Device(format!(
             "--device {choice} is not compiled in: rebuild with `--features {feature}` (compiled in: {})",

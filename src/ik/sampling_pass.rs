@@ -137,9 +137,7 @@ impl Workers {
             None
         } else {
             Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(threads)
-                    .build()
+                crate::core::denormals::thread_pool(threads)
                     .map_err(|e| Error::Config(format!("cannot start {threads} threads: {e}")))?,
             )
         };

@@ -217,9 +217,7 @@ fn timed<T>(mut f: impl FnMut() -> T) -> (f64, T) {
 
 /// Run `f` on a pool of `threads` threads.
 fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
+    let pool = crate::core::denormals::thread_pool(threads)
         .map_err(|e| Error::Config(format!("a pool of {threads} threads: {e}")))?;
     Ok(pool.install(f))
 }
