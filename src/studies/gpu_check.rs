@@ -48,8 +48,9 @@ pub enum Part {
     Split,
 }
 
-/// The works per thread (multiply-adds) the `split` part tries: 0 is every thread.
-pub const SPLIT_WORK: [usize; 4] = [0, 1 << 18, 1 << 20, 1 << 22];
+/// The works per thread (multiply-adds) the `split` part tries: 0 is every thread, 2^30 one
+/// thread for every layer of NeuroKin at batch 1.
+pub const SPLIT_WORK: [usize; 5] = [0, 1 << 18, 1 << 20, 1 << 22, 1 << 30];
 
 impl Part {
     pub const ALL: [Part; 8] = [
