@@ -1170,7 +1170,11 @@ fn a_group_of_the_srdf_beside_the_urdf_is_the_joint_vector() {
         r#"<robot name="two_arms"><group name="left_arm"><chain base_link="base" tip_link="left_hand"/></group></robot>"#,
     )
     .unwrap();
-    assert_clean_failure(&run("legs"), &["\"legs\" is not a group", "left_arm"], &out_dir);
+    assert_clean_failure(
+        &run("legs"),
+        &["\"legs\" is not a group", "left_arm"],
+        &out_dir,
+    );
     let out = run("left_arm");
     common::assert_ok(&out);
     let data = selfmodel::data::dataset::Dataset::load(&npz).unwrap();

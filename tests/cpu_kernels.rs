@@ -196,7 +196,11 @@ fn subnormals_are_flushed_in_the_workers_only() {
     use std::hint::black_box;
     let caller = flushed_on_this_thread();
     selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
-    assert_eq!(flushed_on_this_thread(), caller, "the caller's thread was changed");
+    assert_eq!(
+        flushed_on_this_thread(),
+        caller,
+        "the caller's thread was changed"
+    );
     // 1e-39 is subnormal in f32: read as zero (DAZ) on every worker.
     let on_workers = rayon::broadcast(|_| {
         (

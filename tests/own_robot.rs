@@ -649,7 +649,10 @@ fn srdf_groups_name_the_joint_vector_and_its_tips() {
     std::fs::write(&path, common::two_armed_urdf()).unwrap();
     // No SRDF yet: --group says where it looked and how to give one.
     let err = find_beside(&path).unwrap_err().to_string();
-    assert!(err.contains("no SRDF file") && err.contains("--srdf"), "{err}");
+    assert!(
+        err.contains("no SRDF file") && err.contains("--srdf"),
+        "{err}"
+    );
     let srdf = dir.path().join("two_arms.srdf");
     std::fs::write(
         &srdf,
@@ -718,5 +721,8 @@ fn srdf_groups_name_the_joint_vector_and_its_tips() {
     // A second SRDF beside it: the user chooses.
     std::fs::copy(&srdf, dir.path().join("other.srdf")).unwrap();
     let err = find_beside(&path).unwrap_err().to_string();
-    assert!(err.contains("several SRDF files") && err.contains("--srdf"), "{err}");
+    assert!(
+        err.contains("several SRDF files") && err.contains("--srdf"),
+        "{err}"
+    );
 }

@@ -170,11 +170,17 @@ pub enum JointGroup {
     /// the URDF or `--srdf FILE`): the joints it lists and those of its links, chains and
     /// subgroups; its chains' tip links are its tips. Resolved when the description is
     /// loaded ([`crate::sim::srdf`]) into [`JointGroup::Members`].
-    Srdf { file: std::path::PathBuf, group: String },
+    Srdf {
+        file: std::path::PathBuf,
+        group: String,
+    },
     /// Joints by name with these links as the tips (what an SRDF group resolves to): fixed
     /// joints among them are skipped, a mimic joint makes its leader an input, and one tip is
     /// the tip (unless `--tip` names another).
-    Members { joints: Vec<String>, tips: Vec<String> },
+    Members {
+        joints: Vec<String>,
+        tips: Vec<String>,
+    },
 }
 
 impl JointGroup {
@@ -425,7 +431,10 @@ impl KinematicChain {
                     on_path[j] = true;
                 }
             }
-            JointGroup::Members { joints: names, tips } => {
+            JointGroup::Members {
+                joints: names,
+                tips,
+            } => {
                 for name in names {
                     let j = joints.iter().position(|j| &j.name == name).ok_or_else(|| {
                         Error::Config(format!("group: \"{name}\" is not a joint of this robot"))
@@ -434,7 +443,9 @@ impl KinematicChain {
                 }
                 for t in tips {
                     let l = sorted_links.iter().position(|l| *l == t).ok_or_else(|| {
-                        Error::Config(format!("group: its tip \"{t}\" is not a link of this robot"))
+                        Error::Config(format!(
+                            "group: its tip \"{t}\" is not a link of this robot"
+                        ))
                     })?;
                     group_tips.push(l);
                 }

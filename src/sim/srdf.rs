@@ -166,20 +166,28 @@ impl Srdf {
             if tree.iter().any(|(n, _, _)| n == j) {
                 add(j);
             } else if !self.virtual_joints.contains(j) {
-                return Err(err(format!("\"{j}\" is not a joint of the robot description")));
+                return Err(err(format!(
+                    "\"{j}\" is not a joint of the robot description"
+                )));
             }
         }
         for l in &group.links {
             match parent_joint(l) {
                 Some((joint, _, _)) => add(joint),
                 None if is_link(l) => {} // the root: no joint moves it
-                None => return Err(err(format!("\"{l}\" is not a link of the robot description"))),
+                None => {
+                    return Err(err(format!(
+                        "\"{l}\" is not a link of the robot description"
+                    )));
+                }
             }
         }
         for (base, tip) in &group.chains {
             for l in [base, tip] {
                 if !is_link(l) {
-                    return Err(err(format!("\"{l}\" is not a link of the robot description")));
+                    return Err(err(format!(
+                        "\"{l}\" is not a link of the robot description"
+                    )));
                 }
             }
             let mut path = Vec::new();

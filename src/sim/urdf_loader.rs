@@ -395,14 +395,8 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         }
         other => other.clone(),
     };
-    let chain = KinematicChain::with_group(
-        link_names.clone(),
-        joints,
-        options.base,
-        tip,
-        &group,
-    )
-    .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
+    let chain = KinematicChain::with_group(link_names.clone(), joints, options.base, tip, &group)
+        .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
 
     // Geometry, stored in the chain's link order.
     let dir = path.parent().unwrap_or(Path::new("."));

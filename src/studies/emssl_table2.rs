@@ -888,15 +888,7 @@ pub fn run_range(
     resume: bool,
     progress: &dyn Fn(&[IkRow], &[ValidationRow]) -> Result<()>,
 ) -> Result<RangeOutcome> {
-    let mut run = RangeRun::start(
-        cfg,
-        robot,
-        range_deg,
-        dir,
-        device_choice,
-        resume,
-        progress,
-    )?;
+    let mut run = RangeRun::start(cfg, robot, range_deg, dir, device_choice, resume, progress)?;
     let chain = &robot.chain;
     let dof = robot.dof();
     let batch = cfg.fit.inference_batch;

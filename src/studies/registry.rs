@@ -221,8 +221,7 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
     )?;
     let cfg = IkComparisonConfig::named(&opts.preset)?;
     let robot = opts.ik_robot()?;
-    let outcome =
-        crate::studies::emssl_table2::run(&cfg, &robot, dir, opts.device, opts.resume)?;
+    let outcome = crate::studies::emssl_table2::run(&cfg, &robot, dir, opts.device, opts.resume)?;
     let rows = outcome
         .rows
         .iter()
