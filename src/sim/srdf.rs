@@ -261,25 +261,24 @@ pub fn find_beside(urdf: &Path) -> Result<PathBuf> {
         here.sort();
         found.extend(here);
     }
+    let list = |paths: &[PathBuf]| {
+        paths
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
     match found.len() {
         1 => Ok(found.remove(0)),
         0 => Err(Error::Config(format!(
             "--group: no SRDF file beside {} (looked in {}); give one with --srdf FILE",
             urdf.display(),
-            places
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
+            list(&places)
         ))),
         _ => Err(Error::Config(format!(
             "--group: several SRDF files beside {} ({}); choose one with --srdf FILE",
             urdf.display(),
-            found
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
+            list(&found)
         ))),
     }
 }
