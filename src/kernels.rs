@@ -5,4 +5,6 @@
 pub mod bilinear_resize;
 pub mod conv_gemm;
 pub mod cpu_extension;
+pub mod parallel_output;
+pub mod pointwise;
 pub mod upconv;

@@ -8,7 +8,7 @@ use selfmodel::kernels::conv_gemm::{
     ConvGeometry, forward, forward_reference, transpose, transpose_backward, transpose_reference,
     weight_grad, weight_grad_reference,
 };
-use selfmodel::kernels::cpu_extension::{conv_transpose2d, conv2d, resize_bilinear};
+use selfmodel::kernels::cpu_extension::{conv_transpose2d, conv2d, relu, resize_bilinear};
 
 fn values(n: usize, seed: u32) -> Vec<f32> {
     // A cheap deterministic sequence in [-1, 1).
@@ -181,6 +181,39 @@ fn resize_bilinear_and_its_gradient_match_burn() {
         {
             println!("resize {input:?} -> {output:?} by matmul: {name}");
             a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-4, 1e-5));
+        }
+    }
+}
+
+/// ReLU on our parallel kernel: values and gradients equal to burn's, to the bit, over more
+/// than one parallel chunk, NaN kept (as PyTorch does), on a non-contiguous input too.
+#[test]
+fn relu_and_its_gradient_equal_burns() {
+    let dev = Device::flex().autodiff();
+    let mut v = values(3 * 5 * 70 * 70, 7);
+    v[11] = f32::NAN;
+    v[40_000] = 0.0;
+    let x = Tensor::<4>::from_data(TensorData::new(v, [3, 5, 70, 70]), &dev);
+    let upstream = Tensor::<4>::random([3, 5, 70, 70], Distribution::Default, &dev);
+    let run = |f: &dyn Fn(Tensor<4>) -> Tensor<4>, x: Tensor<4>| {
+        let x = x.require_grad();
+        let y = f(x.clone());
+        let grads = (y.clone() * upstream.clone()).sum().backward();
+        [y.into_data(), x.grad(&grads).unwrap().into_data()]
+    };
+    for (what, input) in [("contiguous", x.clone()), ("transposed", x.swap_dims(2, 3))] {
+        let ours = run(&|x| relu(x), input.clone());
+        let burns = run(&|x| burn::tensor::activation::relu(x), input);
+        for (name, (a, b)) in ["output", "input grad"].iter().zip(ours.iter().zip(&burns)) {
+            println!("relu, {what}: {name}");
+            let (a, b) = (a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
+            assert_eq!(a.len(), b.len());
+            for (i, (p, q)) in a.iter().zip(b).enumerate() {
+                assert!(
+                    p.to_bits() == q.to_bits(),
+                    "{what} {name} [{i}]: {p} vs {q}"
+                );
+            }
         }
     }
 }

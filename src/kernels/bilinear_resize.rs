@@ -9,7 +9,7 @@
 //! result does not depend on the scheduling. The reference is burn's `interpolate` (see the
 //! tests).
 
-use rayon::prelude::*;
+use crate::kernels::parallel_output::zeroed_in_parallel;
 
 /// The two source indices and the weight of the second, for each output coordinate.
 #[derive(Clone, Debug)]
@@ -45,12 +45,13 @@ pub fn resize(x: &[f32], planes: usize, input: [usize; 2], output: [usize; 2]) -
     let [oh, ow] = output;
     assert_eq!(x.len(), planes * h * w);
     let (ty, tx) = (Taps::new(h, oh), Taps::new(w, ow));
-    let mut out = vec![0f32; planes * oh * ow];
-    out.par_chunks_mut(oh * ow)
-        .zip(x.par_chunks(h * w))
-        .for_each(|(out, x)| {
+    zeroed_in_parallel(
+        planes * oh * ow,
+        oh * ow,
+        || vec![0f32; h * ow],
+        |rows, plane, out| {
+            let x = &x[plane * h * w..(plane + 1) * h * w];
             // Rows: [h, w] -> [h, ow].
-            let mut rows = vec![0f32; h * ow];
             for (row, src) in rows.chunks_exact_mut(ow).zip(x.chunks_exact(w)) {
                 for (o, r) in row.iter_mut().enumerate() {
                     let f = tx.frac[o];
@@ -66,8 +67,8 @@ pub fn resize(x: &[f32], planes: usize, input: [usize; 2], output: [usize; 2]) -
                     *d = a * (1.0 - f) + b * f;
                 }
             }
-        });
-    out
+        },
+    )
 }
 
 /// The gradient of [`resize`] with respect to its input: `grad` `[planes, out_h, out_w]` ->
@@ -82,12 +83,14 @@ pub fn resize_backward(
     let [oh, ow] = output;
     assert_eq!(grad.len(), planes * oh * ow);
     let (ty, tx) = (Taps::new(h, oh), Taps::new(w, ow));
-    let mut out = vec![0f32; planes * h * w];
-    out.par_chunks_mut(h * w)
-        .zip(grad.par_chunks(oh * ow))
-        .for_each(|(dx, g)| {
+    zeroed_in_parallel(
+        planes * h * w,
+        h * w,
+        || vec![0f32; h * ow],
+        |rows, plane, dx| {
+            let g = &grad[plane * oh * ow..(plane + 1) * oh * ow];
+            rows.fill(0.0);
             // Columns, transposed: [oh, ow] -> [h, ow].
-            let mut rows = vec![0f32; h * ow];
             for (oy, src) in g.chunks_exact(ow).enumerate() {
                 let f = ty.frac[oy];
                 for (r, &v) in rows[ty.lo[oy] * ow..][..ow].iter_mut().zip(src) {
@@ -105,8 +108,8 @@ pub fn resize_backward(
                     dst[tx.hi[o]] += v * f;
                 }
             }
-        });
-    out
+        },
+    )
 }
 
 /// The `[output, input]` matrix of a 1-D bilinear resize (align_corners false: PyTorch's

@@ -20,7 +20,7 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind, unary};
 use burn::backend::autodiff::{Autodiff, NodeId};
 use burn::backend::flex::FlexTensor;
-use burn::backend::ops::ModuleOps;
+use burn::backend::ops::{ActivationOps, FloatTensorOps, ModuleOps};
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
     Backend, DType, Dispatch, DispatchDevice, Flex, TensorMetadata, backend_extension,
@@ -28,8 +28,8 @@ use burn::backend::{
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, InterpolateOptions};
 use burn::tensor::{Shape, Tensor, TensorData};
 
-use crate::kernels::bilinear_resize;
 use crate::kernels::conv_gemm::{self, ConvGeometry, weight_grad};
+use crate::kernels::{bilinear_resize, pointwise};
 
 /// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
 #[backend_extension(Flex, Autodiff)]
@@ -89,6 +89,30 @@ pub trait CpuKernelOps: Backend {
     /// backward pass uses [`Self::resize_bilinear_backward`].
     fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
         Self::interpolate(x, size, bilinear_options())
+    }
+
+    /// `y` `[batch, channels, h, w]` plus `bias` `[channels]`; its backward pass uses
+    /// [`Self::bias_grad`].
+    fn add_bias_fast(y: FloatTensor<Self>, bias: FloatTensor<Self>) -> FloatTensor<Self> {
+        let c = bias.shape().dims::<1>()[0];
+        Self::float_add(y, Self::float_reshape(bias, Shape::new([1, c, 1, 1])))
+    }
+
+    /// The gradient of [`Self::add_bias_fast`]'s bias: `grad` summed over images and pixels.
+    fn bias_grad(grad: FloatTensor<Self>) -> FloatTensor<Self> {
+        let c = grad.shape().dims::<4>()[1];
+        let g = Self::float_sum_dim(Self::float_sum_dim(grad, 0), 2);
+        Self::float_reshape(Self::float_sum_dim(g, 3), Shape::new([c]))
+    }
+
+    /// ReLU; its backward pass uses [`Self::relu_fast_backward`].
+    fn relu_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::relu(x)
+    }
+
+    /// The gradient of [`Self::relu_fast`] from its input `x`.
+    fn relu_fast_backward(x: FloatTensor<Self>, grad: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::relu_backward(x, grad)
     }
 
     /// Gradient of [`Self::resize_bilinear_fast`] for an input of shape `input`.
@@ -245,6 +269,46 @@ impl CpuKernelOps for Flex {
         let [_, _, h, w] = input;
         let dx = bilinear_resize::resize_backward(g.storage::<f32>(), n * c, [h, w], [oh, ow]);
         flex_tensor(dx, input)
+    }
+
+    fn add_bias_fast(y: FlexTensor, bias: FlexTensor) -> FlexTensor {
+        if y.dtype() != DType::F32 || bias.dtype() != DType::F32 {
+            let c = bias.shape().dims::<1>()[0];
+            return Self::float_add(y, Self::float_reshape(bias, Shape::new([1, c, 1, 1])));
+        }
+        let (y, dims @ [_, _, h, w]) = f32_nchw(&y);
+        let bias = bias.to_contiguous();
+        let out = pointwise::add_bias(y.storage::<f32>(), bias.storage::<f32>(), h * w);
+        flex_tensor(out, dims)
+    }
+
+    fn bias_grad(grad: FlexTensor) -> FlexTensor {
+        let (g, [_, c, h, w]) = f32_nchw(&grad);
+        if grad.dtype() != DType::F32 {
+            let g = Self::float_sum_dim(Self::float_sum_dim(g, 0), 2);
+            return Self::float_reshape(Self::float_sum_dim(g, 3), Shape::new([c]));
+        }
+        let db = pointwise::bias_grad(g.storage::<f32>(), c, h * w);
+        FlexTensor::from_data(TensorData::new(db, [c]))
+    }
+
+    fn relu_fast(x: FlexTensor) -> FlexTensor {
+        if x.dtype() != DType::F32 {
+            return Self::relu(x);
+        }
+        let shape = x.shape();
+        let x = x.to_contiguous();
+        FlexTensor::from_data(TensorData::new(pointwise::relu(x.storage::<f32>()), shape))
+    }
+
+    fn relu_fast_backward(x: FlexTensor, grad: FlexTensor) -> FlexTensor {
+        if x.dtype() != DType::F32 || grad.dtype() != DType::F32 {
+            return Self::relu_backward(x, grad);
+        }
+        let shape = x.shape();
+        let (x, grad) = (x.to_contiguous(), grad.to_contiguous());
+        let dx = pointwise::relu_backward(x.storage::<f32>(), grad.storage::<f32>());
+        FlexTensor::from_data(TensorData::new(dx, shape))
     }
 }
 
@@ -404,6 +468,65 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
             }
         }
     }
+
+    fn add_bias_fast(y: FloatTensor<Self>, bias: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct AddBias;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for AddBias {
+            type State = ();
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
+                let [node_y, node_bias] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                if let Some(node) = node_bias {
+                    grads.register::<B>(node.id, B::bias_grad(grad.clone()));
+                }
+                if let Some(node) = node_y {
+                    grads.register::<B>(node.id, grad);
+                }
+            }
+        }
+
+        AddBias
+            .prepare::<C>([y.node(), bias.node()])
+            .compute_bound()
+            .stateless(B::add_bias_fast(y.into_primitive(), bias.into_primitive()))
+    }
+
+    fn relu_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct Relu;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 1> for Relu {
+            type State = NodeId;
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 1>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state);
+                unary::<B, _>(ops.parents, ops.node, grads, |grad| {
+                    B::relu_fast_backward(x, grad)
+                });
+            }
+        }
+
+        match Relu.prepare::<C>([x.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(mut prep) => {
+                let state = prep.checkpoint(&x);
+                prep.finish(state, B::relu_fast(x.into_primitive()))
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::relu_fast(x.into_primitive())),
+        }
+    }
 }
 
 /// The input gradient of a convolution. With stride 1 and symmetric padding `p` it is the
@@ -455,15 +578,26 @@ fn on_flex(x: &Tensor<4>) -> bool {
     )
 }
 
-/// `[c_out]` -> broadcast over `[batch, c_out, H, W]`.
+/// `[c_out]` -> broadcast over `[batch, c_out, H, W]` (`y` on flex: on our kernel).
 fn add_bias(y: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
     match bias {
-        Some(b) => {
-            let c = b.dims()[0];
-            y + b.reshape([1, c, 1, 1])
-        }
+        Some(b) => Tensor::from_dispatch(<Dispatch as CpuKernelOps>::add_bias_fast(
+            y.into_dispatch(),
+            b.into_dispatch(),
+        )),
         None => y,
     }
+}
+
+/// burn's `relu`, on our parallel kernel when `x` is on flex.
+pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
+    if !matches!(
+        x.device().without_autodiff().as_dispatch(),
+        DispatchDevice::Flex(_)
+    ) {
+        return burn::tensor::activation::relu(x);
+    }
+    Tensor::from_dispatch(<Dispatch as CpuKernelOps>::relu_fast(x.into_dispatch()))
 }
 
 /// burn's `conv2d`, with the weight gradient on our kernel when `x` is on flex.

@@ -16,12 +16,12 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
-use burn::tensor::activation::{relu, sigmoid};
+use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
-use crate::kernels::cpu_extension::conv2d_layer;
+use crate::kernels::cpu_extension::{conv2d_layer, relu};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::neurokin::resize_bilinear;
