@@ -5,6 +5,7 @@
 pub mod bilinear_resize;
 pub mod conv_gemm;
 pub mod cpu_extension;
+pub mod linear;
 pub mod parallel_output;
 pub mod pointwise;
 pub mod upconv;

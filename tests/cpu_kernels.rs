@@ -8,7 +8,10 @@ use selfmodel::kernels::conv_gemm::{
     ConvGeometry, forward, forward_reference, transpose, transpose_backward, transpose_reference,
     weight_grad, weight_grad_reference,
 };
-use selfmodel::kernels::cpu_extension::{conv_transpose2d, conv2d, relu, resize_bilinear};
+use selfmodel::kernels::cpu_extension::{
+    conv_transpose2d, conv2d, linear_layer, relu, resize_bilinear, sigmoid,
+};
+use selfmodel::train::losses::{bce_with_logits, bce_with_logits_composed};
 
 fn values(n: usize, seed: u32) -> Vec<f32> {
     // A cheap deterministic sequence in [-1, 1).
@@ -214,6 +217,88 @@ fn relu_and_its_gradient_equal_burns() {
                     "{what} {name} [{i}]: {p} vs {q}"
                 );
             }
+        }
+    }
+}
+
+/// The sigmoid on our kernel: flex's values and gradients to the bit. The binary
+/// cross-entropy on logits in one kernel each way: the value and both gradients of burn's
+/// composition of elementwise ops, over several chunks, with saturated logits.
+#[test]
+fn sigmoid_and_the_logit_cross_entropy_match_burn() {
+    let dev = Device::flex().autodiff();
+    let mut v = values(4 * 100 * 100, 3);
+    v.iter_mut().step_by(97).for_each(|z| *z *= 60.0);
+    let z = Tensor::<4>::from_data(TensorData::new(v, [4, 1, 100, 100]), &dev);
+    let y = Tensor::<4>::random([4, 1, 100, 100], Distribution::Default, &dev);
+    let upstream = Tensor::<4>::random([4, 1, 100, 100], Distribution::Default, &dev);
+    let run = |f: &dyn Fn(Tensor<4>) -> Tensor<4>| {
+        let z = z.clone().require_grad();
+        let s = f(z.clone());
+        let grads = (s.clone() * upstream.clone()).sum().backward();
+        [s.into_data(), z.grad(&grads).unwrap().into_data()]
+    };
+    let ours = run(&|z| sigmoid(z));
+    let burns = run(&|z| burn::tensor::activation::sigmoid(z));
+    for (name, (a, b)) in ["sigmoid", "sigmoid grad"].iter().zip(ours.iter().zip(&burns)) {
+        println!("{name}");
+        assert_eq!(a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
+    }
+    let loss = |f: &dyn Fn(Tensor<4>, Tensor<4>) -> Tensor<1>| {
+        let (z, y) = (z.clone().require_grad(), y.clone().require_grad());
+        let l = f(z.clone(), y.clone()).mul_scalar(3.0);
+        let grads = l.backward();
+        [
+            l.into_data(),
+            z.grad(&grads).unwrap().into_data(),
+            y.grad(&grads).unwrap().into_data(),
+        ]
+    };
+    let ours = loss(&|z, y| bce_with_logits(z, y));
+    let burns = loss(&|z, y| bce_with_logits_composed(z, y));
+    for (name, (a, b)) in ["loss", "logit grad", "target grad"]
+        .iter()
+        .zip(ours.iter().zip(&burns))
+    {
+        println!("bce with logits: {name}");
+        a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-5, 1e-9));
+    }
+}
+
+/// A linear layer on our kernel (blocks of output columns on the threads, for few rows) and
+/// on burn's: the same values and gradients (input, weight, bias), at batch 1, at a batch of a
+/// few rows and at one that leaves the product to gemm.
+#[test]
+fn linear_layers_and_their_gradients_match_burn() {
+    let dev = Device::flex().autodiff();
+    let layer = burn::nn::LinearConfig::new(1024, 1200).init(&dev);
+    for batch in [1, 7, 100] {
+        let x = Tensor::<2>::random([batch, 1024], Distribution::Default, &dev);
+        let upstream = Tensor::<2>::random([batch, 1200], Distribution::Default, &dev);
+        let run = |f: &dyn Fn(Tensor<2>) -> Tensor<2>| {
+            let x = x.clone().require_grad();
+            let y = f(x.clone());
+            let grads = (y.clone() * upstream.clone()).sum().backward();
+            [
+                y.into_data(),
+                x.grad(&grads).unwrap().into_data(),
+                layer.weight.grad(&grads).unwrap().into_data(),
+                layer.bias.as_ref().unwrap().grad(&grads).unwrap().into_data(),
+            ]
+        };
+        let (m, k, n) = (batch, 1024, 1200);
+        assert_eq!(
+            selfmodel::kernels::linear::by_columns_pays(m, k, n),
+            batch < 64
+        );
+        let ours = run(&|x| linear_layer(&layer, x));
+        let burns = run(&|x| layer.forward(x));
+        for (name, (a, b)) in ["output", "input grad", "weight grad", "bias grad"]
+            .iter()
+            .zip(ours.iter().zip(&burns))
+        {
+            println!("linear, batch {batch}: {name}");
+            a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-5, 1e-5));
         }
     }
 }

@@ -147,6 +147,17 @@ impl Layout {
         }
     }
 
+    /// A `rows x cols` block of a row-major matrix `row_stride` wide (at least `cols`).
+    pub(crate) fn row_major_block(rows: usize, cols: usize, row_stride: usize) -> Self {
+        assert!(row_stride >= cols);
+        Layout {
+            rows,
+            cols,
+            row_stride,
+            col_stride: 1,
+        }
+    }
+
     fn column_major(rows: usize, cols: usize) -> Self {
         Layout {
             rows,

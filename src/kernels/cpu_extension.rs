@@ -29,7 +29,7 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions, InterpolateMode, Inte
 use burn::tensor::{Shape, Tensor, TensorData};
 
 use crate::kernels::conv_gemm::{self, ConvGeometry, weight_grad};
-use crate::kernels::{bilinear_resize, pointwise};
+use crate::kernels::{bilinear_resize, linear, pointwise};
 
 /// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
 #[backend_extension(Flex, Autodiff)]
@@ -103,6 +103,49 @@ pub trait CpuKernelOps: Backend {
         let c = grad.shape().dims::<4>()[1];
         let g = Self::float_sum_dim(Self::float_sum_dim(grad, 0), 2);
         Self::float_reshape(Self::float_sum_dim(g, 3), Shape::new([c]))
+    }
+
+    /// `x` `[m, k]` · `w` `[k, n]` (a linear layer's weight); its backward pass is burn's
+    /// linear layer's.
+    fn matmul_fast(x: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::float_matmul(x, w)
+    }
+
+    /// The logistic sigmoid; its backward pass uses [`Self::sigmoid_fast_backward`].
+    fn sigmoid_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::sigmoid(x)
+    }
+
+    /// The gradient of [`Self::sigmoid_fast`] from its output `s`.
+    fn sigmoid_fast_backward(s: FloatTensor<Self>, grad: FloatTensor<Self>) -> FloatTensor<Self> {
+        Self::sigmoid_backward(s, grad)
+    }
+
+    /// The mean binary cross-entropy of logits `z` against targets `y` (`[1]`); its backward
+    /// pass uses [`Self::bce_with_logits_grads`].
+    fn bce_with_logits_fast(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
+        let softplus = Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(
+            z.clone(),
+        ))));
+        let hinge = Self::float_clamp_min(z.clone(), 0.0.into());
+        let loss = Self::float_add(Self::float_sub(hinge, Self::float_mul(z, y)), softplus);
+        Self::float_mean(loss)
+    }
+
+    /// The gradients of [`Self::bce_with_logits_fast`] for `z` and `y` from the upstream
+    /// gradient `grad` (`[1]`): `(σ(z) − y) · grad / n` and `−z · grad / n`.
+    fn bce_with_logits_grads(
+        z: FloatTensor<Self>,
+        y: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
+        let shape = z.shape();
+        let ones = Shape::from(vec![1; shape.num_dims()]);
+        let scale = Self::float_div_scalar(grad, (shape.num_elements() as f32).into());
+        let scale = Self::float_expand(Self::float_reshape(scale, ones), shape);
+        let dz = Self::float_mul(Self::float_sub(Self::sigmoid(z.clone()), y), scale.clone());
+        let dy = Self::float_mul(Self::float_neg(z), scale);
+        (dz, dy)
     }
 
     /// ReLU; its backward pass uses [`Self::relu_fast_backward`].
@@ -290,6 +333,59 @@ impl CpuKernelOps for Flex {
         }
         let db = pointwise::bias_grad(g.storage::<f32>(), c, h * w);
         FlexTensor::from_data(TensorData::new(db, [c]))
+    }
+
+    fn matmul_fast(x: FlexTensor, w: FlexTensor) -> FlexTensor {
+        let ([m, k], [_, n]) = (x.shape().dims::<2>(), w.shape().dims::<2>());
+        if x.dtype() != DType::F32 || w.dtype() != DType::F32 || !linear::by_columns_pays(m, k, n)
+        {
+            return Self::float_matmul(x, w);
+        }
+        let (x, w) = (x.to_contiguous(), w.to_contiguous());
+        let y = linear::matmul_by_columns(x.storage::<f32>(), w.storage::<f32>(), m, k, n);
+        FlexTensor::from_data(TensorData::new(y, [m, n]))
+    }
+
+    fn sigmoid_fast(x: FlexTensor) -> FlexTensor {
+        if x.dtype() != DType::F32 {
+            return Self::sigmoid(x);
+        }
+        let shape = x.shape();
+        let x = x.to_contiguous();
+        FlexTensor::from_data(TensorData::new(pointwise::sigmoid(x.storage::<f32>()), shape))
+    }
+
+    fn sigmoid_fast_backward(s: FlexTensor, grad: FlexTensor) -> FlexTensor {
+        if s.dtype() != DType::F32 || grad.dtype() != DType::F32 {
+            return Self::sigmoid_backward(s, grad);
+        }
+        let shape = s.shape();
+        let (s, grad) = (s.to_contiguous(), grad.to_contiguous());
+        let dx = pointwise::sigmoid_backward(s.storage::<f32>(), grad.storage::<f32>());
+        FlexTensor::from_data(TensorData::new(dx, shape))
+    }
+
+    fn bce_with_logits_fast(z: FlexTensor, y: FlexTensor) -> FlexTensor {
+        let (z, y) = (z.to_contiguous(), y.to_contiguous());
+        let loss = pointwise::bce_with_logits(z.storage::<f32>(), y.storage::<f32>());
+        FlexTensor::from_data(TensorData::new(vec![loss], [1]))
+    }
+
+    fn bce_with_logits_grads(
+        z: FlexTensor,
+        y: FlexTensor,
+        grad: FlexTensor,
+    ) -> (FlexTensor, FlexTensor) {
+        let shape = z.shape();
+        let (z, y) = (z.to_contiguous(), y.to_contiguous());
+        let scale = grad.to_contiguous().storage::<f32>()[0] / shape.num_elements() as f32;
+        let (z, y) = (z.storage::<f32>(), y.storage::<f32>());
+        let dz = pointwise::bce_with_logits_z_grad(z, y, scale);
+        let dy = pointwise::bce_with_logits_y_grad(z, scale);
+        (
+            FlexTensor::from_data(TensorData::new(dz, shape.clone())),
+            FlexTensor::from_data(TensorData::new(dy, shape)),
+        )
     }
 
     fn relu_fast(x: FlexTensor) -> FlexTensor {
@@ -499,6 +595,122 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
             .stateless(B::add_bias_fast(y.into_primitive(), bias.into_primitive()))
     }
 
+    fn matmul_fast(x: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct MatmulFast;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for MatmulFast {
+            type State = (NodeId, NodeId);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_w] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
+                let w = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
+                if let Some(node) = node_w {
+                    grads.register::<B>(node.id, B::linear_weight_backward(x, grad.clone()));
+                }
+                if let Some(node) = node_x {
+                    grads.register::<B>(node.id, B::linear_x_backward(w, grad));
+                }
+            }
+        }
+
+        match MatmulFast
+            .prepare::<C>([x.node(), w.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (prep.checkpoint(&x), prep.checkpoint(&w));
+                prep.finish(state, B::matmul_fast(x.into_primitive(), w.into_primitive()))
+            }
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::matmul_fast(x.into_primitive(), w.into_primitive()))
+            }
+        }
+    }
+
+    fn sigmoid_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct Sigmoid;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 1> for Sigmoid {
+            type State = B::FloatTensorPrimitive;
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 1>,
+                grads: &mut Gradients,
+                _checkpointer: &mut Checkpointer,
+            ) {
+                let s = ops.state;
+                unary::<B, _>(ops.parents, ops.node, grads, |grad| {
+                    B::sigmoid_fast_backward(s, grad)
+                });
+            }
+        }
+
+        match Sigmoid.prepare::<C>([x.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(prep) => {
+                let s = B::sigmoid_fast(x.into_primitive());
+                prep.finish(s.clone(), s)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::sigmoid_fast(x.into_primitive())),
+        }
+    }
+
+    fn bce_with_logits_fast(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct BceWithLogits;
+
+        impl<B: Backend + CpuKernelOps> Backward<B, 2> for BceWithLogits {
+            type State = (NodeId, NodeId);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 2>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_z, node_y] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let z = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
+                let y = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
+                let (dz, dy) = B::bce_with_logits_grads(z, y, grad);
+                if let Some(node) = node_z {
+                    grads.register::<B>(node.id, dz);
+                }
+                if let Some(node) = node_y {
+                    grads.register::<B>(node.id, dy);
+                }
+            }
+        }
+
+        match BceWithLogits
+            .prepare::<C>([z.node(), y.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let state = (prep.checkpoint(&z), prep.checkpoint(&y));
+                prep.finish(
+                    state,
+                    B::bce_with_logits_fast(z.into_primitive(), y.into_primitive()),
+                )
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::bce_with_logits_fast(
+                z.into_primitive(),
+                y.into_primitive(),
+            )),
+        }
+    }
+
     fn relu_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
         #[derive(Debug)]
         struct Relu;
@@ -571,7 +783,7 @@ fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
 }
 
 /// Whether `x` lives on the flex backend (with or without autodiff).
-fn on_flex(x: &Tensor<4>) -> bool {
+fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
     matches!(
         x.device().without_autodiff().as_dispatch(),
         DispatchDevice::Flex(_)
@@ -589,12 +801,44 @@ fn add_bias(y: Tensor<4>, bias: Option<Tensor<1>>) -> Tensor<4> {
     }
 }
 
+/// A burn `Linear` layer's forward pass on `[batch, d_input]`, its product on
+/// [`linear::matmul_by_columns`] when `x` is on flex and has few rows.
+pub fn linear_layer(layer: &burn::nn::Linear, x: Tensor<2>) -> Tensor<2> {
+    if !on_flex(&x) {
+        return layer.forward(x);
+    }
+    let y = Tensor::<2>::from_dispatch(<Dispatch as CpuKernelOps>::matmul_fast(
+        x.into_dispatch(),
+        layer.weight.val().into_dispatch(),
+    ));
+    match &layer.bias {
+        Some(b) => y + b.val().unsqueeze_dim(0),
+        None => y,
+    }
+}
+
+/// burn's `sigmoid`, on our parallel kernel when `x` is on flex.
+pub fn sigmoid<const D: usize>(x: Tensor<D>) -> Tensor<D> {
+    if !on_flex(&x) {
+        return burn::tensor::activation::sigmoid(x);
+    }
+    Tensor::from_dispatch(<Dispatch as CpuKernelOps>::sigmoid_fast(x.into_dispatch()))
+}
+
+/// The mean binary cross-entropy of the logits `z` against the targets `y` on our kernel
+/// (forward and backward in one pass each); `None` when `z` is not on flex.
+pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<Tensor<1>> {
+    on_flex(z).then(|| {
+        Tensor::from_dispatch(<Dispatch as CpuKernelOps>::bce_with_logits_fast(
+            z.clone().into_dispatch(),
+            y.clone().into_dispatch(),
+        ))
+    })
+}
+
 /// burn's `relu`, on our parallel kernel when `x` is on flex.
 pub fn relu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
-    if !matches!(
-        x.device().without_autodiff().as_dispatch(),
-        DispatchDevice::Flex(_)
-    ) {
+    if !on_flex(&x) {
         return burn::tensor::activation::relu(x);
     }
     Tensor::from_dispatch(<Dispatch as CpuKernelOps>::relu_fast(x.into_dispatch()))

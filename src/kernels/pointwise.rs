@@ -1,12 +1,14 @@
-//! A layer's bias and ReLU on the CPU, forward and backward, in parallel.
+//! Elementwise steps of a training step on the CPU, forward and backward, in parallel: a
+//! layer's bias and ReLU, the sigmoid, and the binary cross-entropy on logits.
 //!
 //! flex runs every elementwise operation on the calling thread. After each convolution of a
 //! NeuroKin step (our kernels, on every thread) the bias add and the ReLU then ran on one
-//! thread while the others waited: a few percent of a step on 2 threads, and a share that
-//! grows with every thread added (Amdahl). Here they run over chunks on rayon's workers. The
-//! values are those of burn's ops to the bit (an add, a comparison); the bias gradient sums
-//! each channel in a fixed order (images, then pixels, in `f64`), whatever the thread count.
-//! The tests compare values and gradients with burn's ops.
+//! thread while the others waited, and the loss (nine elementwise operations forward, more
+//! backward) too: a few percent of a step on 2 threads each, a share that grows with every
+//! thread added (Amdahl). Here they run over chunks on rayon's workers. The values of the
+//! bias add, ReLU and sigmoid are flex's to the bit; the sums (the bias gradient, the loss)
+//! run in `f64` in a fixed order, whatever the thread count, and the loss's gradient is its
+//! closed form `σ(z) − y`. The tests compare values and gradients with burn's ops.
 
 use rayon::prelude::*;
 
@@ -63,32 +65,93 @@ pub fn bias_grad(grad: &[f32], channels: usize, plane: usize) -> Vec<f32> {
 
 /// `max(x, 0)`, NaN kept (as burn's and PyTorch's ReLU).
 pub fn relu(x: &[f32]) -> Vec<f32> {
+    map(x, |v| if v.is_nan() || v > 0.0 { v } else { 0.0 })
+}
+
+/// The gradient of [`relu`] from its input `x`: `grad` where `x > 0` (or NaN), else 0.
+pub fn relu_backward(x: &[f32], grad: &[f32]) -> Vec<f32> {
+    zip_map(x, grad, |v, g| if v.is_nan() || v > 0.0 { g } else { 0.0 })
+}
+
+/// The logistic sigmoid as flex computes it (`1 / (1 + e^-x)` for `x >= 0`, `e^x / (1 + e^x)`
+/// below), so that the values are flex's to the bit.
+fn logistic(v: f32) -> f32 {
+    if v >= 0.0 {
+        1.0 / (1.0 + (-v).exp())
+    } else {
+        let e = v.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// `out[i] = f(a[i], b[i])` over chunks in parallel.
+fn zip_map(a: &[f32], b: &[f32], f: impl Fn(f32, f32) -> f32 + Sync + Send) -> Vec<f32> {
+    assert_eq!(a.len(), b.len());
     zeroed_in_parallel(
-        x.len(),
+        a.len(),
         CHUNK,
         || (),
         |_, index, out| {
-            let src = &x[index * CHUNK..][..out.len()];
-            for (o, &v) in out.iter_mut().zip(src) {
-                *o = if v.is_nan() || v > 0.0 { v } else { 0.0 };
+            let start = index * CHUNK;
+            let (a, b) = (&a[start..][..out.len()], &b[start..][..out.len()]);
+            for ((o, &a), &b) in out.iter_mut().zip(a).zip(b) {
+                *o = f(a, b);
             }
         },
     )
 }
 
-/// The gradient of [`relu`] from its input `x`: `grad` where `x > 0` (or NaN), else 0.
-pub fn relu_backward(x: &[f32], grad: &[f32]) -> Vec<f32> {
-    assert_eq!(x.len(), grad.len());
+/// `out[i] = f(a[i])` over chunks in parallel.
+fn map(a: &[f32], f: impl Fn(f32) -> f32 + Sync + Send) -> Vec<f32> {
     zeroed_in_parallel(
-        x.len(),
+        a.len(),
         CHUNK,
         || (),
         |_, index, out| {
-            let start = index * CHUNK;
-            let (src, g) = (&x[start..][..out.len()], &grad[start..][..out.len()]);
-            for ((o, &v), &g) in out.iter_mut().zip(src).zip(g) {
-                *o = if v.is_nan() || v > 0.0 { g } else { 0.0 };
+            let a = &a[index * CHUNK..][..out.len()];
+            for (o, &a) in out.iter_mut().zip(a) {
+                *o = f(a);
             }
         },
     )
+}
+
+/// The logistic sigmoid, flex's values to the bit.
+pub fn sigmoid(x: &[f32]) -> Vec<f32> {
+    map(x, logistic)
+}
+
+/// The gradient of [`sigmoid`] from its output `s`: `grad · s · (1 − s)`.
+pub fn sigmoid_backward(s: &[f32], grad: &[f32]) -> Vec<f32> {
+    zip_map(s, grad, |s, g| g * s * (1.0 - s))
+}
+
+/// The mean binary cross-entropy of the logits `z` against the targets `y`,
+/// `max(z, 0) − z·y + ln(1 + e^−|z|)` (stable for any `z`), summed in `f64` over fixed chunks
+/// added in order: the same value at any thread count.
+pub fn bce_with_logits(z: &[f32], y: &[f32]) -> f32 {
+    assert_eq!(z.len(), y.len());
+    assert!(!z.is_empty());
+    let sums: Vec<f64> = z
+        .par_chunks(CHUNK)
+        .zip(y.par_chunks(CHUNK))
+        .map(|(z, y)| {
+            z.iter()
+                .zip(y)
+                .map(|(&z, &y)| (z.max(0.0) - z * y + (-z.abs()).exp().ln_1p()) as f64)
+                .sum::<f64>()
+        })
+        .collect();
+    (sums.iter().sum::<f64>() / z.len() as f64) as f32
+}
+
+/// The gradient of [`bce_with_logits`] for `z`, times `scale · len` (`scale`: the upstream
+/// gradient over the element count): `(σ(z) − y) · scale`.
+pub fn bce_with_logits_z_grad(z: &[f32], y: &[f32], scale: f32) -> Vec<f32> {
+    zip_map(z, y, |z, y| (logistic(z) - y) * scale)
+}
+
+/// The gradient of [`bce_with_logits`] for `y`, times `scale · len`: `−z · scale`.
+pub fn bce_with_logits_y_grad(z: &[f32], scale: f32) -> Vec<f32> {
+    map(z, |z| -z * scale)
 }

@@ -23,12 +23,11 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
-use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
-use crate::kernels::cpu_extension::{conv2d_layer, relu};
+use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
@@ -415,7 +414,7 @@ impl NeuroKin {
         let mut x = angles;
         let last = self.encoder.len() - 1;
         for (i, layer) in self.encoder.iter().enumerate() {
-            x = layer.forward(x);
+            x = linear_layer(layer, x);
             // The code's encoder has no activation on its output; the text variant's has.
             if i < last || self.arch == NeuroKinArch::Text64 {
                 x = relu(x);
@@ -454,7 +453,7 @@ impl NeuroKin {
     fn decode(&self, angles: Tensor<2>) -> Tensor<4> {
         let z = self.encode(angles);
         let [b, _] = z.dims();
-        let mut x = relu(self.seed.forward(z)).reshape([b, self.seed_channels, 4, 4]);
+        let mut x = relu(linear_layer(&self.seed, z)).reshape([b, self.seed_channels, 4, 4]);
         for (i, up) in self.ups.iter().enumerate() {
             x = up.forward(x);
             if let Some(norm) = self.norms.get(i) {

@@ -16,12 +16,11 @@
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
-use burn::tensor::activation::sigmoid;
 use burn::tensor::{Device, Tensor};
 
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
-use crate::kernels::cpu_extension::{conv2d_layer, relu};
+use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::neurokin::resize_bilinear;
@@ -204,7 +203,7 @@ impl ResNeuroKinD {
         let mut x = angles;
         let last = self.encoder.len() - 1;
         for (i, layer) in self.encoder.iter().enumerate() {
-            x = layer.forward(x);
+            x = linear_layer(layer, x);
             if i < last {
                 x = relu(x);
             }
@@ -227,7 +226,7 @@ impl ResNeuroKinD {
     pub fn forward(&self, angles: Tensor<2>) -> (Tensor<4>, Tensor<4>) {
         let z = self.encode(angles);
         let [b, _] = z.dims();
-        let mut x = relu(self.seed.forward(z)).reshape([b, self.seed_channels, 8, 8]);
+        let mut x = relu(linear_layer(&self.seed, z)).reshape([b, self.seed_channels, 8, 8]);
         x = self.blocks[0].forward(x);
         for (i, up) in self.ups.iter().enumerate() {
             x = relu(self.norms[i].forward(up.forward(x)));
