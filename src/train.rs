@@ -2,6 +2,7 @@
 //! convergence on a validation score), the losses, and Elastic Weight Consolidation (a penalty
 //! that keeps an old task while training a new one).
 
+pub mod adam;
 pub mod ewc;
 pub mod losses;
 pub mod trainer;

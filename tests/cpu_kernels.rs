@@ -240,7 +240,10 @@ fn sigmoid_and_the_logit_cross_entropy_match_burn() {
     };
     let ours = run(&|z| sigmoid(z));
     let burns = run(&|z| burn::tensor::activation::sigmoid(z));
-    for (name, (a, b)) in ["sigmoid", "sigmoid grad"].iter().zip(ours.iter().zip(&burns)) {
+    for (name, (a, b)) in ["sigmoid", "sigmoid grad"]
+        .iter()
+        .zip(ours.iter().zip(&burns))
+    {
         println!("{name}");
         assert_eq!(a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
     }
@@ -283,7 +286,13 @@ fn linear_layers_and_their_gradients_match_burn() {
                 y.into_data(),
                 x.grad(&grads).unwrap().into_data(),
                 layer.weight.grad(&grads).unwrap().into_data(),
-                layer.bias.as_ref().unwrap().grad(&grads).unwrap().into_data(),
+                layer
+                    .bias
+                    .as_ref()
+                    .unwrap()
+                    .grad(&grads)
+                    .unwrap()
+                    .into_data(),
             ]
         };
         let (m, k, n) = (batch, 1024, 1200);

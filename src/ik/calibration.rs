@@ -11,7 +11,6 @@
 //! [`KinematicChain`], the updated forward model.
 
 use burn::module::{Module, Param};
-use burn::optim::AdamConfig;
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
 
@@ -185,7 +184,7 @@ pub fn calibrate(
     };
     let fit_before_mm = fit_mm(nominal);
     let mut model = LinkParameters::new(nominal, &tdev);
-    let mut optim = AdamConfig::new().init();
+    let mut optim = crate::train::adam::adam();
     for (i, &(steps, learning_rate)) in cfg.stages.iter().enumerate() {
         let train = TrainConfig {
             steps,

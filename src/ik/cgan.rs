@@ -17,7 +17,7 @@
 //! epoch, and a killed run continues from its last epoch to the same result.
 
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Point3;
 use rand::SeedableRng;
@@ -148,8 +148,8 @@ pub fn train_gan(
         unit_pairs: false,
     }
     .init(&tdev, cfg.fit.seed ^ 0xD15C)?;
-    let mut g_optim = AdamConfig::new().with_beta_1(0.5).init();
-    let mut d_optim = AdamConfig::new().with_beta_1(0.5).init();
+    let mut g_optim = crate::train::adam::adam_with_beta_1(0.5);
+    let mut d_optim = crate::train::adam::adam_with_beta_1(0.5);
     let train_cfg = cfg.fit.train_config(set.len());
     let steps_per_epoch = set.len().div_ceil(train_cfg.batch.min(set.len()).max(1));
     let epochs = cfg

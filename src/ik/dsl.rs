@@ -11,7 +11,6 @@
 //! output the forward model reads (cos, sin) per joint, which the inverse model writes.
 
 use burn::module::Module;
-use burn::optim::AdamConfig;
 use burn::tensor::Device;
 
 use crate::core::error::Result;
@@ -151,7 +150,7 @@ pub fn dsl(
         None => {
             let (m, _) = fit_set(
                 forward,
-                AdamConfig::new().init(),
+                crate::train::adam::adam(),
                 &set,
                 &FitConfig {
                     epochs: cfg.forward_epochs,
@@ -191,7 +190,7 @@ pub fn dsl(
         None => {
             let (m, _) = fit_set(
                 inverse,
-                AdamConfig::new().init(),
+                crate::train::adam::adam(),
                 &set,
                 &FitConfig {
                     epochs: cfg.inverse_epochs,
@@ -275,7 +274,7 @@ fn inverse_through_arm(
         None => {
             let (m, _) = fit_set(
                 inverse,
-                AdamConfig::new().init(),
+                crate::train::adam::adam(),
                 set,
                 &FitConfig {
                     epochs: cfg.inverse_epochs,

@@ -20,7 +20,6 @@
 
 use burn::module::Module;
 use burn::nn::{Initializer, Linear, LinearConfig};
-use burn::optim::AdamConfig;
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use nalgebra::Point3;
@@ -325,7 +324,7 @@ pub fn fit_flow(
         Some(conv) => {
             let (model, log) = train_to_convergence(
                 model,
-                AdamConfig::new().init(),
+                crate::train::adam::adam(),
                 &set,
                 &train_cfg,
                 conv,

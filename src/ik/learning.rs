@@ -36,7 +36,7 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::{DistanceErrors, IkData, JointOutput, distances, reach_errors};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
-use burn::optim::{AdamConfig, ModuleOptimizer};
+use burn::optim::ModuleOptimizer;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
@@ -212,7 +212,7 @@ pub fn fit_converged(
 ) -> Result<(Mlp, ConvergenceLog)> {
     train_to_convergence(
         model,
-        AdamConfig::new().init(),
+        crate::train::adam::adam(),
         set,
         &cfg.train_config(set.len()),
         conv,
@@ -295,7 +295,7 @@ pub fn drl(
     }
     let (model, _) = fit(
         model,
-        AdamConfig::new().init(),
+        crate::train::adam::adam(),
         data,
         positions,
         joints,
@@ -680,7 +680,7 @@ fn emssl_run(
     checkpoint: Option<&EmsslCheckpoint>,
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
     let mut model = model;
-    let mut optim = AdamConfig::new().init();
+    let mut optim = crate::train::adam::adam();
     let resumed = checkpoint.and_then(|c| c.load().map(|s| (c, s)));
     let desired = &data.positions[data.train()];
     let held_out = &data.positions[data.validation()];

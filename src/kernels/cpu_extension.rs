@@ -124,9 +124,8 @@ pub trait CpuKernelOps: Backend {
     /// The mean binary cross-entropy of logits `z` against targets `y` (`[1]`); its backward
     /// pass uses [`Self::bce_with_logits_grads`].
     fn bce_with_logits_fast(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
-        let softplus = Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(
-            z.clone(),
-        ))));
+        let softplus =
+            Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(z.clone()))));
         let hinge = Self::float_clamp_min(z.clone(), 0.0.into());
         let loss = Self::float_add(Self::float_sub(hinge, Self::float_mul(z, y)), softplus);
         Self::float_mean(loss)
@@ -146,6 +145,18 @@ pub trait CpuKernelOps: Backend {
         let dz = Self::float_mul(Self::float_sub(Self::sigmoid(z.clone()), y), scale.clone());
         let dy = Self::float_mul(Self::float_neg(z), scale);
         (dz, dy)
+    }
+
+    /// One Adam step (burn's `Adam`, no weight decay, no AMSGrad) on a parameter `p` with
+    /// gradient `g` and moments `m`, `v`: the new `(p, m, v)`. No autodiff (an optimizer step).
+    fn adam_step(
+        p: FloatTensor<Self>,
+        g: FloatTensor<Self>,
+        m: FloatTensor<Self>,
+        v: FloatTensor<Self>,
+        step: pointwise::AdamStep,
+    ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
+        adam_step_composed::<Self>(p, g, m, v, step)
     }
 
     /// ReLU; its backward pass uses [`Self::relu_fast_backward`].
@@ -337,8 +348,7 @@ impl CpuKernelOps for Flex {
 
     fn matmul_fast(x: FlexTensor, w: FlexTensor) -> FlexTensor {
         let ([m, k], [_, n]) = (x.shape().dims::<2>(), w.shape().dims::<2>());
-        if x.dtype() != DType::F32 || w.dtype() != DType::F32 || !linear::by_columns_pays(m, k, n)
-        {
+        if x.dtype() != DType::F32 || w.dtype() != DType::F32 || !linear::by_columns_pays(m, k, n) {
             return Self::float_matmul(x, w);
         }
         let (x, w) = (x.to_contiguous(), w.to_contiguous());
@@ -352,7 +362,10 @@ impl CpuKernelOps for Flex {
         }
         let shape = x.shape();
         let x = x.to_contiguous();
-        FlexTensor::from_data(TensorData::new(pointwise::sigmoid(x.storage::<f32>()), shape))
+        FlexTensor::from_data(TensorData::new(
+            pointwise::sigmoid(x.storage::<f32>()),
+            shape,
+        ))
     }
 
     fn sigmoid_fast_backward(s: FlexTensor, grad: FlexTensor) -> FlexTensor {
@@ -388,6 +401,29 @@ impl CpuKernelOps for Flex {
         )
     }
 
+    fn adam_step(
+        p: FlexTensor,
+        g: FlexTensor,
+        m: FlexTensor,
+        v: FlexTensor,
+        step: pointwise::AdamStep,
+    ) -> (FlexTensor, FlexTensor, FlexTensor) {
+        if [&p, &g, &m, &v].iter().any(|t| t.dtype() != DType::F32) {
+            return adam_step_composed::<Self>(p, g, m, v, step);
+        }
+        let shape = p.shape();
+        let [p, g, m, v] = [p, g, m, v].map(|t| t.to_contiguous());
+        let [p, m, v] = pointwise::adam(
+            p.storage::<f32>(),
+            g.storage::<f32>(),
+            m.storage::<f32>(),
+            v.storage::<f32>(),
+            step,
+        )
+        .map(|values| FlexTensor::from_data(TensorData::new(values, shape.clone())));
+        (p, m, v)
+    }
+
     fn relu_fast(x: FlexTensor) -> FlexTensor {
         if x.dtype() != DType::F32 {
             return Self::relu(x);
@@ -406,6 +442,34 @@ impl CpuKernelOps for Flex {
         let dx = pointwise::relu_backward(x.storage::<f32>(), grad.storage::<f32>());
         FlexTensor::from_data(TensorData::new(dx, shape))
     }
+}
+
+/// [`CpuKernelOps::adam_step`] as burn's `Adam` computes it, one tensor op after another.
+fn adam_step_composed<B: Backend>(
+    p: FloatTensor<B>,
+    g: FloatTensor<B>,
+    m: FloatTensor<B>,
+    v: FloatTensor<B>,
+    step: pointwise::AdamStep,
+) -> (FloatTensor<B>, FloatTensor<B>, FloatTensor<B>) {
+    let (f1, f2) = (1.0 - step.beta_1, 1.0 - step.beta_2);
+    let m = B::float_add(
+        B::float_mul_scalar(m, step.beta_1.into()),
+        B::float_mul_scalar(g.clone(), f1.into()),
+    );
+    let v = B::float_add(
+        B::float_mul_scalar(v, step.beta_2.into()),
+        B::float_mul_scalar(B::float_mul(g.clone(), g), f2.into()),
+    );
+    let bias_correction2_sqrt = (1.0 - step.beta_2.powi(step.time)).sqrt();
+    let combined = bias_correction2_sqrt / (1.0 - step.beta_1.powi(step.time));
+    let denominator = B::float_add_scalar(
+        B::float_sqrt(v.clone()),
+        (step.epsilon * bias_correction2_sqrt).into(),
+    );
+    let update = B::float_div(B::float_mul_scalar(m.clone(), combined.into()), denominator);
+    let p = B::float_sub(p, B::float_mul_scalar(update, step.lr.into()));
+    (p, m, v)
 }
 
 fn kernel_supports(dtype: DType, dilation: &[usize; 2], groups: usize) -> bool {
@@ -628,7 +692,10 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
         {
             OpsKind::Tracked(mut prep) => {
                 let state = (prep.checkpoint(&x), prep.checkpoint(&w));
-                prep.finish(state, B::matmul_fast(x.into_primitive(), w.into_primitive()))
+                prep.finish(
+                    state,
+                    B::matmul_fast(x.into_primitive(), w.into_primitive()),
+                )
             }
             OpsKind::UnTracked(prep) => {
                 prep.finish(B::matmul_fast(x.into_primitive(), w.into_primitive()))
@@ -834,6 +901,28 @@ pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<T
             y.clone().into_dispatch(),
         ))
     })
+}
+
+/// One Adam step on our parallel kernel (see [`crate::train::adam`]); `None` when `p` is not on
+/// flex.
+pub fn adam_step<const D: usize>(
+    p: Tensor<D>,
+    g: Tensor<D>,
+    m: Tensor<D>,
+    v: Tensor<D>,
+    step: pointwise::AdamStep,
+) -> Option<[Tensor<D>; 3]> {
+    if !on_flex(&p) {
+        return None;
+    }
+    let (p, m, v) = <Dispatch as CpuKernelOps>::adam_step(
+        p.into_dispatch(),
+        g.into_dispatch(),
+        m.into_dispatch(),
+        v.into_dispatch(),
+        step,
+    );
+    Some([p, m, v].map(Tensor::from_dispatch))
 }
 
 /// burn's `relu`, on our parallel kernel when `x` is on flex.

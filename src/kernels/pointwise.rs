@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use crate::kernels::parallel_output::zeroed_in_parallel;
+use crate::kernels::parallel_output::{self, zeroed_in_parallel};
 
 /// Elements per parallel chunk: a rayon job for at least this much work (below it, one
 /// chunk, run on the calling thread).
@@ -154,4 +154,53 @@ pub fn bce_with_logits_z_grad(z: &[f32], y: &[f32], scale: f32) -> Vec<f32> {
 /// The gradient of [`bce_with_logits`] for `y`, times `scale · len`: `−z · scale`.
 pub fn bce_with_logits_y_grad(z: &[f32], scale: f32) -> Vec<f32> {
     map(z, |z| -z * scale)
+}
+
+/// One Adam step's constants (burn's `Adam`, no weight decay, no AMSGrad).
+#[derive(Clone, Copy, Debug)]
+pub struct AdamStep {
+    pub beta_1: f32,
+    pub beta_2: f32,
+    pub epsilon: f32,
+    /// The step's number, from 1.
+    pub time: i32,
+    pub lr: f32,
+}
+
+/// One Adam step on a parameter `p` with gradient `g` and moments `m`, `v` (zeros before the
+/// first step): the new `(p, m, v)`, each element computed in the order of burn's `Adam` (its
+/// tensor ops one after the other), so the values are burn's to the bit.
+pub fn adam(p: &[f32], g: &[f32], m: &[f32], v: &[f32], s: AdamStep) -> [Vec<f32>; 3] {
+    let n = p.len();
+    assert!(g.len() == n && m.len() == n && v.len() == n);
+    let (f1, f2) = (1.0 - s.beta_1, 1.0 - s.beta_2);
+    let bias_correction2_sqrt = (1.0 - s.beta_2.powi(s.time)).sqrt();
+    let combined = bias_correction2_sqrt / (1.0 - s.beta_1.powi(s.time));
+    let eps = s.epsilon * bias_correction2_sqrt;
+    let mut out = [0usize; 3].map(|_| parallel_output::zeros(n));
+    let [p_out, m_out, v_out] = &mut out;
+    p_out
+        .par_chunks_mut(CHUNK)
+        .zip(m_out.par_chunks_mut(CHUNK))
+        .zip(v_out.par_chunks_mut(CHUNK))
+        .enumerate()
+        .for_each(|(chunk, ((po, mo), vo))| {
+            let start = chunk * CHUNK;
+            let range = start..start + po.len();
+            let (p, g, m, v) = (
+                &p[range.clone()],
+                &g[range.clone()],
+                &m[range.clone()],
+                &v[range],
+            );
+            for i in 0..po.len() {
+                let m = m[i] * s.beta_1 + g[i] * f1;
+                let v = v[i] * s.beta_2 + (g[i] * g[i]) * f2;
+                let update = (m * combined) / (v.sqrt() + eps);
+                po[i] = p[i] - update * s.lr;
+                mo[i] = m;
+                vo[i] = v;
+            }
+        });
+    out
 }

@@ -3,7 +3,7 @@
 //! NeuroKin architectures. `../shared/bench/torch_reference.py` measures the same workloads;
 //! `bench_decoders --torch PYTHON` runs it in the same sitting and prints the ratios.
 
-use burn::optim::{AdamConfig, GradientsParams};
+use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
 
 use crate::core::device::DeviceChoice;
@@ -54,7 +54,7 @@ fn train_rate(
 ) -> Result<f64> {
     let tdev = autodiff_device(device, 0);
     let model = cfg.init(&tdev, 0)?;
-    let mut optim = AdamConfig::new().init();
+    let mut optim = crate::train::adam::adam();
     let native = cfg.native_size();
     let (q, y) = crate::core::device::with_seed(&tdev, 1, || {
         let q = Tensor::<2>::random([batch, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev);

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use burn::module::{Module, ModuleVisitor, Param, ParamId};
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -601,7 +601,7 @@ impl<'a, M: Module> Trainer<'a, M> {
         L: Fn(&M, &Batch) -> S,
         S: Into<StepLoss>,
     {
-        let optim = self.optim.unwrap_or_else(|| AdamConfig::new().init());
+        let optim = self.optim.unwrap_or_else(|| crate::train::adam::adam());
         let mut none = NoHooks;
         let hooks: &mut dyn TrainHooks<M> = match self.hooks {
             Some(h) => h,
@@ -1263,7 +1263,7 @@ where
             Ok((m, reset)) => {
                 model = m;
                 if reset {
-                    optim = AdamConfig::new().init();
+                    optim = crate::train::adam::adam();
                 }
             }
             Err(e) => {
