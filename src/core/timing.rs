@@ -53,6 +53,28 @@ pub fn median_seconds(r: Repeats, f: impl FnMut()) -> f64 {
     median(&time_calls(r, f))
 }
 
+/// Seconds the calling thread has run on a CPU since it started (Linux's
+/// `/proc/thread-self/schedstat`, nanoseconds); `None` elsewhere.
+pub fn thread_cpu_seconds() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: f64 = text.split_whitespace().next()?.parse().ok()?;
+    Some(ns * 1e-9)
+}
+
+/// `f()`, and the share of its wall time the calling thread spent on a CPU (`None` where
+/// [`thread_cpu_seconds`] is). The work a caller does alone while rayon's workers wait is what
+/// more threads cannot shorten: with parallel kernels the caller mostly sleeps until they end,
+/// so this share bounds the speed-up more threads can give (Amdahl).
+pub fn with_caller_share<T>(f: impl FnOnce() -> T) -> (T, Option<f64>) {
+    let (cpu, wall) = (thread_cpu_seconds(), Instant::now());
+    let out = f();
+    let share = match (cpu, thread_cpu_seconds()) {
+        (Some(a), Some(b)) => Some((b - a) / wall.elapsed().as_secs_f64().max(1e-9)),
+        _ => None,
+    };
+    (out, share)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -64,5 +86,21 @@ mod tests {
         let mut calls = 0;
         let times = time_calls(Repeats::exactly(2, 3), || calls += 1);
         assert_eq!((calls, times.len()), (5, 3));
+    }
+
+    #[test]
+    fn the_caller_share_tells_work_from_waiting() {
+        let ms = std::time::Duration::from_millis(80);
+        let (_, busy) = with_caller_share(|| {
+            let t = Instant::now();
+            while t.elapsed() < ms {
+                std::hint::black_box(t.elapsed());
+            }
+        });
+        let (_, idle) = with_caller_share(|| std::thread::sleep(ms));
+        if cfg!(target_os = "linux") {
+            let (busy, idle) = (busy.unwrap(), idle.unwrap());
+            assert!(busy > 0.3 && idle < 0.2, "busy {busy}, sleeping {idle}");
+        }
     }
 }

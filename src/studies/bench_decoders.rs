@@ -9,7 +9,9 @@ use burn::tensor::{Device, Distribution, Tensor};
 use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::core::preset::Preset;
+use crate::core::timing::with_caller_share;
 use crate::eval::inference_speed::{SpeedConfig, measure};
+use crate::kernels::cpu_extension::sigmoid;
 use crate::self_models::neurokin::{NeuroKinArch, NeuroKinConfig};
 use crate::train::losses::{bce_with_logits, mse};
 use crate::train::trainer::autodiff_device;
@@ -23,6 +25,11 @@ pub struct BenchRow {
     pub torch: Option<f64>,
     /// `ours / torch`: above 1 is faster than PyTorch.
     pub ratio: Option<f64>,
+    /// The share of our measurement's wall time the calling thread was on a CPU
+    /// ([`crate::core::timing::with_caller_share`]): work on one thread, which more threads do
+    /// not shorten. Empty in CSVs written before it was measured.
+    #[serde(default)]
+    pub caller_busy: Option<f64>,
     /// `paper` (the paper's models and batches) or `quick`.
     pub preset: String,
     pub device: String,
@@ -30,13 +37,20 @@ pub struct BenchRow {
 }
 
 impl BenchRow {
-    fn new(model: &str, figure: String, ours: f64, quick: bool, device: DeviceChoice) -> Self {
+    fn new(
+        model: &str,
+        figure: String,
+        (ours, caller_busy): (f64, Option<f64>),
+        quick: bool,
+        device: DeviceChoice,
+    ) -> Self {
         BenchRow {
             model: model.into(),
             figure,
             ours,
             torch: None,
             ratio: None,
+            caller_busy,
             preset: if quick { "quick" } else { "paper" }.into(),
             device: device.to_string(),
             git_revision: crate::core::provenance::git_revision(),
@@ -73,7 +87,7 @@ fn train_rate(
             let z = model.forward(q.clone());
             let loss = match cfg.arch {
                 NeuroKinArch::Code => bce_with_logits(z, y.clone()),
-                NeuroKinArch::Text64 => mse(burn::tensor::activation::sigmoid(z), y.clone()),
+                NeuroKinArch::Text64 => mse(sigmoid(z), y.clone()),
             };
             let grads = GradientsParams::from_grads(loss.backward(), &model);
             slot = Some(optim.step(1e-3, model, grads));
@@ -150,11 +164,13 @@ pub fn run_batches(
                 batches: vec![b],
                 ..speed.clone()
             };
-            for t in measure(|q| model.predict(q), cfg.dof, device, &one) {
+            let (timings, busy) =
+                with_caller_share(|| measure(|q| model.predict(q), cfg.dof, device, &one));
+            for t in timings {
                 let row = BenchRow::new(
                     name,
                     format!("infer_b{}_img_per_s", t.batch),
-                    t.images_per_second(),
+                    (t.images_per_second(), busy),
                     quick,
                     choice,
                 );
@@ -167,7 +183,10 @@ pub fn run_batches(
             let row = BenchRow::new(
                 name,
                 format!("train_b{b}_img_per_s"),
-                train_rate(&cfg, b, device, w, r)?,
+                {
+                    let (rate, busy) = with_caller_share(|| train_rate(&cfg, b, device, w, r));
+                    (rate?, busy)
+                },
                 quick,
                 choice,
             );
@@ -213,20 +232,24 @@ pub fn run_torch(
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// The rows as the console shows them: model, figure, ours, PyTorch's, ratio.
+/// The rows as the console shows them: model, figure, ours, PyTorch's, ratio, and the share
+/// of our time the calling thread was busy.
 pub fn console_table(rows: &[BenchRow]) -> String {
     let mut text = format!(
-        "{:<11} {:<22} {:>10} {:>10} {:>8}\n",
-        "model", "figure", "selfmodel", "pytorch", "ratio"
+        "{:<11} {:<22} {:>10} {:>10} {:>8} {:>12}\n",
+        "model", "figure", "selfmodel", "pytorch", "ratio", "caller busy"
     );
     for r in rows {
         let (t, ratio) = match r.torch {
             Some(t) => (format!("{t:.1}"), format!("{:.2}x", r.ours / t)),
             None => ("-".into(), "-".into()),
         };
+        let busy = r
+            .caller_busy
+            .map_or("-".into(), |b| format!("{:.0}%", 100.0 * b));
         text += &format!(
-            "{:<11} {:<22} {:>10.1} {:>10} {:>8}\n",
-            r.model, r.figure, r.ours, t, ratio
+            "{:<11} {:<22} {:>10.1} {:>10} {:>8} {:>12}\n",
+            r.model, r.figure, r.ours, t, ratio, busy
         );
     }
     text

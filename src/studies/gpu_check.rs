@@ -97,6 +97,9 @@ pub struct ThreadRow {
     pub ours: f64,
     pub torch: Option<f64>,
     pub ratio: Option<f64>,
+    /// [`BenchRow::caller_busy`]: the share of the time the calling thread worked alone.
+    #[serde(default)]
+    pub caller_busy: Option<f64>,
     pub git_revision: String,
 }
 
@@ -506,6 +509,7 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
             ours: r.ours,
             torch: r.torch,
             ratio: r.ratio,
+            caller_busy: r.caller_busy,
             git_revision: r.git_revision,
         }));
         write_csv(&check.out.join("cpu_threads.csv"), &all)?;
@@ -536,6 +540,7 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
             ours: r.ours,
             torch: None,
             ratio: None,
+            caller_busy: r.caller_busy,
             git_revision: r.git_revision.clone(),
         }));
         if torch.is_empty() {
