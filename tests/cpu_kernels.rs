@@ -223,7 +223,8 @@ fn relu_and_its_gradient_equal_burns() {
 
 /// The sigmoid on our kernel: flex's values and gradients to the bit. The binary
 /// cross-entropy on logits in one kernel each way: the value and both gradients of burn's
-/// composition of elementwise ops, over several chunks, with saturated logits.
+/// composition of elementwise ops, to the bit (a training run gives the numbers it gave
+/// before), over several chunks, with saturated logits.
 #[test]
 fn sigmoid_and_the_logit_cross_entropy_match_burn() {
     let dev = Device::flex().autodiff();
@@ -264,7 +265,33 @@ fn sigmoid_and_the_logit_cross_entropy_match_burn() {
         .zip(ours.iter().zip(&burns))
     {
         println!("bce with logits: {name}");
-        a.assert_approx_eq::<f32>(b, Tolerance::rel_abs(1e-5, 1e-9));
+        assert_eq!(a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
+    }
+}
+
+/// A layer's bias on our kernel: the output and the bias gradient of burn's broadcast add, to
+/// the bit.
+#[test]
+fn the_bias_add_and_its_gradient_equal_burns() {
+    let dev = Device::flex().autodiff();
+    let x = Tensor::<4>::random([6, 5, 40, 30], Distribution::Default, &dev);
+    let w = Tensor::<4>::random([3, 5, 3, 3], Distribution::Default, &dev);
+    let b = Tensor::<1>::random([3], Distribution::Default, &dev);
+    let options = ConvOptions::new([1, 1], [1, 1], [1, 1], 1);
+    let run = |with_bias: bool| {
+        let b = b.clone().require_grad();
+        let y = if with_bias {
+            conv2d(x.clone(), w.clone(), Some(b.clone()), options.clone())
+        } else {
+            conv2d(x.clone(), w.clone(), None, options.clone()) + b.clone().reshape([1, 3, 1, 1])
+        };
+        let grads = (y.clone() * y.clone()).sum().backward();
+        [y.into_data(), b.grad(&grads).unwrap().into_data()]
+    };
+    let (ours, burns) = (run(true), run(false));
+    for (name, (a, b)) in ["output", "bias grad"].iter().zip(ours.iter().zip(&burns)) {
+        println!("bias: {name}");
+        assert_eq!(a.as_slice::<f32>().unwrap(), b.as_slice::<f32>().unwrap());
     }
 }
 

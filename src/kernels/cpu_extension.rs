@@ -100,9 +100,9 @@ pub trait CpuKernelOps: Backend {
 
     /// The gradient of [`Self::add_bias_fast`]'s bias: `grad` summed over images and pixels.
     fn bias_grad(grad: FloatTensor<Self>) -> FloatTensor<Self> {
+        // As burn's autodiff reduces a broadcast add's gradient: the same sums, to the bit.
         let c = grad.shape().dims::<4>()[1];
-        let g = Self::float_sum_dim(Self::float_sum_dim(grad, 0), 2);
-        Self::float_reshape(Self::float_sum_dim(g, 3), Shape::new([c]))
+        Self::float_reshape(Self::float_sum_dims(grad, &[0, 2, 3]), Shape::new([c]))
     }
 
     /// `x` `[m, k]` · `w` `[k, n]` (a linear layer's weight); its backward pass is burn's
@@ -140,7 +140,7 @@ pub trait CpuKernelOps: Backend {
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let shape = z.shape();
         let ones = Shape::from(vec![1; shape.num_dims()]);
-        let scale = Self::float_div_scalar(grad, (shape.num_elements() as f32).into());
+        let scale = Self::float_mul_scalar(grad, (1.0 / shape.num_elements() as f64).into());
         let scale = Self::float_expand(Self::float_reshape(scale, ones), shape);
         let dz = Self::float_mul(Self::float_sub(Self::sigmoid(z.clone()), y), scale.clone());
         let dy = Self::float_mul(Self::float_neg(z), scale);
@@ -336,16 +336,6 @@ impl CpuKernelOps for Flex {
         flex_tensor(out, dims)
     }
 
-    fn bias_grad(grad: FlexTensor) -> FlexTensor {
-        let (g, [_, c, h, w]) = f32_nchw(&grad);
-        if grad.dtype() != DType::F32 {
-            let g = Self::float_sum_dim(Self::float_sum_dim(g, 0), 2);
-            return Self::float_reshape(Self::float_sum_dim(g, 3), Shape::new([c]));
-        }
-        let db = pointwise::bias_grad(g.storage::<f32>(), c, h * w);
-        FlexTensor::from_data(TensorData::new(db, [c]))
-    }
-
     fn matmul_fast(x: FlexTensor, w: FlexTensor) -> FlexTensor {
         let ([m, k], [_, n]) = (x.shape().dims::<2>(), w.shape().dims::<2>());
         if x.dtype() != DType::F32 || w.dtype() != DType::F32 || !linear::by_columns_pays(m, k, n) {
@@ -379,9 +369,10 @@ impl CpuKernelOps for Flex {
     }
 
     fn bce_with_logits_fast(z: FlexTensor, y: FlexTensor) -> FlexTensor {
+        let shape = z.shape();
         let (z, y) = (z.to_contiguous(), y.to_contiguous());
-        let loss = pointwise::bce_with_logits(z.storage::<f32>(), y.storage::<f32>());
-        FlexTensor::from_data(TensorData::new(vec![loss], [1]))
+        let each = pointwise::bce_with_logits_elements(z.storage::<f32>(), y.storage::<f32>());
+        Self::float_mean(FlexTensor::from_data(TensorData::new(each, shape)))
     }
 
     fn bce_with_logits_grads(
@@ -391,7 +382,9 @@ impl CpuKernelOps for Flex {
     ) -> (FlexTensor, FlexTensor) {
         let shape = z.shape();
         let (z, y) = (z.to_contiguous(), y.to_contiguous());
-        let scale = grad.to_contiguous().storage::<f32>()[0] / shape.num_elements() as f32;
+        // burn's mean passes back `(1 / n) · grad`, the factor rounded to f32 first.
+        let scale =
+            (1.0 / shape.num_elements() as f64) as f32 * grad.to_contiguous().storage::<f32>()[0];
         let (z, y) = (z.storage::<f32>(), y.storage::<f32>());
         let dz = pointwise::bce_with_logits_z_grad(z, y, scale);
         let dy = pointwise::bce_with_logits_y_grad(z, scale);

@@ -5,10 +5,10 @@
 //! NeuroKin step (our kernels, on every thread) the bias add and the ReLU then ran on one
 //! thread while the others waited, and the loss (nine elementwise operations forward, more
 //! backward) too: a few percent of a step on 2 threads each, a share that grows with every
-//! thread added (Amdahl). Here they run over chunks on rayon's workers. The values of the
-//! bias add, ReLU and sigmoid are flex's to the bit; the sums (the bias gradient, the loss)
-//! run in `f64` in a fixed order, whatever the thread count, and the loss's gradient is its
-//! closed form `σ(z) − y`. The tests compare values and gradients with burn's ops.
+//! thread added (Amdahl). Here they run over chunks on rayon's workers, each element computed
+//! as burn's ops compute it, so values and gradients are burn's to the bit (the tests compare
+//! them bit for bit) and a run gives the numbers it gave before; the sums (the bias gradient,
+//! the loss's mean) stay flex's own.
 
 use rayon::prelude::*;
 
@@ -43,24 +43,6 @@ pub fn add_bias(y: &[f32], bias: &[f32], plane: usize) -> Vec<f32> {
             }
         },
     )
-}
-
-/// The bias gradient of [`add_bias`]: the sum of `grad` `[batch, channels, plane]` over images
-/// and pixels, per channel.
-pub fn bias_grad(grad: &[f32], channels: usize, plane: usize) -> Vec<f32> {
-    assert!(channels > 0 && plane > 0 && grad.len() % (channels * plane) == 0);
-    let batch = grad.len() / (channels * plane);
-    (0..channels)
-        .into_par_iter()
-        .map(|c| {
-            let mut sum = 0f64;
-            for n in 0..batch {
-                let p = &grad[(n * channels + c) * plane..][..plane];
-                sum += p.iter().map(|&v| v as f64).sum::<f64>();
-            }
-            sum as f32
-        })
-        .collect()
 }
 
 /// `max(x, 0)`, NaN kept (as burn's and PyTorch's ReLU).
@@ -126,34 +108,39 @@ pub fn sigmoid_backward(s: &[f32], grad: &[f32]) -> Vec<f32> {
     zip_map(s, grad, |s, g| g * s * (1.0 - s))
 }
 
-/// The mean binary cross-entropy of the logits `z` against the targets `y`,
-/// `max(z, 0) − z·y + ln(1 + e^−|z|)` (stable for any `z`), summed in `f64` over fixed chunks
-/// added in order: the same value at any thread count.
-pub fn bce_with_logits(z: &[f32], y: &[f32]) -> f32 {
-    assert_eq!(z.len(), y.len());
-    assert!(!z.is_empty());
-    let sums: Vec<f64> = z
-        .par_chunks(CHUNK)
-        .zip(y.par_chunks(CHUNK))
-        .map(|(z, y)| {
-            z.iter()
-                .zip(y)
-                .map(|(&z, &y)| (z.max(0.0) - z * y + (-z.abs()).exp().ln_1p()) as f64)
-                .sum::<f64>()
-        })
-        .collect();
-    (sums.iter().sum::<f64>() / z.len() as f64) as f32
+/// The binary cross-entropy of each logit `z` against its target `y`,
+/// `(max(z, 0) − z·y) + ln(1 + e^−|z|)` (stable for any `z`), each element as burn's
+/// composition of flex's ops computes it (its mean is then flex's own).
+pub fn bce_with_logits_elements(z: &[f32], y: &[f32]) -> Vec<f32> {
+    zip_map(z, y, |z, y| {
+        let hinge = if z < 0.0 { 0.0 } else { z };
+        (hinge - z * y) + (-z.abs()).exp().ln_1p()
+    })
 }
 
-/// The gradient of [`bce_with_logits`] for `z`, times `scale · len` (`scale`: the upstream
-/// gradient over the element count): `(σ(z) − y) · scale`.
-pub fn bce_with_logits_z_grad(z: &[f32], y: &[f32], scale: f32) -> Vec<f32> {
-    zip_map(z, y, |z, y| (logistic(z) - y) * scale)
+/// The gradient of the mean of [`bce_with_logits_elements`] for `z`, from `g` = the upstream
+/// gradient times `1 / len` (as burn's mean passes it back): `σ(z) − y` times `g`, computed as
+/// burn's autodiff differentiates the composition (the three paths through `z`, added in the
+/// order it adds them), so the values are its own to the bit.
+pub fn bce_with_logits_z_grad(z: &[f32], y: &[f32], g: f32) -> Vec<f32> {
+    zip_map(z, y, |z, y| {
+        let u = (-z.abs()).exp();
+        let through_softplus = -((g * (1.0 / (u + 1.0))) * u);
+        let sign = if z > 0.0 {
+            1.0
+        } else if z < 0.0 {
+            -1.0
+        } else {
+            0.0
+        };
+        let through_hinge = if z < 0.0 { 0.0 } else { g };
+        ((-g) * y + through_softplus * sign) + through_hinge
+    })
 }
 
-/// The gradient of [`bce_with_logits`] for `y`, times `scale · len`: `−z · scale`.
-pub fn bce_with_logits_y_grad(z: &[f32], scale: f32) -> Vec<f32> {
-    map(z, |z| -z * scale)
+/// The same gradient for `y`: `−g · z`.
+pub fn bce_with_logits_y_grad(z: &[f32], g: f32) -> Vec<f32> {
+    map(z, |z| (-g) * z)
 }
 
 /// One Adam step's constants (burn's `Adam`, no weight decay, no AMSGrad).
