@@ -34,6 +34,9 @@ fn kernels_match_their_references() {
         (2, 3, [8, 5], 2, [1, 1], [1, 1], [0, 0]),
         (4, 2, [5, 5], 3, [3, 3], [1, 1], [2, 2]),
         (1, 1, [7, 9], 2, [3, 2], [2, 3], [0, 1]),
+        // A lone image (fewer images than threads): im2col and col2im over its channels.
+        (1, 6, [12, 10], 4, [4, 4], [2, 2], [1, 1]),
+        (1, 5, [9, 9], 3, [3, 3], [1, 1], [1, 1]),
         // 64 output pixels or more (the GEMMs' other layout).
         (2, 3, [18, 18], 4, [4, 4], [2, 2], [1, 1]),
         (3, 2, [10, 9], 3, [3, 3], [1, 1], [1, 1]),
@@ -65,6 +68,23 @@ fn kernels_match_their_references() {
         assert!(y < 1e-4, "{g:?}: forward max difference {y}");
         let t = worst(transpose(&go, &w, &g), transpose_reference(&go, &w, &g));
         assert!(t < 1e-4, "{g:?}: transposed convolution max difference {t}");
+        if batch == 1 {
+            // The lone image's result (its work spread over the threads) is, to the bit, what
+            // it gets as one image of a batch (each image on one thread).
+            let pair = ConvGeometry { batch: 2, ..g };
+            let two = |v: &[f32]| [v, v].concat();
+            let half = |v: Vec<f32>| v[..v.len() / 2].to_vec();
+            assert_eq!(
+                forward(&x, &w, &g),
+                half(forward(&two(&x), &w, &pair)),
+                "{g:?}"
+            );
+            assert_eq!(
+                transpose(&go, &w, &g),
+                half(transpose(&two(&go), &w, &pair)),
+                "{g:?}"
+            );
+        }
         // The transposed convolution of `go` (its input) back onto `x`'s grid, with `x` as its
         // output gradient: input gradient `forward(x, w)`, weight gradient
         // `weight_grad(x, go)`.

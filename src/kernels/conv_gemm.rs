@@ -292,12 +292,49 @@ fn weight_grad_from_chunks(chunk_sums: Vec<Vec<f32>>, g: &ConvGeometry) -> Vec<f
 
 /// The im2col matrix of one image `[c_in, H, W]`: the image itself for a 1x1 kernel with
 /// stride 1 and no padding, else [`im2col`] into `buffer` (of [`ConvGeometry::columns_len`]).
-fn columns<'a>(image: &'a [f32], g: &ConvGeometry, buffer: &'a mut [f32]) -> &'a [f32] {
+fn columns<'a>(
+    image: &'a [f32],
+    g: &ConvGeometry,
+    buffer: &'a mut [f32],
+    spread: Spread,
+) -> &'a [f32] {
     if g.im2col_is_identity() {
         image
     } else {
-        im2col(image, g, buffer);
+        im2col(image, g, buffer, spread);
         buffer
+    }
+}
+
+/// Whether a lone image's im2col and col2im run over its channels on every thread (when
+/// there are fewer images than threads, as its GEMM does) or on the calling one. Each
+/// channel's rows or plane are written by one thread in the same order either way: the same
+/// result to the bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Spread {
+    OneThread,
+    Channels,
+}
+
+impl Spread {
+    fn of(parallelism: gemm::Parallelism) -> Self {
+        match parallelism {
+            gemm::Parallelism::None => Spread::OneThread,
+            _ => Spread::Channels,
+        }
+    }
+
+    /// `f(channel, block)` over consecutive blocks of `len` elements of `data`, one per
+    /// channel, at least ~16k elements a rayon job.
+    fn each_channel(self, data: &mut [f32], len: usize, f: impl Fn(usize, &mut [f32]) + Sync) {
+        match self {
+            Spread::OneThread => data.chunks_mut(len).enumerate().for_each(|(c, b)| f(c, b)),
+            Spread::Channels => data
+                .par_chunks_mut(len)
+                .with_min_len(((1 << 14) / len.max(1)).max(1))
+                .enumerate()
+                .for_each(|(c, b)| f(c, b)),
+        }
     }
 }
 
@@ -352,7 +389,12 @@ pub fn forward(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
         g.c_out * pixels,
         || vec![0f32; g.columns_len()],
         |buffer, n, out| {
-            let col = columns(&x[n * image_in..(n + 1) * image_in], g, buffer);
+            let col = columns(
+                &x[n * image_in..(n + 1) * image_in],
+                g,
+                buffer,
+                Spread::of(parallelism),
+            );
             gemm_weights_by_columns(out, w, col, g, parallelism);
         },
     )
@@ -415,7 +457,8 @@ fn weight_grad_chunks(
             let mut buffer = vec![0f32; g.columns_len()];
             let first = chunk * per_chunk;
             for n in first..(first + per_chunk).min(g.batch) {
-                let col = columns(&x[n * image_in..(n + 1) * image_in], g, &mut buffer);
+                let image = &x[n * image_in..(n + 1) * image_in];
+                let col = columns(image, g, &mut buffer, Spread::OneThread);
                 if let (Some(w), Some(y)) = (w, y_chunk.as_deref_mut()) {
                     let y_n = &mut y[(n - first) * image_out..(n - first + 1) * image_out];
                     gemm_weights_by_columns(y_n, w, col, g, gemm::Parallelism::None);
@@ -463,21 +506,20 @@ pub fn transpose(x: &[f32], w: &[f32], g: &ConvGeometry) -> Vec<f32> {
             if column_major {
                 transpose_into(scratch, pixels, patch, col);
             }
-            col2im(col, g, out);
+            col2im(col, g, out, Spread::of(parallelism));
         },
     )
 }
 
 /// The adjoint of [`im2col`]: add `col[(c, kh, kw), (oy, ox)]` into the image `[c_in, H, W]`
 /// (zeros on entry).
-fn col2im(col: &[f32], g: &ConvGeometry, image: &mut [f32]) {
+fn col2im(col: &[f32], g: &ConvGeometry, image: &mut [f32], spread: Spread) {
     let [h, w] = g.input;
     let [oh, ow] = g.output();
     let [kh, kw] = g.kernel;
     let [sy, sx] = g.stride;
     let [py, px] = g.padding;
-    for c in 0..g.c_in {
-        let plane = &mut image[c * h * w..(c + 1) * h * w];
+    spread.each_channel(image, h * w, |c, plane| {
         for ky in 0..kh {
             for kx in 0..kw {
                 let row = &col[((c * kh + ky) * kw + kx) * oh * ow..][..oh * ow];
@@ -504,57 +546,61 @@ fn col2im(col: &[f32], g: &ConvGeometry, image: &mut [f32]) {
                 }
             }
         }
-    }
+    });
 }
 
 /// One image `[c_in, H, W]` to `col[(c, kh, kw), (oy, ox)]`, zeros where the patch leaves the
 /// image.
-fn im2col(x: &[f32], g: &ConvGeometry, col: &mut [f32]) {
+fn im2col(x: &[f32], g: &ConvGeometry, col: &mut [f32], spread: Spread) {
     let [h, w] = g.input;
     let [oh, ow] = g.output();
     let [kh, kw] = g.kernel;
     let [sy, sx] = g.stride;
     let [py, px] = g.padding;
-    for c in 0..g.c_in {
-        let plane = &x[c * h * w..(c + 1) * h * w];
-        for ky in 0..kh {
-            for kx in 0..kw {
-                let row = &mut col[((c * kh + ky) * kw + kx) * oh * ow..][..oh * ow];
-                for oy in 0..oh {
-                    let out = &mut row[oy * ow..(oy + 1) * ow];
-                    let iy = (oy * sy + ky) as isize - py as isize;
-                    if iy < 0 || iy >= h as isize {
-                        out.fill(0.0);
-                        continue;
-                    }
-                    let src = &plane[iy as usize * w..(iy as usize + 1) * w];
-                    if sx == 1 {
-                        // ix = ox + kx − px: one shifted copy with zeros at the borders.
-                        let shift = kx as isize - px as isize;
-                        let lo = (-shift).clamp(0, ow as isize) as usize;
-                        let hi = (w as isize - shift).clamp(lo as isize, ow as isize) as usize;
-                        out[..lo].fill(0.0);
-                        out[hi..].fill(0.0);
-                        let start = (lo as isize + shift) as usize;
-                        out[lo..hi].copy_from_slice(&src[start..start + hi - lo]);
-                    } else {
-                        // ox range whose ix = ox·sx + kx − px lies in [0, w): a strided copy.
-                        let lo = px.saturating_sub(kx).div_ceil(sx).min(ow);
-                        let hi = (w + px).saturating_sub(kx).div_ceil(sx).clamp(lo, ow);
-                        out[..lo].fill(0.0);
-                        out[hi..].fill(0.0);
-                        if lo < hi {
-                            let ix0 = lo * sx + kx - px;
-                            let strided = src[ix0..].iter().step_by(sx);
-                            for (o, &v) in out[lo..hi].iter_mut().zip(strided) {
-                                *o = v;
+    spread.each_channel(
+        &mut col[..g.c_in * kh * kw * oh * ow],
+        kh * kw * oh * ow,
+        |c, rows| {
+            let plane = &x[c * h * w..(c + 1) * h * w];
+            for ky in 0..kh {
+                for kx in 0..kw {
+                    let row = &mut rows[(ky * kw + kx) * oh * ow..][..oh * ow];
+                    for oy in 0..oh {
+                        let out = &mut row[oy * ow..(oy + 1) * ow];
+                        let iy = (oy * sy + ky) as isize - py as isize;
+                        if iy < 0 || iy >= h as isize {
+                            out.fill(0.0);
+                            continue;
+                        }
+                        let src = &plane[iy as usize * w..(iy as usize + 1) * w];
+                        if sx == 1 {
+                            // ix = ox + kx − px: one shifted copy with zeros at the borders.
+                            let shift = kx as isize - px as isize;
+                            let lo = (-shift).clamp(0, ow as isize) as usize;
+                            let hi = (w as isize - shift).clamp(lo as isize, ow as isize) as usize;
+                            out[..lo].fill(0.0);
+                            out[hi..].fill(0.0);
+                            let start = (lo as isize + shift) as usize;
+                            out[lo..hi].copy_from_slice(&src[start..start + hi - lo]);
+                        } else {
+                            // ox range whose ix = ox·sx + kx − px lies in [0, w): a strided copy.
+                            let lo = px.saturating_sub(kx).div_ceil(sx).min(ow);
+                            let hi = (w + px).saturating_sub(kx).div_ceil(sx).clamp(lo, ow);
+                            out[..lo].fill(0.0);
+                            out[hi..].fill(0.0);
+                            if lo < hi {
+                                let ix0 = lo * sx + kx - px;
+                                let strided = src[ix0..].iter().step_by(sx);
+                                for (o, &v) in out[lo..hi].iter_mut().zip(strided) {
+                                    *o = v;
+                                }
                             }
                         }
                     }
                 }
             }
-        }
-    }
+        },
+    );
 }
 
 /// Every tap of the convolution `g`: `visit(x_index, y_index, w_index)` for each input element

@@ -653,47 +653,12 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
     }
 
     fn matmul_fast(x: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct MatmulFast;
-
-        impl<B: Backend + CpuKernelOps> Backward<B, 2> for MatmulFast {
-            type State = (NodeId, NodeId);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 2>,
-                grads: &mut Gradients,
-                checkpointer: &mut Checkpointer,
-            ) {
-                let [node_x, node_w] = ops.parents;
-                let grad = grads.consume::<B>(&ops.node);
-                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
-                let w = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
-                if let Some(node) = node_w {
-                    grads.register::<B>(node.id, B::linear_weight_backward(x, grad.clone()));
-                }
-                if let Some(node) = node_x {
-                    grads.register::<B>(node.id, B::linear_x_backward(w, grad));
-                }
-            }
-        }
-
-        match MatmulFast
-            .prepare::<C>([x.node(), w.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&x), prep.checkpoint(&w));
-                prep.finish(
-                    state,
-                    B::matmul_fast(x.into_primitive(), w.into_primitive()),
-                )
-            }
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::matmul_fast(x.into_primitive(), w.into_primitive()))
-            }
-        }
+        two_inputs::<B, C>(x, w, B::matmul_fast, |x, w, grad, [need_x, need_w]| {
+            [
+                need_x.then(|| B::linear_x_backward(w, grad.clone())),
+                need_w.then(|| B::linear_weight_backward(x, grad)),
+            ]
+        })
     }
 
     fn sigmoid_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -726,49 +691,10 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
     }
 
     fn bce_with_logits_fast(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct BceWithLogits;
-
-        impl<B: Backend + CpuKernelOps> Backward<B, 2> for BceWithLogits {
-            type State = (NodeId, NodeId);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 2>,
-                grads: &mut Gradients,
-                checkpointer: &mut Checkpointer,
-            ) {
-                let [node_z, node_y] = ops.parents;
-                let grad = grads.consume::<B>(&ops.node);
-                let z = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
-                let y = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
-                let (dz, dy) = B::bce_with_logits_grads(z, y, grad);
-                if let Some(node) = node_z {
-                    grads.register::<B>(node.id, dz);
-                }
-                if let Some(node) = node_y {
-                    grads.register::<B>(node.id, dy);
-                }
-            }
-        }
-
-        match BceWithLogits
-            .prepare::<C>([z.node(), y.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let state = (prep.checkpoint(&z), prep.checkpoint(&y));
-                prep.finish(
-                    state,
-                    B::bce_with_logits_fast(z.into_primitive(), y.into_primitive()),
-                )
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::bce_with_logits_fast(
-                z.into_primitive(),
-                y.into_primitive(),
-            )),
-        }
+        two_inputs::<B, C>(z, y, B::bce_with_logits_fast, |z, y, grad, need| {
+            let (dz, dy) = B::bce_with_logits_grads(z, y, grad);
+            [need[0].then_some(dz), need[1].then_some(dy)]
+        })
     }
 
     fn relu_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -798,6 +724,56 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
             }
             OpsKind::UnTracked(prep) => prep.finish(B::relu_fast(x.into_primitive())),
         }
+    }
+}
+
+/// The gradients of a two-input op from both inputs and the output's gradient, each where
+/// `need` says its input is tracked.
+type TwoInputGrads<B> =
+    fn(FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, [bool; 2]) -> [Option<FloatTensor<B>>; 2];
+
+/// A two-input op in the autodiff graph whose backward pass reads both inputs: `forward` on
+/// the inner backend, both inputs checkpointed, `grads` in the backward pass.
+fn two_inputs<B: Backend, C: CheckpointStrategy>(
+    a: FloatTensor<Autodiff<B, C>>,
+    b: FloatTensor<Autodiff<B, C>>,
+    forward: fn(FloatTensor<B>, FloatTensor<B>) -> FloatTensor<B>,
+    grads: TwoInputGrads<B>,
+) -> FloatTensor<Autodiff<B, C>> {
+    #[derive(Debug)]
+    struct TwoInputs<B: Backend>(TwoInputGrads<B>);
+
+    impl<B: Backend> Backward<B, 2> for TwoInputs<B> {
+        type State = (NodeId, NodeId);
+
+        fn backward(
+            self,
+            ops: Ops<Self::State, 2>,
+            gradients: &mut Gradients,
+            checkpointer: &mut Checkpointer,
+        ) {
+            let grad = gradients.consume::<B>(&ops.node);
+            let a = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
+            let b = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
+            let need = ops.parents.each_ref().map(Option::is_some);
+            for (node, g) in ops.parents.into_iter().zip((self.0)(a, b, grad, need)) {
+                if let (Some(node), Some(g)) = (node, g) {
+                    gradients.register::<B>(node.id, g);
+                }
+            }
+        }
+    }
+
+    match TwoInputs(grads)
+        .prepare::<C>([a.node(), b.node()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(mut prep) => {
+            let state = (prep.checkpoint(&a), prep.checkpoint(&b));
+            prep.finish(state, forward(a.into_primitive(), b.into_primitive()))
+        }
+        OpsKind::UnTracked(prep) => prep.finish(forward(a.into_primitive(), b.into_primitive())),
     }
 }
 
