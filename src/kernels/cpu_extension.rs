@@ -819,7 +819,7 @@ fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
 }
 
 /// Whether `x` lives on the flex backend (with or without autodiff).
-fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
+pub fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
     matches!(
         x.device().without_autodiff().as_dispatch(),
         DispatchDevice::Flex(_)

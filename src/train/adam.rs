@@ -13,7 +13,7 @@
 use burn::optim::{AdamConfig, AdamState, AdaptiveMomentumState, LearningRate, ModuleOptimizer};
 use burn::tensor::{Device, Tensor};
 
-use crate::kernels::cpu_extension::adam_step;
+use crate::kernels::cpu_extension::{adam_step, on_flex};
 use crate::kernels::pointwise::AdamStep;
 
 /// Adam with burn's defaults (β₁ 0.9, β₂ 0.999, ε 1e-5) and β₁ as given.
@@ -63,6 +63,9 @@ impl burn::optim::Optimizer for Adam {
         grad: Tensor<D>,
         state: Option<Self::State<D>>,
     ) -> (Tensor<D>, Option<Self::State<D>>) {
+        if !on_flex(&tensor) {
+            return self.reference.step(lr, tensor, grad, state);
+        }
         let (time, m, v) = match &state {
             Some(s) => (
                 s.momentum.time + 1,
