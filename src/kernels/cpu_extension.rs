@@ -872,18 +872,16 @@ pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<T
     })
 }
 
-/// One Adam step on our parallel kernel (see [`crate::train::adam`]); `None` when `p` is not on
-/// flex.
+/// One Adam step, `[p, m, v]` after it: on our parallel kernel on flex (see
+/// [`crate::train::adam`], which sends other devices to burn's own `Adam`), else as burn's
+/// `Adam` composes it.
 pub fn adam_step<const D: usize>(
     p: Tensor<D>,
     g: Tensor<D>,
     m: Tensor<D>,
     v: Tensor<D>,
     step: pointwise::AdamStep,
-) -> Option<[Tensor<D>; 3]> {
-    if !on_flex(&p) {
-        return None;
-    }
+) -> [Tensor<D>; 3] {
     let (p, m, v) = <Dispatch as CpuKernelOps>::adam_step(
         p.into_dispatch(),
         g.into_dispatch(),
@@ -891,7 +889,7 @@ pub fn adam_step<const D: usize>(
         v.into_dispatch(),
         step,
     );
-    Some([p, m, v].map(Tensor::from_dispatch))
+    [p, m, v].map(Tensor::from_dispatch)
 }
 
 /// burn's `relu`, on our parallel kernel when `x` is on flex.

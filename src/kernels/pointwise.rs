@@ -1,5 +1,5 @@
 //! Elementwise steps of a training step on the CPU, forward and backward, in parallel: a
-//! layer's bias and ReLU, the sigmoid, and the binary cross-entropy on logits.
+//! layer's bias and ReLU, the sigmoid, the binary cross-entropy on logits, and Adam's update.
 //!
 //! flex runs every elementwise operation on the calling thread. After each convolution of a
 //! NeuroKin step (our kernels, on every thread) the bias add and the ReLU then ran on one

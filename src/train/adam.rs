@@ -66,11 +66,11 @@ impl burn::optim::Optimizer for Adam {
         if !on_flex(&tensor) {
             return self.reference.step(lr, tensor, grad, state);
         }
-        let (time, m, v) = match &state {
+        let (time, m, v) = match state {
             Some(s) => (
                 s.momentum.time + 1,
-                s.momentum.moment_1.clone(),
-                s.momentum.moment_2.clone(),
+                s.momentum.moment_1,
+                s.momentum.moment_2,
             ),
             // m = v = 0 before the first step: 0·β + x is x, burn's first step to the bit.
             None => (1, grad.zeros_like(), grad.zeros_like()),
@@ -82,13 +82,9 @@ impl burn::optim::Optimizer for Adam {
             time: time as i32,
             lr: lr as f32,
         };
-        match adam_step(tensor.clone(), grad.clone(), m, v, step) {
-            Some([p, m, v]) => {
-                let momentum = AdaptiveMomentumState::new(time, m, v);
-                (p, Some(AdamState::new(momentum)))
-            }
-            None => self.reference.step(lr, tensor, grad, state),
-        }
+        let [p, m, v] = adam_step(tensor, grad, m, v, step);
+        let momentum = AdaptiveMomentumState::new(time, m, v);
+        (p, Some(AdamState::new(momentum)))
     }
 
     fn to_device<const D: usize>(state: Self::State<D>, device: &Device) -> Self::State<D> {
