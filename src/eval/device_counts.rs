@@ -27,35 +27,45 @@ pub struct DeviceCounts {
     pub uploads: u64,
     /// Launches by kernel name.
     pub kernels: BTreeMap<String, u64>,
+    /// Launches by kernel name and the operations burn's fusion backend ran them for
+    /// (`kernel <- operation+operation`): which operation asks for each copy, reduction or
+    /// fill. Launches outside fusion's blocks (none in a training step) are `kernel <- ?`.
+    pub sources: BTreeMap<String, u64>,
 }
 
 impl DeviceCounts {
     /// Both counts together.
     pub fn plus(&self, other: &DeviceCounts) -> DeviceCounts {
-        let mut kernels = self.kernels.clone();
-        for (k, n) in &other.kernels {
-            *kernels.entry(k.clone()).or_default() += n;
-        }
+        let add = |a: &BTreeMap<String, u64>, b: &BTreeMap<String, u64>| {
+            let mut sum = a.clone();
+            for (k, n) in b {
+                *sum.entry(k.clone()).or_default() += n;
+            }
+            sum
+        };
         DeviceCounts {
             launches: self.launches + other.launches,
             reads: self.reads + other.reads,
             uploads: self.uploads + other.uploads,
-            kernels,
+            kernels: add(&self.kernels, &other.kernels),
+            sources: add(&self.sources, &other.sources),
         }
     }
 
     /// What happened between `earlier` and `self`.
     pub fn since(&self, earlier: &DeviceCounts) -> DeviceCounts {
+        let less = |a: &BTreeMap<String, u64>, b: &BTreeMap<String, u64>| {
+            a.iter()
+                .map(|(k, &n)| (k.clone(), n - b.get(k).copied().unwrap_or(0)))
+                .filter(|(_, n)| *n > 0)
+                .collect()
+        };
         DeviceCounts {
             launches: self.launches - earlier.launches,
             reads: self.reads - earlier.reads,
             uploads: self.uploads - earlier.uploads,
-            kernels: self
-                .kernels
-                .iter()
-                .map(|(k, &n)| (k.clone(), n - earlier.kernels.get(k).copied().unwrap_or(0)))
-                .filter(|(_, n)| *n > 0)
-                .collect(),
+            kernels: less(&self.kernels, &earlier.kernels),
+            sources: less(&self.sources, &earlier.sources),
         }
     }
 }
@@ -69,6 +79,7 @@ struct Counter {
     reads: AtomicU64,
     uploads: AtomicU64,
     kernels: Mutex<BTreeMap<String, u64>>,
+    sources: Mutex<BTreeMap<String, u64>>,
     next_id: AtomicU64,
 }
 
@@ -130,6 +141,13 @@ impl Subscriber for &'static Counter {
                 let mut name = KernelName(None);
                 span.record(&mut name);
                 let name = short_name(name.0.as_deref().unwrap_or("?"));
+                let block = BLOCK.with(|b| b.borrow().clone());
+                *self
+                    .sources
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .entry(format!("{name} <- {}", block.as_deref().unwrap_or("?")))
+                    .or_default() += 1;
                 *self
                     .kernels
                     .lock()
@@ -171,6 +189,63 @@ impl Subscriber for &'static Counter {
 thread_local! {
     /// Read spans entered on this thread and not yet left (odd span ids are reads).
     static READ_DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    /// The operations of the fusion block running on this thread (the fusion server's).
+    static BLOCK: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+}
+
+/// An operation of burn's IR by its kind: `BaseFloat(SwapDims(..))` -> `SwapDims`,
+/// `NumericFloat(F32, Add(..))` -> `Add`, `Custom(CustomOpIr { id: "adam", .. })` -> `adam`.
+pub fn operation_name(debug: &str) -> String {
+    if let Some(rest) = debug.strip_prefix("Custom(")
+        && let Some(start) = rest.find("id: \"")
+    {
+        let id = &rest[start + 5..];
+        return id.split('"').next().unwrap_or("custom").to_string();
+    }
+    let words: Vec<&str> = debug
+        .split(|c: char| !c.is_alphanumeric() && c != '_')
+        .filter(|w| !w.is_empty())
+        .take(4)
+        .collect();
+    let is_dtype = |w: &str| {
+        matches!(
+            w,
+            "F64" | "F32" | "F16" | "BF16" | "Flex32" | "I64" | "I32" | "I16" | "I8" | "U64"
+                | "U32" | "U16" | "U8" | "Bool"
+        )
+    };
+    words
+        .iter()
+        .skip(1)
+        .find(|w| !is_dtype(w) && w.chars().next().is_some_and(char::is_uppercase))
+        .or(words.first())
+        .map(|w| w.to_string())
+        .unwrap_or_default()
+}
+
+/// Names the operations of each fusion block on the server's thread while it runs.
+struct BlockNames;
+
+impl burn_fusion::observer::FusionObserver for BlockNames {
+    fn registered(&self, _operation: &burn_ir::OperationIr) {}
+    fn block_starts(&self, block: burn_fusion::observer::BlockOperations<'_>) {
+        let mut names: Vec<String> = Vec::new();
+        for op in block.iter() {
+            let name = operation_name(&format!("{op:?}"));
+            if !names.contains(&name) {
+                names.push(name);
+            }
+        }
+        let summary = if names.len() > 6 {
+            format!("{}+..({} kinds)", names[..6].join("+"), names.len())
+        } else {
+            names.join("+")
+        };
+        BLOCK.with(|b| *b.borrow_mut() = Some(summary));
+    }
+    fn block_ran(&self) {
+        BLOCK.with(|b| *b.borrow_mut() = None);
+    }
 }
 
 static COUNTER: OnceLock<&'static Counter> = OnceLock::new();
@@ -185,9 +260,14 @@ pub fn install() -> bool {
             reads: AtomicU64::new(0),
             uploads: AtomicU64::new(0),
             kernels: Mutex::new(BTreeMap::new()),
+            sources: Mutex::new(BTreeMap::new()),
             next_id: AtomicU64::new(0),
         }));
         installed = tracing::subscriber::set_global_default(counter).is_ok();
+        // Kept for the process's life, as the subscriber.
+        std::mem::forget(burn_fusion::observer::FusionObservation::new(
+            std::sync::Arc::new(BlockNames),
+        ));
         counter
     });
     installed
@@ -201,6 +281,7 @@ pub fn snapshot() -> DeviceCounts {
             reads: c.reads.load(Ordering::Relaxed),
             uploads: c.uploads.load(Ordering::Relaxed),
             kernels: c.kernels.lock().unwrap_or_else(|e| e.into_inner()).clone(),
+            sources: c.sources.lock().unwrap_or_else(|e| e.into_inner()).clone(),
         },
         None => DeviceCounts::default(),
     }

@@ -271,6 +271,9 @@ impl Densifier<'_> {
 }
 
 impl TrainHooks<KinematicGaussians> for Densifier<'_> {
+    fn wants_gradients(&self) -> bool {
+        true
+    }
     fn gradients(&mut self, model: &KinematicGaussians, grads: &GradientsParams, step: usize) {
         let n = model.len();
         if self.grad_sum.len() != n {

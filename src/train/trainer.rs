@@ -679,8 +679,13 @@ impl<M, W: FnMut(&M, usize) -> Result<()>> TrainHooks<M> for Watch<W> {
 
 /// What a model may do during training besides descending the loss.
 pub trait TrainHooks<M> {
-    /// Sees each step's gradients before the optimiser applies them.
+    /// Sees each step's gradients (clipped) before the optimiser applies them.
     fn gradients(&mut self, _model: &M, _grads: &GradientsParams, _step: usize) {}
+    /// Whether [`TrainHooks::gradients`] looks at the gradients: where it does not, a GPU
+    /// clips them inside the optimiser's kernels instead of scaling each one first.
+    fn wants_gradients(&self) -> bool {
+        false
+    }
     /// After each step (`step` = steps done): may replace the model (K-3DGS densifies and
     /// prunes its Gaussians) and returns whether the optimiser state must start afresh (it
     /// must when parameters changed shape). An error stops training and is returned.
@@ -1194,11 +1199,15 @@ where
         let step_loss: StepLoss = loss(&model, &batch).into();
         losses.push(step, &step_loss);
         let mut grads = step_loss.gradients(&model);
-        if let Some(max) = cfg.grad_clip_norm {
-            clip_global_norm(&model, &mut grads, max);
+        let mut clip = cfg.grad_clip_norm;
+        if hooks.wants_gradients() {
+            if let Some(max) = clip.take() {
+                clip_global_norm(&model, &mut grads, max);
+            }
+            hooks.gradients(&model, &grads, step);
         }
-        hooks.gradients(&model, &grads, step);
-        model = optim.step(hooks.learning_rate(cfg.learning_rate), model, grads);
+        let lr = hooks.learning_rate(cfg.learning_rate);
+        model = crate::train::adam::step(&mut optim, lr, model, grads, clip);
         log.train_seconds += t0.elapsed().as_secs_f64();
         log.images += n;
         log.step += 1;

@@ -1,0 +1,161 @@
+//! Launching the multi-tensor kernels on burn's CubeCL tensors: contiguity, outputs, and the
+//! tensors split into as many launches as the device's binding limit asks.
+
+use burn::tensor::DType;
+use burn_cubecl::tensor::CubeTensor;
+use burn_cubecl::kernel::into_contiguous;
+use burn_cubecl::ops::numeric::empty_device_dtype;
+use cubecl::calculate_cube_count_elemwise;
+use cubecl::prelude::*;
+
+use super::multi_tensor::{self, AdamScalarsLaunch, BLOCK};
+use crate::kernels::pointwise::AdamStep;
+
+/// Workgroups a tensor's sum of squares is split over (each sums a strided share).
+pub const GROUPS: usize = 32;
+
+/// Storage buffers one launch may bind: the device's limit, less one for the kernel's own
+/// metadata.
+fn max_bindings(t: &CubeTensor) -> usize {
+    let limit = t.client.properties().hardware.max_bindings as usize;
+    limit.saturating_sub(1).max(8)
+}
+
+fn contiguous(t: CubeTensor) -> CubeTensor {
+    if t.is_contiguous() {
+        t
+    } else {
+        into_contiguous(t)
+    }
+}
+
+fn empty_like(t: &CubeTensor) -> CubeTensor {
+    empty_device_dtype(t.client.clone(), t.device.clone(), t.meta.shape().clone(), t.dtype)
+}
+
+fn f32_only(tensors: &[CubeTensor]) {
+    assert!(
+        tensors.iter().all(|t| t.dtype == DType::F32),
+        "the multi-tensor kernels take f32 tensors"
+    );
+}
+
+/// The sum of squares of each tensor's elements, as `GROUPS` partial sums a tensor in one
+/// `[tensors.len() * GROUPS]` tensor (every value of the global norm, in a fixed order).
+pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
+    assert!(!tensors.is_empty(), "the sum of squares of no tensor");
+    f32_only(&tensors);
+    let first = tensors[0].clone();
+    let partials = empty_device_dtype(
+        first.client.clone(),
+        first.device.clone(),
+        [tensors.len() * GROUPS].into(),
+        DType::F32,
+    );
+    // Each launch binds its tensors and the partials.
+    let per_launch = max_bindings(&first) - 1;
+    let tensors: Vec<CubeTensor> = tensors.into_iter().map(contiguous).collect();
+    for (c, chunk) in tensors.chunks(per_launch).enumerate() {
+        let mut seq = SequenceArg::<OwnedTensor<f32>>::new();
+        for t in chunk {
+            seq.push(t.clone().into_tensor_arg());
+        }
+        multi_tensor::sum_of_squares::launch(
+            &first.client,
+            CubeCount::new_2d(GROUPS as u32, chunk.len() as u32),
+            CubeDim::new_1d(BLOCK as u32),
+            seq,
+            partials.clone().into_tensor_arg(),
+            (c * per_launch) as u32,
+            BLOCK,
+        );
+    }
+    partials
+}
+
+/// One Adam step of every parameter: `(params, grads, first moments, second moments)` in,
+/// `(params, first moments, second moments)` out, as many parameters a launch as the device
+/// binds. With `clip = Some((partials, max))`, every gradient is first scaled by the global
+/// norm's clipping factor (the partials from [`sum_of_squares`] over every gradient).
+pub fn adam(
+    params: Vec<CubeTensor>,
+    grads: Vec<CubeTensor>,
+    moment_1: Vec<CubeTensor>,
+    moment_2: Vec<CubeTensor>,
+    step: AdamStep,
+    clip: Option<(CubeTensor, f32)>,
+) -> Vec<[CubeTensor; 3]> {
+    let n = params.len();
+    assert!(n > 0 && grads.len() == n && moment_1.len() == n && moment_2.len() == n);
+    f32_only(&params);
+    f32_only(&grads);
+    let first = params[0].clone();
+    // Seven tensors a parameter, and the partials.
+    let per_launch = ((max_bindings(&first) - 1) / 7).max(1);
+    let (partials, max_norm, clipping) = match clip {
+        Some((p, max)) => (p, max, true),
+        // A kernel argument is needed all the same: a tensor of its own (a buffer bound
+        // twice in one launch is not allowed), never read.
+        None => (
+            empty_device_dtype(first.client.clone(), first.device.clone(), [1].into(), DType::F32),
+            0.0,
+            false,
+        ),
+    };
+    let bias_correction2_sqrt = (1.0 - step.beta_2.powi(step.time)).sqrt();
+    let combined = bias_correction2_sqrt / (1.0 - step.beta_1.powi(step.time));
+    let epsilon = step.epsilon * bias_correction2_sqrt;
+
+    let contiguous_all = |v: Vec<CubeTensor>| -> Vec<CubeTensor> { v.into_iter().map(contiguous).collect() };
+    let (params, grads) = (contiguous_all(params), contiguous_all(grads));
+    let (moment_1, moment_2) = (contiguous_all(moment_1), contiguous_all(moment_2));
+    let mut out = Vec::with_capacity(n);
+    for start in (0..n).step_by(per_launch) {
+        let end = (start + per_launch).min(n);
+        let outs: Vec<[CubeTensor; 3]> = (start..end)
+            .map(|i| [empty_like(&params[i]), empty_like(&moment_1[i]), empty_like(&moment_2[i])])
+            .collect();
+        let seq = |v: &[CubeTensor]| {
+            let mut s = SequenceArg::<OwnedTensor<f32>>::new();
+            for t in v {
+                s.push(t.clone().into_tensor_arg());
+            }
+            s
+        };
+        let out_seq = |k: usize| {
+            let mut s = SequenceArg::<OwnedTensor<f32>>::new();
+            for o in &outs {
+                s.push(o[k].clone().into_tensor_arg());
+            }
+            s
+        };
+        let elements: usize = (start..end).map(|i| params[i].meta.num_elements()).sum();
+        let cube_dim = CubeDim::new_1d(BLOCK as u32);
+        let cube_count = calculate_cube_count_elemwise(&first.client, elements, cube_dim);
+        multi_tensor::adam::launch(
+            &first.client,
+            cube_count,
+            cube_dim,
+            seq(&params[start..end]),
+            seq(&grads[start..end]),
+            seq(&moment_1[start..end]),
+            seq(&moment_2[start..end]),
+            out_seq(0),
+            out_seq(1),
+            out_seq(2),
+            partials.clone().into_tensor_arg(),
+            AdamScalarsLaunch::new(
+                step.lr,
+                step.beta_1,
+                step.beta_2,
+                combined,
+                epsilon,
+                max_norm,
+            ),
+            clipping,
+            BLOCK,
+        );
+        out.extend(outs);
+    }
+    out
+}

@@ -1,0 +1,105 @@
+//! Our GPU kernels, in CubeCL (burn's kernel language), for what burn runs as many launches:
+//! behind the `wgpu` feature, as [`crate::kernels::cpu_extension`] is for the CPU.
+//!
+//! - [`multi_tensor`]: the kernels (the sum of squares of many tensors; Adam over many
+//!   parameters);
+//! - [`launch`]: launching them on burn's CubeCL tensors (contiguity, outputs, the device's
+//!   binding limit);
+//! - here: the bridge to burn's tensors. On a GPU burn's tensors are lazy (burn's fusion
+//!   backend records operations and runs them in blocks); [`run_lazily`] records one of ours
+//!   the same way, so it runs in order with the rest and nothing waits for the device.
+//!
+//! Each kernel has its slow reference in burn's own operations beside its caller, and
+//! `tests/gpu_kernels.rs` compares them on lavapipe.
+
+pub mod launch;
+pub mod multi_tensor;
+
+use burn_fusion::FusionTensor;
+use burn_fusion::custom::{
+    CustomOpIr, HandleContainer, OperationFn, OperationIr, StreamId, TensorIr,
+};
+use burn::backend::{BackendTensor, DispatchAutodiffContext, DispatchTensor, DispatchTensorKind};
+use burn::tensor::{DType, Shape, Tensor};
+use burn_cubecl::fusion::FusionCubeRuntime;
+use burn_cubecl::CubeBackend;
+use burn_cubecl::tensor::CubeTensor;
+
+/// A lazy tensor of burn's fusion backend on a CubeCL device.
+pub type LazyTensor = FusionTensor<FusionCubeRuntime>;
+
+/// A float tensor on a CubeCL device (wgpu) as burn's fusion backend holds it, with the
+/// autodiff context to give it back; the tensor itself where it lives elsewhere.
+pub fn lazy<const D: usize>(
+    t: Tensor<D>,
+) -> std::result::Result<(LazyTensor, DispatchAutodiffContext), Tensor<D>> {
+    let dispatch = t.into_dispatch();
+    match dispatch.kind {
+        DispatchTensorKind::Cube(BackendTensor::Float(f)) => Ok((f, dispatch.autodiff)),
+        kind => Err(Tensor::from_dispatch(DispatchTensor {
+            kind,
+            autodiff: dispatch.autodiff,
+        })),
+    }
+}
+
+/// Whether `t` is a float tensor on a CubeCL device, where [`lazy`] takes it.
+pub fn is_lazy<const D: usize>(t: &Tensor<D>) -> bool {
+    matches!(
+        t.clone().into_dispatch().kind,
+        DispatchTensorKind::Cube(BackendTensor::Float(_))
+    )
+}
+
+/// Back from [`lazy`].
+pub fn tensor<const D: usize>(t: LazyTensor, autodiff: DispatchAutodiffContext) -> Tensor<D> {
+    Tensor::from_dispatch(DispatchTensor {
+        kind: DispatchTensorKind::Cube(BackendTensor::Float(t)),
+        autodiff,
+    })
+}
+
+/// Records `run` (CubeCL tensors in, CubeCL tensors out) as one operation of burn's fusion
+/// backend on the inputs' device: it runs when burn runs the operations before it, and its
+/// outputs (of these shapes and types) are lazy tensors like any other.
+pub fn run_lazily(
+    id: &str,
+    inputs: Vec<LazyTensor>,
+    outputs: &[(Shape, DType)],
+    run: impl Fn(Vec<CubeTensor>) -> Vec<CubeTensor> + Send + Sync + 'static,
+) -> Vec<LazyTensor> {
+    let client = inputs
+        .first()
+        .expect("an operation of no input has no device")
+        .client
+        .clone();
+    let inputs: Vec<TensorIr> = inputs.into_iter().map(|t| t.into_ir()).collect();
+    let outputs: Vec<TensorIr> = outputs
+        .iter()
+        .map(|(shape, dtype)| TensorIr::uninit(client.create_empty_handle(), shape.clone(), *dtype))
+        .collect();
+    let ids: Vec<_> = outputs.iter().map(|o| o.id).collect();
+    let desc = CustomOpIr {
+        id: id.into(),
+        inputs: inputs.clone(),
+        outputs,
+        scalars: Vec::new(),
+    };
+    let op = OperationFn(
+        move |handles: &mut HandleContainer<
+            <FusionCubeRuntime as burn_fusion::FusionRuntime>::FusionHandle,
+        >| {
+            let tensors = inputs
+                .iter()
+                .map(|ir| handles.get_float_tensor::<CubeBackend>(ir))
+                .collect();
+            let results = run(tensors);
+            assert_eq!(results.len(), ids.len(), "{} outputs expected", ids.len());
+            for (id, t) in ids.iter().zip(results) {
+                handles.register_float_tensor::<CubeBackend>(id, t);
+            }
+            Ok(())
+        },
+    );
+    client.register(StreamId::current(), OperationIr::Custom(desc), op)
+}

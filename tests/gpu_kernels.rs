@@ -1,0 +1,103 @@
+//! Our GPU kernels (`kernels::cube`) against burn's own operations, on wgpu (lavapipe in CI):
+//! behind the `wgpu` feature, `cargo test --release --features wgpu --test gpu_kernels`.
+#![cfg(feature = "wgpu")]
+
+use burn::module::{Module, ModuleVisitor, Param};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Distribution, Tensor};
+use selfmodel::core::device::{DeviceChoice, select, with_seed};
+use selfmodel::core::preset::Preset;
+use selfmodel::self_models::neurokin::{NeuroKin, NeuroKinConfig};
+use selfmodel::train::adam;
+use selfmodel::train::trainer::{autodiff_device, clip_global_norm};
+
+/// Every parameter of a module, flattened, in visiting order.
+fn values<M: Module>(m: &M) -> Vec<Vec<f32>> {
+    struct Collect(Vec<Vec<f32>>);
+    impl ModuleVisitor for Collect {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            self.0.push(p.val().into_data().try_to_vec::<f32>().unwrap());
+        }
+    }
+    let mut c = Collect(Vec::new());
+    m.visit(&mut c);
+    c.0
+}
+
+fn largest_difference(a: &[Vec<f32>], b: &[Vec<f32>]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| {
+            assert_eq!(x.len(), y.len());
+            x.iter().zip(y).map(|(p, q)| (p - q).abs())
+        })
+        .fold(0.0, f32::max)
+}
+
+/// burn's Adam with our settings: the reference of the fused step.
+fn burns_adam() -> ModuleOptimizer {
+    ModuleOptimizer::from(AdamConfig::new().with_epsilon(1e-5).build())
+}
+
+/// A copy of the gradients (`GradientsParams` is not `Clone`).
+fn copy(model: &NeuroKin, grads: &GradientsParams) -> GradientsParams {
+    struct Copy<'a>(&'a GradientsParams, GradientsParams);
+    impl ModuleVisitor for Copy<'_> {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            if let Some(g) = self.0.get::<D>(p.id) {
+                self.1.register(p.id, g);
+            }
+        }
+    }
+    let mut c = Copy(grads, GradientsParams::new());
+    model.visit(&mut c);
+    c.1
+}
+
+fn grads(model: &NeuroKin, x: &Tensor<2>, y: &Tensor<4>) -> GradientsParams {
+    let loss = (model.forward(x.clone()) - y.clone()).square().mean();
+    GradientsParams::from_grads(loss.backward(), model)
+}
+
+/// Adam over every parameter in a few launches (with the global-norm clipping inside)
+/// against burn's Adam after burn's clipping, step by step on the same gradients; then the
+/// optimiser states: the fused step's loads into burn's and the two go on alike.
+#[test]
+fn the_fused_adam_step_is_burns() {
+    let device = select(DeviceChoice::Wgpu).unwrap();
+    let tdev = autodiff_device(&device, 0);
+    let cfg = NeuroKinConfig::quick();
+    let model = cfg.init(&tdev, 3).unwrap();
+    let (x, y) = with_seed(&tdev, 5, || {
+        (
+            Tensor::<2>::random([8, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
+            Tensor::<4>::random([8, 1, 32, 32], Distribution::Default, &tdev),
+        )
+    });
+    let (mut fused, mut reference) = (model.clone(), model);
+    let (mut opt_fused, mut opt_reference) = (adam::adam(), burns_adam());
+    let max_norm = 0.05;
+    for step in 0..3 {
+        // The same gradients for both (the parameters differ by rounding only).
+        let mut g_ref = grads(&reference, &x, &y);
+        let g_fused = copy(&reference, &g_ref);
+        let norm = clip_global_norm(&reference, &mut g_ref, max_norm).unwrap();
+        let norm: f32 = norm.into_scalar();
+        assert!(norm > max_norm, "step {step}: the norm {norm} is not clipped");
+        reference = opt_reference.step(1e-3, reference, g_ref);
+        fused = adam::step(&mut opt_fused, 1e-3, fused, g_fused, Some(max_norm));
+        let d = largest_difference(&values(&fused), &values(&reference));
+        eprintln!("step {step}: norm {norm:.4}, largest parameter difference {d:.2e}");
+        assert!(d < 1e-5, "step {step}: parameters differ by {d}");
+    }
+    // The state of the fused steps is burn's: it loads into burn's Adam.
+    let record = opt_fused.to_record();
+    let mut opt_loaded = burns_adam().load_record(record);
+    let g = grads(&reference, &x, &y);
+    let g2 = copy(&reference, &g);
+    let a = opt_loaded.step(1e-3, reference.clone(), g);
+    let b = opt_reference.step(1e-3, reference, g2);
+    let d = largest_difference(&values(&a), &values(&b));
+    assert!(d < 1e-5, "the loaded state steps {d} away from burn's own");
+}
