@@ -12,3 +12,15 @@ pub mod linear;
 pub mod parallel_output;
 pub mod pointwise;
 pub mod upconv;
+
+/// burn's `BatchNorm::forward`: on a GPU in training, two launches forward and two backward
+/// (`cube::extension`); burn's own elsewhere.
+pub fn batch_norm<const D: usize>(
+    norm: &burn::nn::BatchNorm,
+    x: burn::tensor::Tensor<D>,
+) -> burn::tensor::Tensor<D> {
+    #[cfg(feature = "wgpu")]
+    return cube::extension::batch_norm(norm, x);
+    #[cfg(not(feature = "wgpu"))]
+    norm.forward(x)
+}

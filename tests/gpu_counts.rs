@@ -42,4 +42,10 @@ fn a_neurokin_training_step_reads_nothing_back() {
     for (name, count) in kernels.iter().take(12) {
         eprintln!("  {count:>4} x {name}");
     }
+    let mut sources: Vec<_> = per_step[1].sources.iter().collect();
+    sources.sort_by(|a, b| b.1.cmp(a.1));
+    eprintln!("step 2's kernels by the operations they ran for:");
+    for (name, count) in &sources {
+        eprintln!("  {count:>4} x {name}");
+    }
 }

@@ -101,3 +101,59 @@ fn the_fused_adam_step_is_burns() {
     let d = largest_difference(&values(&a), &values(&b));
     assert!(d < 1e-5, "the loaded state steps {d} away from burn's own");
 }
+
+/// A batch-norm layer in training on our kernels (statistics and gradient sums in a launch
+/// each) against burn's `BatchNorm`: outputs, running statistics and every gradient.
+#[test]
+fn batch_norm_on_our_kernels_is_burns() {
+    use burn::nn::BatchNormConfig;
+    let device = select(DeviceChoice::Wgpu).unwrap();
+    let tdev = autodiff_device(&device, 0);
+    let (x, w) = with_seed(&tdev, 7, || {
+        (
+            Tensor::<4>::random([5, 3, 7, 6], Distribution::Normal(0.5, 2.0), &tdev).require_grad(),
+            Tensor::<4>::random([5, 3, 7, 6], Distribution::Default, &tdev),
+        )
+    });
+    let ours = BatchNormConfig::new(3).init(&tdev);
+    let mut burns = BatchNormConfig::new(3).init(&tdev);
+    burns.gamma = Param::from_tensor(Tensor::<1>::from_data([1.5, 0.7, -0.3], &tdev));
+    let ours = burn::nn::BatchNorm {
+        gamma: burns.gamma.clone(),
+        beta: burns.beta.clone(),
+        ..ours
+    };
+    let mut worst = 0.0f32;
+    let mut compare = |what: &str, a: Tensor<1>, b: Tensor<1>| {
+        let (a, b) = (
+            a.into_data().try_to_vec::<f32>().unwrap(),
+            b.into_data().try_to_vec::<f32>().unwrap(),
+        );
+        let scale = b.iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        let d = largest_difference(&[a], &[b]) / scale;
+        eprintln!("{what}: largest difference {d:.2e} (relative to the largest value)");
+        worst = worst.max(d);
+    };
+    for _ in 0..2 {
+        let y_ours = selfmodel::kernels::batch_norm(&ours, x.clone());
+        let y_burns = burns.forward(x.clone());
+        let g_ours = (y_ours.clone() * w.clone()).sum().backward();
+        let g_burns = (y_burns.clone() * w.clone()).sum().backward();
+        compare("output", y_ours.flatten(0, 3), y_burns.flatten(0, 3));
+        compare("running mean", ours.running_mean.value(), burns.running_mean.value());
+        compare("running variance", ours.running_var.value(), burns.running_var.value());
+        compare(
+            "x gradient",
+            x.grad(&g_ours).unwrap().flatten(0, 3),
+            x.grad(&g_burns).unwrap().flatten(0, 3),
+        );
+        for (name, p) in [("gamma", &ours.gamma), ("beta", &ours.beta)] {
+            compare(
+                &format!("{name} gradient"),
+                p.val().grad(&g_ours).unwrap(),
+                p.val().grad(&g_burns).unwrap(),
+            );
+        }
+    }
+    assert!(worst < 2e-6, "batch norm differs from burn's by {worst} (relative)");
+}

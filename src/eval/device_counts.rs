@@ -226,9 +226,9 @@ pub fn operation_name(debug: &str) -> String {
 /// Names the operations of each fusion block on the server's thread while it runs.
 struct BlockNames;
 
-impl burn_fusion::observer::FusionObserver for BlockNames {
-    fn registered(&self, _operation: &burn_ir::OperationIr) {}
-    fn block_starts(&self, block: burn_fusion::observer::BlockOperations<'_>) {
+impl burn::backend::fusion::observer::FusionObserver for BlockNames {
+    fn registered(&self, _operation: &burn::backend::ir::OperationIr) {}
+    fn block_starts(&self, block: burn::backend::fusion::observer::BlockOperations<'_>) {
         let mut names: Vec<String> = Vec::new();
         for op in block.iter() {
             let name = operation_name(&format!("{op:?}"));
@@ -265,7 +265,7 @@ pub fn install() -> bool {
         }));
         installed = tracing::subscriber::set_global_default(counter).is_ok();
         // Kept for the process's life, as the subscriber.
-        std::mem::forget(burn_fusion::observer::FusionObservation::new(
+        std::mem::forget(burn::backend::fusion::observer::FusionObservation::new(
             std::sync::Arc::new(BlockNames),
         ));
         counter

@@ -457,7 +457,7 @@ impl NeuroKin {
         for (i, up) in self.ups.iter().enumerate() {
             x = up.forward(x);
             if let Some(norm) = self.norms.get(i) {
-                x = norm.forward(x);
+                x = crate::kernels::batch_norm(norm, x);
             }
             x = relu(x);
         }

@@ -5,6 +5,9 @@
 //!   parameters);
 //! - [`launch`]: launching them on burn's CubeCL tensors (contiguity, outputs, the device's
 //!   binding limit);
+//! - [`batch_norm`]: a batch-norm layer's statistics and its gradient's sums, a launch each;
+//! - [`extension`]: the kernels that are layers, in burn's autodiff graph (a backend
+//!   extension, with their backward passes);
 //! - here: the bridge to burn's tensors. On a GPU burn's tensors are lazy (burn's fusion
 //!   backend records operations and runs them in blocks); [`run_lazily`] records one of ours
 //!   the same way, so it runs in order with the rest and nothing waits for the device.
@@ -12,11 +15,13 @@
 //! Each kernel has its slow reference in burn's own operations beside its caller, and
 //! `tests/gpu_kernels.rs` compares them on lavapipe.
 
+pub mod batch_norm;
+pub mod extension;
 pub mod launch;
 pub mod multi_tensor;
 
-use burn_fusion::FusionTensor;
-use burn_fusion::custom::{
+use burn::backend::fusion::FusionTensor;
+use burn::backend::fusion::custom::{
     CustomOpIr, HandleContainer, OperationFn, OperationIr, StreamId, TensorIr,
 };
 use burn::backend::{BackendTensor, DispatchAutodiffContext, DispatchTensor, DispatchTensorKind};
@@ -87,7 +92,7 @@ pub fn run_lazily(
     };
     let op = OperationFn(
         move |handles: &mut HandleContainer<
-            <FusionCubeRuntime as burn_fusion::FusionRuntime>::FusionHandle,
+            <FusionCubeRuntime as burn::backend::fusion::FusionRuntime>::FusionHandle,
         >| {
             let tensors = inputs
                 .iter()

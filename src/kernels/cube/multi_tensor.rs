@@ -17,7 +17,7 @@ pub const BLOCK: usize = 256;
 /// Sums `shared[0..CUBE_DIM]` into `shared[0]` (every unit takes part; `CUBE_DIM` a power of
 /// two), in a fixed order: the result does not depend on timing.
 #[cube]
-fn tree_sum(shared: &mut Shared<[f32]>) -> f32 {
+pub fn tree_sum(shared: &mut Shared<[f32]>) -> f32 {
     sync_cube();
     let mut active = CUBE_DIM / 2;
     while active > 0 {
