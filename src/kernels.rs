@@ -13,14 +13,23 @@ pub mod parallel_output;
 pub mod pointwise;
 pub mod upconv;
 
-/// burn's `BatchNorm::forward`: on a GPU in training, two launches forward and two backward
-/// (`cube::extension`); burn's own elsewhere.
+/// burn's `BatchNorm::forward`, then a ReLU where `relu`: on a GPU in training, two launches
+/// forward and two backward (`cube::extension`); burn's own (and our ReLU) elsewhere.
 pub fn batch_norm<const D: usize>(
     norm: &burn::nn::BatchNorm,
     x: burn::tensor::Tensor<D>,
+    relu: bool,
 ) -> burn::tensor::Tensor<D> {
     #[cfg(feature = "wgpu")]
-    return cube::extension::batch_norm(norm, x);
+    if cpu_extension::on_flex(&x) {
+        let y = norm.forward(x);
+        return if relu { cpu_extension::relu(y) } else { y };
+    } else {
+        return cube::extension::batch_norm(norm, x, relu);
+    }
     #[cfg(not(feature = "wgpu"))]
-    norm.forward(x)
+    {
+        let y = norm.forward(x);
+        if relu { cpu_extension::relu(y) } else { y }
+    }
 }

@@ -14,7 +14,16 @@ fn a_neurokin_training_step_reads_nothing_back() {
     // The paper preset's step at the quick preset's size: input noise, clipping; batches of
     // 8, an epoch every 4 steps.
     let (log_every, steps) = (4, 12);
+    selfmodel::eval::device_counts::log_launches();
     let (per_step, log) = neurokin_step_counts("quick", 8, steps, log_every).unwrap();
+    if std::env::var_os("SELFMODEL_PRINT_LAUNCHES").is_some() {
+        // The last step's launches in order.
+        let all = selfmodel::eval::device_counts::launch_log();
+        let last = per_step.last().map_or(0, |c| c.launches as usize);
+        for (i, l) in all[all.len().saturating_sub(last)..].iter().enumerate() {
+            eprintln!("launch {i:>3}: {l}");
+        }
+    }
     assert_eq!(log.curve.len(), steps / log_every, "{:?}", log.curve);
     assert_eq!(per_step.len(), steps);
     for (i, c) in per_step.iter().enumerate() {

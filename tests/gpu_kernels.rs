@@ -102,8 +102,9 @@ fn the_fused_adam_step_is_burns() {
     assert!(d < 1e-5, "the loaded state steps {d} away from burn's own");
 }
 
-/// A batch-norm layer in training on our kernels (statistics and gradient sums in a launch
-/// each) against burn's `BatchNorm`: outputs, running statistics and every gradient.
+/// A batch-norm layer in training on our kernels (statistics, parameter gradients and the
+/// input gradient in a launch each), with and without the ReLU after it, against burn's
+/// `BatchNorm` (and ReLU): outputs, running statistics and every gradient.
 #[test]
 fn batch_norm_on_our_kernels_is_burns() {
     use burn::nn::BatchNormConfig;
@@ -134,9 +135,12 @@ fn batch_norm_on_our_kernels_is_burns() {
         eprintln!("{what}: largest difference {d:.2e} (relative to the largest value)");
         worst = worst.max(d);
     };
-    for _ in 0..2 {
-        let y_ours = selfmodel::kernels::batch_norm(&ours, x.clone());
-        let y_burns = burns.forward(x.clone());
+    for relu in [false, true, true] {
+        let y_ours = selfmodel::kernels::batch_norm(&ours, x.clone(), relu);
+        let mut y_burns = burns.forward(x.clone());
+        if relu {
+            y_burns = burn::tensor::activation::relu(y_burns);
+        }
         let g_ours = (y_ours.clone() * w.clone()).sum().backward();
         let g_burns = (y_burns.clone() * w.clone()).sum().backward();
         compare("output", y_ours.flatten(0, 3), y_burns.flatten(0, 3));

@@ -142,11 +142,18 @@ impl Subscriber for &'static Counter {
                 span.record(&mut name);
                 let name = short_name(name.0.as_deref().unwrap_or("?"));
                 let block = BLOCK.with(|b| b.borrow().clone());
+                let source = format!("{name} <- {}", block.as_deref().unwrap_or("?"));
+                if let Some(log) = LOG.get() {
+                    let mut log = log.lock().unwrap_or_else(|e| e.into_inner());
+                    if log.len() < 100_000 {
+                        log.push(source.clone());
+                    }
+                }
                 *self
                     .sources
                     .lock()
                     .unwrap_or_else(|e| e.into_inner())
-                    .entry(format!("{name} <- {}", block.as_deref().unwrap_or("?")))
+                    .entry(source)
                     .or_default() += 1;
                 *self
                     .kernels
@@ -249,6 +256,21 @@ impl burn::backend::fusion::observer::FusionObserver for BlockNames {
 }
 
 static COUNTER: OnceLock<&'static Counter> = OnceLock::new();
+
+/// Every launch in order (`kernel <- operations`), once [`log_launches`] was called.
+static LOG: OnceLock<Mutex<Vec<String>>> = OnceLock::new();
+
+/// Keep every launch from now on, in order, for [`launch_log`] (bounded: 100,000 launches).
+pub fn log_launches() {
+    LOG.get_or_init(|| Mutex::new(Vec::new()));
+}
+
+/// The launches kept since [`log_launches`], in order.
+pub fn launch_log() -> Vec<String> {
+    LOG.get()
+        .map(|l| l.lock().unwrap_or_else(|e| e.into_inner()).clone())
+        .unwrap_or_default()
+}
 
 /// Start counting (the first call installs the process's subscriber; `false` when another
 /// subscriber was installed first and nothing can be counted).

@@ -456,10 +456,10 @@ impl NeuroKin {
         let mut x = relu(linear_layer(&self.seed, z)).reshape([b, self.seed_channels, 4, 4]);
         for (i, up) in self.ups.iter().enumerate() {
             x = up.forward(x);
-            if let Some(norm) = self.norms.get(i) {
-                x = crate::kernels::batch_norm(norm, x);
-            }
-            x = relu(x);
+            x = match self.norms.get(i) {
+                Some(norm) => crate::kernels::batch_norm(norm, x, true),
+                None => relu(x),
+            };
         }
         match self.arch {
             NeuroKinArch::Code => {

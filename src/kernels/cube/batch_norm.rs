@@ -1,9 +1,12 @@
-//! Batch normalisation in training, by channel: one launch for the statistics (and the running
-//! statistics moved towards them), one for the gradient's two sums, where burn's composition
-//! takes a layout copy and two reductions forward and two copies and four reductions backward
-//! (its `batch_norm_train` swaps the batch and channel axes and reshapes, then reduces).
+//! Batch normalisation in training (and the ReLU after it, where there is one), by channel:
+//! one launch for the statistics (and the running statistics moved towards them), one for the
+//! γ and β gradients, one for the input gradient, where burn's composition takes a layout copy
+//! and two reductions forward, and two copies, four reductions and about six elementwise
+//! launches backward (its `batch_norm_train` swaps the batch and channel axes and reshapes,
+//! then reduces).
 //!
-//! A workgroup a channel; every tensor contiguous `[N, C, H, W]` (the host side makes sure).
+//! A workgroup a channel; the layer's tensors `[N, C, ...]` of any strides (a convolution's
+//! output is a channels-last view: read as it is, not copied).
 //! The slow reference is the default body of [`super::extension::GpuKernelOps`]'s methods,
 //! burn's own operations; `tests/gpu_kernels.rs` compares the two.
 
@@ -13,33 +16,26 @@ use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use super::multi_tensor::{BLOCK, tree_sum};
+use super::multi_tensor::{BLOCK, at, tree_sum};
 
-/// The sum over a channel `c` of `value(k)` for its elements `k` (batch-major), by the whole
-/// workgroup; every unit gets it.
+/// `Σ (x - shift)²` over channel `c` (the workgroup's) of an `[N, C, ...]` tensor,
+/// by the whole workgroup; every unit gets it.
 #[cube]
-fn channel_sum(
+fn squares_about(
     x: &Tensor<f32>,
-    other: &Tensor<f32>,
     shift: f32,
     channels: usize,
     plane: usize,
-    #[comptime] product: bool,
     #[comptime] block: usize,
 ) -> f32 {
     let c = CUBE_POS_X as usize;
-    let count = x.len() / channels;
+    let n = x.len() / channels;
     let mut shared = Shared::new_slice(block);
     let mut acc = 0.0;
     let mut k = UNIT_POS as usize;
-    while k < count {
-        let at = ((k / plane) * channels + c) * plane + k % plane;
-        if product {
-            acc += other[at] * (x[at] - shift);
-        } else {
-            let d = x[at] - shift;
-            acc += d * d;
-        }
+    while k < n {
+        let d = x[at(x, (k / plane * channels + c) * plane + k % plane)] - shift;
+        acc += d * d;
         k += block;
     }
     shared[UNIT_POS as usize] = acc;
@@ -48,8 +44,8 @@ fn channel_sum(
     sum
 }
 
-/// Each channel's mean and biased variance, and the running statistics moved towards them by
-/// `momentum` (as burn's `BatchNorm` does: `r (1 - m) + s m`).
+/// Each channel's mean, biased variance and `1 / sqrt(var + epsilon)`, and the running
+/// statistics moved towards them by `momentum` (as burn's `BatchNorm` does: `r (1 - m) + s m`).
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn statistics(
@@ -58,65 +54,122 @@ pub fn statistics(
     running_var: &Tensor<f32>,
     mean: &mut Tensor<f32>,
     var: &mut Tensor<f32>,
+    inv_std: &mut Tensor<f32>,
     running_mean_out: &mut Tensor<f32>,
     running_var_out: &mut Tensor<f32>,
     channels: u32,
     plane: u32,
+    epsilon: f32,
     momentum: f32,
     #[comptime] block: usize,
 ) {
     let (channels, plane) = (channels as usize, plane as usize);
     let c = CUBE_POS_X as usize;
-    let count = f32::cast_from(x.len() / channels);
+    let n = x.len() / channels;
+    let count = f32::cast_from(n);
     let mut shared = Shared::new_slice(block);
     let mut acc = 0.0;
     let mut k = UNIT_POS as usize;
-    let n = x.len() / channels;
     while k < n {
-        acc += x[((k / plane) * channels + c) * plane + k % plane];
+        acc += x[at(x, (k / plane * channels + c) * plane + k % plane)];
         k += block;
     }
     shared[UNIT_POS as usize] = acc;
     let m = tree_sum(&mut shared) / count;
     sync_cube();
-    let v = channel_sum(x, x, m, channels, plane, false, block) / count;
+    let v = squares_about(x, m, channels, plane, block) / count;
     if UNIT_POS == 0 {
         mean[c] = m;
         var[c] = v;
+        inv_std[c] = 1.0 / f32::sqrt(v + epsilon);
         running_mean_out[c] = running_mean[c] * (1.0 - momentum) + m * momentum;
         running_var_out[c] = running_var[c] * (1.0 - momentum) + v * momentum;
     }
 }
 
-/// Each channel's `Σ dy` and `Σ dy (x - mean)`.
+/// The gradient reaching the normalisation: `dy`, or with a ReLU after the layer, `dy` where
+/// its output `y` is positive.
+#[cube]
+fn reaching(dy: f32, y: f32, #[comptime] relu: bool) -> f32 {
+    let mut g = dy;
+    if relu {
+        if y <= 0.0 {
+            g = 0.0;
+        }
+    }
+    g
+}
+
+/// Each channel's `γ` and `β` gradients: `Σ g (x - mean) / std` and `Σ g`, with `g` the
+/// gradient reaching the normalisation ([`reaching`]).
 #[cube(launch)]
+#[allow(clippy::too_many_arguments)]
 pub fn grad_sums(
     x: &Tensor<f32>,
+    y: &Tensor<f32>,
     dy: &Tensor<f32>,
     mean: &Tensor<f32>,
-    sum_dy: &mut Tensor<f32>,
-    sum_dy_xc: &mut Tensor<f32>,
+    inv_std: &Tensor<f32>,
+    gamma_grad: &mut Tensor<f32>,
+    beta_grad: &mut Tensor<f32>,
     channels: u32,
     plane: u32,
+    #[comptime] relu: bool,
     #[comptime] block: usize,
 ) {
     let (channels, plane) = (channels as usize, plane as usize);
     let c = CUBE_POS_X as usize;
+    let m = mean[c];
     let mut shared = Shared::new_slice(block);
-    let mut acc = 0.0;
+    let mut sum_g = 0.0;
+    let mut sum_gx = 0.0;
     let mut k = UNIT_POS as usize;
     let n = x.len() / channels;
     while k < n {
-        acc += dy[((k / plane) * channels + c) * plane + k % plane];
+        let i = (k / plane * channels + c) * plane + k % plane;
+        let g = reaching(dy[at(dy, i)], y[at(y, i)], relu);
+        sum_g += g;
+        sum_gx += g * (x[at(x, i)] - m);
         k += block;
     }
-    shared[UNIT_POS as usize] = acc;
+    shared[UNIT_POS as usize] = sum_g;
     let s = tree_sum(&mut shared);
     sync_cube();
-    let p = channel_sum(x, dy, mean[c], channels, plane, true, block);
+    shared[UNIT_POS as usize] = sum_gx;
+    let p = tree_sum(&mut shared);
     if UNIT_POS == 0 {
-        sum_dy[c] = s;
-        sum_dy_xc[c] = p;
+        gamma_grad[c] = p * inv_std[c];
+        beta_grad[c] = s;
+    }
+}
+
+/// The input gradient, element by element:
+/// `γ/std (g - Σg/M - (x - mean)/std · Σ g (x - mean)/std / M)`, `M` a channel's count.
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+pub fn x_grad(
+    x: &Tensor<f32>,
+    y: &Tensor<f32>,
+    dy: &Tensor<f32>,
+    mean: &Tensor<f32>,
+    inv_std: &Tensor<f32>,
+    gamma: &Tensor<f32>,
+    gamma_grad: &Tensor<f32>,
+    beta_grad: &Tensor<f32>,
+    dx: &mut Tensor<f32>,
+    channels: u32,
+    plane: u32,
+    #[comptime] relu: bool,
+) {
+    let k = ABSOLUTE_POS;
+    if k < x.len() {
+        let (channels, plane) = (channels as usize, plane as usize);
+        let c = (k / plane) % channels;
+        let count = f32::cast_from(x.len() / channels);
+        let s = inv_std[c];
+        let g = reaching(dy[at(dy, k)], y[at(y, k)], relu);
+        let xhat = (x[at(x, k)] - mean[c]) * s;
+        dx[k] = gamma[c] * s * (g - beta_grad[c] / count - xhat * gamma_grad[c] / count);
     }
 }
 
@@ -139,16 +192,16 @@ fn channel_vector(x: &CubeTensor, channels: usize) -> CubeTensor {
     empty_device_dtype(x.client.clone(), x.device.clone(), [channels].into(), DType::F32)
 }
 
-/// `(mean, variance, running mean, running variance)` of [`statistics`].
+/// `(mean, variance, 1 / std, running mean, running variance)` of [`statistics`].
 pub fn launch_statistics(
     x: CubeTensor,
     running_mean: CubeTensor,
     running_var: CubeTensor,
+    epsilon: f64,
     momentum: f64,
-) -> [CubeTensor; 4] {
-    let x = contiguous(x);
+) -> [CubeTensor; 5] {
     let (channels, plane) = layout(&x);
-    let out = [(); 4].map(|_| channel_vector(&x, channels));
+    let out = [(); 5].map(|_| channel_vector(&x, channels));
     statistics::launch(
         &x.client,
         CubeCount::new_1d(channels as u32),
@@ -160,17 +213,29 @@ pub fn launch_statistics(
         out[1].clone().into_tensor_arg(),
         out[2].clone().into_tensor_arg(),
         out[3].clone().into_tensor_arg(),
+        out[4].clone().into_tensor_arg(),
         channels as u32,
         plane as u32,
+        epsilon as f32,
         momentum as f32,
         BLOCK,
     );
     out
 }
 
-/// `(Σ dy, Σ dy (x - mean))` of [`grad_sums`].
-pub fn launch_grad_sums(x: CubeTensor, dy: CubeTensor, mean: CubeTensor) -> [CubeTensor; 2] {
-    let (x, dy) = (contiguous(x), contiguous(dy));
+/// The batch's statistics as the backward pass reads them, and the layer's tensors.
+pub struct Saved {
+    pub x: CubeTensor,
+    /// The layer's output (after the ReLU where there is one).
+    pub y: CubeTensor,
+    pub dy: CubeTensor,
+    pub mean: CubeTensor,
+    pub inv_std: CubeTensor,
+}
+
+/// `(γ gradient, β gradient)` of [`grad_sums`].
+pub fn launch_grad_sums(t: Saved, relu: bool) -> [CubeTensor; 2] {
+    let (x, y, dy) = (t.x, t.y, t.dy);
     let (channels, plane) = layout(&x);
     let out = [(); 2].map(|_| channel_vector(&x, channels));
     grad_sums::launch(
@@ -178,13 +243,49 @@ pub fn launch_grad_sums(x: CubeTensor, dy: CubeTensor, mean: CubeTensor) -> [Cub
         CubeCount::new_1d(channels as u32),
         CubeDim::new_1d(BLOCK as u32),
         x.clone().into_tensor_arg(),
+        y.into_tensor_arg(),
         dy.into_tensor_arg(),
-        contiguous(mean).into_tensor_arg(),
+        contiguous(t.mean).into_tensor_arg(),
+        contiguous(t.inv_std).into_tensor_arg(),
         out[0].clone().into_tensor_arg(),
         out[1].clone().into_tensor_arg(),
         channels as u32,
         plane as u32,
+        relu,
         BLOCK,
     );
     out
+}
+
+/// The input gradient of [`x_grad`].
+pub fn launch_x_grad(
+    t: Saved,
+    gamma: CubeTensor,
+    gamma_grad: CubeTensor,
+    beta_grad: CubeTensor,
+    relu: bool,
+) -> CubeTensor {
+    let (x, y, dy) = (t.x, t.y, t.dy);
+    let (channels, plane) = layout(&x);
+    let dx = empty_device_dtype(x.client.clone(), x.device.clone(), x.meta.shape().clone(), DType::F32);
+    let n = x.meta.num_elements();
+    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    x_grad::launch(
+        &x.client,
+        cubecl::calculate_cube_count_elemwise(&x.client, n, cube_dim),
+        cube_dim,
+        x.clone().into_tensor_arg(),
+        y.into_tensor_arg(),
+        dy.into_tensor_arg(),
+        contiguous(t.mean).into_tensor_arg(),
+        contiguous(t.inv_std).into_tensor_arg(),
+        contiguous(gamma).into_tensor_arg(),
+        contiguous(gamma_grad).into_tensor_arg(),
+        contiguous(beta_grad).into_tensor_arg(),
+        dx.clone().into_tensor_arg(),
+        channels as u32,
+        plane as u32,
+        relu,
+    );
+    dx
 }

@@ -37,18 +37,39 @@ fn broadcast<B: Backend>(v: FloatTensor<B>, rank: usize) -> FloatTensor<B> {
     B::float_reshape(v, Shape::from(dims))
 }
 
+/// `relu(x)` where `relu`, else `x`.
+fn maybe_relu<B: Backend>(x: FloatTensor<B>, relu: bool) -> FloatTensor<B> {
+    if relu { B::relu(x) } else { x }
+}
+
+/// The gradient reaching a batch norm's normalisation from `dy` (masked where a ReLU after
+/// it gave 0).
+fn reaching<B: Backend>(y: FloatTensor<B>, dy: FloatTensor<B>, relu: bool) -> FloatTensor<B> {
+    if relu {
+        B::relu_backward(y, dy)
+    } else {
+        dy
+    }
+}
+
 /// Operations that burn composes of many launches, as kernels of ours on a GPU.
 #[backend_extension(Cube, Fusion, Autodiff)]
 pub trait GpuKernelOps: Backend {
-    /// A batch-norm layer's statistics in training: each channel's mean and biased variance
-    /// of `x` `[N, C, ...]`, and the running statistics moved towards them by `momentum`.
-    #[fusion(meta = |x, _rm, _rv, _momentum| (per_channel(x), per_channel(x), per_channel(x), per_channel(x)))]
+    /// A batch-norm layer's statistics in training: each channel's mean, biased variance and
+    /// `1 / sqrt(var + epsilon)` over `x` `[N, C, ...]`, and the running statistics moved
+    /// towards them by `momentum`.
+    #[fusion(meta = |x, _rm, _rv, _epsilon, _momentum| {
+        let c = per_channel(x);
+        (c.clone(), c.clone(), c.clone(), c.clone(), c)
+    })]
     fn batch_norm_statistics(
         x: FloatTensor<Self>,
         running_mean: FloatTensor<Self>,
         running_var: FloatTensor<Self>,
+        epsilon: f64,
         momentum: f64,
     ) -> (
+        FloatTensor<Self>,
         FloatTensor<Self>,
         FloatTensor<Self>,
         FloatTensor<Self>,
@@ -65,6 +86,10 @@ pub trait GpuKernelOps: Backend {
         let centred = Self::float_sub(x, broadcast::<Self>(mean.clone(), rank));
         let var = Self::float_mean_dim(by_channel(Self::float_mul(centred.clone(), centred)), 1);
         let var = Self::float_reshape(var, Shape::new([c]));
+        let inv_std = Self::float_recip(Self::float_sqrt(Self::float_add_scalar(
+            var.clone(),
+            Scalar::Float(epsilon),
+        )));
         let moved = |r: FloatTensor<Self>, s: FloatTensor<Self>| {
             Self::float_add(
                 Self::float_mul_scalar(r, Scalar::Float(1.0 - momentum)),
@@ -73,15 +98,19 @@ pub trait GpuKernelOps: Backend {
         };
         let running_mean = moved(running_mean, mean.clone());
         let running_var = moved(running_var, var.clone());
-        (mean, var, running_mean, running_var)
+        (mean, var, inv_std, running_mean, running_var)
     }
 
-    /// Each channel's `Σ dy` and `Σ dy (x - mean)` (the backward pass's two sums).
-    #[fusion(meta = |x, _dy, _mean| (per_channel(x), per_channel(x)))]
-    fn batch_norm_grad_sums(
+    /// A batch-norm layer's `γ` and `β` gradients from its input `x`, output `y` (after the
+    /// ReLU where `relu`), output gradient `dy` and the batch's mean and `1 / std`.
+    #[fusion(meta = |x, _y, _dy, _mean, _inv_std, _relu| (per_channel(x), per_channel(x)))]
+    fn batch_norm_param_grads(
         x: FloatTensor<Self>,
+        y: FloatTensor<Self>,
         dy: FloatTensor<Self>,
         mean: FloatTensor<Self>,
+        inv_std: FloatTensor<Self>,
+        relu: bool,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let rank = x.shape().num_dims();
         let c = x.shape()[1];
@@ -89,18 +118,49 @@ pub trait GpuKernelOps: Backend {
         let by_channel = |t: FloatTensor<Self>| {
             Self::float_reshape(Self::float_swap_dims(t, 0, 1), flat.clone())
         };
+        let g = reaching::<Self>(y, dy, relu);
         let centred = Self::float_sub(x, broadcast::<Self>(mean, rank));
-        let sum_dy = Self::float_sum_dim(by_channel(dy.clone()), 1);
-        let sum_dy_xc = Self::float_sum_dim(by_channel(Self::float_mul(dy, centred)), 1);
-        (
-            Self::float_reshape(sum_dy, Shape::new([c])),
-            Self::float_reshape(sum_dy_xc, Shape::new([c])),
-        )
+        let beta = Self::float_sum_dim(by_channel(g.clone()), 1);
+        let gx = Self::float_sum_dim(by_channel(Self::float_mul(g, centred)), 1);
+        let gamma = Self::float_mul(Self::float_reshape(gx, Shape::new([c])), inv_std);
+        (gamma, Self::float_reshape(beta, Shape::new([c])))
     }
 
-    /// A batch-norm layer in training: the output, and the new running mean and variance
-    /// (burn's `BatchNorm::forward` in training, as one operation of the autodiff graph).
+    /// A batch-norm layer's input gradient (see [`Self::batch_norm_param_grads`]; `gamma`,
+    /// and the `γ` and `β` gradients it gave).
+    #[fusion(dtype = x, shape = x)]
+    #[allow(clippy::too_many_arguments)]
+    fn batch_norm_x_grad(
+        x: FloatTensor<Self>,
+        y: FloatTensor<Self>,
+        dy: FloatTensor<Self>,
+        mean: FloatTensor<Self>,
+        inv_std: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        gamma_grad: FloatTensor<Self>,
+        beta_grad: FloatTensor<Self>,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        // γ/std (g - Σg/M - (x - mean)/std · Σ g (x - mean)/std / M).
+        let rank = x.shape().num_dims();
+        let count = (x.shape().num_elements() / x.shape()[1]) as f64;
+        let c = |t| broadcast::<Self>(t, rank);
+        let g = reaching::<Self>(y, dy, relu);
+        let xhat = Self::float_mul(Self::float_sub(x, c(mean)), c(inv_std.clone()));
+        let mean_g = Self::float_div_scalar(beta_grad, Scalar::Float(count));
+        let projection = Self::float_div_scalar(gamma_grad, Scalar::Float(count));
+        let dx = Self::float_sub(
+            Self::float_sub(g, c(mean_g)),
+            Self::float_mul(xhat, c(projection)),
+        );
+        Self::float_mul(dx, c(Self::float_mul(gamma, inv_std)))
+    }
+
+    /// A batch-norm layer in training (and the ReLU after it where `relu`): the output, and the
+    /// new running mean and variance (burn's `BatchNorm::forward` in training, as one
+    /// operation of the autodiff graph).
     #[fusion(default)]
+    #[allow(clippy::too_many_arguments)]
     fn batch_norm_train(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
@@ -109,10 +169,11 @@ pub trait GpuKernelOps: Backend {
         running_var: FloatTensor<Self>,
         epsilon: f64,
         momentum: f64,
+        relu: bool,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
-        let (mean, var, running_mean, running_var) =
-            Self::batch_norm_statistics(x.clone(), running_mean, running_var, momentum);
-        let y = Self::batch_norm(x, gamma, beta, mean, var, epsilon);
+        let (mean, var, _, running_mean, running_var) =
+            Self::batch_norm_statistics(x.clone(), running_mean, running_var, epsilon, momentum);
+        let y = maybe_relu::<Self>(Self::batch_norm(x, gamma, beta, mean, var, epsilon), relu);
         (y, running_mean, running_var)
     }
 }
@@ -122,24 +183,46 @@ impl GpuKernelOps for CubeBackend {
         x: FloatTensor<Self>,
         running_mean: FloatTensor<Self>,
         running_var: FloatTensor<Self>,
+        epsilon: f64,
         momentum: f64,
     ) -> (
         FloatTensor<Self>,
         FloatTensor<Self>,
         FloatTensor<Self>,
         FloatTensor<Self>,
+        FloatTensor<Self>,
     ) {
-        let [m, v, rm, rv] = batch_norm::launch_statistics(x, running_mean, running_var, momentum);
-        (m, v, rm, rv)
+        let [m, v, s, rm, rv] =
+            batch_norm::launch_statistics(x, running_mean, running_var, epsilon, momentum);
+        (m, v, s, rm, rv)
     }
 
-    fn batch_norm_grad_sums(
+    fn batch_norm_param_grads(
         x: FloatTensor<Self>,
+        y: FloatTensor<Self>,
         dy: FloatTensor<Self>,
         mean: FloatTensor<Self>,
+        inv_std: FloatTensor<Self>,
+        relu: bool,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let [s, p] = batch_norm::launch_grad_sums(x, dy, mean);
-        (s, p)
+        let saved = batch_norm::Saved { x, y, dy, mean, inv_std };
+        let [gamma, beta] = batch_norm::launch_grad_sums(saved, relu);
+        (gamma, beta)
+    }
+
+    fn batch_norm_x_grad(
+        x: FloatTensor<Self>,
+        y: FloatTensor<Self>,
+        dy: FloatTensor<Self>,
+        mean: FloatTensor<Self>,
+        inv_std: FloatTensor<Self>,
+        gamma: FloatTensor<Self>,
+        gamma_grad: FloatTensor<Self>,
+        beta_grad: FloatTensor<Self>,
+        relu: bool,
+    ) -> FloatTensor<Self> {
+        let saved = batch_norm::Saved { x, y, dy, mean, inv_std };
+        batch_norm::launch_x_grad(saved, gamma, gamma_grad, beta_grad, relu)
     }
 }
 
@@ -152,13 +235,23 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
         running_var: FloatTensor<Self>,
         epsilon: f64,
         momentum: f64,
+        relu: bool,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
         #[derive(Debug)]
         struct BatchNormTrain;
 
+        /// x, gamma, the output, the batch's mean and 1 / std, and whether a ReLU follows.
+        type State<B> = (
+            NodeId,
+            NodeId,
+            FloatTensor<B>,
+            FloatTensor<B>,
+            FloatTensor<B>,
+            bool,
+        );
+
         impl<B: Backend + GpuKernelOps> Backward<B, 3> for BatchNormTrain {
-            /// x, gamma, the batch's mean and 1 / std.
-            type State = (NodeId, NodeId, B::FloatTensorPrimitive, B::FloatTensorPrimitive);
+            type State = State<B>;
 
             fn backward(
                 self,
@@ -168,46 +261,46 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
             ) {
                 let [node_x, node_gamma, node_beta] = ops.parents;
                 let dy = grads.consume::<B>(&ops.node);
-                let (x_state, gamma_state, mean, inv_std) = ops.state;
+                let (x_state, gamma_state, y, mean, inv_std, relu) = ops.state;
                 let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
                 let gamma =
                     checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(gamma_state);
-                let rank = x.shape().num_dims();
-                let count = (x.shape().num_elements() / x.shape()[1]) as f64;
-                let (sum_dy, sum_dy_xc) = B::batch_norm_grad_sums(x.clone(), dy.clone(), mean.clone());
-                if let Some(node) = node_gamma {
-                    grads.register::<B>(node.id, B::float_mul(sum_dy_xc.clone(), inv_std.clone()));
-                }
+                let (gamma_grad, beta_grad) = B::batch_norm_param_grads(
+                    x.clone(),
+                    y.clone(),
+                    dy.clone(),
+                    mean.clone(),
+                    inv_std.clone(),
+                    relu,
+                );
                 if let Some(node) = node_x {
-                    // gamma / std (dy - mean(dy) - (x - mean) / std² · mean(dy (x - mean))).
-                    let c = |t| broadcast::<B>(t, rank);
-                    let scale = B::float_mul(gamma, inv_std.clone());
-                    let mean_dy = B::float_div_scalar(sum_dy.clone(), Scalar::Float(count));
-                    let projection = B::float_div_scalar(
-                        B::float_mul(B::float_mul(sum_dy_xc, inv_std.clone()), inv_std),
-                        Scalar::Float(count),
+                    let dx = B::batch_norm_x_grad(
+                        x,
+                        y,
+                        dy,
+                        mean,
+                        inv_std,
+                        gamma,
+                        gamma_grad.clone(),
+                        beta_grad.clone(),
+                        relu,
                     );
-                    let centred = B::float_sub(x, c(mean));
-                    let dx = B::float_sub(
-                        B::float_sub(dy, c(mean_dy)),
-                        B::float_mul(centred, c(projection)),
-                    );
-                    grads.register::<B>(node.id, B::float_mul(dx, c(scale)));
+                    grads.register::<B>(node.id, dx);
+                }
+                if let Some(node) = node_gamma {
+                    grads.register::<B>(node.id, gamma_grad);
                 }
                 if let Some(node) = node_beta {
-                    grads.register::<B>(node.id, sum_dy);
+                    grads.register::<B>(node.id, beta_grad);
                 }
             }
         }
 
         let forward = |x: FloatTensor<B>, gamma, beta, rm, rv| {
-            let (mean, var, rm, rv) = B::batch_norm_statistics(x.clone(), rm, rv, momentum);
-            let y = B::batch_norm(x, gamma, beta, mean.clone(), var.clone(), epsilon);
-            let inv_std = B::float_recip(B::float_sqrt(B::float_add_scalar(
-                var,
-                Scalar::Float(epsilon),
-            )));
-            (y, mean, inv_std, rm, rv)
+            let (mean, var, inv_std, rm, rv) =
+                B::batch_norm_statistics(x.clone(), rm, rv, epsilon, momentum);
+            let y = B::batch_norm(x, gamma, beta, mean.clone(), var, epsilon);
+            (maybe_relu::<B>(y, relu), mean, inv_std, rm, rv)
         };
         let constant = |t: FloatTensor<B>| <Self as AutodiffBackend>::from_inner(t);
         let (rm, rv) = (running_mean.into_primitive(), running_var.into_primitive());
@@ -226,7 +319,8 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
                     rm,
                     rv,
                 );
-                let y = prep.finish((x_state, gamma_state, mean, inv_std), y);
+                let state = (x_state, gamma_state, y.clone(), mean, inv_std, relu);
+                let y = prep.finish(state, y);
                 (y, constant(rm), constant(rv))
             }
             OpsKind::UnTracked(prep) => {
@@ -243,14 +337,18 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
     }
 }
 
-/// burn's `BatchNorm::forward`, on our kernels where `x` is on a GPU and the layer trains
-/// (the running statistics updated as burn updates them); burn's own elsewhere.
-pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>) -> Tensor<D> {
+/// burn's `BatchNorm::forward` (then a ReLU where `relu`), on our kernels where `x` is on a
+/// GPU and the layer trains (the running statistics updated as burn updates them); burn's own
+/// elsewhere.
+pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) -> Tensor<D> {
     let training = x.device().is_autodiff() && norm.training.is_enabled();
     if !training || !super::is_lazy(&x.clone().inner()) {
-        return norm.forward(x);
+        let y = norm.forward(x);
+        return if relu { burn::tensor::activation::relu(y) } else { y };
     }
     let device = x.device();
+    // As burn's: `value_sync` (the mean over the threads that updated the state, one here:
+    // burn's `RunningState` divides by their count, a launch a layer).
     let running_mean = norm.running_mean.value_sync().to_device(&device);
     let running_var = norm.running_var.value_sync().to_device(&device);
     let (y, rm, rv) = <Dispatch as GpuKernelOps>::batch_norm_train(
@@ -261,6 +359,7 @@ pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>) -> Tensor<D> {
         running_var.into_dispatch(),
         norm.epsilon,
         norm.momentum,
+        relu,
     );
     let rm = Tensor::<1>::from_dispatch(rm);
     let rv = Tensor::<1>::from_dispatch(rv);

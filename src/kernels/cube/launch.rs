@@ -52,9 +52,8 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
         [tensors.len() * GROUPS].into(),
         DType::F32,
     );
-    // Each launch binds its tensors and the partials.
+    // Each launch binds its tensors (any strides) and the partials.
     let per_launch = max_bindings(&first) - 1;
-    let tensors: Vec<CubeTensor> = tensors.into_iter().map(contiguous).collect();
     for (c, chunk) in tensors.chunks(per_launch).enumerate() {
         let mut seq = SequenceArg::<OwnedTensor<f32>>::new();
         for t in chunk {
@@ -107,7 +106,9 @@ pub fn adam(
     let epsilon = step.epsilon * bias_correction2_sqrt;
 
     let contiguous_all = |v: Vec<CubeTensor>| -> Vec<CubeTensor> { v.into_iter().map(contiguous).collect() };
-    let (params, grads) = (contiguous_all(params), contiguous_all(grads));
+    // The gradients are read through their strides (a transposed weight gradient is not
+    // copied); the parameters and moments are contiguous, as the outputs.
+    let params = contiguous_all(params);
     let (moment_1, moment_2) = (contiguous_all(moment_1), contiguous_all(moment_2));
     let mut out = Vec::with_capacity(n);
     for start in (0..n).step_by(per_launch) {

@@ -31,6 +31,22 @@ pub fn tree_sum(shared: &mut Shared<[f32]>) -> f32 {
     shared[0]
 }
 
+/// Where element `index` of `t` (counted in row-major order of its shape) lies in its buffer:
+/// a tensor of any strides (a transposed or permuted view) is read without a copy.
+#[cube]
+pub fn at(t: &Tensor<f32>, index: usize) -> usize {
+    let rank = t.rank();
+    let mut rest = index;
+    let mut offset = 0;
+    for d in 0..rank {
+        let dim = rank - 1 - d;
+        let size = t.shape(dim);
+        offset += (rest % size) * t.stride(dim);
+        rest /= size;
+    }
+    offset
+}
+
 /// `partials[(first + t) * groups + g]`: the sum of squares of the elements of tensor `t`
 /// that workgroup `g` of `groups` (the grid's x) visits; the grid's y is the tensor.
 #[cube(launch)]
@@ -46,10 +62,10 @@ pub fn sum_of_squares(
     #[unroll]
     for i in 0..tensors.len() {
         if tensor == i {
-            let x = tensors[i].as_slice();
+            let x = &tensors[i];
             let mut k = CUBE_POS_X as usize * block + UNIT_POS as usize;
             while k < x.len() {
-                let value = x[k];
+                let value = x.as_slice()[at(x, k)];
                 acc += value * value;
                 k += groups * block;
             }
@@ -102,6 +118,7 @@ fn clip_scale(partials: &Tensor<f32>, max_norm: f32, #[comptime] block: usize) -
 
 /// One Adam step of every tensor in the sequences (parameters, gradients, first and second
 /// moments in; new parameters and moments out), each element as burn's `Adam` computes it.
+/// The gradients may have any strides; the rest are contiguous.
 /// With `clip`, each gradient is first scaled by the global-norm clipping factor of
 /// `partials` (the sums of squares of every gradient of the step, from [`sum_of_squares`]).
 #[cube(launch)]
@@ -136,7 +153,7 @@ pub fn adam(
         if !done {
             if offset < n {
                 done = true;
-                let g = grads[i].as_slice()[offset] * scale;
+                let g = grads[i].as_slice()[at(&grads[i], offset)] * scale;
                 let m = moment_1[i].as_slice()[offset] * beta_1 + g * (1.0 - beta_1);
                 let v =
                     moment_2[i].as_slice()[offset] * beta_2 + g * g * (1.0 - beta_2);
