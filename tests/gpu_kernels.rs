@@ -161,3 +161,31 @@ fn batch_norm_on_our_kernels_is_burns() {
     }
     assert!(worst < 2e-6, "batch norm differs from burn's by {worst} (relative)");
 }
+
+/// The binary cross-entropy on logits on our kernels (two launches forward, one backward)
+/// against burn's composition: the loss and the logits' gradient.
+#[test]
+fn the_logit_cross_entropy_on_our_kernels_is_burns() {
+    use selfmodel::train::losses::{bce_with_logits, bce_with_logits_composed};
+    let device = select(DeviceChoice::Wgpu).unwrap();
+    let tdev = autodiff_device(&device, 0);
+    for (i, shape) in [[3, 1, 5, 7], [64, 1, 40, 40]].into_iter().enumerate() {
+        let (z, y) = with_seed(&tdev, 11 + i as u64, || {
+            (
+                Tensor::<4>::random(shape, Distribution::Normal(0.0, 20.0), &tdev).require_grad(),
+                Tensor::<4>::random(shape, Distribution::Bernoulli(0.3), &tdev),
+            )
+        });
+        let ours = bce_with_logits(z.clone(), y.clone());
+        let burns = bce_with_logits_composed(z.clone(), y.clone());
+        let (a, b): (f32, f32) = (ours.clone().into_scalar(), burns.clone().into_scalar());
+        let g_ours = z.grad(&ours.mul_scalar(3.0).backward()).unwrap();
+        let g_burns = z.grad(&burns.mul_scalar(3.0).backward()).unwrap();
+        let g = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+        let scale = g(g_burns.clone())[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let dg = largest_difference(&g(g_ours), &g(g_burns)) / scale;
+        eprintln!("{shape:?}: loss {a} against {b}, gradient differs by {dg:.2e} (relative)");
+        assert!((a - b).abs() <= 1e-5 * b.abs(), "{shape:?}: loss {a} against {b}");
+        assert!(dg < 1e-5, "{shape:?}: gradients differ by {dg} (relative)");
+    }
+}

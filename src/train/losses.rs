@@ -17,12 +17,18 @@ pub fn bce<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
 /// Binary cross-entropy of `sigmoid(z)` against `y`, computed stably from the logits `z`:
 /// `max(z, 0) - z y + log(1 + exp(-|z|))`, mean over all elements. Equal to `sigmoid` followed
 /// by PyTorch's `BCELoss` wherever that is finite. On the CPU, one parallel kernel forward and
-/// one backward ([`crate::kernels::pointwise::bce_with_logits_elements`] and its gradient); the tests compare the two.
+/// one backward ([`crate::kernels::pointwise::bce_with_logits_elements`] and its gradient); on
+/// a GPU two launches forward and one backward (`kernels::cube::loss`); the tests compare each
+/// with [`bce_with_logits_composed`].
 pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
-    match crate::kernels::cpu_extension::bce_with_logits(&z, &y) {
-        Some(loss) => loss,
-        None => bce_with_logits_composed(z, y),
+    if let Some(loss) = crate::kernels::cpu_extension::bce_with_logits(&z, &y) {
+        return loss;
     }
+    #[cfg(feature = "wgpu")]
+    if let Some(loss) = crate::kernels::cube::extension::bce_with_logits(&z, &y) {
+        return loss;
+    }
+    bce_with_logits_composed(z, y)
 }
 
 /// [`bce_with_logits`] as burn's elementwise ops (off the CPU, and the CPU kernel's reference).

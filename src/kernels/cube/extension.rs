@@ -22,7 +22,7 @@ use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 use burn::backend::fusion::custom::TensorSpec;
 
-use super::batch_norm;
+use super::{batch_norm, loss};
 
 /// A `[channels]` tensor's spec for an `[N, C, ...]` input.
 fn per_channel(x: &TensorSpec) -> TensorSpec {
@@ -156,6 +156,39 @@ pub trait GpuKernelOps: Backend {
         Self::float_mul(dx, c(Self::float_mul(gamma, inv_std)))
     }
 
+    /// The mean binary cross-entropy of the logits `z` against the targets `y`, a `[1]`
+    /// tensor (differentiated in `z` by [`Self::bce_with_logits_grad`]).
+    #[fusion(meta = |z, _y| TensorSpec::new(Shape::new([1]), z.dtype))]
+    fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
+        let n = z.shape().num_elements();
+        let softplus = Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(
+            z.clone(),
+        ))));
+        let l = Self::float_add(
+            Self::float_sub(
+                Self::float_clamp_min(z.clone(), Scalar::Float(0.0)),
+                Self::float_mul(z, y),
+            ),
+            softplus,
+        );
+        Self::float_mean(Self::float_reshape(l, Shape::new([n])))
+    }
+
+    /// The gradient of [`Self::bce_with_logits_mean`] in `z`, given the loss's gradient `grad`
+    /// (`[1]`): `(σ(z) - y) grad / n`.
+    #[fusion(dtype = z, shape = z)]
+    fn bce_with_logits_grad(
+        z: FloatTensor<Self>,
+        y: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        let n = z.shape().num_elements() as f64;
+        let rank = z.shape().num_dims();
+        let g = Self::float_reshape(grad, Shape::from(vec![1; rank]));
+        let d = Self::float_sub(Self::sigmoid(z), y);
+        Self::float_mul(d, Self::float_div_scalar(g, Scalar::Float(n)))
+    }
+
     /// A batch-norm layer in training (and the ReLU after it where `relu`): the output, and the
     /// new running mean and variance (burn's `BatchNorm::forward` in training, as one
     /// operation of the autodiff graph).
@@ -179,6 +212,18 @@ pub trait GpuKernelOps: Backend {
 }
 
 impl GpuKernelOps for CubeBackend {
+    fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
+        loss::launch_mean(z, y)
+    }
+
+    fn bce_with_logits_grad(
+        z: FloatTensor<Self>,
+        y: FloatTensor<Self>,
+        grad: FloatTensor<Self>,
+    ) -> FloatTensor<Self> {
+        loss::launch_logits_grad(z, y, grad)
+    }
+
     fn batch_norm_statistics(
         x: FloatTensor<Self>,
         running_mean: FloatTensor<Self>,
@@ -227,6 +272,44 @@ impl GpuKernelOps for CubeBackend {
 }
 
 impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff<B, C> {
+    fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct BceWithLogits;
+
+        impl<B: Backend + GpuKernelOps> Backward<B, 1> for BceWithLogits {
+            /// The logits and the targets (constants: their gradient is not asked for).
+            type State = (NodeId, FloatTensor<B>);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 1>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_z] = ops.parents;
+                let grad = grads.consume::<B>(&ops.node);
+                let (z_state, y) = ops.state;
+                if let Some(node) = node_z {
+                    let z = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(z_state);
+                    grads.register::<B>(node.id, B::bce_with_logits_grad(z, y, grad));
+                }
+            }
+        }
+
+        // The targets are data: their gradient is not taken (a tracked target would be a bug).
+        let y = y.into_primitive();
+        match BceWithLogits.prepare::<C>([z.node()]).compute_bound().stateful() {
+            OpsKind::Tracked(mut prep) => {
+                let z_state = prep.checkpoint(&z);
+                let loss = B::bce_with_logits_mean(z.into_primitive(), y.clone());
+                prep.finish((z_state, y), loss)
+            }
+            OpsKind::UnTracked(prep) => {
+                prep.finish(B::bce_with_logits_mean(z.into_primitive(), y))
+            }
+        }
+    }
+
     fn batch_norm_train(
         x: FloatTensor<Self>,
         gamma: FloatTensor<Self>,
@@ -366,4 +449,16 @@ pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) ->
     norm.running_mean.update(rm.detach());
     norm.running_var.update(rv.detach());
     Tensor::from_dispatch(y)
+}
+
+/// The mean binary cross-entropy of the logits `z` against the targets `y` on our kernels
+/// where `z` is on a GPU; `None` elsewhere.
+pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<Tensor<1>> {
+    let on_gpu = super::is_lazy(&z.clone().inner()) && super::is_lazy(&y.clone().inner());
+    on_gpu.then(|| {
+        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::bce_with_logits_mean(
+            z.clone().into_dispatch(),
+            y.clone().into_dispatch(),
+        ))
+    })
 }

@@ -5,7 +5,9 @@
 //!   parameters);
 //! - [`launch`]: launching them on burn's CubeCL tensors (contiguity, outputs, the device's
 //!   binding limit);
-//! - [`batch_norm`]: a batch-norm layer's statistics and its gradient's sums, a launch each;
+//! - [`batch_norm`]: a batch-norm layer's statistics, parameter and input gradients, a launch
+//!   each;
+//! - [`loss`]: the binary cross-entropy on logits and its gradient;
 //! - [`extension`]: the kernels that are layers, in burn's autodiff graph (a backend
 //!   extension, with their backward passes);
 //! - here: the bridge to burn's tensors. On a GPU burn's tensors are lazy (burn's fusion
@@ -18,6 +20,7 @@
 pub mod batch_norm;
 pub mod extension;
 pub mod launch;
+pub mod loss;
 pub mod multi_tensor;
 
 use burn::backend::fusion::FusionTensor;
