@@ -189,3 +189,47 @@ fn the_logit_cross_entropy_on_our_kernels_is_burns() {
         assert!(dg < 1e-5, "{shape:?}: gradients differ by {dg} (relative)");
     }
 }
+
+/// A transposed convolution (the decoders' upsampling layers: k4 s2 p1 and k3 s1 p2) with its
+/// gradients from our im2col and two matrix products, against burn's `conv_transpose2d`.
+#[test]
+fn transposed_convolution_gradients_on_our_kernels_are_burns() {
+    use burn::tensor::ops::ConvTransposeOptions;
+    let device = select(DeviceChoice::Wgpu).unwrap();
+    let tdev = autodiff_device(&device, 0);
+    for (i, (k, s, p, hw)) in [(4, 2, 1, 5), (3, 1, 2, 9)].into_iter().enumerate() {
+        let (x, w, b) = with_seed(&tdev, 20 + i as u64, || {
+            (
+                Tensor::<4>::random([3, 6, hw, hw + 1], Distribution::Default, &tdev).require_grad(),
+                Tensor::<4>::random([6, 4, k, k], Distribution::Default, &tdev).require_grad(),
+                Tensor::<1>::random([4], Distribution::Default, &tdev).require_grad(),
+            )
+        });
+        let options = ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1);
+        let ours = selfmodel::kernels::cube::extension::conv_transpose2d(&x, &w, &b, &options)
+            .expect("on our kernels");
+        let burns = burn::tensor::module::conv_transpose2d(
+            x.clone(),
+            w.clone(),
+            Some(b.clone()),
+            options.clone(),
+        );
+        let weights = Tensor::<4>::random(burns.dims(), Distribution::Default, &tdev);
+        let g_ours = (ours.clone() * weights.clone()).sum().backward();
+        let g_burns = (burns.clone() * weights).sum().backward();
+        let v = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+        let v1 = |t: Tensor<1>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+        let rel = |a: Vec<Vec<f32>>, b: Vec<Vec<f32>>| {
+            let scale = b[0].iter().fold(1.0f32, |m, v| m.max(v.abs()));
+            largest_difference(&a, &b) / scale
+        };
+        let d = [
+            rel(v(ours), v(burns)),
+            rel(v(x.grad(&g_ours).unwrap()), v(x.grad(&g_burns).unwrap())),
+            rel(v(w.grad(&g_ours).unwrap()), v(w.grad(&g_burns).unwrap())),
+            rel(v1(b.grad(&g_ours).unwrap()), v1(b.grad(&g_burns).unwrap())),
+        ];
+        eprintln!("k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)");
+        assert!(d.iter().all(|&e| e < 1e-5), "k{k} s{s} p{p}: {d:?}");
+    }
+}

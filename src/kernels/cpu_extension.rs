@@ -923,6 +923,12 @@ pub fn conv_transpose2d(
     options: ConvTransposeOptions<2>,
 ) -> Tensor<4> {
     if !on_flex(&x) {
+        #[cfg(feature = "wgpu")]
+        if let Some(b) = &bias
+            && let Some(y) = crate::kernels::cube::extension::conv_transpose2d(&x, &weight, b, &options)
+        {
+            return y;
+        }
         return burn::tensor::module::conv_transpose2d(x, weight, bias, options);
     }
     let y = <Dispatch as CpuKernelOps>::conv_transpose2d_fast(

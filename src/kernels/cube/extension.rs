@@ -18,11 +18,12 @@ use burn::backend::{
     AutodiffBackend, Backend, Dispatch, Scalar, TensorMetadata, backend_extension,
 };
 use burn::nn::BatchNorm;
+use burn::tensor::ops::ConvTransposeOptions;
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 use burn::backend::fusion::custom::TensorSpec;
 
-use super::{batch_norm, loss};
+use super::{batch_norm, conv_transpose, loss};
 
 /// A `[channels]` tensor's spec for an `[N, C, ...]` input.
 fn per_channel(x: &TensorSpec) -> TensorSpec {
@@ -156,6 +157,49 @@ pub trait GpuKernelOps: Backend {
         Self::float_mul(dx, c(Self::float_mul(gamma, inv_std)))
     }
 
+    /// The im2col of a transposed convolution's output gradient `dy` for an input of `in_hw`:
+    /// `[N, Hi·Wi, c_out·k·k]` (see `kernels::cube::conv_transpose`).
+    #[fusion(meta = |dy, in_hw, kernel, _stride, _padding| {
+        TensorSpec::new(
+            Shape::new([dy.shape[0], in_hw[0] * in_hw[1], dy.shape[1] * kernel * kernel]),
+            dy.dtype,
+        )
+    })]
+    fn conv_transpose_columns(
+        dy: FloatTensor<Self>,
+        in_hw: [usize; 2],
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+    ) -> FloatTensor<Self> {
+        // Only the CubeCL kernel: the layer's reference is burn's own backward pass, which
+        // `tests/gpu_kernels.rs` compares the gradients with.
+        let _ = (dy, in_hw, kernel, stride, padding);
+        unreachable!("conv_transpose_columns runs on CubeCL devices only")
+    }
+
+    /// `Σ t[n, c, ...]` by channel: `[C]`.
+    #[fusion(meta = |t| per_channel(t))]
+    fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
+        let c = t.shape()[1];
+        let flat = Shape::new([c, t.shape().num_elements() / c]);
+        let s = Self::float_sum_dim(Self::float_reshape(Self::float_swap_dims(t, 0, 1), flat), 1);
+        Self::float_reshape(s, Shape::new([c]))
+    }
+
+    /// A transposed convolution with bias, differentiated by [`Self::conv_transpose_columns`]
+    /// and two matrix products (square kernels, equal strides and paddings, no dilation or
+    /// groups).
+    #[fusion(default)]
+    fn conv_transpose2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv_transpose2d(x, weight, Some(bias), options)
+    }
+
     /// The mean binary cross-entropy of the logits `z` against the targets `y`, a `[1]`
     /// tensor (differentiated in `z` by [`Self::bce_with_logits_grad`]).
     #[fusion(meta = |z, _y| TensorSpec::new(Shape::new([1]), z.dtype))]
@@ -212,6 +256,20 @@ pub trait GpuKernelOps: Backend {
 }
 
 impl GpuKernelOps for CubeBackend {
+    fn conv_transpose_columns(
+        dy: FloatTensor<Self>,
+        in_hw: [usize; 2],
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+    ) -> FloatTensor<Self> {
+        conv_transpose::launch_columns(dy, in_hw, kernel, stride, padding)
+    }
+
+    fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
+        conv_transpose::launch_channel_sums(t)
+    }
+
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
         loss::launch_mean(z, y)
     }
@@ -272,6 +330,80 @@ impl GpuKernelOps for CubeBackend {
 }
 
 impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff<B, C> {
+    fn conv_transpose2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvTransposeOptions<2>,
+    ) -> FloatTensor<Self> {
+        #[derive(Debug)]
+        struct ConvTranspose;
+
+        impl<B: Backend + GpuKernelOps> Backward<B, 3> for ConvTranspose {
+            /// x, the weight, and the stride and padding.
+            type State = (NodeId, NodeId, usize, usize);
+
+            fn backward(
+                self,
+                ops: Ops<Self::State, 3>,
+                grads: &mut Gradients,
+                checkpointer: &mut Checkpointer,
+            ) {
+                let [node_x, node_w, node_b] = ops.parents;
+                let dy = grads.consume::<B>(&ops.node);
+                let (x_state, w_state, stride, padding) = ops.state;
+                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+                let w = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(w_state);
+                let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
+                let [_, c_out, k, _] = w.shape().dims::<4>();
+                let q = c_out * k * k;
+                if let Some(node) = node_b {
+                    grads.register::<B>(node.id, B::channel_sums(dy.clone()));
+                }
+                let cols = B::conv_transpose_columns(dy, [in_h, in_w], k, stride, padding);
+                if let Some(node) = node_x {
+                    // [N·Hi·Wi, q] · [q, c_in], channels last, seen as [N, c_in, Hi, Wi].
+                    let flat = B::float_reshape(cols.clone(), Shape::new([n * in_h * in_w, q]));
+                    let wt = B::float_transpose(B::float_reshape(w.clone(), Shape::new([c_in, q])));
+                    let dx = B::float_matmul(flat, wt);
+                    let dx = B::float_reshape(dx, Shape::new([n, in_h, in_w, c_in]));
+                    grads.register::<B>(node.id, B::float_permute(dx, &[0, 3, 1, 2]));
+                }
+                if let Some(node) = node_w {
+                    // Σₙ [c_in, Hi·Wi] · [Hi·Wi, q].
+                    let xs = B::float_reshape(x, Shape::new([n, c_in, in_h * in_w]));
+                    let dw = B::float_sum_dim(B::float_matmul(xs, cols), 0);
+                    grads.register::<B>(node.id, B::float_reshape(dw, w.shape()));
+                }
+            }
+        }
+
+        let (stride, padding) = (options.stride[0], options.padding[0]);
+        match ConvTranspose
+            .prepare::<C>([x.node(), weight.node(), bias.node()])
+            .compute_bound()
+            .stateful()
+        {
+            OpsKind::Tracked(mut prep) => {
+                let x_state = prep.checkpoint(&x);
+                let w_state = prep.checkpoint(&weight);
+                let y = B::conv_transpose2d(
+                    x.into_primitive(),
+                    weight.into_primitive(),
+                    Some(bias.into_primitive()),
+                    options,
+                );
+                prep.finish((x_state, w_state, stride, padding), y)
+            }
+            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d(
+                x.into_primitive(),
+                weight.into_primitive(),
+                Some(bias.into_primitive()),
+                options,
+            )),
+        }
+    }
+
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
         #[derive(Debug)]
         struct BceWithLogits;
@@ -459,6 +591,34 @@ pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<T
         Tensor::from_dispatch(<Dispatch as GpuKernelOps>::bce_with_logits_mean(
             z.clone().into_dispatch(),
             y.clone().into_dispatch(),
+        ))
+    })
+}
+
+/// A transposed convolution with bias on a GPU in training, differentiated on our kernels
+/// (see [`GpuKernelOps::conv_transpose2d_train`]); `None` where `x` is elsewhere or the
+/// layer's shape is not one the kernels take (a square kernel, equal strides and paddings, no
+/// dilation, output padding or groups).
+pub fn conv_transpose2d(
+    x: &Tensor<4>,
+    weight: &Tensor<4>,
+    bias: &Tensor<1>,
+    options: &ConvTransposeOptions<2>,
+) -> Option<Tensor<4>> {
+    let [_, _, kh, kw] = weight.dims();
+    let plain = kh == kw
+        && options.stride[0] == options.stride[1]
+        && options.padding[0] == options.padding[1]
+        && options.padding_out == [0, 0]
+        && options.dilation == [1, 1]
+        && options.groups == 1;
+    let training = x.device().is_autodiff();
+    (plain && training && super::is_lazy(&x.clone().inner())).then(|| {
+        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv_transpose2d_train(
+            x.clone().into_dispatch(),
+            weight.clone().into_dispatch(),
+            bias.clone().into_dispatch(),
+            options.clone(),
         ))
     })
 }

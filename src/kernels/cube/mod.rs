@@ -8,6 +8,7 @@
 //! - [`batch_norm`]: a batch-norm layer's statistics, parameter and input gradients, a launch
 //!   each;
 //! - [`loss`]: the binary cross-entropy on logits and its gradient;
+//! - [`conv_transpose`]: a transposed convolution's gradients from one im2col;
 //! - [`extension`]: the kernels that are layers, in burn's autodiff graph (a backend
 //!   extension, with their backward passes);
 //! - here: the bridge to burn's tensors. On a GPU burn's tensors are lazy (burn's fusion
@@ -18,6 +19,7 @@
 //! `tests/gpu_kernels.rs` compares them on lavapipe.
 
 pub mod batch_norm;
+pub mod conv_transpose;
 pub mod extension;
 pub mod launch;
 pub mod loss;

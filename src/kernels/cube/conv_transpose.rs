@@ -1,0 +1,115 @@
+//! A transposed convolution's gradients (the decoders' upsampling layers) from one im2col of
+//! the output gradient: `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, and the bias gradient a sum by
+//! channel, where burn's backward pass runs two direct convolutions with their layout copies
+//! and a reduction after a copy (about eight launches a layer, against five here).
+//!
+//! For `y = convᵀ(x, W)` with `W` `[c_in, c_out, k, k]`, stride `s` and padding `p`,
+//! `cols[n, (iy, ix), (co, ky, kx)] = dy[n, co, iy·s − p + ky, ix·s − p + kx]` (0 outside).
+//! The slow reference is burn's own backward pass; `tests/gpu_kernels.rs` compares the two.
+
+use burn::tensor::DType;
+use burn_cubecl::ops::numeric::empty_device_dtype;
+use burn_cubecl::tensor::CubeTensor;
+use cubecl::prelude::*;
+
+use super::multi_tensor::{BLOCK, at, tree_sum};
+
+/// `cols` `[N, Hi·Wi, c_out·k·k]` from `dy` `[N, c_out, Ho, Wo]` (any strides).
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+pub fn columns(
+    dy: &Tensor<f32>,
+    cols: &mut Tensor<f32>,
+    in_h: u32,
+    in_w: u32,
+    kernel: u32,
+    stride: u32,
+    padding: u32,
+) {
+    let k = ABSOLUTE_POS;
+    if k < cols.len() {
+        let (in_h, in_w) = (in_h as usize, in_w as usize);
+        let (kernel, stride, padding) = (kernel as usize, stride as usize, padding as usize);
+        let (c_out, out_h, out_w) = (dy.shape(1), dy.shape(2), dy.shape(3));
+        let width = c_out * kernel * kernel;
+        let q = k % width;
+        let pix = (k / width) % (in_h * in_w);
+        let n = k / (width * in_h * in_w);
+        let (co, kk) = (q / (kernel * kernel), q % (kernel * kernel));
+        let (ky, kx) = (kk / kernel, kk % kernel);
+        let (iy, ix) = (pix / in_w, pix % in_w);
+        // oy = iy s − p + ky, kept unsigned: oy + p = iy s + ky.
+        let (oyp, oxp) = (iy * stride + ky, ix * stride + kx);
+        let mut v = 0.0;
+        if oyp >= padding && oxp >= padding && oyp - padding < out_h && oxp - padding < out_w {
+            let i = ((n * c_out + co) * out_h + oyp - padding) * out_w + oxp - padding;
+            v = dy[at(dy, i)];
+        }
+        cols[k] = v;
+    }
+}
+
+/// `sums[c] = Σ t[n, c, ...]` (any strides): a layer's bias gradient.
+#[cube(launch)]
+pub fn channel_sums(t: &Tensor<f32>, sums: &mut Tensor<f32>, #[comptime] block: usize) {
+    let c = CUBE_POS_X as usize;
+    let channels = t.shape(1);
+    let plane = t.len() / (t.shape(0) * channels);
+    let n = t.len() / channels;
+    let mut acc = 0.0;
+    let mut k = UNIT_POS as usize;
+    while k < n {
+        acc += t[at(t, (k / plane * channels + c) * plane + k % plane)];
+        k += block;
+    }
+    let mut shared = Shared::new_slice(block);
+    shared[UNIT_POS as usize] = acc;
+    let sum = tree_sum(&mut shared);
+    if UNIT_POS == 0 {
+        sums[c] = sum;
+    }
+}
+
+/// [`columns`] of `dy` for an input of `in_hw`.
+pub fn launch_columns(
+    dy: CubeTensor,
+    in_hw: [usize; 2],
+    kernel: usize,
+    stride: usize,
+    padding: usize,
+) -> CubeTensor {
+    let dims = dy.meta.shape().clone();
+    assert!(dims.len() == 4 && dy.dtype == DType::F32, "an f32 [N, C, H, W] gradient");
+    let shape = [dims[0], in_hw[0] * in_hw[1], dims[1] * kernel * kernel];
+    let cols = empty_device_dtype(dy.client.clone(), dy.device.clone(), shape.into(), DType::F32);
+    let n = shape.iter().product();
+    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    columns::launch(
+        &dy.client,
+        cubecl::calculate_cube_count_elemwise(&dy.client, n, cube_dim),
+        cube_dim,
+        dy.clone().into_tensor_arg(),
+        cols.clone().into_tensor_arg(),
+        in_hw[0] as u32,
+        in_hw[1] as u32,
+        kernel as u32,
+        stride as u32,
+        padding as u32,
+    );
+    cols
+}
+
+/// [`channel_sums`] of `t` `[N, C, ...]`.
+pub fn launch_channel_sums(t: CubeTensor) -> CubeTensor {
+    let channels = t.meta.shape()[1];
+    let sums = empty_device_dtype(t.client.clone(), t.device.clone(), [channels].into(), DType::F32);
+    channel_sums::launch(
+        &t.client,
+        CubeCount::new_1d(channels as u32),
+        CubeDim::new_1d(BLOCK as u32),
+        t.clone().into_tensor_arg(),
+        sums.clone().into_tensor_arg(),
+        BLOCK,
+    );
+    sums
+}
