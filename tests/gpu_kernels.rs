@@ -8,15 +8,16 @@ use burn::tensor::{Distribution, Tensor};
 use selfmodel::core::device::{DeviceChoice, select, with_seed};
 use selfmodel::core::preset::Preset;
 use selfmodel::self_models::neurokin::{NeuroKin, NeuroKinConfig};
-use selfmodel::train::adam;
-use selfmodel::train::trainer::{autodiff_device, clip_global_norm};
+use selfmodel::train::adam::{self, clip_global_norm};
+use selfmodel::train::trainer::autodiff_device;
 
 /// Every parameter of a module, flattened, in visiting order.
 fn values<M: Module>(m: &M) -> Vec<Vec<f32>> {
     struct Collect(Vec<Vec<f32>>);
     impl ModuleVisitor for Collect {
         fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
-            self.0.push(p.val().into_data().try_to_vec::<f32>().unwrap());
+            self.0
+                .push(p.val().into_data().try_to_vec::<f32>().unwrap());
         }
     }
     let mut c = Collect(Vec::new());
@@ -84,7 +85,10 @@ fn the_fused_adam_step_is_burns() {
         let g_fused = copy(&reference, &g_ref);
         let norm = clip_global_norm(&reference, &mut g_ref, max_norm).unwrap();
         let norm: f32 = norm.into_scalar();
-        assert!(norm > max_norm, "step {step}: the norm {norm} is not clipped");
+        assert!(
+            norm > max_norm,
+            "step {step}: the norm {norm} is not clipped"
+        );
         reference = opt_reference.step(1e-3, reference, g_ref);
         fused = adam::step(&mut opt_fused, 1e-3, fused, g_fused, Some(max_norm));
         let d = largest_difference(&values(&fused), &values(&reference));
@@ -144,8 +148,16 @@ fn batch_norm_on_our_kernels_is_burns() {
         let g_ours = (y_ours.clone() * w.clone()).sum().backward();
         let g_burns = (y_burns.clone() * w.clone()).sum().backward();
         compare("output", y_ours.flatten(0, 3), y_burns.flatten(0, 3));
-        compare("running mean", ours.running_mean.value(), burns.running_mean.value());
-        compare("running variance", ours.running_var.value(), burns.running_var.value());
+        compare(
+            "running mean",
+            ours.running_mean.value(),
+            burns.running_mean.value(),
+        );
+        compare(
+            "running variance",
+            ours.running_var.value(),
+            burns.running_var.value(),
+        );
         compare(
             "x gradient",
             x.grad(&g_ours).unwrap().flatten(0, 3),
@@ -159,7 +171,10 @@ fn batch_norm_on_our_kernels_is_burns() {
             );
         }
     }
-    assert!(worst < 2e-6, "batch norm differs from burn's by {worst} (relative)");
+    assert!(
+        worst < 2e-6,
+        "batch norm differs from burn's by {worst} (relative)"
+    );
 }
 
 /// The binary cross-entropy on logits on our kernels (two launches forward, one backward)
@@ -182,10 +197,15 @@ fn the_logit_cross_entropy_on_our_kernels_is_burns() {
         let g_ours = z.grad(&ours.mul_scalar(3.0).backward()).unwrap();
         let g_burns = z.grad(&burns.mul_scalar(3.0).backward()).unwrap();
         let g = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
-        let scale = g(g_burns.clone())[0].iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let scale = g(g_burns.clone())[0]
+            .iter()
+            .fold(0.0f32, |m, v| m.max(v.abs()));
         let dg = largest_difference(&g(g_ours), &g(g_burns)) / scale;
         eprintln!("{shape:?}: loss {a} against {b}, gradient differs by {dg:.2e} (relative)");
-        assert!((a - b).abs() <= 1e-5 * b.abs(), "{shape:?}: loss {a} against {b}");
+        assert!(
+            (a - b).abs() <= 1e-5 * b.abs(),
+            "{shape:?}: loss {a} against {b}"
+        );
         assert!(dg < 1e-5, "{shape:?}: gradients differ by {dg} (relative)");
     }
 }
@@ -200,7 +220,8 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
     for (i, (k, s, p, hw)) in [(4, 2, 1, 5), (3, 1, 2, 9)].into_iter().enumerate() {
         let (x, w, b) = with_seed(&tdev, 20 + i as u64, || {
             (
-                Tensor::<4>::random([3, 6, hw, hw + 1], Distribution::Default, &tdev).require_grad(),
+                Tensor::<4>::random([3, 6, hw, hw + 1], Distribution::Default, &tdev)
+                    .require_grad(),
                 Tensor::<4>::random([6, 4, k, k], Distribution::Default, &tdev).require_grad(),
                 Tensor::<1>::random([4], Distribution::Default, &tdev).require_grad(),
             )
@@ -229,7 +250,9 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
             rel(v(w.grad(&g_ours).unwrap()), v(w.grad(&g_burns).unwrap())),
             rel(v1(b.grad(&g_ours).unwrap()), v1(b.grad(&g_burns).unwrap())),
         ];
-        eprintln!("k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)");
+        eprintln!(
+            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)"
+        );
         assert!(d.iter().all(|&e| e < 1e-5), "k{k} s{s} p{p}: {d:?}");
     }
 }

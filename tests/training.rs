@@ -8,10 +8,10 @@ use std::cell::Cell;
 use burn::nn::{Linear, LinearConfig};
 use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
+use selfmodel::train::adam::clip_global_norm;
 use selfmodel::train::losses::{bce, bce_with_logits, mse};
 use selfmodel::train::trainer::{
     Batch, CheckpointPlan, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer, autodiff_device,
-    clip_global_norm,
 };
 
 /// The training loop with an optional checkpoint plan.

@@ -217,8 +217,20 @@ pub fn operation_name(debug: &str) -> String {
     let is_dtype = |w: &str| {
         matches!(
             w,
-            "F64" | "F32" | "F16" | "BF16" | "Flex32" | "I64" | "I32" | "I16" | "I8" | "U64"
-                | "U32" | "U16" | "U8" | "Bool"
+            "F64"
+                | "F32"
+                | "F16"
+                | "BF16"
+                | "Flex32"
+                | "I64"
+                | "I32"
+                | "I16"
+                | "I8"
+                | "U64"
+                | "U32"
+                | "U16"
+                | "U8"
+                | "Bool"
         )
     };
     words

@@ -925,7 +925,8 @@ pub fn conv_transpose2d(
     if !on_flex(&x) {
         #[cfg(feature = "wgpu")]
         if let Some(b) = &bias
-            && let Some(y) = crate::kernels::cube::extension::conv_transpose2d(&x, &weight, b, &options)
+            && let Some(y) =
+                crate::kernels::cube::extension::conv_transpose2d(&x, &weight, b, &options)
         {
             return y;
         }

@@ -10,7 +10,7 @@
 //! burn's `AdamState`: checkpoints written with either load into the other (tested). Off the
 //! CPU the step is burn's own.
 
-use burn::module::Module;
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::optim::{
     AdamConfig, AdamState, AdaptiveMomentumState, GradientsParams, LearningRate, ModuleOptimizer,
 };
@@ -104,10 +104,71 @@ impl burn::optim::Optimizer for Adam {
     }
 }
 
+/// Scale all gradients so their global L2 norm is at most `max_norm` (PyTorch's
+/// `clip_grad_norm_`), on the device: the norm is never read to the host, so a step that
+/// clips waits for nothing. A non-finite norm leaves the gradients as they are (the loss
+/// check stops such a run). Returns the norm before clipping, as a one-element tensor.
+pub fn clip_global_norm<M: Module>(
+    model: &M,
+    grads: &mut GradientsParams,
+    max_norm: f32,
+) -> Option<Tensor<1>> {
+    struct SquaredNorm<'a> {
+        grads: &'a GradientsParams,
+        sum: Option<Tensor<1>>,
+    }
+    impl ModuleVisitor for SquaredNorm<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if let Some(g) = self.grads.get::<D>(param.id) {
+                let s = g.square().sum();
+                self.sum = Some(match self.sum.take() {
+                    Some(acc) => acc + s,
+                    None => s,
+                });
+            }
+        }
+    }
+    struct Scale<'a> {
+        grads: &'a mut GradientsParams,
+        scale: Tensor<1>,
+        ids: Vec<ParamId>,
+    }
+    impl ModuleVisitor for Scale<'_> {
+        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+            if self.ids.contains(&param.id) {
+                return;
+            }
+            if let Some(g) = self.grads.remove::<D>(param.id) {
+                let scale = self.scale.clone().reshape([1usize; D]);
+                self.grads.register(param.id, g * scale);
+                self.ids.push(param.id);
+            }
+        }
+    }
+    let mut v = SquaredNorm { grads, sum: None };
+    model.visit(&mut v);
+    let norm = v.sum?.sqrt();
+    // max / (norm + 1e-6) where the norm is finite and above max, else 1: the same f32
+    // arithmetic the host did when it read the norm.
+    let clip = norm
+        .clone()
+        .is_finite()
+        .bool_and(norm.clone().greater_elem(max_norm));
+    let ratio = norm.zeros_like().add_scalar(max_norm) / norm.clone().add_scalar(1e-6f32);
+    let scale = norm.ones_like().mask_where(clip, ratio);
+    let mut s = Scale {
+        grads,
+        scale,
+        ids: Vec::new(),
+    };
+    model.visit(&mut s);
+    Some(norm)
+}
+
 /// One optimiser step of `model` with `grads`, the global gradient norm first clipped to
 /// `clip` (PyTorch's `clip_grad_norm_`) where given: what every trainer calls.
 ///
-/// On the CPU: [`crate::train::trainer::clip_global_norm`], then `optim.step` (each parameter
+/// On the CPU: [`clip_global_norm`], then `optim.step` (each parameter
 /// on our parallel kernel, burn's numbers to the bit). On a GPU (feature `wgpu`), with our
 /// [`Adam`]: the clipping and every parameter's update in a few launches
 /// ([`crate::kernels::cube::multi_tensor`]: one for the norm, one per handful of parameters),
@@ -128,7 +189,7 @@ pub fn step<M: Module>(
     }
     let mut grads = grads;
     if let Some(max) = clip {
-        crate::train::trainer::clip_global_norm(&model, &mut grads, max);
+        clip_global_norm(&model, &mut grads, max);
     }
     optim.step(lr, model, grads)
 }

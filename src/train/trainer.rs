@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use burn::module::{Module, ModuleVisitor, Param, ParamId};
+use burn::module::Module;
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::SeedableRng;
@@ -264,67 +264,6 @@ impl CheckpointPlan {
         );
         Ok((model, optim, Some((state.log, state.hooks))))
     }
-}
-
-/// Scale all gradients so their global L2 norm is at most `max_norm` (PyTorch's
-/// `clip_grad_norm_`), on the device: the norm is never read to the host, so a step that
-/// clips waits for nothing. A non-finite norm leaves the gradients as they are (the loss
-/// check stops such a run). Returns the norm before clipping, as a one-element tensor.
-pub fn clip_global_norm<M: Module>(
-    model: &M,
-    grads: &mut GradientsParams,
-    max_norm: f32,
-) -> Option<Tensor<1>> {
-    struct SquaredNorm<'a> {
-        grads: &'a GradientsParams,
-        sum: Option<Tensor<1>>,
-    }
-    impl ModuleVisitor for SquaredNorm<'_> {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if let Some(g) = self.grads.get::<D>(param.id) {
-                let s = g.square().sum();
-                self.sum = Some(match self.sum.take() {
-                    Some(acc) => acc + s,
-                    None => s,
-                });
-            }
-        }
-    }
-    struct Scale<'a> {
-        grads: &'a mut GradientsParams,
-        scale: Tensor<1>,
-        ids: Vec<ParamId>,
-    }
-    impl ModuleVisitor for Scale<'_> {
-        fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
-            if self.ids.contains(&param.id) {
-                return;
-            }
-            if let Some(g) = self.grads.remove::<D>(param.id) {
-                let scale = self.scale.clone().reshape([1usize; D]);
-                self.grads.register(param.id, g * scale);
-                self.ids.push(param.id);
-            }
-        }
-    }
-    let mut v = SquaredNorm { grads, sum: None };
-    model.visit(&mut v);
-    let norm = v.sum?.sqrt();
-    // max / (norm + 1e-6) where the norm is finite and above max, else 1: the same f32
-    // arithmetic the host did when it read the norm.
-    let clip = norm
-        .clone()
-        .is_finite()
-        .bool_and(norm.clone().greater_elem(max_norm));
-    let ratio = norm.zeros_like().add_scalar(max_norm) / norm.clone().add_scalar(1e-6f32);
-    let scale = norm.ones_like().mask_where(clip, ratio);
-    let mut s = Scale {
-        grads,
-        scale,
-        ids: Vec::new(),
-    };
-    model.visit(&mut s);
-    Some(norm)
 }
 
 /// Draws batches: epoch permutations seeded by `(seed, epoch)`, noise by `(seed, step)`.
@@ -1202,7 +1141,7 @@ where
         let mut clip = cfg.grad_clip_norm;
         if hooks.wants_gradients() {
             if let Some(max) = clip.take() {
-                clip_global_norm(&model, &mut grads, max);
+                crate::train::adam::clip_global_norm(&model, &mut grads, max);
             }
             hooks.gradients(&model, &grads, step);
         }

@@ -184,12 +184,20 @@ fn contiguous(t: CubeTensor) -> CubeTensor {
 /// `[channels, plane]` of an `[N, C, ...]` tensor.
 fn layout(x: &CubeTensor) -> (usize, usize) {
     let dims = x.meta.shape();
-    assert!(dims.len() >= 2 && x.dtype == DType::F32, "an f32 [N, C, ...] tensor");
+    assert!(
+        dims.len() >= 2 && x.dtype == DType::F32,
+        "an f32 [N, C, ...] tensor"
+    );
     (dims[1], dims.iter().skip(2).product())
 }
 
 fn channel_vector(x: &CubeTensor, channels: usize) -> CubeTensor {
-    empty_device_dtype(x.client.clone(), x.device.clone(), [channels].into(), DType::F32)
+    empty_device_dtype(
+        x.client.clone(),
+        x.device.clone(),
+        [channels].into(),
+        DType::F32,
+    )
 }
 
 /// `(mean, variance, 1 / std, running mean, running variance)` of [`statistics`].
@@ -267,7 +275,12 @@ pub fn launch_x_grad(
 ) -> CubeTensor {
     let (x, y, dy) = (t.x, t.y, t.dy);
     let (channels, plane) = layout(&x);
-    let dx = empty_device_dtype(x.client.clone(), x.device.clone(), x.meta.shape().clone(), DType::F32);
+    let dx = empty_device_dtype(
+        x.client.clone(),
+        x.device.clone(),
+        x.meta.shape().clone(),
+        DType::F32,
+    );
     let n = x.meta.num_elements();
     let cube_dim = CubeDim::new_1d(BLOCK as u32);
     x_grad::launch(

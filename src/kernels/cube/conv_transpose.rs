@@ -79,9 +79,17 @@ pub fn launch_columns(
     padding: usize,
 ) -> CubeTensor {
     let dims = dy.meta.shape().clone();
-    assert!(dims.len() == 4 && dy.dtype == DType::F32, "an f32 [N, C, H, W] gradient");
+    assert!(
+        dims.len() == 4 && dy.dtype == DType::F32,
+        "an f32 [N, C, H, W] gradient"
+    );
     let shape = [dims[0], in_hw[0] * in_hw[1], dims[1] * kernel * kernel];
-    let cols = empty_device_dtype(dy.client.clone(), dy.device.clone(), shape.into(), DType::F32);
+    let cols = empty_device_dtype(
+        dy.client.clone(),
+        dy.device.clone(),
+        shape.into(),
+        DType::F32,
+    );
     let n = shape.iter().product();
     let cube_dim = CubeDim::new_1d(BLOCK as u32);
     columns::launch(
@@ -102,7 +110,12 @@ pub fn launch_columns(
 /// [`channel_sums`] of `t` `[N, C, ...]`.
 pub fn launch_channel_sums(t: CubeTensor) -> CubeTensor {
     let channels = t.meta.shape()[1];
-    let sums = empty_device_dtype(t.client.clone(), t.device.clone(), [channels].into(), DType::F32);
+    let sums = empty_device_dtype(
+        t.client.clone(),
+        t.device.clone(),
+        [channels].into(),
+        DType::F32,
+    );
     channel_sums::launch(
         &t.client,
         CubeCount::new_1d(channels as u32),

@@ -13,6 +13,7 @@ use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
 use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::autodiff::{Autodiff, NodeId};
+use burn::backend::fusion::custom::TensorSpec;
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{
     AutodiffBackend, Backend, Dispatch, Scalar, TensorMetadata, backend_extension,
@@ -21,7 +22,6 @@ use burn::nn::BatchNorm;
 use burn::tensor::ops::ConvTransposeOptions;
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
-use burn::backend::fusion::custom::TensorSpec;
 
 use super::{batch_norm, conv_transpose, loss};
 
@@ -46,11 +46,7 @@ fn maybe_relu<B: Backend>(x: FloatTensor<B>, relu: bool) -> FloatTensor<B> {
 /// The gradient reaching a batch norm's normalisation from `dy` (masked where a ReLU after
 /// it gave 0).
 fn reaching<B: Backend>(y: FloatTensor<B>, dy: FloatTensor<B>, relu: bool) -> FloatTensor<B> {
-    if relu {
-        B::relu_backward(y, dy)
-    } else {
-        dy
-    }
+    if relu { B::relu_backward(y, dy) } else { dy }
 }
 
 /// Operations that burn composes of many launches, as kernels of ours on a GPU.
@@ -205,9 +201,8 @@ pub trait GpuKernelOps: Backend {
     #[fusion(meta = |z, _y| TensorSpec::new(Shape::new([1]), z.dtype))]
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
         let n = z.shape().num_elements();
-        let softplus = Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(
-            z.clone(),
-        ))));
+        let softplus =
+            Self::float_log1p(Self::float_exp(Self::float_neg(Self::float_abs(z.clone()))));
         let l = Self::float_add(
             Self::float_sub(
                 Self::float_clamp_min(z.clone(), Scalar::Float(0.0)),
@@ -308,7 +303,13 @@ impl GpuKernelOps for CubeBackend {
         inv_std: FloatTensor<Self>,
         relu: bool,
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let saved = batch_norm::Saved { x, y, dy, mean, inv_std };
+        let saved = batch_norm::Saved {
+            x,
+            y,
+            dy,
+            mean,
+            inv_std,
+        };
         let [gamma, beta] = batch_norm::launch_grad_sums(saved, relu);
         (gamma, beta)
     }
@@ -324,7 +325,13 @@ impl GpuKernelOps for CubeBackend {
         beta_grad: FloatTensor<Self>,
         relu: bool,
     ) -> FloatTensor<Self> {
-        let saved = batch_norm::Saved { x, y, dy, mean, inv_std };
+        let saved = batch_norm::Saved {
+            x,
+            y,
+            dy,
+            mean,
+            inv_std,
+        };
         batch_norm::launch_x_grad(saved, gamma, gamma_grad, beta_grad, relu)
     }
 }
@@ -430,15 +437,17 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
 
         // The targets are data: their gradient is not taken (a tracked target would be a bug).
         let y = y.into_primitive();
-        match BceWithLogits.prepare::<C>([z.node()]).compute_bound().stateful() {
+        match BceWithLogits
+            .prepare::<C>([z.node()])
+            .compute_bound()
+            .stateful()
+        {
             OpsKind::Tracked(mut prep) => {
                 let z_state = prep.checkpoint(&z);
                 let loss = B::bce_with_logits_mean(z.into_primitive(), y.clone());
                 prep.finish((z_state, y), loss)
             }
-            OpsKind::UnTracked(prep) => {
-                prep.finish(B::bce_with_logits_mean(z.into_primitive(), y))
-            }
+            OpsKind::UnTracked(prep) => prep.finish(B::bce_with_logits_mean(z.into_primitive(), y)),
         }
     }
 
@@ -559,7 +568,11 @@ pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) ->
     let training = x.device().is_autodiff() && norm.training.is_enabled();
     if !training || !super::is_lazy(&x.clone().inner()) {
         let y = norm.forward(x);
-        return if relu { burn::tensor::activation::relu(y) } else { y };
+        return if relu {
+            burn::tensor::activation::relu(y)
+        } else {
+            y
+        };
     }
     let device = x.device();
     // As burn's: `value_sync` (the mean over the threads that updated the state, one here:

@@ -2,9 +2,9 @@
 //! tensors split into as many launches as the device's binding limit asks.
 
 use burn::tensor::DType;
-use burn_cubecl::tensor::CubeTensor;
 use burn_cubecl::kernel::into_contiguous;
 use burn_cubecl::ops::numeric::empty_device_dtype;
+use burn_cubecl::tensor::CubeTensor;
 use cubecl::calculate_cube_count_elemwise;
 use cubecl::prelude::*;
 
@@ -30,7 +30,12 @@ fn contiguous(t: CubeTensor) -> CubeTensor {
 }
 
 fn empty_like(t: &CubeTensor) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), t.meta.shape().clone(), t.dtype)
+    empty_device_dtype(
+        t.client.clone(),
+        t.device.clone(),
+        t.meta.shape().clone(),
+        t.dtype,
+    )
 }
 
 fn f32_only(tensors: &[CubeTensor]) {
@@ -96,7 +101,12 @@ pub fn adam(
         // A kernel argument is needed all the same: a tensor of its own (a buffer bound
         // twice in one launch is not allowed), never read.
         None => (
-            empty_device_dtype(first.client.clone(), first.device.clone(), [1].into(), DType::F32),
+            empty_device_dtype(
+                first.client.clone(),
+                first.device.clone(),
+                [1].into(),
+                DType::F32,
+            ),
             0.0,
             false,
         ),
@@ -105,7 +115,8 @@ pub fn adam(
     let combined = bias_correction2_sqrt / (1.0 - step.beta_1.powi(step.time));
     let epsilon = step.epsilon * bias_correction2_sqrt;
 
-    let contiguous_all = |v: Vec<CubeTensor>| -> Vec<CubeTensor> { v.into_iter().map(contiguous).collect() };
+    let contiguous_all =
+        |v: Vec<CubeTensor>| -> Vec<CubeTensor> { v.into_iter().map(contiguous).collect() };
     // The gradients are read through their strides (a transposed weight gradient is not
     // copied); the parameters and moments are contiguous, as the outputs.
     let params = contiguous_all(params);
@@ -114,7 +125,13 @@ pub fn adam(
     for start in (0..n).step_by(per_launch) {
         let end = (start + per_launch).min(n);
         let outs: Vec<[CubeTensor; 3]> = (start..end)
-            .map(|i| [empty_like(&params[i]), empty_like(&moment_1[i]), empty_like(&moment_2[i])])
+            .map(|i| {
+                [
+                    empty_like(&params[i]),
+                    empty_like(&moment_1[i]),
+                    empty_like(&moment_2[i]),
+                ]
+            })
             .collect();
         let seq = |v: &[CubeTensor]| {
             let mut s = SequenceArg::<OwnedTensor<f32>>::new();

@@ -85,7 +85,10 @@ fn empty(t: &CubeTensor, shape: burn::tensor::Shape) -> CubeTensor {
 
 /// The mean loss, a `[1]` tensor.
 pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
-    assert!(z.dtype == DType::F32 && y.dtype == DType::F32, "f32 logits and targets");
+    assert!(
+        z.dtype == DType::F32 && y.dtype == DType::F32,
+        "f32 logits and targets"
+    );
     let n = z.meta.num_elements();
     let groups = n.div_ceil(BLOCK * 8).clamp(1, GROUPS);
     let partials = empty(&z, [groups].into());

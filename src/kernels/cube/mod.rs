@@ -31,8 +31,8 @@ use burn::backend::fusion::custom::{
 };
 use burn::backend::{BackendTensor, DispatchAutodiffContext, DispatchTensor, DispatchTensorKind};
 use burn::tensor::{DType, Shape, Tensor};
-use burn_cubecl::fusion::FusionCubeRuntime;
 use burn_cubecl::CubeBackend;
+use burn_cubecl::fusion::FusionCubeRuntime;
 use burn_cubecl::tensor::CubeTensor;
 
 /// A lazy tensor of burn's fusion backend on a CubeCL device.

@@ -94,7 +94,7 @@ pub struct AdamScalars {
 }
 
 /// The global-norm clipping factor from the partial sums of squares: `max / (norm + 1e-6)`
-/// where the norm is finite and above `max`, else 1 (as `train::trainer::clip_global_norm`).
+/// where the norm is finite and above `max`, else 1 (as `train::adam::clip_global_norm`).
 /// Every unit of the workgroup takes part.
 #[cube]
 fn clip_scale(partials: &Tensor<f32>, max_norm: f32, #[comptime] block: usize) -> f32 {
@@ -155,8 +155,7 @@ pub fn adam(
                 done = true;
                 let g = grads[i].as_slice()[at(&grads[i], offset)] * scale;
                 let m = moment_1[i].as_slice()[offset] * beta_1 + g * (1.0 - beta_1);
-                let v =
-                    moment_2[i].as_slice()[offset] * beta_2 + g * g * (1.0 - beta_2);
+                let v = moment_2[i].as_slice()[offset] * beta_2 + g * g * (1.0 - beta_2);
                 let update = m * combined / (f32::sqrt(v) + epsilon);
                 let p = params[i].as_slice()[offset] - update * lr;
                 params_out.index_mut(i).as_mut_slice()[offset] = p;
