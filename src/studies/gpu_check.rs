@@ -235,6 +235,7 @@ pub fn neurokin_step_counts(
 fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
     use crate::eval::device_counts::DeviceCounts;
     let mut rows = Vec::new();
+    let mut sources = Vec::new();
     let (steps, log_every) = (24, 8);
     for batch in [32, 256] {
         let preset = if check.quick { "quick" } else { "paper" };
@@ -263,9 +264,37 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
         for (name, n) in kernels.iter().take(8) {
             console.say(format!("  {:>6.1} x {name}", *n as f64 / k))?;
         }
+        // Which operations each launch ran for (burn's fusion blocks): where copies and
+        // reductions come from.
+        let mut by_source: Vec<_> = c.sources.into_iter().collect();
+        by_source.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        console.say("  by the operations they ran for:")?;
+        for (name, n) in &by_source {
+            console.say(format!("  {:>6.1} x {name}", *n as f64 / k))?;
+            let (kernel, operations) = name.split_once(" <- ").unwrap_or((name, "?"));
+            sources.push(LaunchSource {
+                model: "NeuroKin".into(),
+                batch,
+                kernel: kernel.into(),
+                operations: operations.into(),
+                launches_per_step: *n as f64 / k,
+            });
+        }
         rows.push(row);
     }
+    write_csv(&check.out.join("counts_sources.csv"), &sources)?;
     write_csv(&check.out.join("counts.csv"), &rows)
+}
+
+/// Launches a step of one kernel for one set of operations (a fusion block's kinds).
+#[cfg(feature = "wgpu")]
+#[derive(Clone, Debug, serde::Serialize)]
+struct LaunchSource {
+    model: String,
+    batch: usize,
+    kernel: String,
+    operations: String,
+    launches_per_step: f64,
 }
 
 #[cfg(not(feature = "wgpu"))]

@@ -262,6 +262,10 @@ mod fused {
             let Some(gathered) = list.as_mut() else {
                 return true;
             };
+            if !cube::is_lazy(tensor) {
+                *list = None;
+                return true;
+            }
             let (time, m, v) = match state {
                 Some(s) => (
                     s.momentum.time + 1,

@@ -38,6 +38,13 @@ fn broadcast<B: Backend>(v: FloatTensor<B>, rank: usize) -> FloatTensor<B> {
     B::float_reshape(v, Shape::from(dims))
 }
 
+/// `[N, C, ...]` -> `[C, N·...]`: a channel a row (burn's way to reduce by channel: a copy).
+fn by_channel<B: Backend>(t: FloatTensor<B>) -> FloatTensor<B> {
+    let c = t.shape()[1];
+    let flat = Shape::new([c, t.shape().num_elements() / c]);
+    B::float_reshape(B::float_swap_dims(t, 0, 1), flat)
+}
+
 /// `relu(x)` where `relu`, else `x`.
 fn maybe_relu<B: Backend>(x: FloatTensor<B>, relu: bool) -> FloatTensor<B> {
     if relu { B::relu(x) } else { x }
@@ -74,14 +81,10 @@ pub trait GpuKernelOps: Backend {
     ) {
         let rank = x.shape().num_dims();
         let c = x.shape()[1];
-        let flat = Shape::new([c, x.shape().num_elements() / c]);
-        let by_channel = |t: FloatTensor<Self>| {
-            Self::float_reshape(Self::float_swap_dims(t, 0, 1), flat.clone())
-        };
-        let mean = Self::float_mean_dim(by_channel(x.clone()), 1);
+        let mean = Self::float_mean_dim(by_channel::<Self>(x.clone()), 1);
         let mean = Self::float_reshape(mean, Shape::new([c]));
         let centred = Self::float_sub(x, broadcast::<Self>(mean.clone(), rank));
-        let var = Self::float_mean_dim(by_channel(Self::float_mul(centred.clone(), centred)), 1);
+        let var = Self::float_mean_dim(by_channel::<Self>(Self::float_mul(centred.clone(), centred)), 1);
         let var = Self::float_reshape(var, Shape::new([c]));
         let inv_std = Self::float_recip(Self::float_sqrt(Self::float_add_scalar(
             var.clone(),
@@ -111,14 +114,10 @@ pub trait GpuKernelOps: Backend {
     ) -> (FloatTensor<Self>, FloatTensor<Self>) {
         let rank = x.shape().num_dims();
         let c = x.shape()[1];
-        let flat = Shape::new([c, x.shape().num_elements() / c]);
-        let by_channel = |t: FloatTensor<Self>| {
-            Self::float_reshape(Self::float_swap_dims(t, 0, 1), flat.clone())
-        };
         let g = reaching::<Self>(y, dy, relu);
         let centred = Self::float_sub(x, broadcast::<Self>(mean, rank));
-        let beta = Self::float_sum_dim(by_channel(g.clone()), 1);
-        let gx = Self::float_sum_dim(by_channel(Self::float_mul(g, centred)), 1);
+        let beta = Self::float_sum_dim(by_channel::<Self>(g.clone()), 1);
+        let gx = Self::float_sum_dim(by_channel::<Self>(Self::float_mul(g, centred)), 1);
         let gamma = Self::float_mul(Self::float_reshape(gx, Shape::new([c])), inv_std);
         (gamma, Self::float_reshape(beta, Shape::new([c])))
     }
@@ -178,9 +177,7 @@ pub trait GpuKernelOps: Backend {
     #[fusion(meta = |t| per_channel(t))]
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
         let c = t.shape()[1];
-        let flat = Shape::new([c, t.shape().num_elements() / c]);
-        let s = Self::float_sum_dim(Self::float_reshape(Self::float_swap_dims(t, 0, 1), flat), 1);
-        Self::float_reshape(s, Shape::new([c]))
+        Self::float_reshape(Self::float_sum_dim(by_channel::<Self>(t), 1), Shape::new([c]))
     }
 
     /// A transposed convolution with bias, differentiated by [`Self::conv_transpose_columns`]
@@ -609,9 +606,9 @@ pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<T
 }
 
 /// A transposed convolution with bias on a GPU in training, differentiated on our kernels
-/// (see [`GpuKernelOps::conv_transpose2d_train`]); `None` where `x` is elsewhere or the
-/// layer's shape is not one the kernels take (a square kernel, equal strides and paddings, no
-/// dilation, output padding or groups).
+/// (see [`GpuKernelOps::conv_transpose2d_train`]); `None` where `x` is elsewhere, the layer's
+/// shape is not one the kernels take (a square kernel, equal strides and paddings, no
+/// dilation, output padding or groups), or the columns would not fit one buffer.
 pub fn conv_transpose2d(
     x: &Tensor<4>,
     weight: &Tensor<4>,
@@ -625,8 +622,13 @@ pub fn conv_transpose2d(
         && options.padding_out == [0, 0]
         && options.dilation == [1, 1]
         && options.groups == 1;
+    // The columns `[N, Hi·Wi, c_out·k·k]` must fit one of the device's buffers (128 MiB on
+    // lavapipe); a batch whose do not takes burn's backward pass.
+    let [n, _, h, w] = x.dims();
+    let columns = (n * h * w * weight.dims()[1] * kh * kw * 4) as u64;
+    let fits = super::max_buffer_bytes(&x.clone().inner()).is_some_and(|max| columns <= max);
     let training = x.device().is_autodiff();
-    (plain && training && super::is_lazy(&x.clone().inner())).then(|| {
+    (plain && training && fits).then(|| {
         Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv_transpose2d_train(
             x.clone().into_dispatch(),
             weight.clone().into_dispatch(),

@@ -61,6 +61,12 @@ pub fn is_lazy<const D: usize>(t: &Tensor<D>) -> bool {
     )
 }
 
+/// The largest buffer `t`'s device allocates, in bytes, where `t` is on a CubeCL device.
+pub fn max_buffer_bytes<const D: usize>(t: &Tensor<D>) -> Option<u64> {
+    let (f, _) = lazy(t.clone()).ok()?;
+    Some(f.client.device().client().properties().memory.max_page_size)
+}
+
 /// Back from [`lazy`].
 pub fn tensor<const D: usize>(t: LazyTensor, autodiff: DispatchAutodiffContext) -> Tensor<D> {
     Tensor::from_dispatch(DispatchTensor {
