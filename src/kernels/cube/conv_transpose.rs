@@ -1,7 +1,9 @@
-//! A transposed convolution's gradients (the decoders' upsampling layers) from one im2col of
-//! the output gradient: `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, and the bias gradient a sum by
-//! channel, where burn's backward pass runs two direct convolutions with their layout copies
-//! and a reduction after a copy (about eight launches a layer, against five here).
+//! A transposed convolution (the decoders' upsampling layers) as matrix products: forward, the
+//! columns `xᵀ W` (one product) folded into the output with the bias ([`col2im`]), two
+//! launches where burn's takes two layout copies, a product and its col2im; backward, from one
+//! im2col of the output gradient ([`columns`]): `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, and the
+//! bias gradient a sum by channel, where burn's runs two direct convolutions with their layout
+//! copies and a reduction after a copy (about eight launches a layer, against five here).
 //!
 //! For `y = convᵀ(x, W)` with `W` `[c_in, c_out, k, k]`, stride `s` and padding `p`,
 //! `cols[n, (iy, ix), (co, ky, kx)] = dy[n, co, iy·s − p + ky, ix·s − p + kx]` (0 outside).
@@ -46,6 +48,53 @@ pub fn columns(
             v = dy[at(dy, i)];
         }
         cols[k] = v;
+    }
+}
+
+/// The layer's output from the columns of its input, `cols = xᵀ W` `[N, Hi·Wi, c_out·k·k]`:
+/// `y[n, co, oy, ox] = b[co] + Σ cols[n, (iy, ix), (co, ky, kx)]` over `oy = iy·s − p + ky`
+/// (and the same across), contiguous out.
+#[cube(launch)]
+#[allow(clippy::too_many_arguments)]
+pub fn col2im(
+    cols: &Tensor<f32>,
+    bias: &Tensor<f32>,
+    y: &mut Tensor<f32>,
+    in_h: u32,
+    in_w: u32,
+    kernel: u32,
+    stride: u32,
+    padding: u32,
+) {
+    let k = ABSOLUTE_POS;
+    if k < y.len() {
+        let (in_h, in_w) = (in_h as usize, in_w as usize);
+        let (kernel, stride, padding) = (kernel as usize, stride as usize, padding as usize);
+        let (c_out, out_h, out_w) = (y.shape(1), y.shape(2), y.shape(3));
+        let ox = k % out_w;
+        let oy = (k / out_w) % out_h;
+        let co = (k / (out_w * out_h)) % c_out;
+        let n = k / (out_w * out_h * c_out);
+        let width = c_out * kernel * kernel;
+        let mut acc = bias[co];
+        for ky in 0..kernel {
+            // iy·s = oy + p − ky, kept unsigned.
+            let ty = oy + padding;
+            if ty >= ky && (ty - ky) % stride == 0 && (ty - ky) / stride < in_h {
+                let iy = (ty - ky) / stride;
+                for kx in 0..kernel {
+                    let tx = ox + padding;
+                    if tx >= kx && (tx - kx) % stride == 0 && (tx - kx) / stride < in_w {
+                        let ix = (tx - kx) / stride;
+                        let i = (n * in_h * in_w + iy * in_w + ix) * width
+                            + (co * kernel + ky) * kernel
+                            + kx;
+                        acc += cols[at(cols, i)];
+                    }
+                }
+            }
+        }
+        y[k] = acc;
     }
 }
 
@@ -105,6 +154,41 @@ pub fn launch_columns(
         padding as u32,
     );
     cols
+}
+
+/// [`col2im`]: the layer's output `[N, c_out, Ho, Wo]` from its columns and bias.
+#[allow(clippy::too_many_arguments)]
+pub fn launch_col2im(
+    cols: CubeTensor,
+    bias: CubeTensor,
+    in_hw: [usize; 2],
+    out: [usize; 4],
+    kernel: usize,
+    stride: usize,
+    padding: usize,
+) -> CubeTensor {
+    let y = empty_device_dtype(
+        cols.client.clone(),
+        cols.device.clone(),
+        out.into(),
+        DType::F32,
+    );
+    let n = out.iter().product();
+    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    col2im::launch(
+        &cols.client,
+        cubecl::calculate_cube_count_elemwise(&cols.client, n, cube_dim),
+        cube_dim,
+        cols.clone().into_tensor_arg(),
+        bias.into_tensor_arg(),
+        y.clone().into_tensor_arg(),
+        in_hw[0] as u32,
+        in_hw[1] as u32,
+        kernel as u32,
+        stride as u32,
+        padding as u32,
+    );
+    y
 }
 
 /// [`channel_sums`] of `t` `[N, C, ...]`.

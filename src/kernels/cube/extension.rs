@@ -84,7 +84,10 @@ pub trait GpuKernelOps: Backend {
         let mean = Self::float_mean_dim(by_channel::<Self>(x.clone()), 1);
         let mean = Self::float_reshape(mean, Shape::new([c]));
         let centred = Self::float_sub(x, broadcast::<Self>(mean.clone(), rank));
-        let var = Self::float_mean_dim(by_channel::<Self>(Self::float_mul(centred.clone(), centred)), 1);
+        let var = Self::float_mean_dim(
+            by_channel::<Self>(Self::float_mul(centred.clone(), centred)),
+            1,
+        );
         let var = Self::float_reshape(var, Shape::new([c]));
         let inv_std = Self::float_recip(Self::float_sqrt(Self::float_add_scalar(
             var.clone(),
@@ -173,16 +176,39 @@ pub trait GpuKernelOps: Backend {
         unreachable!("conv_transpose_columns runs on CubeCL devices only")
     }
 
+    /// A transposed convolution's output `[N, c_out, Ho, Wo]` from its columns `xᵀ W`
+    /// `[N, Hi·Wi, c_out·k·k]` and its bias (see `kernels::cube::conv_transpose`).
+    #[fusion(meta = |cols, _bias, _in_hw, out, _kernel, _stride, _padding| {
+        TensorSpec::new(Shape::new(*out), cols.dtype)
+    })]
+    fn conv_transpose_col2im(
+        cols: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        in_hw: [usize; 2],
+        out: [usize; 4],
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+    ) -> FloatTensor<Self> {
+        // Only the CubeCL kernel: the layer's reference is burn's `conv_transpose2d`, which
+        // `tests/gpu_kernels.rs` compares the output with.
+        let _ = (cols, bias, in_hw, out, kernel, stride, padding);
+        unreachable!("conv_transpose_col2im runs on CubeCL devices only")
+    }
+
     /// `Σ t[n, c, ...]` by channel: `[C]`.
     #[fusion(meta = |t| per_channel(t))]
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
         let c = t.shape()[1];
-        Self::float_reshape(Self::float_sum_dim(by_channel::<Self>(t), 1), Shape::new([c]))
+        Self::float_reshape(
+            Self::float_sum_dim(by_channel::<Self>(t), 1),
+            Shape::new([c]),
+        )
     }
 
-    /// A transposed convolution with bias, differentiated by [`Self::conv_transpose_columns`]
-    /// and two matrix products (square kernels, equal strides and paddings, no dilation or
-    /// groups).
+    /// A transposed convolution with bias as a matrix product and [`Self::conv_transpose_col2im`],
+    /// differentiated by [`Self::conv_transpose_columns`] and two matrix products (square
+    /// kernels, equal strides and paddings, no dilation or groups).
     #[fusion(default)]
     fn conv_transpose2d_train(
         x: FloatTensor<Self>,
@@ -260,6 +286,18 @@ impl GpuKernelOps for CubeBackend {
 
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
         conv_transpose::launch_channel_sums(t)
+    }
+
+    fn conv_transpose_col2im(
+        cols: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        in_hw: [usize; 2],
+        out: [usize; 4],
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+    ) -> FloatTensor<Self> {
+        conv_transpose::launch_col2im(cols, bias, in_hw, out, kernel, stride, padding)
     }
 
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -383,6 +421,22 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
         }
 
         let (stride, padding) = (options.stride[0], options.padding[0]);
+        // The columns xᵀ W (one batched product, x read transposed in place), then col2im.
+        let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
+            let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
+            let [_, c_out, k, _] = w.shape().dims::<4>();
+            let out_h = (in_h - 1) * stride + k - 2 * padding;
+            let out_w = (in_w - 1) * stride + k - 2 * padding;
+            let xt = B::float_swap_dims(
+                B::float_reshape(x, Shape::new([n, c_in, in_h * in_w])),
+                1,
+                2,
+            );
+            let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
+            let cols = B::float_matmul(xt, w);
+            let out = [n, c_out, out_h, out_w];
+            B::conv_transpose_col2im(cols, b, [in_h, in_w], out, k, stride, padding)
+        };
         match ConvTranspose
             .prepare::<C>([x.node(), weight.node(), bias.node()])
             .compute_bound()
@@ -391,19 +445,17 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
             OpsKind::Tracked(mut prep) => {
                 let x_state = prep.checkpoint(&x);
                 let w_state = prep.checkpoint(&weight);
-                let y = B::conv_transpose2d(
+                let y = forward(
                     x.into_primitive(),
                     weight.into_primitive(),
-                    Some(bias.into_primitive()),
-                    options,
+                    bias.into_primitive(),
                 );
                 prep.finish((x_state, w_state, stride, padding), y)
             }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d(
+            OpsKind::UnTracked(prep) => prep.finish(forward(
                 x.into_primitive(),
                 weight.into_primitive(),
-                Some(bias.into_primitive()),
-                options,
+                bias.into_primitive(),
             )),
         }
     }
