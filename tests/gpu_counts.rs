@@ -11,7 +11,7 @@
 use selfmodel::studies::gpu_check::neurokin_step_counts;
 
 /// Launches a NeuroKin step may take here (the log intervals' loss read included).
-const MOST_LAUNCHES: u64 = 105;
+const MOST_LAUNCHES: u64 = 110;
 
 #[test]
 fn a_neurokin_training_step_reads_nothing_back() {
@@ -49,8 +49,9 @@ fn a_neurokin_training_step_reads_nothing_back() {
         );
         assert!(c.launches > 0, "step {step}: no kernel launch counted");
         // 310 launches a step before our fused kernels (Adam and the clipping, batch norm,
-        // the loss, the transposed convolutions); 104 with them. The target is 100: this
-        // bound keeps what was won.
+        // the loss, the transposed convolutions); 104 with them here. The target is 100: this
+        // bound keeps what was won, with room for autotune choosing a matrix kernel that
+        // needs a layout copy.
         assert!(
             c.launches <= MOST_LAUNCHES,
             "step {step}: {} kernel launches, more than the {MOST_LAUNCHES} of our fused kernels",
