@@ -21,15 +21,9 @@ pub fn batch_norm<const D: usize>(
     relu: bool,
 ) -> burn::tensor::Tensor<D> {
     #[cfg(feature = "wgpu")]
-    if cpu_extension::on_flex(&x) {
-        let y = norm.forward(x);
-        return if relu { cpu_extension::relu(y) } else { y };
-    } else {
-        return cube::extension::batch_norm(norm, x, relu);
+    if let Some(y) = cube::extension::batch_norm(norm, &x, relu) {
+        return y;
     }
-    #[cfg(not(feature = "wgpu"))]
-    {
-        let y = norm.forward(x);
-        if relu { cpu_extension::relu(y) } else { y }
-    }
+    let y = norm.forward(x);
+    if relu { cpu_extension::relu(y) } else { y }
 }

@@ -11,21 +11,21 @@
 //! burn's own operations; `tests/gpu_kernels.rs` compares the two.
 
 use burn::tensor::DType;
-use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{BLOCK, at, tree_sum};
+use super::{contiguous, elementwise, empty_f32};
 
-/// `Σ (x - shift)²` over channel `c` (the workgroup's) of an `[N, C, ...]` tensor,
-/// by the whole workgroup; every unit gets it.
+/// `Σ (x - shift)` (or with `square`, `Σ (x - shift)²`) over channel `c` (the workgroup's) of
+/// an `[N, C, ...]` tensor of any strides, by the whole workgroup; every unit gets it.
 #[cube]
-fn squares_about(
+pub fn channel_total(
     x: &Tensor<f32>,
     shift: f32,
     channels: usize,
     plane: usize,
+    #[comptime] square: bool,
     #[comptime] block: usize,
 ) -> f32 {
     let c = CUBE_POS_X as usize;
@@ -35,7 +35,11 @@ fn squares_about(
     let mut k = UNIT_POS as usize;
     while k < n {
         let d = x[at(x, (k / plane * channels + c) * plane + k % plane)] - shift;
-        acc += d * d;
+        if square {
+            acc += d * d;
+        } else {
+            acc += d;
+        }
         k += block;
     }
     shared[UNIT_POS as usize] = acc;
@@ -65,19 +69,9 @@ pub fn statistics(
 ) {
     let (channels, plane) = (channels as usize, plane as usize);
     let c = CUBE_POS_X as usize;
-    let n = x.len() / channels;
-    let count = f32::cast_from(n);
-    let mut shared = Shared::new_slice(block);
-    let mut acc = 0.0;
-    let mut k = UNIT_POS as usize;
-    while k < n {
-        acc += x[at(x, (k / plane * channels + c) * plane + k % plane)];
-        k += block;
-    }
-    shared[UNIT_POS as usize] = acc;
-    let m = tree_sum(&mut shared) / count;
-    sync_cube();
-    let v = squares_about(x, m, channels, plane, block) / count;
+    let count = f32::cast_from(x.len() / channels);
+    let m = channel_total(x, 0.0, channels, plane, false, block) / count;
+    let v = channel_total(x, m, channels, plane, true, block) / count;
     if UNIT_POS == 0 {
         mean[c] = m;
         var[c] = v;
@@ -173,14 +167,6 @@ pub fn x_grad(
     }
 }
 
-fn contiguous(t: CubeTensor) -> CubeTensor {
-    if t.is_contiguous() {
-        t
-    } else {
-        into_contiguous(t)
-    }
-}
-
 /// `[channels, plane]` of an `[N, C, ...]` tensor.
 fn layout(x: &CubeTensor) -> (usize, usize) {
     let dims = x.meta.shape();
@@ -189,15 +175,6 @@ fn layout(x: &CubeTensor) -> (usize, usize) {
         "an f32 [N, C, ...] tensor"
     );
     (dims[1], dims.iter().skip(2).product())
-}
-
-fn channel_vector(x: &CubeTensor, channels: usize) -> CubeTensor {
-    empty_device_dtype(
-        x.client.clone(),
-        x.device.clone(),
-        [channels].into(),
-        DType::F32,
-    )
 }
 
 /// `(mean, variance, 1 / std, running mean, running variance)` of [`statistics`].
@@ -209,7 +186,7 @@ pub fn launch_statistics(
     momentum: f64,
 ) -> [CubeTensor; 5] {
     let (channels, plane) = layout(&x);
-    let out = [(); 5].map(|_| channel_vector(&x, channels));
+    let out = [(); 5].map(|_| empty_f32(&x, [channels]));
     statistics::launch(
         &x.client,
         CubeCount::new_1d(channels as u32),
@@ -245,7 +222,7 @@ pub struct Saved {
 pub fn launch_grad_sums(t: Saved, relu: bool) -> [CubeTensor; 2] {
     let (x, y, dy) = (t.x, t.y, t.dy);
     let (channels, plane) = layout(&x);
-    let out = [(); 2].map(|_| channel_vector(&x, channels));
+    let out = [(); 2].map(|_| empty_f32(&x, [channels]));
     grad_sums::launch(
         &x.client,
         CubeCount::new_1d(channels as u32),
@@ -275,17 +252,11 @@ pub fn launch_x_grad(
 ) -> CubeTensor {
     let (x, y, dy) = (t.x, t.y, t.dy);
     let (channels, plane) = layout(&x);
-    let dx = empty_device_dtype(
-        x.client.clone(),
-        x.device.clone(),
-        x.meta.shape().clone(),
-        DType::F32,
-    );
-    let n = x.meta.num_elements();
-    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    let dx = empty_f32(&x, x.meta.shape().clone());
+    let (cube_count, cube_dim) = elementwise(&x, x.meta.num_elements());
     x_grad::launch(
         &x.client,
-        cubecl::calculate_cube_count_elemwise(&x.client, n, cube_dim),
+        cube_count,
         cube_dim,
         x.clone().into_tensor_arg(),
         y.into_tensor_arg(),

@@ -10,11 +10,12 @@
 //! The slow reference is burn's own backward pass; `tests/gpu_kernels.rs` compares the two.
 
 use burn::tensor::DType;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use super::multi_tensor::{BLOCK, at, tree_sum};
+use super::batch_norm::channel_total;
+use super::multi_tensor::{BLOCK, at};
+use super::{elementwise, empty_f32};
 
 /// `cols` `[N, Hi·Wi, c_out·k·k]` from `dy` `[N, c_out, Ho, Wo]` (any strides).
 #[cube(launch)]
@@ -101,21 +102,11 @@ pub fn col2im(
 /// `sums[c] = Σ t[n, c, ...]` (any strides): a layer's bias gradient.
 #[cube(launch)]
 pub fn channel_sums(t: &Tensor<f32>, sums: &mut Tensor<f32>, #[comptime] block: usize) {
-    let c = CUBE_POS_X as usize;
     let channels = t.shape(1);
     let plane = t.len() / (t.shape(0) * channels);
-    let n = t.len() / channels;
-    let mut acc = 0.0;
-    let mut k = UNIT_POS as usize;
-    while k < n {
-        acc += t[at(t, (k / plane * channels + c) * plane + k % plane)];
-        k += block;
-    }
-    let mut shared = Shared::new_slice(block);
-    shared[UNIT_POS as usize] = acc;
-    let sum = tree_sum(&mut shared);
+    let sum = channel_total(t, 0.0, channels, plane, false, block);
     if UNIT_POS == 0 {
-        sums[c] = sum;
+        sums[CUBE_POS_X as usize] = sum;
     }
 }
 
@@ -133,17 +124,11 @@ pub fn launch_columns(
         "an f32 [N, C, H, W] gradient"
     );
     let shape = [dims[0], in_hw[0] * in_hw[1], dims[1] * kernel * kernel];
-    let cols = empty_device_dtype(
-        dy.client.clone(),
-        dy.device.clone(),
-        shape.into(),
-        DType::F32,
-    );
-    let n = shape.iter().product();
-    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    let cols = empty_f32(&dy, shape);
+    let (cube_count, cube_dim) = elementwise(&dy, shape.iter().product());
     columns::launch(
         &dy.client,
-        cubecl::calculate_cube_count_elemwise(&dy.client, n, cube_dim),
+        cube_count,
         cube_dim,
         dy.clone().into_tensor_arg(),
         cols.clone().into_tensor_arg(),
@@ -167,17 +152,11 @@ pub fn launch_col2im(
     stride: usize,
     padding: usize,
 ) -> CubeTensor {
-    let y = empty_device_dtype(
-        cols.client.clone(),
-        cols.device.clone(),
-        out.into(),
-        DType::F32,
-    );
-    let n = out.iter().product();
-    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    let y = empty_f32(&cols, out);
+    let (cube_count, cube_dim) = elementwise(&cols, out.iter().product());
     col2im::launch(
         &cols.client,
-        cubecl::calculate_cube_count_elemwise(&cols.client, n, cube_dim),
+        cube_count,
         cube_dim,
         cols.clone().into_tensor_arg(),
         bias.into_tensor_arg(),
@@ -194,12 +173,7 @@ pub fn launch_col2im(
 /// [`channel_sums`] of `t` `[N, C, ...]`.
 pub fn launch_channel_sums(t: CubeTensor) -> CubeTensor {
     let channels = t.meta.shape()[1];
-    let sums = empty_device_dtype(
-        t.client.clone(),
-        t.device.clone(),
-        [channels].into(),
-        DType::F32,
-    );
+    let sums = empty_f32(&t, [channels]);
     channel_sums::launch(
         &t.client,
         CubeCount::new_1d(channels as u32),

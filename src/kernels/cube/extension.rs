@@ -610,18 +610,17 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
     }
 }
 
-/// burn's `BatchNorm::forward` (then a ReLU where `relu`), on our kernels where `x` is on a
-/// GPU and the layer trains (the running statistics updated as burn updates them); burn's own
+/// burn's `BatchNorm::forward` then a ReLU where `relu`, on our kernels where `x` is on a GPU
+/// and the layer trains (the running statistics updated as burn updates them); `None`
 /// elsewhere.
-pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) -> Tensor<D> {
+pub fn batch_norm<const D: usize>(
+    norm: &BatchNorm,
+    x: &Tensor<D>,
+    relu: bool,
+) -> Option<Tensor<D>> {
     let training = x.device().is_autodiff() && norm.training.is_enabled();
     if !training || !super::is_lazy(&x.clone().inner()) {
-        let y = norm.forward(x);
-        return if relu {
-            burn::tensor::activation::relu(y)
-        } else {
-            y
-        };
+        return None;
     }
     let device = x.device();
     // As burn's: `value_sync` (the mean over the threads that updated the state, one here:
@@ -629,7 +628,7 @@ pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) ->
     let running_mean = norm.running_mean.value_sync().to_device(&device);
     let running_var = norm.running_var.value_sync().to_device(&device);
     let (y, rm, rv) = <Dispatch as GpuKernelOps>::batch_norm_train(
-        x.into_dispatch(),
+        x.clone().into_dispatch(),
         norm.gamma.val().into_dispatch(),
         norm.beta.val().into_dispatch(),
         running_mean.into_dispatch(),
@@ -642,7 +641,7 @@ pub fn batch_norm<const D: usize>(norm: &BatchNorm, x: Tensor<D>, relu: bool) ->
     let rv = Tensor::<1>::from_dispatch(rv);
     norm.running_mean.update(rm.detach());
     norm.running_var.update(rv.detach());
-    Tensor::from_dispatch(y)
+    Some(Tensor::from_dispatch(y))
 }
 
 /// The mean binary cross-entropy of the logits `z` against the targets `y` on our kernels

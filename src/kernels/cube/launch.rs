@@ -2,13 +2,11 @@
 //! tensors split into as many launches as the device's binding limit asks.
 
 use burn::tensor::DType;
-use burn_cubecl::kernel::into_contiguous;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
-use cubecl::calculate_cube_count_elemwise;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{self, AdamScalarsLaunch, BLOCK};
+use super::{contiguous, elementwise, empty_f32};
 use crate::kernels::pointwise::AdamStep;
 
 /// Workgroups a tensor's sum of squares is split over (each sums a strided share).
@@ -19,23 +17,6 @@ pub const GROUPS: usize = 32;
 fn max_bindings(t: &CubeTensor) -> usize {
     let limit = t.client.properties().hardware.max_bindings as usize;
     limit.saturating_sub(1).max(8)
-}
-
-fn contiguous(t: CubeTensor) -> CubeTensor {
-    if t.is_contiguous() {
-        t
-    } else {
-        into_contiguous(t)
-    }
-}
-
-fn empty_like(t: &CubeTensor) -> CubeTensor {
-    empty_device_dtype(
-        t.client.clone(),
-        t.device.clone(),
-        t.meta.shape().clone(),
-        t.dtype,
-    )
 }
 
 fn f32_only(tensors: &[CubeTensor]) {
@@ -51,12 +32,7 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
     assert!(!tensors.is_empty(), "the sum of squares of no tensor");
     f32_only(&tensors);
     let first = tensors[0].clone();
-    let partials = empty_device_dtype(
-        first.client.clone(),
-        first.device.clone(),
-        [tensors.len() * GROUPS].into(),
-        DType::F32,
-    );
+    let partials = empty_f32(&first, [tensors.len() * GROUPS]);
     // Each launch binds its tensors (any strides) and the partials.
     let per_launch = max_bindings(&first) - 1;
     for (c, chunk) in tensors.chunks(per_launch).enumerate() {
@@ -100,16 +76,7 @@ pub fn adam(
         Some((p, max)) => (p, max, true),
         // A kernel argument is needed all the same: a tensor of its own (a buffer bound
         // twice in one launch is not allowed), never read.
-        None => (
-            empty_device_dtype(
-                first.client.clone(),
-                first.device.clone(),
-                [1].into(),
-                DType::F32,
-            ),
-            0.0,
-            false,
-        ),
+        None => (empty_f32(&first, [1]), 0.0, false),
     };
     let bias_correction2_sqrt = (1.0 - step.beta_2.powi(step.time)).sqrt();
     let combined = bias_correction2_sqrt / (1.0 - step.beta_1.powi(step.time));
@@ -126,11 +93,8 @@ pub fn adam(
         let end = (start + per_launch).min(n);
         let outs: Vec<[CubeTensor; 3]> = (start..end)
             .map(|i| {
-                [
-                    empty_like(&params[i]),
-                    empty_like(&moment_1[i]),
-                    empty_like(&moment_2[i]),
-                ]
+                [&params[i], &moment_1[i], &moment_2[i]]
+                    .map(|t| empty_f32(t, t.meta.shape().clone()))
             })
             .collect();
         let seq = |v: &[CubeTensor]| {
@@ -148,8 +112,7 @@ pub fn adam(
             s
         };
         let elements: usize = (start..end).map(|i| params[i].meta.num_elements()).sum();
-        let cube_dim = CubeDim::new_1d(BLOCK as u32);
-        let cube_count = calculate_cube_count_elemwise(&first.client, elements, cube_dim);
+        let (cube_count, cube_dim) = elementwise(&first, elements);
         multi_tensor::adam::launch(
             &first.client,
             cube_count,

@@ -7,11 +7,11 @@
 //! compares the two.
 
 use burn::tensor::DType;
-use burn_cubecl::ops::numeric::empty_device_dtype;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{BLOCK, at, tree_sum};
+use super::{elementwise, empty_f32};
 
 /// Workgroups of the forward pass's partial sums, at most.
 const GROUPS: usize = 256;
@@ -79,10 +79,6 @@ pub fn logits_grad(
     }
 }
 
-fn empty(t: &CubeTensor, shape: burn::tensor::Shape) -> CubeTensor {
-    empty_device_dtype(t.client.clone(), t.device.clone(), shape, DType::F32)
-}
-
 /// The mean loss, a `[1]` tensor.
 pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
     assert!(
@@ -91,7 +87,7 @@ pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
     );
     let n = z.meta.num_elements();
     let groups = n.div_ceil(BLOCK * 8).clamp(1, GROUPS);
-    let partials = empty(&z, [groups].into());
+    let partials = empty_f32(&z, [groups]);
     partial_sums::launch(
         &z.client,
         CubeCount::new_1d(groups as u32),
@@ -101,7 +97,7 @@ pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
         partials.clone().into_tensor_arg(),
         BLOCK,
     );
-    let loss = empty(&z, [1].into());
+    let loss = empty_f32(&z, [1]);
     mean_of_partials::launch(
         &z.client,
         CubeCount::new_1d(1),
@@ -117,11 +113,11 @@ pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
 /// The logits' gradient given the loss's `grad` (a `[1]` tensor).
 pub fn launch_logits_grad(z: CubeTensor, y: CubeTensor, grad: CubeTensor) -> CubeTensor {
     let n = z.meta.num_elements();
-    let dz = empty(&z, z.meta.shape().clone());
-    let cube_dim = CubeDim::new_1d(BLOCK as u32);
+    let dz = empty_f32(&z, z.meta.shape().clone());
+    let (cube_count, cube_dim) = elementwise(&z, n);
     logits_grad::launch(
         &z.client,
-        cubecl::calculate_cube_count_elemwise(&z.client, n, cube_dim),
+        cube_count,
         cube_dim,
         z.clone().into_tensor_arg(),
         y.into_tensor_arg(),

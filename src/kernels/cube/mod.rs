@@ -35,6 +35,38 @@ use burn_cubecl::CubeBackend;
 use burn_cubecl::fusion::FusionCubeRuntime;
 use burn_cubecl::tensor::CubeTensor;
 
+/// `t` as it is where contiguous, else a contiguous copy.
+fn contiguous(t: CubeTensor) -> CubeTensor {
+    if t.is_contiguous() {
+        t
+    } else {
+        burn_cubecl::kernel::into_contiguous(t)
+    }
+}
+
+/// A new contiguous f32 tensor of `shape` on `like`'s device (its values unset).
+fn empty_f32(like: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
+    burn_cubecl::ops::numeric::empty_device_dtype(
+        like.client.clone(),
+        like.device.clone(),
+        shape.into(),
+        DType::F32,
+    )
+}
+
+/// Workgroups and their size for a kernel with a unit an element, `n` elements, on `like`'s
+/// device (more than 65,535 workgroups spread over a second dimension).
+fn elementwise(
+    like: &CubeTensor,
+    n: usize,
+) -> (cubecl::prelude::CubeCount, cubecl::prelude::CubeDim) {
+    let dim = cubecl::prelude::CubeDim::new_1d(multi_tensor::BLOCK as u32);
+    (
+        cubecl::calculate_cube_count_elemwise(&like.client, n, dim),
+        dim,
+    )
+}
+
 /// A lazy tensor of burn's fusion backend on a CubeCL device.
 pub type LazyTensor = FusionTensor<FusionCubeRuntime>;
 
