@@ -210,6 +210,48 @@ fn the_logit_cross_entropy_on_our_kernels_is_burns() {
     }
 }
 
+/// A layer's output and its `x`, weight and bias gradients on our kernels against burn's, the
+/// largest differences relative to burn's largest value, each.
+fn layer_differences(
+    tdev: &burn::tensor::Device,
+    (x, w, b): (&Tensor<4>, &Tensor<4>, &Tensor<1>),
+    ours: Tensor<4>,
+    burns: Tensor<4>,
+) -> [f32; 4] {
+    let weights = Tensor::<4>::random(burns.dims(), Distribution::Default, tdev);
+    let g_ours = (ours.clone() * weights.clone()).sum().backward();
+    let g_burns = (burns.clone() * weights).sum().backward();
+    let v = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+    let v1 = |t: Tensor<1>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+    let rel = |a: Vec<Vec<f32>>, b: Vec<Vec<f32>>| {
+        let scale = b[0].iter().fold(1.0f32, |m, v| m.max(v.abs()));
+        largest_difference(&a, &b) / scale
+    };
+    [
+        rel(v(ours), v(burns)),
+        rel(v(x.grad(&g_ours).unwrap()), v(x.grad(&g_burns).unwrap())),
+        rel(v(w.grad(&g_ours).unwrap()), v(w.grad(&g_burns).unwrap())),
+        rel(v1(b.grad(&g_ours).unwrap()), v1(b.grad(&g_burns).unwrap())),
+    ]
+}
+
+/// A layer's input, weight `w_shape` and bias, tracked, seeded.
+fn layer_inputs(
+    tdev: &burn::tensor::Device,
+    seed: u64,
+    x_shape: [usize; 4],
+    w_shape: [usize; 4],
+    bias: usize,
+) -> (Tensor<4>, Tensor<4>, Tensor<1>) {
+    with_seed(tdev, seed, || {
+        (
+            Tensor::<4>::random(x_shape, Distribution::Default, tdev).require_grad(),
+            Tensor::<4>::random(w_shape, Distribution::Default, tdev).require_grad(),
+            Tensor::<1>::random([bias], Distribution::Default, tdev).require_grad(),
+        )
+    })
+}
+
 /// A transposed convolution (the decoders' upsampling layers: k4 s2 p1 and k3 s1 p2) with its
 /// gradients from our im2col and two matrix products, against burn's `conv_transpose2d`.
 #[test]
@@ -218,16 +260,9 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
     let device = select(DeviceChoice::Wgpu).unwrap();
     let tdev = autodiff_device(&device, 0);
     for (i, (k, s, p, hw)) in [(4, 2, 1, 5), (3, 1, 2, 9)].into_iter().enumerate() {
-        let (x, w, b) = with_seed(&tdev, 20 + i as u64, || {
-            (
-                Tensor::<4>::random([3, 6, hw, hw + 1], Distribution::Default, &tdev)
-                    .require_grad(),
-                Tensor::<4>::random([6, 4, k, k], Distribution::Default, &tdev).require_grad(),
-                Tensor::<1>::random([4], Distribution::Default, &tdev).require_grad(),
-            )
-        });
+        let (x, w, b) = layer_inputs(&tdev, 20 + i as u64, [3, 6, hw, hw + 1], [6, 4, k, k], 4);
         let options = ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1);
-        let ours = selfmodel::kernels::cube::extension::conv_transpose2d(&x, &w, &b, &options)
+        let ours = selfmodel::kernels::cube::convolution::conv_transpose2d(&x, &w, &b, &options)
             .expect("on our kernels");
         let burns = burn::tensor::module::conv_transpose2d(
             x.clone(),
@@ -235,21 +270,32 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
             Some(b.clone()),
             options.clone(),
         );
-        let weights = Tensor::<4>::random(burns.dims(), Distribution::Default, &tdev);
-        let g_ours = (ours.clone() * weights.clone()).sum().backward();
-        let g_burns = (burns.clone() * weights).sum().backward();
-        let v = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
-        let v1 = |t: Tensor<1>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
-        let rel = |a: Vec<Vec<f32>>, b: Vec<Vec<f32>>| {
-            let scale = b[0].iter().fold(1.0f32, |m, v| m.max(v.abs()));
-            largest_difference(&a, &b) / scale
-        };
-        let d = [
-            rel(v(ours), v(burns)),
-            rel(v(x.grad(&g_ours).unwrap()), v(x.grad(&g_burns).unwrap())),
-            rel(v(w.grad(&g_ours).unwrap()), v(w.grad(&g_burns).unwrap())),
-            rel(v1(b.grad(&g_ours).unwrap()), v1(b.grad(&g_burns).unwrap())),
-        ];
+        let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
+        eprintln!(
+            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)"
+        );
+        assert!(d.iter().all(|&e| e < 1e-5), "k{k} s{s} p{p}: {d:?}");
+    }
+}
+
+/// A convolution (the NeuroKin head's 3x3 with padding 1 and its 1x1; a strided 3x3) with its
+/// gradients from our im2col, matrix products and col2im, against burn's `conv2d`.
+#[test]
+fn convolution_gradients_on_our_kernels_are_burns() {
+    use burn::tensor::ops::ConvOptions;
+    let device = select(DeviceChoice::Wgpu).unwrap();
+    let tdev = autodiff_device(&device, 0);
+    for (i, (k, s, p, hw)) in [(3, 1, 1, 7), (1, 1, 0, 6), (3, 2, 1, 9)]
+        .into_iter()
+        .enumerate()
+    {
+        let (x, w, b) = layer_inputs(&tdev, 30 + i as u64, [3, 5, hw, hw + 2], [4, 5, k, k], 4);
+        let options = ConvOptions::new([s, s], [p, p], [1, 1], 1);
+        let ours = selfmodel::kernels::cube::convolution::conv2d(&x, &w, &b, &options)
+            .expect("on our kernels");
+        let burns =
+            burn::tensor::module::conv2d(x.clone(), w.clone(), Some(b.clone()), options.clone());
+        let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
         eprintln!(
             "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)"
         );

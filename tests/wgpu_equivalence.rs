@@ -2,7 +2,8 @@
 //! FFKSM models from the same seed on both, their losses step by step and their rendered
 //! images compared within a tolerance (`studies::device_equivalence`). Behind the `wgpu`
 //! feature; CI runs it on lavapipe (Mesa's software Vulkan):
-//! `cargo test --release --features wgpu --test wgpu_equivalence`.
+//! `cargo test --release --features wgpu --test wgpu_equivalence`; under the SPIR-V compiler,
+//! the same with `--features vulkan` (a build of its own: `CARGO_TARGET_DIR=target/vulkan`).
 #![cfg(feature = "wgpu")]
 
 use selfmodel::core::device::DeviceChoice;
@@ -39,6 +40,21 @@ fn same_on_both<M: SelfModel>(cfg: SelfModelRun<M>, steps: usize, loss_tol: f64,
         e.worst_image,
         e.max_image_abs
     );
+}
+
+/// The build's shader compiler is the one its features name: SPIR-V with `vulkan` (on a
+/// Vulkan device: lavapipe here), WGSL without, so this file tests the compiler it says.
+#[test]
+fn kernels_are_compiled_by_the_features_compiler() {
+    let device = selfmodel::core::device::select(DeviceChoice::Wgpu).unwrap();
+    let compiler = selfmodel::kernels::cube::compiler(&device).expect("a CubeCL device");
+    eprintln!("GPU kernels compiled by {compiler}");
+    let expected = if cfg!(feature = "vulkan") {
+        "wgpu<spirv>"
+    } else {
+        "wgpu<wgsl>"
+    };
+    assert_eq!(compiler, expected);
 }
 
 #[test]

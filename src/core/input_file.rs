@@ -11,13 +11,24 @@ use std::path::Path;
 /// ~100 kB).
 pub const MAX_DESCRIPTION_BYTES: u64 = 64 << 20;
 
+/// The largest weights file read (a saved model's `model.bpk`; the paper's models are tens of
+/// MB).
+pub const MAX_WEIGHTS_BYTES: u64 = 4 << 30;
+
+/// The largest table or array file read (`--targets`, `--angles`, `.npz`): 10 million poses
+/// of a humanoid fit.
+pub const MAX_TABLE_BYTES: u64 = 8 << 30;
+
+/// The largest JSON file a user's model folder holds (`model.json`).
+pub const MAX_JSON_BYTES: u64 = 16 << 20;
+
 /// The largest mesh file read (and any file a mesh names, an OBJ's materials).
 pub const MAX_MESH_BYTES: u64 = 512 << 20;
 
-/// The bytes of `path`, if it is a regular file (a link to one is followed) of at most
-/// `max` bytes; otherwise an error saying what it is. `what` names the file in the message
+/// The size of `path`, if it is a regular file (a link to one is followed) of at most `max`
+/// bytes; otherwise an error saying what it is. `what` names the file in the message
 /// ("mesh", "robot description").
-pub fn read_regular(path: &Path, what: &str, max: u64) -> std::io::Result<Vec<u8>> {
+fn regular_len(path: &Path, what: &str, max: u64) -> std::io::Result<u64> {
     let meta = std::fs::metadata(path)?;
     if !meta.is_file() {
         let kind = if meta.is_dir() {
@@ -40,7 +51,13 @@ pub fn read_regular(path: &Path, what: &str, max: u64) -> std::io::Result<Vec<u8
             ),
         ));
     }
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    Ok(meta.len())
+}
+
+/// The bytes of `path`, if it is a regular file of at most `max` bytes (see [`regular_len`]).
+pub fn read_regular(path: &Path, what: &str, max: u64) -> std::io::Result<Vec<u8>> {
+    let len = regular_len(path, what, max)?;
+    let mut bytes = Vec::with_capacity(len as usize);
     std::fs::File::open(path)?
         .take(max + 1)
         .read_to_end(&mut bytes)?;
@@ -51,6 +68,95 @@ pub fn read_regular(path: &Path, what: &str, max: u64) -> std::io::Result<Vec<u8
         ));
     }
     Ok(bytes)
+}
+
+/// The deepest nesting of XML elements read (a URDF or SRDF nests 3-4 deep; the parsers
+/// recurse, on Python's thread too, whose stack is smaller than a command's).
+pub const MAX_XML_NESTING: usize = 100;
+
+/// How deep the XML elements of `text` nest (comments, declarations and processing
+/// instructions aside; a rough scan, enough to refuse a file that would exhaust the stack).
+fn nesting_depth(text: &str) -> usize {
+    let (mut depth, mut deepest) = (0usize, 0usize);
+    let bytes = text.as_bytes();
+    let mut i = 0;
+    while let Some(at) = text[i..].find('<') {
+        let start = i + at;
+        let Some(len) = text[start..].find('>') else {
+            break;
+        };
+        let end = start + len;
+        match bytes.get(start + 1) {
+            Some(b'/') => depth = depth.saturating_sub(1),
+            Some(b'!' | b'?') => {}
+            _ if bytes[end - 1] == b'/' => {}
+            _ => {
+                depth += 1;
+                deepest = deepest.max(depth);
+            }
+        }
+        i = end + 1;
+    }
+    deepest
+}
+
+/// The text outside XML comments.
+pub fn without_comments(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(start) = rest.find("<!--") {
+        out.push_str(&rest[..start]);
+        rest = match rest[start + 4..].find("-->") {
+            Some(end) => &rest[start + 4 + end + 3..],
+            None => "",
+        };
+    }
+    out.push_str(rest);
+    out
+}
+
+/// `Err` (one line, for the file's own error) where the XML elements of `text` nest deeper
+/// than [`MAX_XML_NESTING`].
+pub fn check_xml_depth(text: &str) -> Result<(), String> {
+    let depth = nesting_depth(&without_comments(text));
+    if depth > MAX_XML_NESTING {
+        return Err(format!(
+            "its elements nest {depth} deep (a robot's XML nests a few levels; at most {MAX_XML_NESTING} are read)"
+        ));
+    }
+    Ok(())
+}
+
+/// The text of an XML file a user names (`what`: "robot description", "SRDF file"), read as
+/// [`read_regular`] reads (at most [`MAX_DESCRIPTION_BYTES`]), UTF-8, its byte-order mark
+/// dropped. Its nesting is checked by [`check_xml_depth`] where it is parsed.
+pub fn read_xml(path: &Path, what: &str) -> crate::core::error::Result<String> {
+    use crate::core::error::Error;
+    let bytes = read_regular(path, what, MAX_DESCRIPTION_BYTES).map_err(|e| Error::io(path, e))?;
+    let text = String::from_utf8(bytes).map_err(|_| {
+        Error::data(
+            path,
+            format!("the {what} is not UTF-8 text (it is XML: save it as UTF-8)"),
+        )
+    })?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
+
+/// The bytes of a file a user names, as [`read_regular`] reads them, with the path in the
+/// error.
+pub fn read_user_file(path: &Path, what: &str, max: u64) -> crate::core::error::Result<Vec<u8>> {
+    read_regular(path, what, max).map_err(|e| crate::core::error::Error::io(path, e))
+}
+
+/// Checks a file a user names before a reader that opens it itself (burn's recorders): a
+/// regular file of at most `max` bytes, or the error [`read_regular`] gives.
+pub fn check_user_file(path: &Path, what: &str, max: u64) -> crate::core::error::Result<()> {
+    regular_len(path, what, max)
+        .map(|_| ())
+        .map_err(|e| crate::core::error::Error::io(path, e))
 }
 
 thread_local! {
@@ -122,8 +228,11 @@ pub fn fnv(bytes: &[u8]) -> String {
     format!("{h:016x}")
 }
 
-/// [`fnv`] of a file.
+/// [`fnv`] of a model's weights file (at most [`MAX_WEIGHTS_BYTES`]).
 pub fn file_fnv(path: &Path) -> crate::core::error::Result<String> {
-    let bytes = std::fs::read(path).map_err(|e| crate::core::error::Error::io(path, e))?;
-    Ok(fnv(&bytes))
+    Ok(fnv(&read_user_file(
+        path,
+        "weights file",
+        MAX_WEIGHTS_BYTES,
+    )?))
 }

@@ -776,6 +776,8 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
         }
         a.to_f64().chunks(cols).map(<[f64]>::to_vec).collect()
     } else {
+        let max = crate::core::input_file::MAX_TABLE_BYTES;
+        crate::core::input_file::check_user_file(path, "angles file", max)?;
         let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
         let mut reader = csv::ReaderBuilder::new()
             .has_headers(false)

@@ -182,6 +182,8 @@ const INITIAL_CAPACITY: u64 = 64 << 20;
 
 /// Read every array of an `.npz` file, by key (the member name without `.npy`).
 pub fn read_npz(path: &Path) -> Result<BTreeMap<String, Array>> {
+    let max = crate::core::input_file::MAX_TABLE_BYTES;
+    crate::core::input_file::check_user_file(path, ".npz file", max)?;
     let file = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut zip = zip::ZipArchive::new(BufReader::new(file))
         .map_err(|e| Error::data(path, format!("not an .npz file (bad zip: {e})")))?;

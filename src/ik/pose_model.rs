@@ -413,8 +413,12 @@ impl PoseModel {
     /// Load a saved model from `dir`.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let json = dir.join("model.json");
-        let text = std::fs::read_to_string(&json).map_err(|e| Error::io(&json, e))?;
-        let saved: SavedModel = serde_json::from_str(&text).map_err(|e| {
+        let text = crate::core::input_file::read_user_file(
+            &json,
+            "saved IK model",
+            crate::core::input_file::MAX_JSON_BYTES,
+        )?;
+        let saved: SavedModel = serde_json::from_slice(&text).map_err(|e| {
             Error::data(
                 &json,
                 format!("not a saved IK model ({e}); make one with `ik train`"),
@@ -426,6 +430,8 @@ impl PoseModel {
         let dof = saved.joint_names.len();
         let width = condition_width(saved.config.position_only, saved.tips.len());
         let file = dir.join("model.bpk");
+        let max = crate::core::input_file::MAX_WEIGHTS_BYTES;
+        crate::core::input_file::check_user_file(&file, "weights file", max)?;
         if let Some(expected) = &saved.weights_fnv
             && file_fnv(&file)? != *expected
         {
@@ -735,6 +741,8 @@ pub fn read_targets(
     tips: &[String],
 ) -> Result<Vec<Vec<PoseTarget>>> {
     let bad = |msg: String| Error::data(path, msg);
+    let max = crate::core::input_file::MAX_TABLE_BYTES;
+    crate::core::input_file::check_user_file(path, "targets file", max)?;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let mut reader = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)

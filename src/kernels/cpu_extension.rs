@@ -908,6 +908,12 @@ pub fn conv2d(
     options: ConvOptions<2>,
 ) -> Tensor<4> {
     if !on_flex(&x) {
+        #[cfg(feature = "wgpu")]
+        if let Some(b) = &bias
+            && let Some(y) = crate::kernels::cube::convolution::conv2d(&x, &weight, b, &options)
+        {
+            return y;
+        }
         return burn::tensor::module::conv2d(x, weight, bias, options);
     }
     let y =
@@ -926,7 +932,7 @@ pub fn conv_transpose2d(
         #[cfg(feature = "wgpu")]
         if let Some(b) = &bias
             && let Some(y) =
-                crate::kernels::cube::extension::conv_transpose2d(&x, &weight, b, &options)
+                crate::kernels::cube::convolution::conv_transpose2d(&x, &weight, b, &options)
         {
             return y;
         }

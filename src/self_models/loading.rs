@@ -120,6 +120,17 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
             ),
         ));
     };
+    let camera_inputs = saved.inputs.checked_sub(saved.joint_names.len());
+    if !saved.joint_names.is_empty() && !matches!(camera_inputs, Some(0 | 9)) {
+        return Err(Error::data(
+            &json,
+            format!(
+                "names {} joints for {} inputs (the joints, then 9 for a camera-conditioned model); {again}",
+                saved.joint_names.len(),
+                saved.inputs
+            ),
+        ));
+    }
     let weights = dir.join("model.bpk");
     if file_fnv(&weights)? != *expected {
         return Err(Error::data(
@@ -148,8 +159,11 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
     Ok(loaded)
 }
 
-/// The loaded model must predict for the probe's poses what the run predicted.
+/// The loaded model must predict for the probe's poses what the run predicted: a model whose
+/// `model.json` does not match its weights (another image size, input count) fails here, as
+/// does one that predicts NaN; a probe without poses is refused.
 fn check_probe(model: &LoadedSelfModel, path: &Path) -> Result<()> {
+    let again = "run the self-model again to save it";
     let arrays = read_npz(path)?;
     let get = |name: &str| -> Result<Vec<f32>> {
         match arrays.get(name).map(|a| &a.data) {
@@ -158,9 +172,31 @@ fn check_probe(model: &LoadedSelfModel, path: &Path) -> Result<()> {
         }
     };
     let angles = get("angles")?;
-    let n = angles.len() / model.saved.inputs.max(1);
-    let (s, d) = model.predict(&angles, n)?;
-    let mut worst = max_abs_diff(&s, &get("silhouettes")?);
+    let inputs = model.saved.inputs.max(1);
+    let n = angles.len() / inputs;
+    if n == 0 || angles.len() % inputs != 0 {
+        return Err(Error::data(
+            path,
+            format!(
+                "its \"angles\" hold {} values, not whole poses of {inputs} inputs; {again}",
+                angles.len()
+            ),
+        ));
+    }
+    // A configuration that disagrees with the weights fails inside burn (a shape error).
+    let (s, d) =
+        crate::core::input_file::catch_panic(|| model.predict(&angles, n)).map_err(|e| {
+            Error::data(
+                path,
+                format!("model.json does not describe the weights beside it ({e}); {again}"),
+            )
+        })??;
+    let [h, w] = model.saved.image;
+    let mut worst = if s.len() == n * h * w {
+        max_abs_diff(&s, &get("silhouettes")?)
+    } else {
+        f32::INFINITY
+    };
     if let Some(d) = d {
         worst = worst.max(max_abs_diff(&d, &get("depth")?));
     }
@@ -168,13 +204,15 @@ fn check_probe(model: &LoadedSelfModel, path: &Path) -> Result<()> {
         return Err(Error::data(
             path,
             format!(
-                "the loaded model predicts its probe poses {worst:.1e} away from what its run predicted; run the self-model again to save it"
+                "the loaded model predicts its probe poses {worst:.1e} away from what its run predicted; {again}"
             ),
         ));
     }
     Ok(())
 }
 
+/// The largest difference of `a` and `b`: infinite where their lengths differ or either holds
+/// NaN (a NaN is never a match).
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     if a.len() != b.len() {
         return f32::INFINITY;
@@ -182,5 +220,10 @@ fn max_abs_diff(a: &[f32], b: &[f32]) -> f32 {
     a.iter()
         .zip(b)
         .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f32::max)
+        .fold(
+            0.0,
+            |m, d| {
+                if d.is_nan() { f32::INFINITY } else { m.max(d) }
+            },
+        )
 }

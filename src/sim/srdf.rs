@@ -38,12 +38,15 @@ pub struct GroupMembers {
     pub tips: Vec<String>,
 }
 
+/// The deepest nesting of subgroups followed (MoveIt's own files nest two or three).
+const MAX_GROUP_DEPTH: usize = 64;
+
 /// A joint of the tree, as (name, parent link, child link).
 pub type TreeJoint = (String, String, String);
 
 impl Srdf {
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::core::input_file::read_xml(path, "SRDF file")?;
         Self::parse(path, &text)
     }
 
@@ -53,6 +56,8 @@ impl Srdf {
             element: element.into(),
             msg,
         };
+        crate::core::input_file::check_xml_depth(text)
+            .map_err(|e| err("srdf", format!("not an SRDF file: {e}")))?;
         let doc = roxmltree::Document::parse(text)
             .map_err(|e| err("srdf", format!("not an SRDF file (bad XML: {e})")))?;
         let root = doc.root_element();
@@ -81,6 +86,9 @@ impl Srdf {
                         ..Group::default()
                     };
                     let element = format!("group \"{}\"", g.name);
+                    if groups.iter().any(|o: &Group| o.name == g.name) {
+                        return Err(err(&element, "is defined twice: rename one".into()));
+                    }
                     for m in node.children().filter(|n| n.is_element()) {
                         match m.tag_name().name() {
                             "joint" => g.joints.push(name_of(m, &element)?),
@@ -122,15 +130,20 @@ impl Srdf {
             joints: Vec::new(),
             tips: Vec::new(),
         };
-        self.collect(name, tree, &mut vec![], &mut members)?;
+        let mut done = Vec::new();
+        self.collect(name, tree, &mut vec![], &mut done, &mut members)?;
         Ok(members)
     }
 
+    /// Add group `name`'s members to `into`: `open` are the groups being collected above it
+    /// (a cycle), `done` those collected already (a group listed twice is added once, not
+    /// expanded again: a group listing one subgroup twice at each of 40 levels is 40 visits).
     fn collect(
         &self,
         name: &str,
         tree: &[TreeJoint],
         open: &mut Vec<String>,
+        done: &mut Vec<String>,
         into: &mut GroupMembers,
     ) -> Result<()> {
         let err = |msg: String| Error::Urdf {
@@ -152,6 +165,15 @@ impl Srdf {
             return Err(err(format!(
                 "its subgroups form a cycle ({} -> {name})",
                 open.join(" -> ")
+            )));
+        }
+        if done.iter().any(|g| g == name) {
+            return Ok(());
+        }
+        if open.len() >= MAX_GROUP_DEPTH {
+            return Err(err(format!(
+                "subgroups nested more than {MAX_GROUP_DEPTH} deep (from \"{}\")",
+                open[0]
             )));
         }
         open.push(name.to_string());
@@ -211,9 +233,10 @@ impl Srdf {
             }
         }
         for g in &group.groups {
-            self.collect(g, tree, open, into)?;
+            self.collect(g, tree, open, done, into)?;
         }
         open.pop();
+        done.push(name.to_string());
         Ok(())
     }
 }

@@ -88,55 +88,11 @@ pub fn pose_from_xyz_rpy(xyz: [f64; 3], rpy: [f64; 3]) -> Isometry3<f64> {
 /// beyond any robot, small enough that poses stay finite.
 pub const MAX_VALUE: f64 = 1e4;
 
-/// The deepest nesting of XML elements read (a URDF nests 3-4 deep; the parser recurses).
-const MAX_NESTING: usize = 1000;
-
-/// How deep the XML elements of `text` nest (comments, declarations and processing
-/// instructions aside; a rough scan, enough to refuse a file that would exhaust the stack).
-fn nesting_depth(text: &str) -> usize {
-    let (mut depth, mut deepest) = (0usize, 0usize);
-    let bytes = text.as_bytes();
-    let mut i = 0;
-    while let Some(at) = text[i..].find('<') {
-        let start = i + at;
-        let Some(len) = text[start..].find('>') else {
-            break;
-        };
-        let end = start + len;
-        match bytes.get(start + 1) {
-            Some(b'/') => depth = depth.saturating_sub(1),
-            Some(b'!' | b'?') => {}
-            _ if bytes[end - 1] == b'/' => {}
-            _ => {
-                depth += 1;
-                deepest = deepest.max(depth);
-            }
-        }
-        i = end + 1;
-    }
-    deepest
-}
-
-/// The text outside XML comments.
-fn without_comments(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    let mut rest = text;
-    while let Some(start) = rest.find("<!--") {
-        out.push_str(&rest[..start]);
-        rest = match rest[start + 4..].find("-->") {
-            Some(end) => &rest[start + 4 + end + 3..],
-            None => "",
-        };
-    }
-    out.push_str(rest);
-    out
-}
-
 /// The first xacro construct outside comments (`<xacro:...`, `${...}`, `$(...)`), if any: a
 /// file that only declares the xacro namespace, as ROS packages ship expanded descriptions,
 /// or mentions xacro in a comment, is the URDF it looks like.
 fn xacro_construct(text: &str) -> Option<String> {
-    let text = without_comments(text);
+    let text = crate::core::input_file::without_comments(text);
     ["<xacro:", "${", "$("].iter().find_map(|needle| {
         let at = text.find(needle)?;
         let end = text[at..]
@@ -192,19 +148,8 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         element,
         msg,
     };
-    let bytes = crate::core::input_file::read_regular(
-        path,
-        "robot description",
-        crate::core::input_file::MAX_DESCRIPTION_BYTES,
-    )
-    .map_err(|e| Error::io(path, e))?;
-    let text = String::from_utf8(bytes).map_err(|_| {
-        urdf_err(
-            "robot".into(),
-            "is not UTF-8 text (a URDF is XML; save it as UTF-8)".into(),
-        )
-    })?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let text = crate::core::input_file::read_xml(path, "robot description")?;
+    let text = text.as_str();
     if let Some(found) = xacro_construct(text) {
         return Err(urdf_err(
             "robot".into(),
@@ -213,15 +158,7 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             ),
         ));
     }
-    let depth = nesting_depth(&without_comments(text));
-    if depth > MAX_NESTING {
-        return Err(urdf_err(
-            "robot".into(),
-            format!(
-                "its elements nest {depth} deep (a URDF nests a few levels; at most {MAX_NESTING} are read)"
-            ),
-        ));
-    }
+    crate::core::input_file::check_xml_depth(text).map_err(|e| urdf_err("robot".into(), e))?;
     let text = as_urdfdom_reads(text);
     let urdf = urdf_rs::read_from_string(&text)
         .map_err(|e| urdf_err("robot".into(), format!("not a valid URDF: {e}")))?;

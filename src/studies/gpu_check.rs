@@ -131,6 +131,21 @@ impl Console {
     }
 }
 
+/// The shader compiler of this build on the GPU (`wgpu<wgsl>`, `wgpu<spirv>`).
+#[cfg(feature = "wgpu")]
+fn gpu_compiler() -> String {
+    crate::core::device::select(DeviceChoice::Wgpu)
+        .ok()
+        .and_then(|d| crate::kernels::cube::compiler(&d))
+        .unwrap_or("no GPU")
+        .to_string()
+}
+
+#[cfg(not(feature = "wgpu"))]
+fn gpu_compiler() -> String {
+    "none (built without the wgpu feature)".to_string()
+}
+
 /// Run the check's parts in order.
 pub fn run(check: &GpuCheck) -> Result<()> {
     std::fs::create_dir_all(&check.out).map_err(|e| Error::io(&check.out, e))?;
@@ -141,9 +156,10 @@ pub fn run(check: &GpuCheck) -> Result<()> {
     let mut console = Console { path, text };
     let preset = if check.quick { "quick" } else { "paper" };
     console.say(format!(
-        "gpu_check at {} ({preset}), CPU: {}",
+        "gpu_check at {} ({preset}), CPU: {}, GPU kernels compiled by {}",
         crate::core::provenance::git_revision(),
-        crate::eval::compute_peak::machine_label(true)
+        crate::eval::compute_peak::machine_label(true),
+        gpu_compiler()
     ))?;
     for &part in &check.parts {
         let t0 = Instant::now();

@@ -153,6 +153,8 @@ pub fn save_module<M: Module>(model: &M, path: &Path) -> Result<()> {
 
 /// `template` with the weights [`save_module`] wrote to `path`.
 pub fn load_module<M: Module>(template: M, path: &Path) -> Result<M> {
+    let max = crate::core::input_file::MAX_WEIGHTS_BYTES;
+    crate::core::input_file::check_user_file(path, "weights file", max)?;
     template.try_load_file(path).map_err(|e| {
         Error::data(
             path,

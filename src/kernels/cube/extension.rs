@@ -19,11 +19,11 @@ use burn::backend::{
     AutodiffBackend, Backend, Dispatch, Scalar, TensorMetadata, backend_extension,
 };
 use burn::nn::BatchNorm;
-use burn::tensor::ops::ConvTransposeOptions;
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 
-use super::{batch_norm, conv_transpose, loss};
+use super::{batch_norm, convolution, im2col, loss};
 
 /// A `[channels]` tensor's spec for an `[N, C, ...]` input.
 fn per_channel(x: &TensorSpec) -> TensorSpec {
@@ -155,45 +155,47 @@ pub trait GpuKernelOps: Backend {
         Self::float_mul(dx, c(Self::float_mul(gamma, inv_std)))
     }
 
-    /// The im2col of a transposed convolution's output gradient `dy` for an input of `in_hw`:
-    /// `[N, Hi·Wi, c_out·k·k]` (see `kernels::cube::conv_transpose`).
-    #[fusion(meta = |dy, in_hw, kernel, _stride, _padding| {
+    /// The columns (im2col) of `t` `[N, C, H, W]` over a grid of `grid` patches:
+    /// `[N, h·w, C·k·k]` (see `kernels::cube::im2col`).
+    #[fusion(meta = |t, grid, kernel, _stride, _padding| {
         TensorSpec::new(
-            Shape::new([dy.shape[0], in_hw[0] * in_hw[1], dy.shape[1] * kernel * kernel]),
-            dy.dtype,
+            Shape::new([t.shape[0], grid[0] * grid[1], t.shape[1] * kernel * kernel]),
+            t.dtype,
         )
     })]
-    fn conv_transpose_columns(
-        dy: FloatTensor<Self>,
-        in_hw: [usize; 2],
+    fn im2col(
+        t: FloatTensor<Self>,
+        grid: [usize; 2],
         kernel: usize,
         stride: usize,
         padding: usize,
     ) -> FloatTensor<Self> {
-        // Only the CubeCL kernel: the layer's reference is burn's own backward pass, which
-        // `tests/gpu_kernels.rs` compares the gradients with.
-        let _ = (dy, in_hw, kernel, stride, padding);
-        unreachable!("conv_transpose_columns runs on CubeCL devices only")
+        // Only the CubeCL kernel: the layers' references are burn's own convolutions and
+        // their backward passes, which `tests/gpu_kernels.rs` compares them with.
+        let _ = (t, grid, kernel, stride, padding);
+        unreachable!("im2col runs on CubeCL devices only")
     }
 
-    /// A transposed convolution's output `[N, c_out, Ho, Wo]` from its columns `xᵀ W`
-    /// `[N, Hi·Wi, c_out·k·k]` and its bias (see `kernels::cube::conv_transpose`).
-    #[fusion(meta = |cols, _bias, _in_hw, out, _kernel, _stride, _padding| {
+    /// The image `out` `[N, C, H, W]` whose columns over a grid of `grid` patches are `cols`
+    /// `[N, h·w, C·k·k]`, overlaps summed, plus `bias` `[C]` where `with_bias` (see
+    /// `kernels::cube::im2col`).
+    #[fusion(meta = |cols, _bias, _with_bias, _grid, out, _kernel, _stride, _padding| {
         TensorSpec::new(Shape::new(*out), cols.dtype)
     })]
-    fn conv_transpose_col2im(
+    #[allow(clippy::too_many_arguments)]
+    fn col2im(
         cols: FloatTensor<Self>,
         bias: FloatTensor<Self>,
-        in_hw: [usize; 2],
+        with_bias: bool,
+        grid: [usize; 2],
         out: [usize; 4],
         kernel: usize,
         stride: usize,
         padding: usize,
     ) -> FloatTensor<Self> {
-        // Only the CubeCL kernel: the layer's reference is burn's `conv_transpose2d`, which
-        // `tests/gpu_kernels.rs` compares the output with.
-        let _ = (cols, bias, in_hw, out, kernel, stride, padding);
-        unreachable!("conv_transpose_col2im runs on CubeCL devices only")
+        // Only the CubeCL kernel (see `im2col`).
+        let _ = (cols, bias, with_bias, grid, out, kernel, stride, padding);
+        unreachable!("col2im runs on CubeCL devices only")
     }
 
     /// `Σ t[n, c, ...]` by channel: `[C]`.
@@ -206,9 +208,21 @@ pub trait GpuKernelOps: Backend {
         )
     }
 
-    /// A transposed convolution with bias as a matrix product and [`Self::conv_transpose_col2im`],
-    /// differentiated by [`Self::conv_transpose_columns`] and two matrix products (square
-    /// kernels, equal strides and paddings, no dilation or groups).
+    /// A convolution with bias as [`Self::im2col`] and a matrix product (none for a 1x1
+    /// kernel), differentiated by two products and [`Self::col2im`] (square kernels, equal
+    /// strides and paddings, no dilation or groups; `kernels::cube::convolution`).
+    #[fusion(default)]
+    fn conv2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        Self::conv2d(x, weight, Some(bias), options)
+    }
+
+    /// A transposed convolution with bias as a matrix product and [`Self::col2im`],
+    /// differentiated by [`Self::im2col`] and two matrix products (as [`Self::conv2d_train`]).
     #[fusion(default)]
     fn conv_transpose2d_train(
         x: FloatTensor<Self>,
@@ -274,30 +288,32 @@ pub trait GpuKernelOps: Backend {
 }
 
 impl GpuKernelOps for CubeBackend {
-    fn conv_transpose_columns(
-        dy: FloatTensor<Self>,
-        in_hw: [usize; 2],
+    fn im2col(
+        t: FloatTensor<Self>,
+        grid: [usize; 2],
         kernel: usize,
         stride: usize,
         padding: usize,
     ) -> FloatTensor<Self> {
-        conv_transpose::launch_columns(dy, in_hw, kernel, stride, padding)
+        im2col::launch_columns(t, grid, kernel, stride, padding)
     }
 
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
-        conv_transpose::launch_channel_sums(t)
+        im2col::launch_channel_sums(t)
     }
 
-    fn conv_transpose_col2im(
+    fn col2im(
         cols: FloatTensor<Self>,
         bias: FloatTensor<Self>,
-        in_hw: [usize; 2],
+        with_bias: bool,
+        grid: [usize; 2],
         out: [usize; 4],
         kernel: usize,
         stride: usize,
         padding: usize,
     ) -> FloatTensor<Self> {
-        conv_transpose::launch_col2im(cols, bias, in_hw, out, kernel, stride, padding)
+        let bias = with_bias.then_some(bias);
+        im2col::launch_col2im(cols, bias, grid, out, kernel, stride, padding)
     }
 
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -372,92 +388,22 @@ impl GpuKernelOps for CubeBackend {
 }
 
 impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff<B, C> {
+    fn conv2d_train(
+        x: FloatTensor<Self>,
+        weight: FloatTensor<Self>,
+        bias: FloatTensor<Self>,
+        options: ConvOptions<2>,
+    ) -> FloatTensor<Self> {
+        convolution::conv2d_train::<B, C>(x, weight, bias, options)
+    }
+
     fn conv_transpose2d_train(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
         bias: FloatTensor<Self>,
         options: ConvTransposeOptions<2>,
     ) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct ConvTranspose;
-
-        impl<B: Backend + GpuKernelOps> Backward<B, 3> for ConvTranspose {
-            /// x, the weight, and the stride and padding.
-            type State = (NodeId, NodeId, usize, usize);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 3>,
-                grads: &mut Gradients,
-                checkpointer: &mut Checkpointer,
-            ) {
-                let [node_x, node_w, node_b] = ops.parents;
-                let dy = grads.consume::<B>(&ops.node);
-                let (x_state, w_state, stride, padding) = ops.state;
-                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
-                let w = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(w_state);
-                let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
-                let [_, c_out, k, _] = w.shape().dims::<4>();
-                let q = c_out * k * k;
-                if let Some(node) = node_b {
-                    grads.register::<B>(node.id, B::channel_sums(dy.clone()));
-                }
-                let cols = B::conv_transpose_columns(dy, [in_h, in_w], k, stride, padding);
-                if let Some(node) = node_x {
-                    // [N·Hi·Wi, q] · [q, c_in], channels last, seen as [N, c_in, Hi, Wi].
-                    let flat = B::float_reshape(cols.clone(), Shape::new([n * in_h * in_w, q]));
-                    let wt = B::float_transpose(B::float_reshape(w.clone(), Shape::new([c_in, q])));
-                    let dx = B::float_matmul(flat, wt);
-                    let dx = B::float_reshape(dx, Shape::new([n, in_h, in_w, c_in]));
-                    grads.register::<B>(node.id, B::float_permute(dx, &[0, 3, 1, 2]));
-                }
-                if let Some(node) = node_w {
-                    // Σₙ [c_in, Hi·Wi] · [Hi·Wi, q].
-                    let xs = B::float_reshape(x, Shape::new([n, c_in, in_h * in_w]));
-                    let dw = B::float_sum_dim(B::float_matmul(xs, cols), 0);
-                    grads.register::<B>(node.id, B::float_reshape(dw, w.shape()));
-                }
-            }
-        }
-
-        let (stride, padding) = (options.stride[0], options.padding[0]);
-        // The columns xᵀ W (one batched product, x read transposed in place), then col2im.
-        let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
-            let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
-            let [_, c_out, k, _] = w.shape().dims::<4>();
-            let out_h = (in_h - 1) * stride + k - 2 * padding;
-            let out_w = (in_w - 1) * stride + k - 2 * padding;
-            let xt = B::float_swap_dims(
-                B::float_reshape(x, Shape::new([n, c_in, in_h * in_w])),
-                1,
-                2,
-            );
-            let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
-            let cols = B::float_matmul(xt, w);
-            let out = [n, c_out, out_h, out_w];
-            B::conv_transpose_col2im(cols, b, [in_h, in_w], out, k, stride, padding)
-        };
-        match ConvTranspose
-            .prepare::<C>([x.node(), weight.node(), bias.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let x_state = prep.checkpoint(&x);
-                let w_state = prep.checkpoint(&weight);
-                let y = forward(
-                    x.into_primitive(),
-                    weight.into_primitive(),
-                    bias.into_primitive(),
-                );
-                prep.finish((x_state, w_state, stride, padding), y)
-            }
-            OpsKind::UnTracked(prep) => prep.finish(forward(
-                x.into_primitive(),
-                weight.into_primitive(),
-                bias.into_primitive(),
-            )),
-        }
+        convolution::conv_transpose2d_train::<B, C>(x, weight, bias, options)
     }
 
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -652,39 +598,6 @@ pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<T
         Tensor::from_dispatch(<Dispatch as GpuKernelOps>::bce_with_logits_mean(
             z.clone().into_dispatch(),
             y.clone().into_dispatch(),
-        ))
-    })
-}
-
-/// A transposed convolution with bias on a GPU in training, differentiated on our kernels
-/// (see [`GpuKernelOps::conv_transpose2d_train`]); `None` where `x` is elsewhere, the layer's
-/// shape is not one the kernels take (a square kernel, equal strides and paddings, no
-/// dilation, output padding or groups), or the columns would not fit one buffer.
-pub fn conv_transpose2d(
-    x: &Tensor<4>,
-    weight: &Tensor<4>,
-    bias: &Tensor<1>,
-    options: &ConvTransposeOptions<2>,
-) -> Option<Tensor<4>> {
-    let [_, _, kh, kw] = weight.dims();
-    let plain = kh == kw
-        && options.stride[0] == options.stride[1]
-        && options.padding[0] == options.padding[1]
-        && options.padding_out == [0, 0]
-        && options.dilation == [1, 1]
-        && options.groups == 1;
-    // The columns `[N, Hi·Wi, c_out·k·k]` must fit one of the device's buffers (128 MiB on
-    // lavapipe); a batch whose do not takes burn's backward pass.
-    let [n, _, h, w] = x.dims();
-    let columns = (n * h * w * weight.dims()[1] * kh * kw * 4) as u64;
-    let fits = super::max_buffer_bytes(&x.clone().inner()).is_some_and(|max| columns <= max);
-    let training = x.device().is_autodiff();
-    (plain && training && fits).then(|| {
-        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv_transpose2d_train(
-            x.clone().into_dispatch(),
-            weight.clone().into_dispatch(),
-            bias.clone().into_dispatch(),
-            options.clone(),
         ))
     })
 }

@@ -8,9 +8,11 @@
 //! - [`batch_norm`]: a batch-norm layer's statistics, parameter and input gradients, a launch
 //!   each;
 //! - [`loss`]: the binary cross-entropy on logits and its gradient;
-//! - [`conv_transpose`]: a transposed convolution's gradients from one im2col;
-//! - [`extension`]: the kernels that are layers, in burn's autodiff graph (a backend
-//!   extension, with their backward passes);
+//! - [`im2col`]: a convolution's columns and their sum back into an image (col2im), the kernels
+//!   around the matrix products of [`convolution`];
+//! - [`extension`]: our kernels as operations of burn's backends (a backend extension), the
+//!   layers among them in burn's autodiff graph with their backward passes;
+//! - [`convolution`]: the convolutions and transposed convolutions as such layers;
 //! - here: the bridge to burn's tensors. On a GPU burn's tensors are lazy (burn's fusion
 //!   backend records operations and runs them in blocks); [`run_lazily`] records one of ours
 //!   the same way, so it runs in order with the rest and nothing waits for the device.
@@ -19,8 +21,9 @@
 //! `tests/gpu_kernels.rs` compares them on lavapipe.
 
 pub mod batch_norm;
-pub mod conv_transpose;
+pub mod convolution;
 pub mod extension;
+pub mod im2col;
 pub mod launch;
 pub mod loss;
 pub mod multi_tensor;
@@ -97,6 +100,14 @@ pub fn is_lazy<const D: usize>(t: &Tensor<D>) -> bool {
 pub fn max_buffer_bytes<const D: usize>(t: &Tensor<D>) -> Option<u64> {
     let (f, _) = lazy(t.clone()).ok()?;
     Some(f.client.device().client().properties().memory.max_page_size)
+}
+
+/// The shader compiler burn's CubeCL runtime compiles our kernels and burn's with on `device`
+/// (`wgpu<wgsl>`, or `wgpu<spirv>` in a `vulkan` build on a Vulkan device); `None` off a
+/// CubeCL device.
+pub fn compiler(device: &burn::tensor::Device) -> Option<&'static str> {
+    let (f, _) = lazy(Tensor::<1>::zeros([1], device)).ok()?;
+    Some(f.client.device().client().name())
 }
 
 /// Back from [`lazy`].

@@ -1,13 +1,17 @@
-//! A transposed convolution (the decoders' upsampling layers) as matrix products: forward, the
-//! columns `xᵀ W` (one product) folded into the output with the bias ([`col2im`]), two
-//! launches where burn's takes two layout copies, a product and its col2im; backward, from one
-//! im2col of the output gradient ([`columns`]): `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, and the
-//! bias gradient a sum by channel, where burn's runs two direct convolutions with their layout
-//! copies and a reduction after a copy (about eight launches a layer, against five here).
+//! Convolutions as matrix products, the GPU kernels around the product: [`columns`] (im2col:
+//! the patches a convolution multiplies, `[N, h·w, C·k·k]`), [`col2im`] (the sum of columns
+//! back into an image, with a bias) and [`channel_sums`] (a layer's bias gradient).
 //!
-//! For `y = convᵀ(x, W)` with `W` `[c_in, c_out, k, k]`, stride `s` and padding `p`,
-//! `cols[n, (iy, ix), (co, ky, kx)] = dy[n, co, iy·s − p + ky, ix·s − p + kx]` (0 outside).
-//! The slow reference is burn's own backward pass; `tests/gpu_kernels.rs` compares the two.
+//! For a patch grid of `h × w`, kernel `k`, stride `s` and padding `p`,
+//! `cols[n, (i, j), (c, ky, kx)] = t[n, c, i·s − p + ky, j·s − p + kx]` (0 outside):
+//! - a convolution's forward pass is `W · colsᵀ` on the columns of its input (the grid its
+//!   output), and its input gradient the col2im of `dy · W`;
+//! - a transposed convolution's forward pass is the col2im of `xᵀ W` (the grid its input),
+//!   and its gradients come from the columns of its output gradient.
+//!
+//! `kernels::cube::convolution` puts them in burn's autodiff graph; the slow references are
+//! burn's own `conv2d` and `conv_transpose2d` and their backward passes, which
+//! `tests/gpu_kernels.rs` compares them with.
 
 use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
@@ -17,11 +21,11 @@ use super::batch_norm::channel_total;
 use super::multi_tensor::{BLOCK, at};
 use super::{elementwise, empty_f32};
 
-/// `cols` `[N, Hi·Wi, c_out·k·k]` from `dy` `[N, c_out, Ho, Wo]` (any strides).
+/// `cols` `[N, h·w, C·k·k]` from `t` `[N, C, H, W]` (any strides) for a grid of `h × w`.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn columns(
-    dy: &Tensor<f32>,
+    t: &Tensor<f32>,
     cols: &mut Tensor<f32>,
     in_h: u32,
     in_w: u32,
@@ -33,7 +37,7 @@ pub fn columns(
     if k < cols.len() {
         let (in_h, in_w) = (in_h as usize, in_w as usize);
         let (kernel, stride, padding) = (kernel as usize, stride as usize, padding as usize);
-        let (c_out, out_h, out_w) = (dy.shape(1), dy.shape(2), dy.shape(3));
+        let (c_out, out_h, out_w) = (t.shape(1), t.shape(2), t.shape(3));
         let width = c_out * kernel * kernel;
         let q = k % width;
         let pix = (k / width) % (in_h * in_w);
@@ -46,15 +50,16 @@ pub fn columns(
         let mut v = 0.0;
         if oyp >= padding && oxp >= padding && oyp - padding < out_h && oxp - padding < out_w {
             let i = ((n * c_out + co) * out_h + oyp - padding) * out_w + oxp - padding;
-            v = dy[at(dy, i)];
+            v = t[at(t, i)];
         }
         cols[k] = v;
     }
 }
 
-/// The layer's output from the columns of its input, `cols = xᵀ W` `[N, Hi·Wi, c_out·k·k]`:
-/// `y[n, co, oy, ox] = b[co] + Σ cols[n, (iy, ix), (co, ky, kx)]` over `oy = iy·s − p + ky`
-/// (and the same across), contiguous out.
+/// The image `[N, C, H, W]` whose columns (over a grid of `h × w`) are `cols`
+/// `[N, h·w, C·k·k]`, summed where patches overlap:
+/// `y[n, c, oy, ox] = b[c] + Σ cols[n, (iy, ix), (c, ky, kx)]` over `oy = iy·s − p + ky`
+/// (and the same across), contiguous out; `b` only `with_bias`.
 #[cube(launch)]
 #[allow(clippy::too_many_arguments)]
 pub fn col2im(
@@ -66,6 +71,7 @@ pub fn col2im(
     kernel: u32,
     stride: u32,
     padding: u32,
+    #[comptime] with_bias: bool,
 ) {
     let k = ABSOLUTE_POS;
     if k < y.len() {
@@ -77,7 +83,10 @@ pub fn col2im(
         let co = (k / (out_w * out_h)) % c_out;
         let n = k / (out_w * out_h * c_out);
         let width = c_out * kernel * kernel;
-        let mut acc = bias[co];
+        let mut acc = 0.0;
+        if with_bias {
+            acc = bias[co];
+        }
         for ky in 0..kernel {
             // iy·s = oy + p − ky, kept unsigned.
             let ty = oy + padding;
@@ -110,27 +119,27 @@ pub fn channel_sums(t: &Tensor<f32>, sums: &mut Tensor<f32>, #[comptime] block: 
     }
 }
 
-/// [`columns`] of `dy` for an input of `in_hw`.
+/// [`columns`] of `t` over a grid of `in_hw`.
 pub fn launch_columns(
-    dy: CubeTensor,
+    t: CubeTensor,
     in_hw: [usize; 2],
     kernel: usize,
     stride: usize,
     padding: usize,
 ) -> CubeTensor {
-    let dims = dy.meta.shape().clone();
+    let dims = t.meta.shape().clone();
     assert!(
-        dims.len() == 4 && dy.dtype == DType::F32,
-        "an f32 [N, C, H, W] gradient"
+        dims.len() == 4 && t.dtype == DType::F32,
+        "an f32 [N, C, H, W] image"
     );
     let shape = [dims[0], in_hw[0] * in_hw[1], dims[1] * kernel * kernel];
-    let cols = empty_f32(&dy, shape);
-    let (cube_count, cube_dim) = elementwise(&dy, shape.iter().product());
+    let cols = empty_f32(&t, shape);
+    let (cube_count, cube_dim) = elementwise(&t, shape.iter().product());
     columns::launch(
-        &dy.client,
+        &t.client,
         cube_count,
         cube_dim,
-        dy.clone().into_tensor_arg(),
+        t.clone().into_tensor_arg(),
         cols.clone().into_tensor_arg(),
         in_hw[0] as u32,
         in_hw[1] as u32,
@@ -141,11 +150,12 @@ pub fn launch_columns(
     cols
 }
 
-/// [`col2im`]: the layer's output `[N, c_out, Ho, Wo]` from its columns and bias.
+/// [`col2im`]: the image `out` `[N, C, H, W]` from its columns over a grid of `in_hw`, plus
+/// `bias` `[C]` where there is one.
 #[allow(clippy::too_many_arguments)]
 pub fn launch_col2im(
     cols: CubeTensor,
-    bias: CubeTensor,
+    bias: Option<CubeTensor>,
     in_hw: [usize; 2],
     out: [usize; 4],
     kernel: usize,
@@ -154,6 +164,9 @@ pub fn launch_col2im(
 ) -> CubeTensor {
     let y = empty_f32(&cols, out);
     let (cube_count, cube_dim) = elementwise(&cols, out.iter().product());
+    // Without a bias the kernel reads none: any other buffer stands in (one element).
+    let with_bias = bias.is_some();
+    let bias = bias.unwrap_or_else(|| empty_f32(&cols, [1]));
     col2im::launch(
         &cols.client,
         cube_count,
@@ -166,6 +179,7 @@ pub fn launch_col2im(
         kernel as u32,
         stride as u32,
         padding as u32,
+        with_bias,
     );
     y
 }

@@ -1,0 +1,314 @@
+//! The decoders' convolutions on a GPU in training: each layer one operation of burn's autodiff
+//! graph, forward and backward as matrix products around our [`im2col`](super::im2col)
+//! kernels, where burn's run direct convolutions with layout copies around them.
+//!
+//! | layer | forward | backward |
+//! |---|---|---|
+//! | convolution `k × k` | im2col, `W · colsᵀ`, the bias (fused with the ReLU after it) | `dW = Σₙ dyₙ · colsₙ`, `dcols = dyᵀ W`, col2im, the bias by channel |
+//! | convolution 1 × 1 | `W · x` | `dW = Σₙ dyₙ · xₙᵀ`, `dx = Wᵀ dy`, the bias by channel |
+//! | transposed convolution | `xᵀ W`, col2im with the bias | im2col of `dy`, `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, the bias by channel |
+//!
+//! Square kernels, equal strides and paddings, no dilation, groups or output padding; a layer
+//! of another shape, or whose columns would not fit one of the device's buffers, takes burn's
+//! own (`None` from [`conv2d`] and [`conv_transpose2d`]). burn's are the slow references,
+//! compared in `tests/gpu_kernels.rs`.
+
+use burn::backend::autodiff::checkpoint::base::Checkpointer;
+use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
+use burn::backend::autodiff::grads::Gradients;
+use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
+use burn::backend::autodiff::{Autodiff, NodeId};
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Backend, Dispatch, TensorMetadata};
+use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
+use burn::tensor::{Shape, Tensor};
+
+use super::extension::GpuKernelOps;
+
+/// A square kernel's geometry: its size, stride and padding.
+#[derive(Debug, Clone, Copy)]
+struct Geometry {
+    kernel: usize,
+    stride: usize,
+    padding: usize,
+}
+
+impl Geometry {
+    /// A 1x1 kernel over every pixel: its columns are the input itself.
+    fn pointwise(&self) -> bool {
+        self.kernel == 1 && self.stride == 1 && self.padding == 0
+    }
+
+    /// The output size of a convolution over `hw`.
+    fn conv_out(&self, hw: [usize; 2]) -> [usize; 2] {
+        hw.map(|d| (d + 2 * self.padding - self.kernel) / self.stride + 1)
+    }
+}
+
+/// Whether the layer's columns, `n·h·w·q` floats, fit one of `x`'s device buffers.
+fn columns_fit(x: &Tensor<4>, n_hw_q: usize) -> bool {
+    let bytes = (n_hw_q * 4) as u64;
+    super::max_buffer_bytes(&x.clone().inner()).is_some_and(|max| bytes <= max)
+}
+
+/// A convolution with bias on a GPU in training, on our kernels (see the module's table);
+/// `None` where `x` is elsewhere or the layer is not one they take.
+pub fn conv2d(
+    x: &Tensor<4>,
+    weight: &Tensor<4>,
+    bias: &Tensor<1>,
+    options: &ConvOptions<2>,
+) -> Option<Tensor<4>> {
+    let [_, c_in, kh, kw] = weight.dims();
+    let [(p0, p1), (p2, p3)] = options.padding;
+    let plain = kh == kw
+        && options.stride[0] == options.stride[1]
+        && p0 == p1
+        && p1 == p2
+        && p2 == p3
+        && options.dilation == [1, 1]
+        && options.groups == 1;
+    let geometry = Geometry {
+        kernel: kh,
+        stride: options.stride[0],
+        padding: p0,
+    };
+    let [n, _, h, w] = x.dims();
+    let [oh, ow] = geometry.conv_out([h, w]);
+    let fits = geometry.pointwise() || columns_fit(x, n * oh * ow * c_in * kh * kw);
+    (plain && x.device().is_autodiff() && fits && super::is_lazy(&x.clone().inner())).then(|| {
+        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv2d_train(
+            x.clone().into_dispatch(),
+            weight.clone().into_dispatch(),
+            bias.clone().into_dispatch(),
+            options.clone(),
+        ))
+    })
+}
+
+/// A transposed convolution with bias on a GPU in training, on our kernels (see the module's
+/// table); `None` where `x` is elsewhere or the layer is not one they take.
+pub fn conv_transpose2d(
+    x: &Tensor<4>,
+    weight: &Tensor<4>,
+    bias: &Tensor<1>,
+    options: &ConvTransposeOptions<2>,
+) -> Option<Tensor<4>> {
+    let [_, c_out, kh, kw] = weight.dims();
+    let plain = kh == kw
+        && options.stride[0] == options.stride[1]
+        && options.padding[0] == options.padding[1]
+        && options.padding_out == [0, 0]
+        && options.dilation == [1, 1]
+        && options.groups == 1;
+    // The columns `[N, Hi·Wi, c_out·k·k]` must fit one of the device's buffers (128 MiB on
+    // lavapipe); a batch whose do not takes burn's backward pass.
+    let [n, _, h, w] = x.dims();
+    let fits = columns_fit(x, n * h * w * c_out * kh * kw);
+    (plain && x.device().is_autodiff() && fits && super::is_lazy(&x.clone().inner())).then(|| {
+        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv_transpose2d_train(
+            x.clone().into_dispatch(),
+            weight.clone().into_dispatch(),
+            bias.clone().into_dispatch(),
+            options.clone(),
+        ))
+    })
+}
+
+/// `GpuKernelOps::conv2d_train` on autodiff: the forward pass on the inner backend, and its
+/// backward pass (see the module's table).
+pub(super) fn conv2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
+    x: FloatTensor<Autodiff<B, C>>,
+    weight: FloatTensor<Autodiff<B, C>>,
+    bias: FloatTensor<Autodiff<B, C>>,
+    options: ConvOptions<2>,
+) -> FloatTensor<Autodiff<B, C>> {
+    #[derive(Debug)]
+    struct Conv;
+
+    /// The columns read transposed `[N, q, h·w]` (for a 1x1 kernel, `x` itself), the weight,
+    /// the input's shape and the geometry.
+    type State<B> = (FloatTensor<B>, NodeId, [usize; 4], Geometry);
+
+    impl<B: Backend + GpuKernelOps> Backward<B, 3> for Conv {
+        type State = State<B>;
+
+        fn backward(
+            self,
+            ops: Ops<Self::State, 3>,
+            grads: &mut Gradients,
+            ckpt: &mut Checkpointer,
+        ) {
+            let [node_x, node_w, node_b] = ops.parents;
+            let dy = grads.consume::<B>(&ops.node);
+            let (cols_t, w_state, [n, c_in, h, w], g) = ops.state;
+            let weight = ckpt.retrieve_node_output::<B::FloatTensorPrimitive>(w_state);
+            let [c_out, _, k, _] = weight.shape().dims::<4>();
+            let [_, _, oh, ow] = dy.shape().dims::<4>();
+            let q = c_in * k * k;
+            if let Some(node) = node_b {
+                grads.register::<B>(node.id, B::channel_sums(dy.clone()));
+            }
+            let dy = B::float_reshape(dy, Shape::new([n, c_out, oh * ow]));
+            let wm = B::float_reshape(weight.clone(), Shape::new([1, c_out, q]));
+            if let Some(node) = node_w {
+                // Σₙ [c_out, h·w] · [h·w, q].
+                let cols = B::float_swap_dims(cols_t, 1, 2);
+                let dw = B::float_sum_dim(B::float_matmul(dy.clone(), cols), 0);
+                grads.register::<B>(node.id, B::float_reshape(dw, weight.shape()));
+            }
+            if let Some(node) = node_x {
+                let dx = if g.pointwise() {
+                    // Wᵀ [c_in, c_out] · dyₙ [c_out, h·w].
+                    B::float_matmul(B::float_swap_dims(wm, 1, 2), dy)
+                } else {
+                    // dcols [N, h·w, q] = dyₙᵀ · W, folded back into the image.
+                    let dcols = B::float_matmul(B::float_swap_dims(dy, 1, 2), wm);
+                    let out = [n, c_in, h, w];
+                    let (k, s, p) = (g.kernel, g.stride, g.padding);
+                    B::col2im(dcols, weight, false, [oh, ow], out, k, s, p)
+                };
+                grads.register::<B>(node.id, B::float_reshape(dx, Shape::new([n, c_in, h, w])));
+            }
+        }
+    }
+
+    let g = Geometry {
+        kernel: weight.shape()[2],
+        stride: options.stride[0],
+        padding: options.padding[0].0,
+    };
+    // The columns read transposed, then one batched product with the bias added.
+    let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
+        let [n, c_in, h, wd] = x.shape().dims::<4>();
+        let [c_out, _, k, _] = w.shape().dims::<4>();
+        let [oh, ow] = g.conv_out([h, wd]);
+        let cols_t = if g.pointwise() {
+            B::float_reshape(x, Shape::new([n, c_in, h * wd]))
+        } else {
+            let cols = B::im2col(x, [oh, ow], k, g.stride, g.padding);
+            B::float_swap_dims(cols, 1, 2)
+        };
+        let wm = B::float_reshape(w, Shape::new([1, c_out, c_in * k * k]));
+        let y = B::float_matmul(wm, cols_t.clone());
+        // Shaped as the image before the bias: the sum then fuses with what follows (the
+        // ReLU), where a reshape after it would stand between them.
+        let y = B::float_reshape(y, Shape::new([n, c_out, oh, ow]));
+        let y = B::float_add(y, B::float_reshape(b, Shape::new([1, c_out, 1, 1])));
+        (y, cols_t)
+    };
+    let x_shape = x.shape().dims::<4>();
+    match Conv
+        .prepare::<C>([x.node(), weight.node(), bias.node()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(mut prep) => {
+            let w_state = prep.checkpoint(&weight);
+            let (y, cols_t) = forward(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+            );
+            prep.finish((cols_t, w_state, x_shape, g), y)
+        }
+        OpsKind::UnTracked(prep) => prep.finish(
+            forward(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+            )
+            .0,
+        ),
+    }
+}
+
+/// `GpuKernelOps::conv_transpose2d_train` on autodiff: the forward pass on the inner backend,
+/// and its backward pass (see the module's table).
+pub(super) fn conv_transpose2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
+    x: FloatTensor<Autodiff<B, C>>,
+    weight: FloatTensor<Autodiff<B, C>>,
+    bias: FloatTensor<Autodiff<B, C>>,
+    options: ConvTransposeOptions<2>,
+) -> FloatTensor<Autodiff<B, C>> {
+    #[derive(Debug)]
+    struct ConvTranspose;
+
+    impl<B: Backend + GpuKernelOps> Backward<B, 3> for ConvTranspose {
+        /// x, the weight, and the stride and padding.
+        type State = (NodeId, NodeId, usize, usize);
+
+        fn backward(
+            self,
+            ops: Ops<Self::State, 3>,
+            grads: &mut Gradients,
+            checkpointer: &mut Checkpointer,
+        ) {
+            let [node_x, node_w, node_b] = ops.parents;
+            let dy = grads.consume::<B>(&ops.node);
+            let (x_state, w_state, stride, padding) = ops.state;
+            let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
+            let w = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(w_state);
+            let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
+            let [_, c_out, k, _] = w.shape().dims::<4>();
+            let q = c_out * k * k;
+            if let Some(node) = node_b {
+                grads.register::<B>(node.id, B::channel_sums(dy.clone()));
+            }
+            let cols = B::im2col(dy, [in_h, in_w], k, stride, padding);
+            if let Some(node) = node_x {
+                // [N·Hi·Wi, q] · [q, c_in], channels last, seen as [N, c_in, Hi, Wi].
+                let flat = B::float_reshape(cols.clone(), Shape::new([n * in_h * in_w, q]));
+                let wt = B::float_transpose(B::float_reshape(w.clone(), Shape::new([c_in, q])));
+                let dx = B::float_matmul(flat, wt);
+                let dx = B::float_reshape(dx, Shape::new([n, in_h, in_w, c_in]));
+                grads.register::<B>(node.id, B::float_permute(dx, &[0, 3, 1, 2]));
+            }
+            if let Some(node) = node_w {
+                // Σₙ [c_in, Hi·Wi] · [Hi·Wi, q].
+                let xs = B::float_reshape(x, Shape::new([n, c_in, in_h * in_w]));
+                let dw = B::float_sum_dim(B::float_matmul(xs, cols), 0);
+                grads.register::<B>(node.id, B::float_reshape(dw, w.shape()));
+            }
+        }
+    }
+
+    let (stride, padding) = (options.stride[0], options.padding[0]);
+    // The columns xᵀ W (one batched product, x read transposed in place), then col2im.
+    let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
+        let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
+        let [_, c_out, k, _] = w.shape().dims::<4>();
+        let out_h = (in_h - 1) * stride + k - 2 * padding;
+        let out_w = (in_w - 1) * stride + k - 2 * padding;
+        let xt = B::float_swap_dims(
+            B::float_reshape(x, Shape::new([n, c_in, in_h * in_w])),
+            1,
+            2,
+        );
+        let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
+        let cols = B::float_matmul(xt, w);
+        let out = [n, c_out, out_h, out_w];
+        B::col2im(cols, b, true, [in_h, in_w], out, k, stride, padding)
+    };
+    match ConvTranspose
+        .prepare::<C>([x.node(), weight.node(), bias.node()])
+        .compute_bound()
+        .stateful()
+    {
+        OpsKind::Tracked(mut prep) => {
+            let x_state = prep.checkpoint(&x);
+            let w_state = prep.checkpoint(&weight);
+            let y = forward(
+                x.into_primitive(),
+                weight.into_primitive(),
+                bias.into_primitive(),
+            );
+            prep.finish((x_state, w_state, stride, padding), y)
+        }
+        OpsKind::UnTracked(prep) => prep.finish(forward(
+            x.into_primitive(),
+            weight.into_primitive(),
+            bias.into_primitive(),
+        )),
+    }
+}

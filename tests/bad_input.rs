@@ -1,0 +1,168 @@
+//! Bad input, round 4 (issue 59): every reader of a file a user names refuses what is not a
+//! bounded regular file in one line, and the SRDF reader refuses or resolves quickly what
+//! would have exhausted the stack or the machine. Each case is a row: the input, and the
+//! refusal expected (a fragment of its one line).
+
+mod common;
+
+use std::path::Path;
+
+use selfmodel::core::device::{DeviceChoice, select};
+use selfmodel::sim::srdf::Srdf;
+
+/// Every reader of a user's file, on `path`: its error, one line.
+fn readers(path: &Path) -> Vec<(&'static str, String)> {
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let dir = path.parent().unwrap();
+    let one_line = |r: Result<String, selfmodel::core::error::Error>| match r {
+        Ok(what) => format!("accepted: {what}"),
+        Err(e) => e.to_string(),
+    };
+    vec![
+        (
+            "--targets",
+            one_line(
+                selfmodel::ik::pose_model::read_targets(path, false, &["tool".into()])
+                    .map(|t| format!("{} targets", t.len())),
+            ),
+        ),
+        (
+            "--angles",
+            one_line(
+                selfmodel::data::dataset::read_angles(path, 4).map(|a| format!("{} rows", a.len())),
+            ),
+        ),
+        (
+            ".npz",
+            one_line(selfmodel::data::npz::read_npz(path).map(|a| format!("{} arrays", a.len()))),
+        ),
+        (
+            "--srdf",
+            one_line(Srdf::read(path).map(|s| format!("{:?}", s.group_names()))),
+        ),
+        (
+            "model.json of an IK model",
+            one_line(
+                selfmodel::ik::pose_model::PoseModel::load(dir, &device).map(|_| "a model".into()),
+            ),
+        ),
+        (
+            "model.json of a self-model",
+            one_line(selfmodel::self_models::loading::load(dir, &device).map(|_| "a model".into())),
+        ),
+    ]
+}
+
+fn assert_refused(cases: Vec<(&'static str, String)>, expected: &str) {
+    for (reader, err) in cases {
+        eprintln!("{reader}: {err}");
+        assert!(
+            err.contains(expected) && !err.contains('\n'),
+            "{reader}: {err:?} (expected one line with {expected:?})"
+        );
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn every_reader_refuses_a_fifo_and_a_device_without_blocking() {
+    let dir = common::tempdir();
+    for name in ["model.json", "targets.csv"] {
+        let fifo = dir.path().join(name);
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap();
+        assert!(made.success());
+    }
+    // Nothing writes to the FIFOs: a reader that opened one would block this test forever.
+    assert_refused(
+        readers(&dir.path().join("targets.csv")),
+        "not a regular file",
+    );
+    // The readers of a file named as such (the model readers take a folder).
+    let named = readers(Path::new("/dev/zero"))
+        .into_iter()
+        .filter(|(reader, _)| !reader.starts_with("model.json"))
+        .collect();
+    assert_refused(named, "not a regular file");
+}
+
+#[test]
+fn every_reader_refuses_a_folder() {
+    let dir = common::tempdir();
+    let folder = dir.path().join("model.json");
+    std::fs::create_dir_all(&folder).unwrap();
+    std::fs::create_dir_all(dir.path().join("model.bpk")).unwrap();
+    assert_refused(readers(&folder), "a folder");
+}
+
+/// An SRDF of `groups` (each `(name, body)`), around the robot element.
+fn srdf(groups: &[(String, String)]) -> String {
+    let mut text = String::from("<?xml version=\"1.0\"?>\n<robot name=\"r\">\n");
+    for (name, body) in groups {
+        text += &format!("<group name=\"{name}\">{body}</group>\n");
+    }
+    text + "</robot>\n"
+}
+
+/// A three-joint chain `base - a - b - c`.
+fn tree() -> Vec<(String, String, String)> {
+    ["base", "a", "b", "c"]
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| (format!("j{i}"), w[0].to_string(), w[1].to_string()))
+        .collect()
+}
+
+#[test]
+fn srdf_groups_that_would_explode_or_overflow_are_resolved_or_refused() {
+    let path = Path::new("robot.srdf");
+    // Each of 40 levels lists the level below twice: 2^40 visits expanded naively.
+    let mut groups: Vec<(String, String)> = (0..40)
+        .map(|i| {
+            let below = format!("level{}", i + 1);
+            (
+                format!("level{i}"),
+                format!("<group name=\"{below}\"/><group name=\"{below}\"/>"),
+            )
+        })
+        .collect();
+    groups.push(("level40".into(), "<joint name=\"j1\"/>".into()));
+    let t0 = std::time::Instant::now();
+    let members = Srdf::parse(path, &srdf(&groups))
+        .unwrap()
+        .resolve("level0", &tree())
+        .unwrap();
+    assert_eq!(members.joints, ["j1"]);
+    assert!(t0.elapsed().as_secs_f64() < 1.0, "{:?}", t0.elapsed());
+
+    // 100,000 groups each listing the next: refused at a stated depth, not a stack overflow.
+    let chain: Vec<(String, String)> = (0..100_000)
+        .map(|i| (format!("g{i}"), format!("<group name=\"g{}\"/>", i + 1)))
+        .chain([("g100000".to_string(), "<joint name=\"j0\"/>".to_string())])
+        .collect();
+    let err = Srdf::parse(path, &srdf(&chain))
+        .unwrap()
+        .resolve("g0", &tree())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("nested more than"), "{err}");
+
+    // Elements nested 100,000 deep: refused before the parser recurses.
+    let deep = format!(
+        "<robot name=\"r\">{}{}</robot>",
+        "<group name=\"g\">".repeat(100_000),
+        "</group>".repeat(100_000)
+    );
+    let err = Srdf::parse(path, &deep).unwrap_err().to_string();
+    assert!(err.contains("nest 100001 deep"), "{err}");
+
+    // A group defined twice: which one MoveIt would take is not ours to guess.
+    let twice = srdf(&[
+        ("arm".into(), "<joint name=\"j0\"/>".into()),
+        ("arm".into(), "<joint name=\"j1\"/>".into()),
+    ]);
+    let err = Srdf::parse(path, &twice).unwrap_err().to_string();
+    assert!(err.contains("defined twice"), "{err}");
+}
