@@ -58,6 +58,11 @@ fn main() -> ExitCode {
             &args.out,
             selfmodel::core::atomic_file::OutKind::File,
         )?;
+        // Never one of the run's inputs: the robot's description, its SRDF, the angles.
+        let mut inputs = args.robot.spec()?.files();
+        inputs.extend(args.angles.clone());
+        let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
+        selfmodel::core::atomic_file::refuse_overwrite(&args.out, &inputs, None)?;
         let robot = args.robot.load()?;
         if robot.dof() == 0 {
             return Err(selfmodel::Error::Config(format!(

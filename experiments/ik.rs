@@ -78,7 +78,8 @@ const MAX_K: usize = 1000;
 const MAX_TARGETS: usize = 10_000_000;
 
 /// What `ik targets` and `ik solve` start with: `out` checked (a file it can write, neither an
-/// input nor inside the model's folder), then the model in `dir` and the robot it names.
+/// input, nor inside the model's folder, nor the robot description it names), then the model
+/// in `dir` and the robot it names.
 fn answering(
     dir: &std::path::Path,
     out: &std::path::Path,
@@ -89,7 +90,12 @@ fn answering(
     check_out(out, OutKind::File)?;
     let model_folder = Some(dir).filter(|d| d.join("model.json").is_file());
     refuse_overwrite(out, inputs, model_folder)?;
-    PoseModel::load_with_robot(dir, device)
+    let (model, robot) = PoseModel::load_with_robot(dir, device)?;
+    // Nor the robot description the model names.
+    let robot_files = model.saved.robot.files();
+    let robot_files: Vec<&std::path::Path> = robot_files.iter().map(|p| p.as_path()).collect();
+    refuse_overwrite(out, &robot_files, None)?;
+    Ok((model, robot))
 }
 
 fn main() -> ExitCode {

@@ -166,3 +166,34 @@ fn srdf_groups_that_would_explode_or_overflow_are_resolved_or_refused() {
     let err = Srdf::parse(path, &twice).unwrap_err().to_string();
     assert!(err.contains("defined twice"), "{err}");
 }
+
+/// `dataset --out` naming one of its inputs (the URDF, the angles) is refused in one line,
+/// and the input is left as it was.
+#[test]
+fn dataset_never_writes_over_its_inputs() {
+    let dir = common::tempdir();
+    let urdf = dir.path().join("arm.urdf");
+    std::fs::write(&urdf, common::arm_urdf(3, false)).unwrap();
+    let angles = dir.path().join("angles.csv");
+    std::fs::write(&angles, "0,0,0\n10,20,30\n").unwrap();
+    let urdf_s = urdf.to_str().unwrap();
+    let angles_s = angles.to_str().unwrap();
+    for (out, args) in [
+        (urdf_s, vec!["--urdf", urdf_s]),
+        (angles_s, vec!["--urdf", urdf_s, "--angles", angles_s]),
+    ] {
+        let before = std::fs::read(out).unwrap();
+        let mut all = args.clone();
+        all.extend(["--preset", "quick", "--out", out]);
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_dataset"))
+            .args(&all)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        eprintln!("dataset {}: {err}", all.join(" "));
+        assert!(!run.status.success(), "{all:?}: exit 0");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains("is the file it reads"), "{err}");
+        assert_eq!(std::fs::read(out).unwrap(), before, "{out} changed");
+    }
+}

@@ -201,6 +201,21 @@ impl RobotSpec {
         *self == RobotSpec::Builtin(BuiltinRobot::Arm4)
     }
 
+    /// The files this robot is read from (its URDF, and the SRDF naming its group): what a
+    /// run's `--out` must never name.
+    pub fn files(&self) -> Vec<PathBuf> {
+        match self {
+            RobotSpec::Builtin(_) => Vec::new(),
+            RobotSpec::Urdf { path, joints, .. } => {
+                let mut files = vec![path.clone()];
+                if let JointGroup::Srdf { file, .. } = joints {
+                    files.push(file.clone());
+                }
+                files
+            }
+        }
+    }
+
     /// `arm4`, `ur5` or the URDF's path.
     pub fn label(&self) -> String {
         match self {
