@@ -94,3 +94,19 @@ fn grid_has_nine_degree_steps() {
     assert!(sub.iter().all(|q| g.contains(q)));
     assert!(grid(10, &r, &[0.0; 2], 0).is_err());
 }
+
+/// The Lorenz sampler stays finite and within the ranges for any joint count (it wrote NaN
+/// angles past ~377 joints, where each further trajectory's step grew with its index).
+#[test]
+fn lorenz_stays_finite_for_a_thousand_joints() {
+    let ranges = vec![[-90.0, 90.0]; 1000];
+    let rows = selfmodel::sim::trajectory::lorenz(200, &ranges).unwrap();
+    assert_eq!(rows.len(), 200);
+    for row in &rows {
+        assert_eq!(row.len(), 1000);
+        assert!(
+            row.iter().all(|v| v.is_finite() && v.abs() <= 90.0),
+            "{row:?}"
+        );
+    }
+}

@@ -68,18 +68,30 @@ pub fn lorenz_trajectory_from(n: usize, dt: f64, scale: f64, start: [f64; 3]) ->
 /// +-90 degree range: 90 * value). `ranges` are in user units.
 ///
 /// Beyond six joints (beyond the paper), every further three joints take the x, y and z of one
-/// more trajectory, the k-th (k = 3, 4, ...) with dt 0.01 + 0.001 k and scale 0.025 started
-/// from [1, 1, 1 + k], so no two joints share a channel; a robot with n joints draws
-/// ceil(n / 3) trajectories beyond the first two only when n > 6.
+/// more trajectory, the k-th (k = 3, 4, ...) started from [1, 1, 1 + k] with scale 0.025 and
+/// dt 0.01 + 0.001 ((k - 3) mod 20 + 3) (0.013 to 0.032: RK4 integrates the Lorenz system
+/// stably there, where a step growing with k diverged past ~377 joints), so no two joints
+/// share a channel; a robot with n joints draws ceil(n / 3) trajectories beyond the first two
+/// only when n > 6. A trajectory that is not finite anyway is an error, never a NaN angle.
 pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
     let t1 = lorenz_trajectory(n, 0.01, 0.025);
     let t2 = lorenz_trajectory(n, 0.012, 0.022);
     let extra: Vec<Vec<[f64; 3]>> = (0..ranges.len().saturating_sub(6).div_ceil(3))
         .map(|i| {
+            let dt = 0.01 + 0.001 * ((i % 20) + 3) as f64;
             let k = (i + 3) as f64;
-            lorenz_trajectory_from(n, 0.01 + 0.001 * k, 0.025, [1.0, 1.0, 1.0 + k])
+            lorenz_trajectory_from(n, dt, 0.025, [1.0, 1.0, 1.0 + k])
         })
         .collect();
+    if let Some(k) = extra
+        .iter()
+        .position(|t| t.iter().flatten().any(|v| !v.is_finite()))
+    {
+        return Err(Error::Config(format!(
+            "the Lorenz sampler's trajectory {} is not finite: use --sampler babbling for this robot",
+            k + 3
+        )));
+    }
     Ok((0..n)
         .map(|i| {
             let channels = [t1[i][0], t1[i][1], t2[i][0], t2[i][2], t1[i][2], t2[i][1]]
