@@ -64,12 +64,9 @@ fn main() -> ExitCode {
         let inputs: Vec<&std::path::Path> = inputs.iter().map(|p| p.as_path()).collect();
         selfmodel::core::atomic_file::refuse_overwrite(&args.out, &inputs, None)?;
         let robot = args.robot.load()?;
-        if robot.dof() == 0 {
-            return Err(selfmodel::Error::Config(format!(
-                "{}: the robot has no movable joint (every joint is fixed, or --tip is its root): a dataset of it would hold one pose; choose a tip below a joint (--tip) or a robot that moves",
-                args.robot.spec()?.label()
-            )));
-        }
+        args.robot
+            .spec()?
+            .require_movable(&robot, "a dataset (of more than one pose)")?;
         let mut cfg = DatasetConfig::preset(&args.preset)?;
         let given = match &args.angles {
             Some(path) => Some(read_angles(path, robot.dof())?),

@@ -181,7 +181,7 @@ fn main() -> ExitCode {
                 let (model, robot) = answering(&model, &out, &[&targets], &device)?;
                 let targets = read_targets(&targets, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
-                let answers = model.solve(&robot.chain, &targets, k, &device);
+                let answers = model.solve(&robot.chain, &targets, k, &device)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let cfg = &model.saved.config.lm;
                 let mut text = String::from("target,solution");

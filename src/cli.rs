@@ -417,12 +417,7 @@ impl ExperimentArgs {
         crate::core::device::select(opts.device)?;
         if opts.urdf.is_some() {
             let spec = opts.robot_spec(crate::sim::robots::BuiltinRobot::Arm4);
-            if spec.load_kinematics()?.dof() == 0 {
-                return Err(crate::Error::Config(format!(
-                    "{}: this robot has no movable joints (all are fixed); a self-model or an inverse model needs at least one",
-                    spec.label()
-                )));
-            }
+            spec.require_movable(&spec.load_kinematics()?, "a self-model or an inverse model")?;
         }
         // Another robot than the experiment's own writes under runs/robots/<robot>/.
         let own = if name.starts_with("emssl_") {

@@ -197,3 +197,44 @@ fn dataset_never_writes_over_its_inputs() {
         assert_eq!(std::fs::read(out).unwrap(), before, "{out} changed");
     }
 }
+
+/// Ctrl-C (SIGINT) stops `dataset` within a second or two: exit 130, one line, no file.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_a_dataset_within_seconds_and_leaves_nothing() {
+    let dir = common::tempdir();
+    let out = dir.path().join("big.npz");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_dataset"))
+        .args(["--samples", "20000", "--out", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let sent = std::time::Instant::now();
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            sent.elapsed().as_secs_f64() < 10.0,
+            "still running 10 s after Ctrl-C"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    let waited = sent.elapsed().as_secs_f64();
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    let last = err.lines().last().unwrap_or_default().to_string();
+    eprintln!("stopped {waited:.2} s after Ctrl-C, exit {status:?}: {last}");
+    assert_eq!(status.code(), Some(130), "{err}");
+    assert!(last.starts_with("interrupted:"), "{err}");
+    assert!(waited < 2.0, "{waited} s");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "{left:?}");
+}

@@ -201,7 +201,9 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
     let use_model = |m: &PoseModel| {
         // What loads answers within its ranges, or is refused for another robot.
         if m.check_robot(&robot).is_ok() {
-            let a = m.solve(&robot.chain, std::slice::from_ref(&target), 1, &device);
+            let a = m
+                .solve(&robot.chain, std::slice::from_ref(&target), 1, &device)
+                .unwrap();
             assert!(selfmodel::sim::kinematics::within(
                 &a[0][0].joints,
                 &m.saved.ranges,

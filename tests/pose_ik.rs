@@ -166,10 +166,10 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
     let qs = selfmodel::sim::trajectory::babbling(40, ranges, 5);
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
-    let before = model.solve(&robot.chain, &targets, 3, &device);
+    let before = model.solve(&robot.chain, &targets, 3, &device).unwrap();
     let loaded = PoseModel::load(&dir.path().join("model"), &device).unwrap();
     loaded.check_robot(&robot).unwrap();
-    let after = loaded.solve(&robot.chain, &targets, 3, &device);
+    let after = loaded.solve(&robot.chain, &targets, 3, &device).unwrap();
     assert_eq!(before, after);
     assert_eq!(
         model.sample(&targets, &device),
@@ -345,7 +345,7 @@ fn limits_offset_around_pi_are_kept_and_answered() {
     assert!(qs.iter().filter(|q| q[1] > PI).count() > 100);
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
-    let answers = model.solve(&robot.chain, &targets, 1, &device);
+    let answers = model.solve(&robot.chain, &targets, 1, &device).unwrap();
     let exact = answers
         .iter()
         .filter(|a| a.iter().any(|s| s.exact(&model.saved.config.lm)))
@@ -408,7 +408,7 @@ fn two_tips_are_solved_together() {
     std::fs::write(&file, text).unwrap();
     let read = read_targets(&file, false, model.tips()).unwrap();
     assert_eq!(read.len(), 100);
-    let answers = model.solve(&robot.chain, &read, 1, &device);
+    let answers = model.solve(&robot.chain, &read, 1, &device).unwrap();
     let lm = &model.saved.config.lm;
     let mut exact = 0;
     for (a, t) in answers.iter().map(|a| &a[0]).zip(&targets) {
@@ -437,4 +437,30 @@ fn two_tips_are_solved_together() {
     swapped.swap(0, 1);
     let (p, _) = pose_error(&robot.chain, &joints[0], &swapped);
     assert!(p > 0.1, "{p}");
+}
+
+/// A long solve asks its `stop` between blocks of targets (Ctrl-C on the command line, Python's
+/// signal check in Python) and ends with `Interrupted`, saying how far it got.
+#[test]
+fn a_solve_stops_between_blocks_when_asked() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let dir = common::tempdir();
+    let (_spec, robot, model) = quick_model(dir.path(), 4);
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let qs = selfmodel::sim::trajectory::babbling(3000, &model.saved.ranges, 9);
+    let targets: Vec<Vec<PoseTarget>> =
+        qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let calls = AtomicUsize::new(0);
+    let stop = || calls.fetch_add(1, Ordering::Relaxed) >= 1;
+    let lm = model.saved.config.lm.clone();
+    let err = model
+        .solve_until(&robot.chain, &targets, 2, &lm, &device, &stop)
+        .unwrap_err();
+    assert!(matches!(err, selfmodel::Error::Interrupted(_)), "{err}");
+    assert!(
+        err.to_string().contains("after 1024 of 3000 targets"),
+        "{err}"
+    );
+    assert_eq!(calls.load(Ordering::Relaxed), 2);
 }

@@ -28,6 +28,13 @@ fn rows(a: &PyReadonlyArray2<f64>, width: usize, what: &str) -> PyResult<(usize,
             "{what}: expected an array of shape (N, {width}), got ({n}, {w})"
         )));
     }
+    // Checked before the copy: a broadcast view of 10^9 rows costs numpy nothing and would
+    // cost this copy gigabytes.
+    if n > MAX_ROWS {
+        return Err(value_error(format!(
+            "{what}: {n} rows, more than the {MAX_ROWS} one call takes; call it in batches"
+        )));
+    }
     let v: Vec<f64> = a.as_array().iter().copied().collect();
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
         return Err(value_error(format!(
@@ -37,6 +44,21 @@ fn rows(a: &PyReadonlyArray2<f64>, width: usize, what: &str) -> PyResult<(usize,
         )));
     }
     Ok((n, v))
+}
+
+/// The most rows one call takes (the command line's most targets).
+const MAX_ROWS: usize = 10_000_000;
+
+/// Python's own Ctrl-C check, for a long call that released the GIL: `true` once a signal
+/// handler raised (KeyboardInterrupt), the exception kept in `raised` for the call to return.
+fn interrupted(raised: &std::sync::Mutex<Option<PyErr>>) -> bool {
+    Python::with_gil(|py| match py.check_signals() {
+        Ok(()) => false,
+        Err(e) => {
+            *raised.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+            true
+        }
+    })
 }
 
 /// A robot: its joints (names, limits, in depth-first order from the root) and forward
@@ -92,6 +114,11 @@ impl PyRobot {
             joints,
         };
         let robot = py.allow_threads(|| spec.load()).map_err(value_error)?;
+        spec.require_movable(
+            &robot,
+            "forward kinematics, a self-model or inverse kinematics",
+        )
+        .map_err(value_error)?;
         Ok(PyRobot { robot })
     }
 
@@ -320,10 +347,18 @@ impl PyIkSolver {
                     .map_err(|e| value_error(format!("targets row {i}: {e}")))
             })
             .collect::<PyResult<_>>()?;
+        // Ctrl-C reaches Python between blocks of targets (well under a second apart).
+        let raised = std::sync::Mutex::new(None);
+        let lm = self.model.saved.config.lm.clone();
         let answers = py.allow_threads(|| {
+            let stop = || interrupted(&raised);
             self.model
-                .solve(&self.robot.chain, &parsed, k, &self.device)
+                .solve_until(&self.robot.chain, &parsed, k, &lm, &self.device, &stop)
         });
+        if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
+            return Err(e);
+        }
+        let answers = answers.map_err(value_error)?;
         let dof = self.model.dof();
         let lm = &self.model.saved.config.lm;
         let (mut joints, mut pos, mut rot, mut exact) = (
@@ -366,14 +401,16 @@ impl PyIkSolver {
     fn solve_one(&self, py: Python<'_>, target: Vec<f64>) -> PyResult<Vec<f64>> {
         let row = target_from_values(&target, self.model.position_only(), self.model.tips())
             .map_err(|e| value_error(format!("target: {e}")))?;
-        let mut a = py.allow_threads(|| {
-            self.model.solve(
-                &self.robot.chain,
-                std::slice::from_ref(&row),
-                1,
-                &self.device,
-            )
-        });
+        let mut a = py
+            .allow_threads(|| {
+                self.model.solve(
+                    &self.robot.chain,
+                    std::slice::from_ref(&row),
+                    1,
+                    &self.device,
+                )
+            })
+            .map_err(value_error)?;
         Ok(std::mem::take(&mut a[0][0].joints))
     }
 
@@ -383,18 +420,19 @@ impl PyIkSolver {
         let row = target_from_values(&target, self.model.position_only(), self.model.tips())
             .map_err(|e| value_error(format!("target: {e}")))?;
         let mut times: Vec<f64> = (0..repeats.max(1))
-            .map(|_| {
+            .map(|_| -> selfmodel::Result<f64> {
                 let t0 = std::time::Instant::now();
                 let a = self.model.solve(
                     &self.robot.chain,
                     std::slice::from_ref(&row),
                     1,
                     &self.device,
-                );
+                )?;
                 std::hint::black_box(a);
-                t0.elapsed().as_secs_f64()
+                Ok(t0.elapsed().as_secs_f64())
             })
-            .collect();
+            .collect::<selfmodel::Result<_>>()
+            .map_err(value_error)?;
         times.sort_by(f64::total_cmp);
         Ok(times[times.len() / 2])
     }
@@ -463,11 +501,16 @@ impl PySelfModel {
         q: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<Bound<'py, PyArray3<f32>>>)> {
         let (n, v) = rows(&q, self.model.saved.inputs, "q")?;
+        let [h, w] = self.model.saved.image;
+        if (n as u64) * (h * w) as u64 > 1 << 30 {
+            return Err(value_error(format!(
+                "q: {n} images of {h}x{w}, more than the 2^30 pixels one call returns; call it in batches"
+            )));
+        }
         let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
         let (s, d) = py
             .allow_threads(|| self.model.predict(&v, n))
             .map_err(value_error)?;
-        let [h, w] = self.model.saved.image;
         let shape = |v: Vec<f32>| {
             numpy::ndarray::Array3::from_shape_vec((n, h, w), v)
                 .expect("n x h x w")

@@ -307,13 +307,23 @@ impl Dataset {
             );
         }
         let caster = RayCaster::new(robot, camera.clone(), cfg.render.clone());
-        let frames = caster.render_batch(&si, progress);
         let (w, h) = (cfg.camera.width, cfg.camera.height);
-        let mut images = Vec::with_capacity(frames.len() * w * h);
-        let mut depth = Vec::with_capacity(frames.len() * w * h);
-        for f in frames {
-            images.extend_from_slice(&f.silhouette);
-            depth.extend_from_slice(&f.depth);
+        let mut images = Vec::with_capacity(si.len() * w * h);
+        let mut depth = Vec::with_capacity(si.len() * w * h);
+        // In blocks, each copied in as it is rendered (the frames of the whole set are never
+        // held twice), with Ctrl-C asked between blocks: a fraction of a second apart.
+        for (b, block) in si.chunks(RENDER_BLOCK).enumerate() {
+            if crate::core::interrupt::requested() {
+                return Err(Error::Interrupted(format!(
+                    "stopped after {} of {} images; nothing was written",
+                    b * RENDER_BLOCK,
+                    si.len()
+                )));
+            }
+            for f in caster.render_batch(block, progress) {
+                images.extend_from_slice(&f.silhouette);
+                depth.extend_from_slice(&f.depth);
+            }
         }
         let pose = camera.pose_matrix();
         let pose: [f64; 16] = std::array::from_fn(|i| pose[(i / 4, i % 4)]);
@@ -751,6 +761,9 @@ pub struct DatasetStats {
 
 /// The most memory a dataset's images may take (silhouettes and depth): 8 GiB.
 pub const MAX_DATASET_BYTES: u64 = 8 << 30;
+
+/// Images rendered between two looks at Ctrl-C.
+const RENDER_BLOCK: usize = 64;
 
 /// The largest joint value [`read_angles`] takes: one turn, in degrees.
 pub const MAX_JOINT_VALUE: f64 = 360.0;

@@ -381,6 +381,22 @@ pub fn sample_rows(
     seed: u64,
     device: &Device,
 ) -> Vec<Vec<Vec<f64>>> {
+    sample_rows_from(model, data, targets, k, batch, seed, 0, device)
+}
+
+/// [`sample_rows`] of rows that come after `batches_before` batches of the same pass: the
+/// seeds those batches would have had in one call, so a pass split into blocks samples as one.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_rows_from(
+    model: &FlowIk,
+    data: &IkData,
+    targets: &[f32],
+    k: usize,
+    batch: usize,
+    seed: u64,
+    batches_before: usize,
+    device: &Device,
+) -> Vec<Vec<Vec<f64>>> {
     let dof = model.dof();
     let width = model.target_width();
     let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
@@ -389,6 +405,7 @@ pub fn sample_rows(
         .map(|s| {
             let mut out = Vec::with_capacity(rows.len());
             for (c, part) in rows.chunks(batch.max(1)).enumerate() {
+                let c = batches_before + c;
                 let n = part.len();
                 let mut rng = StdRng::seed_from_u64(seed ^ ((s as u64) << 32) ^ ((c as u64) << 8));
                 let z: Vec<f32> = (0..n * dof).map(|_| normal.sample(&mut rng)).collect();

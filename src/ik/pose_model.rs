@@ -20,7 +20,7 @@ use crate::core::error::{Error, Result};
 use crate::core::input_file::{file_fnv, fnv};
 use crate::core::preset::Preset;
 use crate::ik::data::{IkData, IkDataConfig};
-use crate::ik::flow::{FlowConfig, FlowIk, fit_flow, sample_rows};
+use crate::ik::flow::{FlowConfig, FlowIk, fit_flow, sample_rows, sample_rows_from};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve};
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;
@@ -507,14 +507,16 @@ impl PoseModel {
     }
 
     /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
-    /// (from random starts where it stalls), in target order.
+    /// (from random starts where it stalls), in target order. Ctrl-C (the command line's
+    /// [`crate::core::interrupt`]) ends it between blocks of targets with
+    /// [`Error::Interrupted`].
     pub fn solve(
         &self,
         chain: &KinematicChain,
         targets: &[Vec<PoseTarget>],
         k: usize,
         device: &Device,
-    ) -> Vec<Vec<PoseSolution>> {
+    ) -> Result<Vec<Vec<PoseSolution>>> {
         self.solve_with(chain, targets, k, &self.saved.config.lm, device)
     }
 
@@ -526,33 +528,68 @@ impl PoseModel {
         k: usize,
         cfg: &LmConfig,
         device: &Device,
-    ) -> Vec<Vec<PoseSolution>> {
-        let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
+    ) -> Result<Vec<Vec<PoseSolution>>> {
+        let stop = crate::core::interrupt::requested;
+        self.solve_until(chain, targets, k, cfg, device, &stop)
+    }
+
+    /// [`Self::solve_with`], asking `stop` on the calling thread before each block of targets
+    /// (a few thousand answers, well under a second): `true` ends it with
+    /// [`Error::Interrupted`] (Python passes its own signal check). The answers are those of
+    /// one pass over all targets: each block samples the flow with the seeds a single pass
+    /// would use.
+    pub fn solve_until(
+        &self,
+        chain: &KinematicChain,
+        targets: &[Vec<PoseTarget>],
+        k: usize,
+        cfg: &LmConfig,
+        device: &Device,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Vec<Vec<PoseSolution>>> {
+        use rayon::prelude::*;
+        /// The flow samples this many rows a batch (a block here).
+        const FLOW_BATCH: usize = 1024;
         let k = k.max(1);
-        let samples = sample_rows(&self.flow, &self.data, &rows, k, 1024, 0x5EED, device);
+        // Targets refined between two questions to `stop`: about 4,096 answers.
+        let per_check = (4096 / k).max(1);
         let ranges = &self.saved.ranges;
         let paths = chain.tip_paths();
-        use rayon::prelude::*;
-        // Each sample refined on its own (the family of answers, not one), from random starts
-        // where it stalls; the random starts differ between samples and targets.
-        targets
-            .par_iter()
-            .enumerate()
-            .map(|(i, t)| {
-                (0..k)
-                    .map(|s| {
-                        solve(
-                            &paths,
-                            t,
-                            &[samples[s][i].clone()],
-                            ranges,
-                            cfg,
-                            (i * k + s) as u64,
-                        )
+        let mut answers: Vec<Vec<PoseSolution>> = Vec::with_capacity(targets.len());
+        for (b, block) in targets.chunks(FLOW_BATCH).enumerate() {
+            let first = b * FLOW_BATCH;
+            let rows = condition_rows(&self.data, block, self.saved.config.position_only);
+            let samples = sample_rows_from(
+                &self.flow, &self.data, &rows, k, FLOW_BATCH, 0x5EED, b, device,
+            );
+            for (c, part) in block.chunks(per_check).enumerate() {
+                if stop() {
+                    return Err(Error::Interrupted(format!(
+                        "stopped after {} of {} targets; nothing was written",
+                        answers.len(),
+                        targets.len()
+                    )));
+                }
+                let offset = c * per_check;
+                // Each sample refined on its own (the family of answers, not one), from random
+                // starts where it stalls; the random starts differ between samples and targets.
+                let solved: Vec<Vec<PoseSolution>> = part
+                    .par_iter()
+                    .enumerate()
+                    .map(|(j, t)| {
+                        let (i, j) = (first + offset + j, offset + j);
+                        (0..k)
+                            .map(|s| {
+                                let start = [samples[s][j].clone()];
+                                solve(&paths, t, &start, ranges, cfg, (i * k + s) as u64)
+                            })
+                            .collect()
                     })
-                    .collect()
-            })
-            .collect()
+                    .collect();
+                answers.extend(solved);
+            }
+        }
+        Ok(answers)
     }
 
     /// The flow's own answers (one sample per target, no refinement).

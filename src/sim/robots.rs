@@ -216,6 +216,18 @@ impl RobotSpec {
         }
     }
 
+    /// `Ok` where `robot` (this spec, loaded) has a joint to move; otherwise the one line
+    /// every edge gives (`needs`: what needs one, "inverse kinematics").
+    pub fn require_movable(&self, robot: &Robot, needs: &str) -> Result<()> {
+        if robot.dof() > 0 {
+            return Ok(());
+        }
+        Err(crate::core::error::Error::Config(format!(
+            "{}: this robot has no movable joints (every joint is fixed, or its tip or group has none); {needs} needs at least one: choose a tip below a joint (--tip), a group with joints, or a robot that moves",
+            self.label()
+        )))
+    }
+
     /// `arm4`, `ur5` or the URDF's path.
     pub fn label(&self) -> String {
         match self {

@@ -330,6 +330,7 @@ pub fn run(
             ..standard.clone()
         };
         let (s, answers) = timed(|| model.solve_with(chain, &targets, 1, &lm, device));
+        let answers = answers?;
         let is_standard = starts == standard.random_starts;
         sitting.push(
             "selfmodel flow + LM",
@@ -345,6 +346,7 @@ pub fn run(
             let (s, answers) = on_threads(1, || {
                 timed(|| model.solve_with(chain, &targets, 1, &lm, device))
             })?;
+            let answers = answers?;
             sitting.push(
                 "selfmodel flow + LM",
                 format!("{starts} random starts"),
@@ -359,6 +361,7 @@ pub fn run(
     }
     // The family: k samples a target, each refined.
     let (s, answers) = timed(|| model.solve(chain, &targets, cfg.k, device));
+    let answers = answers?;
     sitting.push(
         "selfmodel flow + LM",
         format!("{} samples a target", cfg.k),

@@ -133,12 +133,7 @@ impl RunOptions {
     pub fn ik_robot(&self) -> Result<crate::sim::robot::Robot> {
         let spec = self.robot_spec(BuiltinRobot::Ur5);
         let robot = spec.load_kinematics()?;
-        if robot.dof() == 0 {
-            return Err(crate::Error::Config(format!(
-                "{}: this robot has no movable joints (all are fixed); inverse kinematics needs at least one",
-                spec.label()
-            )));
-        }
+        spec.require_movable(&robot, "inverse kinematics")?;
         Ok(robot)
     }
 
