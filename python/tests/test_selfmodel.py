@@ -111,6 +111,8 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
     urdf, model, _, _ = trained
     robot = selfmodel.Robot.from_urdf(str(urdf), tip="hand", geometry="none")
     ik = selfmodel.IkSolver.load(str(model))
+    fifo = tmp_path / "robot.urdf"
+    os.mkfifo(fifo)
     cases = [
         lambda: robot.fk(np.zeros((2, 5))),
         lambda: robot.fk(np.full((1, 6), np.nan)),
@@ -123,6 +125,13 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
         lambda: selfmodel.Robot.from_urdf(str(tmp_path / "missing.urdf")),
         lambda: selfmodel.Robot.from_urdf(str(urdf), geometry="shiny"),
         lambda: selfmodel.IkSolver.load(str(tmp_path)),
+        # 10^9 rows as a broadcast view (no memory in numpy): refused before any copy.
+        lambda: robot.fk(np.broadcast_to(np.zeros(6), (10**9, 6))),
+        lambda: ik.solve(np.broadcast_to(np.zeros(7), (10**9, 7))),
+        # A robot with no joint to move: its tip is the root.
+        lambda: selfmodel.Robot.from_urdf(str(urdf), tip="base"),
+        # A FIFO where a file is read would block forever.
+        lambda: selfmodel.Robot.from_urdf(str(fifo)),
     ]
     for case in cases:
         with pytest.raises(ValueError) as e:
@@ -138,6 +147,23 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
             selfmodel.IkSolver.load(str(model))
     finally:
         urdf.write_text(text)
+
+
+def test_ctrl_c_interrupts_a_long_solve_within_a_second(trained):
+    """KeyboardInterrupt reaches Python from inside a solve (between blocks of targets)."""
+    import signal
+    import threading
+    import time
+
+    _, model, _, _ = trained
+    ik = selfmodel.IkSolver.load(str(model))
+    rows = np.tile(np.array([[0.1, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0]]), (200_000, 1))
+    threading.Timer(1.0, lambda: signal.raise_signal(signal.SIGINT)).start()
+    start = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        ik.solve(rows)
+    waited = time.monotonic() - start - 1.0
+    assert waited < 1.0, waited
 
 
 def test_render_draws_what_the_command_line_renders(tmp_path):
