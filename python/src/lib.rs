@@ -1,11 +1,13 @@
 //! The Python package's native module (`selfmodel._selfmodel`): a thin layer over the crate.
-//! Arrays come in as numpy (float64, C order or not), are checked for shape and finiteness
-//! (a `ValueError` of one line, never a crash), and the GIL is released while Rust computes.
+//! Arrays come in as numpy arrays of numbers (any float or integer dtype, either byte order,
+//! any strides), are checked for size before they are copied, then for shape and finiteness
+//! (a `ValueError` or `TypeError` of one line, never a crash), and the GIL is released while
+//! Rust computes.
 
 use std::path::PathBuf;
 
-use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
+use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
 use selfmodel::ik::pose::PoseTarget;
@@ -20,22 +22,84 @@ fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
-/// The rows of a 2-D float array with `width` columns, finite: `(rows, values)`.
-fn rows(a: &PyReadonlyArray2<f64>, width: usize, what: &str) -> PyResult<(usize, Vec<f64>)> {
-    let [n, w] = [a.shape()[0], a.shape()[1]];
+/// A 2-D array of numbers as Python hands it over: any float, integer or bool dtype, either
+/// byte order, any strides (a broadcast view included), cast to float64 once its size is
+/// known to be one a call takes. Anything else is a `TypeError` (not numbers) or a
+/// `ValueError` (not 2-D, too many rows) of one line.
+struct Matrix {
+    shape: [usize; 2],
+    values: Vec<f64>,
+}
+
+impl<'py> FromPyObject<'py> for Matrix {
+    fn extract_bound(obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+        let numpy = obj.py().import("numpy")?;
+        // No copy for an array; a list of lists becomes one.
+        let a = numpy.call_method1("asanyarray", (obj,))?;
+        let dtype = a.getattr("dtype")?;
+        let kind: String = dtype.getattr("kind")?.extract()?;
+        if !matches!(kind.as_str(), "f" | "i" | "u" | "b") {
+            return Err(PyTypeError::new_err(format!(
+                "expected an array of numbers (float64 or any dtype numpy casts to it), got dtype {}",
+                dtype.str()?
+            )));
+        }
+        let shape: Vec<usize> = a.getattr("shape")?.extract()?;
+        let [n, w] = shape[..] else {
+            return Err(value_error(format!(
+                "expected a 2-D array (N rows), got shape {shape:?}"
+            )));
+        };
+        // Checked before the copy: a broadcast view of 10^9 rows costs numpy nothing and would
+        // cost this copy gigabytes.
+        if n > MAX_ROWS {
+            return Err(value_error(format!(
+                "{n} rows, more than the {MAX_ROWS} one call takes; call it in batches"
+            )));
+        }
+        let kwargs = pyo3::types::PyDict::new(obj.py());
+        kwargs.set_item("dtype", numpy.getattr("float64")?)?;
+        let c = numpy.call_method("ascontiguousarray", (a,), Some(&kwargs))?;
+        let c: PyReadonlyArray2<f64> = c.extract()?;
+        Ok(Matrix {
+            shape: [n, w],
+            values: c.as_slice()?.to_vec(),
+        })
+    }
+}
+
+/// Names as Python gives them: one string (`joints="all"`, `tips="hand"`) or a sequence.
+struct Names(Vec<String>);
+
+impl<'py> FromPyObject<'py> for Names {
+    fn extract_bound(obj: &Bound<'py, PyAny>) -> PyResult<Self> {
+        if let Ok(one) = obj.extract::<String>() {
+            return Ok(Names(vec![one]));
+        }
+        obj.extract::<Vec<String>>()
+            .map(Names)
+            .map_err(|_| PyTypeError::new_err("expected a name or a list of names (strings)"))
+    }
+}
+
+/// A count Python gives (`k`, `size`): an integer from `lo` to `hi`, else a `ValueError`
+/// naming `what` (a negative one included, which pyo3 would call an overflow).
+fn count(value: i64, what: &str, lo: usize, hi: usize) -> PyResult<usize> {
+    usize::try_from(value)
+        .ok()
+        .filter(|v| (lo..=hi).contains(v))
+        .ok_or_else(|| value_error(format!("{what} must be {lo} to {hi}, got {value}")))
+}
+
+/// The rows of a 2-D array with `width` columns, finite: `(rows, values)`.
+fn rows(a: Matrix, width: usize, what: &str) -> PyResult<(usize, Vec<f64>)> {
+    let [n, w] = a.shape;
     if w != width {
         return Err(value_error(format!(
             "{what}: expected an array of shape (N, {width}), got ({n}, {w})"
         )));
     }
-    // Checked before the copy: a broadcast view of 10^9 rows costs numpy nothing and would
-    // cost this copy gigabytes.
-    if n > MAX_ROWS {
-        return Err(value_error(format!(
-            "{what}: {n} rows, more than the {MAX_ROWS} one call takes; call it in batches"
-        )));
-    }
-    let v: Vec<f64> = a.as_array().iter().copied().collect();
+    let v = &a.values;
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
         return Err(value_error(format!(
             "{what}: row {} holds {}, not a finite number",
@@ -43,7 +107,7 @@ fn rows(a: &PyReadonlyArray2<f64>, width: usize, what: &str) -> PyResult<(usize,
             v[i]
         )));
     }
-    Ok((n, v))
+    Ok((n, a.values))
 }
 
 /// The most rows one call takes (the command line's most targets).
@@ -81,8 +145,8 @@ impl PyRobot {
         py: Python<'_>,
         path: PathBuf,
         tip: Option<String>,
-        joints: Option<Vec<String>>,
-        tips: Option<Vec<String>>,
+        joints: Option<Names>,
+        tips: Option<Names>,
         geometry: &str,
         group: Option<String>,
         srdf: Option<PathBuf>,
@@ -98,8 +162,8 @@ impl PyRobot {
             }
         };
         let joints = JointGroup::from_args(
-            joints.as_deref(),
-            tips.as_deref(),
+            joints.as_ref().map(|n| n.0.as_slice()),
+            tips.as_ref().map(|n| n.0.as_slice()),
             group.as_deref(),
             srdf.as_deref(),
             Some(&path),
@@ -156,12 +220,12 @@ impl PyRobot {
     fn fk<'py>(
         &self,
         py: Python<'py>,
-        q: PyReadonlyArray2<'py, f64>,
+        q: Matrix,
         link: Option<String>,
     ) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let chain = &self.robot.chain;
         let dof = chain.dof();
-        let (n, v) = rows(&q, dof, "q")?;
+        let (n, v) = rows(q, dof, "q")?;
         let link = match link {
             None => None,
             Some(name) => Some(chain.links.iter().position(|l| *l == name).ok_or_else(|| {
@@ -192,14 +256,10 @@ impl PyRobot {
 
     /// The tip's pose Jacobian (N, 6, dof) at `q` (N, dof): linear rows, then angular
     /// (world frame).
-    fn jacobian<'py>(
-        &self,
-        py: Python<'py>,
-        q: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    fn jacobian<'py>(&self, py: Python<'py>, q: Matrix) -> PyResult<Bound<'py, PyArray3<f64>>> {
         let chain = &self.robot.chain;
         let dof = chain.dof();
-        let (n, v) = rows(&q, dof, "q")?;
+        let (n, v) = rows(q, dof, "q")?;
         let out: Vec<f64> = py.allow_threads(|| {
             v.chunks(dof.max(1))
                 .take(n)
@@ -223,8 +283,8 @@ impl PyRobot {
     fn render<'py>(
         &self,
         py: Python<'py>,
-        q: PyReadonlyArray2<'py, f64>,
-        size: usize,
+        q: Matrix,
+        size: i64,
         view: Option<[f64; 3]>,
         fov: Option<f64>,
     ) -> PyResult<(Bound<'py, PyArray3<u8>>, Bound<'py, PyArray3<f32>>)> {
@@ -233,8 +293,9 @@ impl PyRobot {
         use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
         let robot = &self.robot;
         let dof = robot.dof();
-        let (n, v) = rows(&q, dof, "q")?;
-        if !(1..=2048).contains(&size) || (n as u64) * (size * size) as u64 > 1 << 30 {
+        let (n, v) = rows(q, dof, "q")?;
+        let size = count(size, "size", 1, 2048)?;
+        if (n as u64) * (size * size) as u64 > 1 << 30 {
             return Err(value_error(format!(
                 "{n} images of {size}x{size}: size must be 1 to 2048 and all images at most 2^30 pixels"
             )));
@@ -330,14 +391,12 @@ impl PyIkSolver {
     fn solve<'py>(
         &self,
         py: Python<'py>,
-        targets: PyReadonlyArray2<'py, f64>,
-        k: usize,
+        targets: Matrix,
+        k: i64,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        if !(1..=1000).contains(&k) {
-            return Err(value_error(format!("k must be 1 to 1000, got {k}")));
-        }
+        let k = count(k, "k", 1, 1000)?;
         let width = self.target_columns().len();
-        let (n, v) = rows(&targets, width, "targets")?;
+        let (n, v) = rows(targets, width, "targets")?;
         let parsed: Vec<Vec<PoseTarget>> = v
             .chunks(width)
             .take(n)
@@ -498,9 +557,9 @@ impl PySelfModel {
     fn predict<'py>(
         &self,
         py: Python<'py>,
-        q: PyReadonlyArray2<'py, f64>,
+        q: Matrix,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<Bound<'py, PyArray3<f32>>>)> {
-        let (n, v) = rows(&q, self.model.saved.inputs, "q")?;
+        let (n, v) = rows(q, self.model.saved.inputs, "q")?;
         let [h, w] = self.model.saved.image;
         if (n as u64) * (h * w) as u64 > 1 << 30 {
             return Err(value_error(format!(

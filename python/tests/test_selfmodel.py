@@ -139,6 +139,21 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
         assert "\n" not in str(e.value), str(e.value)
     with pytest.raises(TypeError):
         robot.fk("not an array")
+    with pytest.raises(TypeError, match="numbers"):
+        robot.fk(np.zeros((1, 6), dtype=complex))
+    for bad in [lambda: ik.solve(np.zeros((1, 7)), k=-1), lambda: robot.render(np.zeros((1, 6)), size=-5)]:
+        with pytest.raises(ValueError, match="must be 1 to"):
+            bad()
+    with pytest.raises(ValueError, match="--group"):
+        selfmodel.Robot.from_urdf(str(urdf), srdf=str(urdf))
+    # What numpy can cast safely is accepted: big-endian, float32, integers, any strides.
+    q = np.linspace(-1, 1, 12).reshape(2, 6)
+    want = robot.fk(q)
+    for same in [q.astype(">f8"), q.astype(np.float32).astype(np.float64), np.asfortranarray(q)]:
+        assert np.array_equal(robot.fk(same), want)
+    assert np.allclose(robot.fk(q.astype(np.float32)), want, atol=1e-6)
+    assert robot.fk(np.zeros((1, 6), dtype=np.int64)).shape == (1, 4, 4)
+    assert selfmodel.Robot.from_urdf(str(urdf), joints="all", geometry="none").dof == 6
     # A model of another robot: the description it names now has a joint renamed.
     text = urdf.read_text()
     urdf.write_text(text.replace('"j2"', '"elbow"'))

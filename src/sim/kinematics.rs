@@ -218,6 +218,12 @@ impl JointGroup {
                 group: group.to_string(),
             });
         }
+        if srdf.is_some() {
+            // As the command line reads it (and Python the same way): the file of a group.
+            return Err(Error::Config(
+                "--srdf names the SRDF file of --group: give --group too".into(),
+            ));
+        }
         match (joints, tips) {
             (Some(_), Some(_)) => Err(Error::Config(
                 "--joints and --tips name the joint vector two ways: give one".into(),
