@@ -238,3 +238,29 @@ fn ctrl_c_stops_a_dataset_within_seconds_and_leaves_nothing() {
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+/// `--tip` beside `--tips` (or a group's tips) must be one of them: another would train the
+/// group's joints for a link they were not chosen for.
+#[test]
+fn a_tip_outside_the_named_tips_is_refused() {
+    use selfmodel::sim::kinematics::JointGroup;
+    use selfmodel::sim::robots::RobotSpec;
+    let dir = common::tempdir();
+    let urdf = dir.path().join("arm.urdf");
+    std::fs::write(&urdf, common::arm_urdf(4, true)).unwrap();
+    let spec = |tip: &str| RobotSpec::Urdf {
+        path: urdf.clone(),
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some(tip.into()),
+        geometry: selfmodel::sim::urdf_loader::GeometryKind::None,
+        joints: JointGroup::Tips(vec!["l2".into(), "finger_a".into()]),
+    };
+    let err = spec("l3").load_kinematics().unwrap_err().to_string();
+    assert!(
+        err.contains("is not a tip of --tips (l2, finger_a)"),
+        "{err}"
+    );
+    // One of them is the tip the poses are read at.
+    assert!(spec("finger_a").load_kinematics().is_ok());
+}

@@ -239,6 +239,26 @@ impl JointGroup {
     }
 }
 
+/// A `--tip` given beside a group with tips must be one of them: another would train the
+/// group's joints for a link they were not chosen for.
+fn refuse_another_tip(
+    given: bool,
+    tip: usize,
+    tips: &[usize],
+    links: &[&String],
+    group: &str,
+) -> Result<()> {
+    if !given || tips.is_empty() || tips.contains(&tip) {
+        return Ok(());
+    }
+    let names: Vec<&str> = tips.iter().map(|&t| links[t].as_str()).collect();
+    Err(Error::Config(format!(
+        "--tip \"{}\" is not a tip of {group} ({}): name one of them, or leave --tip out",
+        links[tip],
+        names.join(", ")
+    )))
+}
+
 /// Each joint's place in a depth-first walk of the tree from the root (link 0), a link's
 /// child joints taken in the order they were given (`given[j]`: joint `j`'s index as given).
 fn depth_first_rank(joints: &[Joint], given: &[usize]) -> Vec<usize> {
@@ -416,6 +436,13 @@ impl KinematicChain {
                     mark_path(l);
                     group_tips.push(l);
                 }
+                refuse_another_tip(
+                    tip.is_some(),
+                    tip_link,
+                    &group_tips,
+                    &sorted_links,
+                    "--tips",
+                )?;
             }
             JointGroup::All => on_path.iter_mut().for_each(|p| *p = true),
             JointGroup::Named(names) => {
@@ -455,6 +482,13 @@ impl KinematicChain {
                     })?;
                     group_tips.push(l);
                 }
+                refuse_another_tip(
+                    tip.is_some(),
+                    tip_link,
+                    &group_tips,
+                    &sorted_links,
+                    "the group",
+                )?;
                 if group_tips.len() == 1 {
                     if tip.is_none() {
                         (tip_link, tip_offset) = (group_tips[0], Point3::origin());
