@@ -8,6 +8,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 use selfmodel::cli::{RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
+use selfmodel::ik::pose::PoseTarget;
 use selfmodel::ik::pose_model::{
     PoseModel, PoseModelConfig, SolveStats, joint_columns, read_targets, train,
 };
@@ -147,19 +148,21 @@ fn main() -> ExitCode {
                     )));
                 }
                 let (model, robot) = answering(&model, &out, &[], &device)?;
-                let (targets, joints) = selfmodel::studies::bench_ik::random_targets(
-                    &robot,
-                    &model.saved.ranges,
-                    n,
-                    seed,
-                );
-                let text = selfmodel::studies::bench_ik::targets_csv(
-                    &targets,
-                    &joints,
-                    &model.saved.joint_names,
-                    model.tips(),
-                );
-                selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
+                // Streamed: each row's pose is made as it is written (ten million rows of a
+                // humanoid would not fit in memory as text and targets at once).
+                let joints = selfmodel::sim::trajectory::babbling(n, &model.saved.ranges, seed);
+                let rows = joints
+                    .iter()
+                    .map(|q| (PoseTarget::of(&robot.chain, q), q.as_slice()));
+                selfmodel::core::atomic_file::write_atomic(&out, |w| {
+                    selfmodel::studies::bench_ik::write_targets_csv(
+                        w,
+                        rows,
+                        &model.saved.joint_names,
+                        model.tips(),
+                    )
+                    .map_err(|e| selfmodel::Error::io(&out, e))
+                })?;
                 println!(
                     "ik targets: {n} reachable poses of {}; wrote {}",
                     model.saved.robot.label(),
@@ -184,28 +187,29 @@ fn main() -> ExitCode {
                 let answers = model.solve(&robot.chain, &targets, k, &device)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let cfg = &model.saved.config.lm;
-                let mut text = String::from("target,solution");
+                let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];
                 for c in joint_columns(&model.saved.joint_names, &taken) {
-                    text += &format!(",{c}");
+                    header += &format!(",{c}");
                 }
-                text += ",pos_err_mm,rot_err_deg,exact\n";
-                for (t, sols) in answers.iter().enumerate() {
-                    for (s, a) in sols.iter().enumerate() {
-                        text += &format!("{t},{s}");
-                        for q in &a.joints {
-                            text += &format!(",{q}");
+                // Streamed, a row an answer.
+                selfmodel::core::atomic_file::write_atomic(&out, |w| {
+                    use std::io::Write;
+                    let io = |e| selfmodel::Error::io(&out, e);
+                    writeln!(w, "{header},pos_err_mm,rot_err_deg,exact").map_err(io)?;
+                    for (t, sols) in answers.iter().enumerate() {
+                        for (s, a) in sols.iter().enumerate() {
+                            write!(w, "{t},{s}").map_err(io)?;
+                            for q in &a.joints {
+                                write!(w, ",{q}").map_err(io)?;
+                            }
+                            let (p, r) = (1000.0 * a.position_error_m, a.rotation_error_rad);
+                            writeln!(w, ",{p},{},{}", r.to_degrees(), a.exact(cfg)).map_err(io)?;
                         }
-                        text += &format!(
-                            ",{},{},{}\n",
-                            1000.0 * a.position_error_m,
-                            a.rotation_error_rad.to_degrees(),
-                            a.exact(cfg)
-                        );
                     }
-                }
+                    Ok(())
+                })?;
                 let stats = SolveStats::of(&answers, cfg, &model.saved.ranges);
-                selfmodel::core::atomic_file::write_bytes(&out, text.as_bytes())?;
                 println!(
                     "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {} threads; wrote {}",
                     stats.targets,

@@ -9,6 +9,7 @@ pub mod error;
 pub mod input_file;
 pub mod interrupt;
 pub mod json_diff;
+pub mod memory;
 pub mod preset;
 pub mod progress;
 pub mod provenance;

@@ -264,3 +264,25 @@ fn a_tip_outside_the_named_tips_is_refused() {
     // One of them is the tip the poses are read at.
     assert!(spec("finger_a").load_kinematics().is_ok());
 }
+
+/// A dataset larger than this machine can hold while it is built and saved is refused in one
+/// line before a pixel is rendered, not an abort allocating.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_dataset_beyond_the_machines_memory_is_refused_at_once() {
+    let dir = common::tempdir();
+    let out = dir.path().join("huge.npz");
+    let t0 = std::time::Instant::now();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_dataset"))
+        .args(["--samples", "5000000", "--size", "200"])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("GiB available") && err.contains("lower --samples"), "{err}");
+    assert!(t0.elapsed().as_secs_f64() < 5.0);
+    assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
+}

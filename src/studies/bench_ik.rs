@@ -125,14 +125,28 @@ pub fn targets_csv(
     names: &[String],
     tips: &[String],
 ) -> String {
+    let mut bytes = Vec::new();
+    let rows = targets.iter().cloned().zip(joints.iter().map(Vec::as_slice));
+    write_targets_csv(&mut bytes, rows, names, tips).expect("writing to memory");
+    String::from_utf8(bytes).expect("CSV text")
+}
+
+/// [`targets_csv`] row by row into `w`, each row's targets made as it is written (`ik targets`
+/// streams ten million rows this way instead of holding them).
+pub fn write_targets_csv<'a>(
+    w: &mut impl std::io::Write,
+    rows: impl Iterator<Item = (Vec<PoseTarget>, &'a [f64])>,
+    names: &[String],
+    tips: &[String],
+) -> std::io::Result<()> {
     let columns = target_columns(tips, false);
     let taken: Vec<&str> = columns.iter().map(String::as_str).collect();
-    let mut text = columns.join(",");
+    let mut header = columns.join(",");
     for c in crate::ik::pose_model::joint_columns(names, &taken) {
-        text += &format!(",{c}");
+        header += &format!(",{c}");
     }
-    text += "\n";
-    for (target, q) in targets.iter().zip(joints) {
+    writeln!(w, "{header}")?;
+    for (target, q) in rows {
         let cells: Vec<String> = target
             .iter()
             .flat_map(|t| {
@@ -143,10 +157,9 @@ pub fn targets_csv(
             .chain(q.iter().copied())
             .map(|v| v.to_string())
             .collect();
-        text += &cells.join(",");
-        text += "\n";
+        writeln!(w, "{}", cells.join(","))?;
     }
-    text
+    Ok(())
 }
 
 struct Sitting<'a> {
