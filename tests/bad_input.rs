@@ -286,3 +286,41 @@ fn a_dataset_beyond_the_machines_memory_is_refused_at_once() {
     assert!(t0.elapsed().as_secs_f64() < 5.0);
     assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
 }
+
+/// A one-link robot whose link's visual is `geometry`, written as `pkg/urdf/robot.urdf`.
+fn one_link(dir: &Path, geometry: &str) -> std::path::PathBuf {
+    let urdf = dir.join("pkg").join("urdf").join("robot.urdf");
+    std::fs::create_dir_all(urdf.parent().unwrap()).unwrap();
+    let text = format!(
+        "<robot name=\"r\"><link name=\"base\"/><link name=\"l1\"><visual><geometry>{geometry}</geometry></visual></link>\
+         <joint name=\"j1\" type=\"revolute\"><parent link=\"base\"/><child link=\"l1\"/><axis xyz=\"0 0 1\"/>\
+         <limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint></robot>"
+    );
+    std::fs::write(&urdf, text).unwrap();
+    urdf
+}
+
+/// Descriptions that were refused and are valid: a binary STL whose header begins with
+/// "solid", a `package:///` reference (three slashes); and one that was accepted and is not: a
+/// box of 1e300 m.
+#[test]
+fn descriptions_are_read_as_ros_reads_them() {
+    use selfmodel::sim::urdf_loader::load_urdf;
+    let dir = common::tempdir();
+    let meshes = dir.path().join("pkg").join("meshes");
+    std::fs::create_dir_all(&meshes).unwrap();
+    let mut stl = common::cube_stl_binary(0.1);
+    stl[..11].copy_from_slice(b"solid cube ");
+    std::fs::write(meshes.join("cube.stl"), &stl).unwrap();
+    let urdf = one_link(
+        dir.path(),
+        "<mesh filename=\"package:///pkg/meshes/cube.stl\"/>",
+    );
+    let robot = load_urdf(&urdf, nalgebra::Isometry3::identity()).unwrap();
+    assert_eq!(robot.dof(), 1);
+    let urdf = one_link(dir.path(), "<box size=\"1e300 1 1\"/>");
+    let err = load_urdf(&urdf, nalgebra::Isometry3::identity())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("at most"), "{err}");
+}

@@ -3,7 +3,9 @@
 //! images compared within a tolerance (`studies::device_equivalence`). Behind the `wgpu`
 //! feature; CI runs it on lavapipe (Mesa's software Vulkan):
 //! `cargo test --release --features wgpu --test wgpu_equivalence`; under the SPIR-V compiler,
-//! the same with `--features vulkan` (a build of its own: `CARGO_TARGET_DIR=target/vulkan`).
+//! the same with `--features vulkan` (a build of its own: `CARGO_TARGET_DIR=target/vulkan`),
+//! on a GPU's driver: lavapipe ends the process compiling cubecl's SPIR-V for shared memory
+//! (docs/performance.md), so there only the compiler test below runs.
 #![cfg(feature = "wgpu")]
 
 use selfmodel::core::device::DeviceChoice;

@@ -83,6 +83,15 @@ impl LoadedSelfModel {
         }
         let q = Tensor::<2>::from_data(TensorData::new(poses.to_vec(), [n, inputs]), &self.device);
         let (s, d) = self.renderer.render(q);
+        // The same number of pixels in another shape would be a reshaped image, not an error.
+        let [h, w] = self.saved.image;
+        let drawn = s.dims();
+        if drawn[2..] != [h, w] {
+            return Err(Error::Config(format!(
+                "model.json says {h}x{w} images, its weights draw {}x{}; run the self-model again to save it",
+                drawn[2], drawn[3]
+            )));
+        }
         let host = |t: Tensor<4>| t.into_data().iter::<f32>().collect::<Vec<f32>>();
         Ok((host(s), d.map(host)))
     }

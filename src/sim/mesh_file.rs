@@ -29,7 +29,13 @@ pub fn load_mesh(path: &Path, scale: Vector3<f64>, pose: &Isometry3<f64>) -> Res
         )));
     }
     let read = |p: &Path| read_regular(p, "mesh", MAX_MESH_BYTES);
-    let bytes = read(path).map_err(|e| bad(format!("cannot read mesh: {e}")))?;
+    let mut bytes = read(path).map_err(|e| bad(format!("cannot read mesh: {e}")))?;
+    if ext == "stl" && binary_stl_saying_solid(&bytes) {
+        // A binary STL whose free-form 80-byte header begins with "solid" (some exporters
+        // write it) is read as ASCII by its first word: the header says nothing else, so
+        // another first word makes it read as what its size says it is.
+        bytes[..5].copy_from_slice(b"mesh ");
+    }
     if ext == "dae"
         && let Some(unit) = collada_unit(&bytes)
         && !(unit.is_finite() && unit > 0.0)
@@ -112,4 +118,15 @@ fn obj_face_index_zero(bytes: &[u8]) -> Option<usize> {
             .any(|v| v.split('/').next().is_some_and(|n| n.trim() == "0"))
             .then_some(i + 1)
     })
+}
+
+/// Whether `bytes` are a binary STL whose header begins with "solid": 84 bytes of header and
+/// count, then exactly 50 bytes a triangle (an ASCII STL of that exact size would have to end
+/// inside a number).
+fn binary_stl_saying_solid(bytes: &[u8]) -> bool {
+    if !bytes.starts_with(b"solid") || bytes.len() < 84 {
+        return false;
+    }
+    let count = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as u64;
+    count > 0 && 84 + 50 * count == bytes.len() as u64
 }

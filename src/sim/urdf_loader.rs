@@ -371,12 +371,14 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
             }
             let pose = pose_from_xyz_rpy(origin.xyz.0, origin.rpy.0);
             let size = |v: f64, what: &str| {
-                if v.is_finite() && v > 0.0 {
+                if v.is_finite() && v > 0.0 && v <= MAX_VALUE {
                     Ok(v)
                 } else {
                     Err(urdf_err(
                         element.clone(),
-                        format!("{what} must be a positive number, got {v}"),
+                        format!(
+                            "{what} must be a positive number of at most {MAX_VALUE} m, got {v}"
+                        ),
                     ))
                 }
             };
@@ -449,6 +451,8 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
 /// Where a URDF mesh reference points, relative to the URDF's folder `dir`.
 pub fn resolve_mesh_path(dir: &Path, filename: &str) -> PathBuf {
     if let Some(rest) = filename.strip_prefix("package://") {
+        // `package:///NAME/...` (three slashes, as some packages write it) is the same place.
+        let rest = rest.trim_start_matches('/');
         let (package, inner) = rest.split_once('/').unwrap_or((rest, ""));
         let dir = std::path::absolute(dir).unwrap_or_else(|_| dir.to_path_buf());
         let root = dir
