@@ -282,7 +282,10 @@ fn a_dataset_beyond_the_machines_memory_is_refused_at_once() {
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success());
     assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(err.contains("GiB available") && err.contains("lower --samples"), "{err}");
+    assert!(
+        err.contains("GiB available") && err.contains("lower --samples"),
+        "{err}"
+    );
     assert!(t0.elapsed().as_secs_f64() < 5.0);
     assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
 }

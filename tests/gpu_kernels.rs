@@ -270,12 +270,29 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
             Some(b.clone()),
             options.clone(),
         );
+        // In inference (no autodiff): the forward pass alone.
+        let (xi, wi, bi) = (x.clone().inner(), w.clone().inner(), b.clone().inner());
+        let inferred =
+            selfmodel::kernels::cube::convolution::conv_transpose2d(&xi, &wi, &bi, &options)
+                .expect("on our kernels");
+        let di = relative(inferred, burns.clone().inner());
         let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
         eprintln!(
-            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)"
+            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
         );
-        assert!(d.iter().all(|&e| e < 1e-5), "k{k} s{s} p{p}: {d:?}");
+        assert!(
+            d.iter().all(|&e| e < 1e-5) && di < 1e-5,
+            "k{k} s{s} p{p}: {d:?} {di}"
+        );
     }
+}
+
+/// The largest difference of `a` and `b` relative to `b`'s largest value.
+fn relative(a: Tensor<4>, b: Tensor<4>) -> f32 {
+    let v = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
+    let b = v(b);
+    let scale = b[0].iter().fold(1.0f32, |m, v| m.max(v.abs()));
+    largest_difference(&v(a), &b) / scale
 }
 
 /// A convolution (the NeuroKin head's 3x3 with padding 1 and its 1x1; a strided 3x3) with its
@@ -295,10 +312,17 @@ fn convolution_gradients_on_our_kernels_are_burns() {
             .expect("on our kernels");
         let burns =
             burn::tensor::module::conv2d(x.clone(), w.clone(), Some(b.clone()), options.clone());
+        let (xi, wi, bi) = (x.clone().inner(), w.clone().inner(), b.clone().inner());
+        let inferred = selfmodel::kernels::cube::convolution::conv2d(&xi, &wi, &bi, &options)
+            .expect("on our kernels");
+        let di = relative(inferred, burns.clone().inner());
         let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
         eprintln!(
-            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?} (relative)"
+            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
         );
-        assert!(d.iter().all(|&e| e < 1e-5), "k{k} s{s} p{p}: {d:?}");
+        assert!(
+            d.iter().all(|&e| e < 1e-5) && di < 1e-5,
+            "k{k} s{s} p{p}: {d:?} {di}"
+        );
     }
 }

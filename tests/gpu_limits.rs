@@ -15,6 +15,8 @@ use selfmodel::core::device::{DeviceChoice, select, with_seed};
 fn a_product_beyond_65535_workgroups_runs_under_the_fullest_autotune() {
     let mut config = CubeClRuntimeConfig::default();
     config.autotune.level = cubecl::config::autotune::AutotuneLevel::Full;
+    // Tuned here, not read from an earlier run's cache (which would skip the naive kernel).
+    config.autotune.disable_cache = true;
     assert!(
         CubeClRuntimeConfig::try_set(config),
         "the configuration was read before this test set it"

@@ -135,10 +135,27 @@ pub fn resize_matrix(input: usize, output: usize) -> Vec<f32> {
 /// every call.
 pub fn resize_matmul(x: burn::tensor::Tensor<4>, size: [usize; 2]) -> burn::tensor::Tensor<4> {
     let [b, c, h, w] = x.dims();
+    // A batched product launches a workgroup column per matrix in the batch on a GPU, and a
+    // dispatch takes at most 65,535 in a dimension: more images than that (4,096 of 16
+    // channels) are resized a slice at a time (burn's naive product, which autotune tries,
+    // failed there: `Cube count too big (4, 4, 65536)`).
+    if b * c > MAX_BATCHED && b > 1 {
+        let per = (MAX_BATCHED / c).max(1);
+        let parts = x
+            .split(per, 0)
+            .into_iter()
+            .map(|p| resize_matmul(p, size))
+            .collect();
+        return burn::tensor::Tensor::cat(parts, 0);
+    }
     let (rh, rw_t) = resize_matrices(&x.device(), [h, w], size);
     let rows = x.matmul(rw_t.unsqueeze::<4>().expand([b, c, w, size[1]]));
     rh.unsqueeze::<4>().expand([b, c, size[0], h]).matmul(rows)
 }
+
+/// The most matrices one batched product of [`resize_matmul`] multiplies: a GPU dispatch's
+/// limit of workgroups in a dimension.
+const MAX_BATCHED: usize = 65_535;
 
 /// `R_h` (`[size[0], h]`) and `R_wᵀ` (`[w, size[1]]`) on `device`, made once per device and
 /// shape and kept for the process (a decoder resizes between the same shapes at every step).

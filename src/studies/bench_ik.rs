@@ -126,7 +126,10 @@ pub fn targets_csv(
     tips: &[String],
 ) -> String {
     let mut bytes = Vec::new();
-    let rows = targets.iter().cloned().zip(joints.iter().map(Vec::as_slice));
+    let rows = targets
+        .iter()
+        .cloned()
+        .zip(joints.iter().map(Vec::as_slice));
     write_targets_csv(&mut bytes, rows, names, tips).expect("writing to memory");
     String::from_utf8(bytes).expect("CSV text")
 }

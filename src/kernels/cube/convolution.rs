@@ -9,9 +9,11 @@
 //! | transposed convolution | `xᵀ W`, col2im with the bias | im2col of `dy`, `dx = cols · Wᵀ`, `dW = Σₙ xₙ · colsₙ`, the bias by channel |
 //!
 //! Square kernels, equal strides and paddings, no dilation, groups or output padding; a layer
-//! of another shape, or whose columns would not fit one of the device's buffers, takes burn's
-//! own (`None` from [`conv2d`] and [`conv_transpose2d`]). burn's are the slow references,
-//! compared in `tests/gpu_kernels.rs`.
+//! of another shape takes burn's own (`None` from [`conv2d`] and [`conv_transpose2d`]). A
+//! batch whose columns would not fit one of the device's buffers, or whose products would need
+//! more than 65,535 workgroups in a dimension, runs in slices ([`by_slices`]), in inference as
+//! in training: burn's own layers failed there (`Cube count too big`). burn's are the slow
+//! references, compared in `tests/gpu_kernels.rs`.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;
@@ -45,14 +47,29 @@ impl Geometry {
     }
 }
 
-/// Whether the layer's columns, `n·h·w·q` floats, fit one of `x`'s device buffers.
-fn columns_fit(x: &Tensor<4>, n_hw_q: usize) -> bool {
-    let bytes = (n_hw_q * 4) as u64;
-    super::max_buffer_bytes(&x.clone().inner()).is_some_and(|max| bytes <= max)
+/// The most samples one slice of a layer takes: its columns (`per_sample` floats a sample)
+/// fit one of `x`'s device buffers (128 MiB on lavapipe), and no dispatch of its products has
+/// more than 65,535 workgroups in a dimension (the batch is one).
+fn slice_size(x: &Tensor<4>, per_sample: usize) -> usize {
+    const MOST_WORKGROUPS: usize = 65_535;
+    let max = super::max_buffer_bytes(&x.clone().inner()).unwrap_or(u64::MAX);
+    let fit = (max / (per_sample.max(1) as u64 * 4)) as usize;
+    fit.clamp(1, MOST_WORKGROUPS)
 }
 
-/// A convolution with bias on a GPU in training, on our kernels (see the module's table);
-/// `None` where `x` is elsewhere or the layer is not one they take.
+/// `layer` over `x` in slices of at most `per` samples along the batch, joined (one slice
+/// where the batch fits): the layer's result whatever the batch, in training too (burn
+/// differentiates the split and the join).
+fn by_slices(x: &Tensor<4>, per: usize, layer: impl Fn(Tensor<4>) -> Tensor<4>) -> Tensor<4> {
+    if x.dims()[0] <= per {
+        return layer(x.clone());
+    }
+    Tensor::cat(x.clone().split(per, 0).into_iter().map(layer).collect(), 0)
+}
+
+/// A convolution with bias on a GPU, on our kernels (see the module's table): in training one
+/// autodiff operation, in inference its forward pass; `None` where `x` is elsewhere or the
+/// layer is not one they take.
 pub fn conv2d(
     x: &Tensor<4>,
     weight: &Tensor<4>,
@@ -68,26 +85,36 @@ pub fn conv2d(
         && p2 == p3
         && options.dilation == [1, 1]
         && options.groups == 1;
-    let geometry = Geometry {
+    if !plain || !super::is_lazy(&x.clone().inner()) {
+        return None;
+    }
+    let g = Geometry {
         kernel: kh,
         stride: options.stride[0],
         padding: p0,
     };
-    let [n, _, h, w] = x.dims();
-    let [oh, ow] = geometry.conv_out([h, w]);
-    let fits = geometry.pointwise() || columns_fit(x, n * oh * ow * c_in * kh * kw);
-    (plain && x.device().is_autodiff() && fits && super::is_lazy(&x.clone().inner())).then(|| {
-        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv2d_train(
-            x.clone().into_dispatch(),
-            weight.clone().into_dispatch(),
-            bias.clone().into_dispatch(),
-            options.clone(),
-        ))
-    })
+    let [_, _, h, w] = x.dims();
+    let [oh, ow] = g.conv_out([h, w]);
+    let per_sample = if g.pointwise() {
+        0
+    } else {
+        oh * ow * c_in * kh * kw
+    };
+    let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
+    let training = x.device().is_autodiff();
+    Some(by_slices(x, slice_size(x, per_sample), |x| {
+        let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
+        Tensor::from_dispatch(if training {
+            <Dispatch as GpuKernelOps>::conv2d_train(x, w, b, options.clone())
+        } else {
+            conv2d_forward::<Dispatch>(x, w, b, g).0
+        })
+    }))
 }
 
-/// A transposed convolution with bias on a GPU in training, on our kernels (see the module's
-/// table); `None` where `x` is elsewhere or the layer is not one they take.
+/// A transposed convolution with bias on a GPU, on our kernels (see the module's table): in
+/// training one autodiff operation, in inference its forward pass; `None` where `x` is
+/// elsewhere or the layer is not one they take.
 pub fn conv_transpose2d(
     x: &Tensor<4>,
     weight: &Tensor<4>,
@@ -101,18 +128,74 @@ pub fn conv_transpose2d(
         && options.padding_out == [0, 0]
         && options.dilation == [1, 1]
         && options.groups == 1;
-    // The columns `[N, Hi·Wi, c_out·k·k]` must fit one of the device's buffers (128 MiB on
-    // lavapipe); a batch whose do not takes burn's backward pass.
-    let [n, _, h, w] = x.dims();
-    let fits = columns_fit(x, n * h * w * c_out * kh * kw);
-    (plain && x.device().is_autodiff() && fits && super::is_lazy(&x.clone().inner())).then(|| {
-        Tensor::from_dispatch(<Dispatch as GpuKernelOps>::conv_transpose2d_train(
-            x.clone().into_dispatch(),
-            weight.clone().into_dispatch(),
-            bias.clone().into_dispatch(),
-            options.clone(),
-        ))
-    })
+    if !plain || !super::is_lazy(&x.clone().inner()) {
+        return None;
+    }
+    // The columns `[N, Hi·Wi, c_out·k·k]`.
+    let [_, _, h, w] = x.dims();
+    let per = slice_size(x, h * w * c_out * kh * kw);
+    let (stride, padding) = (options.stride[0], options.padding[0]);
+    let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
+    let training = x.device().is_autodiff();
+    Some(by_slices(x, per, |x| {
+        let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
+        Tensor::from_dispatch(if training {
+            <Dispatch as GpuKernelOps>::conv_transpose2d_train(x, w, b, options.clone())
+        } else {
+            conv_transpose2d_forward::<Dispatch>(x, w, b, stride, padding)
+        })
+    }))
+}
+
+/// A convolution's forward pass (see the module's table) on any backend with our kernels:
+/// the output, and the columns read transposed `[N, q, h·w]` (for a 1x1 kernel, `x` itself).
+fn conv2d_forward<B: Backend + GpuKernelOps>(
+    x: FloatTensor<B>,
+    w: FloatTensor<B>,
+    b: FloatTensor<B>,
+    g: Geometry,
+) -> (FloatTensor<B>, FloatTensor<B>) {
+    let [n, c_in, h, wd] = x.shape().dims::<4>();
+    let [c_out, _, k, _] = w.shape().dims::<4>();
+    let [oh, ow] = g.conv_out([h, wd]);
+    let cols_t = if g.pointwise() {
+        B::float_reshape(x, Shape::new([n, c_in, h * wd]))
+    } else {
+        let cols = B::im2col(x, [oh, ow], k, g.stride, g.padding);
+        B::float_swap_dims(cols, 1, 2)
+    };
+    let wm = B::float_reshape(w, Shape::new([1, c_out, c_in * k * k]));
+    let y = B::float_matmul(wm, cols_t.clone());
+    // Shaped as the image before the bias: the sum then fuses with what follows (the ReLU),
+    // where a reshape after it would stand between them.
+    let y = B::float_reshape(y, Shape::new([n, c_out, oh, ow]));
+    let y = B::float_add(y, B::float_reshape(b, Shape::new([1, c_out, 1, 1])));
+    (y, cols_t)
+}
+
+/// A transposed convolution's forward pass (see the module's table) on any backend with our
+/// kernels: the columns `xᵀ W` (one batched product, `x` read transposed in place), then
+/// col2im with the bias.
+fn conv_transpose2d_forward<B: Backend + GpuKernelOps>(
+    x: FloatTensor<B>,
+    w: FloatTensor<B>,
+    b: FloatTensor<B>,
+    stride: usize,
+    padding: usize,
+) -> FloatTensor<B> {
+    let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
+    let [_, c_out, k, _] = w.shape().dims::<4>();
+    let out_h = (in_h - 1) * stride + k - 2 * padding;
+    let out_w = (in_w - 1) * stride + k - 2 * padding;
+    let xt = B::float_swap_dims(
+        B::float_reshape(x, Shape::new([n, c_in, in_h * in_w])),
+        1,
+        2,
+    );
+    let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
+    let cols = B::float_matmul(xt, w);
+    let out = [n, c_out, out_h, out_w];
+    B::col2im(cols, b, true, [in_h, in_w], out, k, stride, padding)
 }
 
 /// `GpuKernelOps::conv2d_train` on autodiff: the forward pass on the inner backend, and its
@@ -178,25 +261,7 @@ pub(super) fn conv2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
         stride: options.stride[0],
         padding: options.padding[0].0,
     };
-    // The columns read transposed, then one batched product with the bias added.
-    let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
-        let [n, c_in, h, wd] = x.shape().dims::<4>();
-        let [c_out, _, k, _] = w.shape().dims::<4>();
-        let [oh, ow] = g.conv_out([h, wd]);
-        let cols_t = if g.pointwise() {
-            B::float_reshape(x, Shape::new([n, c_in, h * wd]))
-        } else {
-            let cols = B::im2col(x, [oh, ow], k, g.stride, g.padding);
-            B::float_swap_dims(cols, 1, 2)
-        };
-        let wm = B::float_reshape(w, Shape::new([1, c_out, c_in * k * k]));
-        let y = B::float_matmul(wm, cols_t.clone());
-        // Shaped as the image before the bias: the sum then fuses with what follows (the
-        // ReLU), where a reshape after it would stand between them.
-        let y = B::float_reshape(y, Shape::new([n, c_out, oh, ow]));
-        let y = B::float_add(y, B::float_reshape(b, Shape::new([1, c_out, 1, 1])));
-        (y, cols_t)
-    };
+    let forward = |x, w, b| conv2d_forward::<B>(x, w, b, g);
     let x_shape = x.shape().dims::<4>();
     match Conv
         .prepare::<C>([x.node(), weight.node(), bias.node()])
@@ -274,22 +339,7 @@ pub(super) fn conv_transpose2d_train<B: Backend + GpuKernelOps, C: CheckpointStr
     }
 
     let (stride, padding) = (options.stride[0], options.padding[0]);
-    // The columns xᵀ W (one batched product, x read transposed in place), then col2im.
-    let forward = |x: FloatTensor<B>, w: FloatTensor<B>, b: FloatTensor<B>| {
-        let [n, c_in, in_h, in_w] = x.shape().dims::<4>();
-        let [_, c_out, k, _] = w.shape().dims::<4>();
-        let out_h = (in_h - 1) * stride + k - 2 * padding;
-        let out_w = (in_w - 1) * stride + k - 2 * padding;
-        let xt = B::float_swap_dims(
-            B::float_reshape(x, Shape::new([n, c_in, in_h * in_w])),
-            1,
-            2,
-        );
-        let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
-        let cols = B::float_matmul(xt, w);
-        let out = [n, c_out, out_h, out_w];
-        B::col2im(cols, b, true, [in_h, in_w], out, k, stride, padding)
-    };
+    let forward = |x, w, b| conv_transpose2d_forward::<B>(x, w, b, stride, padding);
     match ConvTranspose
         .prepare::<C>([x.node(), weight.node(), bias.node()])
         .compute_bound()
