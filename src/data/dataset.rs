@@ -903,6 +903,8 @@ pub fn build_and_save(
     out: &Path,
     progress: bool,
 ) -> Result<(Dataset, BuildReport)> {
+    // The configuration's own limits first, then what this machine holds.
+    cfg.validate()?;
     check_memory(cfg)?;
     let bar = progress
         .then(|| crate::core::progress::progress_bar(cfg.samples as u64, "render", "images"));
