@@ -11,9 +11,39 @@ use crate::sim::robot::Robot;
 pub use crate::sim::robots::{BuiltinRobot, shared_arm_urdf};
 use crate::sim::urdf_loader::{GeometryKind, pose_from_xyz_rpy};
 
+/// A panic on a GPU's device thread (cubecl's `DSU-*` threads: a kernel that could not be
+/// launched, a lost device) ends the process with one line and exit 1: the thread that waits
+/// for that device would otherwise wait for ever.
+fn end_on_device_failure() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let device_thread = std::thread::current()
+                .name()
+                .is_some_and(|n| n.starts_with("DSU-"));
+            if !device_thread {
+                return previous(info);
+            }
+            let msg = info
+                .payload()
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            let msg = msg.split_whitespace().collect::<Vec<_>>().join(" ");
+            eprintln!(
+                "error: the GPU failed ({msg}); rerun with CUBECL_AUTOTUNE_LEVEL=minimal or a smaller --batch, and report it"
+            );
+            std::process::exit(1);
+        }));
+    });
+}
+
 /// Run a binary's body: on error print one line (`error: <file>: <what>`) and exit 1.
 pub fn run_main(body: impl FnOnce() -> Result<()>) -> ExitCode {
     crate::core::interrupt::install();
+    end_on_device_failure();
     crate::core::denormals::flush_everywhere();
     match body() {
         Ok(()) => ExitCode::SUCCESS,
