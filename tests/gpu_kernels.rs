@@ -275,16 +275,34 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
         let inferred =
             selfmodel::kernels::cube::convolution::conv_transpose2d(&xi, &wi, &bi, &options)
                 .expect("on our kernels");
-        let di = relative(inferred, burns.clone().inner());
-        let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
-        eprintln!(
-            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
-        );
-        assert!(
-            d.iter().all(|&e| e < 1e-5) && di < 1e-5,
-            "k{k} s{s} p{p}: {d:?} {di}"
+        assert_layer_is_burns(
+            &format!("k{k} s{s} p{p}"),
+            &tdev,
+            (&x, &w, &b),
+            [ours, inferred],
+            burns,
         );
     }
+}
+
+/// Our layer (`[training, inference]` outputs) is burn's (`burns`, tracked) within 1e-5
+/// relative: the output, its gradients, and the inference pass.
+fn assert_layer_is_burns(
+    label: &str,
+    tdev: &burn::tensor::Device,
+    inputs: (&Tensor<4>, &Tensor<4>, &Tensor<1>),
+    [ours, inferred]: [Tensor<4>; 2],
+    burns: Tensor<4>,
+) {
+    let di = relative(inferred, burns.clone().inner());
+    let d = layer_differences(tdev, inputs, ours, burns);
+    eprintln!(
+        "{label}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
+    );
+    assert!(
+        d.iter().all(|&e| e < 1e-5) && di < 1e-5,
+        "{label}: {d:?} {di}"
+    );
 }
 
 /// The largest difference of `a` and `b` relative to `b`'s largest value.
@@ -315,14 +333,12 @@ fn convolution_gradients_on_our_kernels_are_burns() {
         let (xi, wi, bi) = (x.clone().inner(), w.clone().inner(), b.clone().inner());
         let inferred = selfmodel::kernels::cube::convolution::conv2d(&xi, &wi, &bi, &options)
             .expect("on our kernels");
-        let di = relative(inferred, burns.clone().inner());
-        let d = layer_differences(&tdev, (&x, &w, &b), ours, burns);
-        eprintln!(
-            "k{k} s{s} p{p}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
-        );
-        assert!(
-            d.iter().all(|&e| e < 1e-5) && di < 1e-5,
-            "k{k} s{s} p{p}: {d:?} {di}"
+        assert_layer_is_burns(
+            &format!("k{k} s{s} p{p}"),
+            &tdev,
+            (&x, &w, &b),
+            [ours, inferred],
+            burns,
         );
     }
 }
