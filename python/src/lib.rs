@@ -17,6 +17,18 @@ use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
 use selfmodel::sim::urdf_loader::GeometryKind;
 
+/// `f`, a method's body, with any panic inside it (a bug: the library's errors are values)
+/// turned into a `RuntimeError` of one line that says so, never a `PanicException` that
+/// ends a script.
+fn guarded<T>(f: impl FnOnce() -> PyResult<T>) -> PyResult<T> {
+    selfmodel::core::input_file::catch_panic(f).unwrap_or_else(|panic| {
+        let panic = panic.split_whitespace().collect::<Vec<_>>().join(" ");
+        Err(pyo3::exceptions::PyRuntimeError::new_err(format!(
+            "selfmodel failed inside ({panic}): a bug, please report it with the call that made it"
+        )))
+    })
+}
+
 /// The library's error as Python's `ValueError` (one line).
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -151,39 +163,47 @@ impl PyRobot {
         group: Option<String>,
         srdf: Option<PathBuf>,
     ) -> PyResult<Self> {
-        let geometry = match geometry {
-            "visual" => GeometryKind::Visual,
-            "collision" => GeometryKind::Collision,
-            "none" => GeometryKind::None,
-            other => {
-                return Err(value_error(format!(
-                    "geometry \"{other}\": choose visual, collision or none"
-                )));
-            }
-        };
-        let joints = JointGroup::from_args(
-            joints.as_ref().map(|n| n.0.as_slice()),
-            tips.as_ref().map(|n| n.0.as_slice()),
-            group.as_deref(),
-            srdf.as_deref(),
-            Some(&path),
-        )
-        .map_err(value_error)?;
-        let spec = RobotSpec::Urdf {
-            path,
-            base_xyz: [0.0; 3],
-            base_rpy: [0.0; 3],
-            tip,
-            geometry,
-            joints,
-        };
-        let robot = py.allow_threads(|| spec.load()).map_err(value_error)?;
-        spec.require_movable(
-            &robot,
-            "forward kinematics, a self-model or inverse kinematics",
-        )
-        .map_err(value_error)?;
-        Ok(PyRobot { robot })
+        guarded(|| {
+            let geometry = match geometry {
+                "visual" => GeometryKind::Visual,
+                "collision" => GeometryKind::Collision,
+                "none" => GeometryKind::None,
+                other => {
+                    return Err(value_error(format!(
+                        "geometry \"{other}\": choose visual, collision or none"
+                    )));
+                }
+            };
+            let joints = JointGroup::from_args(
+                joints.as_ref().map(|n| n.0.as_slice()),
+                tips.as_ref().map(|n| n.0.as_slice()),
+                group.as_deref(),
+                srdf.as_deref(),
+                Some(&path),
+            )
+            .map_err(value_error)?;
+            let spec = RobotSpec::Urdf {
+                path,
+                base_xyz: [0.0; 3],
+                base_rpy: [0.0; 3],
+                tip,
+                geometry,
+                joints,
+            };
+            let robot = py.allow_threads(|| spec.load()).map_err(value_error)?;
+            spec.require_movable(
+                &robot,
+                "forward kinematics, a self-model or inverse kinematics",
+            )
+            .map_err(value_error)?;
+            Ok(PyRobot { robot })
+        })
+    }
+
+    /// For the tests of the boundary: a panic, as a bug would make one.
+    #[staticmethod]
+    fn _panic_for_test() -> PyResult<()> {
+        guarded(|| panic!("a deliberate panic"))
     }
 
     /// The number of joints.
@@ -223,55 +243,61 @@ impl PyRobot {
         q: Matrix,
         link: Option<String>,
     ) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        let chain = &self.robot.chain;
-        let dof = chain.dof();
-        let (n, v) = rows(q, dof, "q")?;
-        let link = match link {
-            None => None,
-            Some(name) => Some(chain.links.iter().position(|l| *l == name).ok_or_else(|| {
-                value_error(format!(
-                    "\"{name}\" is not a link of this robot; its links: {}",
-                    chain.links.join(", ")
-                ))
-            })?),
-        };
-        let out: Vec<f64> = py.allow_threads(|| {
-            use rayon::prelude::*;
-            v.par_chunks(dof.max(1))
-                .take(n)
-                .flat_map_iter(|q| {
-                    let pose = match link {
-                        Some(l) => chain.link_frames(q)[l],
-                        None => chain.tip_poses(q)[0],
-                    };
-                    let m = pose.to_homogeneous();
-                    (0..16).map(move |i| m[(i / 4, i % 4)])
-                })
-                .collect()
-        });
-        Ok(numpy::ndarray::Array3::from_shape_vec((n, 4, 4), out)
-            .expect("n x 4 x 4")
-            .into_pyarray(py))
+        guarded(|| {
+            let chain = &self.robot.chain;
+            let dof = chain.dof();
+            let (n, v) = rows(q, dof, "q")?;
+            let link = match link {
+                None => None,
+                Some(name) => {
+                    Some(chain.links.iter().position(|l| *l == name).ok_or_else(|| {
+                        value_error(format!(
+                            "\"{name}\" is not a link of this robot; its links: {}",
+                            chain.links.join(", ")
+                        ))
+                    })?)
+                }
+            };
+            let out: Vec<f64> = py.allow_threads(|| {
+                use rayon::prelude::*;
+                v.par_chunks(dof.max(1))
+                    .take(n)
+                    .flat_map_iter(|q| {
+                        let pose = match link {
+                            Some(l) => chain.link_frames(q)[l],
+                            None => chain.tip_poses(q)[0],
+                        };
+                        let m = pose.to_homogeneous();
+                        (0..16).map(move |i| m[(i / 4, i % 4)])
+                    })
+                    .collect()
+            });
+            Ok(numpy::ndarray::Array3::from_shape_vec((n, 4, 4), out)
+                .expect("n x 4 x 4")
+                .into_pyarray(py))
+        })
     }
 
     /// The tip's pose Jacobian (N, 6, dof) at `q` (N, dof): linear rows, then angular
     /// (world frame).
     fn jacobian<'py>(&self, py: Python<'py>, q: Matrix) -> PyResult<Bound<'py, PyArray3<f64>>> {
-        let chain = &self.robot.chain;
-        let dof = chain.dof();
-        let (n, v) = rows(q, dof, "q")?;
-        let out: Vec<f64> = py.allow_threads(|| {
-            v.chunks(dof.max(1))
-                .take(n)
-                .flat_map(|q| {
-                    let j = chain.pose_jacobian(q);
-                    (0..6 * dof).map(move |i| j[(i / dof, i % dof)])
-                })
-                .collect()
-        });
-        Ok(numpy::ndarray::Array3::from_shape_vec((n, 6, dof), out)
-            .expect("n x 6 x dof")
-            .into_pyarray(py))
+        guarded(|| {
+            let chain = &self.robot.chain;
+            let dof = chain.dof();
+            let (n, v) = rows(q, dof, "q")?;
+            let out: Vec<f64> = py.allow_threads(|| {
+                v.chunks(dof.max(1))
+                    .take(n)
+                    .flat_map(|q| {
+                        let j = chain.pose_jacobian(q);
+                        (0..6 * dof).map(move |i| j[(i / dof, i % dof)])
+                    })
+                    .collect()
+            });
+            Ok(numpy::ndarray::Array3::from_shape_vec((n, 6, dof), out)
+                .expect("n x 6 x dof")
+                .into_pyarray(py))
+        })
     }
 
     /// Silhouettes (N, size, size) uint8 (255 where the robot is) and depth (N, size, size)
@@ -288,50 +314,52 @@ impl PyRobot {
         view: Option<[f64; 3]>,
         fov: Option<f64>,
     ) -> PyResult<(Bound<'py, PyArray3<u8>>, Bound<'py, PyArray3<f32>>)> {
-        use selfmodel::Preset;
-        use selfmodel::data::dataset::{DatasetConfig, Framing, swept_points};
-        use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
-        let robot = &self.robot;
-        let dof = robot.dof();
-        let (n, v) = rows(q, dof, "q")?;
-        let size = count(size, "size", 1, 2048)?;
-        if (n as u64) * (size * size) as u64 > 1 << 30 {
-            return Err(value_error(format!(
-                "{n} images of {size}x{size}: size must be 1 to 2048 and all images at most 2^30 pixels"
-            )));
-        }
-        let si: Vec<Vec<f64>> = v.chunks(dof.max(1)).take(n).map(<[f64]>::to_vec).collect();
-        let framing = Framing::default();
-        let mut camera = DatasetConfig::paper().camera;
-        (camera.width, camera.height) = (size, size);
-        camera.fov_deg = fov.unwrap_or(camera.fov_deg);
-        camera.validate().map_err(value_error)?;
-        let camera = camera
-            .framing(
-                &swept_points(robot, &si),
-                view.unwrap_or(framing.view),
-                framing.margin,
-            )
-            .map_err(value_error)?;
-        let frames = py.allow_threads(|| {
-            RayCaster::new(robot, camera, RenderOptions::default()).render_batch(&si, None)
-        });
-        let (mut silhouettes, mut depth) = (
-            Vec::with_capacity(n * size * size),
-            Vec::with_capacity(n * size * size),
-        );
-        for f in frames {
-            silhouettes.extend_from_slice(&f.silhouette);
-            depth.extend_from_slice(&f.depth);
-        }
-        Ok((
-            numpy::ndarray::Array3::from_shape_vec((n, size, size), silhouettes)
-                .expect("n x size x size")
-                .into_pyarray(py),
-            numpy::ndarray::Array3::from_shape_vec((n, size, size), depth)
-                .expect("n x size x size")
-                .into_pyarray(py),
-        ))
+        guarded(|| {
+            use selfmodel::Preset;
+            use selfmodel::data::dataset::{DatasetConfig, Framing, swept_points};
+            use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
+            let robot = &self.robot;
+            let dof = robot.dof();
+            let (n, v) = rows(q, dof, "q")?;
+            let size = count(size, "size", 1, 2048)?;
+            if (n as u64) * (size * size) as u64 > 1 << 30 {
+                return Err(value_error(format!(
+                    "{n} images of {size}x{size}: size must be 1 to 2048 and all images at most 2^30 pixels"
+                )));
+            }
+            let si: Vec<Vec<f64>> = v.chunks(dof.max(1)).take(n).map(<[f64]>::to_vec).collect();
+            let framing = Framing::default();
+            let mut camera = DatasetConfig::paper().camera;
+            (camera.width, camera.height) = (size, size);
+            camera.fov_deg = fov.unwrap_or(camera.fov_deg);
+            camera.validate().map_err(value_error)?;
+            let camera = camera
+                .framing(
+                    &swept_points(robot, &si),
+                    view.unwrap_or(framing.view),
+                    framing.margin,
+                )
+                .map_err(value_error)?;
+            let frames = py.allow_threads(|| {
+                RayCaster::new(robot, camera, RenderOptions::default()).render_batch(&si, None)
+            });
+            let (mut silhouettes, mut depth) = (
+                Vec::with_capacity(n * size * size),
+                Vec::with_capacity(n * size * size),
+            );
+            for f in frames {
+                silhouettes.extend_from_slice(&f.silhouette);
+                depth.extend_from_slice(&f.depth);
+            }
+            Ok((
+                numpy::ndarray::Array3::from_shape_vec((n, size, size), silhouettes)
+                    .expect("n x size x size")
+                    .into_pyarray(py),
+                numpy::ndarray::Array3::from_shape_vec((n, size, size), depth)
+                    .expect("n x size x size")
+                    .into_pyarray(py),
+            ))
+        })
     }
 
     fn __repr__(&self) -> String {
@@ -358,17 +386,19 @@ impl PyIkSolver {
     /// (refused, with why, when they do not match).
     #[staticmethod]
     fn load(py: Python<'_>, model_dir: PathBuf) -> PyResult<Self> {
-        py.allow_threads(|| {
-            let device =
-                selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-            let (model, robot) = PoseModel::load_with_robot(&model_dir, &device)?;
-            Ok::<_, selfmodel::Error>(PyIkSolver {
-                model,
-                robot,
-                device,
+        guarded(|| {
+            py.allow_threads(|| {
+                let device =
+                    selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
+                let (model, robot) = PoseModel::load_with_robot(&model_dir, &device)?;
+                Ok::<_, selfmodel::Error>(PyIkSolver {
+                    model,
+                    robot,
+                    device,
+                })
             })
+            .map_err(value_error)
         })
-        .map_err(value_error)
     }
 
     /// The joints of an answer, in order.
@@ -394,106 +424,112 @@ impl PyIkSolver {
         targets: Matrix,
         k: i64,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
-        let k = count(k, "k", 1, 1000)?;
-        let width = self.target_columns().len();
-        let (n, v) = rows(targets, width, "targets")?;
-        let parsed: Vec<Vec<PoseTarget>> = v
-            .chunks(width)
-            .take(n)
-            .enumerate()
-            .map(|(i, row)| {
-                target_from_values(row, self.model.position_only(), self.model.tips())
-                    .map_err(|e| value_error(format!("targets row {i}: {e}")))
-            })
-            .collect::<PyResult<_>>()?;
-        // Ctrl-C reaches Python between blocks of targets (well under a second apart).
-        let raised = std::sync::Mutex::new(None);
-        let lm = self.model.saved.config.lm.clone();
-        let answers = py.allow_threads(|| {
-            let stop = || interrupted(&raised);
-            self.model
-                .solve_until(&self.robot.chain, &parsed, k, &lm, &self.device, &stop)
-        });
-        if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
-            return Err(e);
-        }
-        let answers = answers.map_err(value_error)?;
-        let dof = self.model.dof();
-        let lm = &self.model.saved.config.lm;
-        let (mut joints, mut pos, mut rot, mut exact) = (
-            Vec::with_capacity(n * k * dof),
-            Vec::with_capacity(n * k),
-            Vec::with_capacity(n * k),
-            Vec::with_capacity(n * k),
-        );
-        for a in answers.iter().flatten() {
-            joints.extend_from_slice(&a.joints);
-            pos.push(1000.0 * a.position_error_m);
-            rot.push(a.rotation_error_rad.to_degrees());
-            exact.push(a.exact(lm));
-        }
-        let out = pyo3::types::PyDict::new(py);
-        let shape2 = |v: Vec<f64>| {
-            numpy::ndarray::Array2::from_shape_vec((n, k), v)
-                .expect("n x k")
-                .into_pyarray(py)
-        };
-        out.set_item(
-            "joints",
-            numpy::ndarray::Array3::from_shape_vec((n, k, dof), joints)
-                .expect("n x k x dof")
-                .into_pyarray(py),
-        )?;
-        out.set_item("pos_err_mm", shape2(pos))?;
-        out.set_item("rot_err_deg", shape2(rot))?;
-        out.set_item(
-            "exact",
-            numpy::ndarray::Array2::from_shape_vec((n, k), exact)
-                .expect("n x k")
-                .into_pyarray(py),
-        )?;
-        Ok(out)
+        guarded(|| {
+            let k = count(k, "k", 1, 1000)?;
+            let width = self.target_columns().len();
+            let (n, v) = rows(targets, width, "targets")?;
+            let parsed: Vec<Vec<PoseTarget>> = v
+                .chunks(width)
+                .take(n)
+                .enumerate()
+                .map(|(i, row)| {
+                    target_from_values(row, self.model.position_only(), self.model.tips())
+                        .map_err(|e| value_error(format!("targets row {i}: {e}")))
+                })
+                .collect::<PyResult<_>>()?;
+            // Ctrl-C reaches Python between blocks of targets (well under a second apart).
+            let raised = std::sync::Mutex::new(None);
+            let lm = self.model.saved.config.lm.clone();
+            let answers = py.allow_threads(|| {
+                let stop = || interrupted(&raised);
+                self.model
+                    .solve_until(&self.robot.chain, &parsed, k, &lm, &self.device, &stop)
+            });
+            if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
+                return Err(e);
+            }
+            let answers = answers.map_err(value_error)?;
+            let dof = self.model.dof();
+            let lm = &self.model.saved.config.lm;
+            let (mut joints, mut pos, mut rot, mut exact) = (
+                Vec::with_capacity(n * k * dof),
+                Vec::with_capacity(n * k),
+                Vec::with_capacity(n * k),
+                Vec::with_capacity(n * k),
+            );
+            for a in answers.iter().flatten() {
+                joints.extend_from_slice(&a.joints);
+                pos.push(1000.0 * a.position_error_m);
+                rot.push(a.rotation_error_rad.to_degrees());
+                exact.push(a.exact(lm));
+            }
+            let out = pyo3::types::PyDict::new(py);
+            let shape2 = |v: Vec<f64>| {
+                numpy::ndarray::Array2::from_shape_vec((n, k), v)
+                    .expect("n x k")
+                    .into_pyarray(py)
+            };
+            out.set_item(
+                "joints",
+                numpy::ndarray::Array3::from_shape_vec((n, k, dof), joints)
+                    .expect("n x k x dof")
+                    .into_pyarray(py),
+            )?;
+            out.set_item("pos_err_mm", shape2(pos))?;
+            out.set_item("rot_err_deg", shape2(rot))?;
+            out.set_item(
+                "exact",
+                numpy::ndarray::Array2::from_shape_vec((n, k), exact)
+                    .expect("n x k")
+                    .into_pyarray(py),
+            )?;
+            Ok(out)
+        })
     }
 
     /// One target (a sequence of len(target_columns) numbers): the joints of one answer, for
     /// a control loop.
     fn solve_one(&self, py: Python<'_>, target: Vec<f64>) -> PyResult<Vec<f64>> {
-        let row = target_from_values(&target, self.model.position_only(), self.model.tips())
-            .map_err(|e| value_error(format!("target: {e}")))?;
-        let mut a = py
-            .allow_threads(|| {
-                self.model.solve(
-                    &self.robot.chain,
-                    std::slice::from_ref(&row),
-                    1,
-                    &self.device,
-                )
-            })
-            .map_err(value_error)?;
-        Ok(std::mem::take(&mut a[0][0].joints))
+        guarded(|| {
+            let row = target_from_values(&target, self.model.position_only(), self.model.tips())
+                .map_err(|e| value_error(format!("target: {e}")))?;
+            let mut a = py
+                .allow_threads(|| {
+                    self.model.solve(
+                        &self.robot.chain,
+                        std::slice::from_ref(&row),
+                        1,
+                        &self.device,
+                    )
+                })
+                .map_err(value_error)?;
+            Ok(std::mem::take(&mut a[0][0].joints))
+        })
     }
 
     /// For the benchmark (python/bench): the median seconds of the solver's own work on one
     /// target, timed inside Rust over `repeats` calls, to subtract from a Python call's time.
     fn _solve_one_seconds(&self, target: Vec<f64>, repeats: usize) -> PyResult<f64> {
-        let row = target_from_values(&target, self.model.position_only(), self.model.tips())
-            .map_err(|e| value_error(format!("target: {e}")))?;
-        let mut times: Vec<f64> = (0..repeats.max(1))
-            .map(|_| -> selfmodel::Result<f64> {
-                let t0 = std::time::Instant::now();
-                let a = self.model.solve(
-                    &self.robot.chain,
-                    std::slice::from_ref(&row),
-                    1,
-                    &self.device,
-                )?;
-                std::hint::black_box(a);
-                Ok(t0.elapsed().as_secs_f64())
-            })
-            .collect::<selfmodel::Result<_>>()
-            .map_err(value_error)?;
-        times.sort_by(f64::total_cmp);
-        Ok(times[times.len() / 2])
+        guarded(|| {
+            let row = target_from_values(&target, self.model.position_only(), self.model.tips())
+                .map_err(|e| value_error(format!("target: {e}")))?;
+            let mut times: Vec<f64> = (0..repeats.max(1))
+                .map(|_| -> selfmodel::Result<f64> {
+                    let t0 = std::time::Instant::now();
+                    let a = self.model.solve(
+                        &self.robot.chain,
+                        std::slice::from_ref(&row),
+                        1,
+                        &self.device,
+                    )?;
+                    std::hint::black_box(a);
+                    Ok(t0.elapsed().as_secs_f64())
+                })
+                .collect::<selfmodel::Result<_>>()
+                .map_err(value_error)?;
+            times.sort_by(f64::total_cmp);
+            Ok(times[times.len() / 2])
+        })
     }
 }
 
@@ -510,13 +546,15 @@ impl PySelfModel {
     /// Refused, with why, when its weights were changed or its kind keeps none.
     #[staticmethod]
     fn load(py: Python<'_>, model_dir: PathBuf) -> PyResult<Self> {
-        py.allow_threads(|| {
-            let device =
-                selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-            selfmodel::self_models::loading::load(&model_dir, &device)
+        guarded(|| {
+            py.allow_threads(|| {
+                let device =
+                    selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
+                selfmodel::self_models::loading::load(&model_dir, &device)
+            })
+            .map(|model| PySelfModel { model })
+            .map_err(value_error)
         })
-        .map(|model| PySelfModel { model })
-        .map_err(value_error)
     }
 
     /// Its name in the results ("NeuroKin", "ResNeuroKin-D", ...).
@@ -547,8 +585,10 @@ impl PySelfModel {
     /// Everything its model.json says, as a dict (configuration, data, test scores, revision).
     #[getter]
     fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let text = serde_json::to_string(&self.model.saved).map_err(value_error)?;
-        py.import("json")?.call_method1("loads", (text,))
+        guarded(|| {
+            let text = serde_json::to_string(&self.model.saved).map_err(value_error)?;
+            py.import("json")?.call_method1("loads", (text,))
+        })
     }
 
     /// Joint values q (N, inputs), degrees (metres for a prismatic joint) -> silhouette
@@ -559,23 +599,25 @@ impl PySelfModel {
         py: Python<'py>,
         q: Matrix,
     ) -> PyResult<(Bound<'py, PyArray3<f32>>, Option<Bound<'py, PyArray3<f32>>>)> {
-        let (n, v) = rows(q, self.model.saved.inputs, "q")?;
-        let [h, w] = self.model.saved.image;
-        if (n as u64) * (h * w) as u64 > 1 << 30 {
-            return Err(value_error(format!(
-                "q: {n} images of {h}x{w}, more than the 2^30 pixels one call returns; call it in batches"
-            )));
-        }
-        let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
-        let (s, d) = py
-            .allow_threads(|| self.model.predict(&v, n))
-            .map_err(value_error)?;
-        let shape = |v: Vec<f32>| {
-            numpy::ndarray::Array3::from_shape_vec((n, h, w), v)
-                .expect("n x h x w")
-                .into_pyarray(py)
-        };
-        Ok((shape(s), d.map(shape)))
+        guarded(|| {
+            let (n, v) = rows(q, self.model.saved.inputs, "q")?;
+            let [h, w] = self.model.saved.image;
+            if (n as u64) * (h * w) as u64 > 1 << 30 {
+                return Err(value_error(format!(
+                    "q: {n} images of {h}x{w}, more than the 2^30 pixels one call returns; call it in batches"
+                )));
+            }
+            let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+            let (s, d) = py
+                .allow_threads(|| self.model.predict(&v, n))
+                .map_err(value_error)?;
+            let shape = |v: Vec<f32>| {
+                numpy::ndarray::Array3::from_shape_vec((n, h, w), v)
+                    .expect("n x h x w")
+                    .into_pyarray(py)
+            };
+            Ok((shape(s), d.map(shape)))
+        })
     }
 
     fn __repr__(&self) -> String {

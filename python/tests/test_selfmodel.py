@@ -139,6 +139,10 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
         assert "\n" not in str(e.value), str(e.value)
     with pytest.raises(TypeError):
         robot.fk("not an array")
+    # A panic (a bug) reaches Python as a RuntimeError of one line, not a PanicException.
+    with pytest.raises(RuntimeError, match="a bug") as e:
+        selfmodel.Robot._panic_for_test()
+    assert "\n" not in str(e.value)
     with pytest.raises(TypeError, match="numbers"):
         robot.fk(np.zeros((1, 6), dtype=complex))
     for bad in [lambda: ik.solve(np.zeros((1, 7)), k=-1), lambda: robot.render(np.zeros((1, 6)), size=-5)]:
