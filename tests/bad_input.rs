@@ -337,3 +337,19 @@ fn descriptions_are_read_as_ros_reads_them() {
         .to_string();
     assert!(err.contains("at most"), "{err}");
 }
+
+/// A joint vector of one joint is refused by the learned inverse kinematics in words, not by
+/// printing its configuration's internals.
+#[test]
+fn a_one_joint_flow_is_refused_in_words() {
+    use selfmodel::ik::flow::{FlowConfig, FlowIk};
+    let device = select(DeviceChoice::Cpu).unwrap();
+    let Err(err) = FlowIk::conditioned(&FlowConfig::standard(), 1, 7, &device, 0) else {
+        panic!("a one-joint flow was built");
+    };
+    let err = err.to_string();
+    assert!(
+        err.contains("at least 2 joints") && err.contains("--tip") && !err.contains("couplings:"),
+        "{err}"
+    );
+}

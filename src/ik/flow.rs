@@ -130,9 +130,15 @@ impl FlowIk {
         seed: u64,
     ) -> Result<Self> {
         let condition = target + 1;
-        if dof < 2 || cfg.couplings == 0 || cfg.hidden.contains(&0) {
+        if dof < 2 {
             return Err(Error::Config(format!(
-                "flow: needs at least 2 joints, a coupling and positive widths ({cfg:?})"
+                "the learned inverse kinematics needs at least 2 joints and this joint vector has {dof}: choose a tip below more joints (--tip), or more joints (--joints, --group)"
+            )));
+        }
+        if cfg.couplings == 0 || cfg.hidden.contains(&0) {
+            return Err(Error::Config(format!(
+                "the flow's configuration has {} couplings of widths {:?}: it needs at least one coupling, every width positive",
+                cfg.couplings, cfg.hidden
             )));
         }
         let keep = dof / 2;

@@ -121,13 +121,18 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
         ));
     }
     let Some(expected) = &saved.weights_fnv else {
-        return Err(Error::data(
-            &json,
+        // A kind whose weights load always writes their hash: without one the file was edited.
+        let msg = if loader(&saved.kind).is_some() {
+            format!(
+                "has no \"weights_fnv\" (the hash of model.bpk its run wrote): it was edited or damaged; {again}"
+            )
+        } else {
             format!(
                 "{} saves no weights that load: it answers from its training set (a lookup table); every other self-model loads",
                 saved.name
-            ),
-        ));
+            )
+        };
+        return Err(Error::data(&json, msg));
     };
     let camera_inputs = saved.inputs.checked_sub(saved.joint_names.len());
     if !saved.joint_names.is_empty() && !matches!(camera_inputs, Some(0 | 9)) {
