@@ -212,8 +212,9 @@ fn ctrl_c_stops_a_dataset_within_seconds_and_leaves_nothing() {
         .unwrap();
     std::thread::sleep(std::time::Duration::from_secs(3));
     let sent = std::time::Instant::now();
-    let kill = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+    // The shell's own `kill` (a machine without procps has no /bin/kill).
+    let kill = std::process::Command::new("sh")
+        .args(["-c", &format!("kill -INT {}", child.id())])
         .status()
         .unwrap();
     assert!(kill.success());
