@@ -287,7 +287,9 @@ impl Dataset {
         angles: Vec<Vec<f64>>,
         progress: Option<&ProgressBar>,
     ) -> Result<Self> {
+        // The configuration's own limits first, then what this machine holds.
         cfg.validate()?;
+        check_memory(cfg)?;
         if angles.len() != cfg.samples {
             return Err(Error::Config(format!(
                 "{} joint vectors for {} samples",
@@ -903,9 +905,6 @@ pub fn build_and_save(
     out: &Path,
     progress: bool,
 ) -> Result<(Dataset, BuildReport)> {
-    // The configuration's own limits first, then what this machine holds.
-    cfg.validate()?;
-    check_memory(cfg)?;
     let bar = progress
         .then(|| crate::core::progress::progress_bar(cfg.samples as u64, "render", "images"));
     let start = std::time::Instant::now();

@@ -47,20 +47,19 @@ impl Geometry {
     }
 }
 
-/// The most samples one slice of a layer takes: its columns (`per_sample` floats a sample)
-/// fit one of `x`'s device buffers (128 MiB on lavapipe), and no dispatch of its products has
-/// more than 65,535 workgroups in a dimension (the batch is one).
-fn slice_size(x: &Tensor<4>, per_sample: usize) -> usize {
+/// `layer` over `x` in slices along the batch, joined (one slice where the batch fits): the
+/// layer's result whatever the batch, in training too (burn differentiates the split and the
+/// join). A slice's columns (`per_sample` floats a sample) fit one of `x`'s device buffers
+/// (128 MiB on lavapipe), and no dispatch of its products has more than 65,535 workgroups in
+/// a dimension (the batch is one).
+fn by_slices(
+    x: &Tensor<4>,
+    per_sample: usize,
+    layer: impl Fn(Tensor<4>) -> Tensor<4>,
+) -> Tensor<4> {
     const MOST_WORKGROUPS: usize = 65_535;
     let max = super::max_buffer_bytes(&x.clone().inner()).unwrap_or(u64::MAX);
-    let fit = (max / (per_sample.max(1) as u64 * 4)) as usize;
-    fit.clamp(1, MOST_WORKGROUPS)
-}
-
-/// `layer` over `x` in slices of at most `per` samples along the batch, joined (one slice
-/// where the batch fits): the layer's result whatever the batch, in training too (burn
-/// differentiates the split and the join).
-fn by_slices(x: &Tensor<4>, per: usize, layer: impl Fn(Tensor<4>) -> Tensor<4>) -> Tensor<4> {
+    let per = ((max / (per_sample.max(1) as u64 * 4)) as usize).clamp(1, MOST_WORKGROUPS);
     if x.dims()[0] <= per {
         return layer(x.clone());
     }
@@ -102,7 +101,7 @@ pub fn conv2d(
     };
     let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
     let training = x.device().is_autodiff();
-    Some(by_slices(x, slice_size(x, per_sample), |x| {
+    Some(by_slices(x, per_sample, |x| {
         let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
         Tensor::from_dispatch(if training {
             <Dispatch as GpuKernelOps>::conv2d_train(x, w, b, options.clone())
@@ -133,11 +132,11 @@ pub fn conv_transpose2d(
     }
     // The columns `[N, Hi·Wi, c_out·k·k]`.
     let [_, _, h, w] = x.dims();
-    let per = slice_size(x, h * w * c_out * kh * kw);
+    let per_sample = h * w * c_out * kh * kw;
     let (stride, padding) = (options.stride[0], options.padding[0]);
     let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
     let training = x.device().is_autodiff();
-    Some(by_slices(x, per, |x| {
+    Some(by_slices(x, per_sample, |x| {
         let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
         Tensor::from_dispatch(if training {
             <Dispatch as GpuKernelOps>::conv_transpose2d_train(x, w, b, options.clone())
