@@ -30,9 +30,14 @@ fn a_product_beyond_65535_workgroups_runs_under_the_fullest_autotune() {
             Tensor::<2>::random([k, n], Distribution::Default, &device),
         )
     });
-    let c: Vec<f32> = a.clone().matmul(b.clone()).into_data().to_vec().unwrap();
-    let a: Vec<f32> = a.into_data().to_vec().unwrap();
-    let b: Vec<f32> = b.into_data().to_vec().unwrap();
+    let c: Vec<f32> = a
+        .clone()
+        .matmul(b.clone())
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    let a: Vec<f32> = a.into_data().try_to_vec::<f32>().unwrap();
+    let b: Vec<f32> = b.into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(c.len(), m * n);
     // Rows across the whole range, the last workgroups' included.
     for row in (0..m).step_by(4099).chain([m - 1]) {

@@ -103,7 +103,7 @@ pub fn with_seed<T>(device: &Device, seed: u64, draw: impl FnOnce() -> T) -> T {
 /// The parameters are drawn on the CPU (`flex`, when compiled in) and then moved to `device`:
 /// each backend has its own generator, and this way a model trained on a GPU starts from the
 /// very numbers it starts from on the CPU (`--device wgpu` is compared with the CPU from the
-/// same seed in `tests/wgpu_equivalence.rs`).
+/// same seed in `tests/gpu/equivalence.rs`).
 pub fn seeded<M: burn::module::Module>(
     device: &Device,
     seed: u64,

@@ -1,5 +1,5 @@
 //! A self-model trained from the same seed on the CPU (`flex`) and on a GPU (`wgpu`): its
-//! losses step by step and its rendered images, compared. `tests/wgpu_equivalence.rs` asserts
+//! losses step by step and its rendered images, compared. `tests/gpu/equivalence.rs` asserts
 //! tolerances on lavapipe; `gpu_check` reports the same comparison on a real GPU.
 
 use std::path::Path;

@@ -197,9 +197,8 @@ pub fn neurokin_step_counts(
     Vec<crate::eval::device_counts::DeviceCounts>,
     crate::train::trainer::TrainLog,
 )> {
-    use crate::core::preset::Preset;
     use crate::eval::device_counts;
-    use crate::self_models::neurokin::{NeuroKin, NeuroKinConfig};
+    use crate::self_models::neurokin::NeuroKin;
     use crate::train::trainer::{TrainConfig, TrainSet, Trainer, Watch, autodiff_device};
     use burn::tensor::{Distribution, Tensor};
     if !device_counts::install() {
@@ -209,7 +208,9 @@ pub fn neurokin_step_counts(
     }
     let device = crate::core::device::select(DeviceChoice::Wgpu)?;
     let tdev = autodiff_device(&device, 0);
-    let mut cfg = NeuroKinConfig::preset(preset)?;
+    // The run's model (its image the preset's camera's): the model `device_equivalence`
+    // trains, so that on lavapipe the two share their compiled and tuned kernels.
+    let mut cfg = crate::self_models::neurokin::neurokin_run(preset)?.model;
     cfg.dof = 4;
     let n = 4 * batch;
     let set = crate::core::device::with_seed(&tdev, 1, || TrainSet {

@@ -8,7 +8,7 @@
 //! A workgroup a channel; the layer's tensors `[N, C, ...]` of any strides (a convolution's
 //! output is a channels-last view: read as it is, not copied).
 //! The slow reference is the default body of [`super::extension::GpuKernelOps`]'s methods,
-//! burn's own operations; `tests/gpu_kernels.rs` compares the two.
+//! burn's own operations; `tests/gpu/kernels.rs` compares the two.
 
 use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;

@@ -13,7 +13,7 @@
 //! batch whose columns would not fit one of the device's buffers, or whose products would need
 //! more than 65,535 workgroups in a dimension, runs in slices ([`by_slices`]), in inference as
 //! in training: burn's own layers failed there (`Cube count too big`). burn's are the slow
-//! references, compared in `tests/gpu_kernels.rs`.
+//! references, compared in `tests/gpu/kernels.rs`.
 
 use burn::backend::autodiff::checkpoint::base::Checkpointer;
 use burn::backend::autodiff::checkpoint::strategy::CheckpointStrategy;

@@ -171,7 +171,7 @@ pub trait GpuKernelOps: Backend {
         padding: usize,
     ) -> FloatTensor<Self> {
         // Only the CubeCL kernel: the layers' references are burn's own convolutions and
-        // their backward passes, which `tests/gpu_kernels.rs` compares them with.
+        // their backward passes, which `tests/gpu/kernels.rs` compares them with.
         let _ = (t, grid, kernel, stride, padding);
         unreachable!("im2col runs on CubeCL devices only")
     }

@@ -11,7 +11,7 @@
 //!
 //! `kernels::cube::convolution` puts them in burn's autodiff graph; the slow references are
 //! burn's own `conv2d` and `conv_transpose2d` and their backward passes, which
-//! `tests/gpu_kernels.rs` compares them with.
+//! `tests/gpu/kernels.rs` compares them with.
 
 use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;

@@ -3,7 +3,7 @@
 //! their sum over the count) and one backward (`(σ(z) - y) g / n`), where burn's composition
 //! takes one fused launch, a reduction a dimension and three launches backward.
 //!
-//! The slow reference is `train::losses::bce_with_logits_composed`; `tests/gpu_kernels.rs`
+//! The slow reference is `train::losses::bce_with_logits_composed`; `tests/gpu/kernels.rs`
 //! compares the two.
 
 use burn::tensor::DType;

@@ -18,7 +18,7 @@
 //!   the same way, so it runs in order with the rest and nothing waits for the device.
 //!
 //! Each kernel has its slow reference in burn's own operations beside its caller, and
-//! `tests/gpu_kernels.rs` compares them on lavapipe.
+//! `tests/gpu/kernels.rs` compares them on lavapipe.
 
 pub mod batch_norm;
 pub mod convolution;

@@ -7,7 +7,7 @@
 //! sequence's lengths; every tensor is contiguous (the host side makes sure).
 //!
 //! The slow references are burn's own operations: `train::adam` composes the same step from
-//! them, and `tests/gpu_kernels.rs` compares the two on lavapipe.
+//! them, and `tests/gpu/kernels.rs` compares the two on lavapipe.
 
 use cubecl::prelude::*;
 

@@ -1,6 +1,7 @@
-//! Our GPU kernels (`kernels::cube`) against burn's own operations, on wgpu (lavapipe in CI):
-//! behind the `wgpu` feature, `cargo test --release --features wgpu --test gpu_kernels`.
-#![cfg(feature = "wgpu")]
+//! Our GPU kernels (`kernels::cube`) on wgpu (lavapipe in CI) against burn's own operations:
+//! the convolutions against burn's on the CPU (no kernel of burn's compiled and tuned for
+//! them on lavapipe, minutes there), Adam, batch norm and the loss against burn's on the same
+//! device. Part of `tests/gpu.rs`.
 
 use burn::module::{Module, ModuleVisitor, Param};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
@@ -56,9 +57,24 @@ fn copy(model: &NeuroKin, grads: &GradientsParams) -> GradientsParams {
     c.1
 }
 
-fn grads(model: &NeuroKin, x: &Tensor<2>, y: &Tensor<4>) -> GradientsParams {
-    let loss = (model.forward(x.clone()) - y.clone()).square().mean();
-    GradientsParams::from_grads(loss.backward(), model)
+/// A gradient for every parameter of `model`, drawn from N(0, 0.1^2) (seeded): what Adam
+/// is given, without a forward and backward pass to compute it (the optimiser is what is
+/// tested; a pass would compile and tune the model's products on lavapipe for minutes).
+fn random_grads(model: &NeuroKin, seed: u64) -> GradientsParams {
+    struct Draw(GradientsParams);
+    impl ModuleVisitor for Draw {
+        fn visit_float<const D: usize>(&mut self, p: &Param<Tensor<D>>) {
+            let v = p.val().inner();
+            let g = Tensor::<D>::random(v.shape(), Distribution::Normal(0.0, 0.1), &v.device());
+            self.0.register(p.id, g);
+        }
+    }
+    let device = model.devices()[0].clone();
+    with_seed(&device, seed, || {
+        let mut d = Draw(GradientsParams::new());
+        model.visit(&mut d);
+        d.0
+    })
 }
 
 /// Adam over every parameter in a few launches (with the global-norm clipping inside)
@@ -70,18 +86,12 @@ fn the_fused_adam_step_is_burns() {
     let tdev = autodiff_device(&device, 0);
     let cfg = NeuroKinConfig::quick();
     let model = cfg.init(&tdev, 3).unwrap();
-    let (x, y) = with_seed(&tdev, 5, || {
-        (
-            Tensor::<2>::random([8, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
-            Tensor::<4>::random([8, 1, 32, 32], Distribution::Default, &tdev),
-        )
-    });
     let (mut fused, mut reference) = (model.clone(), model);
     let (mut opt_fused, mut opt_reference) = (adam::adam(), burns_adam());
     let max_norm = 0.05;
     for step in 0..3 {
         // The same gradients for both (the parameters differ by rounding only).
-        let mut g_ref = grads(&reference, &x, &y);
+        let mut g_ref = random_grads(&reference, 5 + step);
         let g_fused = copy(&reference, &g_ref);
         let norm = clip_global_norm(&reference, &mut g_ref, max_norm).unwrap();
         let norm: f32 = norm.into_scalar();
@@ -98,7 +108,7 @@ fn the_fused_adam_step_is_burns() {
     // The state of the fused steps is burn's: it loads into burn's Adam.
     let record = opt_fused.to_record();
     let mut opt_loaded = burns_adam().load_record(record);
-    let g = grads(&reference, &x, &y);
+    let g = random_grads(&reference, 9);
     let g2 = copy(&reference, &g);
     let a = opt_loaded.step(1e-3, reference.clone(), g);
     let b = opt_reference.step(1e-3, reference, g2);
@@ -210,16 +220,33 @@ fn the_logit_cross_entropy_on_our_kernels_is_burns() {
     }
 }
 
-/// A layer's output and its `x`, weight and bias gradients on our kernels against burn's, the
-/// largest differences relative to burn's largest value, each.
-fn layer_differences(
-    tdev: &burn::tensor::Device,
-    (x, w, b): (&Tensor<4>, &Tensor<4>, &Tensor<1>),
-    ours: Tensor<4>,
-    burns: Tensor<4>,
-) -> [f32; 4] {
-    let weights = Tensor::<4>::random(burns.dims(), Distribution::Default, tdev);
-    let g_ours = (ours.clone() * weights.clone()).sum().backward();
+/// The reference device: the CPU (burn's `flex` backend), tracked. Burn's own operations run
+/// there, so no kernel of burn's is compiled and tuned on lavapipe for the comparison.
+fn cpu() -> burn::tensor::Device {
+    autodiff_device(&select(DeviceChoice::Cpu).unwrap(), 0)
+}
+
+/// The GPU: wgpu, tracked.
+fn gpu() -> burn::tensor::Device {
+    autodiff_device(&select(DeviceChoice::Wgpu).unwrap(), 0)
+}
+
+/// A tracked copy of `t` on `device`.
+fn on<const D: usize>(t: &Tensor<D>, device: &burn::tensor::Device) -> Tensor<D> {
+    Tensor::from_data(t.to_data(), device).require_grad()
+}
+
+/// A layer's input, weight and bias on the CPU and their copies on the GPU.
+type Layer = (Tensor<4>, Tensor<4>, Tensor<1>);
+
+/// A layer's output and its `x`, weight and bias gradients on our kernels (`ours`, from the
+/// GPU copies `g`) against burn's (`burns`, from the CPU inputs `c`), the largest differences
+/// relative to burn's largest value, each.
+fn layer_differences(g: &Layer, c: &Layer, ours: Tensor<4>, burns: Tensor<4>) -> [f32; 4] {
+    let weights = Tensor::<4>::random(burns.dims(), Distribution::Default, &burns.device());
+    let g_ours = (ours.clone() * on(&weights, &ours.device()))
+        .sum()
+        .backward();
     let g_burns = (burns.clone() * weights).sum().backward();
     let v = |t: Tensor<4>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
     let v1 = |t: Tensor<1>| vec![t.into_data().try_to_vec::<f32>().unwrap()];
@@ -229,73 +256,85 @@ fn layer_differences(
     };
     [
         rel(v(ours), v(burns)),
-        rel(v(x.grad(&g_ours).unwrap()), v(x.grad(&g_burns).unwrap())),
-        rel(v(w.grad(&g_ours).unwrap()), v(w.grad(&g_burns).unwrap())),
-        rel(v1(b.grad(&g_ours).unwrap()), v1(b.grad(&g_burns).unwrap())),
+        rel(
+            v(g.0.grad(&g_ours).unwrap()),
+            v(c.0.grad(&g_burns).unwrap()),
+        ),
+        rel(
+            v(g.1.grad(&g_ours).unwrap()),
+            v(c.1.grad(&g_burns).unwrap()),
+        ),
+        rel(
+            v1(g.2.grad(&g_ours).unwrap()),
+            v1(c.2.grad(&g_burns).unwrap()),
+        ),
     ]
 }
 
-/// A layer's input, weight `w_shape` and bias, tracked, seeded.
+/// A layer's input, weight `w_shape` and bias, tracked, seeded, on the CPU, and their copies
+/// on the GPU: `(gpu, cpu)`.
 fn layer_inputs(
-    tdev: &burn::tensor::Device,
     seed: u64,
     x_shape: [usize; 4],
     w_shape: [usize; 4],
     bias: usize,
-) -> (Tensor<4>, Tensor<4>, Tensor<1>) {
-    with_seed(tdev, seed, || {
+) -> (Layer, Layer) {
+    let cpu = cpu();
+    let c = with_seed(&cpu, seed, || {
         (
-            Tensor::<4>::random(x_shape, Distribution::Default, tdev).require_grad(),
-            Tensor::<4>::random(w_shape, Distribution::Default, tdev).require_grad(),
-            Tensor::<1>::random([bias], Distribution::Default, tdev).require_grad(),
+            Tensor::<4>::random(x_shape, Distribution::Default, &cpu).require_grad(),
+            Tensor::<4>::random(w_shape, Distribution::Default, &cpu).require_grad(),
+            Tensor::<1>::random([bias], Distribution::Default, &cpu).require_grad(),
         )
-    })
+    });
+    let gpu = gpu();
+    ((on(&c.0, &gpu), on(&c.1, &gpu), on(&c.2, &gpu)), c)
 }
 
 /// A transposed convolution (the decoders' upsampling layers: k4 s2 p1 and k3 s1 p2) with its
-/// gradients from our im2col and two matrix products, against burn's `conv_transpose2d`.
+/// gradients from our im2col and two matrix products on the GPU, against burn's
+/// `conv_transpose2d` on the CPU.
 #[test]
 fn transposed_convolution_gradients_on_our_kernels_are_burns() {
     use burn::tensor::ops::ConvTransposeOptions;
-    let device = select(DeviceChoice::Wgpu).unwrap();
-    let tdev = autodiff_device(&device, 0);
+    use selfmodel::kernels::cube::convolution::conv_transpose2d;
     for (i, (k, s, p, hw)) in [(4, 2, 1, 5), (3, 1, 2, 9)].into_iter().enumerate() {
-        let (x, w, b) = layer_inputs(&tdev, 20 + i as u64, [3, 6, hw, hw + 1], [6, 4, k, k], 4);
+        let (g, c) = layer_inputs(20 + i as u64, [3, 6, hw, hw + 1], [6, 4, k, k], 4);
         let options = ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1);
-        let ours = selfmodel::kernels::cube::convolution::conv_transpose2d(&x, &w, &b, &options)
-            .expect("on our kernels");
+        let ours = conv_transpose2d(&g.0, &g.1, &g.2, &options).expect("on our kernels");
         let burns = burn::tensor::module::conv_transpose2d(
-            x.clone(),
-            w.clone(),
-            Some(b.clone()),
+            c.0.clone(),
+            c.1.clone(),
+            Some(c.2.clone()),
             options.clone(),
         );
         // In inference (no autodiff): the forward pass alone.
-        let (xi, wi, bi) = (x.clone().inner(), w.clone().inner(), b.clone().inner());
-        let inferred =
-            selfmodel::kernels::cube::convolution::conv_transpose2d(&xi, &wi, &bi, &options)
-                .expect("on our kernels");
+        let inferred = conv_transpose2d(
+            &g.0.clone().inner(),
+            &g.1.clone().inner(),
+            &g.2.clone().inner(),
+            &options,
+        )
+        .expect("on our kernels");
         assert_layer_is_burns(
             &format!("k{k} s{s} p{p}"),
-            &tdev,
-            (&x, &w, &b),
+            (&g, &c),
             [ours, inferred],
             burns,
         );
     }
 }
 
-/// Our layer (`[training, inference]` outputs) is burn's (`burns`, tracked) within 1e-5
-/// relative: the output, its gradients, and the inference pass.
+/// Our layer (`[training, inference]` outputs on the GPU) is burn's (`burns`, tracked, on the
+/// CPU) within 1e-5 relative: the output, its gradients, and the inference pass.
 fn assert_layer_is_burns(
     label: &str,
-    tdev: &burn::tensor::Device,
-    inputs: (&Tensor<4>, &Tensor<4>, &Tensor<1>),
+    (g, c): (&Layer, &Layer),
     [ours, inferred]: [Tensor<4>; 2],
     burns: Tensor<4>,
 ) {
     let di = relative(inferred, burns.clone().inner());
-    let d = layer_differences(tdev, inputs, ours, burns);
+    let d = layer_differences(g, c, ours, burns);
     eprintln!(
         "{label}: output, x, weight and bias gradients differ by {d:?}, inference by {di:.1e} (relative)"
     );
@@ -314,29 +353,35 @@ fn relative(a: Tensor<4>, b: Tensor<4>) -> f32 {
 }
 
 /// A convolution (the NeuroKin head's 3x3 with padding 1 and its 1x1; a strided 3x3) with its
-/// gradients from our im2col, matrix products and col2im, against burn's `conv2d`.
+/// gradients from our im2col, matrix products and col2im on the GPU, against burn's `conv2d`
+/// on the CPU.
 #[test]
 fn convolution_gradients_on_our_kernels_are_burns() {
     use burn::tensor::ops::ConvOptions;
-    let device = select(DeviceChoice::Wgpu).unwrap();
-    let tdev = autodiff_device(&device, 0);
+    use selfmodel::kernels::cube::convolution::conv2d;
     for (i, (k, s, p, hw)) in [(3, 1, 1, 7), (1, 1, 0, 6), (3, 2, 1, 9)]
         .into_iter()
         .enumerate()
     {
-        let (x, w, b) = layer_inputs(&tdev, 30 + i as u64, [3, 5, hw, hw + 2], [4, 5, k, k], 4);
+        let (g, c) = layer_inputs(30 + i as u64, [3, 5, hw, hw + 2], [4, 5, k, k], 4);
         let options = ConvOptions::new([s, s], [p, p], [1, 1], 1);
-        let ours = selfmodel::kernels::cube::convolution::conv2d(&x, &w, &b, &options)
-            .expect("on our kernels");
-        let burns =
-            burn::tensor::module::conv2d(x.clone(), w.clone(), Some(b.clone()), options.clone());
-        let (xi, wi, bi) = (x.clone().inner(), w.clone().inner(), b.clone().inner());
-        let inferred = selfmodel::kernels::cube::convolution::conv2d(&xi, &wi, &bi, &options)
-            .expect("on our kernels");
+        let ours = conv2d(&g.0, &g.1, &g.2, &options).expect("on our kernels");
+        let burns = burn::tensor::module::conv2d(
+            c.0.clone(),
+            c.1.clone(),
+            Some(c.2.clone()),
+            options.clone(),
+        );
+        let inferred = conv2d(
+            &g.0.clone().inner(),
+            &g.1.clone().inner(),
+            &g.2.clone().inner(),
+            &options,
+        )
+        .expect("on our kernels");
         assert_layer_is_burns(
             &format!("k{k} s{s} p{p}"),
-            &tdev,
-            (&x, &w, &b),
+            (&g, &c),
             [ours, inferred],
             burns,
         );

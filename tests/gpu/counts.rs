@@ -3,10 +3,8 @@
 //! in order, each with the operations it ran for), host reads and uploads per step (`eval::device_counts`, through
 //! `studies::gpu_check::neurokin_step_counts`, which `gpu_check` reports on a GPU). A host
 //! read inside a step makes the step wait for the device, so the losses are read only at log
-//! intervals: this test fails when a read appears in any other step. Behind the `wgpu`
-//! feature: `cargo test --release --features wgpu --test gpu_counts -- --nocapture` prints
-//! the counts.
-#![cfg(feature = "wgpu")]
+//! intervals: this test fails when a read appears in any other step. Part of `tests/gpu.rs`:
+//! `cargo test --release --features wgpu --test gpu -- counts --nocapture` prints the counts.
 
 use selfmodel::studies::gpu_check::neurokin_step_counts;
 
@@ -17,10 +15,10 @@ const MOST_LAUNCHES: u64 = 100;
 #[test]
 fn a_neurokin_training_step_reads_nothing_back() {
     // The paper preset's step at the quick preset's size: input noise, clipping; batches of
-    // 8, an epoch every 4 steps.
+    // 16 (the quick preset's, as the equivalence test trains), an epoch every 4 steps.
     let (log_every, steps) = (4, 12);
     selfmodel::eval::device_counts::log_launches();
-    let (per_step, log) = neurokin_step_counts("quick", 8, steps, log_every).unwrap();
+    let (per_step, log) = neurokin_step_counts("quick", 16, steps, log_every).unwrap();
     if std::env::var_os("SELFMODEL_PRINT_LAUNCHES").is_some() {
         // The last step's launches in order.
         let all = selfmodel::eval::device_counts::launch_log();
