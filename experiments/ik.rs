@@ -67,8 +67,13 @@ enum Command {
         /// Answers per target (k > 1: the flow's k samples, each refined: the family).
         #[arg(long, default_value_t = 1)]
         k: usize,
+        /// Iterate each answer until every tip is within MM millimetres and DEG degrees (the
+        /// convergence tolerance; an answer is exact within 1 mm and 0.572 degrees, the
+        /// success threshold, whatever this is).
+        #[arg(long, value_name = "MM,DEG", default_value = "0.0001,0.0001")]
+        tolerance: String,
         /// Where the answers go (CSV: target,solution, one column per joint named after it,
-        /// pos_err_mm,rot_err_deg,exact).
+        /// pos_err_mm,rot_err_deg,exact; beside it OUT.json: how they were made).
         #[arg(long)]
         out: PathBuf,
     },
@@ -83,19 +88,23 @@ const MAX_TARGETS: usize = 10_000_000;
 /// in `dir` and the robot it names.
 fn answering(
     dir: &std::path::Path,
-    out: &std::path::Path,
+    outs: &[&std::path::Path],
     inputs: &[&std::path::Path],
     device: &burn::tensor::Device,
 ) -> selfmodel::Result<(PoseModel, selfmodel::Robot)> {
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite};
-    check_out(out, OutKind::File)?;
     let model_folder = Some(dir).filter(|d| d.join("model.json").is_file());
-    refuse_overwrite(out, inputs, model_folder)?;
+    for out in outs {
+        check_out(out, OutKind::File)?;
+        refuse_overwrite(out, inputs, model_folder)?;
+    }
     let (model, robot) = PoseModel::load_with_robot(dir, device)?;
     // Nor the robot description the model names.
     let robot_files = model.saved.robot.files();
     let robot_files: Vec<&std::path::Path> = robot_files.iter().map(|p| p.as_path()).collect();
-    refuse_overwrite(out, &robot_files, None)?;
+    for out in outs {
+        refuse_overwrite(out, &robot_files, None)?;
+    }
     Ok((model, robot))
 }
 
@@ -147,7 +156,7 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                let (model, robot) = answering(&model, &out, &[], &device)?;
+                let (model, robot) = answering(&model, &[&out], &[], &device)?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
                 let joints = selfmodel::sim::trajectory::babbling(n, &model.saved.ranges, seed);
@@ -171,9 +180,10 @@ fn main() -> ExitCode {
                 Ok(())
             }
             Command::Solve {
-                model,
-                targets,
+                model: model_dir,
+                targets: targets_file,
                 k,
+                tolerance,
                 out,
             } => {
                 if !(1..=MAX_K).contains(&k) {
@@ -181,12 +191,21 @@ fn main() -> ExitCode {
                         "--k must be 1 to {MAX_K} (answers per target)"
                     )));
                 }
-                let (model, robot) = answering(&model, &out, &[&targets], &device)?;
-                let targets = read_targets(&targets, model.position_only(), model.tips())?;
+                let provenance = PathBuf::from(format!("{}.json", out.display()));
+                let (model, robot) =
+                    answering(&model_dir, &[&out, &provenance], &[&targets_file], &device)?;
+                let cfg = model
+                    .saved
+                    .config
+                    .lm
+                    .clone()
+                    .converging_to_text(&tolerance)
+                    .map_err(|e| selfmodel::Error::Config(format!("--tolerance: {e}")))?;
+                let targets = read_targets(&targets_file, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
-                let answers = model.solve(&robot.chain, &targets, k, &device)?;
+                let answers = model.solve_with(&robot.chain, &targets, k, &cfg, &device)?;
                 let seconds = start.elapsed().as_secs_f64();
-                let cfg = &model.saved.config.lm;
+                let cfg = &cfg;
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];
                 for c in joint_columns(&model.saved.joint_names, &taken) {
@@ -210,17 +229,36 @@ fn main() -> ExitCode {
                     Ok(())
                 })?;
                 let stats = SolveStats::of(&answers, cfg, &model.saved.ranges);
+                let threads = rayon::current_num_threads();
+                selfmodel::core::atomic_file::write_json(
+                    &provenance,
+                    &serde_json::json!({
+                        "model": model_dir,
+                        "targets": targets_file,
+                        "k": k,
+                        "exact_within_mm": 1e3 * cfg.tolerance_m,
+                        "exact_within_deg": cfg.tolerance_rad.to_degrees(),
+                        "tolerance_mm": 1e3 * cfg.convergence_m,
+                        "tolerance_deg": cfg.convergence_rad.to_degrees(),
+                        "solver": cfg,
+                        "stats": stats,
+                        "seconds": seconds,
+                        "threads": threads,
+                        "device": "cpu",
+                        "revision": selfmodel::core::provenance::git_revision(),
+                    }),
+                )?;
                 println!(
-                    "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {} threads; wrote {}",
+                    "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {}, {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {threads} threads; wrote {}",
                     stats.targets,
                     stats.exact_targets,
                     stats.exact_pct(),
                     stats.exact_answers,
                     stats.distinct_mean,
+                    stats.precision(),
                     stats.iterations_mean,
                     stats.starts_mean,
                     stats.exact_answers as f64 / seconds,
-                    rayon::current_num_threads(),
                     out.display()
                 );
                 Ok(())

@@ -13,5 +13,6 @@ pub mod memory;
 pub mod preset;
 pub mod progress;
 pub mod provenance;
+pub mod spread;
 pub mod timing;
 pub mod unit_cache;

@@ -735,6 +735,13 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         answers.to_str().unwrap(),
     ]);
     assert!(said.contains("50 targets"), "{said}");
+    // The precision of the answers, and how they were made beside them.
+    assert!(said.contains("pose error median/p98/max "), "{said}");
+    let provenance: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("answers.csv.json")).unwrap())
+            .unwrap();
+    assert_eq!(provenance["tolerance_mm"], 1e-4, "{provenance}");
+    assert_eq!(provenance["k"], 2, "{provenance}");
     let text = std::fs::read_to_string(&answers).unwrap();
     let mut lines = text.lines();
     assert_eq!(
@@ -784,6 +791,21 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         &["--k"],
         &out,
     );
+    // A tolerance that is not two numbers, not finite, not positive, or looser than the
+    // success threshold.
+    for bad in [
+        "NaN,0.0001",
+        "-1,0.0001",
+        "0.0001,1e9",
+        "0.0001",
+        "abc,def",
+        "2,0.1",
+        "0,0",
+    ] {
+        let mut args = solve(&targets, "1", &out, &model);
+        args.push(format!("--tolerance={bad}"));
+        run(args, &["--tolerance"], &out);
+    }
     let before = std::fs::read(&targets).unwrap();
     let o = Command::new(ik)
         .args(solve(&targets, "1", &targets, &model))

@@ -1,5 +1,6 @@
 //! Bounded fuzzing (stable Rust, seeded, no extra crate): valid inputs of the targets CSV
-//! reader, the URDF loader and the saved-model loader, mutated thousands of times (bytes
+//! reader, the URDF loader, the SRDF reader, the saved IK model loader and a saved
+//! self-model's `model.json`, mutated thousands of times (bytes
 //! flipped, dropped, repeated, spliced with tokens a parser trips on), must each be read or
 //! refused with one line: never a panic, never a hang. Each target runs for a bounded time.
 
@@ -223,5 +224,76 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
         PoseModel::load(&model, &device)
             .map(|m| use_model(&m))
             .map_err(|e| e.to_string())
+    });
+}
+
+/// An SRDF with nested groups, chains, single joints and links, mutated: parsed and every
+/// group resolved on the robot's tree, or refused in one line.
+#[test]
+fn the_srdf_reader_reads_or_refuses_every_mutation() {
+    use selfmodel::sim::srdf::Srdf;
+    let tree: Vec<(String, String, String)> = ["base", "a", "b", "c", "d"]
+        .windows(2)
+        .enumerate()
+        .map(|(i, w)| (format!("j{i}"), w[0].to_string(), w[1].to_string()))
+        .collect();
+    let text = r#"<?xml version="1.0"?>
+<robot name="r">
+  <group name="arm"><chain base_link="base" tip_link="c"/></group>
+  <group name="wrist"><joint name="j3"/></group>
+  <group name="all"><group name="arm"/><group name="wrist"/></group>
+  <group name="links"><link name="b"/><link name="d"/></group>
+  <group_state name="home" group="arm"><joint name="j0" value="0"/></group_state>
+  <disable_collisions link1="a" link2="b" reason="Adjacent"/>
+</robot>
+"#;
+    let path = std::path::Path::new("robot.srdf");
+    let (tried, accepted) = fuzz("SRDF", text.as_bytes(), |bytes| {
+        let text = String::from_utf8_lossy(bytes);
+        let srdf = Srdf::parse(path, &text).map_err(|e| e.to_string())?;
+        for name in srdf.group_names() {
+            // A group that resolves names joints of the tree only.
+            if let Ok(members) = srdf.resolve(name, &tree) {
+                assert!(
+                    members
+                        .joints
+                        .iter()
+                        .all(|j| tree.iter().any(|t| &t.0 == j))
+                );
+            }
+        }
+        Ok(())
+    });
+    assert!(
+        tried > 100 && accepted > 0,
+        "{tried} inputs, {accepted} accepted"
+    );
+}
+
+/// A saved self-model's `model.json` (NeuroKin, two training steps), mutated: loaded and
+/// predicting finite images of its own size, or refused in one line.
+#[test]
+fn the_saved_self_model_loader_reads_or_refuses_every_mutation() {
+    use selfmodel::core::device::DeviceChoice;
+    use selfmodel::self_models::harness::run;
+    use selfmodel::self_models::loading::load;
+    use selfmodel::self_models::neurokin::neurokin_run;
+    let mut cfg = neurokin_run("quick").unwrap();
+    cfg.train.steps = 2;
+    cfg.train.checkpoint_every = 0;
+    let dir = common::tempdir();
+    run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
+    let device = selfmodel::core::device::select(DeviceChoice::Cpu).unwrap();
+    // The run saves its model in `model/` (what `loading::load` finds from the run's folder).
+    let path = dir.path().join("model").join("model.json");
+    let json = std::fs::read(&path).unwrap();
+    fuzz("self-model model.json", &json, |bytes| {
+        std::fs::write(&path, bytes).unwrap();
+        let model = load(dir.path(), &device).map_err(|e| e.to_string())?;
+        let n = 2;
+        let poses = vec![0.1f32; n * model.saved.inputs];
+        let (silhouettes, _) = model.predict(&poses, n).map_err(|e| e.to_string())?;
+        assert!(silhouettes.iter().all(|v| v.is_finite()));
+        Ok(())
     });
 }

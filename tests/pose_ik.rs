@@ -464,3 +464,94 @@ fn a_solve_stops_between_blocks_when_asked() {
     );
     assert_eq!(calls.load(Ordering::Relaxed), 2);
 }
+
+/// Exact means converged: every exact answer's pose error, recomputed here by the robot's own
+/// forward kinematics, is below the convergence tolerance (1e-4 mm and 1e-4 degrees), far
+/// inside the success threshold; on the UR5 and, where the shared descriptions sit beside the
+/// repository, the Panda as Franka ships it.
+#[test]
+fn exact_answers_are_converged_below_the_tolerance() {
+    let mut robots = vec![(
+        "UR5",
+        selfmodel::sim::dh_robot::ur5([-std::f64::consts::PI, std::f64::consts::PI]),
+    )];
+    let panda = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/robots/franka_description/urdf/panda.urdf");
+    if panda.is_file() {
+        let options = UrdfOptions {
+            tip: Some("panda_hand".into()),
+            geometry: GeometryKind::None,
+            base: Isometry3::identity(),
+            joints: Default::default(),
+        };
+        robots.push(("Panda", load_urdf_with(&panda, &options).unwrap()));
+    } else {
+        eprintln!("the Panda left out: ../shared/robots is not beside the repository");
+    }
+    let cfg = LmConfig::standard();
+    for (name, robot) in robots {
+        let ranges = robot.chain.joint_ranges();
+        let qs = selfmodel::sim::trajectory::babbling(300, &ranges, 11);
+        let targets: Vec<Vec<PoseTarget>> =
+            qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+        let solved = solve_batch(&robot.chain, &targets, &[], &ranges, &cfg);
+        let mut exact = 0;
+        let (mut worst_p, mut worst_r) = (0f64, 0f64);
+        for (s, t) in solved.iter().zip(&targets) {
+            let (p, r) = pose_error(&robot.chain, &s.joints, t);
+            assert!(
+                (p - s.position_error_m).abs() < 1e-12 && (r - s.rotation_error_rad).abs() < 1e-12,
+                "{name}: the answer says {} m and {} rad, forward kinematics {p} m and {r} rad",
+                s.position_error_m,
+                s.rotation_error_rad
+            );
+            if s.exact(&cfg) {
+                exact += 1;
+                worst_p = worst_p.max(p);
+                worst_r = worst_r.max(r);
+                assert!(
+                    p <= cfg.convergence_m && r <= cfg.convergence_rad,
+                    "{name}: an exact answer {:.3e} mm and {:.3e} degrees from its target ({} iterations, {} starts, at {:?})",
+                    1e3 * p,
+                    r.to_degrees(),
+                    s.iterations,
+                    s.starts,
+                    s.joints
+                );
+            }
+        }
+        eprintln!(
+            "{name}: {exact} of 300 exact, the worst {:.2e} mm and {:.2e} degrees",
+            1e3 * worst_p,
+            worst_r.to_degrees()
+        );
+        assert!(exact >= 297, "{name}: {exact} of 300 exact");
+    }
+}
+
+/// The tolerance is checked: finite, positive, no looser than the success threshold.
+#[test]
+fn a_tolerance_outside_its_range_is_refused() {
+    let cfg = LmConfig::standard();
+    let ok = cfg.clone().converging_to(1e-3, 1e-3).unwrap();
+    assert_eq!(
+        (ok.convergence_m, ok.convergence_rad),
+        (1e-6, 1e-3f64.to_radians())
+    );
+    for (mm, deg) in [
+        (f64::NAN, 1e-4),
+        (1e-4, f64::INFINITY),
+        (-1e-4, 1e-4),
+        (0.0, 1e-4),
+        (1.5, 1e-4),
+        (1e-4, 1.0),
+        (1e-12, 1e-4),
+    ] {
+        let e = cfg.clone().converging_to(mm, deg).unwrap_err();
+        assert!(e.contains("tolerance"), "{e}");
+    }
+    assert!(cfg.clone().converging_to_text("0.001, 0.01").is_ok());
+    for bad in ["", "1", "1,2,3", "a,b", "0.001;0.01"] {
+        assert!(cfg.clone().converging_to_text(bad).is_err(), "{bad}");
+    }
+}

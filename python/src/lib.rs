@@ -414,18 +414,28 @@ impl PyIkSolver {
         target_columns(self.model.tips(), self.model.position_only())
     }
 
-    /// Answer targets (N, len(target_columns)), metres: `k` answers each. Returns a dict:
-    /// `joints` (N, k, dof), `pos_err_mm` and `rot_err_deg` (N, k, the worst tip's), `exact`
-    /// (N, k; within 1 mm and 0.572 degrees).
-    #[pyo3(signature = (targets, k=1))]
+    /// Answer targets (N, len(target_columns)), metres: `k` answers each, each iterated until
+    /// every tip is within `tolerance` (millimetres, degrees; 1e-4 and 1e-4 by default).
+    /// Returns a dict: `joints` (N, k, dof), `pos_err_mm` and `rot_err_deg` (N, k, the worst
+    /// tip's), `exact` (N, k; within 1 mm and 0.572 degrees, the success threshold).
+    #[pyo3(signature = (targets, k=1, tolerance=(1e-4, 1e-4)))]
     fn solve<'py>(
         &self,
         py: Python<'py>,
         targets: Matrix,
         k: i64,
+        tolerance: (f64, f64),
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         guarded(|| {
             let k = count(k, "k", 1, 1000)?;
+            let lm = self
+                .model
+                .saved
+                .config
+                .lm
+                .clone()
+                .converging_to(tolerance.0, tolerance.1)
+                .map_err(|e| value_error(format!("tolerance: {e}")))?;
             let width = self.target_columns().len();
             let (n, v) = rows(targets, width, "targets")?;
             let parsed: Vec<Vec<PoseTarget>> = v
@@ -439,7 +449,6 @@ impl PyIkSolver {
                 .collect::<PyResult<_>>()?;
             // Ctrl-C reaches Python between blocks of targets (well under a second apart).
             let raised = std::sync::Mutex::new(None);
-            let lm = self.model.saved.config.lm.clone();
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
                 self.model
@@ -450,7 +459,7 @@ impl PyIkSolver {
             }
             let answers = answers.map_err(value_error)?;
             let dof = self.model.dof();
-            let lm = &self.model.saved.config.lm;
+            let lm = &lm;
             let (mut joints, mut pos, mut rot, mut exact) = (
                 Vec::with_capacity(n * k * dof),
                 Vec::with_capacity(n * k),

@@ -105,6 +105,15 @@ def test_solve_answers_as_the_command_line_does(trained):
     assert out["exact"].mean() >= 0.95
     one = ik.solve_one(list(rows[0, :7].astype(float)))
     np.testing.assert_allclose(one, joints[0], atol=1e-9)
+    # Exact answers are converged to the tolerance (1e-4 mm and 1e-4 degrees by default), and
+    # a looser tolerance stops them sooner, still exact.
+    exact = out["exact"][:, 0]
+    assert out["pos_err_mm"][exact, 0].max() <= 1e-4
+    assert out["rot_err_deg"][exact, 0].max() <= 1e-4
+    loose = ik.solve(rows[:, :7].astype(float), tolerance=(0.5, 0.2))
+    assert loose["exact"].mean() >= 0.95
+    assert loose["pos_err_mm"][loose["exact"]].max() <= 0.5
+    assert np.median(loose["pos_err_mm"]) > np.median(out["pos_err_mm"])
 
 
 def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
@@ -121,6 +130,9 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
         lambda: ik.solve(np.array([[0.1, 0.2, 0.3, 2.0, 0, 0, 0]])),
         lambda: ik.solve(np.array([[1e39, 0.2, 0.3, 1.0, 0, 0, 0]])),
         lambda: ik.solve(np.zeros((1, 7)), k=0),
+        lambda: ik.solve(np.zeros((1, 7)), tolerance=(float("nan"), 1e-4)),
+        lambda: ik.solve(np.zeros((1, 7)), tolerance=(1e-4, -1.0)),
+        lambda: ik.solve(np.zeros((1, 7)), tolerance=(5.0, 1e-4)),
         lambda: ik.solve_one([0.1, 0.2]),
         lambda: selfmodel.Robot.from_urdf(str(tmp_path / "missing.urdf")),
         lambda: selfmodel.Robot.from_urdf(str(urdf), geometry="shiny"),
@@ -328,3 +340,50 @@ def test_a_group_of_the_srdf_beside_the_urdf(tmp_path):
     assert upper.joint_names == ["j1", "j2", "j3"]
     with pytest.raises(ValueError, match="is not a group"):
         selfmodel.Robot.from_urdf(str(urdf), group="legs")
+
+
+def test_the_argument_converters_take_or_refuse_any_array(trained):
+    """Bounded fuzzing of the argument converters: arrays of every numpy dtype, byte order,
+    shape and stride (seeded), values NaN, huge or ordinary, and objects that are not arrays,
+    given to fk, jacobian and solve: each returns a correct-shaped answer or raises ValueError
+    or TypeError in one line; the interpreter never dies."""
+    urdf, model, _, _ = trained
+    robot = selfmodel.Robot.from_urdf(str(urdf), tip="hand", geometry="none")
+    ik = selfmodel.IkSolver.load(str(model))
+    rng = np.random.default_rng(5)
+    dtypes = [np.float64, np.float32, np.float16, np.int8, np.int64, np.uint16, np.bool_, np.complex64, ">f8", "<f4", object, "U3"]
+    values = [0.3, np.nan, np.inf, -1e300, 1e39, 0.0]
+    calls = [
+        (robot.fk, 6, lambda out, n: out.shape == (n, 4, 4)),
+        (robot.jacobian, 6, lambda out, n: out.shape[0] == n),
+        (lambda a: ik.solve(a)["joints"], 7, lambda out, n: out.shape == (n, 1, 6)),
+    ]
+    accepted = refused = 0
+    for _ in range(300):
+        call, width, ok = calls[rng.integers(len(calls))]
+        n = int(rng.integers(0, 4))
+        cols = width if rng.random() < 0.7 else int(rng.integers(0, 9))
+        shape = [(n, cols), (cols,), (n, cols, 1), (), (n * cols,)][rng.integers(5) if rng.random() < 0.3 else 0]
+        dtype = dtypes[rng.integers(len(dtypes))]
+        base = np.full(shape, values[rng.integers(len(values))] if rng.random() < 0.5 else 0.2)
+        if width == 7 and base.ndim == 2 and base.shape[1] == 7:
+            base[:, 3] = 1.0  # a unit quaternion where the values allow one
+        try:
+            a = base.astype(dtype)
+        except (ValueError, OverflowError):
+            continue
+        if a.ndim == 2 and rng.random() < 0.3:
+            a = np.asfortranarray(a)
+        if a.ndim == 2 and a.shape[0] > 1 and rng.random() < 0.3:
+            a = a[::-1]
+        arg = a if rng.random() < 0.9 else [list(map(str, a.ravel()))]
+        try:
+            out = call(arg)
+        except (ValueError, TypeError) as e:
+            assert "\n" not in str(e), str(e)
+            refused += 1
+            continue
+        if a.ndim == 2:
+            assert ok(np.asarray(out), a.shape[0]), (a.dtype, a.shape)
+        accepted += 1
+    assert accepted > 10 and refused > 10, (accepted, refused)

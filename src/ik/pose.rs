@@ -2,7 +2,10 @@
 //! each tip of the chain (one, or several: both hands of a humanoid), and an answer is exact
 //! when every tip is within 1 mm and 0.572 degrees (0.01 rad), IKFlow's definition. Solved by
 //! Levenberg-Marquardt on the 6-D pose error within the joint limits, from given starts (a
-//! learned model's samples) and then from random starts when those stall.
+//! learned model's samples) and then from random starts when those stall. Exact is the
+//! success threshold; a start iterates on to the convergence tolerance (1e-4 mm and 1e-4
+//! degrees by default, `LmConfig::converging_to`), where Levenberg-Marquardt converges
+//! quadratically: from 1 mm, two or three iterations more.
 //!
 //! The error of joints `q` for a target `(p_t, R_t)`: position `p_t - p(q)` (m) and rotation the
 //! rotation vector of `R_t R(q)^T` (rad, world frame; its norm is the angle of `R_t^T R(q)`).
@@ -21,7 +24,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 
-use crate::ik::dls::keep_in;
+use crate::ik::dls::{keep_in, wraps};
 use crate::sim::kinematics::{KinematicChain, TipPath};
 
 /// The pose of one tip an inverse-kinematics target asks for: a position (m) and, for a
@@ -81,9 +84,17 @@ fn errors_at(pose: &Isometry3<f64>, target: &PoseTarget) -> (Vector3<f64>, Vecto
 /// Levenberg-Marquardt settings.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LmConfig {
-    /// An answer is exact within these (IKFlow's: 1 mm and 0.01 rad = 0.572 degrees).
+    /// An answer is exact within these (IKFlow's: 1 mm and 0.01 rad = 0.572 degrees): the
+    /// success threshold.
     pub tolerance_m: f64,
     pub tolerance_rad: f64,
+    /// A start iterates until every tip is within these (the convergence tolerance, far
+    /// tighter than the success threshold: the precision the peers reach), or it stalls.
+    /// Models saved before it existed load with the default.
+    #[serde(default = "default_convergence_m")]
+    pub convergence_m: f64,
+    #[serde(default = "default_convergence_rad")]
+    pub convergence_rad: f64,
     /// Iterations from one start.
     pub max_iterations: usize,
     /// Random starts tried after the given ones stall (per target).
@@ -91,18 +102,77 @@ pub struct LmConfig {
     pub seed: u64,
 }
 
+/// The default convergence tolerance: 1e-4 mm.
+pub const CONVERGENCE_M: f64 = 1e-7;
+/// The default convergence tolerance: 1e-4 degrees.
+pub const CONVERGENCE_DEG: f64 = 1e-4;
+
+fn default_convergence_m() -> f64 {
+    CONVERGENCE_M
+}
+
+fn default_convergence_rad() -> f64 {
+    CONVERGENCE_DEG.to_radians()
+}
+
 impl LmConfig {
-    /// 1 mm, 0.01 rad, 30 iterations a start, up to 100 random starts (a start that stalls
-    /// is given up within a few iterations, so many are cheap; 20 left 0.5% of the Panda's
-    /// targets unsolved from a quick model's samples, 100 left 0.02%).
+    /// Exact within 1 mm and 0.01 rad, converged to 1e-4 mm and 1e-4 degrees, 30 iterations
+    /// a start, up to 100 random starts (a start that stalls is given up within a few
+    /// iterations, so many are cheap; 20 left 0.5% of the Panda's targets unsolved from a
+    /// quick model's samples, 100 left 0.02%).
     pub fn standard() -> Self {
         LmConfig {
             tolerance_m: 1e-3,
             tolerance_rad: 0.01,
+            convergence_m: CONVERGENCE_M,
+            convergence_rad: default_convergence_rad(),
             max_iterations: 30,
             random_starts: 100,
             seed: 0,
         }
+    }
+
+    /// The same settings converging to `mm` millimetres and `deg` degrees: refused unless
+    /// both are finite, positive and no looser than the success threshold (1 mm and 0.572
+    /// degrees by default), nor tighter than float64 can resolve (1e-9 mm, 1e-9 degrees).
+    pub fn converging_to(mut self, mm: f64, deg: f64) -> Result<Self, String> {
+        let (max_mm, max_deg) = (1e3 * self.tolerance_m, self.tolerance_rad.to_degrees());
+        let check = |v: f64, unit: &str, max: f64| {
+            if v.is_finite() && (1e-9..=max * (1.0 + 1e-12)).contains(&v) {
+                Ok(())
+            } else {
+                Err(format!(
+                    "a tolerance of {v} {unit} is not between 1e-9 and {max:.4} {unit} (the success threshold)"
+                ))
+            }
+        };
+        check(mm, "mm", max_mm)?;
+        check(deg, "degrees", max_deg)?;
+        self.convergence_m = mm * 1e-3;
+        self.convergence_rad = deg.to_radians();
+        Ok(self)
+    }
+
+    /// [`Self::converging_to`] from `MM,DEG` as the command line writes it (`0.0001,0.0001`).
+    pub fn converging_to_text(self, text: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+        let number = |t: &str| t.parse::<f64>().ok();
+        match parts.as_slice() {
+            [mm, deg] => match (number(mm), number(deg)) {
+                (Some(mm), Some(deg)) => self.converging_to(mm, deg),
+                _ => Err(format!(
+                    "the tolerance \"{text}\" is not two numbers MM,DEG (e.g. 0.0001,0.0001)"
+                )),
+            },
+            _ => Err(format!(
+                "the tolerance \"{text}\" is not MM,DEG: millimetres and degrees, comma-separated (e.g. 0.0001,0.0001)"
+            )),
+        }
+    }
+
+    /// Converged: every tip within the convergence tolerance.
+    fn converged(&self, position_m: f64, rotation_rad: f64) -> bool {
+        position_m <= self.convergence_m && rotation_rad <= self.convergence_rad
     }
 }
 
@@ -142,6 +212,10 @@ impl PoseSolution {
 
 /// Iterations without the error halving after which a start is given up.
 const STALL: usize = 5;
+
+/// Iterations a start may take beyond `max_iterations` once inside the success threshold, to
+/// converge.
+const POLISH_ITERATIONS: usize = 5;
 
 /// Levenberg-Marquardt from `start` (clamped into `ranges` first), on the paths to the
 /// chain's tips ([`KinematicChain::tip_paths`]), `target` holding one pose per path: the
@@ -200,8 +274,11 @@ pub fn solve_from(
     loop {
         let err = errors(&q, &mut jacs);
         let (p_worst, r_worst) = worst(&err);
-        let done = p_worst <= cfg.tolerance_m && r_worst <= cfg.tolerance_rad;
-        if done || given_up || iterations >= cfg.max_iterations {
+        // Inside the success threshold a start may take a few iterations more to converge
+        // (quadratically there).
+        let exact = p_worst <= cfg.tolerance_m && r_worst <= cfg.tolerance_rad;
+        let limit = cfg.max_iterations + if exact { POLISH_ITERATIONS } else { 0 };
+        if cfg.converged(p_worst, r_worst) || given_up || iterations >= limit {
             return PoseSolution {
                 joints: q,
                 position_error_m: p_worst,
@@ -232,14 +309,10 @@ pub fn solve_from(
         }
         let jtj = j.tr_mul(&j);
         let g = j.tr_mul(&e);
-        let mut lambda = e_now + 1e-6;
+        let mut lambda = e_now + 1e-12;
         let mut improved = false;
         for _ in 0..8 {
-            let mut a = jtj.clone();
-            for d in 0..n {
-                a[(d, d)] += lambda;
-            }
-            let Some(dq) = a.cholesky().map(|c| c.solve(&g)) else {
+            let Some(dq) = limited_step(&jtj, &g, lambda, &q, ranges) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -258,8 +331,56 @@ pub fn solve_from(
     }
 }
 
+/// The damped step `(A + lambda I) dq = g`, a joint at a limit that the step would push
+/// past held there: the step is solved again without it (an active set), so the other joints
+/// converge instead of a clamped step stalling against the limit. `None` where the system is
+/// not positive definite.
+fn limited_step(
+    a: &DMatrix<f64>,
+    g: &DVector<f64>,
+    lambda: f64,
+    q: &[f64],
+    ranges: &[[f64; 2]],
+) -> Option<DVector<f64>> {
+    let n = q.len();
+    let mut held = vec![false; n];
+    // Each pass holds at least one more joint, so n + 1 passes suffice; two nearly always do.
+    for _ in 0..=n {
+        let mut m = a.clone();
+        let mut rhs = g.clone();
+        for d in 0..n {
+            if held[d] {
+                m.row_mut(d).fill(0.0);
+                m.column_mut(d).fill(0.0);
+                m[(d, d)] = 1.0;
+                rhs[d] = 0.0;
+            } else {
+                m[(d, d)] += lambda;
+            }
+        }
+        let dq = m.cholesky()?.solve(&rhs);
+        let mut more = false;
+        for d in 0..n {
+            let [lo, hi] = ranges[d];
+            let at_limit =
+                !wraps(ranges[d]) && ((q[d] <= lo && dq[d] < 0.0) || (q[d] >= hi && dq[d] > 0.0));
+            if at_limit && !held[d] {
+                held[d] = true;
+                more = true;
+            }
+        }
+        if !more {
+            return Some(dq);
+        }
+    }
+    None
+}
+
 /// Solve `target` from each of `starts` in turn, then from random joint vectors in `ranges`
-/// (seeded by `cfg.seed` and `salt`), until one is exact; the best answer otherwise.
+/// (seeded by `cfg.seed` and `salt`), until one converges; the best answer otherwise. A start
+/// that stalls inside the success threshold without converging (a local minimum a fraction of
+/// a millimetre from the target, or a singularity: the UR5's wrist at q5 = 0) is exact but
+/// kept only if no later start converges.
 pub fn solve(
     paths: &[TipPath],
     target: &[PoseTarget],
@@ -283,11 +404,11 @@ pub fn solve(
         let s = solve_from(paths, target, &start, ranges, cfg);
         iterations += s.iterations;
         tried += 1;
-        let exact = s.exact(cfg);
+        let converged = cfg.converged(s.position_error_m, s.rotation_error_rad);
         if best.as_ref().is_none_or(|b| cost(&s) < cost(b)) {
             best = Some(s);
         }
-        if exact {
+        if converged {
             break;
         }
     }

@@ -19,6 +19,7 @@ use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
 use crate::core::input_file::{file_fnv, fnv};
 use crate::core::preset::Preset;
+use crate::core::spread::Spread;
 use crate::ik::data::{IkData, IkDataConfig};
 use crate::ik::flow::{FlowConfig, FlowIk, fit_flow, sample_rows, sample_rows_from};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve};
@@ -199,6 +200,9 @@ impl SavedModel {
                 lm.tolerance_rad
             ));
         }
+        lm.clone()
+            .converging_to(1e3 * lm.convergence_m, lm.convergence_rad.to_degrees())
+            .map_err(|e| format!("its convergence tolerance: {e}"))?;
         if !(1..=MAX_ITERATIONS).contains(&lm.max_iterations) {
             return Err(format!(
                 "it asks {} iterations a start (1 to {MAX_ITERATIONS})",
@@ -630,6 +634,10 @@ pub struct SolveStats {
     pub iterations_mean: f64,
     pub starts_mean: f64,
     pub outside_limits: usize,
+    /// The answers' pose errors, every answer (exact or not): position (mm) and rotation
+    /// (degrees), the largest over the tips of each.
+    pub position_mm: Spread,
+    pub rotation_deg: Spread,
 }
 
 impl SolveStats {
@@ -664,12 +672,29 @@ impl SolveStats {
             iterations_mean: iterations as f64 / n.max(1) as f64,
             starts_mean: starts as f64 / n.max(1) as f64,
             outside_limits: outside,
+            position_mm: Spread::of(answers.iter().flatten().map(|a| 1e3 * a.position_error_m)),
+            rotation_deg: Spread::of(
+                answers
+                    .iter()
+                    .flatten()
+                    .map(|a| a.rotation_error_rad.to_degrees()),
+            ),
         }
     }
 
     /// Share of targets solved exactly (%).
     pub fn exact_pct(&self) -> f64 {
         100.0 * self.exact_targets as f64 / self.targets.max(1) as f64
+    }
+
+    /// The answers' precision in words: `pose error median/p98/max 0.0001/0.0002/0.0004 mm,
+    /// ... degrees`.
+    pub fn precision(&self) -> String {
+        format!(
+            "pose error median/p98/max {} mm, {} degrees",
+            self.position_mm.short(2),
+            self.rotation_deg.short(2)
+        )
     }
 }
 

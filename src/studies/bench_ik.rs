@@ -95,6 +95,19 @@ pub struct BenchIkRow {
     pub pos_err_mm_median: Option<f64>,
     pub rot_err_deg_mean: Option<f64>,
     pub rot_err_deg_median: Option<f64>,
+    /// The answers' precision: the 98th percentile and the largest pose error (ours, every
+    /// answer; the references where their script reports it).
+    #[serde(default)]
+    pub pos_err_mm_p98: Option<f64>,
+    #[serde(default)]
+    pub pos_err_mm_max: Option<f64>,
+    #[serde(default)]
+    pub rot_err_deg_p98: Option<f64>,
+    #[serde(default)]
+    pub rot_err_deg_max: Option<f64>,
+    /// Where the solver stops iterating (ours: the convergence tolerance, mm and degrees).
+    #[serde(default)]
+    pub tolerance: Option<String>,
     /// Ours: exact solutions/s over the fastest reference's at its default budget on as many
     /// threads (processes).
     pub vs_fastest_reference: Option<f64>,
@@ -212,9 +225,18 @@ impl Sitting<'_> {
             distinct_mean: family.then_some(s.distinct_mean),
             distinct_5_pct: family.then_some(s.distinct_5_pct),
             pos_err_mm_mean: None,
-            pos_err_mm_median: None,
+            pos_err_mm_median: Some(s.position_mm.median),
             rot_err_deg_mean: None,
-            rot_err_deg_median: None,
+            rot_err_deg_median: Some(s.rotation_deg.median),
+            pos_err_mm_p98: Some(s.position_mm.p98),
+            pos_err_mm_max: Some(s.position_mm.max),
+            rot_err_deg_p98: Some(s.rotation_deg.p98),
+            rot_err_deg_max: Some(s.rotation_deg.max),
+            tolerance: Some(format!(
+                "{} mm, {} degrees",
+                1e3 * lm.convergence_m,
+                lm.convergence_rad.to_degrees()
+            )),
             vs_fastest_reference: None,
             cpu: self.cpu.clone(),
             model_preset: self.model_preset.clone(),
@@ -333,6 +355,7 @@ pub fn run(
         row.rot_err_deg_median = Some(rmed);
         row.iterations_mean = None;
         row.starts_mean = None;
+        row.tolerance = None;
     }
     // Ours at every budget (and the model's own), on all threads; the model's own budget on
     // one thread too.
@@ -428,6 +451,10 @@ pub fn run(
                 .args(["--out", &file.to_string_lossy()]);
             if standard_only {
                 cmd.arg("--standard-only");
+            } else {
+                // Each reference at its default budget with tighter tolerances too: the
+                // comparison at equal precision.
+                cmd.arg("--tight");
             }
             let o = match cmd.output() {
                 Ok(o) => o,
@@ -506,6 +533,22 @@ struct ReferenceRow {
     exact: usize,
     outside_limits: usize,
     seconds: f64,
+    /// Where it stops (`tol 1e-06`, `eps 1e-05`) and its answers' pose errors: absent from
+    /// files the script wrote before it reported them.
+    #[serde(default)]
+    tolerance: Option<String>,
+    #[serde(default)]
+    pos_err_mm_median: Option<f64>,
+    #[serde(default)]
+    pos_err_mm_p98: Option<f64>,
+    #[serde(default)]
+    pos_err_mm_max: Option<f64>,
+    #[serde(default)]
+    rot_err_deg_median: Option<f64>,
+    #[serde(default)]
+    rot_err_deg_p98: Option<f64>,
+    #[serde(default)]
+    rot_err_deg_max: Option<f64>,
 }
 
 fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
@@ -529,9 +572,14 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
             distinct_mean: None,
             distinct_5_pct: None,
             pos_err_mm_mean: None,
-            pos_err_mm_median: None,
+            pos_err_mm_median: r.pos_err_mm_median,
             rot_err_deg_mean: None,
-            rot_err_deg_median: None,
+            rot_err_deg_median: r.rot_err_deg_median,
+            pos_err_mm_p98: r.pos_err_mm_p98,
+            pos_err_mm_max: r.pos_err_mm_max,
+            rot_err_deg_p98: r.rot_err_deg_p98,
+            rot_err_deg_max: r.rot_err_deg_max,
+            tolerance: r.tolerance,
             vs_fastest_reference: None,
             cpu: s.cpu.clone(),
             model_preset: s.model_preset.clone(),
@@ -562,8 +610,15 @@ pub fn write_report(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
 fn draw(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
     let most = rows.iter().map(|r| r.threads).max().unwrap_or(1);
     let mut lines: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    // Each solver's curve at the tolerance of its standard row (a reference's tighter
+    // tolerances are table rows, not points of its curve).
+    let standard_tolerance = |solver: &str| {
+        rows.iter()
+            .find(|r| r.solver == solver && r.standard)
+            .and_then(|r| r.tolerance.clone())
+    };
     for r in rows.iter().filter(|r| r.threads == most && r.k == 1) {
-        if r.solver.contains("alone") {
+        if r.solver.contains("alone") || r.tolerance != standard_tolerance(&r.solver) {
             continue;
         }
         let label = format!(

@@ -299,30 +299,32 @@ fn transposed_convolution_gradients_on_our_kernels_are_burns() {
     use burn::tensor::ops::ConvTransposeOptions;
     use selfmodel::kernels::cube::convolution::conv_transpose2d;
     for (i, (k, s, p, hw)) in [(4, 2, 1, 5), (3, 1, 2, 9)].into_iter().enumerate() {
-        let (g, c) = layer_inputs(20 + i as u64, [3, 6, hw, hw + 1], [6, 4, k, k], 4);
         let options = ConvTransposeOptions::new([s, s], [p, p], [0, 0], [1, 1], 1);
-        let ours = conv_transpose2d(&g.0, &g.1, &g.2, &options).expect("on our kernels");
-        let burns = burn::tensor::module::conv_transpose2d(
-            c.0.clone(),
-            c.1.clone(),
-            Some(c.2.clone()),
-            options.clone(),
-        );
-        // In inference (no autodiff): the forward pass alone.
-        let inferred = conv_transpose2d(
-            &g.0.clone().inner(),
-            &g.1.clone().inner(),
-            &g.2.clone().inner(),
-            &options,
-        )
-        .expect("on our kernels");
-        assert_layer_is_burns(
+        check_layer(
             &format!("k{k} s{s} p{p}"),
-            (&g, &c),
-            [ours, inferred],
-            burns,
+            layer_inputs(20 + i as u64, [3, 6, hw, hw + 1], [6, 4, k, k], 4),
+            |x, w, b| conv_transpose2d(x, w, b, &options).expect("on our kernels"),
+            |x, w, b| burn::tensor::module::conv_transpose2d(x, w, Some(b), options.clone()),
         );
     }
+}
+
+/// Our layer `ours` on the GPU copies (tracked, then in inference: the forward pass alone)
+/// against burn's `burns` on the CPU inputs.
+fn check_layer(
+    label: &str,
+    (g, c): (Layer, Layer),
+    ours: impl Fn(&Tensor<4>, &Tensor<4>, &Tensor<1>) -> Tensor<4>,
+    burns: impl FnOnce(Tensor<4>, Tensor<4>, Tensor<1>) -> Tensor<4>,
+) {
+    let trained = ours(&g.0, &g.1, &g.2);
+    let inferred = ours(
+        &g.0.clone().inner(),
+        &g.1.clone().inner(),
+        &g.2.clone().inner(),
+    );
+    let reference = burns(c.0.clone(), c.1.clone(), c.2.clone());
+    assert_layer_is_burns(label, (&g, &c), [trained, inferred], reference);
 }
 
 /// Our layer (`[training, inference]` outputs on the GPU) is burn's (`burns`, tracked, on the
@@ -363,27 +365,12 @@ fn convolution_gradients_on_our_kernels_are_burns() {
         .into_iter()
         .enumerate()
     {
-        let (g, c) = layer_inputs(30 + i as u64, [3, 5, hw, hw + 2], [4, 5, k, k], 4);
         let options = ConvOptions::new([s, s], [p, p], [1, 1], 1);
-        let ours = conv2d(&g.0, &g.1, &g.2, &options).expect("on our kernels");
-        let burns = burn::tensor::module::conv2d(
-            c.0.clone(),
-            c.1.clone(),
-            Some(c.2.clone()),
-            options.clone(),
-        );
-        let inferred = conv2d(
-            &g.0.clone().inner(),
-            &g.1.clone().inner(),
-            &g.2.clone().inner(),
-            &options,
-        )
-        .expect("on our kernels");
-        assert_layer_is_burns(
+        check_layer(
             &format!("k{k} s{s} p{p}"),
-            (&g, &c),
-            [ours, inferred],
-            burns,
+            layer_inputs(30 + i as u64, [3, 5, hw, hw + 2], [4, 5, k, k], 4),
+            |x, w, b| conv2d(x, w, b, &options).expect("on our kernels"),
+            |x, w, b| burn::tensor::module::conv2d(x, w, Some(b), options.clone()),
         );
     }
 }
