@@ -8,7 +8,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::studies::bench_ik::{BenchIkConfig, default_out, run};
+use selfmodel::core::spread::format_significant;
+use selfmodel::studies::bench_ik::{BenchIkConfig, default_out, run, summary_rows};
 
 /// Benchmark a model `ik train` saved: share of targets solved exactly (1 mm, 0.572 degrees,
 /// inside the limits) and exact solutions/s at several budgets, the family of k answers, the
@@ -50,18 +51,33 @@ fn main() -> ExitCode {
         let python = (!args.no_references).then_some(args.python.as_path());
         let rows = run(&cfg, &args.model, &out, python, &device)?;
         let mut text = format!(
-            "{:<34} {:<30} {:>7} {:>8} {:>10} {:>9}\n",
-            "solver", "budget", "threads", "exact %", "exact/s", "distinct"
+            "{:<34} {:<22} {:<26} {:>7} {:>8} {:>10} {:>9} {:>20}\n",
+            "solver",
+            "budget",
+            "tolerance",
+            "threads",
+            "exact %",
+            "exact/s",
+            "distinct",
+            "p98 error mm, deg"
         );
-        for r in rows.iter().filter(|r| r.standard) {
+        for r in summary_rows(&rows) {
+            let p98 = match (r.pos_err_mm_p98, r.rot_err_deg_p98) {
+                (Some(p), Some(d)) => {
+                    format!("{}, {}", format_significant(p, 2), format_significant(d, 2))
+                }
+                _ => "-".into(),
+            };
             text += &format!(
-                "{:<34} {:<30} {:>7} {:>8.2} {:>10.0} {:>9}\n",
+                "{:<34} {:<22} {:<26} {:>7} {:>8.2} {:>10.0} {:>9} {:>20}\n",
                 r.solver,
                 r.budget,
+                r.tolerance.as_deref().unwrap_or("-"),
                 r.threads,
                 r.exact_pct,
                 r.exact_per_s,
-                r.distinct_mean.map_or("-".into(), |d| format!("{d:.1}"))
+                r.distinct_mean.map_or("-".into(), |d| format!("{d:.1}")),
+                p98
             );
         }
         if let Some(a) = rows.iter().find(|r| r.solver.contains("alone")) {

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use burn::tensor::Device;
 
 use crate::core::error::{Error, Result};
+use crate::core::spread::format_significant;
 use crate::core::timing::{Repeats, median, median_seconds};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
 use crate::ik::pose_model::{PoseModel, SolveStats, target_columns};
@@ -234,8 +235,8 @@ impl Sitting<'_> {
             rot_err_deg_max: Some(s.rotation_deg.max),
             tolerance: Some(format!(
                 "{} mm, {} degrees",
-                1e3 * lm.convergence_m,
-                lm.convergence_rad.to_degrees()
+                format_significant(1e3 * lm.convergence_m, 2),
+                format_significant(lm.convergence_rad.to_degrees(), 2)
             )),
             vs_fastest_reference: None,
             cpu: self.cpu.clone(),
@@ -587,6 +588,23 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
             git_revision: crate::core::provenance::git_revision(),
         })
         .collect())
+}
+
+/// The rows a summary shows: each solver's default budget, and the references at that budget
+/// with their tighter tolerances (the comparison at equal precision).
+pub fn summary_rows(rows: &[BenchIkRow]) -> Vec<&BenchIkRow> {
+    rows.iter()
+        .filter(|r| {
+            r.standard
+                || rows.iter().any(|s| {
+                    s.standard
+                        && s.solver == r.solver
+                        && s.budget == r.budget
+                        && s.threads == r.threads
+                        && s.tolerance != r.tolerance
+                })
+        })
+        .collect()
 }
 
 /// `results.csv` and its Markdown, and the success-against-time figure.
