@@ -167,6 +167,77 @@ fn srdf_groups_that_would_explode_or_overflow_are_resolved_or_refused() {
     assert!(err.contains("defined twice"), "{err}");
 }
 
+/// A chain whose base is not above its tip (iCub's `chest` -> `l_sole`) resolves as MoveIt
+/// (KDL) resolves it, through the two links' common ancestor: the joints from the base up to
+/// it, then down to the tip.
+#[test]
+fn an_srdf_chain_through_a_common_ancestor_is_resolved() {
+    let path = Path::new("robot.srdf");
+    // waist -> torso (t0) -> chest (t1); waist -> hip (h0) -> knee (h1) -> sole (h2).
+    let tree: Vec<(String, String, String)> = [
+        ("t0", "waist", "torso"),
+        ("t1", "torso", "chest"),
+        ("h0", "waist", "hip"),
+        ("h1", "hip", "knee"),
+        ("h2", "knee", "sole"),
+    ]
+    .iter()
+    .map(|(j, p, c)| (j.to_string(), p.to_string(), c.to_string()))
+    .collect();
+    let text = srdf(&[(
+        "leg".into(),
+        "<chain base_link=\"chest\" tip_link=\"sole\"/>".into(),
+    )]);
+    let members = Srdf::parse(path, &text)
+        .unwrap()
+        .resolve("leg", &tree)
+        .unwrap();
+    assert_eq!(members.joints, ["t1", "t0", "h0", "h1", "h2"]);
+    assert_eq!(members.tips, ["sole"]);
+    // Down from the base as before.
+    let text = srdf(&[(
+        "leg".into(),
+        "<chain base_link=\"waist\" tip_link=\"sole\"/>".into(),
+    )]);
+    let members = Srdf::parse(path, &text)
+        .unwrap()
+        .resolve("leg", &tree)
+        .unwrap();
+    assert_eq!(members.joints, ["h0", "h1", "h2"]);
+}
+
+/// A description with collision geometry only is refused for drawing with a hint to draw
+/// its collision geometry, which then loads.
+#[test]
+fn a_collision_only_robot_says_which_geometry_draws_it() {
+    use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
+    let dir = common::tempdir();
+    let urdf = dir.path().join("r.urdf");
+    std::fs::write(
+        &urdf,
+        r#"<robot name="r"><link name="base"><collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
+<link name="arm"><collision><geometry><cylinder radius="0.02" length="0.3"/></geometry></collision></link>
+<joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>"#,
+    )
+    .unwrap();
+    let load = |geometry| {
+        load_urdf_with(
+            &urdf,
+            &UrdfOptions {
+                geometry,
+                ..UrdfOptions::default()
+            },
+        )
+    };
+    let e = load(GeometryKind::Visual).err().unwrap().to_string();
+    assert!(
+        e.contains("--geometry collision") && !e.contains('\n'),
+        "{e}"
+    );
+    assert!(load(GeometryKind::Collision).unwrap().shape_count() > 0);
+    assert_eq!(load(GeometryKind::None).unwrap().dof(), 1);
+}
+
 /// `dataset --out` naming one of its inputs (the URDF, the angles) is refused in one line,
 /// and the input is left as it was.
 #[test]

@@ -2,7 +2,8 @@
 //! which joints of a robot description a named group moves, and which links are its tips.
 //!
 //! A `<group>` lists `<joint name>` (that joint), `<link name>` (the joint whose child it is),
-//! `<chain base_link tip_link>` (the joints from the base down to the tip) and
+//! `<chain base_link tip_link>` (the joints from the base down to the tip; from the base up to
+//! the two links' common ancestor and down to the tip where the base is not above the tip) and
 //! `<group name>` (another group's members), as MoveIt reads them. Its chains' tip links are
 //! its tips. Joints a group lists that the URDF lacks are refused unless the SRDF declares
 //! them as `<virtual_joint>`s (the joint that places a mobile robot in the world).
@@ -212,21 +213,36 @@ impl Srdf {
                     )));
                 }
             }
-            let mut path = Vec::new();
-            let mut link = tip.as_str();
-            while link != base {
-                match parent_joint(link) {
-                    Some((joint, parent, _)) => {
-                        path.push(joint.as_str());
-                        link = parent;
+            // The links and joints from `from` up to the root, `from` first.
+            let up = |from: &str| {
+                let (mut links, mut joints) = (vec![from.to_string()], Vec::new());
+                let mut link = from.to_string();
+                while let Some((joint, parent, _)) = parent_joint(&link) {
+                    if links.len() > tree.len() {
+                        break; // not a tree: the URDF loader refuses such a file first
                     }
-                    None => {
-                        return Err(err(format!(
-                            "its chain from \"{base}\" to \"{tip}\": \"{base}\" is not above \"{tip}\" in the tree"
-                        )));
-                    }
+                    joints.push(joint.clone());
+                    links.push(parent.clone());
+                    link = parent.clone();
                 }
-            }
+                (links, joints)
+            };
+            // Through the two links' common ancestor, as MoveIt (KDL) reads a chain whose base
+            // is not above its tip (iCub's `chest` -> `l_sole`): the joints from the base up
+            // to it, then down to the tip.
+            let (base_links, base_joints) = up(base);
+            let (tip_links, tip_joints) = up(tip);
+            let Some(meet) = tip_links.iter().position(|l| base_links.contains(l)) else {
+                return Err(err(format!(
+                    "its chain from \"{base}\" to \"{tip}\": the two links share no ancestor"
+                )));
+            };
+            let above = base_links
+                .iter()
+                .position(|l| *l == tip_links[meet])
+                .unwrap_or(0);
+            base_joints[..above].iter().for_each(|j| add(j));
+            let path: Vec<&str> = tip_joints[..meet].iter().map(String::as_str).collect();
             path.iter().rev().for_each(|j| add(j));
             if !into.tips.contains(tip) {
                 into.tips.push(tip.clone());

@@ -335,6 +335,17 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
     let chain = KinematicChain::with_group(link_names.clone(), joints, options.base, tip, &group)
         .map_err(|e| urdf_err("robot".into(), e.to_string()))?;
 
+    // A description drawn by its collision elements only: say which option draws it, rather
+    // than load a robot with nothing to see.
+    if options.geometry == GeometryKind::Visual
+        && urdf.links.iter().all(|l| l.visual.is_empty())
+        && urdf.links.iter().any(|l| !l.collision.is_empty())
+    {
+        return Err(urdf_err(
+            "robot".into(),
+            "it has <collision> geometry but no <visual> element: load it with --geometry collision (geometry=\"collision\" in Python), or --geometry none for its kinematics alone".into(),
+        ));
+    }
     // Geometry, stored in the chain's link order.
     let dir = path.parent().unwrap_or(Path::new("."));
     let mut geometry = Vec::with_capacity(chain.links.len());
