@@ -11,8 +11,8 @@
 
 use burn::module::{Module, Param};
 use burn::tensor::{Device, Int, Tensor, TensorData};
+use rand::SeedableRng;
 use rand::rngs::StdRng;
-use rand::{RngExt, SeedableRng};
 
 use crate::body::descent::{check_schedule, descend};
 use crate::body::observations::{Observed, check_angles, host};
@@ -137,12 +137,7 @@ fn starting_poses(
     let mut rng = StdRng::seed_from_u64(seed);
     let mut out: Vec<Vec<f64>> = guess.map(|g| g.to_vec()).into_iter().collect();
     while out.len() < starts {
-        out.push(
-            ranges
-                .iter()
-                .map(|r| rng.random_range(r[0]..=r[1]))
-                .collect(),
-        );
+        out.push(crate::sim::trajectory::uniform_in(&mut rng, ranges));
     }
     out.truncate(starts);
     out

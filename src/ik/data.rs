@@ -11,8 +11,8 @@
 //! `train()` is what models fit, `validation()` what they stop on, `test()` is untouched.
 
 use nalgebra::Point3;
+use rand::SeedableRng;
 use rand::rngs::StdRng;
-use rand::{RngExt, SeedableRng};
 
 use crate::core::error::{Error, Result};
 use crate::sim::kinematics::KinematicChain;
@@ -138,12 +138,7 @@ impl IkData {
         }
         let mut rng = StdRng::seed_from_u64(cfg.seed);
         let joints: Vec<Vec<f64>> = (0..cfg.samples)
-            .map(|_| {
-                ranges
-                    .iter()
-                    .map(|&[lo, hi]| rng.random_range(lo..=hi))
-                    .collect()
-            })
+            .map(|_| crate::sim::trajectory::uniform_in(&mut rng, &ranges))
             .collect();
         let positions = chain.end_effector_batch(&joints);
         let mut lo = [f64::INFINITY; 3];

@@ -163,7 +163,7 @@ pub fn solve_with_restarts(
     restarts: &Restarts,
     samples: impl FnOnce(&[usize]) -> Vec<Vec<Vec<f64>>>,
 ) -> (Vec<IkSolution>, usize) {
-    use rand::{RngExt, SeedableRng};
+    use rand::SeedableRng;
     let mut solutions = solve_batch(chain, targets, starts, ranges, cfg);
     let stalled: Vec<usize> = (0..targets.len())
         .filter(|&i| solutions[i].error_m >= cfg.tolerance_m)
@@ -194,12 +194,7 @@ pub fn solve_with_restarts(
                 restarts.seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );
             let random: Vec<Vec<f64>> = (0..restarts.random)
-                .map(|_| {
-                    ranges
-                        .iter()
-                        .map(|&[lo, hi]| rng.random_range(lo..=hi))
-                        .collect()
-                })
+                .map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges))
                 .collect();
             for start in candidates.into_iter().chain(random.iter()) {
                 let s = solve(chain, target, start, ranges, cfg);

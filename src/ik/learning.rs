@@ -506,16 +506,10 @@ fn babble(
     ranges: &[[f64; 2]],
     seed: u64,
 ) -> (Vec<Point3<f64>>, Vec<Vec<f64>>) {
-    use rand::RngExt;
     let mut rng = StdRng::seed_from_u64(seed);
+    let dof = forward.dof().min(ranges.len());
     let joints: Vec<Vec<f64>> = (0..n)
-        .map(|_| {
-            ranges
-                .iter()
-                .take(forward.dof())
-                .map(|&[lo, hi]| rng.random_range(lo..=hi))
-                .collect()
-        })
+        .map(|_| crate::sim::trajectory::uniform_in(&mut rng, &ranges[..dof]))
         .collect();
     (forward.end_effector_batch(&joints), joints)
 }

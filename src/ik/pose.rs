@@ -20,8 +20,8 @@
 //! a limit), for the next start.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
 use rand::rngs::StdRng;
-use rand::{RngExt, SeedableRng};
 use rayon::prelude::*;
 
 use crate::ik::dls::{keep_in, wraps};
@@ -394,12 +394,8 @@ pub fn solve(
     let cost = |s: &PoseSolution| s.position_error_m.powi(2) + (w * s.rotation_error_rad).powi(2);
     let mut best: Option<PoseSolution> = None;
     let (mut iterations, mut tried) = (0, 0);
-    let random = (0..cfg.random_starts).map(|_| {
-        ranges
-            .iter()
-            .map(|&[lo, hi]| rng.random_range(lo..=hi))
-            .collect::<Vec<f64>>()
-    });
+    let random =
+        (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
         let s = solve_from(paths, target, &start, ranges, cfg);
         iterations += s.iterations;

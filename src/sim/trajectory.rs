@@ -109,13 +109,15 @@ pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
 /// `n` uniform samples within `ranges` (user units), seeded.
 pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
     let mut rng = StdRng::seed_from_u64(seed);
-    (0..n)
-        .map(|_| {
-            ranges
-                .iter()
-                .map(|r| rng.random_range(r[0]..=r[1]))
-                .collect()
-        })
+    (0..n).map(|_| uniform_in(&mut rng, ranges)).collect()
+}
+
+/// One joint vector drawn uniformly within `ranges` (each joint's `[lo, hi]`, ends included),
+/// joint by joint from `rng`: the one draw every sampler, random start and restart makes.
+pub fn uniform_in<R: RngExt + ?Sized>(rng: &mut R, ranges: &[[f64; 2]]) -> Vec<f64> {
+    ranges
+        .iter()
+        .map(|&[lo, hi]| rng.random_range(lo..=hi))
         .collect()
 }
 
