@@ -96,6 +96,7 @@ fn main() -> ExitCode {
 
         let (data, report) =
             build_and_save(&robot, &args.robot.label(), &cfg, given, &args.out, true)?;
+        selfmodel::report::dataset_preview::dataset_preview(&data, &report, &args.out)?;
         let stats = &report.stats;
         let (render_s, write_s) = (report.render_seconds, report.write_seconds);
         println!(

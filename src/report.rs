@@ -2,5 +2,6 @@
 //! image previews. Nothing here is typed by hand.
 
 pub mod canvas;
+pub mod dataset_preview;
 pub mod figures;
 pub mod table;

@@ -152,3 +152,40 @@ fn core_imports_nothing_above_it() {
         }
     }
 }
+
+/// The layers of ARCHITECTURE.md, top to bottom: a module imports from its own layer or the
+/// layers above it in this list, never from one below.
+const LAYERS: &[&str] = &[
+    "core",
+    "sim",
+    "data",
+    "kernels",
+    "train",
+    "eval",
+    "report",
+    "self_models",
+    "ik",
+    "body",
+    "studies",
+    "cli",
+];
+
+#[test]
+fn every_module_imports_only_its_own_layer_or_those_above_it() {
+    let layer = |module: &str| {
+        let top = module.split("::").next().unwrap_or(module);
+        LAYERS.iter().position(|l| *l == top)
+    };
+    let mut wrong = Vec::new();
+    for (module, refs) in import_graph() {
+        let Some(own) = layer(&module) else {
+            panic!("{module} is in no layer of ARCHITECTURE.md");
+        };
+        for r in refs {
+            if layer(&r).is_some_and(|l| l > own) {
+                wrong.push(format!("{module} imports {r}"));
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "imports from a layer below: {wrong:#?}");
+}

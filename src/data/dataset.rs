@@ -27,7 +27,6 @@ use crate::core::provenance::git_revision;
 use indicatif::ProgressBar;
 
 use crate::data::npz::{Array, ArrayData, read_npz, write_npz};
-use crate::report::figures::{GridRow, image_grid};
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::{RayCaster, RenderOptions};
 use crate::sim::robot::Robot;
@@ -895,8 +894,9 @@ pub struct BuildReport {
     pub git_revision: String,
 }
 
-/// Sample (or take `angles`), render, and write `out` (.npz) with `.stats.json`,
-/// `.config.json` and `.preview.png` beside it. `progress`: show a progress bar.
+/// Sample (or take `angles`), render, and write `out` (.npz) with `.stats.json` and
+/// `.config.json` beside it (`report::dataset_preview` draws its `.preview.png`).
+/// `progress`: show a progress bar.
 pub fn build_and_save(
     robot: &Robot,
     robot_label: &str,
@@ -939,29 +939,5 @@ pub fn build_and_save(
     };
     write_json(&out.with_extension("stats.json"), &report)?;
     write_json(&out.with_extension("config.json"), cfg)?;
-    let shown = 8.min(data.len());
-    let picks: Vec<usize> = (0..shown).map(|k| k * data.len() / shown).collect();
-    let silhouettes: Vec<Vec<f32>> = picks
-        .iter()
-        .map(|&i| data.image(i).iter().map(|&v| v as f32 / 255.0).collect())
-        .collect();
-    let range = report
-        .stats
-        .depth_m
-        .as_ref()
-        .map_or([0.5, 1.5], |d| [d.min as f32, d.max as f32]);
-    let rows = [
-        GridRow::Grey(silhouettes.iter().map(Vec::as_slice).collect()),
-        GridRow::Depth(picks.iter().map(|&i| data.depth_map(i)).collect(), range),
-    ];
-    image_grid(
-        &out.with_extension("preview.png"),
-        &rows,
-        &["silhouette", "depth"],
-        &[],
-        data.width,
-        data.height,
-        1,
-    )?;
     Ok((data, report))
 }

@@ -30,8 +30,9 @@ fn run_dataset(opts: &RunOptions, dir: &Path) -> Result<String> {
     })?;
     cfg.render.ground_artifact = opts.paper_compatible;
     let robot = crate::sim::arm4::arm4();
-    let (data, report) =
-        build_and_save(&robot, "arm4", &cfg, None, &dir.join("dataset.npz"), false)?;
+    let out = dir.join("dataset.npz");
+    let (data, report) = build_and_save(&robot, "arm4", &cfg, None, &out, false)?;
+    crate::report::dataset_preview::dataset_preview(&data, &report, &out)?;
     Ok(format!(
         "{} samples rendered in {:.3} s, mean occupancy {:.2}%",
         data.len(),
