@@ -2,6 +2,8 @@
 //! give the same samples, the latency is real, the link parameters of a changed arm are
 //! learned, and adaptation recovers most of the error the change caused.
 
+mod common;
+
 use std::time::Instant;
 
 use burn::tensor::{Tensor, TensorData};
@@ -206,9 +208,9 @@ fn adaptation_recovers_most_of_the_error_a_longer_arm_causes() {
         changes: vec![ArmChange::Lengthen { cm: 3.0 }],
         ..AdaptationConfig::quick()
     };
-    let dir = std::env::temp_dir().join(format!("selfmodel-adapt-{}", std::process::id()));
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let (rows, curve) = adapt_robot(&cfg, &ur5(), &dir, DeviceChoice::Cpu).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
     assert_eq!(rows.len(), 2);
     for r in &rows {
         eprintln!(

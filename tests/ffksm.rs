@@ -394,7 +394,8 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
     assert_eq!(centre_crop(4, 6, 2), vec![8, 9, 14, 15]);
     let mut cfg = ffksm_run("quick", FfksmVariant::Reimplementation).unwrap();
     cfg.model.novel_views_deg = vec![30.0];
-    let dir = std::env::temp_dir().join(format!("selfmodel-ffksm-{}", std::process::id()));
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
     // Its saved field loads with its robot and camera and renders as its run did.
     common::the_saved_model_scores_as_its_run(&cfg, &dir, &out.quality);
@@ -434,7 +435,6 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -450,7 +450,8 @@ fn a_field_that_renders_black_is_restarted_then_trained_once_without_the_check()
         r.until = 20;
         r.max_restarts = 2;
     }
-    let dir = std::env::temp_dir().join(format!("selfmodel-collapse-{}", std::process::id()));
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     // After `max_restarts` collapses the last try trains to the end, and its row says so (a
     // robot the field cannot pick up gets a row with its low score, not an error).
     let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
@@ -469,7 +470,6 @@ fn a_field_that_renders_black_is_restarted_then_trained_once_without_the_check()
     // The restarts are kept beside the checkpoint, so a resumed run reports them.
     let kept = std::fs::read_to_string(dir.join("checkpoint/restarts.json")).unwrap();
     assert_eq!(kept.trim(), "2");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The hand-written dense training step against burn's autodiff through the dense marcher and
@@ -625,12 +625,11 @@ fn training_with_the_hand_written_step_follows_autodiff() {
         cfg.data.test = Some(start..start + 3);
         cfg.model.novel_views_deg = vec![];
         cfg.model.dense_gradients = path;
-        let dir =
-            std::env::temp_dir().join(format!("selfmodel-ffksm-{path:?}-{}", std::process::id()));
+        let tmp = common::tempdir();
+        let dir = tmp.path().to_path_buf();
         outcomes.push(
             selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap(),
         );
-        let _ = std::fs::remove_dir_all(&dir);
     }
     let (a, b) = (&outcomes[0], &outcomes[1]);
     assert!(

@@ -1,6 +1,8 @@
 //! Figures: clean log axes (one label per tick, across the whole range) and Pareto labels
 //! that never overprint each other.
 
+mod common;
+
 use selfmodel::report::figures::{ParetoPoint, log_ticks, pareto_plot, tick_label};
 
 #[test]
@@ -30,9 +32,9 @@ fn a_crowded_pareto_plot_is_drawn() {
             reference: i % 2 == 1,
         })
         .collect();
-    let path = std::env::temp_dir().join(format!("selfmodel_pareto_{}.png", std::process::id()));
+    let tmp = common::tempdir();
+    let path = tmp.path().join("selfmodel_pareto.png");
     pareto_plot(&path, "crowded", "PSNR", &points, &[("floor".into(), 19.0)]).unwrap();
     let bytes = std::fs::read(&path).unwrap();
     assert!(bytes.starts_with(b"\x89PNG"));
-    std::fs::remove_file(&path).unwrap();
 }

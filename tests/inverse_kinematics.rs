@@ -1,5 +1,7 @@
 //! Learned inverse kinematics: data, normalisation and error statistics.
 
+mod common;
+
 use selfmodel::ik::data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
 
 #[test]
@@ -281,7 +283,8 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
 #[test]
 fn predictions_csv_holds_the_answers_and_where_they_reach() {
     let (robot, data) = ur5_data(50, 90.0);
-    let dir = std::env::temp_dir().join(format!("ik-pred-{}", std::process::id()));
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let path = dir.join("p.csv");
     let targets = &data.positions[data.test()];
     let joints = &data.joints[..targets.len()];
@@ -312,7 +315,6 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
             assert!((v[9 + k] - reached[k]).abs() < 1e-6);
         }
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -383,8 +385,8 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
 #[test]
 fn reused_units_keep_the_revision_that_trained_them() {
     use selfmodel::studies::emssl_table2::{IkComparisonConfig, run};
-    let dir = std::env::temp_dir().join(format!("selfmodel_units_{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let mut cfg = IkComparisonConfig::named("quick").unwrap();
     cfg.ranges_deg = vec![90.0];
     let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
@@ -415,7 +417,6 @@ fn reused_units_keep_the_revision_that_trained_them() {
         revisions.iter().all(|r| r == "earlier-revision"),
         "{revisions:?}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 /// `--resume` over a finished run whose EMSSL unit must run again from a damaged checkpoint
@@ -424,8 +425,8 @@ fn reused_units_keep_the_revision_that_trained_them() {
 #[test]
 fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
     use selfmodel::studies::emssl_table2::{IkComparisonConfig, run};
-    let dir = std::env::temp_dir().join(format!("selfmodel_damaged_{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let mut cfg = IkComparisonConfig::named("quick").unwrap();
     cfg.ranges_deg = vec![90.0];
     let robot = selfmodel::sim::dh_robot::ur5([-1.0, 1.0]);
@@ -464,7 +465,6 @@ fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
             "{path:?} was rewritten"
         );
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

@@ -243,7 +243,8 @@ fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::self_models::k3dgs::{CountRow, K3dgsVariant, k3dgs_run};
     let cfg = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha).unwrap();
-    let dir = std::env::temp_dir().join(format!("selfmodel-k3dgs-{}", std::process::id()));
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
     let counts: Vec<(usize, usize)> =
         selfmodel::report::table::read_csv::<CountRow>(&dir.join("gaussian_counts.csv"))
@@ -280,5 +281,4 @@ fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     // Its saved model (the Gaussians densification left, on the robot's chain) loads and
     // scores as its run did.
     common::the_saved_model_scores_as_its_run(&cfg, &dir, &out.quality);
-    let _ = std::fs::remove_dir_all(&dir);
 }
