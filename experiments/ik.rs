@@ -205,7 +205,6 @@ fn main() -> ExitCode {
                 let start = std::time::Instant::now();
                 let answers = model.solve_with(&robot.chain, &targets, k, &cfg, &device)?;
                 let seconds = start.elapsed().as_secs_f64();
-                let cfg = &cfg;
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];
                 for c in joint_columns(&model.saved.joint_names, &taken) {
@@ -223,12 +222,12 @@ fn main() -> ExitCode {
                                 write!(w, ",{q}").map_err(io)?;
                             }
                             let (p, r) = (1000.0 * a.position_error_m, a.rotation_error_rad);
-                            writeln!(w, ",{p},{},{}", r.to_degrees(), a.exact(cfg)).map_err(io)?;
+                            writeln!(w, ",{p},{},{}", r.to_degrees(), a.exact(&cfg)).map_err(io)?;
                         }
                     }
                     Ok(())
                 })?;
-                let stats = SolveStats::of(&answers, cfg, &model.saved.ranges);
+                let stats = SolveStats::of(&answers, &cfg, &model.saved.ranges);
                 let threads = rayon::current_num_threads();
                 selfmodel::core::atomic_file::write_json(
                     &provenance,
@@ -240,7 +239,7 @@ fn main() -> ExitCode {
                         "exact_within_deg": cfg.tolerance_rad.to_degrees(),
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
-                        "solver": cfg,
+                        "solver": &cfg,
                         "stats": stats,
                         "seconds": seconds,
                         "threads": threads,

@@ -459,7 +459,6 @@ impl PyIkSolver {
             }
             let answers = answers.map_err(value_error)?;
             let dof = self.model.dof();
-            let lm = &lm;
             let (mut joints, mut pos, mut rot, mut exact) = (
                 Vec::with_capacity(n * k * dof),
                 Vec::with_capacity(n * k),
@@ -470,7 +469,7 @@ impl PyIkSolver {
                 joints.extend_from_slice(&a.joints);
                 pos.push(1000.0 * a.position_error_m);
                 rot.push(a.rotation_error_rad.to_degrees());
-                exact.push(a.exact(lm));
+                exact.push(a.exact(&lm));
             }
             let out = pyo3::types::PyDict::new(py);
             let shape2 = |v: Vec<f64>| {

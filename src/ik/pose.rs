@@ -12,10 +12,13 @@
 //! Several tips stack their rows in `e` and `J` (tips may share joints: a torso moving both
 //! hands). Each iteration solves `(J^T W J + lambda I) dq = J^T W e` with the analytic pose Jacobian
 //! ([`KinematicChain::pose_jacobian`]), `W` weighting rotation by `tolerance_m /
-//! tolerance_rad` metres per radian (so both tolerances weigh alike) and `lambda = E + 1e-6`
+//! tolerance_rad` metres per radian (so both tolerances weigh alike) and `lambda = E + 1e-12`
 //! (`E = e^T W e / 2`, Sugihara's choice: Gauss-Newton near the solution, gradient-like far
-//! from it). A step that would leave a joint's range is clamped to it (whole-circle ranges
-//! wrap); a step that does not lower `E` is retried with ten times the damping. A start is
+//! from it; the floor is small so the last iterations to the convergence tolerance stay
+//! Gauss-Newton). A joint at a limit the step would push past is held there and the step
+//! solved again without it; a step that would leave a joint's range is clamped to it
+//! (whole-circle ranges wrap); a step that does not lower `E` is retried with ten times the
+//! damping. A start is
 //! given up when no step lowers `E` or `E` has not halved in 5 iterations (a local minimum or
 //! a limit), for the next start.
 
@@ -124,7 +127,7 @@ impl LmConfig {
         LmConfig {
             tolerance_m: 1e-3,
             tolerance_rad: 0.01,
-            convergence_m: CONVERGENCE_M,
+            convergence_m: default_convergence_m(),
             convergence_rad: default_convergence_rad(),
             max_iterations: 30,
             random_starts: 100,
