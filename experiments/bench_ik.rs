@@ -9,7 +9,9 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::core::spread::format_significant;
-use selfmodel::studies::bench_ik::{BenchIkConfig, default_out, run, summary_rows};
+use selfmodel::studies::bench_ik::{
+    BenchIkConfig, EQUAL_PRECISION_MM_DEG, default_out, run, summary_rows,
+};
 
 /// Benchmark a model `ik train` saved: share of targets solved exactly (1 mm, 0.572 degrees,
 /// inside the limits) and exact solutions/s at several budgets, the family of k answers, the
@@ -38,6 +40,37 @@ struct Args {
     out: Option<PathBuf>,
 }
 
+/// The ranking at equal precision in one line a thread count: ours at its default budget
+/// against the reference with the most answers within the common precision a second.
+fn equal_precision_line(rows: &[selfmodel::studies::bench_ik::BenchIkRow]) -> String {
+    let (mm, deg) = EQUAL_PRECISION_MM_DEG;
+    let mut text = String::new();
+    let ours = rows.iter().filter(|r| {
+        r.standard && r.k == 1 && r.solver == "selfmodel flow + LM" && r.precise_per_s.is_some()
+    });
+    for o in ours {
+        let best = rows
+            .iter()
+            .filter(|r| !r.solver.starts_with("selfmodel") && r.threads == o.threads)
+            .filter(|r| r.precise_per_s.is_some())
+            .max_by(|a, b| a.precise_per_s.partial_cmp(&b.precise_per_s).expect("finite"));
+        if let (Some(b), Some(v)) = (best, o.vs_best_reference_precise) {
+            text += &format!(
+                "at equal precision ({} mm, {} degrees), {} threads or processes: ours {:.0}/s, the best reference {} at {} {:.0}/s: {:.1}x\n",
+                format_significant(mm, 2),
+                format_significant(deg, 2),
+                o.threads,
+                o.precise_per_s.unwrap_or(0.0),
+                b.solver,
+                b.tolerance.as_deref().unwrap_or("-"),
+                b.precise_per_s.unwrap_or(0.0),
+                v
+            );
+        }
+    }
+    text
+}
+
 fn main() -> ExitCode {
     let args = Args::parse();
     selfmodel::cli::git_revision();
@@ -51,7 +84,7 @@ fn main() -> ExitCode {
         let python = (!args.no_references).then_some(args.python.as_path());
         let rows = run(&cfg, &args.model, &out, python, &device)?;
         let mut text = format!(
-            "{:<34} {:<22} {:<26} {:>7} {:>8} {:>10} {:>9} {:>20}\n",
+            "{:<34} {:<22} {:<26} {:>7} {:>8} {:>10} {:>9} {:>20} {:>22}\n",
             "solver",
             "budget",
             "tolerance",
@@ -59,7 +92,8 @@ fn main() -> ExitCode {
             "exact %",
             "exact/s",
             "distinct",
-            "p98 error mm, deg"
+            "p98 error mm, deg",
+            "within precision %, /s"
         );
         for r in summary_rows(&rows) {
             let p98 = match (r.pos_err_mm_p98, r.rot_err_deg_p98) {
@@ -68,8 +102,12 @@ fn main() -> ExitCode {
                 }
                 _ => "-".into(),
             };
+            let precise = match (r.precise_pct, r.precise_per_s) {
+                (Some(pct), Some(per_s)) => format!("{pct:.2}, {per_s:.0}"),
+                _ => "-".into(),
+            };
             text += &format!(
-                "{:<34} {:<22} {:<26} {:>7} {:>8.2} {:>10.0} {:>9} {:>20}\n",
+                "{:<34} {:<22} {:<26} {:>7} {:>8.2} {:>10.0} {:>9} {:>20} {:>22}\n",
                 r.solver,
                 r.budget,
                 r.tolerance.as_deref().unwrap_or("-"),
@@ -77,9 +115,11 @@ fn main() -> ExitCode {
                 r.exact_pct,
                 r.exact_per_s,
                 r.distinct_mean.map_or("-".into(), |d| format!("{d:.1}")),
-                p98
+                p98,
+                precise
             );
         }
+        text += &equal_precision_line(&rows);
         if let Some(a) = rows.iter().find(|r| r.solver.contains("alone")) {
             text += &format!(
                 "the model alone: {:.1} mm, {:.2} degrees mean ({:.1} mm, {:.2} degrees median)\n",

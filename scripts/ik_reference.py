@@ -17,11 +17,13 @@ Each solver runs at its default tolerance (ik_LM's `tol` 1e-6 on its error E; TR
 `eps` 1e-5) over every budget, and at its default budget with tighter tolerances (`--tight`:
 ik_LM tol 1e-10 and 1e-14, TRAC-IK eps 1e-7 and 1e-9), so that solvers are compared at equal
 precision: each row gives the median, 98th percentile and largest pose error of the answers it
-returned (millimetres, degrees).
+returned (millimetres, degrees), and `precise` counts the answers within `--precision MM,DEG`
+(default 1e-4 mm and 1e-4 degrees, ours' convergence tolerance) and inside the limits: the
+ranking at a common precision.
 
 Each solver runs in `--processes` worker processes (the targets split between them; seconds are
 the wall time of the whole batch, pool start-up excluded). Writes CSV to `--out`:
-solver,budget,standard,processes,targets,exact,outside_limits,seconds,tolerance,pos_err_mm_median,
+solver,budget,standard,processes,targets,exact,outside_limits,seconds,tolerance,precise,pos_err_mm_median,
 pos_err_mm_p98,pos_err_mm_max,rot_err_deg_median,rot_err_deg_p98,rot_err_deg_max. A solver whose
 package is absent is skipped with a line saying so.
 
@@ -141,6 +143,7 @@ def main():
     p.add_argument("--out", required=True)
     p.add_argument("--standard-only", action="store_true", help="each solver's default budget only")
     p.add_argument("--tight", action="store_true", help="also each solver's default budget at tighter tolerances")
+    p.add_argument("--precision", default="0.0001,0.0001", help="MM,DEG: the common precision answers are also counted at (column precise)")
     args = p.parse_args()
     rows = [
         [float(r[k]) for k in ("x", "y", "z", "qw", "qx", "qy", "qz")]
@@ -153,11 +156,13 @@ def main():
         return
     ets = load_ets(args.urdf, args.tip)
     lo, hi = ets.qlim
+    precise_mm, precise_deg = (float(v) for v in args.precision.split(","))
 
     def score(answers):
-        """Exact answers, answers outside the limits, and the spread (median, p98, max) of the
-        returned answers' position (mm) and rotation (degrees) errors."""
-        exact = outside = 0
+        """Exact answers, answers within the common precision, answers outside the limits, and the
+        spread (median, p98, max) of the returned answers' position (mm) and rotation (degrees)
+        errors."""
+        exact = precise = outside = 0
         mm, deg = [], []
         for r, q in zip(rows, answers):
             if q is None:
@@ -173,7 +178,8 @@ def main():
             inside = np.all(q >= lo - 1e-6) and np.all(q <= hi + 1e-6)
             outside += not inside
             exact += bool(dp <= 1e-3 and dr <= 0.01 and inside)
-        return exact, outside, spread(mm) + spread(deg)
+            precise += bool(mm[-1] <= precise_mm and deg[-1] <= precise_deg and inside)
+        return exact, precise, outside, spread(mm) + spread(deg)
 
     solvers = [("Robotics Toolbox ik_LM", "rtb", RTB_SEARCHES, RTB_STANDARD, "searches", "tol", RTB_TOL, RTB_TIGHT)]
     try:
@@ -186,7 +192,7 @@ def main():
         solvers.append(("TRAC-IK (Speed)", "tracik", TRACIK_TIMEOUTS_MS, TRACIK_STANDARD, "ms", "eps", TRACIK_EPS, TRACIK_TIGHT))
     except ImportError:
         print("skipped TRAC-IK: pytracik is not installed (pip install pytracik)")
-    columns = ["solver", "budget", "standard", "processes", "targets", "exact", "outside_limits", "seconds", "tolerance"]
+    columns = ["solver", "budget", "standard", "processes", "targets", "exact", "outside_limits", "seconds", "tolerance", "precise"]
     columns += [f"{e}_{s}" for e in ("pos_err_mm", "rot_err_deg") for s in ("median", "p98", "max")]
     with open(args.out, "w", newline="") as f:
         w = csv.writer(f)
@@ -196,14 +202,14 @@ def main():
             runs += [(standard, t) for t in tight] if args.tight else []
             for budget, t in runs:
                 answers, seconds = run(kind, budget, t, args, rows)
-                exact, outside, errors = score(answers)
+                exact, precise, outside, errors = score(answers)
                 tolerance = f"{tol_name} {t:g}"
-                w.writerow([name, f"{budget} {unit}", budget == standard and t == tol, args.processes, len(rows), exact, outside, seconds, tolerance] + errors)
+                w.writerow([name, f"{budget} {unit}", budget == standard and t == tol, args.processes, len(rows), exact, outside, seconds, tolerance, precise] + errors)
                 f.flush()
                 print(
                     f"{name}, {budget} {unit}, {tolerance}: {exact} of {len(rows)} exact ({100 * exact / len(rows):.2f}%), "
                     f"{exact / seconds:.0f} exact/s on {args.processes} processes, position error median/p98/max "
-                    f"{errors[0]:.2g}/{errors[1]:.2g}/{errors[2]:.2g} mm",
+                    f"{errors[0]:.2g}/{errors[1]:.2g}/{errors[2]:.2g} mm, {precise} within {args.precision} mm,deg",
                     flush=True,
                 )
 

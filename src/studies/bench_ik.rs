@@ -29,6 +29,12 @@ use crate::sim::robots::RobotSpec;
 /// `model_performances.md` (500 test targets, 2023-03-28). A reference column, not ours.
 pub const IKFLOW_PANDA_MM_DEG: (f64, f64) = (10.6033, 4.60678);
 
+/// The common precision every solver is ranked at (mm, degrees): our default convergence
+/// tolerance (`ik::pose::CONVERGENCE_M`, `CONVERGENCE_DEG`), which each reference reaches at
+/// its tightest setting. An answer counts at it when its pose is within both and every joint
+/// inside its limits.
+pub const EQUAL_PRECISION_MM_DEG: (f64, f64) = (1e-4, 1e-4);
+
 /// What the benchmark runs.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BenchIkConfig {
@@ -109,9 +115,19 @@ pub struct BenchIkRow {
     /// Where the solver stops iterating (ours: the convergence tolerance, mm and degrees).
     #[serde(default)]
     pub tolerance: Option<String>,
+    /// Targets answered within [`EQUAL_PRECISION_MM_DEG`] (%, and such answers a second):
+    /// the ranking at equal precision.
+    #[serde(default)]
+    pub precise_pct: Option<f64>,
+    #[serde(default)]
+    pub precise_per_s: Option<f64>,
     /// Ours: exact solutions/s over the fastest reference's at its default budget on as many
     /// threads (processes).
     pub vs_fastest_reference: Option<f64>,
+    /// Ours: answers within the common precision a second over the best reference's at any of
+    /// its tolerances, at its default budget on as many threads (processes).
+    #[serde(default)]
+    pub vs_best_reference_precise: Option<f64>,
     pub cpu: String,
     pub model_preset: String,
     pub preset: String,
@@ -202,6 +218,7 @@ impl Sitting<'_> {
         seconds: f64,
     ) {
         let s = SolveStats::of(answers, lm, ranges);
+        let precise = SolveStats::of(answers, &at_equal_precision(lm), ranges);
         let k = answers.first().map_or(1, Vec::len);
         let family = k > 1;
         eprintln!(
@@ -238,12 +255,24 @@ impl Sitting<'_> {
                 format_significant(1e3 * lm.convergence_m, 2),
                 format_significant(lm.convergence_rad.to_degrees(), 2)
             )),
+            precise_pct: Some(precise.exact_pct()),
+            precise_per_s: Some(precise.exact_answers as f64 / seconds),
             vs_fastest_reference: None,
+            vs_best_reference_precise: None,
             cpu: self.cpu.clone(),
             model_preset: self.model_preset.clone(),
             preset: self.cfg.preset.clone(),
             git_revision: crate::core::provenance::git_revision(),
         });
+    }
+}
+
+/// `lm` with its success threshold at the common precision.
+fn at_equal_precision(lm: &LmConfig) -> LmConfig {
+    LmConfig {
+        tolerance_m: EQUAL_PRECISION_MM_DEG.0 / 1e3,
+        tolerance_rad: EQUAL_PRECISION_MM_DEG.1.to_radians(),
+        ..lm.clone()
     }
 }
 
@@ -449,14 +478,21 @@ pub fn run(
                 .args(["--base", &chain.links[0]])
                 .args(["--tip", &tip])
                 .args(["--processes", &processes.to_string()])
+                .args([
+                    "--precision",
+                    &format!(
+                        "{},{}",
+                        format_significant(EQUAL_PRECISION_MM_DEG.0, 3),
+                        format_significant(EQUAL_PRECISION_MM_DEG.1, 3)
+                    ),
+                ])
                 .args(["--out", &file.to_string_lossy()]);
             if standard_only {
                 cmd.arg("--standard-only");
-            } else {
-                // Each reference at its default budget with tighter tolerances too: the
-                // comparison at equal precision.
-                cmd.arg("--tight");
             }
+            // Each reference at its default budget with tighter tolerances too: the comparison
+            // at equal precision.
+            cmd.arg("--tight");
             let o = match cmd.output() {
                 Ok(o) => o,
                 Err(e) => {
@@ -518,6 +554,15 @@ pub fn run(
             .map(|r| r.exact_per_s)
             .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
         rows[i].vs_fastest_reference = fastest.map(|f| rows[i].exact_per_s / f);
+        let best_precise = rows
+            .iter()
+            .filter(|r| !r.solver.starts_with("selfmodel") && r.threads == rows[i].threads)
+            .filter_map(|r| r.precise_per_s)
+            .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+        rows[i].vs_best_reference_precise = match (rows[i].precise_per_s, best_precise) {
+            (Some(ours), Some(best)) if best > 0.0 => Some(ours / best),
+            _ => None,
+        };
     }
     write_report(out, &rows)?;
     Ok(rows)
@@ -550,6 +595,9 @@ struct ReferenceRow {
     rot_err_deg_p98: Option<f64>,
     #[serde(default)]
     rot_err_deg_max: Option<f64>,
+    /// Answers within the common precision (`--precision`): absent from older files.
+    #[serde(default)]
+    precise: Option<usize>,
 }
 
 fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
@@ -581,7 +629,10 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
             rot_err_deg_p98: r.rot_err_deg_p98,
             rot_err_deg_max: r.rot_err_deg_max,
             tolerance: r.tolerance,
+            precise_pct: r.precise.map(|p| 100.0 * p as f64 / r.targets.max(1) as f64),
+            precise_per_s: r.precise.map(|p| p as f64 / r.seconds),
             vs_fastest_reference: None,
+            vs_best_reference_precise: None,
             cpu: s.cpu.clone(),
             model_preset: s.model_preset.clone(),
             preset: s.cfg.preset.clone(),
@@ -678,4 +729,27 @@ pub fn default_out(model_dir: &Path) -> PathBuf {
                 .file_name()
                 .map_or("model".into(), |n| n.to_string_lossy().to_string()),
         )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_common_precision_is_the_default_convergence_tolerance() {
+        let (mm, deg) = EQUAL_PRECISION_MM_DEG;
+        assert!((mm - 1e3 * crate::ik::pose::CONVERGENCE_M).abs() < 1e-15);
+        assert!((deg - crate::ik::pose::CONVERGENCE_DEG).abs() < 1e-15);
+        // An answer just inside counts at it; one just outside (or outside the limits) does not.
+        let lm = at_equal_precision(&LmConfig::standard());
+        let answer = |mm: f64| PoseSolution {
+            joints: vec![0.0],
+            position_error_m: mm / 1e3,
+            rotation_error_rad: 0.5e-4_f64.to_radians(),
+            iterations: 1,
+            starts: 1,
+        };
+        let stats = SolveStats::of(&[vec![answer(0.9e-4)], vec![answer(1.1e-4)]], &lm, &[[-1.0, 1.0]]);
+        assert_eq!(stats.exact_targets, 1);
+    }
 }
