@@ -115,6 +115,10 @@ pub struct BenchIkRow {
     /// Where the solver stops iterating (ours: the convergence tolerance, mm and degrees).
     #[serde(default)]
     pub tolerance: Option<String>,
+    /// The solver at its default budget, at any of its tolerances (the summary's rows and the
+    /// equal-precision table's: `standard` rows and the references' tighter ones).
+    #[serde(default)]
+    pub default_budget: bool,
     /// Targets answered within [`EQUAL_PRECISION_MM_DEG`] (%, and such answers a second):
     /// the ranking at equal precision.
     #[serde(default)]
@@ -255,6 +259,7 @@ impl Sitting<'_> {
                 format_significant(1e3 * lm.convergence_m, 2),
                 format_significant(lm.convergence_rad.to_degrees(), 2)
             )),
+            default_budget: false,
             precise_pct: Some(precise.exact_pct()),
             precise_per_s: Some(precise.exact_answers as f64 / seconds),
             vs_fastest_reference: None,
@@ -543,6 +548,22 @@ pub fn run(
         );
     }
     let mut rows = sitting.rows;
+    let default_budget: Vec<bool> = rows
+        .iter()
+        .map(|r| {
+            r.standard
+                || rows.iter().any(|s| {
+                    s.standard
+                        && s.solver == r.solver
+                        && s.budget == r.budget
+                        && s.threads == r.threads
+                        && s.tolerance != r.tolerance
+                })
+        })
+        .collect();
+    for (r, d) in rows.iter_mut().zip(default_budget) {
+        r.default_budget = d;
+    }
     for i in 0..rows.len() {
         if !rows[i].solver.starts_with("selfmodel") {
             continue;
@@ -629,6 +650,7 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
             rot_err_deg_p98: r.rot_err_deg_p98,
             rot_err_deg_max: r.rot_err_deg_max,
             tolerance: r.tolerance,
+            default_budget: false,
             precise_pct: r.precise.map(|p| 100.0 * p as f64 / r.targets.max(1) as f64),
             precise_per_s: r.precise.map(|p| p as f64 / r.seconds),
             vs_fastest_reference: None,
@@ -644,18 +666,7 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
 /// The rows a summary shows: each solver's default budget, and the references at that budget
 /// with their tighter tolerances (the comparison at equal precision).
 pub fn summary_rows(rows: &[BenchIkRow]) -> Vec<&BenchIkRow> {
-    rows.iter()
-        .filter(|r| {
-            r.standard
-                || rows.iter().any(|s| {
-                    s.standard
-                        && s.solver == r.solver
-                        && s.budget == r.budget
-                        && s.threads == r.threads
-                        && s.tolerance != r.tolerance
-                })
-        })
-        .collect()
+    rows.iter().filter(|r| r.default_budget).collect()
 }
 
 /// `results.csv` and its Markdown, and the success-against-time figure.
@@ -668,8 +679,11 @@ pub fn write_report(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
             "Full-pose inverse kinematics on {robot}: ours beside the references, same targets, same sitting"
         ),
         &format!(
-            "Random reachable targets (the tip's pose at joints drawn within the limits). Exact: within 1 mm and 0.572 degrees with every joint inside its limits. `threads`: our threads or the references' processes; `ms_per_target`: the batch's wall time over its targets. `standard` marks each solver's default budget; the other budgets draw `success_against_time.png`. The learned model alone is the flow's one sample without refinement: IKFlow's published Panda model (panda_full_tpm, 25M training poses, GPU) has {:.1} mm and {:.2} degrees mean errors (jstmn/ikflow model_performances.md).",
-            IKFLOW_PANDA_MM_DEG.0, IKFLOW_PANDA_MM_DEG.1
+            "Random reachable targets (the tip's pose at joints drawn within the limits). Exact: within 1 mm and 0.572 degrees with every joint inside its limits. `threads`: our threads or the references' processes; `ms_per_target`: the batch's wall time over its targets. `standard` marks each solver's default budget at its default tolerance; the other budgets draw `success_against_time.png`; `default_budget` marks the default budget at any tolerance (the references' tighter ones too). `tolerance`: where the solver stops iterating. `pos_err_mm_*`, `rot_err_deg_*`: every returned answer's pose error. `precise_pct`, `precise_per_s`: targets answered within {} mm and {} degrees (inside the limits), the common precision solvers are ranked at; `vs_best_reference_precise`: ours over the best reference at it, at any of its tolerances. The learned model alone is the flow's one sample without refinement: IKFlow's published Panda model (panda_full_tpm, 25M training poses, GPU) has {:.1} mm and {:.2} degrees mean errors (jstmn/ikflow model_performances.md).",
+            format_significant(EQUAL_PRECISION_MM_DEG.0, 2),
+            format_significant(EQUAL_PRECISION_MM_DEG.1, 2),
+            IKFLOW_PANDA_MM_DEG.0,
+            IKFLOW_PANDA_MM_DEG.1
         ),
     )?;
     draw(out, rows)
