@@ -53,7 +53,11 @@ fn equal_precision_line(rows: &[selfmodel::studies::bench_ik::BenchIkRow]) -> St
             .iter()
             .filter(|r| !r.solver.starts_with("selfmodel") && r.threads == o.threads)
             .filter(|r| r.precise_per_s.is_some())
-            .max_by(|a, b| a.precise_per_s.partial_cmp(&b.precise_per_s).expect("finite"));
+            .max_by(|a, b| {
+                a.precise_per_s
+                    .partial_cmp(&b.precise_per_s)
+                    .expect("finite")
+            });
         if let (Some(b), Some(v)) = (best, o.vs_best_reference_precise) {
             text += &format!(
                 "at equal precision ({} mm, {} degrees), {} threads or processes: ours {:.0}/s, the best reference {} at {} {:.0}/s: {:.1}x\n",

@@ -651,7 +651,9 @@ fn read_reference(path: &Path, s: &Sitting) -> Result<Vec<BenchIkRow>> {
             rot_err_deg_max: r.rot_err_deg_max,
             tolerance: r.tolerance,
             default_budget: false,
-            precise_pct: r.precise.map(|p| 100.0 * p as f64 / r.targets.max(1) as f64),
+            precise_pct: r
+                .precise
+                .map(|p| 100.0 * p as f64 / r.targets.max(1) as f64),
             precise_per_s: r.precise.map(|p| p as f64 / r.seconds),
             vs_fastest_reference: None,
             vs_best_reference_precise: None,
@@ -763,7 +765,11 @@ mod tests {
             iterations: 1,
             starts: 1,
         };
-        let stats = SolveStats::of(&[vec![answer(0.9e-4)], vec![answer(1.1e-4)]], &lm, &[[-1.0, 1.0]]);
+        let stats = SolveStats::of(
+            &[vec![answer(0.9e-4)], vec![answer(1.1e-4)]],
+            &lm,
+            &[[-1.0, 1.0]],
+        );
         assert_eq!(stats.exact_targets, 1);
     }
 }
