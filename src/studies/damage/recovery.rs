@@ -82,7 +82,7 @@ pub(super) fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<Recovery
             rows.extend(ctx.updates(&case, n)?);
         }
         if cfg.recovery.from_scratch {
-            rows.push(ctx.from_scratch(&case)?);
+            rows.push(ctx.trained_from_scratch(&case)?);
         }
     }
     Ok(rows)
@@ -787,7 +787,7 @@ impl<'a> Context<'a> {
 
     /// A new NeuroKin on the damaged arm's whole training set, the healthy model's schedule:
     /// the reference a recovery is measured against.
-    fn from_scratch(&mut self, case: &DamageCase) -> Result<RecoveryRow> {
+    fn trained_from_scratch(&mut self, case: &DamageCase) -> Result<RecoveryRow> {
         let key = format!("{} from scratch", case.damage.label());
         self.cached_or(key, |c| {
             let (r, nk) = (c.r, &c.r.model_run.model);
