@@ -3,6 +3,11 @@
 //! that keeps an old task while training a new one).
 
 pub mod adam;
+pub mod batcher;
+pub mod checkpoint;
+pub mod config;
+pub mod convergence;
 pub mod ewc;
+pub mod hooks;
 pub mod losses;
 pub mod trainer;

@@ -221,7 +221,11 @@ fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
     use burn::tensor::{Tensor, TensorData};
     use selfmodel::core::preset::Preset;
     use selfmodel::self_models::neurokin::NeuroKinConfig;
-    use selfmodel::train::trainer::{TrainConfig, TrainSet, Trainer, autodiff_device};
+    use selfmodel::train::{
+        batcher::TrainSet,
+        config::TrainConfig,
+        trainer::{Trainer, autodiff_device},
+    };
     let device =
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     let tdev = autodiff_device(&device, 3);

@@ -6,7 +6,7 @@ use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
 use selfmodel::ik::learning::{FitConfig, drl, predict, validation_cm};
 use selfmodel::ik::mlp::InverseModelConfig;
-use selfmodel::train::trainer::{Convergence, Plateau};
+use selfmodel::train::convergence::{Convergence, Plateau};
 
 #[test]
 fn the_validation_split_is_carved_from_the_training_samples_and_leaves_the_test_set_alone() {
@@ -444,7 +444,7 @@ fn tiny_ur5(seed: u64) -> (selfmodel::sim::robot::Robot, IkData) {
 #[test]
 fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     use selfmodel::ik::learning::{fit_converged, joint_set, mse};
-    use selfmodel::train::trainer::{Batch, FitCheckpoint, autodiff_device};
+    use selfmodel::train::{batcher::Batch, convergence::FitCheckpoint, trainer::autodiff_device};
     let (robot, data) = tiny_ur5(8);
     let device = select(DeviceChoice::Cpu).unwrap();
     let conv = Convergence {
@@ -508,7 +508,7 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
     let killed = run(&kept, Some(11 * steps_per_epoch + 2));
     assert!(killed.is_err(), "the NaN loss must stop the run");
     let (resumed, log) = run(&kept, None).unwrap();
-    let key = |l: &selfmodel::train::trainer::ConvergenceLog| {
+    let key = |l: &selfmodel::train::convergence::ConvergenceLog| {
         l.curve
             .iter()
             .map(|p| (p.epoch, p.learning_rate, p.validation))
@@ -551,7 +551,7 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
 #[test]
 fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     use selfmodel::ik::cgan::{GanConfig, train_gan};
-    use selfmodel::train::trainer::FitCheckpoint;
+    use selfmodel::train::convergence::FitCheckpoint;
     let (robot, data) = tiny_ur5(9);
     let device = select(DeviceChoice::Cpu).unwrap();
     let gan = |max_epochs: usize, checkpoint: Option<std::path::PathBuf>| GanConfig {
@@ -588,7 +588,7 @@ fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     assert_eq!(cut.unwrap().epochs, 4);
     let (resumed, log) = run(&gan(12, Some(dir.clone())));
     let log = log.unwrap();
-    let key = |l: &selfmodel::train::trainer::ConvergenceLog| {
+    let key = |l: &selfmodel::train::convergence::ConvergenceLog| {
         l.curve
             .iter()
             .map(|p| (p.epoch, p.learning_rate, p.validation, p.train_loss))

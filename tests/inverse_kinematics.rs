@@ -526,9 +526,9 @@ fn a_matched_budget_trains_the_inverse_network_for_exactly_its_steps() {
     let device = select(DeviceChoice::Cpu).unwrap();
     let fit = FitConfig {
         batch: 100,
-        converge: Some(selfmodel::train::trainer::Convergence {
+        converge: Some(selfmodel::train::convergence::Convergence {
             max_epochs: 3,
-            ..selfmodel::train::trainer::Convergence::standard()
+            ..selfmodel::train::convergence::Convergence::standard()
         }),
         ..FitConfig::paper()
     };

@@ -10,8 +10,11 @@ use burn::optim::GradientsParams;
 use burn::tensor::{Device, Distribution, Tensor};
 use selfmodel::train::adam::clip_global_norm;
 use selfmodel::train::losses::{bce, bce_with_logits, mse};
-use selfmodel::train::trainer::{
-    Batch, CheckpointPlan, StepLoss, TrainConfig, TrainLog, TrainSet, Trainer, autodiff_device,
+use selfmodel::train::{
+    batcher::{Batch, TrainSet},
+    checkpoint::CheckpointPlan,
+    config::{TrainConfig, TrainLog},
+    trainer::{StepLoss, Trainer, autodiff_device},
 };
 
 /// The training loop with an optional checkpoint plan.
@@ -51,7 +54,7 @@ fn data(dev: &Device) -> TrainSet {
     }
 }
 
-fn loss(m: &Linear, b: &selfmodel::train::trainer::Batch) -> Tensor<1> {
+fn loss(m: &Linear, b: &selfmodel::train::batcher::Batch) -> Tensor<1> {
     let n = b.inputs.dims()[0];
     mse(
         m.forward(b.inputs.clone()).reshape([n, 1, 1, 1]),

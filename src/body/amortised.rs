@@ -20,7 +20,12 @@ use crate::core::error::{Error, Result};
 use crate::kernels::cpu_extension::conv2d_layer;
 use crate::self_models::harness::Render;
 use crate::train::losses::mse;
-use crate::train::trainer::{Schedule, TrainConfig, TrainSet, Trainer, autodiff_device};
+use crate::train::{
+    batcher::TrainSet,
+    config::TrainConfig,
+    hooks::Schedule,
+    trainer::{Trainer, autodiff_device},
+};
 
 /// The estimator and how it is trained.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

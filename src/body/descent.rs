@@ -7,7 +7,12 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::body::observations::{Observed, check_angles};
 use crate::core::error::{Error, Result};
-use crate::train::trainer::{Batch, Schedule, TrainConfig, TrainSet, Trainer};
+use crate::train::{
+    batcher::{Batch, TrainSet},
+    config::TrainConfig,
+    hooks::Schedule,
+    trainer::Trainer,
+};
 
 /// Reject a schedule that cannot descend (`what`: the fit, for the message).
 pub fn check_schedule(steps: usize, learning_rate: f64, what: &str) -> Result<()> {

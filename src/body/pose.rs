@@ -18,7 +18,7 @@ use crate::body::descent::{check_schedule, descend};
 use crate::body::observations::{Observed, check_angles, host};
 use crate::core::error::{Error, Result};
 use crate::self_models::harness::Render;
-use crate::train::trainer::TrainSet;
+use crate::train::batcher::TrainSet;
 
 /// What the rendered silhouette is compared with the observed one by.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

@@ -1,7 +1,7 @@
 //! Inference speed measured properly: warm-up calls, then timed calls with the device
 //! synchronised after each, median of the repeats; at batch 1 (latency) and batch 256
 //! (throughput). Training throughput is measured by the training loop itself
-//! ([`crate::train::trainer::TrainLog::images_per_second`]); the paper's "FPS" was that figure.
+//! ([`crate::train::config::TrainLog::images_per_second`]); the paper's "FPS" was that figure.
 
 use burn::tensor::{Device, Distribution, Tensor};
 

@@ -18,7 +18,11 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::distances;
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::tensor_kinematics::TensorChain;
-use crate::train::trainer::{Batch, TrainConfig, TrainSet, Trainer, autodiff_device};
+use crate::train::{
+    batcher::{Batch, TrainSet},
+    config::TrainConfig,
+    trainer::{Trainer, autodiff_device},
+};
 
 /// How the link parameters are learned.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -30,9 +30,11 @@ use crate::ik::learning::{FitConfig, row_set};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
 use crate::train::losses::bce_with_logits;
-use crate::train::trainer::{
-    Batcher, ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint, autodiff_device, save_module,
-    save_renamed,
+use crate::train::{
+    batcher::Batcher,
+    checkpoint::{save_module, save_renamed},
+    convergence::{ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint},
+    trainer::autodiff_device,
 };
 
 /// The two networks and their training.
@@ -164,7 +166,7 @@ pub fn train_gan(
     let mut earlier_seconds = 0.0;
     let mut first_epoch = 0;
     let mut stopped = false;
-    let mut best_file = crate::train::trainer::BestFile::default();
+    let mut best_file = crate::train::convergence::BestFile::default();
     let checkpoint = cfg
         .fit
         .checkpoint
@@ -174,7 +176,7 @@ pub fn train_gan(
         && let Some(state) = c.load()
     {
         let bad = |path: std::path::PathBuf, e: &dyn std::fmt::Display| {
-            crate::train::trainer::unreadable_checkpoint(&path, &c.dir, e)
+            crate::train::checkpoint::unreadable_checkpoint(&path, &c.dir, e)
         };
         let load = |m: Mlp, file: &str| {
             m.try_load_file(c.path(file))

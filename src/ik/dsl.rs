@@ -18,7 +18,7 @@ use crate::ik::data::IkData;
 use crate::ik::learning::{FitConfig, fit_converged, fit_set, mse, row_set, validation_cm};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
-use crate::train::trainer::{Batch, ConvergenceLog, autodiff_device};
+use crate::train::{batcher::Batch, convergence::ConvergenceLog, trainer::autodiff_device};
 
 /// The forward model network and how long each phase trains.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -42,13 +42,13 @@ impl DistalConfig {
     fn inverse_fit(&self, fit_cfg: &FitConfig, samples: usize) -> FitConfig {
         match self.inverse_steps {
             Some(steps) => FitConfig {
-                converge: Some(crate::train::trainer::Convergence {
+                converge: Some(crate::train::convergence::Convergence {
                     max_epochs: steps.div_ceil(samples.div_ceil(fit_cfg.batch).max(1)),
                     patience: usize::MAX,
                     ..fit_cfg
                         .converge
                         .clone()
-                        .unwrap_or_else(crate::train::trainer::Convergence::standard)
+                        .unwrap_or_else(crate::train::convergence::Convergence::standard)
                 }),
                 ..fit_cfg.clone()
             },
@@ -219,7 +219,7 @@ fn inverse_through_arm(
     chain: &KinematicChain,
     data: &IkData,
     inverse: Mlp,
-    set: &crate::train::trainer::TrainSet,
+    set: &crate::train::batcher::TrainSet,
     fit_cfg: &FitConfig,
     cfg: &DistalConfig,
     tdev: &Device,

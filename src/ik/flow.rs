@@ -32,7 +32,11 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::{DistanceErrors, IkData, reach_errors};
 use crate::ik::learning::{FitConfig, row_set};
 use crate::sim::kinematics::KinematicChain;
-use crate::train::trainer::{Batch, ConvergenceLog, autodiff_device, train_to_convergence};
+use crate::train::{
+    batcher::Batch,
+    convergence::{ConvergenceLog, train_to_convergence},
+    trainer::autodiff_device,
+};
 
 /// The flow's shape and training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -526,7 +530,7 @@ impl crate::ik::method::IkMethod for FlowMethod {
         if let Some(parent) = file.parent() {
             std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
         }
-        crate::train::trainer::save_module(&trained.model, &file)?;
+        crate::train::checkpoint::save_module(&trained.model, &file)?;
         let seed = cfg.fit.seed ^ 0x5EED;
         let draw = |k: usize| {
             sample(

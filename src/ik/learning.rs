@@ -41,9 +41,12 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::train::trainer::{
-    Batch, Convergence, ConvergenceLog, FitCheckpoint, Plateau, Schedule, TrainConfig, TrainSet,
-    Trainer, autodiff_device, train_to_convergence,
+use crate::train::{
+    batcher::{Batch, TrainSet},
+    config::TrainConfig,
+    convergence::{Convergence, ConvergenceLog, FitCheckpoint, Plateau, train_to_convergence},
+    hooks::Schedule,
+    trainer::{Trainer, autodiff_device},
 };
 
 /// Optimisation of one fit.
@@ -634,10 +637,10 @@ impl EmsslCheckpoint {
         state: &EmsslState,
     ) -> Result<()> {
         std::fs::create_dir_all(&self.dir).map_err(|e| crate::Error::io(&self.dir, e))?;
-        crate::train::trainer::save_module(model, &self.path("model.bpk"))?;
-        crate::train::trainer::save_renamed(&self.path("optimizer.bpk"), |t| optim.save(t))?;
+        crate::train::checkpoint::save_module(model, &self.path("model.bpk"))?;
+        crate::train::checkpoint::save_renamed(&self.path("optimizer.bpk"), |t| optim.save(t))?;
         if let Some(b) = best {
-            crate::train::trainer::save_module(b, &self.path("best.bpk"))?;
+            crate::train::checkpoint::save_module(b, &self.path("best.bpk"))?;
         }
         crate::core::atomic_file::write_json(&self.path("state.json"), state)
     }
@@ -721,12 +724,13 @@ fn emssl_run(
     });
     if let Some((c, state)) = resumed {
         let load = |m: Mlp, file: &str| {
-            m.try_load_file(c.path(file))
-                .map_err(|e| crate::train::trainer::unreadable_checkpoint(&c.path(file), &c.dir, e))
+            m.try_load_file(c.path(file)).map_err(|e| {
+                crate::train::checkpoint::unreadable_checkpoint(&c.path(file), &c.dir, e)
+            })
         };
         model = load(model.clone(), "model.bpk")?;
         optim = optim.load(c.path("optimizer.bpk")).map_err(|e| {
-            crate::train::trainer::unreadable_checkpoint(&c.path("optimizer.bpk"), &c.dir, e)
+            crate::train::checkpoint::unreadable_checkpoint(&c.path("optimizer.bpk"), &c.dir, e)
         })?;
         if c.path("best.bpk").exists() {
             let b = load(model.clone(), "best.bpk")?;

@@ -13,7 +13,7 @@ use crate::core::error::Result;
 use crate::ik::data::IkData;
 use crate::ik::learning::EmsslIteration;
 use crate::sim::kinematics::KinematicChain;
-use crate::train::trainer::ConvergenceLog;
+use crate::train::convergence::ConvergenceLog;
 
 /// What a method works with in one joint range.
 pub struct IkTask<'a> {
@@ -50,7 +50,7 @@ impl IkTask<'_> {
         fit: &crate::ik::learning::FitConfig,
     ) -> crate::ik::learning::FitConfig {
         crate::ik::learning::FitConfig {
-            checkpoint: Some(crate::train::trainer::FitCheckpoint {
+            checkpoint: Some(crate::train::convergence::FitCheckpoint {
                 dir: self.file(&format!("{name} checkpoint"), ""),
                 settings: serde_json::json!({
                     "method": settings,

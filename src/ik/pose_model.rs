@@ -44,9 +44,9 @@ impl Preset for PoseModelConfig {
     /// (about 25 s an epoch on 2 CPU cores).
     fn paper() -> Self {
         let mut flow = FlowConfig::standard();
-        flow.fit.converge = Some(crate::train::trainer::Convergence {
+        flow.fit.converge = Some(crate::train::convergence::Convergence {
             max_epochs: 100,
-            ..crate::train::trainer::Convergence::standard()
+            ..crate::train::convergence::Convergence::standard()
         });
         PoseModelConfig {
             preset: "paper".into(),
@@ -323,7 +323,7 @@ pub fn train(
     // command, run again after a kill, continues from its last epoch to the same model.
     let checkpoint = dir.join("checkpoint");
     let mut flow_cfg = cfg.flow.clone();
-    flow_cfg.fit.checkpoint = Some(crate::train::trainer::FitCheckpoint {
+    flow_cfg.fit.checkpoint = Some(crate::train::convergence::FitCheckpoint {
         dir: checkpoint.clone(),
         settings: serde_json::json!({ "config": cfg, "robot": fingerprint(chain) }),
     });
@@ -387,7 +387,7 @@ fn save_model(
 ) -> Result<SavedModel> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     let weights = dir.join("model.bpk");
-    crate::train::trainer::save_module(&trained.model, &weights)?;
+    crate::train::checkpoint::save_module(&trained.model, &weights)?;
     // The solver's budget for the model's tips (one tip: the preset's).
     let mut config = cfg.clone();
     config.lm = config.lm.for_tips(tips.len());

@@ -247,7 +247,7 @@ struct CurveRow {
 pub fn write_training_curve(
     dir: &Path,
     name: &str,
-    log: &crate::train::trainer::TrainLog,
+    log: &crate::train::config::TrainLog,
 ) -> Result<()> {
     let rows: Vec<CurveRow> = log
         .curve

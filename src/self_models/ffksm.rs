@@ -56,7 +56,11 @@ use crate::self_models::harness::{
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
-use crate::train::trainer::{StepLoss, TrainConfig, TrainLog, Trainer, Watch};
+use crate::train::{
+    config::{TrainConfig, TrainLog},
+    hooks::Watch,
+    trainer::{StepLoss, Trainer},
+};
 
 /// Train on the central `crop x crop` pixels for the first `steps` steps.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -661,7 +665,7 @@ fn train_field(
     loop {
         let seed = train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(fit.train_device, seed)?;
-        let loss = |m: &OccupancyField, b: &crate::train::trainer::Batch| {
+        let loss = |m: &OccupancyField, b: &crate::train::batcher::Batch| {
             let i = b.indices[0];
             let a = &host_inputs[i * columns..(i + 1) * columns];
             let truth = &host_targets[i * pixels_per_image..(i + 1) * pixels_per_image];
@@ -863,8 +867,10 @@ impl SelfModel for Ffksm {
         let robot = ctx
             .robot
             .ok_or_else(|| Error::Config("FFKSM loads with its robot".into()))?;
-        let field =
-            crate::train::trainer::load_module(state.fitted.field.init(ctx.device, 0)?, weights)?;
+        let field = crate::train::checkpoint::load_module(
+            state.fitted.field.init(ctx.device, 0)?,
+            weights,
+        )?;
         let shared = Arc::new(FfksmShared {
             field,
             model: state.fitted,
@@ -1088,7 +1094,7 @@ struct FfksmState {
 
 impl Render for FfksmRenderer {
     fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
-        crate::train::trainer::save_module(&self.shared.field, path)?;
+        crate::train::checkpoint::save_module(&self.shared.field, path)?;
         let state = FfksmState {
             fitted: self.shared.model.clone(),
             accelerated: self.accelerated.clone(),

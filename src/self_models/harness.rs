@@ -28,7 +28,12 @@ use crate::self_models::result::{ModelResult, PaperReference};
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
-use crate::train::trainer::{CheckpointPlan, TrainConfig, TrainLog, TrainSet, autodiff_device};
+use crate::train::{
+    batcher::TrainSet,
+    checkpoint::CheckpointPlan,
+    config::{TrainConfig, TrainLog},
+    trainer::autodiff_device,
+};
 
 /// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
 /// it on the model's config; [`run`] does the rest.
@@ -108,7 +113,7 @@ pub fn load_network<R>(template: R, weights: &Path) -> Result<Option<Box<dyn Ren
 where
     R: Render + burn::module::Module + Send + Sync + 'static,
 {
-    let network = crate::train::trainer::load_module(template, weights)?;
+    let network = crate::train::checkpoint::load_module(template, weights)?;
     Ok(Some(Box::new(network)))
 }
 

@@ -35,7 +35,7 @@ use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
 use crate::sim::camera::Camera;
 use crate::sim::tensor_kinematics::TensorChain;
-use crate::train::trainer::{TrainConfig, TrainHooks, Trainer};
+use crate::train::{config::TrainConfig, hooks::TrainHooks, trainer::Trainer};
 
 /// When and how the set of Gaussians changes during training.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -497,7 +497,7 @@ impl SelfModel for K3dgs {
             ctx.device,
         );
         Ok(Some(Box::new(K3dgsRenderer {
-            model: crate::train::trainer::load_module(template, weights)?,
+            model: crate::train::checkpoint::load_module(template, weights)?,
             chain: TensorChain::new(&robot.chain),
             camera: ctx.camera.clone(),
             mode: state.mode,
@@ -585,7 +585,7 @@ impl Render for K3dgsRenderer {
     }
 
     fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
-        crate::train::trainer::save_module(&self.model, path)?;
+        crate::train::checkpoint::save_module(&self.model, path)?;
         let state = K3dgsState {
             links: self
                 .model

@@ -13,7 +13,7 @@ use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
-use crate::train::trainer::TrainLog;
+use crate::train::config::TrainLog;
 
 /// The constant image's config. Presets: `paper` (100x100), `quick` (32x32).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -54,7 +54,7 @@ impl Render for ConstantImage {
     }
 
     fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
-        crate::train::trainer::save_module(self, path)?;
+        crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
 }

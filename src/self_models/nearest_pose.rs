@@ -9,7 +9,7 @@ use crate::core::error::Result;
 use crate::core::preset::Preset;
 use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
-use crate::train::trainer::TrainLog;
+use crate::train::config::TrainLog;
 
 /// The lookup table's config. Presets: `paper` (100x100), `quick` (32x32).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -33,7 +33,11 @@ use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained,
 use crate::self_models::result::PaperReference;
 use crate::self_models::tree_encoder::TreeEncoder;
 use crate::train::losses::{bce_with_logits, mse};
-use crate::train::trainer::{Batch, TrainConfig, TrainSet, Trainer};
+use crate::train::{
+    batcher::{Batch, TrainSet},
+    config::TrainConfig,
+    trainer::Trainer,
+};
 
 /// Which of the two published NeuroKin architectures.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -488,7 +492,7 @@ impl Render for NeuroKin {
         (self.predict(angles), None)
     }
     fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
-        crate::train::trainer::save_module(self, path)?;
+        crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {

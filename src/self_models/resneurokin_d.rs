@@ -245,7 +245,7 @@ impl Render for ResNeuroKinD {
         (s, Some(d))
     }
     fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
-        crate::train::trainer::save_module(self, path)?;
+        crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
 }

@@ -316,7 +316,7 @@ pub fn run(
     // The model's training curve beside its benchmark (principle: show the curve).
     let curve_file = model_dir.join("validation_curve.csv");
     if curve_file.exists() {
-        let curve: Vec<crate::train::trainer::ValidationPoint> =
+        let curve: Vec<crate::train::convergence::ValidationPoint> =
             crate::report::table::read_csv(&curve_file)?;
         crate::report::table::write_csv(&out.join("flow_validation_curve.csv"), &curve)?;
         crate::report::figures::curves(

@@ -256,7 +256,7 @@ fn base_model(
                 .map(|c| c.train_reach_cm)
                 .fold(f64::INFINITY, f64::min);
             std::fs::create_dir_all(&folder).map_err(|e| Error::io(&folder, e))?;
-            crate::train::trainer::save_module(&model, &file)?;
+            crate::train::checkpoint::save_module(&model, &file)?;
             write_json(
                 &state_path,
                 &BaseState {

@@ -30,7 +30,7 @@ use crate::ik::dsl::{DistalConfig, DistalForward};
 use crate::ik::method::IkMethod;
 use crate::sim::robot::Robot;
 use crate::studies::emssl_table2::{IkComparisonConfig, IkRow, RangeRun};
-use crate::train::trainer::TrainConfig;
+use crate::train::config::TrainConfig;
 
 /// The study's protocol: Table II's config at the study's scale, the range and the seeds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -54,7 +54,7 @@ use crate::ik::learning::{EmsslConfig, EmsslIteration, FitConfig};
 use crate::ik::method::{Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed};
 use crate::ik::mlp::InverseModelConfig;
 use crate::sim::robot::Robot;
-use crate::train::trainer::Convergence;
+use crate::train::convergence::Convergence;
 
 /// The presets of the inverse-kinematics experiments.
 pub const IK_PRESETS: &[&str] = &["paper", "quick"];

@@ -195,11 +195,16 @@ pub fn neurokin_step_counts(
     log_every: usize,
 ) -> Result<(
     Vec<crate::eval::device_counts::DeviceCounts>,
-    crate::train::trainer::TrainLog,
+    crate::train::config::TrainLog,
 )> {
     use crate::eval::device_counts;
     use crate::self_models::neurokin::NeuroKin;
-    use crate::train::trainer::{TrainConfig, TrainSet, Trainer, Watch, autodiff_device};
+    use crate::train::{
+        batcher::TrainSet,
+        config::TrainConfig,
+        hooks::Watch,
+        trainer::{Trainer, autodiff_device},
+    };
     use burn::tensor::{Distribution, Tensor};
     if !device_counts::install() {
         return Err(Error::Device(

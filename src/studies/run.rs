@@ -185,7 +185,7 @@ impl RunOptions {
     /// count, if the batch changed.
     fn override_batch(
         &self,
-        train: &mut crate::train::trainer::TrainConfig,
+        train: &mut crate::train::config::TrainConfig,
         note: &mut String,
     ) -> Option<usize> {
         let new = self.batch.filter(|&b| b != train.batch)?;

@@ -20,7 +20,8 @@ use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::optim::GradientsParams;
 use burn::tensor::{Tensor, TensorData};
 
-use crate::train::trainer::{Batch, Batcher, TrainConfig, TrainSet};
+use crate::train::batcher::{Batch, Batcher, TrainSet};
+use crate::train::config::TrainConfig;
 
 /// The old weights and their Fisher information, per parameter (flattened, on the device
 /// without autodiff: constants that join no step's graph, uploaded once).

@@ -20,7 +20,11 @@ use crate::report::table::write_table;
 use crate::self_models::neurokin::NeuroKin;
 use crate::sim::arm_change::Damage;
 use crate::sim::ray_caster::silhouettes;
-use crate::train::trainer::{TrainConfig, TrainSet, Trainer, autodiff_device};
+use crate::train::{
+    batcher::TrainSet,
+    config::TrainConfig,
+    trainer::{Trainer, autodiff_device},
+};
 
 /// One update of the self-model after one damage, from n images.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -798,7 +802,7 @@ impl<'a> Context<'a> {
                 &c.tdev,
             ));
             let label = format!("from scratch ({})", case.damage.label());
-            let plan = crate::train::trainer::CheckpointPlan {
+            let plan = crate::train::checkpoint::CheckpointPlan {
                 dir: r.out.join("checkpoint").join(format!(
                     "scratch_{}",
                     crate::core::atomic_file::file_name(&case.damage.label())
