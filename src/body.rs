@@ -4,7 +4,7 @@
 //! renderer.
 //!
 //! - [`pose`]: joint angles from a silhouette, by gradient descent on the angles through the
-//!   model ([`crate::self_models::harness::Render::differentiable`]) from several starts.
+//!   model ([`crate::self_models::model::Render::differentiable`]) from several starts.
 //! - [`amortised`]: a small CNN trained on the self-model's own renderings that maps an image
 //!   to angles in one pass, alone and as the start of the refinement.
 //! - [`drift`]: constant encoder offsets from k images and the angles the encoders report.

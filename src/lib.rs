@@ -22,7 +22,11 @@ pub use crate::core::error::{Error, Result};
 pub use crate::core::preset::Preset;
 pub use crate::data::dataset::{Dataset, DatasetConfig};
 pub use crate::ik::data::{IkData, IkDataConfig};
-pub use crate::self_models::harness::{DataSpec, Render, SelfModel, SelfModelRun};
+pub use crate::self_models::{
+    data_spec::DataSpec,
+    model::{Render, SelfModel},
+    run_config::SelfModelRun,
+};
 pub use crate::sim::robot::Robot;
 pub use crate::sim::robots::{BuiltinRobot, RobotSpec};
 pub use crate::studies::registry::{EXPERIMENTS, Experiment, RunOptions};

@@ -3,14 +3,18 @@
 //! ResNeuroKin-D) and their run (`decoder_run`), FFKSM (an occupancy field, ray marched) and
 //! K-3DGS (Gaussians on the links, splatted), and `result`, the row of Table I each reports.
 
+pub mod camera_input;
+pub mod data_spec;
 pub mod ffksm;
 pub mod harness;
 pub mod k3dgs;
 pub mod loading;
 pub mod mean_silhouette;
+pub mod model;
 pub mod nearest_pose;
 pub mod neurokin;
 pub mod resneurokin_d;
 pub mod result;
+pub mod run_config;
 pub mod saved;
 pub mod tree_encoder;

@@ -9,8 +9,11 @@ use selfmodel::body::drift::{DriftConfig, estimate_offsets};
 use selfmodel::body::observations::Observed;
 use selfmodel::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::self_models::harness::{Fitted, Render, fit_run};
 use selfmodel::self_models::neurokin::neurokin_run;
+use selfmodel::self_models::{
+    harness::{Fitted, fit_run},
+    model::Render,
+};
 use selfmodel::train::trainer::autodiff_device;
 
 /// The quick NeuroKin (trained once, for all the checks below: a model is not `Sync`).

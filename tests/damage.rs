@@ -272,7 +272,7 @@ fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
 #[test]
 fn the_damage_studys_model_is_neurokins_large_preset() {
     use selfmodel::core::preset::Preset;
-    use selfmodel::self_models::harness::SelfModel;
+    use selfmodel::self_models::model::SelfModel;
     let opts = selfmodel::studies::run::RunOptions::preset("paper");
     let ours = selfmodel::studies::damage::model_run(
         &selfmodel::studies::damage::DamageConfig::paper(),

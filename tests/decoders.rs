@@ -7,10 +7,10 @@ use burn::tensor::Device;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::preset::Preset;
 use selfmodel::eval::evaluation::{Predictions, score};
-use selfmodel::self_models::harness::{SelfModel, SelfModelRun, run};
 use selfmodel::self_models::mean_silhouette::MeanSilhouette;
 use selfmodel::self_models::neurokin::NeuroKinConfig;
 use selfmodel::self_models::resneurokin_d::ResNeuroKinDConfig;
+use selfmodel::self_models::{harness::run, model::SelfModel, run_config::SelfModelRun};
 
 #[test]
 fn parameter_counts_match_the_notebooks() {

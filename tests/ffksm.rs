@@ -704,7 +704,7 @@ fn the_step_benchmark_times_both_paths_on_the_same_step() {
 fn a_checkpoint_without_a_recorded_robot_resumes_and_one_of_another_robot_is_refused() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
-    use selfmodel::self_models::harness::{DataSpec, run};
+    use selfmodel::self_models::{data_spec::DataSpec, harness::run};
     use selfmodel::sim::robots::RobotSpec;
     let urdf = RobotSpec::Urdf {
         path: "robot.urdf".into(),

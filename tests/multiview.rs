@@ -157,8 +157,8 @@ fn a_multi_view_dataset_holds_every_pose_from_every_camera_and_records_each_came
 fn a_tiny_camera_conditioned_model_renders_a_trained_camera_better_than_a_constant() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::eval::evaluation::{iou, psnr_db};
-    use selfmodel::self_models::harness::{camera_input, fit_run};
     use selfmodel::self_models::neurokin::{CameraUse, neurokin_run};
+    use selfmodel::self_models::{camera_input::camera_input, harness::fit_run};
     let cameras = 4;
     let mut base = neurokin_run("quick").unwrap();
     base.data.dataset.views = Some(selfmodel::data::dataset::Views {

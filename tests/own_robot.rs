@@ -598,7 +598,7 @@ fn joint_groups_drive_several_tips_and_every_joint() {
 fn a_dataset_is_read_only_with_the_robot_whose_joints_it_names() {
     use selfmodel::core::preset::Preset;
     use selfmodel::data::dataset::{Dataset, DatasetConfig};
-    use selfmodel::self_models::harness::DataSpec;
+    use selfmodel::self_models::data_spec::DataSpec;
     use selfmodel::sim::robots::RobotSpec;
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 3, false);

@@ -192,9 +192,13 @@ fn bce_from_logits_matches_bce_of_probabilities() {
 fn every_self_model_reloaded_from_its_checkpoint_renders_bit_identically() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
-    use selfmodel::self_models::harness::{Fitted, SelfModel, SelfModelRun, fit_run};
     use selfmodel::self_models::neurokin::{neurokin_run, neurokin64_run};
     use selfmodel::self_models::resneurokin_d::resneurokin_d_run;
+    use selfmodel::self_models::{
+        harness::{Fitted, fit_run},
+        model::SelfModel,
+        run_config::SelfModelRun,
+    };
 
     fn images(f: &Fitted) -> Vec<Vec<f32>> {
         let q = f.test_set.inputs.clone().slice([0..4]);

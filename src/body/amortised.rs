@@ -18,7 +18,7 @@ use rand::{RngExt, SeedableRng};
 use crate::body::observations::{Observed, host};
 use crate::core::error::{Error, Result};
 use crate::kernels::cpu_extension::conv2d_layer;
-use crate::self_models::harness::Render;
+use crate::self_models::model::Render;
 use crate::train::losses::mse;
 use crate::train::{
     batcher::TrainSet,

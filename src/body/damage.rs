@@ -24,7 +24,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::body::observations::host;
 use crate::core::error::Result;
-use crate::self_models::harness::Render;
+use crate::self_models::model::Render;
 use crate::sim::bvh::Bvh;
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::{RayCaster, RenderOptions};

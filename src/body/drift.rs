@@ -10,7 +10,7 @@ use crate::body::descent::{check_schedule, descend, views};
 use crate::body::observations::{Observed, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::Result;
-use crate::self_models::harness::Render;
+use crate::self_models::model::Render;
 
 /// How the offsets are fitted.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -6,7 +6,7 @@
 //! Starts: the caller's guess for each image (the amortised estimator's answer,
 //! [`crate::body::amortised`]) when given, then poses drawn uniformly within the joint
 //! ranges (the same draws for every image, seeded). The learning rate falls along a half
-//! cosine ([`Schedule`]); the angles are in degrees, so the learning rate is about the
+//! cosine ([`crate::train::hooks::Schedule`]); the angles are in degrees, so the learning rate is about the
 //! largest step in degrees Adam takes.
 
 use burn::module::{Module, Param};
@@ -17,7 +17,7 @@ use rand::rngs::StdRng;
 use crate::body::descent::{check_schedule, descend};
 use crate::body::observations::{Observed, check_angles, host};
 use crate::core::error::{Error, Result};
-use crate::self_models::harness::Render;
+use crate::self_models::model::Render;
 use crate::train::batcher::TrainSet;
 
 /// What the rendered silhouette is compared with the observed one by.

@@ -49,11 +49,14 @@ use crate::self_models::ffksm::dense_step::dense_step;
 use crate::self_models::ffksm::field::{OccupancyField, OccupancyFieldConfig};
 use crate::self_models::ffksm::marcher::{MarchConfig, render_dense, render_silhouette};
 use crate::self_models::ffksm::virtual_frame::{JointsFrame, VirtualFrame};
-use crate::self_models::harness::{
-    DataSpec, Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks,
-    host_targets, nth_image, views_of_rows,
-};
 use crate::self_models::result::PaperReference;
+use crate::self_models::{
+    camera_input::views_of_rows,
+    data_spec::DataSpec,
+    harness::{grid_picks, host_targets, nth_image},
+    model::{Fit, Render, ReportContext, SelfModel, Trained},
+    run_config::SelfModelRun,
+};
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 use crate::train::{
@@ -860,7 +863,7 @@ impl SelfModel for Ffksm {
     fn load(
         &self,
         weights: &std::path::Path,
-        ctx: &crate::self_models::harness::LoadContext,
+        ctx: &crate::self_models::model::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
         let state: FfksmState = serde_json::from_value(ctx.state.clone())
             .map_err(|e| Error::data(weights, format!("its saved state: {e}")))?;

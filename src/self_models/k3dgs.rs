@@ -27,12 +27,15 @@ use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::table::write_table;
-use crate::self_models::harness::{
-    Fit, Render, ReportContext, SelfModel, SelfModelRun, Trained, grid_picks, split_views,
-};
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
+use crate::self_models::{
+    camera_input::split_views,
+    harness::grid_picks,
+    model::{Fit, Render, ReportContext, SelfModel, Trained},
+    run_config::SelfModelRun,
+};
 use crate::sim::camera::Camera;
 use crate::sim::tensor_kinematics::TensorChain;
 use crate::train::{config::TrainConfig, hooks::TrainHooks, trainer::Trainer};
@@ -478,7 +481,7 @@ impl SelfModel for K3dgs {
     fn load(
         &self,
         weights: &std::path::Path,
-        ctx: &crate::self_models::harness::LoadContext,
+        ctx: &crate::self_models::model::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
         let state: K3dgsState = serde_json::from_value(ctx.state.clone())
             .map_err(|e| crate::Error::data(weights, format!("its saved state: {e}")))?;

@@ -10,12 +10,15 @@ use crate::core::error::{Error, Result};
 use crate::core::input_file::file_fnv;
 use crate::data::npz::{ArrayData, read_npz};
 use crate::self_models::ffksm::Ffksm;
-use crate::self_models::harness::{DataSpec, LoadContext, Render, SelfModel};
 use crate::self_models::k3dgs::K3dgs;
 use crate::self_models::mean_silhouette::MeanSilhouette;
 use crate::self_models::neurokin::NeuroKinConfig;
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::self_models::saved::{FORMAT, SavedSelfModel};
+use crate::self_models::{
+    data_spec::DataSpec,
+    model::{LoadContext, Render, SelfModel},
+};
 
 /// The kinds whose weights load, each with its loader: one line a kind.
 fn loader(kind: &str) -> Option<Loader> {

@@ -11,8 +11,11 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::core::error::Result;
 use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
-use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
+use crate::self_models::{
+    model::{Fit, Render, SelfModel, Trained},
+    run_config::{SelfModelRun, model_preset},
+};
 use crate::train::config::TrainLog;
 
 /// The constant image's config. Presets: `paper` (100x100), `quick` (32x32).
@@ -132,13 +135,13 @@ impl SelfModel for MeanSilhouette {
     fn load(
         &self,
         weights: &std::path::Path,
-        ctx: &crate::self_models::harness::LoadContext,
+        ctx: &crate::self_models::model::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
         let [h, w] = self.image;
         let template = ConstantImage {
             image: Param::from_tensor(Tensor::zeros([1, 1, h, w], ctx.device)),
         };
-        crate::self_models::harness::load_network(template, weights)
+        crate::self_models::model::load_network(template, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -7,8 +7,11 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::core::error::Result;
 use crate::core::preset::Preset;
-use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
+use crate::self_models::{
+    model::{Fit, Render, SelfModel, Trained},
+    run_config::{SelfModelRun, model_preset},
+};
 use crate::train::config::TrainLog;
 
 /// The lookup table's config. Presets: `paper` (100x100), `quick` (32x32).

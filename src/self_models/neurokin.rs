@@ -29,9 +29,12 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
-use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::result::PaperReference;
 use crate::self_models::tree_encoder::TreeEncoder;
+use crate::self_models::{
+    model::{Fit, Render, SelfModel, Trained},
+    run_config::{SelfModelRun, model_preset},
+};
 use crate::train::losses::{bce_with_logits, mse};
 use crate::train::{
     batcher::{Batch, TrainSet},
@@ -107,7 +110,7 @@ pub enum CameraUse {
     #[default]
     None,
     /// Camera conditioning, f(theta, c): the camera's pose vector
-    /// ([`crate::self_models::harness::camera_input`]) joins the joint angles at the encoder's
+    /// ([`crate::self_models::camera_input::camera_input`]) joins the joint angles at the encoder's
     /// input; any camera renders.
     Input,
     /// Multi-head: one output channel per fixed camera (these, as their pose vectors), the
@@ -539,9 +542,9 @@ impl SelfModel for NeuroKinConfig {
     fn load(
         &self,
         weights: &std::path::Path,
-        ctx: &crate::self_models::harness::LoadContext,
+        ctx: &crate::self_models::model::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::harness::load_network(self.init(ctx.device, 0)?, weights)
+        crate::self_models::model::load_network(self.init(ctx.device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -22,9 +22,12 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
-use crate::self_models::harness::{Fit, Render, SelfModel, SelfModelRun, Trained, model_preset};
 use crate::self_models::neurokin::resize_bilinear;
 use crate::self_models::result::PaperReference;
+use crate::self_models::{
+    model::{Fit, Render, SelfModel, Trained},
+    run_config::{SelfModelRun, model_preset},
+};
 use crate::train::losses::{bce, l1_masked, soft_dice};
 use crate::train::trainer::Trainer;
 
@@ -288,9 +291,9 @@ impl SelfModel for ResNeuroKinDConfig {
     fn load(
         &self,
         weights: &std::path::Path,
-        ctx: &crate::self_models::harness::LoadContext,
+        ctx: &crate::self_models::model::LoadContext,
     ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::harness::load_network(self.init(ctx.device, 0)?, weights)
+        crate::self_models::model::load_network(self.init(ctx.device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -17,8 +17,8 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::figures::{pareto_plot, training_curves};
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::harness::{SelfModelRun, run};
 use crate::self_models::neurokin::NeuroKinConfig;
+use crate::self_models::{harness::run, run_config::SelfModelRun};
 
 /// One NeuroKin run, as the ablations vary it.
 type NeuroKinRun = SelfModelRun<NeuroKinConfig>;

@@ -43,9 +43,9 @@ use crate::core::provenance::git_revision;
 use crate::core::timing::{Repeats, median_seconds};
 use crate::report::figures::{GridRow, image_grid, log_log_lines};
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::harness::{Render, fit_run};
 use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
 use crate::self_models::neurokin::neurokin_run;
+use crate::self_models::{harness::fit_run, model::Render};
 use crate::sim::robot::Robot;
 use crate::train::trainer::autodiff_device;
 

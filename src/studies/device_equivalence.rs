@@ -8,7 +8,11 @@ use burn::tensor::Tensor;
 
 use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
-use crate::self_models::harness::{Fitted, SelfModel, SelfModelRun, fit_run};
+use crate::self_models::{
+    harness::{Fitted, fit_run},
+    model::SelfModel,
+    run_config::SelfModelRun,
+};
 
 /// Test poses rendered by both devices.
 const POSES: usize = 4;

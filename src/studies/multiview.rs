@@ -6,7 +6,7 @@
 //! on held-out poses, from the trained cameras and from cameras never trained on (yawed and
 //! raised away from the first). Against: FFKSM (the original model) and K-3DGS, trained on
 //! the first camera and on the same N cameras (reading each image's camera from its inputs,
-//! [`crate::self_models::harness::SelfModel::renders_any_view`]) and rendering the held-out
+//! [`crate::self_models::model::SelfModel::renders_any_view`]) and rendering the held-out
 //! cameras in 3-D, and the view-blind bound (the
 //! nearest trained camera's true image of the same pose: the best a model of the trained
 //! views can show). Writes `reports/multiview/`:
@@ -30,9 +30,9 @@ use crate::eval::evaluation::{iou, psnr_db};
 use crate::report::figures::{GridRow, image_grid, lines_log_x, lines_marked};
 use crate::report::table::write_table;
 use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
-use crate::self_models::harness::{camera_input, fit_run};
 use crate::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
 use crate::self_models::neurokin::{CameraUse, neurokin_run};
+use crate::self_models::{camera_input::camera_input, harness::fit_run};
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::silhouettes as truth;
 
@@ -475,8 +475,8 @@ trait ThreeDRun {
     fn fingerprint(&self, cfg: &MultiviewConfig) -> Result<serde_json::Value>;
 }
 
-impl<M: crate::self_models::harness::SelfModel> ThreeDRun
-    for crate::self_models::harness::SelfModelRun<M>
+impl<M: crate::self_models::model::SelfModel> ThreeDRun
+    for crate::self_models::run_config::SelfModelRun<M>
 {
     fn fit(
         &self,
@@ -610,7 +610,7 @@ fn read_strip(path: &Path, [h, w]: [usize; 2], k: usize) -> Option<Vec<Vec<f32>>
 /// model has two).
 fn scored_renderer(
     fitted: &crate::self_models::harness::Fitted,
-) -> &dyn crate::self_models::harness::Render {
+) -> &dyn crate::self_models::model::Render {
     fitted
         .trained
         .renderers

@@ -6,13 +6,13 @@
 use std::path::Path;
 
 use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
-use crate::self_models::harness::SELF_MODEL_PRESETS;
 use crate::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
 use crate::self_models::mean_silhouette::MeanSilhouette;
 use crate::self_models::neurokin::{
     NeuroKinConfig, neurokin_run, neurokin_tree_run, neurokin64_run,
 };
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
+use crate::self_models::run_config::SELF_MODEL_PRESETS;
 use crate::studies::ablations::{Ablation, run_ablation};
 use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
 

@@ -7,8 +7,11 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::data::dataset::Dataset;
 use crate::report::table::{write_csv, write_markdown_report};
-use crate::self_models::harness::{SELF_MODEL_PRESETS, SelfModel, SelfModelRun};
 use crate::self_models::result::ModelResult;
+use crate::self_models::{
+    model::SelfModel,
+    run_config::{SELF_MODEL_PRESETS, SelfModelRun},
+};
 use crate::sim::robots::{BuiltinRobot, RobotSpec};
 
 /// How to run an experiment: the preset and the switches every experiment understands.

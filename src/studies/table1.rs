@@ -12,8 +12,8 @@ use std::path::Path;
 
 use crate::core::error::Result;
 use crate::report::figures::pareto_plot;
-use crate::self_models::harness::preset_train_samples;
 use crate::self_models::result::{ModelResult, pareto_floors, pareto_points, read_results};
+use crate::self_models::run_config::preset_train_samples;
 use crate::sim::robots::BuiltinRobot;
 use crate::studies::run::{Experiment, RunOptions, write_rows};
 

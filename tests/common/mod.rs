@@ -127,7 +127,7 @@ pub fn tempdir() -> TempDir {
 
 /// Mean PSNR (dB) of an all-black prediction on the first `n` test images of `spec` (all
 /// when `None`): the constant predictor a trained self-model must beat.
-pub fn black_psnr(spec: &selfmodel::self_models::harness::DataSpec, n: Option<usize>) -> f64 {
+pub fn black_psnr(spec: &selfmodel::self_models::data_spec::DataSpec, n: Option<usize>) -> f64 {
     let (data, _, test) = spec.load().unwrap();
     let test = test.start..test.start + n.unwrap_or(test.len()).min(test.len());
     let px = data.width * data.height;
@@ -317,8 +317,8 @@ pub fn two_armed_urdf() -> String {
 
 /// The saved model (`dir/model`), loaded, predicts the run's test poses to the run's own
 /// scores; with its weights damaged it is refused.
-pub fn the_saved_model_scores_as_its_run<M: selfmodel::self_models::harness::SelfModel>(
-    cfg: &selfmodel::self_models::harness::SelfModelRun<M>,
+pub fn the_saved_model_scores_as_its_run<M: selfmodel::self_models::model::SelfModel>(
+    cfg: &selfmodel::self_models::run_config::SelfModelRun<M>,
     dir: &std::path::Path,
     run: &selfmodel::eval::evaluation::Quality,
 ) {

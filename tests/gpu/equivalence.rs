@@ -8,9 +8,9 @@
 
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
-use selfmodel::self_models::harness::{SelfModel, SelfModelRun};
 use selfmodel::self_models::k3dgs::{K3dgsVariant, TrainSplatting, k3dgs_run};
 use selfmodel::self_models::neurokin::neurokin_run;
+use selfmodel::self_models::{model::SelfModel, run_config::SelfModelRun};
 use selfmodel::studies::device_equivalence::compare;
 
 /// Train `cfg` for `steps` steps on the CPU and on wgpu, and compare.

@@ -17,8 +17,8 @@ use crate::body::damage::{
 };
 use crate::core::error::Result;
 use crate::report::table::write_table;
-use crate::self_models::harness::{Fitted, SelfModelRun};
 use crate::self_models::neurokin::NeuroKinConfig;
+use crate::self_models::{harness::Fitted, run_config::SelfModelRun};
 use crate::sim::arm_change::Damage;
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::{RenderOptions, silhouettes};

@@ -90,7 +90,7 @@ pub struct DamageConfig {
     pub trials: usize,
     /// Test poses the trials draw from.
     pub pool: usize,
-    /// A link's standard score above which it is named damaged ([`localise`]).
+    /// A link's standard score above which it is named damaged ([`crate::body::damage::localise`]).
     pub z_threshold: f64,
     pub false_alarms: f64,
     pub seed: u64,
@@ -227,8 +227,9 @@ impl Preset for DamageConfig {
 pub fn model_run(
     cfg: &DamageConfig,
     opts: &crate::studies::run::RunOptions,
-) -> Result<crate::self_models::harness::SelfModelRun<crate::self_models::neurokin::NeuroKinConfig>>
-{
+) -> Result<
+    crate::self_models::run_config::SelfModelRun<crate::self_models::neurokin::NeuroKinConfig>,
+> {
     let mut model_run = opts.apply(neurokin_run(&cfg.model_preset)?)?;
     if let Some(n) = cfg.samples {
         let test = cfg.test_samples.unwrap_or(n / 5).min(n - 1);

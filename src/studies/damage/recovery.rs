@@ -54,8 +54,9 @@ pub struct RecoveryRow {
 
 /// What the recovery runs with.
 pub(super) struct Recovering<'a> {
-    pub model_run:
-        &'a crate::self_models::harness::SelfModelRun<crate::self_models::neurokin::NeuroKinConfig>,
+    pub model_run: &'a crate::self_models::run_config::SelfModelRun<
+        crate::self_models::neurokin::NeuroKinConfig,
+    >,
     pub fitted: &'a crate::self_models::harness::Fitted,
     pub robot: &'a crate::sim::robot::Robot,
     pub camera: &'a crate::sim::camera::Camera,
