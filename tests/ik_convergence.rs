@@ -4,8 +4,11 @@
 use nalgebra::Point3;
 use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
-use selfmodel::ik::learning::{FitConfig, drl, predict, validation_cm};
 use selfmodel::ik::mlp::InverseModelConfig;
+use selfmodel::ik::{
+    drl::drl,
+    learning::{FitConfig, predict, validation_cm},
+};
 use selfmodel::train::convergence::{Convergence, Plateau};
 
 #[test]
@@ -315,7 +318,7 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
 
 #[test]
 fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
-    use selfmodel::ik::learning::{EmsslConfig, LrPlateau, emssl_checkpointed};
+    use selfmodel::ik::emssl::{EmsslConfig, LrPlateau, emssl_checkpointed};
     let (robot, data) = tiny_ur5(6);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
@@ -349,7 +352,7 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
     assert_eq!(first.len(), 3);
     let (resumed, curve) =
         emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
-    let key = |c: &[selfmodel::ik::learning::EmsslIteration]| {
+    let key = |c: &[selfmodel::ik::emssl::EmsslIteration]| {
         c.iter()
             .map(|i| {
                 (
@@ -383,7 +386,10 @@ fn tempdir() -> std::path::PathBuf {
 
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
-    use selfmodel::ik::learning::{EmsslConfig, emssl_checkpointed, validation_cm};
+    use selfmodel::ik::{
+        emssl::{EmsslConfig, emssl_checkpointed},
+        learning::validation_cm,
+    };
     let (robot, data) = tiny_ur5(7);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);

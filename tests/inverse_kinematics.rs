@@ -53,8 +53,12 @@ use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::cgan::{GanConfig, train_gan};
 use selfmodel::ik::dls::{DlsConfig, solve, solve_batch};
 use selfmodel::ik::dsl::{DistalConfig, dsl};
-use selfmodel::ik::learning::{EmsslConfig, FitConfig, drl, emssl, test_errors};
 use selfmodel::ik::mlp::InverseModelConfig;
+use selfmodel::ik::{
+    drl::drl,
+    emssl::{EmsslConfig, emssl},
+    learning::{FitConfig, test_errors},
+};
 
 fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::sim::robot::Robot, IkData) {
     let r = range_deg.to_radians();

@@ -34,8 +34,11 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::ik::calibration::{CalibrationConfig, calibrate};
 use crate::ik::data::{DistanceErrors, IkData, distances};
-use crate::ik::learning::{EmsslConfig, EmsslIteration, FitConfig, emssl, emssl_from, test_errors};
 use crate::ik::mlp::{InverseModelConfig, Mlp};
+use crate::ik::{
+    emssl::{EmsslConfig, EmsslIteration, emssl, emssl_from},
+    learning::{FitConfig, test_errors},
+};
 use crate::sim::arm_change::ArmChange;
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;

@@ -9,7 +9,7 @@ use crate::core::atomic_file::write_json;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::ik::data::IkData;
-use crate::ik::learning::{EmsslConfig, EmsslIteration, StopRule, emssl};
+use crate::ik::emssl::{EmsslConfig, EmsslIteration, StopRule, emssl};
 use crate::sim::robot::Robot;
 use crate::studies::emssl_table2::{CurveRow, IkComparisonConfig, write_curves};
 

@@ -85,7 +85,7 @@ impl Preset for SeedsConfig {
                 hidden: vec![64, 32],
                 wrapped_ranges_deg: Vec::new(),
                 prediction_sample_rows: 0,
-                emssl: crate::ik::learning::EmsslConfig {
+                emssl: crate::ik::emssl::EmsslConfig {
                     max_iterations: 6,
                     ..t.emssl.clone()
                 },

@@ -20,8 +20,11 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::ik::data::{IkData, IkDataConfig, JointOutput};
-use crate::ik::learning::{EmsslConfig, FitConfig, LrPlateau, emssl};
 use crate::ik::mlp::InverseModelConfig;
+use crate::ik::{
+    emssl::{EmsslConfig, LrPlateau, emssl},
+    learning::FitConfig,
+};
 use crate::sim::robot::Robot;
 
 /// One setting of the study: what changed from the baseline, and the configs it runs.

@@ -50,9 +50,12 @@ use crate::ik::drl::DrlMethod;
 use crate::ik::dsl::{DistalConfig, DslMethod};
 use crate::ik::emssl::EmsslMethod;
 use crate::ik::flow::{FlowConfig, FlowIk, FlowMethod, sample};
-use crate::ik::learning::{EmsslConfig, EmsslIteration, FitConfig};
 use crate::ik::method::{Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed};
 use crate::ik::mlp::InverseModelConfig;
+use crate::ik::{
+    emssl::{EmsslConfig, EmsslIteration},
+    learning::FitConfig,
+};
 use crate::sim::robot::Robot;
 use crate::train::convergence::Convergence;
 
