@@ -319,17 +319,17 @@ pub fn emssl_checkpointed(
                 "range": data.range_record(),
             }),
         });
-    emssl_run(
-        model,
-        &tdev,
-        chain,
-        chain,
+    Run {
+        tdev: &tdev,
+        forward: chain,
+        arm: chain,
         data,
         fit_cfg,
         cfg,
         device,
-        plan.as_ref(),
-    )
+        checkpoint: plan.as_ref(),
+    }
+    .run(model)
 }
 
 /// Where an EMSSL run keeps its state, and the settings it must match to continue.
@@ -386,6 +386,7 @@ impl EmsslCheckpoint {
 /// comes back with `.train()`), with `forward` as the forward model, on the desired training
 /// positions of `data`. The test errors are those of `arm`, the arm the answers are for (the
 /// forward model itself, or the real arm when the forward model is a learned stand-in).
+// The paper's nouns as arguments (callers name each); inside, one `Run` holds them.
 #[allow(clippy::too_many_arguments)]
 pub fn emssl_from(
     model: Mlp,
@@ -397,122 +398,191 @@ pub fn emssl_from(
     cfg: &EmsslConfig,
     device: &Device,
 ) -> Result<(Mlp, Vec<EmsslIteration>)> {
-    emssl_run(model, tdev, forward, arm, data, fit_cfg, cfg, device, None)
+    Run {
+        tdev,
+        forward,
+        arm,
+        data,
+        fit_cfg,
+        cfg,
+        device,
+        checkpoint: None,
+    }
+    .run(model)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn emssl_run(
+/// What one EMSSL run works with: the devices, the forward model and the arm it is scored
+/// on, the goals, the settings, and where it keeps its state.
+struct Run<'a> {
+    tdev: &'a Device,
+    forward: &'a KinematicChain,
+    arm: &'a KinematicChain,
+    data: &'a IkData,
+    fit_cfg: &'a FitConfig,
+    cfg: &'a EmsslConfig,
+    device: &'a Device,
+    checkpoint: Option<&'a EmsslCheckpoint>,
+}
+
+/// Where a run stands between iterations.
+struct Progress {
     model: Mlp,
-    tdev: &Device,
-    forward: &KinematicChain,
-    arm: &KinematicChain,
-    data: &IkData,
-    fit_cfg: &FitConfig,
-    cfg: &EmsslConfig,
-    device: &Device,
-    checkpoint: Option<&EmsslCheckpoint>,
-) -> Result<(Mlp, Vec<EmsslIteration>)> {
-    let mut model = model;
-    let mut optim = crate::train::adam::adam();
-    let resumed = checkpoint.and_then(|c| c.load().map(|s| (c, s)));
-    let desired = &data.positions[data.train()];
-    let held_out = &data.positions[data.validation()];
-    let wrap = model.joint_output() == JointOutput::Wrapped && data.full_circle();
-    let mut warm_steps = 0;
-    if cfg.warm_start_epochs > 0 && resumed.is_none() {
-        warm_steps =
-            TrainConfig::steps_for_epochs(cfg.warm_start_epochs, desired.len(), fit_cfg.batch);
-        let (reached, tried) = babble(
-            forward,
-            desired.len(),
-            &data.ranges,
-            fit_cfg.seed ^ 0xBABB1E,
-        );
-        (model, optim) = fit(
-            model,
-            optim,
-            data,
-            &reached,
-            &tried,
-            &FitConfig {
-                epochs: cfg.warm_start_epochs,
-                ..fit_cfg.clone()
-            },
-            "EMSSL warm start (motor babbling)",
-            tdev,
-        )?;
+    optim: ModuleOptimizer,
+    curve: Vec<EmsslIteration>,
+    /// The kept model (by the selection error), and the same on the training device for the
+    /// polishing rounds.
+    best: Option<Mlp>,
+    best_trainable: Option<Mlp>,
+    rule: StopRule,
+    plateau: Option<Plateau>,
+    finished: bool,
+    /// The warm start's steps, counted in the first iteration's.
+    warm_steps: usize,
+    /// The pairs of the last `keep_iterations` iterations.
+    kept: std::collections::VecDeque<(Vec<Point3<f64>>, Vec<Vec<f64>>)>,
+    /// The answers for the desired positions (the next iteration samples around them) and
+    /// the seconds their inference took.
+    answers: Vec<Vec<f64>>,
+    inference_seconds: f64,
+}
+
+impl Run<'_> {
+    fn desired(&self) -> &[Point3<f64>] {
+        &self.data.positions[self.data.train()]
     }
-    let mut curve: Vec<EmsslIteration> = Vec::new();
-    let mut best: Option<Mlp> = None;
-    // The best model on the training device, for the polishing rounds.
-    let mut best_trainable: Option<Mlp> = None;
-    let mut rule = StopRule::default();
-    let mut finished = false;
-    let mut plateau = cfg.lr_plateau.as_ref().map(|p| {
-        Plateau::new(&Convergence {
-            max_epochs: cfg.max_iterations,
-            patience: usize::MAX,
-            lr_patience: p.patience,
-            lr_factor: p.factor,
-            min_improvement: 1e-3,
-            min_epochs: 0,
-        })
-    });
-    if let Some((c, state)) = resumed {
-        let load = |m: Mlp, file: &str| {
-            m.try_load_file(c.path(file)).map_err(|e| {
-                crate::train::checkpoint::unreadable_checkpoint(&c.path(file), &c.dir, e)
-            })
+
+    fn held_out(&self) -> &[Point3<f64>] {
+        &self.data.positions[self.data.validation()]
+    }
+
+    fn predict(&self, model: &Mlp, positions: &[Point3<f64>]) -> Vec<Vec<f64>> {
+        predict(model, self.data, positions, self.fit_cfg.inference_batch, self.device)
+    }
+
+    /// The iterations, then the polishing rounds: the model to keep and the curve.
+    fn run(&self, model: Mlp) -> Result<(Mlp, Vec<EmsslIteration>)> {
+        let mut p = self.start(model)?;
+        let last_iteration = if p.finished {
+            p.curve.len()
+        } else {
+            self.cfg.max_iterations
         };
-        model = load(model.clone(), "model.bpk")?;
-        optim = optim.load(c.path("optimizer.bpk")).map_err(|e| {
-            crate::train::checkpoint::unreadable_checkpoint(&c.path("optimizer.bpk"), &c.dir, e)
-        })?;
-        if c.path("best.bpk").exists() {
-            let b = load(model.clone(), "best.bpk")?;
-            best = Some(b.valid());
-            best_trainable = Some(b);
+        for iteration in p.curve.len() + 1..=last_iteration {
+            let stop;
+            (p, stop) = self.iteration(p, iteration)?;
+            if stop {
+                break;
+            }
         }
-        eprintln!(
-            "EMSSL: continuing from iteration {} in {}",
-            state.curve.len(),
-            c.dir.display()
-        );
-        curve = state.curve;
-        rule = state.rule;
-        plateau = state.plateau;
-        finished = state.finished;
+        if self.cfg.polish_rounds > 0 {
+            let start = p.best_trainable.unwrap_or(p.model);
+            let (polished, more) = self.polish(start, &p.curve)?;
+            p.curve.extend(more);
+            return Ok((polished, p.curve));
+        }
+        let model = p.best.unwrap_or_else(|| p.model.valid());
+        Ok((model, p.curve))
     }
-    let first = curve.len() + 1;
-    let last_iteration = if finished {
-        curve.len()
-    } else {
-        cfg.max_iterations
-    };
-    // The pairs of the last `keep_iterations` iterations.
-    let mut kept: std::collections::VecDeque<(Vec<Point3<f64>>, Vec<Vec<f64>>)> =
-        std::collections::VecDeque::new();
-    // The answers for the desired positions: the first sampling pass, and after each
-    // iteration both its agreement check and the next iteration's sampling.
-    let t0 = std::time::Instant::now();
-    let mut answers = predict(
-        &model.valid(),
-        data,
-        desired,
-        fit_cfg.inference_batch,
-        device,
-    );
-    let mut inference_seconds = t0.elapsed().as_secs_f64();
-    for iteration in first..=last_iteration {
+
+    /// A fresh run (after its warm start of motor babbling, if any), or the checkpoint's.
+    fn start(&self, model: Mlp) -> Result<Progress> {
+        let (cfg, fit_cfg) = (self.cfg, self.fit_cfg);
+        let mut p = Progress {
+            model,
+            optim: crate::train::adam::adam(),
+            curve: Vec::new(),
+            best: None,
+            best_trainable: None,
+            rule: StopRule::default(),
+            plateau: cfg.lr_plateau.as_ref().map(|l| {
+                Plateau::new(&Convergence {
+                    max_epochs: cfg.max_iterations,
+                    patience: usize::MAX,
+                    lr_patience: l.patience,
+                    lr_factor: l.factor,
+                    min_improvement: 1e-3,
+                    min_epochs: 0,
+                })
+            }),
+            finished: false,
+            warm_steps: 0,
+            kept: Default::default(),
+            answers: Vec::new(),
+            inference_seconds: 0.0,
+        };
+        let resumed = self.checkpoint.and_then(|c| c.load().map(|s| (c, s)));
+        let desired = self.desired();
+        if cfg.warm_start_epochs > 0 && resumed.is_none() {
+            p.warm_steps =
+                TrainConfig::steps_for_epochs(cfg.warm_start_epochs, desired.len(), fit_cfg.batch);
+            let (reached, tried) = babble(
+                self.forward,
+                desired.len(),
+                &self.data.ranges,
+                fit_cfg.seed ^ 0xBABB1E,
+            );
+            (p.model, p.optim) = fit(
+                p.model,
+                p.optim,
+                self.data,
+                &reached,
+                &tried,
+                &FitConfig {
+                    epochs: cfg.warm_start_epochs,
+                    ..fit_cfg.clone()
+                },
+                "EMSSL warm start (motor babbling)",
+                self.tdev,
+            )?;
+        }
+        if let Some((c, state)) = resumed {
+            let load = |m: Mlp, file: &str| {
+                m.try_load_file(c.path(file)).map_err(|e| {
+                    crate::train::checkpoint::unreadable_checkpoint(&c.path(file), &c.dir, e)
+                })
+            };
+            p.model = load(p.model.clone(), "model.bpk")?;
+            p.optim = p.optim.load(c.path("optimizer.bpk")).map_err(|e| {
+                crate::train::checkpoint::unreadable_checkpoint(&c.path("optimizer.bpk"), &c.dir, e)
+            })?;
+            if c.path("best.bpk").exists() {
+                let b = load(p.model.clone(), "best.bpk")?;
+                p.best = Some(b.valid());
+                p.best_trainable = Some(b);
+            }
+            eprintln!(
+                "EMSSL: continuing from iteration {} in {}",
+                state.curve.len(),
+                c.dir.display()
+            );
+            p.curve = state.curve;
+            p.rule = state.rule;
+            p.plateau = state.plateau;
+            p.finished = state.finished;
+        }
+        // The answers for the desired positions: the first sampling pass, and after each
+        // iteration both its agreement check and the next iteration's sampling.
+        let t0 = std::time::Instant::now();
+        p.answers = self.predict(&p.model.valid(), desired);
+        p.inference_seconds = t0.elapsed().as_secs_f64();
+        Ok(p)
+    }
+
+    /// One iteration: sample (the answers with exploration noise, through the forward
+    /// model), train on the pairs, score, keep the best, checkpoint. Whether the stopping
+    /// rule ends the run.
+    fn iteration(&self, mut p: Progress, iteration: usize) -> Result<(Progress, bool)> {
+        let (cfg, fit_cfg, data) = (self.cfg, self.fit_cfg, self.data);
+        let wrap = p.model.joint_output() == JointOutput::Wrapped && data.full_circle();
         let decay = |rate: f64| rate.powi(iteration as i32 - 1);
         let sigma = (cfg.exploration * decay(cfg.exploration_decay)).max(cfg.exploration_floor);
         let learning_rate = fit_cfg.learning_rate
             * decay(cfg.learning_rate_decay)
-            * plateau.as_ref().map_or(1.0, |p| p.scale);
+            * p.plateau.as_ref().map_or(1.0, |l| l.scale);
         // Sampling: the batched inference (done at the end of the last iteration), the
         // exploration noise, then the forward model.
         let t0 = std::time::Instant::now();
-        let mut tried = answers.clone();
+        let mut tried = p.answers.clone();
         explore(
             &mut tried,
             &data.ranges,
@@ -520,11 +590,11 @@ fn emssl_run(
             fit_cfg.seed ^ (iteration as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             wrap,
         );
-        let reached = forward.end_effector_batch(&tried);
-        let sampling_seconds = inference_seconds + t0.elapsed().as_secs_f64();
-        kept.push_back((reached, tried));
-        while kept.len() > cfg.keep_iterations.max(1) {
-            kept.pop_front();
+        let reached = self.forward.end_effector_batch(&tried);
+        let sampling_seconds = p.inference_seconds + t0.elapsed().as_secs_f64();
+        p.kept.push_back((reached, tried));
+        while p.kept.len() > cfg.keep_iterations.max(1) {
+            p.kept.pop_front();
         }
         // Training on the self-generated pairs (reached -> joints tried).
         let t0 = std::time::Instant::now();
@@ -533,25 +603,25 @@ fn emssl_run(
             learning_rate,
             ..fit_cfg.clone()
         };
-        let (reached, tried): (Vec<Point3<f64>>, Vec<Vec<f64>>) = if kept.len() == 1 {
-            kept[0].clone()
+        let (reached, tried): (Vec<Point3<f64>>, Vec<Vec<f64>>) = if p.kept.len() == 1 {
+            p.kept[0].clone()
         } else {
             (
-                kept.iter().flat_map(|k| k.0.iter().copied()).collect(),
-                kept.iter().flat_map(|k| k.1.iter().cloned()).collect(),
+                p.kept.iter().flat_map(|k| k.0.iter().copied()).collect(),
+                p.kept.iter().flat_map(|k| k.1.iter().cloned()).collect(),
             )
         };
-        (model, optim) = fit(
-            model,
-            optim,
+        (p.model, p.optim) = fit(
+            p.model,
+            p.optim,
             data,
             &reached,
             &tried,
             &fit_iter,
             &format!("EMSSL iteration {iteration}"),
-            tdev,
+            self.tdev,
         )
-        .map_err(|e| match (e, checkpoint) {
+        .map_err(|e| match (e, self.checkpoint) {
             // The fit inside an iteration keeps no checkpoint; the iterations do.
             (Error::Interrupted(_), Some(c)) => Error::Interrupted(format!(
                 "EMSSL stopped during iteration {iteration}; its checkpoint after iteration {} \
@@ -563,179 +633,182 @@ fn emssl_run(
         })?;
         let training_seconds = t0.elapsed().as_secs_f64();
         let steps = TrainConfig::steps_for_epochs(fit_iter.epochs, reached.len(), fit_iter.batch)
-            + std::mem::take(&mut warm_steps);
-        let valid = model.valid();
+            + std::mem::take(&mut p.warm_steps);
+        let valid = p.model.valid();
         // The next sampling pass's inference, and the agreement check on it.
         let t0 = std::time::Instant::now();
-        answers = predict(&valid, data, desired, fit_cfg.inference_batch, device);
-        inference_seconds = t0.elapsed().as_secs_f64();
-        let clean_reached = forward.end_effector_batch(&answers);
-        let back = predict(
-            &valid,
-            data,
-            &clean_reached,
-            fit_cfg.inference_batch,
-            device,
-        );
-        let disagreement = disagreement(&answers, &back, &data.ranges);
-        let train_reach_cm =
-            DistanceErrors::from_metres(&distances(desired, &clean_reached)).mean_cm;
-        let validation_reach_cm = (!held_out.is_empty()).then(|| {
-            let q = predict(&valid, data, held_out, fit_cfg.inference_batch, device);
-            DistanceErrors::from_metres(&reach_errors(forward, held_out, &q)).mean_cm
-        });
-        let (test, _) = test_errors(&valid, arm, data, fit_cfg.inference_batch, device);
-        curve.push(EmsslIteration {
+        p.answers = self.predict(&valid, self.desired());
+        p.inference_seconds = t0.elapsed().as_secs_f64();
+        let point = EmsslIteration {
             iteration,
             exploration: sigma,
             learning_rate,
-            test,
-            train_reach_cm,
-            validation_reach_cm,
-            disagreement,
             sampling_seconds,
             training_seconds,
-            forward_calls: 2 * desired.len() * iteration,
+            forward_calls: 2 * self.desired().len() * iteration,
             steps,
-        });
-        let last = curve.last().expect("just pushed");
+            ..self.scored(&valid, &p.answers)
+        };
         if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
             eprintln!(
                 "EMSSL iteration {iteration}: selection {:.4} cm, test {:.4} cm, lr {learning_rate:.2e}, noise {sigma:.4}",
-                last.selection_cm(),
-                last.test.mean_cm
+                point.selection_cm(),
+                point.test.mean_cm
             );
         }
-        if let Some(p) = plateau.as_mut() {
-            p.observe(last.selection_cm());
+        if let Some(l) = p.plateau.as_mut() {
+            l.observe(point.selection_cm());
         }
-        let (improved, stop) = rule.observe(last, cfg);
+        let (improved, stop) = p.rule.observe(&point, cfg);
+        p.curve.push(point);
         if improved {
-            best = Some(valid);
+            p.best = Some(valid);
             if cfg.polish_rounds > 0 {
-                best_trainable = Some(model.clone());
+                p.best_trainable = Some(p.model.clone());
             }
         }
-        if let Some(c) = checkpoint {
+        if let Some(c) = self.checkpoint {
             c.save(
-                &model,
-                &optim,
-                best.as_ref().filter(|_| improved),
+                &p.model,
+                &p.optim,
+                p.best.as_ref().filter(|_| improved),
                 &EmsslState {
                     settings: c.settings.clone(),
-                    curve: curve.clone(),
-                    rule: rule.clone(),
-                    plateau: plateau.clone(),
+                    curve: p.curve.clone(),
+                    rule: p.rule.clone(),
+                    plateau: p.plateau.clone(),
                     finished: stop,
                 },
             )?;
         }
-        if stop {
-            break;
-        }
+        Ok((p, stop))
     }
-    if cfg.polish_rounds > 0 {
-        let start = best_trainable.unwrap_or(model);
-        let (polished, more) = polish(
-            start, tdev, forward, arm, data, fit_cfg, cfg, &curve, device,
-        )?;
-        curve.extend(more);
-        return Ok((polished, curve));
-    }
-    let model = best.unwrap_or_else(|| model.valid());
-    Ok((model, curve))
-}
 
-/// EMSSL's polishing rounds (see [`EmsslConfig::polish_rounds`]) from `model`, the kept
-/// model of the iterations in `curve`: the inference model to keep and the rounds' curve
-/// points (numbered after the iterations, exploration 0).
-#[allow(clippy::too_many_arguments)]
-fn polish(
-    model: Mlp,
-    tdev: &Device,
-    forward: &KinematicChain,
-    arm: &KinematicChain,
-    data: &IkData,
-    fit_cfg: &FitConfig,
-    cfg: &EmsslConfig,
-    curve: &[EmsslIteration],
-    device: &Device,
-) -> Result<(Mlp, Vec<EmsslIteration>)> {
-    let desired = &data.positions[data.train()];
-    let held_out = &data.positions[data.validation()];
-    let kept = curve
-        .iter()
-        .min_by(|a, b| a.selection_cm().total_cmp(&b.selection_cm()))
-        .ok_or_else(|| crate::Error::Training("EMSSL: no iteration to polish".into()))?;
-    let (mut best_cm, learning_rate) = (kept.selection_cm(), kept.learning_rate);
-    let batch = fit_cfg.inference_batch;
-    // The selection error: the reach error on the validation goals, else the training goals.
-    let goals = if held_out.is_empty() {
-        desired
-    } else {
-        held_out
-    };
-    let reach_cm = |m: &Mlp| {
-        let q = predict(m, data, goals, batch, device);
-        DistanceErrors::from_metres(&reach_errors(forward, goals, &q)).mean_cm
-    };
-    let mut model = model;
-    let mut points = Vec::new();
-    for round in 1..=cfg.polish_rounds {
-        let iteration = curve.len() + round;
-        let t0 = std::time::Instant::now();
-        let answers = predict(&model.valid(), data, desired, batch, device);
-        let reached = forward.end_effector_batch(&answers);
-        let set = joint_set(data, &reached, &answers, model.joint_output(), tdev);
-        let sampling_seconds = t0.elapsed().as_secs_f64();
-        let fit_round = FitConfig {
-            learning_rate,
-            seed: fit_cfg.seed.wrapping_add(iteration as u64),
-            ..fit_cfg.clone()
-        };
-        let (polished, log) = fit_converged(
-            model.clone(),
-            &set,
-            &fit_round,
-            &Convergence::standard(),
-            &format!("EMSSL polishing round {round}"),
-            mse,
-            reach_cm,
-        )?;
-        let valid = polished.valid();
-        let clean = predict(&valid, data, desired, batch, device);
-        let clean_reached = forward.end_effector_batch(&clean);
-        let back = predict(&valid, data, &clean_reached, batch, device);
-        let (test, _) = test_errors(&valid, arm, data, batch, device);
-        let point = EmsslIteration {
-            iteration,
+    /// `valid`'s scores, its `answers` for the desired positions given: the disagreement
+    /// with its answers for where they reach, the reach errors on the training and held-out
+    /// goals, and the test errors on the arm (the timing fields left zero).
+    fn scored(&self, valid: &Mlp, answers: &[Vec<f64>]) -> EmsslIteration {
+        let (desired, held_out) = (self.desired(), self.held_out());
+        let clean_reached = self.forward.end_effector_batch(answers);
+        let back = self.predict(valid, &clean_reached);
+        let validation_reach_cm = (!held_out.is_empty()).then(|| {
+            let q = self.predict(valid, held_out);
+            DistanceErrors::from_metres(&reach_errors(self.forward, held_out, &q)).mean_cm
+        });
+        let batch = self.fit_cfg.inference_batch;
+        let (test, _) = test_errors(valid, self.arm, self.data, batch, self.device);
+        EmsslIteration {
+            iteration: 0,
             exploration: 0.0,
-            learning_rate,
+            learning_rate: 0.0,
             test,
             train_reach_cm: DistanceErrors::from_metres(&distances(desired, &clean_reached))
                 .mean_cm,
-            validation_reach_cm: (!held_out.is_empty()).then_some(log.best_validation),
-            disagreement: disagreement(&clean, &back, &data.ranges),
-            sampling_seconds,
-            training_seconds: log.seconds,
-            forward_calls: curve.last().map_or(0, |c| c.forward_calls) + 2 * desired.len() * round,
-            steps: log.epochs * set.len().div_ceil(fit_round.batch),
-        };
-        eprintln!(
-            "EMSSL polishing round {round}: selection {:.4} cm (before {best_cm:.4}), test {:.4} cm, {}",
-            point.selection_cm(),
-            point.test.mean_cm,
-            log.summary()
-        );
-        let better = point.selection_cm() < best_cm;
-        points.push(point);
-        if !better {
-            break;
+            validation_reach_cm,
+            disagreement: disagreement(answers, &back, &self.data.ranges),
+            sampling_seconds: 0.0,
+            training_seconds: 0.0,
+            forward_calls: 0,
+            steps: 0,
         }
-        best_cm = points.last().expect("pushed").selection_cm();
-        model = polished;
     }
-    Ok((model.valid(), points))
+
+    /// EMSSL's polishing rounds (see [`EmsslConfig::polish_rounds`]) from `model`, the kept
+    /// model of the iterations in `curve`: the inference model to keep and the rounds' curve
+    /// points (numbered after the iterations, exploration 0).
+    fn polish(&self, model: Mlp, curve: &[EmsslIteration]) -> Result<(Mlp, Vec<EmsslIteration>)> {
+        let (data, fit_cfg, forward) = (self.data, self.fit_cfg, self.forward);
+        let (desired, held_out) = (self.desired(), self.held_out());
+        let kept = curve
+            .iter()
+            .min_by(|a, b| a.selection_cm().total_cmp(&b.selection_cm()))
+            .ok_or_else(|| crate::Error::Training("EMSSL: no iteration to polish".into()))?;
+        let (mut best_cm, learning_rate) = (kept.selection_cm(), kept.learning_rate);
+        // The selection error: the reach error on the validation goals, else the training goals.
+        let goals = if held_out.is_empty() {
+            desired
+        } else {
+            held_out
+        };
+        let reach_cm = |m: &Mlp| {
+            let q = self.predict(m, goals);
+            DistanceErrors::from_metres(&reach_errors(forward, goals, &q)).mean_cm
+        };
+        let mut model = model;
+        let mut points = Vec::new();
+        for round in 1..=self.cfg.polish_rounds {
+            let iteration = curve.len() + round;
+            let t0 = std::time::Instant::now();
+            let answers = self.predict(&model.valid(), desired);
+            let reached = forward.end_effector_batch(&answers);
+            let set = joint_set(data, &reached, &answers, model.joint_output(), self.tdev);
+            let sampling_seconds = t0.elapsed().as_secs_f64();
+            let fit_round = FitConfig {
+                learning_rate,
+                seed: fit_cfg.seed.wrapping_add(iteration as u64),
+                ..fit_cfg.clone()
+            };
+            let (polished, log) = fit_converged(
+                model.clone(),
+                &set,
+                &fit_round,
+                &Convergence::standard(),
+                &format!("EMSSL polishing round {round}"),
+                mse,
+                reach_cm,
+            )?;
+            let valid = polished.valid();
+            let clean = self.predict(&valid, desired);
+            let point = EmsslIteration {
+                iteration,
+                learning_rate,
+                validation_reach_cm: (!held_out.is_empty()).then_some(log.best_validation),
+                sampling_seconds,
+                training_seconds: log.seconds,
+                forward_calls: curve.last().map_or(0, |c| c.forward_calls)
+                    + 2 * desired.len() * round,
+                steps: log.epochs * set.len().div_ceil(fit_round.batch),
+                ..self.scored_without_held_out(&valid, &clean)
+            };
+            eprintln!(
+                "EMSSL polishing round {round}: selection {:.4} cm (before {best_cm:.4}), test {:.4} cm, {}",
+                point.selection_cm(),
+                point.test.mean_cm,
+                log.summary()
+            );
+            let better = point.selection_cm() < best_cm;
+            points.push(point);
+            if !better {
+                break;
+            }
+            best_cm = points.last().expect("pushed").selection_cm();
+            model = polished;
+        }
+        Ok((model.valid(), points))
+    }
+
+    /// [`Self::scored`] without the held-out goals' inference (a polishing round takes their
+    /// error from its fit).
+    fn scored_without_held_out(&self, valid: &Mlp, answers: &[Vec<f64>]) -> EmsslIteration {
+        let clean_reached = self.forward.end_effector_batch(answers);
+        let back = self.predict(valid, &clean_reached);
+        let batch = self.fit_cfg.inference_batch;
+        let (test, _) = test_errors(valid, self.arm, self.data, batch, self.device);
+        EmsslIteration {
+            iteration: 0,
+            exploration: 0.0,
+            learning_rate: 0.0,
+            test,
+            train_reach_cm: DistanceErrors::from_metres(&distances(self.desired(), &clean_reached))
+                .mean_cm,
+            validation_reach_cm: None,
+            disagreement: disagreement(answers, &back, &self.data.ranges),
+            sampling_seconds: 0.0,
+            training_seconds: 0.0,
+            forward_calls: 0,
+            steps: 0,
+        }
+    }
 }
 
 /// EMSSL as a Table II method: checkpointed in the task's files (a killed run continues), its
