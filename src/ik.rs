@@ -13,6 +13,7 @@ pub mod dls;
 pub mod drl;
 pub mod dsl;
 pub mod emssl;
+pub mod emssl_iteration;
 pub mod flow;
 pub mod learning;
 pub mod method;

@@ -22,6 +22,8 @@ fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
                     .map(|c| c.as_os_str().to_string_lossy().into_owned())
                     .collect::<Vec<_>>()
                     .join("::");
+                // A folder's `mod.rs` is the folder's module (`sim::kinematics`).
+                let module = module.strip_suffix("::mod").unwrap_or(&module).to_string();
                 if module != "lib" {
                     files.push((module, path));
                 }

@@ -39,6 +39,8 @@ use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::ik::learning::{FitConfig, fit, fit_converged, joint_set, mse, predict, test_errors};
+
+pub use crate::ik::emssl_iteration::EmsslIteration;
 use crate::train::{
     config::TrainConfig,
     convergence::{Convergence, Plateau},
@@ -138,47 +140,6 @@ impl EmsslConfig {
             keep_iterations: 1,
             polish_rounds: 0,
         }
-    }
-}
-
-/// One EMSSL iteration, for the learning curve (Figure 6).
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct EmsslIteration {
-    pub iteration: usize,
-    /// Exploration noise and learning rate used in this iteration.
-    pub exploration: f64,
-    pub learning_rate: f64,
-    /// Test distance errors after this iteration (evaluation only; never used to stop).
-    pub test: DistanceErrors,
-    /// Mean distance (cm) between the desired training positions and where the model's
-    /// answers for them (without noise) take the arm.
-    pub train_reach_cm: f64,
-    /// The same on the held-out validation goals, where the data has a validation split.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub validation_reach_cm: Option<f64>,
-    /// Mean absolute difference (normalised joints) between the model's answers for the
-    /// desired positions and its answers for the positions those answers reach: zero when
-    /// the model is consistent with the arm (the paper's stopping rule).
-    pub disagreement: f64,
-    /// Seconds of the sampling phase (batched inference, noise, forward model) and of training.
-    pub sampling_seconds: f64,
-    pub training_seconds: f64,
-    /// Forward-model calls so far (the sampling pass and the noise-free reach check of every
-    /// iteration): with a real arm as the forward model, the moves it made.
-    #[serde(default)]
-    pub forward_calls: usize,
-    /// Optimiser steps (batches) this iteration took (the warm start's counted in the first):
-    /// their sum is the run's training budget (0 in curves from before it was recorded).
-    #[serde(default)]
-    pub steps: usize,
-}
-
-impl EmsslIteration {
-    /// The error that picks the model and stops the run: the reach error on the validation
-    /// goals where there are some, on the training goals otherwise (both self-supervised:
-    /// goals and the forward model, no labels).
-    pub fn selection_cm(&self) -> f64 {
-        self.validation_reach_cm.unwrap_or(self.train_reach_cm)
     }
 }
 
@@ -456,7 +417,13 @@ impl Run<'_> {
     }
 
     fn predict(&self, model: &Mlp, positions: &[Point3<f64>]) -> Vec<Vec<f64>> {
-        predict(model, self.data, positions, self.fit_cfg.inference_batch, self.device)
+        predict(
+            model,
+            self.data,
+            positions,
+            self.fit_cfg.inference_batch,
+            self.device,
+        )
     }
 
     /// The iterations, then the polishing rounds: the model to keep and the curve.
@@ -647,7 +614,7 @@ impl Run<'_> {
             training_seconds,
             forward_calls: 2 * self.desired().len() * iteration,
             steps,
-            ..self.scored(&valid, &p.answers)
+            ..self.scored(&valid, &p.answers, true)
         };
         if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
             eprintln!(
@@ -685,13 +652,14 @@ impl Run<'_> {
     }
 
     /// `valid`'s scores, its `answers` for the desired positions given: the disagreement
-    /// with its answers for where they reach, the reach errors on the training and held-out
-    /// goals, and the test errors on the arm (the timing fields left zero).
-    fn scored(&self, valid: &Mlp, answers: &[Vec<f64>]) -> EmsslIteration {
+    /// with its answers for where they reach, the reach errors on the training goals and (with
+    /// `held_out_reach`) the held-out ones, and the test errors on the arm (the timing fields
+    /// left zero).
+    fn scored(&self, valid: &Mlp, answers: &[Vec<f64>], held_out_reach: bool) -> EmsslIteration {
         let (desired, held_out) = (self.desired(), self.held_out());
         let clean_reached = self.forward.end_effector_batch(answers);
         let back = self.predict(valid, &clean_reached);
-        let validation_reach_cm = (!held_out.is_empty()).then(|| {
+        let validation_reach_cm = (held_out_reach && !held_out.is_empty()).then(|| {
             let q = self.predict(valid, held_out);
             DistanceErrors::from_metres(&reach_errors(self.forward, held_out, &q)).mean_cm
         });
@@ -768,7 +736,7 @@ impl Run<'_> {
                 forward_calls: curve.last().map_or(0, |c| c.forward_calls)
                     + 2 * desired.len() * round,
                 steps: log.epochs * set.len().div_ceil(fit_round.batch),
-                ..self.scored_without_held_out(&valid, &clean)
+                ..self.scored(&valid, &clean, false)
             };
             eprintln!(
                 "EMSSL polishing round {round}: selection {:.4} cm (before {best_cm:.4}), test {:.4} cm, {}",
@@ -785,29 +753,6 @@ impl Run<'_> {
             model = polished;
         }
         Ok((model.valid(), points))
-    }
-
-    /// [`Self::scored`] without the held-out goals' inference (a polishing round takes their
-    /// error from its fit).
-    fn scored_without_held_out(&self, valid: &Mlp, answers: &[Vec<f64>]) -> EmsslIteration {
-        let clean_reached = self.forward.end_effector_batch(answers);
-        let back = self.predict(valid, &clean_reached);
-        let batch = self.fit_cfg.inference_batch;
-        let (test, _) = test_errors(valid, self.arm, self.data, batch, self.device);
-        EmsslIteration {
-            iteration: 0,
-            exploration: 0.0,
-            learning_rate: 0.0,
-            test,
-            train_reach_cm: DistanceErrors::from_metres(&distances(self.desired(), &clean_reached))
-                .mean_cm,
-            validation_reach_cm: None,
-            disagreement: disagreement(answers, &back, &self.data.ranges),
-            sampling_seconds: 0.0,
-            training_seconds: 0.0,
-            forward_calls: 0,
-            steps: 0,
-        }
     }
 }
 

@@ -313,31 +313,13 @@ pub fn run(
     }
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
-    // The model's training curve beside its benchmark (principle: show the curve).
-    let curve_file = model_dir.join("validation_curve.csv");
-    if curve_file.exists() {
-        let curve: Vec<crate::train::convergence::ValidationPoint> =
-            crate::report::table::read_csv(&curve_file)?;
-        crate::report::table::write_csv(&out.join("flow_validation_curve.csv"), &curve)?;
-        crate::report::figures::curves(
-            &out.join("flow_validation_curve.png"),
-            "the flow's validation error (one sample a target, before refinement)",
-            "epoch",
-            "mean position error, cm (log)",
-            &[(
-                "validation".to_string(),
-                curve.iter().map(|p| (p.epoch, p.validation)).collect(),
-            )],
-        )?;
-    }
-    let ranges = model.saved.ranges.clone();
-    let (targets, joints) = random_targets(&robot, &ranges, cfg.targets, cfg.seed);
+    copy_training_curve(model_dir, out)?;
+    let (targets, joints) = random_targets(&robot, &model.saved.ranges, cfg.targets, cfg.seed);
     let targets_file = out.join("targets.csv");
     crate::core::atomic_file::write_bytes(
         &targets_file,
         targets_csv(&targets, &joints, &model.saved.joint_names, model.tips()).as_bytes(),
     )?;
-    let threads = rayon::current_num_threads();
     let mut sitting = Sitting {
         cfg,
         robot_name: model.saved.robot.label(),
@@ -345,197 +327,208 @@ pub fn run(
         model_preset: model.saved.config.preset.clone(),
         rows: Vec::new(),
     };
-    let chain = &robot.chain;
-    let standard = model.saved.config.lm.clone();
-    // The model alone: one sample a target, no refinement.
-    let (seconds, samples) = timed(|| model.sample(&targets, device));
-    let errors: Vec<(f64, f64)> = samples
-        .iter()
-        .zip(&targets)
-        .map(|(q, t)| {
-            let (p, r) = pose_error(chain, q, t);
-            (1000.0 * p, r.to_degrees())
-        })
-        .collect();
-    let alone: Vec<Vec<PoseSolution>> = samples
-        .iter()
-        .zip(&errors)
-        .map(|(q, &(p, r))| {
-            vec![PoseSolution {
-                joints: q.clone(),
-                position_error_m: p / 1000.0,
-                rotation_error_rad: r.to_radians(),
-                iterations: 0,
-                starts: 0,
-            }]
-        })
-        .collect();
-    sitting.push(
-        "selfmodel flow alone",
-        "1 sample".into(),
-        false,
-        threads,
-        &alone,
-        &standard,
-        &ranges,
-        seconds,
-    );
-    let stats = |v: Vec<f64>| (v.iter().sum::<f64>() / v.len().max(1) as f64, median(&v));
-    let (pm, pmed) = stats(errors.iter().map(|e| e.0).collect());
-    let (rm, rmed) = stats(errors.iter().map(|e| e.1).collect());
-    if let Some(row) = sitting.rows.last_mut() {
-        row.pos_err_mm_mean = Some(pm);
-        row.pos_err_mm_median = Some(pmed);
-        row.rot_err_deg_mean = Some(rm);
-        row.rot_err_deg_median = Some(rmed);
-        row.iterations_mean = None;
-        row.starts_mean = None;
-        row.tolerance = None;
+    let ours = Ours {
+        model: &model,
+        chain: &robot.chain,
+        targets: &targets,
+        device,
+    };
+    ours.model_alone(&mut sitting);
+    ours.at_every_budget(&mut sitting)?;
+    ours.family(&mut sitting)?;
+    ours.random_starts_only(&mut sitting);
+    references(&mut sitting, &model, &robot, &targets_file, out, python)?;
+    let mut rows = sitting.rows;
+    rank(&mut rows);
+    write_report(out, &rows)?;
+    Ok(rows)
+}
+
+/// The model's training curve beside its benchmark (principle: show the curve).
+fn copy_training_curve(model_dir: &Path, out: &Path) -> Result<()> {
+    let curve_file = model_dir.join("validation_curve.csv");
+    if !curve_file.exists() {
+        return Ok(());
     }
-    // Ours at every budget (and the model's own), on all threads; the model's own budget on
-    // one thread too.
-    let mut budgets = cfg.random_starts.clone();
-    budgets.push(standard.random_starts);
-    budgets.sort_unstable();
-    budgets.dedup();
-    for &starts in &budgets {
-        let lm = LmConfig {
-            random_starts: starts,
-            ..standard.clone()
-        };
-        let (s, answers) = timed(|| model.solve_with(chain, &targets, 1, &lm, device));
-        let answers = answers?;
-        let is_standard = starts == standard.random_starts;
+    let curve: Vec<crate::train::convergence::ValidationPoint> =
+        crate::report::table::read_csv(&curve_file)?;
+    crate::report::table::write_csv(&out.join("flow_validation_curve.csv"), &curve)?;
+    crate::report::figures::curves(
+        &out.join("flow_validation_curve.png"),
+        "the flow's validation error (one sample a target, before refinement)",
+        "epoch",
+        "mean position error, cm (log)",
+        &[(
+            "validation".to_string(),
+            curve.iter().map(|p| (p.epoch, p.validation)).collect(),
+        )],
+    )
+}
+
+/// Our rows: the model and the solver it feeds, on the sitting's targets.
+struct Ours<'a> {
+    model: &'a PoseModel,
+    chain: &'a crate::sim::kinematics::KinematicChain,
+    targets: &'a [Vec<PoseTarget>],
+    device: &'a Device,
+}
+
+impl Ours<'_> {
+    fn ranges(&self) -> &[[f64; 2]] {
+        &self.model.saved.ranges
+    }
+
+    fn standard(&self) -> &LmConfig {
+        &self.model.saved.config.lm
+    }
+
+    /// The model alone: one sample a target, no refinement.
+    fn model_alone(&self, sitting: &mut Sitting) {
+        let threads = rayon::current_num_threads();
+        let (seconds, samples) = timed(|| self.model.sample(self.targets, self.device));
+        let errors: Vec<(f64, f64)> = samples
+            .iter()
+            .zip(self.targets)
+            .map(|(q, t)| {
+                let (p, r) = pose_error(self.chain, q, t);
+                (1000.0 * p, r.to_degrees())
+            })
+            .collect();
+        let alone: Vec<Vec<PoseSolution>> = samples
+            .iter()
+            .zip(&errors)
+            .map(|(q, &(p, r))| {
+                vec![PoseSolution {
+                    joints: q.clone(),
+                    position_error_m: p / 1000.0,
+                    rotation_error_rad: r.to_radians(),
+                    iterations: 0,
+                    starts: 0,
+                }]
+            })
+            .collect();
+        sitting.push(
+            "selfmodel flow alone",
+            "1 sample".into(),
+            false,
+            threads,
+            &alone,
+            self.standard(),
+            self.ranges(),
+            seconds,
+        );
+        let stats = |v: Vec<f64>| (v.iter().sum::<f64>() / v.len().max(1) as f64, median(&v));
+        let (pm, pmed) = stats(errors.iter().map(|e| e.0).collect());
+        let (rm, rmed) = stats(errors.iter().map(|e| e.1).collect());
+        if let Some(row) = sitting.rows.last_mut() {
+            row.pos_err_mm_mean = Some(pm);
+            row.pos_err_mm_median = Some(pmed);
+            row.rot_err_deg_mean = Some(rm);
+            row.rot_err_deg_median = Some(rmed);
+            row.iterations_mean = None;
+            row.starts_mean = None;
+            row.tolerance = None;
+        }
+    }
+
+    /// Ours at every budget (and the model's own), on all threads; the model's own budget on
+    /// one thread too.
+    fn at_every_budget(&self, sitting: &mut Sitting) -> Result<()> {
+        let threads = rayon::current_num_threads();
+        let standard = self.standard();
+        let mut budgets = sitting.cfg.random_starts.clone();
+        budgets.push(standard.random_starts);
+        budgets.sort_unstable();
+        budgets.dedup();
+        for &starts in &budgets {
+            let lm = LmConfig {
+                random_starts: starts,
+                ..standard.clone()
+            };
+            let solve = || {
+                self.model
+                    .solve_with(self.chain, self.targets, 1, &lm, self.device)
+            };
+            let (s, answers) = timed(solve);
+            let is_standard = starts == standard.random_starts;
+            let budget = format!("{starts} random starts");
+            let (ranges, solver) = (self.ranges(), "selfmodel flow + LM");
+            sitting.push(
+                solver,
+                budget.clone(),
+                is_standard,
+                threads,
+                &answers?,
+                &lm,
+                ranges,
+                s,
+            );
+            if is_standard && threads > 1 {
+                let (s, answers) = on_threads(1, || timed(solve))?;
+                sitting.push(solver, budget, true, 1, &answers?, &lm, ranges, s);
+            }
+        }
+        Ok(())
+    }
+
+    /// The family: k samples a target, each refined.
+    fn family(&self, sitting: &mut Sitting) -> Result<()> {
+        let k = sitting.cfg.k;
+        let (s, answers) = timed(|| self.model.solve(self.chain, self.targets, k, self.device));
         sitting.push(
             "selfmodel flow + LM",
-            format!("{starts} random starts"),
-            is_standard,
-            threads,
-            &answers,
-            &lm,
-            &ranges,
+            format!("{k} samples a target"),
+            true,
+            rayon::current_num_threads(),
+            &answers?,
+            self.standard(),
+            self.ranges(),
             s,
         );
-        if is_standard && threads > 1 {
-            let (s, answers) = on_threads(1, || {
-                timed(|| model.solve_with(chain, &targets, 1, &lm, device))
-            })?;
-            let answers = answers?;
+        Ok(())
+    }
+
+    /// The same solver without a model: random starts only.
+    fn random_starts_only(&self, sitting: &mut Sitting) {
+        let standard = self.standard();
+        for &starts in &sitting.cfg.random_only_starts.clone() {
+            let lm = LmConfig {
+                random_starts: starts,
+                ..standard.clone()
+            };
+            let (s, answers) =
+                timed(|| solve_batch(self.chain, self.targets, &[], self.ranges(), &lm));
+            let answers: Vec<Vec<PoseSolution>> = answers.into_iter().map(|a| vec![a]).collect();
             sitting.push(
-                "selfmodel flow + LM",
+                "selfmodel LM from random starts",
                 format!("{starts} random starts"),
-                true,
-                1,
+                starts == standard.random_starts,
+                rayon::current_num_threads(),
                 &answers,
                 &lm,
-                &ranges,
+                self.ranges(),
                 s,
             );
         }
     }
-    // The family: k samples a target, each refined.
-    let (s, answers) = timed(|| model.solve(chain, &targets, cfg.k, device));
-    let answers = answers?;
-    sitting.push(
-        "selfmodel flow + LM",
-        format!("{} samples a target", cfg.k),
-        true,
-        threads,
-        &answers,
-        &standard,
-        &ranges,
-        s,
-    );
-    // The same solver without a model: random starts only.
-    for &starts in &cfg.random_only_starts {
-        let lm = LmConfig {
-            random_starts: starts,
-            ..standard.clone()
-        };
-        let (s, answers) = timed(|| solve_batch(chain, &targets, &[], &ranges, &lm));
-        let answers: Vec<Vec<PoseSolution>> = answers.into_iter().map(|a| vec![a]).collect();
-        sitting.push(
-            "selfmodel LM from random starts",
-            format!("{starts} random starts"),
-            starts == standard.random_starts,
-            threads,
-            &answers,
-            &lm,
-            &ranges,
-            s,
-        );
-    }
-    // The references, on the same targets file.
+}
+
+/// The references on the same targets file (`scripts/ik_reference.py`), on as many processes
+/// as we have threads and on one; skipped, saying why, where they cannot run.
+fn references(
+    sitting: &mut Sitting,
+    model: &PoseModel,
+    robot: &Robot,
+    targets_file: &Path,
+    out: &Path,
+    python: Option<&Path>,
+) -> Result<()> {
+    let chain = &robot.chain;
+    let threads = rayon::current_num_threads();
     let reference = out.join("reference.csv");
     let one_tip = model.tips().is_empty();
-    if let (Some(py), RobotSpec::Urdf { path, tip, .. }, true) =
-        (python, &model.saved.robot, one_tip)
-    {
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ik_reference.py");
-        let tip = tip
-            .clone()
-            .unwrap_or_else(|| chain.links[chain.tip_link].clone());
-        let run = |processes: usize, file: &Path, standard_only: bool| -> Result<()> {
-            let mut cmd = std::process::Command::new(py);
-            cmd.arg(&script)
-                .args(["--targets", &targets_file.to_string_lossy()])
-                .args(["--urdf", &path.to_string_lossy()])
-                .args(["--base", &chain.links[0]])
-                .args(["--tip", &tip])
-                .args(["--processes", &processes.to_string()])
-                .args([
-                    "--precision",
-                    &format!(
-                        "{},{}",
-                        format_significant(EQUAL_PRECISION_MM_DEG.0, 3),
-                        format_significant(EQUAL_PRECISION_MM_DEG.1, 3)
-                    ),
-                ])
-                .args(["--out", &file.to_string_lossy()]);
-            if standard_only {
-                cmd.arg("--standard-only");
-            }
-            // Each reference at its default budget with tighter tolerances too: the comparison
-            // at equal precision.
-            cmd.arg("--tight");
-            let o = match cmd.output() {
-                Ok(o) => o,
-                Err(e) => {
-                    eprintln!(
-                        "bench_ik: the references skipped ({} cannot run: {e})",
-                        py.display()
-                    );
-                    return Ok(());
-                }
-            };
-            let stdout = String::from_utf8_lossy(&o.stdout);
-            for line in stdout.lines() {
-                eprintln!("bench_ik: {line}");
-            }
-            if !o.status.success() {
-                return Err(Error::Config(format!(
-                    "{} failed: {}",
-                    script.display(),
-                    String::from_utf8_lossy(&o.stderr)
-                        .lines()
-                        .last()
-                        .unwrap_or("")
-                )));
-            }
-            Ok(())
-        };
-        run(threads, &reference, false)?;
-        let one = out.join("reference_1_process.csv");
-        if threads > 1 {
-            run(1, &one, true)?;
-        }
-        for file in [reference.as_path(), one.as_path()] {
-            if file.exists() {
-                let rows = read_reference(file, &sitting)?;
-                sitting.rows.extend(rows);
-            }
-        }
-    } else {
+    let (Some(py), RobotSpec::Urdf { path, tip, .. }, true) = (python, &model.saved.robot, one_tip)
+    else {
         eprintln!(
             "bench_ik: the references skipped ({})",
             if python.is_none() {
@@ -546,8 +539,80 @@ pub fn run(
                 "they read a URDF; this model's robot is built in"
             }
         );
+        return Ok(());
+    };
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/ik_reference.py");
+    let tip = tip
+        .clone()
+        .unwrap_or_else(|| chain.links[chain.tip_link].clone());
+    let run = |processes: usize, file: &Path, standard_only: bool| -> Result<()> {
+        let mut cmd = std::process::Command::new(py);
+        cmd.arg(&script)
+            .args(["--targets", &targets_file.to_string_lossy()])
+            .args(["--urdf", &path.to_string_lossy()])
+            .args(["--base", &chain.links[0]])
+            .args(["--tip", &tip])
+            .args(["--processes", &processes.to_string()])
+            .args([
+                "--precision",
+                &format!(
+                    "{},{}",
+                    format_significant(EQUAL_PRECISION_MM_DEG.0, 3),
+                    format_significant(EQUAL_PRECISION_MM_DEG.1, 3)
+                ),
+            ])
+            .args(["--out", &file.to_string_lossy()]);
+        if standard_only {
+            cmd.arg("--standard-only");
+        }
+        // Each reference at its default budget with tighter tolerances too: the comparison
+        // at equal precision.
+        cmd.arg("--tight");
+        let o = match cmd.output() {
+            Ok(o) => o,
+            Err(e) => {
+                eprintln!(
+                    "bench_ik: the references skipped ({} cannot run: {e})",
+                    py.display()
+                );
+                return Ok(());
+            }
+        };
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        for line in stdout.lines() {
+            eprintln!("bench_ik: {line}");
+        }
+        if !o.status.success() {
+            return Err(Error::Config(format!(
+                "{} failed: {}",
+                script.display(),
+                String::from_utf8_lossy(&o.stderr)
+                    .lines()
+                    .last()
+                    .unwrap_or("")
+            )));
+        }
+        Ok(())
+    };
+    run(threads, &reference, false)?;
+    let one = out.join("reference_1_process.csv");
+    if threads > 1 {
+        run(1, &one, true)?;
     }
-    let mut rows = sitting.rows;
+    for file in [reference.as_path(), one.as_path()] {
+        if file.exists() {
+            let rows = read_reference(file, sitting)?;
+            sitting.rows.extend(rows);
+        }
+    }
+    Ok(())
+}
+
+/// Which rows are each solver's default budget (at any tolerance), and ours against the
+/// references: exact solutions/s over the fastest at its default budget and tolerance, and
+/// answers within the common precision a second over the best at any tolerance, on as many
+/// threads (processes).
+fn rank(rows: &mut [BenchIkRow]) {
     let default_budget: Vec<bool> = rows
         .iter()
         .map(|r| {
@@ -564,29 +629,29 @@ pub fn run(
     for (r, d) in rows.iter_mut().zip(default_budget) {
         r.default_budget = d;
     }
+    let best = |rows: &[BenchIkRow],
+                threads: usize,
+                standard_only: bool,
+                f: fn(&BenchIkRow) -> Option<f64>| {
+        rows.iter()
+            .filter(|r| !r.solver.starts_with("selfmodel") && r.threads == threads)
+            .filter(|r| r.standard || !standard_only)
+            .filter_map(f)
+            .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))))
+    };
     for i in 0..rows.len() {
         if !rows[i].solver.starts_with("selfmodel") {
             continue;
         }
-        let fastest = rows
-            .iter()
-            .filter(|r| !r.solver.starts_with("selfmodel") && r.standard)
-            .filter(|r| r.threads == rows[i].threads)
-            .map(|r| r.exact_per_s)
-            .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+        let threads = rows[i].threads;
+        let fastest = best(rows, threads, true, |r| Some(r.exact_per_s));
         rows[i].vs_fastest_reference = fastest.map(|f| rows[i].exact_per_s / f);
-        let best_precise = rows
-            .iter()
-            .filter(|r| !r.solver.starts_with("selfmodel") && r.threads == rows[i].threads)
-            .filter_map(|r| r.precise_per_s)
-            .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))));
+        let best_precise = best(rows, threads, false, |r| r.precise_per_s);
         rows[i].vs_best_reference_precise = match (rows[i].precise_per_s, best_precise) {
             (Some(ours), Some(best)) if best > 0.0 => Some(ours / best),
             _ => None,
         };
     }
-    write_report(out, &rows)?;
-    Ok(rows)
 }
 
 /// What `scripts/ik_reference.py` wrote.
