@@ -108,7 +108,7 @@ def main():
     with open(run / "results.csv", newline="") as f:
         cli_b1 = float(next(csv.DictReader(f))["infer_b1_img_per_s"])
     sm = selfmodel.SelfModel.load(run)
-    q = np.random.default_rng(0).uniform(-60, 60, size=(1, sm.inputs))
+    q = np.radians(np.random.default_rng(0).uniform(-60, 60, size=(1, sm.inputs)))
     for _ in range(20):
         sm.predict(q)
     times = []

@@ -599,9 +599,9 @@ impl PySelfModel {
         })
     }
 
-    /// Joint values q (N, inputs), degrees (metres for a prismatic joint) -> silhouette
-    /// probabilities (N, H, W) float32 in [0, 1], and depth (N, H, W) float32 in metres for a
-    /// model that predicts it (else None).
+    /// Joint values q (N, inputs), radians (metres for a prismatic joint; a camera-conditioned
+    /// model's camera inputs as they are) -> silhouette probabilities (N, H, W) float32 in
+    /// [0, 1], and depth (N, H, W) float32 in metres for a model that predicts it (else None).
     fn predict<'py>(
         &self,
         py: Python<'py>,
@@ -615,9 +615,8 @@ impl PySelfModel {
                     "q: {n} images of {h}x{w}, more than the 2^30 pixels one call returns; call it in batches"
                 )));
             }
-            let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
             let (s, d) = py
-                .allow_threads(|| self.model.predict(&v, n))
+                .allow_threads(|| self.model.predict_si(&v, n))
                 .map_err(value_error)?;
             let shape = |v: Vec<f32>| {
                 numpy::ndarray::Array3::from_shape_vec((n, h, w), v)

@@ -256,14 +256,19 @@ def test_a_saved_self_model_predicts_what_its_run_evaluated(neurokin_run):
     assert abs(model.info["psnr_db_test"] - float(row["psnr_db_test"])) < 1e-9
     # The probe: test poses and what the command line's evaluation predicted for them.
     probe = np.load(folder / "model" / "probe.npz")
-    silhouettes, depth = model.predict(probe["angles"].astype(np.float64))
+    # The probe keeps the model's inputs in the dataset's units (degrees); predict takes
+    # radians, as every other call does.
+    radians = np.radians(probe["angles"].astype(np.float64))
+    silhouettes, depth = model.predict(radians)
     assert depth is None
     assert silhouettes.shape == probe["silhouettes"].shape and silhouettes.dtype == np.float32
     assert np.abs(silhouettes - probe["silhouettes"]).max() < 1e-5
     # Other poses give other images, within [0, 1].
-    moved = model.predict(probe["angles"].astype(np.float64) + 20.0)[0]
+    moved = model.predict(radians + np.radians(20.0))[0]
     assert 0.0 <= moved.min() and moved.max() <= 1.0
     assert np.abs(moved - silhouettes).max() > 0.05
+    # Degrees given where radians are taken are other poses, not the probe's.
+    assert np.abs(model.predict(np.degrees(radians))[0] - silhouettes).max() > 0.05
 
 
 def test_a_self_model_refuses_bad_input_and_damaged_weights(neurokin_run, tmp_path):

@@ -128,6 +128,9 @@ fn predict_all(model: &dyn Render, test: &TrainSet, batch: usize, pixels: usize)
 /// A self-model trained by [`fit_run`], with the data it is scored on.
 pub struct Fitted {
     pub trained: Trained,
+    /// Per joint input, whether it is rotational (empty where the robot is not the
+    /// dataset's).
+    pub rotational: Vec<bool>,
     /// Where it renders.
     pub device: Device,
     pub data: crate::data::dataset::Dataset,
@@ -225,8 +228,18 @@ pub fn fit_run<M: SelfModel>(
         device_choice,
         cameras_in_inputs,
     })?;
+    let rotational = if robot.dof() == data.dof() {
+        robot
+            .chain
+            .movable_joints()
+            .map(|j| j.kind.is_rotational())
+            .collect()
+    } else {
+        Vec::new()
+    };
     Ok(Fitted {
         trained,
+        rotational,
         device,
         data,
         train_range,
@@ -312,6 +325,7 @@ pub fn run<M: SelfModel>(
     }
     let Fitted {
         trained,
+        rotational,
         device,
         data,
         train_range,
@@ -410,6 +424,7 @@ pub fn run<M: SelfModel>(
             name: &cfg.name,
             save_weights: &|path| trained.renderers[0].1.save(path),
             camera: cfg.data.camera(&data),
+            rotational: rotational.clone(),
             data: &data,
             data_fingerprint: cfg.data.fingerprint(),
             test_inputs: &test_set.inputs,

@@ -66,6 +66,38 @@ pub struct LoadedSelfModel {
 }
 
 impl LoadedSelfModel {
+    /// [`Self::predict`] from joint values in SI units, as every other call of the library's
+    /// edge takes them (radians, metres for a prismatic joint; the camera's 9 values of a
+    /// camera-conditioned model as [`crate::self_models::camera_input::camera_input`] writes
+    /// them): `[n, inputs]` row-major.
+    pub fn predict_si(&self, q: &[f64], n: usize) -> Result<(Vec<f32>, Option<Vec<f32>>)> {
+        let inputs = self.saved.inputs.max(1);
+        let joints = self.joint_inputs();
+        let poses: Vec<f32> = q
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| {
+                let c = i % inputs;
+                let rotational =
+                    c < joints && self.saved.rotational.get(c).copied().unwrap_or(true);
+                (if rotational { v.to_degrees() } else { v }) as f32
+            })
+            .collect();
+        self.predict(&poses, n)
+    }
+
+    /// How many of the inputs are joint values (the rest: a camera's).
+    pub fn joint_inputs(&self) -> usize {
+        let s = &self.saved;
+        if !s.rotational.is_empty() {
+            s.rotational.len()
+        } else if !s.joint_names.is_empty() {
+            s.joint_names.len()
+        } else {
+            s.inputs
+        }
+    }
+
     /// `[n, inputs]` poses (row-major, the joints' units) -> silhouette probabilities
     /// `[n, H, W]` and depth (metres) where the model predicts it, on the host.
     pub fn predict(&self, poses: &[f32], n: usize) -> Result<(Vec<f32>, Option<Vec<f32>>)> {

@@ -44,6 +44,12 @@ pub struct SavedSelfModel {
     pub inputs: usize,
     /// The robot's joints, in the order of the inputs (empty where the dataset did not say).
     pub joint_names: Vec<String>,
+    /// Per joint input: rotational (degrees in the inputs, radians at the SI edge,
+    /// [`crate::self_models::loading::LoadedSelfModel::predict_si`]) or prismatic (metres).
+    /// Empty in files saved before it was recorded, or where the robot is not the dataset's:
+    /// every joint input rotational.
+    #[serde(default)]
+    pub rotational: Vec<bool>,
     /// The robot, camera and dataset it was trained on (the run's fingerprint of its data).
     pub data: serde_json::Value,
     /// The camera of its first image: focal length (px) and camera-to-world matrix.
@@ -74,6 +80,8 @@ pub struct ToSave<'a> {
     /// (`Render::save`); `None`: it saves none.
     pub save_weights: &'a dyn Fn(&Path) -> Result<Option<serde_json::Value>>,
     pub camera: crate::sim::camera::Camera,
+    /// Per joint input, whether it is rotational (empty: not known).
+    pub rotational: Vec<bool>,
     pub data: &'a crate::data::dataset::Dataset,
     pub data_fingerprint: serde_json::Value,
     /// The test inputs (on the rendering device) and the run's predictions for them.
@@ -125,6 +133,7 @@ pub fn save(dir: &Path, s: &ToSave) -> Result<SavedSelfModel> {
         image: [h, w],
         inputs,
         joint_names: s.data.joint_names.clone(),
+        rotational: s.rotational.clone(),
         data: s.data_fingerprint.clone(),
         focal: s.data.focal,
         camera_pose: s.data.poses.first().copied().unwrap_or_default(),
