@@ -1,0 +1,280 @@
+//! Lines, one per run: against a count on log-y (training curves), on log-x with log or linear y
+//! (sweeps), or on linear axes (a ROC curve, a trade-off).
+
+use std::path::Path;
+
+use plotters::coord::combinators::BindKeyPoints;
+use plotters::prelude::*;
+
+use super::{
+    FONT, draw_err, draw_legend, draw_line_runs, draw_markers, log_ticks, nice_ceil, nice_floor,
+    register_font, save_rgb, tick_label,
+};
+use crate::core::error::Result;
+use crate::report::canvas::Canvas;
+
+/// Training loss against step, one line per run (log-y).
+pub fn training_curves(
+    path: &Path,
+    title: &str,
+    runs: &[(String, Vec<(usize, f64)>)],
+) -> Result<()> {
+    curves(path, title, "step", "training loss (log)", runs)
+}
+
+/// Lines of positive values against a count (steps, iterations), one per run, log-y.
+pub fn curves(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(usize, f64)>)],
+) -> Result<()> {
+    register_font();
+    let (w, h) = (900u32, 500u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
+        let all = runs.iter().flat_map(|(_, c)| c.iter());
+        let max_step = all.clone().map(|p| p.0).max().unwrap_or(1).max(1);
+        let pos = all.map(|p| p.1).filter(|v| *v > 0.0);
+        let lo = pos.clone().fold(f64::INFINITY, f64::min);
+        let lo = if lo.is_finite() { lo } else { 1.0 };
+        let hi = pos.fold(0.0, f64::max).max(lo * 3.0);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 22))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                0..max_step,
+                (nice_floor(lo * 0.95)..nice_ceil(hi * 1.05))
+                    .log_scale()
+                    .with_key_points(log_ticks(nice_floor(lo * 0.95), nice_ceil(hi * 1.05))),
+            )
+            .map_err(|e| draw_err(path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .y_label_formatter(&|v| tick_label(*v))
+            .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
+            .draw()
+            .map_err(|e| draw_err(path, e))?;
+        draw_line_runs(
+            &mut chart,
+            path,
+            runs.iter().map(|(label, curve)| {
+                (
+                    label.clone(),
+                    curve.iter().copied().filter(|p| p.1 > 0.0).collect(),
+                )
+            }),
+        )?;
+        // Falling curves leave the upper right empty.
+        draw_legend(&mut chart, path, SeriesLabelPosition::UpperRight)?;
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w, h)
+}
+
+/// Lines of positive `(x, y)` points, one per run, both axes logarithmic (sweeps over batch
+/// sizes or thread counts), with a marker on every measured point. The x ticks are the
+/// measured x values themselves (counts: 1, 2, 3, 4 threads; 64, 512 batch), the y ticks
+/// 1-2-5 per decade.
+pub fn log_log_lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    marked_lines(path, title, x_desc, y_desc, runs, true)
+}
+
+/// [`log_log_lines`] with a linear y axis (a share in percent against a time, say), its
+/// range padded around the points.
+pub fn lines_log_x(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    marked_lines(path, title, x_desc, y_desc, runs, false)
+}
+
+fn marked_lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+    log_y: bool,
+) -> Result<()> {
+    register_font();
+    let (w, h) = (900u32, 500u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    let runs: Vec<(String, Vec<(f64, f64)>)> = runs
+        .iter()
+        .map(|(l, c)| {
+            let pts = c
+                .iter()
+                .copied()
+                .filter(|p| p.0 > 0.0 && (p.1 > 0.0 || !log_y))
+                .collect();
+            (l.clone(), pts)
+        })
+        .collect();
+    {
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
+        let points = runs.iter().flat_map(|(_, c)| c.iter());
+        let bounds = |f: fn(&(f64, f64)) -> f64| {
+            let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
+            let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
+            (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+        };
+        let log_range = |b: Option<(f64, f64)>| match b {
+            Some((lo, hi)) => {
+                let pad = ((hi / lo).powf(0.06)).max(1.15);
+                (lo / pad, hi * pad)
+            }
+            None => (1.0, 10.0),
+        };
+        let (x_lo, x_hi) = log_range(bounds(|p| p.0));
+        let mut xs: Vec<f64> = points.clone().map(|p| p.0).collect();
+        xs.sort_by(f64::total_cmp);
+        xs.dedup();
+        // The data's own x values as ticks, unless there are many or two sit so close that
+        // their labels would overlap: then the 1-2-5 ticks of the range.
+        if xs.len() > 12 || xs.windows(2).any(|w| w[1] < 1.3 * w[0]) {
+            xs = log_ticks(x_lo, x_hi);
+        }
+        let x_spec = (x_lo..x_hi).log_scale().with_key_points(xs);
+        // The same chart on either y axis.
+        macro_rules! draw_on {
+            ($y_spec:expr) => {{
+                let mut chart = ChartBuilder::on(&root)
+                    .caption(title, (FONT, 20))
+                    .margin(15)
+                    .x_label_area_size(40)
+                    .y_label_area_size(70)
+                    .build_cartesian_2d(x_spec, $y_spec)
+                    .map_err(|e| draw_err(path, e))?;
+                chart
+                    .configure_mesh()
+                    .x_desc(x_desc)
+                    .y_desc(y_desc)
+                    .x_label_formatter(&|v| tick_label(*v))
+                    .y_label_formatter(&|v| tick_label(*v))
+                    .label_style((FONT, 14))
+                    .light_line_style(TRANSPARENT)
+                    .draw()
+                    .map_err(|e| draw_err(path, e))?;
+                draw_line_runs(&mut chart, path, runs.iter().cloned())?;
+                draw_markers(&mut chart, path, &runs, 3)?;
+                draw_legend(
+                    &mut chart,
+                    path,
+                    if log_y {
+                        SeriesLabelPosition::UpperRight
+                    } else {
+                        SeriesLabelPosition::LowerRight
+                    },
+                )?;
+            }};
+        }
+        if log_y {
+            let (y_lo, y_hi) = log_range(bounds(|p| p.1));
+            draw_on!(
+                (nice_floor(y_lo)..nice_ceil(y_hi))
+                    .log_scale()
+                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi)))
+            );
+        } else {
+            let (lo, hi) = bounds(|p| p.1).unwrap_or((0.0, 1.0));
+            let pad = ((hi - lo) * 0.08).max(0.5);
+            draw_on!((lo - pad)..(hi + pad));
+        }
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w, h)
+}
+
+/// Lines of `(x, y)` points, one per run, both axes linear over the points' range (a ROC
+/// curve's unit square, say).
+pub fn lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    lines_marked(path, title, x_desc, y_desc, runs, false)
+}
+
+/// [`lines`] with a dot at every point (runs of one point: a trade-off between two scores).
+pub fn lines_marked(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    runs: &[(String, Vec<(f64, f64)>)],
+    markers: bool,
+) -> Result<()> {
+    register_font();
+    let (w, h) = (800u32, 600u32);
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
+        let points = runs.iter().flat_map(|(_, c)| c.iter());
+        // Scattered points leave no corner free: with markers, the legend gets room of its
+        // own above them.
+        let headroom = if markers {
+            0.08 * runs.len() as f64
+        } else {
+            0.02
+        };
+        let span = |f: fn(&(f64, f64)) -> f64, top: f64| {
+            let lo = points.clone().map(f).fold(f64::INFINITY, f64::min);
+            let hi = points.clone().map(f).fold(f64::NEG_INFINITY, f64::max);
+            if lo.is_finite() && hi > lo {
+                let pad = 0.02 * (hi - lo);
+                (lo - pad)..(hi + top * (hi - lo))
+            } else {
+                0.0..1.0
+            }
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 20))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(span(|p| p.0, 0.02), span(|p| p.1, headroom))
+            .map_err(|e| draw_err(path, e))?;
+        chart
+            .configure_mesh()
+            .x_desc(x_desc)
+            .y_desc(y_desc)
+            .label_style((FONT, 14))
+            .light_line_style(TRANSPARENT)
+            .draw()
+            .map_err(|e| draw_err(path, e))?;
+        draw_line_runs(&mut chart, path, runs.iter().cloned())?;
+        if markers {
+            draw_markers(&mut chart, path, runs, 5)?;
+        }
+        let corner = if markers {
+            SeriesLabelPosition::UpperMiddle
+        } else {
+            SeriesLabelPosition::LowerRight
+        };
+        draw_legend(&mut chart, path, corner)?;
+        root.present().map_err(|e| draw_err(path, e))?;
+    }
+    save_rgb(path, &buf, w, h)
+}
