@@ -164,7 +164,7 @@ fn main() -> ExitCode {
                     .iter()
                     .map(|q| (PoseTarget::of(&robot.chain, q), q.as_slice()));
                 selfmodel::core::atomic_file::write_atomic(&out, |w| {
-                    selfmodel::studies::bench_ik::write_targets_csv(
+                    selfmodel::ik::targets::write_targets_csv(
                         w,
                         rows,
                         &model.saved.joint_names,

@@ -2,9 +2,10 @@
 //! runs; the methods are `drl` (direct regression), `emssl` (the paper's method), `dsl`
 //! (distal supervised learning), `cgan` (conditional GAN), `flow` (a normalizing flow, many
 //! solutions) and `dls` (damped least squares, numerical). Beneath them: the data (`data`),
-//! the inverse MLP (`mlp`), the fitting and EMSSL's iterations (`learning`), link
-//! calibration and EMSSL's batched sampling pass. `pose`: full-pose targets (position and
-//! orientation) solved exactly by Levenberg-Marquardt within the joint limits.
+//! the inverse MLP (`mlp`), the fitting they share (`learning`), link calibration and
+//! EMSSL's batched sampling pass. `pose`: full-pose targets (position and orientation) solved
+//! exactly by Levenberg-Marquardt within the joint limits; `targets`: random reachable ones
+//! and their file.
 
 pub mod calibration;
 pub mod cgan;
@@ -21,3 +22,4 @@ pub mod mlp;
 pub mod pose;
 pub mod pose_model;
 pub mod sampling_pass;
+pub mod targets;

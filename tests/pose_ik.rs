@@ -390,8 +390,8 @@ fn two_tips_are_solved_together() {
     );
     assert_eq!(model.saved.config.lm.max_iterations, 60);
     let (targets, joints) =
-        selfmodel::studies::bench_ik::random_targets(&robot, &model.saved.ranges, 100, 3);
-    let text = selfmodel::studies::bench_ik::targets_csv(
+        selfmodel::ik::targets::random_targets(&robot, &model.saved.ranges, 100, 3);
+    let text = selfmodel::ik::targets::targets_csv(
         &targets,
         &joints,
         &model.saved.joint_names,
