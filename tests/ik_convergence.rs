@@ -1,6 +1,8 @@
 //! Training to convergence (the validation split, early stopping, best weights) and the
 //! wrapped joint output of the learned inverse-kinematics methods.
 
+mod common;
+
 use nalgebra::Point3;
 use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
@@ -342,7 +344,8 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
     };
     let (whole, whole_curve) =
         emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, None).unwrap();
-    let dir = tempdir();
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let cut = EmsslConfig {
         max_iterations: 3,
         ..cfg.clone()
@@ -371,19 +374,6 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
     assert!(curve.iter().any(|c| c.learning_rate < fit.learning_rate));
 }
 
-fn tempdir() -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "selfmodel-emssl-ckpt-{}-{}",
-        std::process::id(),
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .unwrap()
-            .as_nanos()
-    ));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
     use selfmodel::ik::{
@@ -404,7 +394,8 @@ fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error(
         polish_rounds: 2,
         ..EmsslConfig::paper()
     };
-    let dir = tempdir();
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let (polished, curve) =
         emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
     let rounds: Vec<_> = curve.iter().filter(|c| c.iteration > 4).collect();
@@ -502,7 +493,8 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
             .iter()
             .any(|p| p.learning_rate < fit.learning_rate)
     );
-    let dir = tempdir();
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let kept = FitConfig {
         checkpoint: Some(FitCheckpoint {
             dir: dir.clone(),
@@ -589,7 +581,8 @@ fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     let (whole, whole_log) = run(&gan(12, None));
     let whole_log = whole_log.unwrap();
     assert!(whole_log.epochs > 4, "{}", whole_log.summary());
-    let dir = tempdir();
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     let (_, cut) = run(&gan(4, Some(dir.clone())));
     assert_eq!(cut.unwrap().epochs, 4);
     let (resumed, log) = run(&gan(12, Some(dir.clone())));
