@@ -22,7 +22,8 @@ fn generated_documents_are_up_to_date() {
 
 #[test]
 fn directives_read_the_csv() {
-    let dir = tempfile_dir("directives");
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     std::fs::write(
         dir.join("t.csv"),
         "model,psnr,note\na,21.23456,x\nb,19.5,y\n",
@@ -39,12 +40,6 @@ fn directives_read_the_csv() {
     assert!(render(&dir, "{{value t.csv | row: model=c | col: psnr}}").is_err());
     assert!(render(&dir, "{{table t.csv | cols: nope}}").is_err());
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-fn tempfile_dir(tag: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("selfmodel_docs_{}_{tag}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }
 
 /// The README lists `cargo run --release --bin NAME` for every experiment of the registry:
@@ -75,7 +70,8 @@ fn every_listed_experiment_is_a_binary() {
 /// quoted value (NaN included) and in a table column of numbers.
 #[test]
 fn a_non_numeric_metric_is_an_error_naming_file_row_and_column() {
-    let dir = tempfile_dir("metrics");
+    let tmp = common::tempdir();
+    let dir = tmp.path().to_path_buf();
     std::fs::write(dir.join("m.csv"), "model,psnr\na,21.5\nb,abc\nc,NaN\n").unwrap();
     let err = render(&dir, "{{table m.csv}}").unwrap_err().to_string();
     assert!(
@@ -125,7 +121,8 @@ fn every_default_output_is_under_the_git_ignored_runs_folder() {
         }
     }
     // A quick run from a clean folder writes there and nowhere else.
-    let cwd = tempfile_dir("fresh_checkout");
+    let tmp = common::tempdir();
+    let cwd = tmp.path().to_path_buf();
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_mean_silhouette"))
         .args(["--preset", "quick"])
         .current_dir(&cwd)
