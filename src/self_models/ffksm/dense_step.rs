@@ -356,6 +356,10 @@ fn mask_by_relu(grad: &mut [f32], activated: &[f32]) {
 /// depths stratified by `jitter` exactly as [`crate::self_models::ffksm::marcher::render_silhouette`] draws
 /// them, against `truth` (one value in [0, 1] per pixel), robot pixels (`truth >= 0.5`)
 /// weighted by `robot_weight`. The gradients are tensors on `device` (not an autodiff one).
+// A hot kernel, kept whole (170 lines): the forward pass of every ray and its hand-written
+// backward pass share buffers laid out for one sweep each, and the reference beside it
+// (`tests/ffksm.rs` against burn's autodiff) checks it as one unit; its arguments are the
+// step's inputs, each named at its one caller.
 #[allow(clippy::too_many_arguments)]
 pub fn dense_step(
     field: &OccupancyField,
