@@ -568,7 +568,7 @@ impl<'a> Context<'a> {
                 &s,
                 gate,
                 (tuned, *seconds, rc.steps),
-                "fine-tuned",
+                ("gated experts", "fine-tuned"),
                 String::new(),
             )
         })?);
@@ -688,7 +688,7 @@ impl<'a> Context<'a> {
         s: &Sample,
         gate: (bool, bool),
         expert: (&NeuroKin, f64, usize),
-        expert_name: &str,
+        (method, expert_name): (&str, &str),
         detail: String,
     ) -> Result<RecoveryRow> {
         let (model, seconds, steps) = expert;
@@ -699,11 +699,6 @@ impl<'a> Context<'a> {
             } else {
                 "healthy (healthy expert)".to_string()
             }
-        };
-        let method = if expert_name == "fine-tuned" {
-            "gated experts".to_string()
-        } else {
-            format!("gated experts ({expert_name})")
         };
         let mut text = format!(
             "gate on the damaged arm: {}; on the healthy arm: {}",
@@ -717,7 +712,7 @@ impl<'a> Context<'a> {
             case,
             &s.far,
             Update {
-                method,
+                method: method.into(),
                 n: s.n,
                 models: (pick(gate.0), pick(gate.1)),
                 seconds,
@@ -755,12 +750,8 @@ impl<'a> Context<'a> {
             .model
             .training_set(&set_of(&q, pixels, self.size, &self.tdev));
         let label = format!("re-simulated ({}, n = {})", case.damage.label(), s.n);
-        let loss = r.model_run.model.training_loss();
-        let (resim, _) = Trainer::new(&self.train_cfg(steps, s.seed), &label).fit(
-            self.load()?,
-            &resim_set,
-            &loss,
-        )?;
+        let (resim, _) = self.fine_tuned(&resim_set, steps, s.seed, &label)?;
+        // The identification and rendering count too.
         let seconds = t.elapsed().as_secs_f64();
         let detail = format!(
             "identified: {} (mean IoU {fit:.3} on the n images); fine-tuned on its {} rendered training poses and the n images",
@@ -784,7 +775,7 @@ impl<'a> Context<'a> {
             s,
             gate,
             (&resim, seconds, steps),
-            "re-simulated",
+            ("gated experts (re-simulated)", "re-simulated"),
             detail,
         )?;
         Ok([row, gated])
