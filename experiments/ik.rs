@@ -159,10 +159,11 @@ fn main() -> ExitCode {
                 let (model, robot) = answering(&model, &[&out], &[], &device)?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
-                let joints = selfmodel::sim::trajectory::babbling(n, &model.saved.ranges, seed);
-                let rows = joints
-                    .iter()
-                    .map(|q| (PoseTarget::of(&robot.chain, q), q.as_slice()));
+                // Ctrl-C ends the rows; the file is then dropped whole.
+                let rows = selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, seed)
+                    .take(n)
+                    .take_while(|_| !selfmodel::core::interrupt::requested())
+                    .map(|q| (PoseTarget::of(&robot.chain, &q), q));
                 selfmodel::core::atomic_file::write_atomic(&out, |w| {
                     selfmodel::ik::targets::write_targets_csv(
                         w,
@@ -170,7 +171,10 @@ fn main() -> ExitCode {
                         &model.saved.joint_names,
                         model.tips(),
                     )
-                    .map_err(|e| selfmodel::Error::io(&out, e))
+                    .map_err(|e| selfmodel::Error::io(&out, e))?;
+                    selfmodel::core::interrupt::check(|| {
+                        format!("stopped writing {}; nothing was written", out.display())
+                    })
                 })?;
                 println!(
                     "ik targets: {n} reachable poses of {}; wrote {}",

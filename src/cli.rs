@@ -398,13 +398,19 @@ impl ExperimentArgs {
                 "--robot, --urdf, --dataset and the camera options apply to the inverse-kinematics and self-model experiments, not {name}"
             )));
         }
-        if let Some(file) = &self.dataset
-            && !file.is_file()
-        {
-            return Err(crate::Error::Config(format!(
-                "--dataset {}: no such file (make one with the dataset binary, or see its --help for the format)",
-                file.display()
-            )));
+        if let Some(file) = &self.dataset {
+            if !file.exists() {
+                return Err(crate::Error::Config(format!(
+                    "--dataset {}: no such file (make one with the dataset binary, or see its --help for the format)",
+                    file.display()
+                )));
+            }
+            // A FIFO, a device or a folder is refused for what it is, before any work.
+            crate::core::input_file::check_user_file(
+                file,
+                "dataset",
+                crate::core::input_file::MAX_TABLE_BYTES,
+            )?;
         }
         if self.latency.is_some() && name != "emssl_sampling_speed" {
             return Err(crate::Error::Config(format!(

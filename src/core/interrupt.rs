@@ -27,3 +27,16 @@ pub fn install() {
 pub fn requested() -> bool {
     FLAG.get().is_some_and(|f| f.load(Ordering::Relaxed))
 }
+
+/// `Err(Interrupted)` saying where the work `stopped` if Ctrl-C was pressed, for the long
+/// reads and writes that look between pieces (a targets file, an `.npz`).
+pub fn check(stopped: impl FnOnce() -> String) -> crate::core::error::Result<()> {
+    if requested() {
+        Err(crate::core::error::Error::Interrupted(stopped()))
+    } else {
+        Ok(())
+    }
+}
+
+/// Rows of a table read between two looks at Ctrl-C (a few milliseconds of parsing).
+pub const ROWS_BETWEEN_CHECKS: usize = 1 << 14;

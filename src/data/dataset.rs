@@ -827,6 +827,11 @@ pub fn read_angles(path: &Path, dof: usize) -> Result<Vec<Vec<f64>>> {
             .from_reader(file);
         let mut rows = Vec::new();
         for (i, rec) in reader.records().enumerate() {
+            if i % crate::core::interrupt::ROWS_BETWEEN_CHECKS == 0 {
+                crate::core::interrupt::check(|| {
+                    format!("stopped reading {} at line {}", path.display(), i + 1)
+                })?;
+            }
             let rec = rec.map_err(|e| bad(format!("line {}: {e}", i + 1)))?;
             let line = rec.iter().collect::<Vec<_>>().join(",");
             if rec.len() == 1 && [';', '\t', ' '].iter().any(|c| line.contains(*c)) {

@@ -128,20 +128,41 @@ fn encode_text(shape: &[usize], data: &[String]) -> std::io::Result<Vec<u8>> {
     Ok(buf)
 }
 
-fn encode<T: npyz::AutoSerialize + Copy>(shape: &[usize], data: &[T]) -> std::io::Result<Vec<u8>> {
+/// Stream one array as `.npy` into `out` in pieces of [`WRITE_PIECE`] elements, asking for
+/// Ctrl-C between them: a big dataset takes seconds to compress, and no copy of it is made.
+fn encode<T: npyz::AutoSerialize + Copy>(
+    out: &mut impl Write,
+    shape: &[usize],
+    data: &[T],
+    path: &Path,
+) -> Result<()> {
+    let io = |e: std::io::Error| Error::io(path, e);
     let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
-    let mut buf = Vec::with_capacity(data.len() * std::mem::size_of::<T>() + 128);
+    // npyz writes element by element: buffered, the compressor sees large blocks.
+    let mut out = std::io::BufWriter::with_capacity(1 << 20, out);
     let mut w = npyz::WriteOptions::new()
         .default_dtype()
         .shape(&shape)
-        .writer(&mut buf)
-        .begin_nd()?;
-    w.extend(data.iter().copied())?;
-    w.finish()?;
-    Ok(buf)
+        .writer(&mut out)
+        .begin_nd()
+        .map_err(io)?;
+    for piece in data.chunks(WRITE_PIECE) {
+        crate::core::interrupt::check(|| {
+            format!(
+                "stopped while writing {}; nothing was written",
+                path.display()
+            )
+        })?;
+        w.extend(piece.iter().copied()).map_err(io)?;
+    }
+    w.finish().map_err(io)?;
+    out.flush().map_err(io)
 }
 
-/// Write `arrays` to `path` atomically (no partial file on error).
+/// Elements written between two looks at Ctrl-C (a few hundredths of a second).
+const WRITE_PIECE: usize = 1 << 20;
+
+/// Write `arrays` to `path` atomically (no partial file on error or Ctrl-C).
 pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
     let io = |e: std::io::Error| Error::io(path, e);
     let zipe = |e: zip::result::ZipError| Error::data(path, format!("cannot write zip: {e}"));
@@ -157,16 +178,17 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
                 array.shape.iter().product::<usize>(),
                 "array \"{name}\": data length does not match its shape"
             );
-            let bytes = match &array.data {
-                ArrayData::U8(v) => encode(&array.shape, v),
-                ArrayData::F32(v) => encode(&array.shape, v),
-                ArrayData::F64(v) => encode(&array.shape, v),
-                ArrayData::I64(v) => encode(&array.shape, v),
-                ArrayData::Text(v) => encode_text(&array.shape, v),
-            }
-            .map_err(io)?;
             zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;
-            zip.write_all(&bytes).map_err(io)?;
+            match &array.data {
+                ArrayData::U8(v) => encode(&mut zip, &array.shape, v, path)?,
+                ArrayData::F32(v) => encode(&mut zip, &array.shape, v, path)?,
+                ArrayData::F64(v) => encode(&mut zip, &array.shape, v, path)?,
+                ArrayData::I64(v) => encode(&mut zip, &array.shape, v, path)?,
+                ArrayData::Text(v) => {
+                    let bytes = encode_text(&array.shape, v).map_err(io)?;
+                    zip.write_all(&bytes).map_err(io)?;
+                }
+            }
         }
         zip.finish().map_err(zipe)?;
         Ok(())

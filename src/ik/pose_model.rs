@@ -841,6 +841,11 @@ pub fn read_targets(
     let mut out = Vec::new();
     for (i, rec) in reader.records().enumerate() {
         let line = i + 2;
+        if i % crate::core::interrupt::ROWS_BETWEEN_CHECKS == 0 {
+            crate::core::interrupt::check(|| {
+                format!("stopped reading {} at line {line}", path.display())
+            })?;
+        }
         let rec = rec.map_err(|e| bad(format!("line {line}: {e}")))?;
         let v: Vec<f64> = cols
             .iter()

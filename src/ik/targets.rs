@@ -38,9 +38,9 @@ pub fn targets_csv(
 
 /// [`targets_csv`] row by row into `w`, each row's targets made as it is written (`ik targets`
 /// streams ten million rows this way instead of holding them).
-pub fn write_targets_csv<'a>(
+pub fn write_targets_csv<Q: AsRef<[f64]>>(
     w: &mut impl std::io::Write,
-    rows: impl Iterator<Item = (Vec<PoseTarget>, &'a [f64])>,
+    rows: impl Iterator<Item = (Vec<PoseTarget>, Q)>,
     names: &[String],
     tips: &[String],
 ) -> std::io::Result<()> {
@@ -59,7 +59,7 @@ pub fn write_targets_csv<'a>(
                 let o = t.orientation.expect("a pose target").coords;
                 [p.x, p.y, p.z, o.w, o.x, o.y, o.z]
             })
-            .chain(q.iter().copied())
+            .chain(q.as_ref().iter().copied())
             .map(|v| v.to_string())
             .collect();
         writeln!(w, "{}", cells.join(","))?;

@@ -108,8 +108,14 @@ pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
 
 /// `n` uniform samples within `ranges` (user units), seeded.
 pub fn babbling(n: usize, ranges: &[[f64; 2]], seed: u64) -> Vec<Vec<f64>> {
+    babbling_rows(ranges, seed).take(n).collect()
+}
+
+/// [`babbling`]'s samples one at a time, drawn as they are asked for (ten million rows are
+/// streamed, never held).
+pub fn babbling_rows(ranges: &[[f64; 2]], seed: u64) -> impl Iterator<Item = Vec<f64>> + '_ {
     let mut rng = StdRng::seed_from_u64(seed);
-    (0..n).map(|_| uniform_in(&mut rng, ranges)).collect()
+    std::iter::repeat_with(move || uniform_in(&mut rng, ranges))
 }
 
 /// One joint vector drawn uniformly within `ranges` (each joint's `[lo, hi]`, ends included),
