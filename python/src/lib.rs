@@ -125,6 +125,12 @@ fn rows(a: Matrix, width: usize, what: &str) -> PyResult<(usize, Vec<f64>)> {
 /// The most rows one call takes (the command line's most targets).
 const MAX_ROWS: usize = 10_000_000;
 
+/// Rows of fk or jacobian between two looks at Ctrl-C (a few hundredths of a second).
+const ROWS_A_BLOCK: usize = 1 << 16;
+
+/// Images of render or predict between two looks at Ctrl-C.
+const IMAGES_A_BLOCK: usize = 512;
+
 /// Python's own Ctrl-C check, for a long call that released the GIL: `true` once a signal
 /// handler raised (KeyboardInterrupt), the exception kept in `raised` for the call to return.
 fn interrupted(raised: &std::sync::Mutex<Option<PyErr>>) -> bool {
@@ -135,6 +141,32 @@ fn interrupted(raised: &std::sync::Mutex<Option<PyErr>>) -> bool {
             true
         }
     })
+}
+
+/// `f` over rows `0..n` in blocks of `block`, the GIL released, with Ctrl-C asked between
+/// blocks (a long fk, jacobian, render or predict stops within a fraction of a second): the
+/// blocks' outputs in order, or the KeyboardInterrupt a signal handler raised.
+fn in_blocks<T: Send>(
+    py: Python<'_>,
+    n: usize,
+    block: usize,
+    f: impl Fn(std::ops::Range<usize>) -> PyResult<Vec<T>> + Send + Sync,
+) -> PyResult<Vec<T>> {
+    let raised = std::sync::Mutex::new(None);
+    let out = py.allow_threads(|| {
+        let mut out = Vec::new();
+        for start in (0..n).step_by(block.max(1)) {
+            if start > 0 && interrupted(&raised) {
+                return Ok(out);
+            }
+            out.extend(f(start..(start + block).min(n))?);
+        }
+        Ok(out)
+    });
+    match raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
+        Some(e) => Err(e),
+        None => out,
+    }
 }
 
 /// A robot: its joints (names, limits, in depth-first order from the root) and forward
@@ -258,10 +290,11 @@ impl PyRobot {
                     })?)
                 }
             };
-            let out: Vec<f64> = py.allow_threads(|| {
+            let width = dof.max(1);
+            let out: Vec<f64> = in_blocks(py, n, ROWS_A_BLOCK, |rows| {
                 use rayon::prelude::*;
-                v.par_chunks(dof.max(1))
-                    .take(n)
+                Ok(v[rows.start * width..rows.end * width]
+                    .par_chunks(width)
                     .flat_map_iter(|q| {
                         let pose = match link {
                             Some(l) => chain.link_frames(q)[l],
@@ -270,8 +303,8 @@ impl PyRobot {
                         let m = pose.to_homogeneous();
                         (0..16).map(move |i| m[(i / 4, i % 4)])
                     })
-                    .collect()
-            });
+                    .collect())
+            })?;
             Ok(numpy::ndarray::Array3::from_shape_vec((n, 4, 4), out)
                 .expect("n x 4 x 4")
                 .into_pyarray(py))
@@ -285,15 +318,17 @@ impl PyRobot {
             let chain = &self.robot.chain;
             let dof = chain.dof();
             let (n, v) = rows(q, dof, "q")?;
-            let out: Vec<f64> = py.allow_threads(|| {
-                v.chunks(dof.max(1))
-                    .take(n)
-                    .flat_map(|q| {
+            let width = dof.max(1);
+            let out: Vec<f64> = in_blocks(py, n, ROWS_A_BLOCK, |rows| {
+                use rayon::prelude::*;
+                Ok(v[rows.start * width..rows.end * width]
+                    .par_chunks(width)
+                    .flat_map_iter(|q| {
                         let j = chain.pose_jacobian(q);
                         (0..6 * dof).map(move |i| j[(i / dof, i % dof)])
                     })
-                    .collect()
-            });
+                    .collect())
+            })?;
             Ok(numpy::ndarray::Array3::from_shape_vec((n, 6, dof), out)
                 .expect("n x 6 x dof")
                 .into_pyarray(py))
@@ -340,9 +375,10 @@ impl PyRobot {
                     framing.margin,
                 )
                 .map_err(value_error)?;
-            let frames = py.allow_threads(|| {
-                RayCaster::new(robot, camera, RenderOptions::default()).render_batch(&si, None)
-            });
+            let caster = RayCaster::new(robot, camera, RenderOptions::default());
+            let frames = in_blocks(py, n, IMAGES_A_BLOCK, |rows| {
+                Ok(caster.render_batch(&si[rows], None))
+            })?;
             let (mut silhouettes, mut depth) = (
                 Vec::with_capacity(n * size * size),
                 Vec::with_capacity(n * size * size),
@@ -615,9 +651,24 @@ impl PySelfModel {
                     "q: {n} images of {h}x{w}, more than the 2^30 pixels one call returns; call it in batches"
                 )));
             }
-            let (s, d) = py
-                .allow_threads(|| self.model.predict_si(&v, n))
-                .map_err(value_error)?;
+            let inputs = self.model.saved.inputs;
+            // Blocks of images, each with its depth map where the model predicts one.
+            let predict = |rows: std::ops::Range<usize>| {
+                let q = &v[rows.start * inputs..rows.end * inputs];
+                Ok(vec![
+                    self.model.predict_si(q, rows.len()).map_err(value_error)?,
+                ])
+            };
+            let blocks = match n {
+                0 => predict(0..0)?,
+                _ => in_blocks(py, n, IMAGES_A_BLOCK, predict)?,
+            };
+            let s: Vec<f32> = blocks.iter().flat_map(|(s, _)| s.iter().copied()).collect();
+            let d: Option<Vec<f32>> = blocks
+                .iter()
+                .map(|(_, d)| d.as_deref())
+                .collect::<Option<Vec<&[f32]>>>()
+                .map(|d| d.concat());
             let shape = |v: Vec<f32>| {
                 numpy::ndarray::Array3::from_shape_vec((n, h, w), v)
                     .expect("n x h x w")

@@ -145,7 +145,7 @@ impl LmConfig {
                 Ok(())
             } else {
                 Err(format!(
-                    "a tolerance of {v} {unit} is not between 1e-9 and {max:.4} {unit} (the success threshold)"
+                    "a tolerance of {v:e} {unit} is not between 1e-9 and {max:.4} {unit} (the success threshold)"
                 ))
             }
         };

@@ -142,7 +142,14 @@ pub fn load(dir: &Path, device: &Device) -> Result<LoadedSelfModel> {
     let json = dir.join("model.json");
     let again = "run the self-model again to save it";
     let bytes = crate::core::input_file::read_regular(&json, "saved self-model", 16 << 20)
-        .map_err(|e| Error::data(&json, format!("no saved self-model here ({e}); {again}")))?;
+        .map_err(|e| {
+            if json.symlink_metadata().is_ok() {
+                // There, but a FIFO, a device, a folder or too big: say which.
+                Error::data(&json, e.to_string())
+            } else {
+                Error::data(&json, format!("no saved self-model here ({e}); {again}"))
+            }
+        })?;
     let text = String::from_utf8_lossy(&bytes);
     let saved: SavedSelfModel = serde_json::from_str(&text)
         .map_err(|e| Error::data(&json, format!("not a saved self-model ({e}); {again}")))?;

@@ -388,7 +388,7 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
                     Err(urdf_err(
                         element.clone(),
                         format!(
-                            "{what} must be a positive number of at most {MAX_VALUE} m, got {v}"
+                            "{what} must be a positive number of at most {MAX_VALUE} m, got {v:e}"
                         ),
                     ))
                 }
