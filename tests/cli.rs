@@ -830,6 +830,26 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
             && String::from_utf8_lossy(&o.stderr).contains("inside the model's folder")
     );
     assert_eq!(std::fs::read_to_string(&json).unwrap(), saved);
+    // bench_ik writes its sitting beside the model, never into it.
+    let o = Command::new(env!("CARGO_BIN_EXE_bench_ik"))
+        .args([
+            "--model",
+            model.to_str().unwrap(),
+            "--out",
+            model.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("inside the model's folder"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read_dir(&model).unwrap().count(),
+        2,
+        "bench_ik wrote into the model"
+    );
     let edited = d.join("edited");
     std::fs::create_dir_all(&edited).unwrap();
     std::fs::copy(model.join("model.bpk"), edited.join("model.bpk")).unwrap();

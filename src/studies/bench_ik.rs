@@ -245,6 +245,7 @@ pub fn run(
     python: Option<&Path>,
     device: &Device,
 ) -> Result<Vec<BenchIkRow>> {
+    crate::core::atomic_file::refuse_overwrite(out, &[], Some(model_dir))?;
     let (model, robot) = PoseModel::load_with_robot(model_dir, device)?;
     if model.position_only() {
         return Err(Error::Config(
