@@ -26,7 +26,7 @@ use crate::core::preset::Preset;
 use crate::core::provenance::git_revision;
 use indicatif::ProgressBar;
 
-use crate::data::npz::{Array, ArrayData, read_npz, write_npz};
+use crate::data::npz::{Array, ArrayData, ArrayView, DataView, read_npz, write_npz_views};
 use crate::sim::camera::Camera;
 use crate::sim::ray_caster::{RayCaster, RenderOptions};
 use crate::sim::robot::Robot;
@@ -476,32 +476,31 @@ impl Dataset {
         (0..self.n_train, self.n_train..self.len())
     }
 
-    /// Save as `.npz` (atomically).
+    /// Save as `.npz` (atomically; the images and depth maps are written without a copy).
     pub fn save(&self, path: &Path) -> Result<()> {
         let n = self.len();
         let (h, w) = (self.height, self.width);
-        let images = Array::u8(&[n, h, w], self.images.clone());
-        let angles = Array::f64(&[n, self.dof()], self.angles.concat());
-        let focal = Array::scalar(self.focal);
-        let poses = Array::f64(&[n, 4, 4], self.poses.concat());
-        let depth = Array::f32(&[n, h, w], self.depth.clone());
-        let n_train = Array {
-            shape: vec![],
-            data: ArrayData::I64(vec![self.n_train as i64]),
+        let view = |shape: &[usize], data| ArrayView {
+            shape: shape.to_vec(),
+            data,
         };
-        let names = Array::text(self.joint_names.clone());
+        let angles = self.angles.concat();
+        let poses = self.poses.concat();
+        let focal = [self.focal];
+        let n_train = [self.n_train as i64];
         let mut arrays = vec![
-            ("images", &images),
-            ("angles", &angles),
-            ("focal", &focal),
-            ("poses", &poses),
-            ("depth", &depth),
-            ("n_train", &n_train),
+            ("images", view(&[n, h, w], DataView::U8(&self.images))),
+            ("angles", view(&[n, self.dof()], DataView::F64(&angles))),
+            ("focal", view(&[], DataView::F64(&focal))),
+            ("poses", view(&[n, 4, 4], DataView::F64(&poses))),
+            ("depth", view(&[n, h, w], DataView::F32(&self.depth))),
+            ("n_train", view(&[], DataView::I64(&n_train))),
         ];
         if !self.joint_names.is_empty() {
-            arrays.push(("joint_names", &names));
+            let names = DataView::Text(&self.joint_names);
+            arrays.push(("joint_names", view(&[self.joint_names.len()], names)));
         }
-        write_npz(path, &arrays)
+        write_npz_views(path, &arrays)
     }
 
     /// Load an `.npz` dataset, ours or the papers', checking keys, shapes, dtypes and values.

@@ -162,8 +162,58 @@ fn encode<T: npyz::AutoSerialize + Copy>(
 /// Elements written between two looks at Ctrl-C (a few hundredths of a second).
 const WRITE_PIECE: usize = 1 << 20;
 
+/// An array to write, its elements borrowed (a dataset's gigabyte of images is written
+/// without a copy).
+pub struct ArrayView<'a> {
+    pub shape: Vec<usize>,
+    pub data: DataView<'a>,
+}
+
+/// [`ArrayData`], borrowed.
+pub enum DataView<'a> {
+    U8(&'a [u8]),
+    F32(&'a [f32]),
+    F64(&'a [f64]),
+    I64(&'a [i64]),
+    Text(&'a [String]),
+}
+
+impl<'a> From<&'a Array> for ArrayView<'a> {
+    fn from(a: &'a Array) -> Self {
+        let data = match &a.data {
+            ArrayData::U8(v) => DataView::U8(v),
+            ArrayData::F32(v) => DataView::F32(v),
+            ArrayData::F64(v) => DataView::F64(v),
+            ArrayData::I64(v) => DataView::I64(v),
+            ArrayData::Text(v) => DataView::Text(v),
+        };
+        ArrayView {
+            shape: a.shape.clone(),
+            data,
+        }
+    }
+}
+
+impl ArrayView<'_> {
+    fn len(&self) -> usize {
+        match &self.data {
+            DataView::U8(v) => v.len(),
+            DataView::F32(v) => v.len(),
+            DataView::F64(v) => v.len(),
+            DataView::I64(v) => v.len(),
+            DataView::Text(v) => v.len(),
+        }
+    }
+}
+
 /// Write `arrays` to `path` atomically (no partial file on error or Ctrl-C).
 pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
+    let views: Vec<(&str, ArrayView)> = arrays.iter().map(|(n, a)| (*n, (*a).into())).collect();
+    write_npz_views(path, &views)
+}
+
+/// [`write_npz`] of borrowed arrays.
+pub fn write_npz_views(path: &Path, arrays: &[(&str, ArrayView)]) -> Result<()> {
     let io = |e: std::io::Error| Error::io(path, e);
     let zipe = |e: zip::result::ZipError| Error::data(path, format!("cannot write zip: {e}"));
     write_atomic(path, |w| {
@@ -179,12 +229,12 @@ pub fn write_npz(path: &Path, arrays: &[(&str, &Array)]) -> Result<()> {
                 "array \"{name}\": data length does not match its shape"
             );
             zip.start_file(format!("{name}.npy"), opts).map_err(zipe)?;
-            match &array.data {
-                ArrayData::U8(v) => encode(&mut zip, &array.shape, v, path)?,
-                ArrayData::F32(v) => encode(&mut zip, &array.shape, v, path)?,
-                ArrayData::F64(v) => encode(&mut zip, &array.shape, v, path)?,
-                ArrayData::I64(v) => encode(&mut zip, &array.shape, v, path)?,
-                ArrayData::Text(v) => {
+            match array.data {
+                DataView::U8(v) => encode(&mut zip, &array.shape, v, path)?,
+                DataView::F32(v) => encode(&mut zip, &array.shape, v, path)?,
+                DataView::F64(v) => encode(&mut zip, &array.shape, v, path)?,
+                DataView::I64(v) => encode(&mut zip, &array.shape, v, path)?,
+                DataView::Text(v) => {
                     let bytes = encode_text(&array.shape, v).map_err(io)?;
                     zip.write_all(&bytes).map_err(io)?;
                 }
