@@ -1,0 +1,166 @@
+//! What every part of the study shares ([`Bench`]: the trained self-model, its data, the
+//! devices) and how an estimate is scored against the true angles.
+
+use burn::tensor::Device;
+
+use super::BodyFromImageConfig;
+use super::pose::PoseRow;
+use crate::body::drift::estimate_offsets;
+use crate::body::observations::Observed;
+use crate::body::pose::{PoseFitConfig, pose_from_image, pose_losses};
+use crate::core::error::Result;
+use crate::self_models::harness::Fitted;
+use crate::self_models::model::Render;
+use crate::sim::robot::Robot;
+
+/// Errors of estimated poses against the truth.
+struct Scores {
+    mean: f64,
+    median: f64,
+    per_joint: Vec<f64>,
+    end_effector_mm: f64,
+    within_2: f64,
+}
+
+fn score(robot: &Robot, found: &[Vec<f64>], truth: &[Vec<f64>]) -> Scores {
+    let dof = truth[0].len();
+    let mut all: Vec<f64> = Vec::new();
+    let mut per_joint = vec![0.0; dof];
+    let mut within = 0;
+    let mut ee = 0.0;
+    for (f, t) in found.iter().zip(truth) {
+        let e: Vec<f64> = f.iter().zip(t).map(|(a, b)| (a - b).abs()).collect();
+        for (j, v) in e.iter().enumerate() {
+            per_joint[j] += v / truth.len() as f64;
+        }
+        within += usize::from(e.iter().all(|&v| v <= 2.0));
+        all.extend(e);
+        let (pf, pt) = (
+            robot.chain.end_effector(&robot.chain.to_si(f)),
+            robot.chain.end_effector(&robot.chain.to_si(t)),
+        );
+        ee += 1000.0 * (pf - pt).norm() / truth.len() as f64;
+    }
+    Scores {
+        mean: all.iter().sum::<f64>() / all.len() as f64,
+        median: crate::core::timing::median(&all),
+        per_joint,
+        end_effector_mm: ee,
+        within_2: within as f64 / truth.len() as f64,
+    }
+}
+
+/// Everything one run shares: the trained self-model (and its data), the robot, the devices.
+pub struct Bench<'a> {
+    pub cfg: &'a BodyFromImageConfig,
+    pub robot: &'a Robot,
+    pub fitted: &'a Fitted,
+    pub renderer: &'a dyn Render,
+    pub differentiable: &'a dyn Render,
+    pub device: &'a Device,
+    pub autodiff: &'a Device,
+    pub image: [usize; 2],
+    pub ranges: Vec<[f64; 2]>,
+    pub device_name: String,
+    pub revision: String,
+}
+
+/// Milliseconds per pose: one image at a time and over the whole batch (NaN: not timed).
+#[derive(Clone, Copy)]
+pub struct Ms {
+    pub b1: f64,
+    pub batched: f64,
+}
+
+impl Ms {
+    pub const UNTIMED: Ms = Ms {
+        b1: f64::NAN,
+        batched: f64::NAN,
+    };
+}
+
+/// Images an estimate was made from, and what they are ("clean", or a perturbation's label).
+pub struct Seen<'a> {
+    pub label: &'a str,
+    pub observed: &'a Observed,
+}
+
+impl Bench<'_> {
+    /// A row of `results.csv`: `found` against `truth` for the images `seen`, judged
+    /// through `through` (on its device).
+    pub fn row(
+        &self,
+        method: &str,
+        found: &[Vec<f64>],
+        truth: &[Vec<f64>],
+        ms: Ms,
+        seen: Seen,
+        through: (&dyn Render, &Device),
+    ) -> Result<PoseRow> {
+        let s = score(self.robot, found, truth);
+        let images = seen.label;
+        let seen = seen.observed.select(0..found.len());
+        let at = |q: &[Vec<f64>]| pose_losses(through.0, through.1, &seen, q, self.cfg.refine.loss);
+        let (l_found, l_truth) = (at(found)?, at(truth)?);
+        let below = l_found.iter().zip(&l_truth).filter(|(f, t)| f < t).count();
+        Ok(PoseRow {
+            method: method.into(),
+            images: images.into(),
+            poses: truth.len(),
+            mean_joint_error_deg: s.mean,
+            median_joint_error_deg: s.median,
+            per_joint_deg: s
+                .per_joint
+                .iter()
+                .map(|v| format!("{v:.2}"))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            end_effector_mm: s.end_effector_mm,
+            within_2deg_share: s.within_2,
+            ms_per_pose_b1: ms.b1,
+            ms_per_pose_batched: ms.batched,
+            loss_below_truth_share: below as f64 / found.len() as f64,
+            preset: self.cfg.preset.clone(),
+            device: self.device_name.clone(),
+            git_revision: self.revision.clone(),
+        })
+    }
+
+    /// Refine `guesses` through `through` (a differentiable self-model on `self.autodiff`).
+    pub fn refine(
+        &self,
+        through: &dyn Render,
+        observed: &Observed,
+        guesses: &[Vec<f64>],
+        cfg: &PoseFitConfig,
+    ) -> Result<Vec<Vec<f64>>> {
+        Ok(pose_from_image(
+            through,
+            self.autodiff,
+            self.image,
+            observed,
+            &self.ranges,
+            Some(guesses),
+            cfg,
+            |_| {},
+        )?
+        .angles)
+    }
+
+    /// The offsets estimated from one capture of poses `truth` whose encoders report
+    /// `truth + offset`.
+    pub fn offsets(&self, observed: &Observed, truth: &[Vec<f64>], offset: &[f64]) -> Result<Vec<f64>> {
+        let reported: Vec<Vec<f64>> = truth
+            .iter()
+            .map(|q| q.iter().zip(offset).map(|(v, o)| v + o).collect())
+            .collect();
+        estimate_offsets(
+            self.differentiable,
+            self.autodiff,
+            self.image,
+            observed,
+            &reported,
+            &self.cfg.drift,
+        )
+    }
+}
