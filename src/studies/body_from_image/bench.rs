@@ -149,7 +149,12 @@ impl Bench<'_> {
 
     /// The offsets estimated from one capture of poses `truth` whose encoders report
     /// `truth + offset`.
-    pub fn offsets(&self, observed: &Observed, truth: &[Vec<f64>], offset: &[f64]) -> Result<Vec<f64>> {
+    pub fn offsets(
+        &self,
+        observed: &Observed,
+        truth: &[Vec<f64>],
+        offset: &[f64],
+    ) -> Result<Vec<f64>> {
         let reported: Vec<Vec<f64>> = truth
             .iter()
             .map(|q| q.iter().zip(offset).map(|(v, o)| v + o).collect())

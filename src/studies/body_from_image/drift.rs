@@ -155,7 +155,11 @@ pub fn detection_rows(
     let poses = test_poses(b, rng, k);
     let calibration_truth: Vec<Vec<f64>> = poses.iter().map(|&i| data.angles[i].clone()).collect();
     *seed += 1;
-    let reference = b.offsets(&capture(b, &poses, *seed), &calibration_truth, &vec![0.0; dof])?;
+    let reference = b.offsets(
+        &capture(b, &poses, *seed),
+        &calibration_truth,
+        &vec![0.0; dof],
+    )?;
     let mut trial = |offset: &[f64]| -> Result<f64> {
         *seed += 1;
         let now = b.offsets(&capture(b, &poses, *seed), &calibration_truth, offset)?;

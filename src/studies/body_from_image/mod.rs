@@ -213,7 +213,12 @@ pub fn run(
     let detection_rows = drift::detection_rows(&bench, &mut rng, &mut seed, out)?;
     let calibration_rows = calibration::visual_calibration(k3dgs.as_ref(), &bench, out)?;
     write_json(&out.join("config.json"), cfg)?;
-    Ok(summary(&rows[2], &drift_rows, &detection_rows, &calibration_rows))
+    Ok(summary(
+        &rows[2],
+        &drift_rows,
+        &detection_rows,
+        &calibration_rows,
+    ))
 }
 
 /// The line the binary prints: the refined CNN, the drift at the largest k, the smallest

@@ -93,7 +93,9 @@ pub fn pose_rows(
     let refine_batched = 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched;
     let refine_b1 = 1000.0
         * median_seconds(Repeats::exactly(1, 3), || {
-            let g = estimator.estimate(&one, device, 1).expect("estimated above");
+            let g = estimator
+                .estimate(&one, device, 1)
+                .expect("estimated above");
             let _ = b.refine(b.differentiable, &one, &g, &cfg.refine);
         });
     let refine = Ms {
