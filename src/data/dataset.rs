@@ -564,59 +564,8 @@ impl Dataset {
             [f] if f.is_finite() && f > 0.0 => f,
             _ => return Err(bad("\"focal\" must be one positive number".into())),
         };
-        if matches!(poses.data, ArrayData::Text(_)) {
-            return Err(bad("\"poses\" must be float, found unicode text".into()));
-        }
-        if let Some(i) = poses.to_f64().iter().position(|v| !v.is_finite()) {
-            return Err(bad(format!(
-                "\"poses\" holds NaN or infinity (camera {})",
-                i / 16
-            )));
-        }
-        let pose_list: Vec<[f64; 16]> = match poses.shape[..] {
-            [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
-            [np, 4, 4] if np == n => poses
-                .to_f64()
-                .chunks(16)
-                .map(|c| std::array::from_fn(|i| c[i]))
-                .collect(),
-            _ => {
-                return Err(bad(format!(
-                    "\"poses\" must have shape (N, 4, 4) or (4, 4), found {:?}",
-                    poses.shape
-                )));
-            }
-        };
-        let depth = match depth {
-            None => vec![0.0; n * h * w],
-            Some(d) => {
-                if d.shape != [n, h, w] {
-                    return Err(bad(format!(
-                        "\"depth\" must have shape {:?}, found {:?}",
-                        [n, h, w],
-                        d.shape
-                    )));
-                }
-                let v: Vec<f32> = match d.data {
-                    ArrayData::F32(v) => v,
-                    ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
-                    _ => {
-                        return Err(bad(format!(
-                            "\"depth\" must be float32, found {}",
-                            d.dtype_name()
-                        )));
-                    }
-                };
-                if let Some(i) = v.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
-                    return Err(bad(format!(
-                        "\"depth\" of sample {} is {}: depth is metres along the camera axis, 0 where empty",
-                        i / (h * w),
-                        v[i]
-                    )));
-                }
-                v
-            }
-        };
+        let pose_list = camera_poses(path, &poses, n)?;
+        let depth = depth_maps(path, depth, [n, h, w])?;
         let n_train = match n_train {
             None => n * 4 / 5,
             Some(a) => match a.to_f64()[..] {
@@ -624,25 +573,7 @@ impl Dataset {
                 _ => return Err(bad(format!("\"n_train\" must be one integer in 0..={n}"))),
             },
         };
-        let joint_names = match joint_names {
-            None => Vec::new(),
-            Some(Array {
-                data: ArrayData::Text(names),
-                shape,
-            }) if shape == [dof] => {
-                if let Some(i) = (1..dof).find(|&i| names[..i].contains(&names[i])) {
-                    return Err(bad(format!("\"joint_names\" names \"{}\" twice", names[i])));
-                }
-                names
-            }
-            Some(a) => {
-                return Err(bad(format!(
-                    "\"joint_names\" must be {dof} strings (one per column of \"angles\"), found {} of shape {:?}",
-                    a.dtype_name(),
-                    a.shape
-                )));
-            }
-        };
+        let joint_names = joint_names_of(path, joint_names, dof)?;
         Ok(Dataset {
             angles,
             images,
@@ -944,4 +875,92 @@ pub fn build_and_save(
     write_json(&out.with_extension("stats.json"), &report)?;
     write_json(&out.with_extension("config.json"), cfg)?;
     Ok((data, report))
+}
+
+/// A dataset's `poses`: one 4x4 camera pose for all `n` samples or one each, finite.
+fn camera_poses(path: &Path, poses: &Array, n: usize) -> Result<Vec<[f64; 16]>> {
+    let bad = |msg: String| Error::data(path, msg);
+    if matches!(poses.data, ArrayData::Text(_)) {
+        return Err(bad("\"poses\" must be float, found unicode text".into()));
+    }
+    if let Some(i) = poses.to_f64().iter().position(|v| !v.is_finite()) {
+        return Err(bad(format!(
+            "\"poses\" holds NaN or infinity (camera {})",
+            i / 16
+        )));
+    }
+    Ok(match poses.shape[..] {
+        [4, 4] => vec![std::array::from_fn(|i| poses.to_f64()[i]); n],
+        [np, 4, 4] if np == n => poses
+            .to_f64()
+            .chunks(16)
+            .map(|c| std::array::from_fn(|i| c[i]))
+            .collect(),
+        _ => {
+            return Err(bad(format!(
+                "\"poses\" must have shape (N, 4, 4) or (4, 4), found {:?}",
+                poses.shape
+            )));
+        }
+    })
+}
+
+/// A dataset's `depth` (metres along the camera axis, 0 where empty) of shape `[n, h, w]`, or
+/// zeros where it has none.
+fn depth_maps(path: &Path, depth: Option<Array>, [n, h, w]: [usize; 3]) -> Result<Vec<f32>> {
+    let bad = |msg: String| Error::data(path, msg);
+    Ok(match depth {
+        None => vec![0.0; n * h * w],
+        Some(d) => {
+            if d.shape != [n, h, w] {
+                return Err(bad(format!(
+                    "\"depth\" must have shape {:?}, found {:?}",
+                    [n, h, w],
+                    d.shape
+                )));
+            }
+            let v: Vec<f32> = match d.data {
+                ArrayData::F32(v) => v,
+                ArrayData::F64(v) => v.into_iter().map(|x| x as f32).collect(),
+                _ => {
+                    return Err(bad(format!(
+                        "\"depth\" must be float32, found {}",
+                        d.dtype_name()
+                    )));
+                }
+            };
+            if let Some(i) = v.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
+                return Err(bad(format!(
+                    "\"depth\" of sample {} is {}: depth is metres along the camera axis, 0 where empty",
+                    i / (h * w),
+                    v[i]
+                )));
+            }
+            v
+        }
+    })
+}
+
+/// A dataset's `joint_names`: `dof` distinct strings, or none.
+fn joint_names_of(path: &Path, names: Option<Array>, dof: usize) -> Result<Vec<String>> {
+    let bad = |msg: String| Error::data(path, msg);
+    Ok(match names {
+        None => Vec::new(),
+        Some(Array {
+            data: ArrayData::Text(names),
+            shape,
+        }) if shape == [dof] => {
+            if let Some(i) = (1..dof).find(|&i| names[..i].contains(&names[i])) {
+                return Err(bad(format!("\"joint_names\" names \"{}\" twice", names[i])));
+            }
+            names
+        }
+        Some(a) => {
+            return Err(bad(format!(
+                "\"joint_names\" must be {dof} strings (one per column of \"angles\"), found {} of shape {:?}",
+                a.dtype_name(),
+                a.shape
+            )));
+        }
+    })
 }
