@@ -175,17 +175,13 @@ impl<'a, M: Module> Trainer<'a, M> {
             Some(h) => h,
             None => &mut none,
         };
-        train_loop(
-            model,
-            optim,
-            data,
-            self.cfg,
-            self.checkpoint,
-            self.label,
-            loss,
-            hooks,
-            self.quiet,
-        )
+        let settings = Settings {
+            cfg: self.cfg,
+            checkpoint: self.checkpoint,
+            label: self.label,
+            quiet: self.quiet,
+        };
+        train_loop(model, optim, data, &settings, loss, hooks)
     }
 
     /// [`Trainer::run`] without the optimiser state.
@@ -199,24 +195,134 @@ impl<'a, M: Module> Trainer<'a, M> {
     }
 }
 
-/// The loop behind [`Trainer`].
-#[allow(clippy::too_many_arguments)]
+/// What a [`Trainer`] was configured with, for its loop.
+struct Settings<'a> {
+    cfg: &'a TrainConfig,
+    checkpoint: Option<&'a CheckpointPlan>,
+    label: &'a str,
+    quiet: bool,
+}
+
+impl Settings<'_> {
+    /// Steps between two points of the curve (and two reads of the losses).
+    fn log_every(&self) -> usize {
+        match self.cfg.log_every {
+            0 => (self.cfg.steps / 200).max(1),
+            n => n,
+        }
+    }
+
+    /// The progress bar (hidden for a quiet run), at the step a resumed run starts from.
+    fn progress_bar(&self, step: usize) -> indicatif::ProgressBar {
+        let bar = if self.quiet {
+            indicatif::ProgressBar::hidden()
+        } else {
+            crate::core::progress::progress_bar(self.cfg.steps as u64, self.label, "steps")
+        };
+        bar.set_position(step as u64);
+        bar.reset_eta();
+        bar
+    }
+
+    /// Without a terminal (a run in the background, CI) the bar is hidden: a line every 5%.
+    fn progress_line(&self, log: &TrainLog, bar: &indicatif::ProgressBar) {
+        let steps = self.cfg.steps;
+        if !self.quiet
+            && bar.is_hidden()
+            && (log.step % (steps / 20).max(1) == 0 || log.step == steps)
+        {
+            let last = log.curve.last().map_or(f64::NAN, |c| c.1);
+            eprintln!(
+                "{}: step {}/{steps}, loss {last:.4}, {:.2} s/step, ETA {}",
+                self.label,
+                log.step,
+                log.train_seconds / log.step as f64,
+                indicatif::HumanDuration(bar.eta())
+            );
+        }
+    }
+
+    /// The run's end at a loss that is not finite, saying what was kept.
+    fn diverged(&self, value: f64, step: usize) -> Error {
+        let kept = match self.checkpoint {
+            Some(plan) if plan.state_path().exists() => {
+                format!("the last good checkpoint is in {}", plan.dir.display())
+            }
+            _ => "no checkpoint was saved".to_string(),
+        };
+        Error::Training(format!(
+            "{}: the loss became {value} at step {step}; {kept}; lower the learning rate or check the data",
+            self.label
+        ))
+    }
+
+    /// The run's end at Ctrl-C after `step`, saying how to go on.
+    fn interrupted(&self, step: usize) -> Error {
+        let label = self.label;
+        Error::Interrupted(match self.checkpoint {
+            Some(plan) => format!(
+                "{label} stopped after step {step}; its checkpoint is in {}: run the same command with --resume to continue",
+                plan.dir.display()
+            ),
+            None => format!(
+                "{label} stopped after step {step}; this run keeps no checkpoint, so it starts afresh when run again"
+            ),
+        })
+    }
+}
+
+/// The losses read since the last read, into the hooks and the curve (a point every
+/// `log_every` steps, the mean of the window); a loss that is not finite ends the run.
+struct Curve {
+    log_every: usize,
+    window: (f64, usize),
+}
+
+impl Curve {
+    fn record<M>(
+        &mut self,
+        values: Vec<(usize, f64)>,
+        settings: &Settings,
+        log: &mut TrainLog,
+        hooks: &mut dyn TrainHooks<M>,
+        bar: &indicatif::ProgressBar,
+    ) -> Result<()> {
+        for (at, value) in values {
+            if !value.is_finite() {
+                bar.abandon();
+                return Err(settings.diverged(value, at + 1));
+            }
+            hooks.loss(value, at);
+            self.window.0 += value;
+            self.window.1 += 1;
+            if (at + 1) % self.log_every == 0 || at + 1 == settings.cfg.steps {
+                let mean = self.window.0 / self.window.1 as f64;
+                log.curve.push((at + 1, mean));
+                bar.set_message(format!("loss {mean:.4}"));
+                self.window = (0.0, 0);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The loop behind [`Trainer`]: resume, then step by step (batch, loss, gradients, Adam), the
+/// losses read at log intervals, checkpoints saved, until the steps are done, a hook stops it
+/// or Ctrl-C.
 fn train_loop<M, L, S>(
     mut model: M,
     mut optim: ModuleOptimizer,
     data: &TrainSet,
-    cfg: &TrainConfig,
-    checkpoint: Option<&CheckpointPlan>,
-    label: &str,
+    settings: &Settings,
     loss: L,
     hooks: &mut dyn TrainHooks<M>,
-    quiet: bool,
 ) -> Result<(M, ModuleOptimizer, TrainLog)>
 where
     M: Module,
     L: Fn(&M, &Batch) -> S,
     S: Into<StepLoss>,
 {
+    let (cfg, checkpoint, label) = (settings.cfg, settings.checkpoint, settings.label);
     if data.is_empty() || cfg.steps == 0 || cfg.batch == 0 {
         return Err(Error::Config(format!(
             "{label}: nothing to train (samples {}, steps {}, batch {})",
@@ -237,19 +343,13 @@ where
         }
     }
     let batcher = Batcher::new(data, cfg);
-    let log_every = match cfg.log_every {
-        0 => (cfg.steps / 200).max(1),
-        n => n,
-    };
-    let bar = if quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        crate::core::progress::progress_bar(cfg.steps as u64, label, "steps")
-    };
-    bar.set_position(log.step as u64);
-    bar.reset_eta();
+    let log_every = settings.log_every();
+    let bar = settings.progress_bar(log.step);
     let mut losses = PendingLosses::default();
-    let mut window = (0.0f64, 0usize);
+    let mut curve = Curve {
+        log_every,
+        window: (0.0, 0),
+    };
     while log.step < cfg.steps && !hooks.stop() {
         let step = log.step;
         let t0 = Instant::now();
@@ -287,46 +387,10 @@ where
             let t1 = Instant::now();
             let values = losses.read();
             log.train_seconds += t1.elapsed().as_secs_f64();
-            for (at, value) in values {
-                if !value.is_finite() {
-                    bar.abandon();
-                    let kept = match checkpoint {
-                        Some(plan) if plan.state_path().exists() => {
-                            format!("the last good checkpoint is in {}", plan.dir.display())
-                        }
-                        _ => "no checkpoint was saved".to_string(),
-                    };
-                    return Err(Error::Training(format!(
-                        "{label}: the loss became {value} at step {}; {kept}; lower the learning rate or check the data",
-                        at + 1
-                    )));
-                }
-                hooks.loss(value, at);
-                window.0 += value;
-                window.1 += 1;
-                if (at + 1) % log_every == 0 || at + 1 == cfg.steps {
-                    let mean = window.0 / window.1 as f64;
-                    log.curve.push((at + 1, mean));
-                    bar.set_message(format!("loss {mean:.4}"));
-                    window = (0.0, 0);
-                }
-            }
+            curve.record(values, settings, &mut log, hooks, &bar)?;
         }
         bar.inc(1);
-        // Without a terminal (a run in the background, CI) the bar is hidden: a line every 5%.
-        if !quiet
-            && bar.is_hidden()
-            && (log.step % (cfg.steps / 20).max(1) == 0 || log.step == cfg.steps)
-        {
-            let last = log.curve.last().map_or(f64::NAN, |c| c.1);
-            eprintln!(
-                "{label}: step {}/{}, loss {last:.4}, {:.2} s/step, ETA {}",
-                log.step,
-                cfg.steps,
-                log.train_seconds / log.step as f64,
-                indicatif::HumanDuration(bar.eta())
-            );
-        }
+        settings.progress_line(&log, &bar);
         match hooks.after_step(model, log.step) {
             Ok((m, reset)) => {
                 model = m;
@@ -346,17 +410,7 @@ where
         }
         if interrupted {
             bar.abandon();
-            return Err(Error::Interrupted(match checkpoint {
-                Some(plan) => format!(
-                    "{label} stopped after step {}; its checkpoint is in {}: run the same command with --resume to continue",
-                    log.step,
-                    plan.dir.display()
-                ),
-                None => format!(
-                    "{label} stopped after step {}; this run keeps no checkpoint, so it starts afresh when run again",
-                    log.step
-                ),
-            }));
+            return Err(settings.interrupted(log.step));
         }
     }
     if log.step < cfg.steps {
