@@ -323,139 +323,46 @@ pub fn run<M: SelfModel>(
     if fitted.is_err() {
         leave_as_found(dir, fresh);
     }
-    let Fitted {
-        trained,
-        rotational,
-        device,
-        data,
-        train_range,
-        test_range,
-        test_set,
-        truth,
-        truth_depth,
-    } = fitted?;
-    let log = &trained.log;
-    let pixels = data.height * data.width;
-    let git_revision = git_revision.as_str();
+    let fitted = fitted?;
+    let run = Evaluation {
+        device_choice,
+        git_revision: &git_revision,
+    };
     let mut rows = Vec::new();
     let mut qualities = Vec::new();
     let mut rendered: Vec<RenderedSet> = Vec::new();
-    for (label, renderer) in &trained.renderers {
-        let renderer = renderer.as_ref();
-        let predictions = predict_all(renderer, &test_set, cfg.eval_batch, pixels);
-        let timings = measure(|q| renderer.render(q).0, data.dof(), &device, &cfg.speed);
-        let quality = score(&predictions, &truth, Some(&truth_depth), cfg.paper_subset);
-        let timing = |b: usize| timings.iter().find(|t| t.batch == b).cloned();
-        let t1 = timing(1).unwrap_or(Timing {
-            batch: 1,
-            median_s: f64::NAN,
-            repeats: 0,
-        });
-        // The largest batch timed (none beyond batch 1: not measured).
-        let tb = timings
-            .iter()
-            .filter(|t| t.batch > 1)
-            .max_by_key(|t| t.batch)
-            .cloned()
-            .unwrap_or(Timing {
-                batch: 0,
-                median_s: f64::NAN,
-                repeats: 0,
-            });
-        let predicts_depth = predictions.depth.is_some();
-        let renderer_note = renderer.note(test_range.len());
-        rows.push(
-            ModelResult {
-                model: if label.is_empty() {
-                    cfg.name.clone()
-                } else {
-                    format!("{} ({label})", cfg.name)
-                },
-                dataset: cfg.data.label().into(),
-                preset: cfg.preset.clone(),
-                device: device_choice.to_string(),
-                git_revision: git_revision.into(),
-                parameters: trained.parameters,
-                train_samples: train_range.len(),
-                train_steps: log.step,
-                batch: cfg.train.batch,
-                train_time_s: log.train_seconds,
-                train_img_per_s: log.images_per_second(),
-                psnr_db_first100: quality.psnr_db_paper_subset,
-                psnr_db_test: quality.psnr_db_test,
-                iou_test: quality.iou_test,
-                depth_mae_mm: quality.depth_mae_mm.filter(|_| predicts_depth),
-                depth_constant_mae_mm: quality.depth_constant_mae_mm.filter(|_| predicts_depth),
-                infer_b1_img_per_s: t1.images_per_second(),
-                latency_b1_ms: 1000.0 * t1.median_s,
-                infer_b256_img_per_s: tb.images_per_second(),
-                paper_psnr_db: None,
-                paper_fps: None,
-                paper_latency_ms: None,
-                paper_train_time_s: None,
-                note: [
-                    renderer_note.as_str(),
-                    trained.note.as_str(),
-                    cfg.note.as_str(),
-                ]
-                .iter()
-                .filter(|n| !n.is_empty())
-                .copied()
-                .collect::<Vec<_>>()
-                .join("; "),
-                steps_override: cfg.steps_override,
-                lower_bound: cfg.model.lower_bound(),
-            }
-            .with_reference(&cfg.reference),
-        );
+    for (label, renderer) in &fitted.trained.renderers {
+        let (row, quality, set) = run.evaluate(cfg, &fitted, label, renderer.as_ref());
+        rows.push(row);
         qualities.push(quality);
-        rendered.push(RenderedSet {
-            label: label.clone(),
-            predictions,
-            timings,
-        });
+        rendered.push(set);
     }
+    let log = &fitted.trained.log;
     write_report(dir, cfg, &rows, log)?;
-    crate::self_models::saved::save(
-        &dir.join("model"),
-        &crate::self_models::saved::ToSave {
-            kind: M::KIND,
-            model: serde_json::to_value(&cfg.model).expect("a model configuration serialises"),
-            name: &cfg.name,
-            save_weights: &|path| trained.renderers[0].1.save(path),
-            camera: cfg.data.camera(&data),
-            rotational: rotational.clone(),
-            data: &data,
-            data_fingerprint: cfg.data.fingerprint(),
-            test_inputs: &test_set.inputs,
-            predictions: &rendered[0].predictions,
-            psnr_db_test: rows[0].psnr_db_test,
-            iou_test: rows[0].iou_test,
-            preset: &cfg.preset,
-            git_revision,
-        },
-    )?;
+    save_model(cfg, dir, &fitted, &rendered[0], &rows[0], &git_revision)?;
+    let data = &fitted.data;
+    let truth: (&[f32], &[f32]) = (&fitted.truth, &fitted.truth_depth);
     let ctx = ReportContext {
         dir,
         name: &cfg.name,
         spec: &cfg.data,
-        data: &data,
-        test: &test_range,
-        truth: (&truth, &truth_depth),
+        data,
+        test: &fitted.test_range,
+        truth,
         rendered: &rendered,
         paper_subset: cfg.paper_subset,
-        device: &device,
-        git_revision,
+        device: &fitted.device,
+        git_revision: &git_revision,
         device_name: device_choice.to_string(),
         preset: &cfg.preset,
     };
-    for (_, renderer) in &trained.renderers {
+    for (_, renderer) in &fitted.trained.renderers {
         renderer.extra_reports(&ctx)?;
     }
     qualitative_figure(
         &dir.join("qualitative.png"),
-        &truth,
-        &truth_depth,
+        truth.0,
+        truth.1,
         &rendered[0].predictions,
         [data.height, data.width],
     )?;
@@ -464,8 +371,142 @@ pub fn run<M: SelfModel>(
         result,
         quality,
         rows,
-        log: trained.log,
+        log: fitted.trained.log,
     })
+}
+
+/// Where and from which revision a run's rows are measured.
+struct Evaluation<'a> {
+    device_choice: DeviceChoice,
+    git_revision: &'a str,
+}
+
+impl Evaluation<'_> {
+    /// One trained renderer (`label`: its variant, empty for the model itself) on the test
+    /// set: its row of the results, its scores and its predictions with their timings.
+    fn evaluate<M: SelfModel>(
+        &self,
+        cfg: &SelfModelRun<M>,
+        fitted: &Fitted,
+        label: &str,
+        renderer: &dyn Render,
+    ) -> (ModelResult, Quality, RenderedSet) {
+        let (data, trained) = (&fitted.data, &fitted.trained);
+        let pixels = data.height * data.width;
+        let predictions = predict_all(renderer, &fitted.test_set, cfg.eval_batch, pixels);
+        let timings = measure(
+            |q| renderer.render(q).0,
+            data.dof(),
+            &fitted.device,
+            &cfg.speed,
+        );
+        let quality = score(
+            &predictions,
+            &fitted.truth,
+            Some(&fitted.truth_depth),
+            cfg.paper_subset,
+        );
+        let untimed = |batch| Timing {
+            batch,
+            median_s: f64::NAN,
+            repeats: 0,
+        };
+        let t1 = timings
+            .iter()
+            .find(|t| t.batch == 1)
+            .cloned()
+            .unwrap_or(untimed(1));
+        // The largest batch timed (none beyond batch 1: not measured).
+        let tb = timings
+            .iter()
+            .filter(|t| t.batch > 1)
+            .max_by_key(|t| t.batch)
+            .cloned()
+            .unwrap_or(untimed(0));
+        let predicts_depth = predictions.depth.is_some();
+        let renderer_note = renderer.note(fitted.test_range.len());
+        let log = &trained.log;
+        let row = ModelResult {
+            model: if label.is_empty() {
+                cfg.name.clone()
+            } else {
+                format!("{} ({label})", cfg.name)
+            },
+            dataset: cfg.data.label().into(),
+            preset: cfg.preset.clone(),
+            device: self.device_choice.to_string(),
+            git_revision: self.git_revision.into(),
+            parameters: trained.parameters,
+            train_samples: fitted.train_range.len(),
+            train_steps: log.step,
+            batch: cfg.train.batch,
+            train_time_s: log.train_seconds,
+            train_img_per_s: log.images_per_second(),
+            psnr_db_first100: quality.psnr_db_paper_subset,
+            psnr_db_test: quality.psnr_db_test,
+            iou_test: quality.iou_test,
+            depth_mae_mm: quality.depth_mae_mm.filter(|_| predicts_depth),
+            depth_constant_mae_mm: quality.depth_constant_mae_mm.filter(|_| predicts_depth),
+            infer_b1_img_per_s: t1.images_per_second(),
+            latency_b1_ms: 1000.0 * t1.median_s,
+            infer_b256_img_per_s: tb.images_per_second(),
+            paper_psnr_db: None,
+            paper_fps: None,
+            paper_latency_ms: None,
+            paper_train_time_s: None,
+            note: [
+                renderer_note.as_str(),
+                trained.note.as_str(),
+                cfg.note.as_str(),
+            ]
+            .iter()
+            .filter(|n| !n.is_empty())
+            .copied()
+            .collect::<Vec<_>>()
+            .join("; "),
+            steps_override: cfg.steps_override,
+            lower_bound: cfg.model.lower_bound(),
+        }
+        .with_reference(&cfg.reference);
+        let set = RenderedSet {
+            label: label.to_string(),
+            predictions,
+            timings,
+        };
+        (row, quality, set)
+    }
+}
+
+/// The trained model saved into `dir/model` (its configuration, weights and a probe of test
+/// poses with what this run predicted for them), for `SelfModel.load` to answer as it did.
+fn save_model<M: SelfModel>(
+    cfg: &SelfModelRun<M>,
+    dir: &Path,
+    fitted: &Fitted,
+    first: &RenderedSet,
+    row: &ModelResult,
+    git_revision: &str,
+) -> Result<()> {
+    crate::self_models::saved::save(
+        &dir.join("model"),
+        &crate::self_models::saved::ToSave {
+            kind: M::KIND,
+            model: serde_json::to_value(&cfg.model).expect("a model configuration serialises"),
+            name: &cfg.name,
+            save_weights: &|path| fitted.trained.renderers[0].1.save(path),
+            camera: cfg.data.camera(&fitted.data),
+            rotational: fitted.rotational.clone(),
+            data: &fitted.data,
+            data_fingerprint: cfg.data.fingerprint(),
+            test_inputs: &fitted.test_set.inputs,
+            predictions: &first.predictions,
+            psnr_db_test: row.psnr_db_test,
+            iou_test: row.iou_test,
+            preset: &cfg.preset,
+            git_revision,
+        },
+    )?;
+    Ok(())
 }
 
 fn write_report<M>(
