@@ -3,6 +3,7 @@
 use std::path::Path;
 
 use plotters::coord::combinators::BindKeyPoints;
+use plotters::coord::ranged1d::Ranged;
 use plotters::prelude::*;
 
 use super::{FONT, draw_err, draw_legend, log_ticks, register_font, save_rgb, tick_label};
@@ -112,25 +113,7 @@ pub fn pareto_plot(
     {
         let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| draw_err(path, e))?;
-        let fps_min = points
-            .iter()
-            .map(|p| p.fps)
-            .fold(f64::INFINITY, f64::min)
-            .min(1.0);
-        let fps_max = points.iter().map(|p| p.fps).fold(1.0, f64::max).max(2000.0);
-        let (x0, x1) = (fps_min / 2.0, fps_max * 3.0);
-        let q_min = points
-            .iter()
-            .map(|p| p.quality)
-            .chain(floors.iter().map(|f| f.1))
-            .fold(f64::INFINITY, f64::min);
-        let q_max = points
-            .iter()
-            .map(|p| p.quality)
-            .chain(floors.iter().map(|f| f.1))
-            .fold(f64::NEG_INFINITY, f64::max);
-        let pad = ((q_max - q_min) * 0.15).max(0.5 * q_max.abs().max(1e-3) * 0.02);
-        let (y0, y1) = (q_min - pad, q_max + pad);
+        let ((x0, x1), (y0, y1)) = ranges(points, floors);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, (FONT, 22))
             .margin(15)
@@ -162,149 +145,226 @@ pub fn pareto_plot(
             .map_err(|e| draw_err(path, e))?
             .label("1,000 FPS (1 kHz control loop)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-        for (label, q) in floors {
-            let grey = BLACK.mix(0.5);
-            // Dashes: short segments across the log axis.
-            let n = 60;
-            let segments: Vec<Vec<(f64, f64)>> = (0..n)
-                .step_by(2)
-                .map(|k| {
-                    let at = |t: f64| x0 * (x1 / x0).powf(t / n as f64);
-                    vec![(at(k as f64), *q), (at(k as f64 + 1.0), *q)]
-                })
-                .collect();
-            chart
-                .draw_series(
-                    segments
-                        .into_iter()
-                        .map(|s| PathElement::new(s, grey.stroke_width(2))),
-                )
-                .map_err(|e| draw_err(path, e))?
-                .label(format!("{label} ({q:.2})"))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(2))
-                });
-        }
-        let ours_style = BLUE.filled();
-        let paper_style = BLACK.stroke_width(2);
-        for (reference, name) in [(false, "ours (this CPU)"), (true, "paper (T4 GPU)")] {
-            // No key entry for the paper's points where there are none (another robot).
-            if !points.iter().any(|p| p.reference == reference) {
-                continue;
-            }
-            let style = if reference { paper_style } else { ours_style };
-            chart
-                .draw_series(
-                    points
-                        .iter()
-                        .filter(|p| p.reference == reference)
-                        .map(|p| Circle::new((p.fps, p.quality), 6, style)),
-                )
-                .map_err(|e| draw_err(path, e))?
-                .label(name)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 6, style));
-        }
+        draw_floors(&mut chart, floors, (x0, x1), path)?;
+        draw_points(&mut chart, points, path)?;
         // Labels where they overlap nothing; a number and a key entry elsewhere.
-        let font_px = 13;
-        let char_w = 8;
         let (xr, yr) = chart.plotting_area().get_pixel_range();
-        let (px0, px1, py0, py1) = (xr.start, xr.end, yr.start, yr.end);
         let area = Rect {
-            x0: px0,
-            y0: py0,
-            x1: px1,
-            y1: py1,
+            x0: xr.start,
+            y0: yr.start,
+            x1: xr.end,
+            y1: yr.end,
         };
         let sized: Vec<(i32, i32, i32, i32)> = points
             .iter()
             .map(|p| {
                 let (x, y) = chart.backend_coord(&(p.fps, p.quality));
-                (x, y, char_w * p.label.chars().count() as i32, font_px + 2)
+                (x, y, CHAR_W * p.label.chars().count() as i32, FONT_PX + 2)
             })
             .collect();
-        // The legend goes in the corner where it covers the fewest points.
-        let entries = 1
-            + floors.len()
-            + [false, true]
-                .iter()
-                .filter(|&&r| points.iter().any(|p| p.reference == r))
-                .count();
-        let legend_w = 50
-            + char_w
-                * floors
-                    .iter()
-                    .map(|(l, _)| l.chars().count() + 8)
-                    .chain([30])
-                    .max()
-                    .unwrap_or(30) as i32;
-        let legend_h = 12 + 17 * entries as i32;
-        let corners = [
-            (SeriesLabelPosition::LowerLeft, px0, py1 - legend_h),
-            (
-                SeriesLabelPosition::LowerRight,
-                px1 - legend_w,
-                py1 - legend_h,
-            ),
-            (SeriesLabelPosition::UpperLeft, px0, py0),
-            (SeriesLabelPosition::UpperRight, px1 - legend_w, py0),
-        ];
-        let (legend_pos, legend_rect) = corners
-            .into_iter()
-            .map(|(pos, x, y)| {
-                let r = Rect {
-                    x0: x,
-                    y0: y,
-                    x1: x + legend_w + 10,
-                    y1: y + legend_h + 10,
-                };
-                (pos, r)
-            })
-            .min_by_key(|(_, r)| {
-                sized
-                    .iter()
-                    .filter(|&&(x, y, w, _)| {
-                        r.overlaps(&Rect {
-                            x0: x - 7,
-                            y0: y - 10,
-                            x1: x + w.min(80),
-                            y1: y + 10,
-                        })
-                    })
-                    .count()
-            })
-            .expect("four corners");
+        let (legend_pos, legend_rect) = legend_corner(points, floors, &sized, area);
         let spots = place_labels(&sized, area, &[legend_rect]);
-        let mut key = Vec::new();
-        for ((p, spot), &(x, y, _, _)) in points.iter().zip(&spots).zip(&sized) {
-            let color = if p.reference { BLACK } else { BLUE };
-            let font = (FONT, font_px).into_font().color(&color);
-            match spot {
-                Some((cx, cy)) => root
-                    .draw(&Text::new(p.label.clone(), (*cx, *cy), font))
-                    .map_err(|e| draw_err(path, e))?,
-                None => {
-                    key.push(format!("{}: {}", key.len() + 1, p.label));
-                    root.draw(&Text::new(format!("{}", key.len()), (x + 8, y - 16), font))
-                        .map_err(|e| draw_err(path, e))?;
-                }
-            }
-        }
+        let key = draw_labels(&root, points, &sized, &spots, path)?;
         draw_legend(&mut chart, path, legend_pos)?;
         // The key of numbered labels: in the top corner the legend does not take.
-        let key_x = if legend_rect.y0 == py0 && legend_rect.x0 == px0 {
-            px1 - 10 - char_w * key.iter().map(|k| k.chars().count()).max().unwrap_or(0) as i32
+        let key_x = if legend_rect.y0 == area.y0 && legend_rect.x0 == area.x0 {
+            area.x1 - 10 - CHAR_W * key.iter().map(|k| k.chars().count()).max().unwrap_or(0) as i32
         } else {
-            px0 + 10
+            area.x0 + 10
         };
         for (i, line) in key.iter().enumerate() {
             root.draw(&Text::new(
                 line.clone(),
-                (key_x, py0 + 8 + i as i32 * (font_px + 4)),
-                (FONT, font_px).into_font(),
+                (key_x, area.y0 + 8 + i as i32 * (FONT_PX + 4)),
+                (FONT, FONT_PX).into_font(),
             ))
             .map_err(|e| draw_err(path, e))?;
         }
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
+}
+
+/// The labels' font size and the width of a character in it (pixels).
+const FONT_PX: i32 = 13;
+const CHAR_W: i32 = 8;
+
+/// The plot's ranges: images/s from half the slowest point (1 at most) to three times the
+/// fastest (2,000 at least), log; the qualities and floors, padded.
+fn ranges(points: &[ParetoPoint], floors: &[(String, f64)]) -> ((f64, f64), (f64, f64)) {
+    let fps_min = points
+        .iter()
+        .map(|p| p.fps)
+        .fold(f64::INFINITY, f64::min)
+        .min(1.0);
+    let fps_max = points.iter().map(|p| p.fps).fold(1.0, f64::max).max(2000.0);
+    let qualities = || {
+        points
+            .iter()
+            .map(|p| p.quality)
+            .chain(floors.iter().map(|f| f.1))
+    };
+    let q_min = qualities().fold(f64::INFINITY, f64::min);
+    let q_max = qualities().fold(f64::NEG_INFINITY, f64::max);
+    let pad = ((q_max - q_min) * 0.15).max(0.5 * q_max.abs().max(1e-3) * 0.02);
+    ((fps_min / 2.0, fps_max * 3.0), (q_min - pad, q_max + pad))
+}
+
+/// The lower bounds as dashed grey lines across the log axis `x0..x1`.
+fn draw_floors<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    floors: &[(String, f64)],
+    (x0, x1): (f64, f64),
+    path: &Path,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    for (label, q) in floors {
+        let grey = BLACK.mix(0.5);
+        // Dashes: short segments across the log axis.
+        let n = 60;
+        let segments: Vec<Vec<(f64, f64)>> = (0..n)
+            .step_by(2)
+            .map(|k| {
+                let at = |t: f64| x0 * (x1 / x0).powf(t / n as f64);
+                vec![(at(k as f64), *q), (at(k as f64 + 1.0), *q)]
+            })
+            .collect();
+        chart
+            .draw_series(
+                segments
+                    .into_iter()
+                    .map(|s| PathElement::new(s, grey.stroke_width(2))),
+            )
+            .map_err(|e| draw_err(path, e))?
+            .label(format!("{label} ({q:.2})"))
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(2))
+            });
+    }
+    Ok(())
+}
+
+/// Our points filled blue, the paper's hollow black, each kind with a key entry where it has
+/// points.
+fn draw_points<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    points: &[ParetoPoint],
+    path: &Path,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let ours_style = BLUE.filled();
+    let paper_style = BLACK.stroke_width(2);
+    for (reference, name) in [(false, "ours (this CPU)"), (true, "paper (T4 GPU)")] {
+        // No key entry for the paper's points where there are none (another robot).
+        if !points.iter().any(|p| p.reference == reference) {
+            continue;
+        }
+        let style = if reference { paper_style } else { ours_style };
+        chart
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.reference == reference)
+                    .map(|p| Circle::new((p.fps, p.quality), 6, style)),
+            )
+            .map_err(|e| draw_err(path, e))?
+            .label(name)
+            .legend(move |(x, y)| Circle::new((x + 10, y), 6, style));
+    }
+    Ok(())
+}
+
+/// The legend's corner of the plotting `area`: the one where it covers the fewest points
+/// (`sized`: each point's pixel position and label size), and the rectangle it takes.
+fn legend_corner(
+    points: &[ParetoPoint],
+    floors: &[(String, f64)],
+    sized: &[(i32, i32, i32, i32)],
+    area: Rect,
+) -> (SeriesLabelPosition, Rect) {
+    let entries = 1
+        + floors.len()
+        + [false, true]
+            .iter()
+            .filter(|&&r| points.iter().any(|p| p.reference == r))
+            .count();
+    let legend_w = 50
+        + CHAR_W
+            * floors
+                .iter()
+                .map(|(l, _)| l.chars().count() + 8)
+                .chain([30])
+                .max()
+                .unwrap_or(30) as i32;
+    let legend_h = 12 + 17 * entries as i32;
+    let corners = [
+        (SeriesLabelPosition::LowerLeft, area.x0, area.y1 - legend_h),
+        (
+            SeriesLabelPosition::LowerRight,
+            area.x1 - legend_w,
+            area.y1 - legend_h,
+        ),
+        (SeriesLabelPosition::UpperLeft, area.x0, area.y0),
+        (SeriesLabelPosition::UpperRight, area.x1 - legend_w, area.y0),
+    ];
+    corners
+        .into_iter()
+        .map(|(pos, x, y)| {
+            let r = Rect {
+                x0: x,
+                y0: y,
+                x1: x + legend_w + 10,
+                y1: y + legend_h + 10,
+            };
+            (pos, r)
+        })
+        .min_by_key(|(_, r)| {
+            sized
+                .iter()
+                .filter(|&&(x, y, w, _)| {
+                    r.overlaps(&Rect {
+                        x0: x - 7,
+                        y0: y - 10,
+                        x1: x + w.min(80),
+                        y1: y + 10,
+                    })
+                })
+                .count()
+        })
+        .expect("four corners")
+}
+
+/// Each point's label at its free spot, or a number beside the point where none is free: the
+/// key lines of the numbered ones.
+fn draw_labels<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    points: &[ParetoPoint],
+    sized: &[(i32, i32, i32, i32)],
+    spots: &[Option<(i32, i32)>],
+    path: &Path,
+) -> Result<Vec<String>> {
+    let mut key = Vec::new();
+    for ((p, spot), &(x, y, _, _)) in points.iter().zip(spots).zip(sized) {
+        let color = if p.reference { BLACK } else { BLUE };
+        let font = (FONT, FONT_PX).into_font().color(&color);
+        match spot {
+            Some((cx, cy)) => root
+                .draw(&Text::new(p.label.clone(), (*cx, *cy), font))
+                .map_err(|e| draw_err(path, e))?,
+            None => {
+                key.push(format!("{}: {}", key.len() + 1, p.label));
+                root.draw(&Text::new(format!("{}", key.len()), (x + 8, y - 16), font))
+                    .map_err(|e| draw_err(path, e))?;
+            }
+        }
+    }
+    Ok(key)
 }
