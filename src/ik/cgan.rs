@@ -17,7 +17,7 @@
 //! epoch, and a killed run continues from its last epoch to the same result.
 
 use burn::module::Module;
-use burn::optim::GradientsParams;
+use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
 use nalgebra::Point3;
 use rand::SeedableRng;
@@ -31,7 +31,7 @@ use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
 use crate::train::losses::bce_with_logits;
 use crate::train::{
-    batcher::Batcher,
+    batcher::{Batch, Batcher},
     checkpoint::{save_module, save_renamed},
     convergence::{ConvergenceLog, FitCheckpoint, Plateau, ValidationPoint},
     trainer::autodiff_device,
@@ -118,6 +118,117 @@ impl GanCheckpoint {
     }
 }
 
+/// The two networks and their optimisers (Adam with beta 1 of 0.5, as GANs are trained).
+struct Gan {
+    generator: Mlp,
+    discriminator: Mlp,
+    g_optim: ModuleOptimizer,
+    d_optim: ModuleOptimizer,
+    /// Columns of a joint row the generator writes.
+    width: usize,
+}
+
+/// A checkpoint's files of a [`Gan`]: the networks, then their optimisers.
+const GAN_FILES: [&str; 4] = [
+    "generator.bpk",
+    "discriminator.bpk",
+    "generator_optimizer.bpk",
+    "discriminator_optimizer.bpk",
+];
+
+impl Gan {
+    /// One step on `batch` at `rate`: the discriminator on real pairs against generated ones
+    /// (the generator detached), then the generator to make it call its pairs real (the
+    /// non-saturating loss), noise seeded by the step. The generator's loss, if `read`.
+    fn step(
+        self,
+        batch: Batch,
+        step: usize,
+        rate: f64,
+        cfg: &GanConfig,
+        read: bool,
+    ) -> (Gan, Option<f64>) {
+        let Gan {
+            generator,
+            discriminator,
+            mut g_optim,
+            mut d_optim,
+            width,
+        } = self;
+        let p = batch.inputs;
+        let [n, _] = p.dims();
+        let tdev = p.device();
+        let real = batch.targets[0].clone().reshape([n, width]);
+        let ones = Tensor::<2>::ones([n, 1], &tdev);
+        let zeros = Tensor::<2>::zeros([n, 1], &tdev);
+        let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 1), &tdev);
+        let fake = generator
+            .forward(Tensor::cat(vec![p.clone(), z], 1))
+            .detach();
+        let d_loss = bce_with_logits(
+            discriminator.forward(Tensor::cat(vec![p.clone(), real], 1)),
+            ones.clone(),
+        ) + bce_with_logits(
+            discriminator.forward(Tensor::cat(vec![p.clone(), fake], 1)),
+            zeros,
+        );
+        let grads = GradientsParams::from_grads(d_loss.backward(), &discriminator);
+        let discriminator = d_optim.step(rate, discriminator, grads);
+        let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 2), &tdev);
+        let fake = generator.forward(Tensor::cat(vec![p.clone(), z], 1));
+        let g_loss = bce_with_logits(discriminator.forward(Tensor::cat(vec![p, fake], 1)), ones);
+        let value = read.then(|| g_loss.clone().into_scalar::<f32>() as f64);
+        let grads = GradientsParams::from_grads(g_loss.backward(), &generator);
+        let generator = g_optim.step(rate, generator, grads);
+        let gan = Gan {
+            generator,
+            discriminator,
+            g_optim,
+            d_optim,
+            width,
+        };
+        (gan, value)
+    }
+
+    /// The networks and optimisers saved in `c`'s folder.
+    fn restore(self, c: &GanCheckpoint) -> Result<Gan> {
+        let bad = |file: &str, e: &dyn std::fmt::Display| {
+            crate::train::checkpoint::unreadable_checkpoint(&c.path(file), &c.dir, e)
+        };
+        let load = |m: Mlp, file: &str| m.try_load_file(c.path(file)).map_err(|e| bad(file, &e));
+        let optim =
+            |o: ModuleOptimizer, file: &str| o.load(c.path(file)).map_err(|e| bad(file, &e));
+        Ok(Gan {
+            generator: load(self.generator, GAN_FILES[0])?,
+            discriminator: load(self.discriminator, GAN_FILES[1])?,
+            g_optim: optim(self.g_optim, GAN_FILES[2])?,
+            d_optim: optim(self.d_optim, GAN_FILES[3])?,
+            width: self.width,
+        })
+    }
+
+    /// The networks and optimisers into `c`'s folder.
+    fn save(&self, c: &GanCheckpoint) -> Result<()> {
+        save_module(&self.generator, &c.path(GAN_FILES[0]))?;
+        save_module(&self.discriminator, &c.path(GAN_FILES[1]))?;
+        save_renamed(&c.path(GAN_FILES[2]), |t| self.g_optim.save(t))?;
+        save_renamed(&c.path(GAN_FILES[3]), |t| self.d_optim.save(t))
+    }
+}
+
+/// The run's end at Ctrl-C after `epoch` (its checkpoint written), saying how to go on.
+fn interrupted(checkpoint: Option<&GanCheckpoint>, epoch: usize) -> crate::Error {
+    crate::Error::Interrupted(match checkpoint {
+        Some(c) => format!(
+            "CGAN stopped after epoch {epoch}; its checkpoint is in {}: run the same command with --resume to continue",
+            c.dir.display()
+        ),
+        None => format!(
+            "CGAN stopped after epoch {epoch}; this run keeps no checkpoint, so it starts afresh when run again"
+        ),
+    })
+}
+
 /// Train the conditional GAN on the random training pairs of `data`, its generator writing
 /// joints under `output`: `cfg.fit.epochs` epochs, or with `cfg.fit.converge` until the
 /// validation error (through `chain`) stops improving (its log returned).
@@ -139,19 +250,26 @@ pub fn train_gan(
         width,
         &tdev,
     );
-    let mut generator =
-        InverseModelConfig::with_output(3 + cfg.noise, cfg.generator_hidden.clone(), dof, output)
-            .init(&tdev, cfg.fit.seed)?;
-    let mut discriminator = InverseModelConfig {
-        inputs: 3 + width,
-        hidden: cfg.discriminator_hidden.clone(),
-        outputs: 1,
-        sigmoid_output: false,
-        unit_pairs: false,
-    }
-    .init(&tdev, cfg.fit.seed ^ 0xD15C)?;
-    let mut g_optim = crate::train::adam::adam_with_beta_1(0.5);
-    let mut d_optim = crate::train::adam::adam_with_beta_1(0.5);
+    let mut gan = Gan {
+        generator: InverseModelConfig::with_output(
+            3 + cfg.noise,
+            cfg.generator_hidden.clone(),
+            dof,
+            output,
+        )
+        .init(&tdev, cfg.fit.seed)?,
+        discriminator: InverseModelConfig {
+            inputs: 3 + width,
+            hidden: cfg.discriminator_hidden.clone(),
+            outputs: 1,
+            sigmoid_output: false,
+            unit_pairs: false,
+        }
+        .init(&tdev, cfg.fit.seed ^ 0xD15C)?,
+        g_optim: crate::train::adam::adam_with_beta_1(0.5),
+        d_optim: crate::train::adam::adam_with_beta_1(0.5),
+        width,
+    };
     let train_cfg = cfg.fit.train_config(set.len());
     let steps_per_epoch = set.len().div_ceil(train_cfg.batch.min(set.len()).max(1));
     let epochs = cfg
@@ -175,23 +293,9 @@ pub fn train_gan(
     if let Some(c) = &checkpoint
         && let Some(state) = c.load()
     {
-        let bad = |path: std::path::PathBuf, e: &dyn std::fmt::Display| {
-            crate::train::checkpoint::unreadable_checkpoint(&path, &c.dir, e)
-        };
-        let load = |m: Mlp, file: &str| {
-            m.try_load_file(c.path(file))
-                .map_err(|e| bad(c.path(file), &e))
-        };
-        generator = load(generator, "generator.bpk")?;
-        discriminator = load(discriminator, "discriminator.bpk")?;
-        g_optim = g_optim
-            .load(c.path("generator_optimizer.bpk"))
-            .map_err(|e| bad(c.path("generator_optimizer.bpk"), &e))?;
-        d_optim = d_optim
-            .load(c.path("discriminator_optimizer.bpk"))
-            .map_err(|e| bad(c.path("discriminator_optimizer.bpk"), &e))?;
+        gan = gan.restore(c)?;
         let best_epoch = state.log.as_ref().map_or(0, |l| l.best_epoch);
-        best = best_file.load(&c.dir, best_epoch, generator.valid())?;
+        best = best_file.load(&c.dir, best_epoch, gan.generator.valid())?;
         eprintln!(
             "CGAN: continuing from epoch {} (checkpoint in {})",
             state.epochs,
@@ -210,51 +314,26 @@ pub fn train_gan(
         crate::core::progress::progress_bar((epochs * steps_per_epoch) as u64, "CGAN", "steps");
     bar.set_position((first_epoch * steps_per_epoch) as u64);
     bar.reset_eta();
-    let mut g_losses = (0.0f64, 0usize);
     for epoch in first_epoch..epochs {
         if stopped {
             break;
         }
         let rate = cfg.fit.learning_rate * plateau.as_ref().map_or(1.0, |p| p.scale);
+        let mut g_losses = (0.0f64, 0usize);
         for step in epoch * steps_per_epoch..(epoch + 1) * steps_per_epoch {
-            let batch = batcher.batch(step);
-            let p = batch.inputs;
-            let [n, _] = p.dims();
-            let real = batch.targets[0].clone().reshape([n, width]);
-            let ones = Tensor::<2>::ones([n, 1], &tdev);
-            let zeros = Tensor::<2>::zeros([n, 1], &tdev);
-            // The discriminator: real pairs against generated ones (the generator detached).
-            let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 1), &tdev);
-            let fake = generator
-                .forward(Tensor::cat(vec![p.clone(), z], 1))
-                .detach();
-            let d_loss = bce_with_logits(
-                discriminator.forward(Tensor::cat(vec![p.clone(), real], 1)),
-                ones.clone(),
-            ) + bce_with_logits(
-                discriminator.forward(Tensor::cat(vec![p.clone(), fake], 1)),
-                zeros,
-            );
-            let grads = GradientsParams::from_grads(d_loss.backward(), &discriminator);
-            discriminator = d_optim.step(rate, discriminator, grads);
-            // The generator: make the discriminator call its pairs real (non-saturating loss).
-            let z = noise(n, cfg.noise, cfg.fit.seed ^ (2 * step as u64 + 2), &tdev);
-            let fake = generator.forward(Tensor::cat(vec![p.clone(), z], 1));
-            let g_loss =
-                bce_with_logits(discriminator.forward(Tensor::cat(vec![p, fake], 1)), ones);
-            if plateau.is_some() {
-                g_losses.0 += g_loss.clone().into_scalar::<f32>() as f64;
+            let (next, loss) = gan.step(batcher.batch(step), step, rate, cfg, plateau.is_some());
+            gan = next;
+            if let Some(v) = loss {
+                g_losses.0 += v;
                 g_losses.1 += 1;
             }
-            let grads = GradientsParams::from_grads(g_loss.backward(), &generator);
-            generator = g_optim.step(rate, generator, grads);
             bar.inc(1);
         }
         let (Some(rule), Some(log)) = (plateau.as_mut(), log.as_mut()) else {
             continue;
         };
         let candidate = Generator {
-            model: generator.valid(),
+            model: gan.generator.valid(),
             noise: cfg.noise,
         };
         let targets = &data.positions[data.validation()];
@@ -273,17 +352,13 @@ pub fn train_gan(
             validation: score,
             seconds: seconds(&started),
         });
-        g_losses = (0.0, 0);
         log.epochs = epoch + 1;
         log.stopped_on_plateau = stop;
         stopped = stop;
         if let Some(c) = &checkpoint {
             std::fs::create_dir_all(&c.dir).map_err(|e| crate::Error::io(&c.dir, e))?;
             best_file.save(&c.dir, log.best_epoch, best.as_ref())?;
-            save_module(&generator, &c.path("generator.bpk"))?;
-            save_module(&discriminator, &c.path("discriminator.bpk"))?;
-            save_renamed(&c.path("generator_optimizer.bpk"), |t| g_optim.save(t))?;
-            save_renamed(&c.path("discriminator_optimizer.bpk"), |t| d_optim.save(t))?;
+            gan.save(c)?;
             crate::core::atomic_file::write_json(
                 &c.path("state.json"),
                 &GanState {
@@ -312,17 +387,7 @@ pub fn train_gan(
         // checks the same flag after every step).
         if crate::core::interrupt::requested() {
             bar.abandon();
-            return Err(crate::Error::Interrupted(match &checkpoint {
-                Some(c) => format!(
-                    "CGAN stopped after epoch {}; its checkpoint is in {}: run the same command with --resume to continue",
-                    epoch + 1,
-                    c.dir.display()
-                ),
-                None => format!(
-                    "CGAN stopped after epoch {}; this run keeps no checkpoint, so it starts afresh when run again",
-                    epoch + 1
-                ),
-            }));
+            return Err(interrupted(checkpoint.as_ref(), epoch + 1));
         }
     }
     bar.finish();
@@ -331,7 +396,7 @@ pub fn train_gan(
     }
     Ok((
         Generator {
-            model: best.unwrap_or_else(|| generator.valid()),
+            model: best.unwrap_or_else(|| gan.generator.valid()),
             noise: cfg.noise,
         },
         log,
