@@ -603,6 +603,224 @@ fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Result<Option<T>> {
     })
 }
 
+/// What every training step of the field reads (the training set on the host, read once: a
+/// step finds its image's angles, camera and pixels there by the batch's indices rather than
+/// reading its batch back from the device) and the counts it keeps, so a resumed run reports
+/// all its steps.
+struct FieldSteps<'a> {
+    cfg: &'a Ffksm,
+    fit: &'a Fit<'a>,
+    hand_written: bool,
+    /// The curriculum's centre crop, and every pixel.
+    crop: Vec<usize>,
+    all: Vec<usize>,
+    host_inputs: Vec<f32>,
+    host_targets: Vec<f32>,
+    columns: usize,
+    pixels_per_image: usize,
+    /// Network evaluations and steps of training so far.
+    evaluations: std::cell::Cell<usize>,
+    steps: std::cell::Cell<usize>,
+}
+
+impl<'a> FieldSteps<'a> {
+    fn new(cfg: &'a Ffksm, fit: &'a Fit<'a>, hand_written: bool, earlier: [usize; 2]) -> Self {
+        let camera = cfg.field_camera(fit.camera);
+        let (h, w) = (camera.height, camera.width);
+        // FFKSM trains without input noise, so these are the batch's inputs.
+        debug_assert_eq!(fit.train.input_noise, 0.0);
+        let host = |t: Tensor<2>| {
+            t.into_data()
+                .convert::<f32>()
+                .try_into_vec::<f32>()
+                .expect("float")
+        };
+        let train_set = fit.train_set;
+        let host_targets = host(train_set.targets[0].clone().flatten::<2>(1, 3));
+        FieldSteps {
+            cfg,
+            fit,
+            hand_written,
+            crop: centre_crop(h, w, cfg.curriculum.crop),
+            all: (0..h * w).collect(),
+            host_inputs: host(train_set.inputs.clone()),
+            columns: train_set.inputs.dims()[1],
+            pixels_per_image: host_targets.len() / train_set.len().max(1),
+            host_targets,
+            evaluations: std::cell::Cell::new(earlier[0]),
+            steps: std::cell::Cell::new(earlier[1]),
+        }
+    }
+
+    /// The pixels step `step` trains on: the centre crop during the curriculum, then
+    /// `rays_per_step` drawn at random (seeded by the step) or every pixel.
+    fn pixels(&self, step: usize) -> std::borrow::Cow<'_, [usize]> {
+        let train = self.fit.train;
+        if step < self.cfg.curriculum.steps {
+            std::borrow::Cow::Borrowed(&self.crop)
+        } else if let Some(n) = self.cfg.rays_per_step.filter(|&n| n < self.all.len()) {
+            use rand::SeedableRng;
+            use rand::seq::IndexedRandom;
+            let mut rng = rand::rngs::StdRng::seed_from_u64(
+                train.seed ^ (step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
+            );
+            std::borrow::Cow::Owned(self.all.sample(&mut rng, n).copied().collect())
+        } else {
+            std::borrow::Cow::Borrowed(&self.all)
+        }
+    }
+
+    /// One step's loss: one image (its joint angles, then on multi-view data its camera), its
+    /// pixels marched densely (our hand-written backward pass where asked) or with skipping.
+    fn loss(&self, m: &OccupancyField, b: &crate::train::batcher::Batch) -> StepLoss {
+        let (cfg, fit) = (self.cfg, self.fit);
+        let dof = fit.robot.dof();
+        let i = b.indices[0];
+        let a = &self.host_inputs[i * self.columns..(i + 1) * self.columns];
+        let ppi = self.pixels_per_image;
+        let truth = &self.host_targets[i * ppi..(i + 1) * ppi];
+        let pixels = self.pixels(b.step);
+        let pixels: &[usize] = &pixels;
+        let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
+        let jitter = fit.train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        let own = views_of_rows(a, a.len(), dof, fit.camera)
+            .expect("the harness built the camera inputs from valid cameras")
+            .remove(0)
+            .1;
+        let own = cfg.field_camera(&own);
+        let radians = radians(&a[..dof], &fit.robot.chain);
+        let view = (&own, radians.as_slice());
+        self.steps.set(self.steps.get() + 1);
+        match cfg.train_marcher {
+            TrainMarcher::Dense => {
+                self.evaluations
+                    .set(self.evaluations.get() + pixels.len() * cfg.march.samples);
+                if self.hand_written {
+                    let step = dense_step(
+                        m,
+                        view,
+                        pixels,
+                        &t,
+                        cfg.robot_weight,
+                        &cfg.march,
+                        Some(jitter),
+                        fit.device,
+                    );
+                    return StepLoss::Computed {
+                        value: step.loss,
+                        gradients: step.gradients,
+                    };
+                }
+                let pred = render_silhouette(
+                    m,
+                    view,
+                    pixels,
+                    &cfg.march,
+                    Some(jitter),
+                    &b.inputs.device(),
+                );
+                StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
+            }
+            TrainMarcher::Skipping => {
+                let (pred, evaluations) = render_silhouette_skipping(
+                    m,
+                    &m.valid(),
+                    view,
+                    pixels,
+                    &cfg.march,
+                    &cfg.accelerated.grid,
+                    Some(jitter),
+                    &b.inputs.device(),
+                );
+                self.evaluations.set(self.evaluations.get() + evaluations);
+                StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
+            }
+        }
+    }
+
+    /// Network evaluations a step over a finished run of `log.step` steps.
+    fn per_step(&self, log: &TrainLog) -> f64 {
+        let cfg = self.cfg;
+        match cfg.train_marcher {
+            // Known exactly, however many processes the run took.
+            TrainMarcher::Dense => {
+                let cropped = log.step.min(cfg.curriculum.steps) * self.crop.len();
+                let full = log.step.saturating_sub(cfg.curriculum.steps) * self.all.len();
+                ((cropped + full) * cfg.march.samples) as f64 / log.step.max(1) as f64
+            }
+            TrainMarcher::Skipping => {
+                self.evaluations.get() as f64 / self.steps.get().max(1) as f64
+            }
+        }
+    }
+}
+
+/// The first training image, where collapse is probed: its angles (from the first camera),
+/// and whether its centre crop shows the robot (an all-black probe is a collapse only then;
+/// a robot framed automatically may lie outside the crop in that pose).
+struct CollapseProbe {
+    angles: Vec<f32>,
+    sees_robot: bool,
+}
+
+impl CollapseProbe {
+    fn new(fit: &Fit, crop: &[usize]) -> Self {
+        // The first training sample's row of a tensor, on the host.
+        fn first<const D: usize>(t: &Tensor<D>) -> Vec<f32> {
+            t.clone()
+                .slice([0..1])
+                .into_data()
+                .convert::<f32>()
+                .try_to_vec::<f32>()
+                .expect("float")
+        }
+        let dof = fit.robot.dof();
+        let image = first(&fit.train_set.targets[0]);
+        CollapseProbe {
+            angles: first(&fit.train_set.inputs)[..dof].to_vec(),
+            sees_robot: crop.iter().any(|&p| image[p] >= 0.5),
+        }
+    }
+
+    /// `Err(Collapsed)` where the field `m` draws the probe all black at `step`, inside the
+    /// restart rule's window (the last try, after `max_restarts`, trains to the end whatever it
+    /// draws: a robot the field cannot pick up then gets its row and its low score).
+    fn check(
+        &self,
+        cfg: &Ffksm,
+        fit: &Fit,
+        m: &OccupancyField,
+        step: usize,
+        restarts: usize,
+        crop: &[usize],
+    ) -> Result<()> {
+        let Some(r) = cfg
+            .restart
+            .as_ref()
+            .filter(|r| self.sees_robot && restarts < r.max_restarts)
+        else {
+            return Ok(());
+        };
+        if step > r.until || step % r.every.max(1) != 0 {
+            return Ok(());
+        }
+        let camera = cfg.field_camera(fit.camera);
+        let probe = render_silhouette(
+            &m.valid(),
+            (&camera, &radians(&self.angles, &fit.robot.chain)),
+            crop,
+            &cfg.march,
+            None,
+            fit.device,
+        );
+        if probe.max().into_scalar::<f32>() < 1e-3 {
+            Err(Error::Collapsed { step })
+        } else {
+            Ok(())
+        }
+    }
+}
+
 /// Train the field, restarting with a fresh model on collapse when the config asks for it:
 /// the field, its log, the restarts and the network evaluations per step.
 fn train_field(
@@ -611,27 +829,7 @@ fn train_field(
     fit: &Fit,
     hand_written: bool,
 ) -> Result<(OccupancyField, TrainLog, usize, f64)> {
-    let (train_set, plan, device, train) = (fit.train_set, fit.plan, fit.device, fit.train);
-    let camera = cfg.field_camera(fit.camera);
-    let (h, w) = (camera.height, camera.width);
-    let all: Vec<usize> = (0..h * w).collect();
-    let crop = centre_crop(h, w, cfg.curriculum.crop);
-    // The first training sample's row of a tensor, on the host.
-    fn first<const D: usize>(t: &Tensor<D>) -> Vec<f32> {
-        t.clone()
-            .slice([0..1])
-            .into_data()
-            .convert::<f32>()
-            .try_to_vec::<f32>()
-            .expect("float")
-    }
-    // The first training image's angles (from the first camera), where collapse is probed.
-    let dof = fit.robot.dof();
-    let probe_truth = first(&train_set.inputs)[..dof].to_vec();
-    // An all-black probe is a collapse only where the truth has robot pixels in the crop (a
-    // robot framed automatically may lie outside the centre crop in that pose).
-    let probe_image = first(&train_set.targets[0]);
-    let probe_sees_robot = crop.iter().any(|&p| probe_image[p] >= 0.5);
+    let (plan, train) = (fit.plan, fit.train);
     let resume = plan.resume;
     // Restarts after collapse so far, so a resumed run reports them (and initialises the same
     // model).
@@ -649,135 +847,21 @@ fn train_field(
     } else {
         [0, 0]
     };
-    let train_evaluations = std::cell::Cell::new(earlier[0]);
-    let train_steps = std::cell::Cell::new(earlier[1]);
-    // The training set on the host, read once: a step finds its image's angles, camera and
-    // pixels here (the batch's indices) rather than reading its batch back from the device.
-    // FFKSM trains without input noise, so these are the batch's inputs.
-    debug_assert_eq!(train.input_noise, 0.0);
-    let host = |t: Tensor<2>| {
-        t.into_data()
-            .convert::<f32>()
-            .try_into_vec::<f32>()
-            .expect("float")
-    };
-    let host_inputs = host(train_set.inputs.clone());
-    let columns = train_set.inputs.dims()[1];
-    let host_targets = host(train_set.targets[0].clone().flatten::<2>(1, 3));
-    let pixels_per_image = host_targets.len() / train_set.len().max(1);
+    let steps = FieldSteps::new(cfg, fit, hand_written, earlier);
+    let probe = CollapseProbe::new(fit, &steps.crop);
     loop {
         let seed = train.seed + 1000 * restarts as u64;
         let field = cfg.field.init(fit.train_device, seed)?;
-        let loss = |m: &OccupancyField, b: &crate::train::batcher::Batch| {
-            let i = b.indices[0];
-            let a = &host_inputs[i * columns..(i + 1) * columns];
-            let truth = &host_targets[i * pixels_per_image..(i + 1) * pixels_per_image];
-            let drawn: Vec<usize>;
-            let pixels = if b.step < cfg.curriculum.steps {
-                &crop
-            } else if let Some(n) = cfg.rays_per_step.filter(|&n| n < all.len()) {
-                use rand::SeedableRng;
-                use rand::seq::IndexedRandom;
-                let mut rng = rand::rngs::StdRng::seed_from_u64(
-                    train.seed ^ (b.step as u64).wrapping_mul(0xD1B5_4A32_D192_ED03),
-                );
-                drawn = all.sample(&mut rng, n).copied().collect();
-                &drawn
-            } else {
-                &all
-            };
-            let t: Vec<f32> = pixels.iter().map(|&p| truth[p]).collect();
-            let jitter = train.seed ^ (b.step as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-            // One image per step: its joint angles, then (multi-view data) its camera.
-            let own = views_of_rows(a, a.len(), dof, fit.camera)
-                .expect("the harness built the camera inputs from valid cameras")
-                .remove(0)
-                .1;
-            let own = cfg.field_camera(&own);
-            let radians = radians(&a[..dof], &fit.robot.chain);
-            let view = (&own, radians.as_slice());
-            train_steps.set(train_steps.get() + 1);
-            match cfg.train_marcher {
-                TrainMarcher::Dense => {
-                    train_evaluations
-                        .set(train_evaluations.get() + pixels.len() * cfg.march.samples);
-                    if hand_written {
-                        let step = dense_step(
-                            m,
-                            view,
-                            pixels,
-                            &t,
-                            cfg.robot_weight,
-                            &cfg.march,
-                            Some(jitter),
-                            device,
-                        );
-                        return StepLoss::Computed {
-                            value: step.loss,
-                            gradients: step.gradients,
-                        };
-                    }
-                    let pred = render_silhouette(
-                        m,
-                        view,
-                        pixels,
-                        &cfg.march,
-                        Some(jitter),
-                        &b.inputs.device(),
-                    );
-                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
-                }
-                TrainMarcher::Skipping => {
-                    let (pred, evaluations) = render_silhouette_skipping(
-                        m,
-                        &m.valid(),
-                        view,
-                        pixels,
-                        &cfg.march,
-                        &cfg.accelerated.grid,
-                        Some(jitter),
-                        &b.inputs.device(),
-                    );
-                    train_evaluations.set(train_evaluations.get() + evaluations);
-                    StepLoss::Graph(weighted_mse(pred, &t, cfg.robot_weight))
-                }
-            }
-        };
+        let loss = |m: &OccupancyField, b: &crate::train::batcher::Batch| steps.loss(m, b);
         let watch = |m: &OccupancyField, step: usize| -> Result<()> {
             // The counts go beside each checkpoint (saved right after this), so a run stopped
             // and resumed still reports all its steps.
             let every = train.checkpoint_every;
             if every > 0 && (step % every == 0 || step == train.steps) {
                 std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
-                write_json(&counts_path, &[train_evaluations.get(), train_steps.get()])?;
+                write_json(&counts_path, &[steps.evaluations.get(), steps.steps.get()])?;
             }
-            // The last try (after `max_restarts`) trains to the end whatever it draws: a robot
-            // the field cannot pick up then gets its row (and its low score), not an error.
-            let Some(r) = cfg
-                .restart
-                .as_ref()
-                .filter(|r| probe_sees_robot && restarts < r.max_restarts)
-            else {
-                return Ok(());
-            };
-            if step > r.until || step % r.every.max(1) != 0 {
-                return Ok(());
-            }
-            let valid = m.valid();
-            let probe = render_silhouette(
-                &valid,
-                (&camera, &radians(&probe_truth, &fit.robot.chain)),
-                &crop,
-                &cfg.march,
-                None,
-                device,
-            );
-            let max = probe.max().into_scalar::<f32>();
-            if max < 1e-3 {
-                Err(Error::Collapsed { step })
-            } else {
-                Ok(())
-            }
+            probe.check(cfg, fit, m, step, restarts, &steps.crop)
         };
         let label = if restarts == 0 {
             name.to_string()
@@ -788,22 +872,13 @@ fn train_field(
         match Trainer::new(train, &label)
             .checkpoint(Some(plan))
             .hooks(&mut watch)
-            .fit(field, train_set, loss)
+            .fit(field, fit.train_set, loss)
         {
             Ok((field, log)) => {
-                let counts = [train_evaluations.get(), train_steps.get()];
                 if plan.dir.is_dir() {
-                    write_json(&counts_path, &counts)?;
+                    write_json(&counts_path, &[steps.evaluations.get(), steps.steps.get()])?;
                 }
-                let per_step = match cfg.train_marcher {
-                    // Known exactly, however many processes the run took.
-                    TrainMarcher::Dense => {
-                        let cropped = log.step.min(cfg.curriculum.steps) * crop.len();
-                        let full = log.step.saturating_sub(cfg.curriculum.steps) * all.len();
-                        ((cropped + full) * cfg.march.samples) as f64 / log.step.max(1) as f64
-                    }
-                    TrainMarcher::Skipping => counts[0] as f64 / counts[1].max(1) as f64,
-                };
+                let per_step = steps.per_step(&log);
                 return Ok((field.valid(), log, restarts, per_step));
             }
             Err(Error::Collapsed { step }) => {
@@ -823,8 +898,8 @@ fn train_field(
                     std::fs::create_dir_all(&plan.dir).map_err(|e| Error::io(&plan.dir, e))?;
                     write_json(&restarts_path, &restarts)?;
                 }
-                train_evaluations.set(0);
-                train_steps.set(0);
+                steps.evaluations.set(0);
+                steps.steps.set(0);
             }
             Err(e) => return Err(e),
         }
