@@ -137,6 +137,33 @@ const GAN_FILES: [&str; 4] = [
 ];
 
 impl Gan {
+    /// Fresh networks on `tdev` (seeded by the fit's seed): the generator from a position and
+    /// `cfg.noise` noise values to `dof` joints under `output`, the discriminator from a
+    /// position and a joint row to one logit.
+    fn new(cfg: &GanConfig, dof: usize, output: JointOutput, tdev: &Device) -> Result<Gan> {
+        let width = output.width(dof);
+        Ok(Gan {
+            generator: InverseModelConfig::with_output(
+                3 + cfg.noise,
+                cfg.generator_hidden.clone(),
+                dof,
+                output,
+            )
+            .init(tdev, cfg.fit.seed)?,
+            discriminator: InverseModelConfig {
+                inputs: 3 + width,
+                hidden: cfg.discriminator_hidden.clone(),
+                outputs: 1,
+                sigmoid_output: false,
+                unit_pairs: false,
+            }
+            .init(tdev, cfg.fit.seed ^ 0xD15C)?,
+            g_optim: crate::train::adam::adam_with_beta_1(0.5),
+            d_optim: crate::train::adam::adam_with_beta_1(0.5),
+            width,
+        })
+    }
+
     /// One step on `batch` at `rate`: the discriminator on real pairs against generated ones
     /// (the generator detached), then the generator to make it call its pairs real (the
     /// non-saturating loss), noise seeded by the step. The generator's loss, if `read`.
@@ -229,6 +256,43 @@ fn interrupted(checkpoint: Option<&GanCheckpoint>, epoch: usize) -> crate::Error
     })
 }
 
+/// The networks, optimisers and best generator a checkpoint `c` holds (`state` read from it).
+fn resume(
+    gan: Gan,
+    c: &GanCheckpoint,
+    best_file: &mut crate::train::convergence::BestFile,
+    state: &GanState,
+) -> Result<(Gan, Option<Mlp>)> {
+    let gan = gan.restore(c)?;
+    let best_epoch = state.log.as_ref().map_or(0, |l| l.best_epoch);
+    let best = best_file.load(&c.dir, best_epoch, gan.generator.valid())?;
+    eprintln!(
+        "CGAN: continuing from epoch {} (checkpoint in {})",
+        state.epochs,
+        c.dir.display()
+    );
+    Ok((gan, best))
+}
+
+/// The generator as it is (off the autodiff graph) and its mean reach error (cm) on the
+/// validation targets, one sample each.
+fn validation_cm(
+    generator: &Mlp,
+    chain: &KinematicChain,
+    data: &IkData,
+    cfg: &GanConfig,
+    device: &Device,
+) -> (Generator, f64) {
+    let candidate = Generator {
+        model: generator.valid(),
+        noise: cfg.noise,
+    };
+    let targets = &data.positions[data.validation()];
+    let joints = candidate.sample(data, targets, cfg.fit.inference_batch, 0x7A1, device);
+    let score = DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm;
+    (candidate, score)
+}
+
 /// Train the conditional GAN on the random training pairs of `data`, its generator writing
 /// joints under `output`: `cfg.fit.epochs` epochs, or with `cfg.fit.converge` until the
 /// validation error (through `chain`) stops improving (its log returned).
@@ -250,26 +314,7 @@ pub fn train_gan(
         width,
         &tdev,
     );
-    let mut gan = Gan {
-        generator: InverseModelConfig::with_output(
-            3 + cfg.noise,
-            cfg.generator_hidden.clone(),
-            dof,
-            output,
-        )
-        .init(&tdev, cfg.fit.seed)?,
-        discriminator: InverseModelConfig {
-            inputs: 3 + width,
-            hidden: cfg.discriminator_hidden.clone(),
-            outputs: 1,
-            sigmoid_output: false,
-            unit_pairs: false,
-        }
-        .init(&tdev, cfg.fit.seed ^ 0xD15C)?,
-        g_optim: crate::train::adam::adam_with_beta_1(0.5),
-        d_optim: crate::train::adam::adam_with_beta_1(0.5),
-        width,
-    };
+    let mut gan = Gan::new(cfg, dof, output, &tdev)?;
     let train_cfg = cfg.fit.train_config(set.len());
     let steps_per_epoch = set.len().div_ceil(train_cfg.batch.min(set.len()).max(1));
     let epochs = cfg
@@ -293,14 +338,7 @@ pub fn train_gan(
     if let Some(c) = &checkpoint
         && let Some(state) = c.load()
     {
-        gan = gan.restore(c)?;
-        let best_epoch = state.log.as_ref().map_or(0, |l| l.best_epoch);
-        best = best_file.load(&c.dir, best_epoch, gan.generator.valid())?;
-        eprintln!(
-            "CGAN: continuing from epoch {} (checkpoint in {})",
-            state.epochs,
-            c.dir.display()
-        );
+        (gan, best) = resume(gan, c, &mut best_file, &state)?;
         first_epoch = state.epochs;
         plateau = state.plateau;
         log = state.log;
@@ -332,13 +370,7 @@ pub fn train_gan(
         let (Some(rule), Some(log)) = (plateau.as_mut(), log.as_mut()) else {
             continue;
         };
-        let candidate = Generator {
-            model: gan.generator.valid(),
-            noise: cfg.noise,
-        };
-        let targets = &data.positions[data.validation()];
-        let joints = candidate.sample(data, targets, cfg.fit.inference_batch, 0x7A1, device);
-        let score = DistanceErrors::from_metres(&reach_errors(chain, targets, &joints)).mean_cm;
+        let (candidate, score) = validation_cm(&gan.generator, chain, data, cfg, device);
         let (improved, stop) = rule.observe(score);
         if improved {
             best = Some(candidate.model);
