@@ -51,6 +51,7 @@ pub fn channel_total(
 /// Each channel's mean, biased variance and `1 / sqrt(var + epsilon)`, and the running
 /// statistics moved towards them by `momentum` (as burn's `BatchNorm` does: `r (1 - m) + s m`).
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn statistics(
     x: &Tensor<f32>,
@@ -97,6 +98,7 @@ fn reaching(dy: f32, y: f32, #[comptime] relu: bool) -> f32 {
 /// Each channel's `γ` and `β` gradients: `Σ g (x - mean) / std` and `Σ g`, with `g` the
 /// gradient reaching the normalisation ([`reaching`]).
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn grad_sums(
     x: &Tensor<f32>,
@@ -140,6 +142,7 @@ pub fn grad_sums(
 /// The input gradient, element by element:
 /// `γ/std (g - Σg/M - (x - mean)/std · Σ g (x - mean)/std / M)`, `M` a channel's count.
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn x_grad(
     x: &Tensor<f32>,

@@ -128,6 +128,7 @@ pub trait GpuKernelOps: Backend {
     /// A batch-norm layer's input gradient (see [`Self::batch_norm_param_grads`]; `gamma`,
     /// and the `γ` and `β` gradients it gave).
     #[fusion(dtype = x, shape = x)]
+    // A backend operation takes its tensors as arguments (burn records each one for fusion).
     #[allow(clippy::too_many_arguments)]
     fn batch_norm_x_grad(
         x: FloatTensor<Self>,
@@ -182,6 +183,7 @@ pub trait GpuKernelOps: Backend {
     #[fusion(meta = |cols, _bias, _with_bias, _grid, out, _kernel, _stride, _padding| {
         TensorSpec::new(Shape::new(*out), cols.dtype)
     })]
+    // A backend operation takes its tensors as arguments (burn records each one for fusion).
     #[allow(clippy::too_many_arguments)]
     fn col2im(
         cols: FloatTensor<Self>,
@@ -269,6 +271,7 @@ pub trait GpuKernelOps: Backend {
     /// new running mean and variance (burn's `BatchNorm::forward` in training, as one
     /// operation of the autodiff graph).
     #[fusion(default)]
+    // A backend operation takes its tensors as arguments (burn records each one for fusion).
     #[allow(clippy::too_many_arguments)]
     fn batch_norm_train(
         x: FloatTensor<Self>,

@@ -23,6 +23,7 @@ use super::{elementwise, empty_f32};
 
 /// `cols` `[N, h·w, C·k·k]` from `t` `[N, C, H, W]` (any strides) for a grid of `h × w`.
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn columns(
     t: &Tensor<f32>,
@@ -61,6 +62,7 @@ pub fn columns(
 /// `y[n, c, oy, ox] = b[c] + Σ cols[n, (iy, ix), (c, ky, kx)]` over `oy = iy·s − p + ky`
 /// (and the same across), contiguous out; `b` only `with_bias`.
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn col2im(
     cols: &Tensor<f32>,
@@ -152,6 +154,7 @@ pub fn launch_columns(
 
 /// [`col2im`]: the image `out` `[N, C, H, W]` from its columns over a grid of `in_hw`, plus
 /// `bias` `[C]` where there is one.
+// Launches a kernel that takes its buffers and sizes as arguments.
 #[allow(clippy::too_many_arguments)]
 pub fn launch_col2im(
     cols: CubeTensor,

@@ -122,6 +122,7 @@ fn clip_scale(partials: &Tensor<f32>, max_norm: f32, #[comptime] block: usize) -
 /// With `clip`, each gradient is first scaled by the global-norm clipping factor of
 /// `partials` (the sums of squares of every gradient of the step, from [`sum_of_squares`]).
 #[cube(launch)]
+// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
 pub fn adam(
     params: &Sequence<OwnedTensor<f32>>,
