@@ -339,6 +339,15 @@ fn ctrl_c_stops_every_long_command_within_seconds_and_leaves_nothing() {
     ]);
     let inputs = ["arm.urdf", "model", "targets.csv"];
     let (model, targets) = (d("model"), d("targets.csv"));
+    let solve = vec![
+        "solve",
+        "--model",
+        &model,
+        "--targets",
+        &targets,
+        "--out",
+        "a.csv",
+    ];
     let cases: Vec<(&str, &str, Vec<&str>, f64)> = vec![
         (
             "dataset, rendering",
@@ -362,34 +371,8 @@ fn ctrl_c_stops_every_long_command_within_seconds_and_leaves_nothing() {
             ],
             1.0,
         ),
-        (
-            "ik solve, reading its targets",
-            ik,
-            vec![
-                "solve",
-                "--model",
-                &model,
-                "--targets",
-                &targets,
-                "--out",
-                "a.csv",
-            ],
-            0.2,
-        ),
-        (
-            "ik solve, solving",
-            ik,
-            vec![
-                "solve",
-                "--model",
-                &model,
-                "--targets",
-                &targets,
-                "--out",
-                "a.csv",
-            ],
-            3.0,
-        ),
+        ("ik solve, reading its targets", ik, solve.clone(), 0.2),
+        ("ik solve, solving", ik, solve, 3.0),
     ];
     let mut failures = Vec::new();
     for (name, binary, args, after) in cases {
