@@ -79,3 +79,13 @@ impl Error {
         }
     }
 }
+
+/// A number as a message shows it: as written for ordinary sizes, in scientific notation where
+/// it would run to many digits (`1e300` rather than 301 digits, `-1` rather than `-1e0`).
+pub fn short_number(v: f64) -> String {
+    if v != 0.0 && v.is_finite() && !(1e-4..1e6).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}

@@ -145,7 +145,8 @@ impl LmConfig {
                 Ok(())
             } else {
                 Err(format!(
-                    "a tolerance of {v:e} {unit} is not between 1e-9 and {max:.4} {unit} (the success threshold)"
+                    "a tolerance of {} {unit} is not between 1e-9 and {max:.4} {unit} (the success threshold)",
+                    crate::core::error::short_number(v)
                 ))
             }
         };

@@ -431,7 +431,8 @@ fn shapes_from_urdf(
             Ok(v)
         } else {
             Err(err(format!(
-                "{what} must be a positive number of at most {MAX_VALUE} m, got {v:e}"
+                "{what} must be a positive number of at most {MAX_VALUE} m, got {}",
+                crate::core::error::short_number(v)
             )))
         }
     };
