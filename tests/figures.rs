@@ -18,6 +18,8 @@ fn log_ticks_label_every_tick_once_across_the_range() {
     assert!(wide.len() <= 8, "{wide:?}");
     assert_eq!(tick_label(0.02), "0.02");
     assert!(log_ticks(0.0, 1.0).is_empty());
+    // Under half a decade: more than one labelled tick.
+    assert_eq!(log_ticks(0.045, 0.07).len(), 3);
 }
 
 #[test]

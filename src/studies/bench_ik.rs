@@ -697,6 +697,12 @@ pub fn write_report(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
     draw(out, rows)
 }
 
+/// [`draw`] from the `results.csv` in `dir` (`reports --figures`).
+pub fn draw_figures(dir: &Path) -> Result<()> {
+    let rows: Vec<BenchIkRow> = crate::report::table::read_csv(&dir.join("results.csv"))?;
+    draw(dir, &rows)
+}
+
 /// Success (%) against wall milliseconds a target, one line per solver (on the most threads).
 fn draw(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
     let most = rows.iter().map(|r| r.threads).max().unwrap_or(1);

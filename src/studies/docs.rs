@@ -339,7 +339,12 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
     type Draw = fn(&Path) -> Result<()>;
     // The studies' own figures, each redrawn by the study's code from its CSVs:
     // (the CSV it reads, a figure it draws, the drawing code).
-    let studies: [(&str, &str, Draw); 3] = [
+    let studies: [(&str, &str, Draw); 4] = [
+        (
+            "results.csv",
+            "success_against_time.png",
+            crate::studies::bench_ik::draw_figures,
+        ),
         (
             "curves.csv",
             "curves_90.png",

@@ -129,7 +129,10 @@ pub fn log_ticks(lo: f64, hi: f64) -> Vec<f64> {
         return vec![];
     }
     let decades = hi.log10() - lo.log10();
-    let mantissas: &[f64] = if decades <= 2.2 {
+    // Under half a decade 1-2-5 may leave one tick (0.045 to 0.07 ms): every integer mantissa.
+    let mantissas: &[f64] = if decades <= 0.5 {
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    } else if decades <= 2.2 {
         &[1.0, 2.0, 5.0]
     } else if decades <= 4.5 {
         &[1.0, 3.0]
