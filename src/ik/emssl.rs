@@ -10,7 +10,7 @@
 //!   absolute difference of the normalised joints below `agreement`), or after
 //!   `max_iterations`. The forward model is only called, never differentiated.
 //!
-//! ## What limits EMSSL (the study in `reports/emssl_study`, `crate::studies::emssl_study`)
+//! ## What limits EMSSL (the study in `reports/emssl_study`, `crate::studies::emssl::study`)
 //! On 22,000 UR5 goals (2,000 held out), the paper's network, one knob at a time from the
 //! schedule Table II ran with at 3bc9f24 (learning rate and noise both times 0.9 per
 //! iteration), test mean of the model the validation goals pick, +-90 / +-180 degrees:
@@ -60,7 +60,7 @@ use crate::train::{
 /// one Adam optimiser serves the whole run.
 ///
 /// The fields after `target_reach_cm` are the knobs of the study in `reports/emssl_study`
-/// ([`crate::studies::emssl_study`]); their defaults are the schedule above.
+/// ([`crate::studies::emssl::study`]); their defaults are the schedule above.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EmsslConfig {
     pub max_iterations: usize,

@@ -2,7 +2,7 @@
 //! self-supervised, only on their positions and the forward model) and answers the test
 //! targets in batches; it hands back its answers (one or more rows: one sample, the best of
 //! k), its validation curve and, for EMSSL, its iteration curve. A new method is one type
-//! implementing [`IkMethod`] and one line in Table II's list (`studies::emssl_table2`).
+//! implementing [`IkMethod`] and one line in Table II's list (`studies::emssl::table2`).
 
 use std::path::{Path, PathBuf};
 

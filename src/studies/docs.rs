@@ -273,7 +273,7 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
     // Table II's compact table, from its results and config.
     for d in &dirs {
         if d.join("table2.md").is_file()
-            && let Some(text) = crate::studies::emssl_table2::table2_markdown(d)?
+            && let Some(text) = crate::studies::emssl::table2::table2_markdown(d)?
         {
             out.push((
                 d.join("table2.md")
@@ -348,17 +348,17 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
         (
             "curves.csv",
             "curves_90.png",
-            crate::studies::emssl_study::draw_figures,
+            crate::studies::emssl::study::draw_figures,
         ),
         (
             "adaptation_curve.csv",
             "adaptation_ur5.png",
-            crate::studies::emssl_adaptation::draw_figures,
+            crate::studies::emssl::adaptation::draw_figures,
         ),
         (
             "thread_sweep.csv",
             "sampling_time_vs_threads.png",
-            crate::studies::emssl_sampling_speed::draw_figures,
+            crate::studies::emssl::sampling_speed::draw_figures,
         ),
     ];
     let mut dirs = Vec::new();
@@ -389,7 +389,7 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
         // Table II's error against the base angle at +-180 degrees, from its answers.
         if dir.join("table2.md").is_file()
             && dir.join("error_by_base_angle_180.png").is_file()
-            && crate::studies::emssl_table2::draw_error_by_base_angle(&dir, 180.0)?
+            && crate::studies::emssl::table2::draw_error_by_base_angle(&dir, 180.0)?
         {
             drawn += 1;
         }
@@ -398,7 +398,7 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
             if dir.join("learning_curve.png").is_file() && dir.join(csv).is_file() {
                 let header = std::fs::read_to_string(dir.join(csv)).unwrap_or_default();
                 if header.starts_with("robot,range_deg,iteration,") {
-                    crate::studies::emssl_table2::redraw_learning_curve(&dir, csv)?;
+                    crate::studies::emssl::table2::redraw_learning_curve(&dir, csv)?;
                     drawn += 1;
                 }
             }

@@ -14,7 +14,7 @@ use crate::self_models::neurokin::{
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::self_models::run_config::SELF_MODEL_PRESETS;
 use crate::studies::ablations::{Ablation, run_ablation};
-use crate::studies::emssl_table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
+use crate::studies::emssl::table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
 
 use crate::core::error::Result;
 use crate::core::preset::Preset;
@@ -222,7 +222,7 @@ pub fn run_emssl_table2(opts: &RunOptions, dir: &Path) -> Result<String> {
     )?;
     let cfg = IkComparisonConfig::named(&opts.preset)?;
     let robot = opts.ik_robot()?;
-    let outcome = crate::studies::emssl_table2::run(&cfg, &robot, dir, opts.device, opts.resume)?;
+    let outcome = crate::studies::emssl::table2::run(&cfg, &robot, dir, opts.device, opts.resume)?;
     let rows = outcome
         .rows
         .iter()
@@ -250,9 +250,9 @@ pub fn run_emssl_seeds(opts: &RunOptions, dir: &Path) -> Result<String> {
         },
         "emssl_seeds",
     )?;
-    let cfg = crate::studies::emssl_seeds::SeedsConfig::preset(&opts.preset)?;
+    let cfg = crate::studies::emssl::seeds::SeedsConfig::preset(&opts.preset)?;
     let robot = opts.ik_robot()?;
-    crate::studies::emssl_seeds::run(&cfg, &robot, dir, opts.device, opts.resume)
+    crate::studies::emssl::seeds::run(&cfg, &robot, dir, opts.device, opts.resume)
 }
 
 /// What limits EMSSL: one knob at a time, both ranges (reports/emssl_study).
@@ -264,9 +264,9 @@ pub fn run_emssl_study(opts: &RunOptions, dir: &Path) -> Result<String> {
         },
         "emssl_study",
     )?;
-    let cfg = crate::studies::emssl_study::StudyConfig::preset(&opts.preset)?;
+    let cfg = crate::studies::emssl::study::StudyConfig::preset(&opts.preset)?;
     let robot = opts.ik_robot()?;
-    crate::studies::emssl_study::run(&cfg, &robot, dir, opts.device, opts.resume)
+    crate::studies::emssl::study::run(&cfg, &robot, dir, opts.device, opts.resume)
 }
 
 /// Figure 6 of the EMSSL paper: EMSSL's test error against iteration, stopping off.
@@ -274,32 +274,32 @@ pub fn run_emssl_learning_curve(opts: &RunOptions, dir: &Path) -> Result<String>
     reject_self_model_switches(opts, "emssl_learning_curve")?;
     let base = IkComparisonConfig::preset(&opts.preset)?;
     let iterations = if opts.preset == "quick" { 8 } else { 40 };
-    let cfg = crate::studies::emssl_learning_curve::config(&base, iterations);
+    let cfg = crate::studies::emssl::learning_curve::config(&base, iterations);
     let robot = opts.ik_robot()?;
-    crate::studies::emssl_learning_curve::run(&cfg, &base.emssl, &robot, dir, opts.device)
+    crate::studies::emssl::learning_curve::run(&cfg, &base.emssl, &robot, dir, opts.device)
 }
 
 /// Table III and Figure 7 of the EMSSL paper: the sampling phase's time under each strategy.
 pub fn run_emssl_sampling_speed(opts: &RunOptions, dir: &Path) -> Result<String> {
     reject_self_model_switches(opts, "emssl_sampling_speed")?;
-    let mut cfg = crate::studies::emssl_sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
+    let mut cfg = crate::studies::emssl::sampling_speed::SamplingSpeedConfig::preset(&opts.preset)?;
     if let Some(l) = &opts.latencies {
         cfg.latencies = l.clone();
     }
     let robot = opts.ik_robot()?;
-    crate::studies::emssl_sampling_speed::run(&cfg, &robot, dir, opts.device)
+    crate::studies::emssl::sampling_speed::run(&cfg, &robot, dir, opts.device)
 }
 
 /// Table IV of the EMSSL paper: adapting the inverse model to a changed arm, two approaches.
 pub fn run_emssl_adaptation(opts: &RunOptions, dir: &Path) -> Result<String> {
     reject_self_model_switches(opts, "emssl_adaptation")?;
-    let cfg = crate::studies::emssl_adaptation::AdaptationConfig::preset(&opts.preset)?;
+    let cfg = crate::studies::emssl::adaptation::AdaptationConfig::preset(&opts.preset)?;
     let robot = if opts.robot.is_some() || opts.urdf.is_some() {
         Some(opts.ik_robot()?)
     } else {
         None
     };
-    crate::studies::emssl_adaptation::run(&cfg, robot, dir, opts.device)
+    crate::studies::emssl::adaptation::run(&cfg, robot, dir, opts.device)
 }
 
 /// Reading the body from images through the trained NeuroKin: joint angles and encoder drift.

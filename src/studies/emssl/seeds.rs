@@ -19,7 +19,7 @@
 //! median_cm,p95_cm`, then the share above 10 cm, the optimiser steps and provenance),
 //! `summary.csv` (per method: mean and spread over the seeds) and `validation_curves.png`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::core::atomic_file::write_json;
 use crate::core::device::DeviceChoice;
@@ -29,7 +29,7 @@ use crate::ik::data::JointOutput;
 use crate::ik::dsl::{DistalConfig, DistalForward};
 use crate::ik::method::IkMethod;
 use crate::sim::robot::Robot;
-use crate::studies::emssl_table2::{IkComparisonConfig, IkRow, RangeRun};
+use crate::studies::emssl::table2::{IkComparisonConfig, IkRow, RangeRun, RunScope};
 use crate::train::config::TrainConfig;
 
 /// The study's protocol: Table II's config at the study's scale, the range and the seeds.
@@ -215,16 +215,18 @@ pub fn run(
     let tables: Vec<IkComparisonConfig> = cfg.seeds.iter().map(|&s| seeded(cfg, s)).collect();
     let quiet = |_: &[IkRow], _: &[crate::ik::method::ValidationRow]| Ok(());
     let mut runs: Vec<RangeRun> = Vec::new();
-    for (t, seed) in tables.iter().zip(&cfg.seeds) {
-        runs.push(RangeRun::start(
-            t,
+    let seed_dirs: Vec<PathBuf> = (cfg.seeds.iter())
+        .map(|seed| dir.join("runs").join(format!("seed_{seed}")))
+        .collect();
+    for (t, seed_dir) in tables.iter().zip(&seed_dirs) {
+        let scope = RunScope {
+            cfg: t,
             robot,
-            cfg.range_deg,
-            &dir.join("runs").join(format!("seed_{seed}")),
+            dir: seed_dir,
             device,
             resume,
-            &quiet,
-        )?);
+        };
+        runs.push(RangeRun::start(scope, cfg.range_deg, &quiet)?);
     }
     let write = |runs: &[RangeRun]| write_outputs(cfg, dir, runs);
     for i in 0..runs.len() {

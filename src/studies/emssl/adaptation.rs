@@ -42,7 +42,7 @@ use crate::ik::{
 use crate::sim::arm_change::ArmChange;
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;
-use crate::studies::emssl_table2::IkComparisonConfig;
+use crate::studies::emssl::table2::IkComparisonConfig;
 use crate::train::trainer::autodiff_device;
 
 /// Everything Table IV's run depends on.

@@ -1,5 +1,5 @@
 //! Figure 6 of the EMSSL paper: EMSSL's test error against iteration. The same settings as
-//! Table II's EMSSL ([`crate::studies::emssl_table2::IkComparisonConfig`]) but with the stopping rule
+//! Table II's EMSSL ([`crate::studies::emssl::table2::IkComparisonConfig`]) but with the stopping rule
 //! off, so the whole curve shows for a fixed number of iterations; the iteration where the
 //! rule would have stopped is reported beside it.
 
@@ -11,7 +11,7 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::IkData;
 use crate::ik::emssl::{EmsslConfig, EmsslIteration, StopRule, emssl};
 use crate::sim::robot::Robot;
-use crate::studies::emssl_table2::{CurveRow, IkComparisonConfig, write_curves};
+use crate::studies::emssl::table2::{CurveRow, IkComparisonConfig, write_curves};
 
 /// Table II's config with `iterations` EMSSL iterations, no stopping and no polishing
 /// (Figure 6 is Algorithm 1's curve).
