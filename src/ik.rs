@@ -14,7 +14,7 @@ pub mod dls;
 pub mod drl;
 pub mod dsl;
 pub mod emssl;
-pub mod emssl_iteration;
+
 pub mod flow;
 pub mod learning;
 pub mod method;

@@ -1,0 +1,215 @@
+//! Answering targets: the flow's samples refined by Levenberg-Marquardt, and what a batch of
+//! answers amounts to.
+
+use super::PoseModel;
+use burn::tensor::Device;
+
+use super::training::condition_rows;
+use crate::core::error::{Error, Result};
+use crate::core::spread::Spread;
+use crate::ik::flow::{sample_rows, sample_rows_from};
+use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, solve};
+use crate::sim::kinematics::KinematicChain;
+
+impl PoseModel {
+    /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
+    /// (from random starts where it stalls), in target order. Ctrl-C (the command line's
+    /// [`crate::core::interrupt`]) ends it between blocks of targets with
+    /// [`Error::Interrupted`].
+    pub fn solve(
+        &self,
+        chain: &KinematicChain,
+        targets: &[Vec<PoseTarget>],
+        k: usize,
+        device: &Device,
+    ) -> Result<Vec<Vec<PoseSolution>>> {
+        self.solve_with(chain, targets, k, &self.saved.config.lm, device)
+    }
+
+    /// [`Self::solve`] with other solver settings (a budget of random starts, tolerances).
+    pub fn solve_with(
+        &self,
+        chain: &KinematicChain,
+        targets: &[Vec<PoseTarget>],
+        k: usize,
+        cfg: &LmConfig,
+        device: &Device,
+    ) -> Result<Vec<Vec<PoseSolution>>> {
+        let stop = crate::core::interrupt::requested;
+        self.solve_until(chain, targets, k, cfg, device, &stop)
+    }
+
+    /// [`Self::solve_with`], asking `stop` on the calling thread before each block of targets
+    /// (a few thousand answers, well under a second): `true` ends it with
+    /// [`Error::Interrupted`] (Python passes its own signal check). The answers are those of
+    /// one pass over all targets: each block samples the flow with the seeds a single pass
+    /// would use.
+    pub fn solve_until(
+        &self,
+        chain: &KinematicChain,
+        targets: &[Vec<PoseTarget>],
+        k: usize,
+        cfg: &LmConfig,
+        device: &Device,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<Vec<Vec<PoseSolution>>> {
+        use rayon::prelude::*;
+        /// The flow samples this many rows a batch (a block here).
+        const FLOW_BATCH: usize = 1024;
+        let k = k.max(1);
+        // Targets refined between two questions to `stop`: about 4,096 answers.
+        let per_check = (4096 / k).max(1);
+        let ranges = &self.saved.ranges;
+        let paths = chain.tip_paths();
+        let mut answers: Vec<Vec<PoseSolution>> = Vec::with_capacity(targets.len());
+        for (b, block) in targets.chunks(FLOW_BATCH).enumerate() {
+            let first = b * FLOW_BATCH;
+            let rows = condition_rows(&self.data, block, self.saved.config.position_only);
+            let samples = sample_rows_from(
+                &self.flow, &self.data, &rows, k, FLOW_BATCH, 0x5EED, b, device,
+            );
+            for (c, part) in block.chunks(per_check).enumerate() {
+                if stop() {
+                    return Err(Error::Interrupted(format!(
+                        "stopped after {} of {} targets; nothing was written",
+                        answers.len(),
+                        targets.len()
+                    )));
+                }
+                let offset = c * per_check;
+                // Each sample refined on its own (the family of answers, not one), from random
+                // starts where it stalls; the random starts differ between samples and targets.
+                let solved: Vec<Vec<PoseSolution>> = part
+                    .par_iter()
+                    .enumerate()
+                    .map(|(j, t)| {
+                        let (i, j) = (first + offset + j, offset + j);
+                        (0..k)
+                            .map(|s| {
+                                let start = [samples[s][j].clone()];
+                                solve(&paths, t, &start, ranges, cfg, (i * k + s) as u64)
+                            })
+                            .collect()
+                    })
+                    .collect();
+                answers.extend(solved);
+            }
+        }
+        Ok(answers)
+    }
+
+    /// The flow's own answers (one sample per target, no refinement).
+    pub fn sample(&self, targets: &[Vec<PoseTarget>], device: &Device) -> Vec<Vec<f64>> {
+        let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
+        sample_rows(&self.flow, &self.data, &rows, 1, 1024, 0x5EED, device)
+            .pop()
+            .unwrap_or_default()
+    }
+
+    pub fn position_only(&self) -> bool {
+        self.saved.config.position_only
+    }
+
+    pub fn dof(&self) -> usize {
+        self.saved.joint_names.len()
+    }
+
+    /// The tips a target row gives poses of (empty: the one tip, columns `x,y,z,...`).
+    pub fn tips(&self) -> &[String] {
+        &self.saved.tips
+    }
+}
+
+/// What a batch of answers amounts to (one entry of `answers` per target, its k answers).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct SolveStats {
+    pub targets: usize,
+    /// Targets with at least one exact answer (every joint is inside its limits by
+    /// construction; `outside_limits` counts the answers that are not, as a check).
+    pub exact_targets: usize,
+    pub exact_answers: usize,
+    /// Mean over targets of the distinct exact answers (more than 0.1 rad apart in a joint).
+    pub distinct_mean: f64,
+    /// Share of targets (%) with at least 5 distinct exact answers.
+    pub distinct_5_pct: f64,
+    /// Mean Levenberg-Marquardt iterations and starts per answer.
+    pub iterations_mean: f64,
+    pub starts_mean: f64,
+    pub outside_limits: usize,
+    /// The answers' pose errors, every answer (exact or not): position (mm) and rotation
+    /// (degrees), the largest over the tips of each.
+    pub position_mm: Spread,
+    pub rotation_deg: Spread,
+}
+
+impl SolveStats {
+    pub fn of(answers: &[Vec<PoseSolution>], cfg: &LmConfig, ranges: &[[f64; 2]]) -> Self {
+        let (mut exact_targets, mut exact_answers, mut families, mut five) = (0, 0, 0, 0);
+        let (mut iterations, mut starts, mut n, mut outside) = (0, 0, 0, 0);
+        for sols in answers {
+            let exact: Vec<&[f64]> = sols
+                .iter()
+                .filter(|a| a.exact(cfg))
+                .map(|a| a.joints.as_slice())
+                .collect();
+            exact_answers += exact.len();
+            exact_targets += usize::from(!exact.is_empty());
+            let d = distinct(&exact, 0.1);
+            families += d;
+            five += usize::from(d >= 5);
+            for a in sols {
+                iterations += a.iterations;
+                starts += a.starts;
+                n += 1;
+                outside += usize::from(!crate::sim::kinematics::within(&a.joints, ranges, 1e-12));
+            }
+        }
+        let t = answers.len().max(1) as f64;
+        SolveStats {
+            targets: answers.len(),
+            exact_targets,
+            exact_answers,
+            distinct_mean: families as f64 / t,
+            distinct_5_pct: 100.0 * five as f64 / t,
+            iterations_mean: iterations as f64 / n.max(1) as f64,
+            starts_mean: starts as f64 / n.max(1) as f64,
+            outside_limits: outside,
+            position_mm: Spread::of(answers.iter().flatten().map(|a| 1e3 * a.position_error_m)),
+            rotation_deg: Spread::of(
+                answers
+                    .iter()
+                    .flatten()
+                    .map(|a| a.rotation_error_rad.to_degrees()),
+            ),
+        }
+    }
+
+    /// Share of targets solved exactly (%).
+    pub fn exact_pct(&self) -> f64 {
+        100.0 * self.exact_targets as f64 / self.targets.max(1) as f64
+    }
+
+    /// The answers' precision in words: `pose error median/p98/max 0.0001/0.0002/0.0004 mm,
+    /// ... degrees`.
+    pub fn precision(&self) -> String {
+        format!(
+            "pose error median/p98/max {} mm, {} degrees",
+            self.position_mm.short(2),
+            self.rotation_deg.short(2)
+        )
+    }
+}
+
+/// Joint vectors more than `apart` (rad) apart in some joint, counted greedily.
+pub fn distinct(solutions: &[&[f64]], apart: f64) -> usize {
+    let mut kept: Vec<&[f64]> = Vec::new();
+    for s in solutions {
+        if kept
+            .iter()
+            .all(|k| k.iter().zip(s.iter()).any(|(a, b)| (a - b).abs() > apart))
+        {
+            kept.push(s);
+        }
+    }
+    kept.len()
+}

@@ -1,0 +1,94 @@
+//! A learned full-pose IK model people can keep and use: a conditional flow (IKFlow-style,
+//! [`crate::ik::flow`]) conditioned on the target's position and orientation, trained on joint
+//! samples drawn within the robot's limits, saved with the robot's fingerprint, joint names
+//! and limits; answers refined to exact by Levenberg-Marquardt ([`crate::ik::pose`]).
+//!
+//! A saved model is a folder: `model.bpk` (the flow's weights), `model.json` ([`SavedModel`]:
+//! the config, the robot as given and its fingerprint, joint names, ranges, the position
+//! normalisation). The condition of a target: its position normalised per axis over the
+//! training positions' bounds, then (unless the model is position-only) its unit quaternion
+//! (w, x, y, z) with `w >= 0`.
+
+mod answer;
+mod columns;
+mod saved;
+mod training;
+
+use crate::core::preset::Preset;
+use crate::ik::data::{IkData, IkDataConfig};
+use crate::ik::flow::{FlowConfig, FlowIk};
+use crate::ik::pose::LmConfig;
+
+pub use answer::{SolveStats, distinct};
+pub use columns::{
+    MAX_TARGET_COORDINATE, joint_columns, read_targets, target_columns, target_from_values,
+};
+pub use saved::{SavedModel, fingerprint};
+pub use training::train;
+
+/// How a pose model is trained and answers.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PoseModelConfig {
+    pub preset: String,
+    /// Joint samples (drawn within the limits, narrowed to +-`range_deg`).
+    pub data: IkDataConfig,
+    pub flow: FlowConfig,
+    /// Condition on the position only (the EMSSL paper's setting).
+    pub position_only: bool,
+    pub lm: LmConfig,
+}
+
+impl Preset for PoseModelConfig {
+    /// 200,000 samples, the standard flow trained to a validation plateau or 100 epochs
+    /// (about 25 s an epoch on 2 CPU cores).
+    fn paper() -> Self {
+        let mut flow = FlowConfig::standard();
+        flow.fit.converge = Some(crate::train::convergence::Convergence {
+            max_epochs: 100,
+            ..crate::train::convergence::Convergence::standard()
+        });
+        PoseModelConfig {
+            preset: "paper".into(),
+            data: IkDataConfig {
+                samples: 210_000,
+                train: 200_000,
+                range_deg: 180.0,
+                seed: 0,
+                validation: 5_000,
+            },
+            flow,
+            position_only: false,
+            lm: LmConfig::standard(),
+        }
+    }
+
+    /// 3,000 samples, a small flow, 5 epochs: seconds.
+    fn quick() -> Self {
+        let mut flow = FlowConfig::standard();
+        flow.couplings = 4;
+        flow.hidden = vec![32, 32];
+        flow.fit.epochs = 5;
+        flow.fit.converge = None;
+        PoseModelConfig {
+            preset: "quick".into(),
+            data: IkDataConfig {
+                samples: 3_000,
+                train: 2_900,
+                range_deg: 180.0,
+                seed: 0,
+                validation: 0,
+            },
+            flow,
+            position_only: false,
+            lm: LmConfig::standard(),
+        }
+    }
+}
+
+/// A trained model ready to answer.
+pub struct PoseModel {
+    pub saved: SavedModel,
+    pub flow: FlowIk,
+    /// The data's normalisations (joints and positions), rebuilt from `saved`.
+    data: IkData,
+}

@@ -1,0 +1,122 @@
+//! Training a pose model: joint samples within the robot's limits, their poses as the
+//! flow's conditions, the flow fitted.
+
+use super::{PoseModel, PoseModelConfig};
+use std::path::Path;
+
+use burn::tensor::Device;
+
+use super::saved::{SavedModel, fingerprint, save_model};
+use crate::core::error::Result;
+use crate::ik::data::IkData;
+use crate::ik::flow::{FlowIk, fit_flow, sample_rows};
+use crate::ik::pose::{PoseTarget, pose_error};
+use crate::sim::robot::Robot;
+use crate::sim::robots::RobotSpec;
+
+/// The condition rows of `targets` (for each tip, its position normalised, then its
+/// quaternion with `w >= 0`).
+pub(super) fn condition_rows(
+    data: &IkData,
+    targets: &[Vec<PoseTarget>],
+    position_only: bool,
+) -> Vec<f32> {
+    let tips = targets.first().map_or(1, Vec::len);
+    let mut rows = Vec::with_capacity(targets.len() * tips * 7);
+    for t in targets.iter().flatten() {
+        rows.extend(data.normalise_position(&t.position));
+        if !position_only {
+            let q = t
+                .orientation
+                .expect("a full-pose model's targets have orientations");
+            let c = q.coords; // (x, y, z, w)
+            let sign = if c.w < 0.0 { -1.0 } else { 1.0 };
+            rows.extend([c.w, c.x, c.y, c.z].map(|v| (sign * v) as f32));
+        }
+    }
+    rows
+}
+
+/// The condition width of a model: 3 or 7 values a tip.
+pub(super) fn condition_width(position_only: bool, tips: usize) -> usize {
+    tips.max(1) * if position_only { 3 } else { 7 }
+}
+
+/// Train a model of `robot` (as `spec` names it) and save it into `dir`.
+pub fn train(
+    spec: &RobotSpec,
+    robot: &Robot,
+    cfg: &PoseModelConfig,
+    dir: &Path,
+    device: &Device,
+) -> Result<PoseModel> {
+    let chain = &robot.chain;
+    let mut data = IkData::generate(chain, &cfg.data)?;
+    let targets: Vec<Vec<PoseTarget>> = data.joints[data.train()]
+        .iter()
+        .map(|q| PoseTarget::of(chain, q))
+        .collect();
+    let tips = chain.tip_names();
+    if tips.len() > 1 {
+        // Several tips share one position normalisation: the box of all their positions.
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for t in targets.iter().flatten() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(t.position[k]);
+                hi[k] = hi[k].max(t.position[k]);
+            }
+        }
+        data.position_bounds = [lo, hi];
+    }
+    let width = condition_width(cfg.position_only, tips.len());
+    let validation: Vec<Vec<PoseTarget>> = data.joints[data.validation()]
+        .iter()
+        .map(|q| PoseTarget::of(chain, q))
+        .collect();
+    let val_rows = condition_rows(&data, &validation, cfg.position_only);
+    let batch = cfg.flow.fit.inference_batch;
+    // A run to convergence keeps a checkpoint after every epoch in `dir/checkpoint/`: the same
+    // command, run again after a kill, continues from its last epoch to the same model.
+    let checkpoint = dir.join("checkpoint");
+    let mut flow_cfg = cfg.flow.clone();
+    flow_cfg.fit.checkpoint = Some(crate::train::convergence::FitCheckpoint {
+        dir: checkpoint.clone(),
+        settings: serde_json::json!({ "config": cfg, "robot": fingerprint(chain) }),
+    });
+    let trained = fit_flow(
+        &data,
+        condition_rows(&data, &targets, cfg.position_only),
+        width,
+        &flow_cfg,
+        device,
+        |m: &FlowIk| {
+            // One sample per validation target: its mean position error (cm).
+            let q = sample_rows(m, &data, &val_rows, 1, batch, 0x7A1, device)
+                .pop()
+                .unwrap_or_default();
+            let n = q.len().max(1) as f64;
+            q.iter()
+                .zip(&validation)
+                .map(|(q, t)| 100.0 * pose_error(chain, q, t).0)
+                .sum::<f64>()
+                / n
+        },
+    )?;
+    let fresh = !dir.exists() || dir.read_dir().is_ok_and(|mut d| d.next().is_none());
+    let description = SavedModel::describe(cfg, spec, chain, tips, &data);
+    let saved = save_model(dir, &trained, description, checkpoint.as_path());
+    if saved.is_err() && fresh {
+        // A run that could not save (a full disk) leaves no empty or partial folder.
+        for name in ["model.bpk", "model.json", "validation_curve.csv"] {
+            let _ = std::fs::remove_file(dir.join(name));
+        }
+        let _ = std::fs::remove_dir(dir);
+    }
+    let saved = saved?;
+    Ok(PoseModel {
+        saved,
+        flow: trained.model,
+        data,
+    })
+}
