@@ -15,8 +15,8 @@ use selfmodel::ik::mlp::InverseModelConfig;
 use selfmodel::ik::sampling_pass::{ForwardModel, Latency, Workers, sampling_pass};
 use selfmodel::sim::arm_change::ArmChange;
 use selfmodel::sim::tensor_kinematics::TensorChain;
-use selfmodel::studies::emssl_adaptation::{AdaptationConfig, adapt_robot};
-use selfmodel::studies::emssl_sampling_speed::mlp_flop_per_row;
+use selfmodel::studies::emssl::adaptation::{AdaptationConfig, adapt_robot};
+use selfmodel::studies::emssl::sampling_speed::mlp_flop_per_row;
 
 fn ur5() -> selfmodel::sim::robot::Robot {
     selfmodel::sim::dh_robot::ur5([-1.6, 1.6])

@@ -1,12 +1,13 @@
 //! Where an EMSSL run keeps its state between iterations (model, optimiser, best model,
 //! curve, the rules' state) and the settings it must match to continue.
 
-use super::{EmsslIteration, StopRule};
-use crate::core::error::Result;
-use crate::ik::mlp::Mlp;
 use burn::optim::ModuleOptimizer;
 
+use crate::core::error::Result;
+use crate::ik::mlp::Mlp;
 use crate::train::convergence::Plateau;
+
+use super::{EmsslIteration, StopRule};
 
 /// Where an EMSSL run keeps its state, and the settings it must match to continue.
 pub(super) struct EmsslCheckpoint {

@@ -1,10 +1,10 @@
 //! EMSSL as a Table II method.
 
-use super::{EmsslConfig, emssl_checkpointed};
 use crate::core::error::Result;
+use crate::ik::learning::{FitConfig, predict};
 use crate::ik::mlp::InverseModelConfig;
 
-use crate::ik::learning::{FitConfig, predict};
+use super::{EmsslConfig, emssl_checkpointed};
 
 /// EMSSL as a Table II method: checkpointed in the task's files (a killed run continues), its
 /// answers kept for the refinement that starts from them.

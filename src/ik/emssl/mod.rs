@@ -34,17 +34,16 @@ use burn::tensor::Device;
 
 use crate::core::error::Result;
 use crate::ik::data::IkData;
+use crate::ik::learning::FitConfig;
 use crate::ik::mlp::{InverseModelConfig, Mlp};
 use crate::sim::kinematics::KinematicChain;
-
-use crate::ik::learning::FitConfig;
-
 use crate::train::trainer::autodiff_device;
-pub use iteration::EmsslIteration;
 
 use checkpoint::EmsslCheckpoint;
-pub use method::EmsslMethod;
 use run::Run;
+
+pub use iteration::EmsslIteration;
+pub use method::EmsslMethod;
 
 /// EMSSL's schedule and stopping rule.
 ///

@@ -2,27 +2,26 @@
 //! go, the model trained on those pairs, scored, stopped by its rule, then polished.
 
 use burn::module::Module;
+use burn::optim::ModuleOptimizer;
 use burn::tensor::Device;
 use nalgebra::Point3;
-
-use super::{
-    EmsslConfig, EmsslIteration, StopRule,
-    checkpoint::{EmsslCheckpoint, EmsslState},
-};
-use crate::core::error::{Error, Result};
-use crate::ik::data::{DistanceErrors, IkData, JointOutput, distances, reach_errors};
-use crate::ik::mlp::Mlp;
-use crate::sim::kinematics::KinematicChain;
-use burn::optim::ModuleOptimizer;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, Normal};
 
+use crate::core::error::{Error, Result};
+use crate::ik::data::{DistanceErrors, IkData, JointOutput, distances, reach_errors};
 use crate::ik::learning::{FitConfig, fit, fit_converged, joint_set, mse, predict, test_errors};
-
+use crate::ik::mlp::Mlp;
+use crate::sim::kinematics::KinematicChain;
 use crate::train::{
     config::TrainConfig,
     convergence::{Convergence, Plateau},
+};
+
+use super::{
+    EmsslConfig, EmsslIteration, StopRule,
+    checkpoint::{EmsslCheckpoint, EmsslState},
 };
 
 /// Perturb `joints` (radians, each within its range of `ranges`) with Gaussian noise of standard deviation `sigma`

@@ -1,15 +1,16 @@
 //! Answering targets: the flow's samples refined by Levenberg-Marquardt, and what a batch of
 //! answers amounts to.
 
-use super::PoseModel;
 use burn::tensor::Device;
 
-use super::training::condition_rows;
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
 use crate::ik::flow::{sample_rows, sample_rows_from};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, solve};
 use crate::sim::kinematics::KinematicChain;
+
+use super::PoseModel;
+use super::training::condition_rows;
 
 impl PoseModel {
     /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt

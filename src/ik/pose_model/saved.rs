@@ -1,13 +1,11 @@
 //! A saved model: what `model.json` holds and checks, the robot's fingerprint, writing a
 //! trained model and loading it back (against the robot it was trained on).
 
-use super::{PoseModel, PoseModelConfig};
 use std::path::Path;
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor};
 
-use super::training::condition_width;
 use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
 use crate::core::input_file::{file_fnv, fnv};
@@ -16,6 +14,9 @@ use crate::ik::flow::FlowIk;
 use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
+
+use super::training::condition_width;
+use super::{PoseModel, PoseModelConfig};
 
 /// What `model.json` holds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

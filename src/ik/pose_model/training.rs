@@ -1,18 +1,19 @@
 //! Training a pose model: joint samples within the robot's limits, their poses as the
 //! flow's conditions, the flow fitted.
 
-use super::{PoseModel, PoseModelConfig};
 use std::path::Path;
 
 use burn::tensor::Device;
 
-use super::saved::{SavedModel, fingerprint, save_model};
 use crate::core::error::Result;
 use crate::ik::data::IkData;
 use crate::ik::flow::{FlowIk, fit_flow, sample_rows};
 use crate::ik::pose::{PoseTarget, pose_error};
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
+
+use super::saved::{SavedModel, fingerprint, save_model};
+use super::{PoseModel, PoseModelConfig};
 
 /// The condition rows of `targets` (for each tip, its position normalised, then its
 /// quaternion with `w >= 0`).

@@ -7,9 +7,10 @@ use burn::backend::{DType, Flex, TensorMetadata};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, TensorData};
 
-use super::{CpuKernelOps, adam_step_composed, bilinear_options, kernel_supports};
 use crate::kernels::conv_gemm::{self, ConvGeometry, weight_grad};
 use crate::kernels::{bilinear_resize, linear, pointwise};
+
+use super::{CpuKernelOps, adam_step_composed, bilinear_options, kernel_supports};
 
 /// `(data, [batch, channels, h, w])` of a contiguous f32 flex tensor.
 fn f32_nchw(t: &FlexTensor) -> (FlexTensor, [usize; 4]) {

@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use burn::tensor::{Device, Tensor};
 
-use super::{config::Ffksm, training::radians};
 use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::evaluation::{Predictions, iou, psnr_db};
@@ -18,6 +17,8 @@ use crate::self_models::ffksm::marcher::render_dense;
 use crate::self_models::harness::{grid_picks, nth_image};
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
+
+use super::{config::Ffksm, training::radians};
 
 /// Dense marching against the accelerated marcher, the same model and test images.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]

@@ -6,13 +6,6 @@ use std::sync::{Arc, Mutex};
 
 use burn::tensor::{Device, Tensor, TensorData};
 
-use super::{
-    config::Ffksm,
-    evaluation::{
-        NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, novel_view_figure, render_all,
-        write_reports,
-    },
-};
 use crate::core::error::{Error, Result};
 use crate::data::dataset::Dataset;
 use crate::eval::evaluation::DepthPixels;
@@ -26,6 +19,14 @@ use crate::self_models::{
 };
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
+
+use super::{
+    config::Ffksm,
+    evaluation::{
+        NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, novel_view_figure, render_all,
+        write_reports,
+    },
+};
 
 /// How far the papers' arm reaches from its base (m): a framed robot's scene is shrunk to it.
 pub(super) const PAPERS_ARM_REACH_M: f64 = 0.45;

@@ -5,11 +5,6 @@ use std::sync::Arc;
 
 use burn::module::Module;
 
-use super::{
-    config::{DenseGradients, Ffksm, FfksmVariant, TrainMarcher, ffksm_run},
-    renderer::{FfksmRenderer, FfksmShared, FfksmState, PAPERS_ARM_REACH_M},
-    training::{fingerprint, train_field},
-};
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::self_models::ffksm::accelerated_marcher::AcceleratedConfig;
@@ -21,6 +16,12 @@ use crate::self_models::{
 };
 use crate::sim::camera::Camera;
 use crate::train::config::TrainConfig;
+
+use super::{
+    config::{DenseGradients, Ffksm, FfksmVariant, TrainMarcher, ffksm_run},
+    renderer::{FfksmRenderer, FfksmShared, FfksmState, PAPERS_ARM_REACH_M},
+    training::{fingerprint, train_field},
+};
 
 impl SelfModel for Ffksm {
     const KIND: &'static str = "ffksm";

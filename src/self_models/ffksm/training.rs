@@ -6,7 +6,6 @@ use std::path::Path;
 use burn::module::Module;
 use burn::tensor::{Tensor, TensorData};
 
-use super::config::{Ffksm, TrainMarcher};
 use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
 use crate::self_models::ffksm::accelerated_marcher::render_silhouette_skipping;
@@ -20,6 +19,8 @@ use crate::train::{
     hooks::Watch,
     trainer::{StepLoss, Trainer},
 };
+
+use super::config::{Ffksm, TrainMarcher};
 
 /// Row-major indices of the central `crop x crop` pixels of a `height x width` image.
 pub fn centre_crop(height: usize, width: usize, crop: usize) -> Vec<usize> {

@@ -3,9 +3,10 @@
 
 use std::path::Path;
 
-use super::predictions::{answers_file, read_reached};
 use crate::core::error::Result;
 use crate::ik::method::ValidationRow;
+
+use super::predictions::{answers_file, read_reached};
 
 /// `error_by_base_angle_<range>.png`: each learned method's error against the target's angle
 /// about the base's vertical axis (atan2(y, x)), one panel per method, with the median per

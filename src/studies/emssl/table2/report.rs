@@ -3,11 +3,12 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::core::error::{Error, Result};
+
 use super::{
     config::IkComparisonConfig,
     predictions::{answers_file, read_reached},
 };
-use crate::core::error::{Error, Result};
 
 /// One method in one joint range: a row of Table II.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]

@@ -6,11 +6,6 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use nalgebra::Point3;
 
-use super::{
-    config::IkComparisonConfig,
-    predictions::{read_predictions, write_predictions},
-    report::{IkRow, paper_reference, set_ratios},
-};
 use crate::core::atomic_file::write_json;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
@@ -20,6 +15,12 @@ use crate::ik::emssl::EmsslIteration;
 use crate::ik::flow::{FlowIk, sample};
 use crate::ik::method::{Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed};
 use crate::sim::robot::Robot;
+
+use super::{
+    config::IkComparisonConfig,
+    predictions::{read_predictions, write_predictions},
+    report::{IkRow, paper_reference, set_ratios},
+};
 
 /// What one method (a unit of the run) produced in one range, kept for `--resume`.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
