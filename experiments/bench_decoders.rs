@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench_decoders::{
+use selfmodel::studies::bench::decoders::{
     Batches, attach_torch, console_table, run_batches, run_torch,
 };
 

@@ -36,7 +36,7 @@ fn main() -> ExitCode {
     selfmodel::cli::git_revision();
     run_main(|| {
         let rows =
-            selfmodel::studies::bench_ffksm_step::run(args.device, args.quick, args.repeats)?;
+            selfmodel::studies::bench::ffksm_step::run(args.device, args.quick, args.repeats)?;
         println!(
             "{:<24} {:<13} {:>9} {:>9} {:>9} {:>8}",
             "model", "path", "median s", "min s", "GFLOP/s", "speedup"

@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use selfmodel::cli::run_main;
 use selfmodel::core::spread::format_significant;
-use selfmodel::studies::bench_ik::{
+use selfmodel::studies::bench::ik::{
     BenchIkConfig, EQUAL_PRECISION_MM_DEG, default_out, run, summary_rows,
 };
 
@@ -42,7 +42,7 @@ struct Args {
 
 /// The ranking at equal precision in one line a thread count: ours at its default budget
 /// against the reference with the most answers within the common precision a second.
-fn equal_precision_line(rows: &[selfmodel::studies::bench_ik::BenchIkRow]) -> String {
+fn equal_precision_line(rows: &[selfmodel::studies::bench::ik::BenchIkRow]) -> String {
     let (mm, deg) = EQUAL_PRECISION_MM_DEG;
     let mut text = String::new();
     let ours = rows.iter().filter(|r| {

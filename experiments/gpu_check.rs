@@ -1,4 +1,4 @@
-//! The GPU check of issue 48 in one binary (`studies::gpu_check`): built here with
+//! The GPU check of issue 48 in one binary (`studies::bench::gpu_check`): built here with
 //! `--features wgpu`, carried to a GPU machine and run there by `scripts/gpu_check.sh`.
 
 use std::path::PathBuf;
@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
-use selfmodel::studies::gpu_check::{GpuCheck, Part, cpu_decoders, k3dgs_cpu, run};
+use selfmodel::studies::bench::gpu_check::{GpuCheck, Part, cpu_decoders, k3dgs_cpu, run};
 
 /// Measure selfmodel on a GPU beside PyTorch on the same GPU, and on its CPU at several
 /// thread counts beside PyTorch at as many: kernel launches and host reads per training step,

@@ -937,7 +937,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         .output()
         .unwrap();
     common::assert_ok(&o);
-    let rows: Vec<selfmodel::studies::bench_ik::BenchIkRow> =
+    let rows: Vec<selfmodel::studies::bench::ik::BenchIkRow> =
         selfmodel::report::table::read_csv(&bench.join("results.csv")).unwrap();
     assert!(
         rows.iter()

@@ -670,7 +670,7 @@ fn the_step_benchmark_times_both_paths_on_the_same_step() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::core::preset::Preset;
     use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
-    use selfmodel::studies::bench_ffksm_step::{run, step_flop};
+    use selfmodel::studies::bench::ffksm_step::{run, step_flop};
     // Per point, forward: 33x128 + 128x128 (coordinate encoder), 128x128 (first layer's
     // coordinate half), 128x128 + 128x32 + 32x2 = 57,536 multiply-adds; backward twice that
     // less the first layer's input gradient (33x128): 110,848.

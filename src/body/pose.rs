@@ -182,6 +182,9 @@ pub fn pose_losses(
 /// `device`: [`Render::differentiable`]), which renders `image`-sized silhouettes of a robot
 /// with joint `ranges` (degrees). `guesses`: one starting pose per image, or none.
 /// `progress(done)` is told how many images are finished.
+// Each argument is a different noun the caller names (the renderer, where it runs, the image
+// size, what is observed, the joint ranges, the starting guesses, the settings, the progress
+// callback); no two travel together elsewhere, so a struct would only rename them.
 #[allow(clippy::too_many_arguments)]
 pub fn pose_from_image(
     renderer: &dyn Render,

@@ -460,6 +460,7 @@ impl Generator {
     }
 
     /// For each position, the one of `k` samples whose forward kinematics lands closest.
+    // The sampler's inputs as `sample` takes them plus `k`; callers name each.
     #[allow(clippy::too_many_arguments)]
     pub fn best_of(
         &self,

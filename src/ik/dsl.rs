@@ -214,6 +214,8 @@ pub fn dsl(
 /// The inverse model trained through the arm's exact forward kinematics: its sigmoid outputs
 /// mapped onto the joint ranges, the chain's differentiable forward kinematics, the position
 /// normalised as the targets are; the loss is DSL's (squared distance in normalised position).
+// Two devices (the training device with autodiff and the inference one) and the run's
+// settings, each named at its one caller.
 #[allow(clippy::too_many_arguments)]
 fn inverse_through_arm(
     chain: &KinematicChain,

@@ -396,6 +396,7 @@ pub fn sample_rows(
 
 /// [`sample_rows`] of rows that come after `batches_before` batches of the same pass: the
 /// seeds those batches would have had in one call, so a pass split into blocks samples as one.
+// `sample_rows`' arguments and the batches before this block, each named at its callers.
 #[allow(clippy::too_many_arguments)]
 pub fn sample_rows_from(
     model: &FlowIk,

@@ -141,6 +141,8 @@ pub fn fit_set(
 }
 
 /// Train `model` to map `positions` to `joints` (radians), normalised, by mean squared error.
+// The training's nouns (model, optimiser, data and its pairs, settings, label, device), each
+// named at its callers; `fit_set` is the same on a prepared set.
 #[allow(clippy::too_many_arguments)]
 pub fn fit(
     model: Mlp,

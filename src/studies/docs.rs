@@ -343,7 +343,7 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
         (
             "results.csv",
             "success_against_time.png",
-            crate::studies::bench_ik::draw_figures,
+            crate::studies::bench::ik::draw_figures,
         ),
         (
             "curves.csv",

@@ -355,6 +355,9 @@ pub struct FitCheckpoint {
 /// epochs, the learning rate follows [`Plateau`]. Returns the best epoch's model and the
 /// validation curve. With `checkpoint`, a killed run continues from its last epoch to the
 /// same result.
+// The loop's inputs, each named at its two callers: what trains (model, optimiser, data), how
+// (settings, stopping rule, label), the two closures that differ per model (loss, validation)
+// and where it keeps its state; grouping any of them would be a struct used once.
 #[allow(clippy::too_many_arguments)]
 pub fn train_to_convergence<M, L, S, V>(
     model: M,

@@ -8,7 +8,7 @@
 //! - `neurokin`: `neurokin --preset paper --device wgpu` end to end at the paper's batch (32) and
 //!   at a larger one (`--batch 256`), with the quality each reaches;
 //! - `equivalence`: NeuroKin, K-3DGS and FFKSM trained from the same seed on the CPU and the
-//!   GPU ([`crate::studies::device_equivalence`]);
+//!   GPU ([`crate::studies::bench::device_equivalence`]);
 //! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU;
 //! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
 //!   CPU threads of the same machine (the 5x target);
@@ -30,7 +30,7 @@ use std::time::Instant;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::table::write_csv;
-use crate::studies::bench_decoders::{
+use crate::studies::bench::decoders::{
     Batches, BenchRow, attach_torch, console_table, run_batches, run_torch,
 };
 use crate::studies::run::RunOptions;
@@ -456,7 +456,7 @@ fn equivalence(check: &GpuCheck, console: &mut Console) -> Result<()> {
     use crate::self_models::ffksm::{FfksmVariant, ffksm_run};
     use crate::self_models::k3dgs::{K3dgsVariant, TrainSplatting, k3dgs_run};
     use crate::self_models::neurokin::neurokin_run;
-    use crate::studies::device_equivalence::compare;
+    use crate::studies::bench::device_equivalence::compare;
     let dir = check.out.join("equivalence_runs");
     let mut k3dgs = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha)?;
     k3dgs.model.train_splatting = TrainSplatting::Dense;

@@ -147,20 +147,31 @@ struct Sitting<'a> {
     rows: Vec<BenchIkRow>,
 }
 
+/// What names a row of ours: the solver, its budget, whether that is its default, on how
+/// many threads.
+struct RowLabel<'s> {
+    solver: &'s str,
+    budget: String,
+    standard: bool,
+    threads: usize,
+}
+
 impl Sitting<'_> {
     /// A row of ours from answers and the median seconds of the batch.
-    #[allow(clippy::too_many_arguments)]
     fn push(
         &mut self,
-        solver: &str,
-        budget: String,
-        standard: bool,
-        threads: usize,
+        label: RowLabel,
         answers: &[Vec<PoseSolution>],
         lm: &LmConfig,
         ranges: &[[f64; 2]],
         seconds: f64,
     ) {
+        let RowLabel {
+            solver,
+            budget,
+            standard,
+            threads,
+        } = label;
         let s = SolveStats::of(answers, lm, ranges);
         let precise = SolveStats::of(answers, &at_equal_precision(lm), ranges);
         let k = answers.first().map_or(1, Vec::len);
@@ -349,10 +360,12 @@ impl Ours<'_> {
             })
             .collect();
         sitting.push(
-            "selfmodel flow alone",
-            "1 sample".into(),
-            false,
-            threads,
+            RowLabel {
+                solver: "selfmodel flow alone",
+                budget: "1 sample".into(),
+                standard: false,
+                threads,
+            },
             &alone,
             self.standard(),
             self.ranges(),
@@ -395,10 +408,12 @@ impl Ours<'_> {
             let budget = format!("{starts} random starts");
             let (ranges, solver) = (self.ranges(), "selfmodel flow + LM");
             sitting.push(
-                solver,
-                budget.clone(),
-                is_standard,
-                threads,
+                RowLabel {
+                    solver,
+                    budget: budget.clone(),
+                    standard: is_standard,
+                    threads,
+                },
                 &answers?,
                 &lm,
                 ranges,
@@ -406,7 +421,18 @@ impl Ours<'_> {
             );
             if is_standard && threads > 1 {
                 let (s, answers) = on_threads(1, || timed(solve))?;
-                sitting.push(solver, budget, true, 1, &answers?, &lm, ranges, s);
+                sitting.push(
+                    RowLabel {
+                        solver,
+                        budget,
+                        standard: true,
+                        threads: 1,
+                    },
+                    &answers?,
+                    &lm,
+                    ranges,
+                    s,
+                );
             }
         }
         Ok(())
@@ -417,10 +443,12 @@ impl Ours<'_> {
         let k = sitting.cfg.k;
         let (s, answers) = timed(|| self.model.solve(self.chain, self.targets, k, self.device));
         sitting.push(
-            "selfmodel flow + LM",
-            format!("{k} samples a target"),
-            true,
-            rayon::current_num_threads(),
+            RowLabel {
+                solver: "selfmodel flow + LM",
+                budget: format!("{k} samples a target"),
+                standard: true,
+                threads: rayon::current_num_threads(),
+            },
             &answers?,
             self.standard(),
             self.ranges(),
@@ -441,10 +469,12 @@ impl Ours<'_> {
                 timed(|| solve_batch(self.chain, self.targets, &[], self.ranges(), &lm));
             let answers: Vec<Vec<PoseSolution>> = answers.into_iter().map(|a| vec![a]).collect();
             sitting.push(
-                "selfmodel LM from random starts",
-                format!("{starts} random starts"),
-                starts == standard.random_starts,
-                rayon::current_num_threads(),
+                RowLabel {
+                    solver: "selfmodel LM from random starts",
+                    budget: format!("{starts} random starts"),
+                    standard: starts == standard.random_starts,
+                    threads: rayon::current_num_threads(),
+                },
                 &answers,
                 &lm,
                 self.ranges(),
