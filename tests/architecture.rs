@@ -172,22 +172,96 @@ const LAYERS: &[&str] = &[
     "cli",
 ];
 
-#[test]
-fn every_module_imports_only_its_own_layer_or_those_above_it() {
+/// Every import of `graph` from a layer below its module's, as "a imports b".
+fn upward_imports(graph: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
     let layer = |module: &str| {
         let top = module.split("::").next().unwrap_or(module);
         LAYERS.iter().position(|l| *l == top)
     };
     let mut wrong = Vec::new();
-    for (module, refs) in import_graph() {
-        let Some(own) = layer(&module) else {
+    for (module, refs) in graph {
+        let Some(own) = layer(module) else {
             panic!("{module} is in no layer of ARCHITECTURE.md");
         };
         for r in refs {
-            if layer(&r).is_some_and(|l| l > own) {
+            if layer(r).is_some_and(|l| l > own) {
                 wrong.push(format!("{module} imports {r}"));
             }
         }
     }
+    wrong
+}
+
+#[test]
+fn every_module_imports_only_its_own_layer_or_those_above_it() {
+    let wrong = upward_imports(&import_graph());
     assert!(wrong.is_empty(), "imports from a layer below: {wrong:#?}");
+}
+
+#[test]
+fn the_layer_check_finds_an_import_from_a_layer_below() {
+    let mut graph = import_graph();
+    graph
+        .get_mut("sim::robot")
+        .expect("sim::robot is read")
+        .insert("studies::run".to_string());
+    assert_eq!(
+        upward_imports(&graph),
+        vec!["sim::robot imports studies::run".to_string()]
+    );
+}
+
+/// Every source file, as ARCHITECTURE.md names it (`sim/robot.rs`): all but `lib.rs` and the
+/// files that open a folder of the same name (`sim.rs`), which the layer list describes.
+fn source_files() -> BTreeSet<String> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = BTreeSet::new();
+    let mut stack = vec![src.clone()];
+    while let Some(dir) = stack.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.extension().is_some_and(|e| e == "rs")
+                && !path.with_extension("").is_dir()
+            {
+                let rel = path
+                    .strip_prefix(&src)
+                    .unwrap()
+                    .to_string_lossy()
+                    .replace('\\', "/");
+                if rel != "lib.rs" {
+                    files.insert(rel);
+                }
+            }
+        }
+    }
+    files
+}
+
+#[test]
+fn architecture_md_gives_every_source_file_its_role_and_names_no_file_that_is_gone() {
+    let text =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("ARCHITECTURE.md"))
+            .unwrap();
+    // The table rows: "| `sim/robot.rs` | what it is |".
+    let listed: BTreeSet<String> = text
+        .lines()
+        .filter_map(|l| l.strip_prefix("| `"))
+        .filter_map(|l| l.split_once("` |").map(|(path, _)| path.to_string()))
+        .filter(|path| path.ends_with(".rs"))
+        .collect();
+    let files = source_files();
+    assert!(files.len() > 100, "found only {} files", files.len());
+    let missing: Vec<_> = files.difference(&listed).collect();
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let gone: Vec<_> = listed.iter().filter(|f| !src.join(f).is_file()).collect();
+    assert!(
+        missing.is_empty(),
+        "files ARCHITECTURE.md does not describe: {missing:?}"
+    );
+    assert!(
+        gone.is_empty(),
+        "ARCHITECTURE.md describes files that are gone: {gone:?}"
+    );
 }

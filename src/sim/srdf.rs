@@ -29,6 +29,8 @@ pub struct Srdf {
     path: PathBuf,
     groups: Vec<Group>,
     virtual_joints: Vec<String>,
+    /// `<disable_collisions link1 link2 reason>`: the pairs of links never checked.
+    disabled: Vec<(String, String, String)>,
 }
 
 /// What a group resolves to on a robot's tree: its joints (in the order met, each once) and
@@ -78,9 +80,21 @@ impl Srdf {
         };
         let mut groups = Vec::new();
         let mut virtual_joints = Vec::new();
+        let mut disabled = Vec::new();
         for node in root.children().filter(|n| n.is_element()) {
             match node.tag_name().name() {
                 "virtual_joint" => virtual_joints.push(name_of(node, "<virtual_joint>")?),
+                "disable_collisions" => {
+                    let (Some(a), Some(b)) = (node.attribute("link1"), node.attribute("link2"))
+                    else {
+                        return Err(err(
+                            "disable_collisions",
+                            "needs link1 and link2 attributes".into(),
+                        ));
+                    };
+                    let reason = node.attribute("reason").unwrap_or("User");
+                    disabled.push((a.to_string(), b.to_string(), reason.to_string()));
+                }
                 "group" => {
                     let mut g = Group {
                         name: name_of(node, "<group>")?,
@@ -118,7 +132,13 @@ impl Srdf {
             path: path.to_path_buf(),
             groups,
             virtual_joints,
+            disabled,
         })
+    }
+
+    /// The pairs of links `<disable_collisions>` names, as (link1, link2, reason).
+    pub fn disabled_collisions(&self) -> &[(String, String, String)] {
+        &self.disabled
     }
 
     pub fn group_names(&self) -> Vec<&str> {

@@ -1,0 +1,143 @@
+//! A robot's collision model: each link's spheres and the pairs of links checked. A
+//! configuration collides where two spheres of a checked pair overlap, or a sphere overlaps
+//! an obstacle, by more than `-margin` (a margin keeps them that far apart). The clearance is
+//! the smallest signed distance between them (negative: overlapping).
+
+use nalgebra::{Isometry3, Point3};
+
+use crate::sim::collision::pairs::AllowedPairs;
+use crate::sim::collision::spheres::Sphere;
+
+/// Spheres placed in the world: centre and radius, with the link each belongs to.
+#[derive(Clone, Copy, Debug)]
+pub struct Placed {
+    pub center: Point3<f64>,
+    pub radius: f64,
+}
+
+/// What may touch what.
+#[derive(Clone, Debug)]
+pub struct CollisionModel {
+    /// Each link's spheres in its frame (index as in the chain's links).
+    pub spheres: Vec<Vec<Sphere>>,
+    /// The checked pairs of link indices (`a < b`), both with spheres.
+    pub pairs: Vec<(usize, usize)>,
+    /// Each link's spheres' bounding sphere in its frame (none without spheres): a pair
+    /// whose bounds are apart needs no closer look.
+    bounds: Vec<Option<Sphere>>,
+}
+
+/// Where two spheres are closest: the signed distance between their surfaces.
+#[inline]
+fn gap(a: &Placed, b: &Placed) -> f64 {
+    (a.center - b.center).norm() - a.radius - b.radius
+}
+
+impl CollisionModel {
+    /// The model of links named `names` with spheres `spheres`, every pair checked that
+    /// `allowed` does not allow.
+    pub fn new(names: &[String], spheres: Vec<Vec<Sphere>>, allowed: &AllowedPairs) -> Self {
+        let mut pairs = Vec::new();
+        for a in 0..names.len() {
+            for b in a + 1..names.len() {
+                if !spheres[a].is_empty()
+                    && !spheres[b].is_empty()
+                    && !allowed.allows(&names[a], &names[b])
+                {
+                    pairs.push((a, b));
+                }
+            }
+        }
+        let bounds = spheres.iter().map(|s| bounding(s)).collect();
+        Self {
+            spheres,
+            pairs,
+            bounds,
+        }
+    }
+
+    /// Every link's spheres placed by the link frames.
+    pub fn place(&self, frames: &[Isometry3<f64>]) -> Vec<Vec<Placed>> {
+        self.spheres
+            .iter()
+            .zip(frames)
+            .map(|(s, f)| {
+                s.iter()
+                    .map(|s| Placed {
+                        center: f * s.center(),
+                        radius: s.radius,
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The smallest signed distance between the spheres of two links, `cap` where it is
+    /// larger (a link pair whose bounds are farther than `cap` apart is not looked into).
+    fn pair_gap(
+        &self,
+        placed: &[Vec<Placed>],
+        frames: &[Isometry3<f64>],
+        a: usize,
+        b: usize,
+        cap: f64,
+    ) -> f64 {
+        if let (Some(ba), Some(bb)) = (&self.bounds[a], &self.bounds[b]) {
+            let (pa, pb) = (frames[a] * ba.center(), frames[b] * bb.center());
+            if (pa - pb).norm() - ba.radius - bb.radius > cap {
+                return cap;
+            }
+        }
+        let mut best = cap;
+        for sa in &placed[a] {
+            for sb in &placed[b] {
+                best = best.min(gap(sa, sb));
+            }
+        }
+        best
+    }
+
+    /// The checked pairs in collision at `frames` (closer than `margin`).
+    pub fn colliding_pairs(&self, frames: &[Isometry3<f64>], margin: f64) -> Vec<(usize, usize)> {
+        let placed = self.place(frames);
+        self.pairs
+            .iter()
+            .copied()
+            .filter(|&(a, b)| self.pair_gap(&placed, frames, a, b, margin) < margin)
+            .collect()
+    }
+
+    /// The smallest signed distance over the checked pairs, at most `cap` (the clearance
+    /// further than `cap` is not needed).
+    pub fn self_clearance(&self, frames: &[Isometry3<f64>], cap: f64) -> f64 {
+        let placed = self.place(frames);
+        self.pairs.iter().fold(cap, |m, &(a, b)| {
+            m.min(self.pair_gap(&placed, frames, a, b, m))
+        })
+    }
+
+    /// Whether a checked pair is closer than `margin` at `frames`.
+    pub fn self_collides(&self, frames: &[Isometry3<f64>], margin: f64) -> bool {
+        self.self_clearance(frames, margin) < margin
+    }
+}
+
+/// The bounding sphere of some spheres (centred at their centres' mean).
+fn bounding(spheres: &[Sphere]) -> Option<Sphere> {
+    if spheres.is_empty() {
+        return None;
+    }
+    let n = spheres.len() as f64;
+    let c = spheres
+        .iter()
+        .fold(nalgebra::Vector3::zeros(), |a, s| a + s.center().coords)
+        / n;
+    let r = spheres
+        .iter()
+        .map(|s| (s.center().coords - c).norm() + s.radius)
+        .fold(0.0, f64::max);
+    Some(Sphere {
+        center: [c.x, c.y, c.z],
+        radius: r,
+    })
+}

@@ -1,0 +1,160 @@
+//! Collision spheres fitted to the exact collision meshes, the allowed pairs (an SRDF's, or
+//! computed as MoveIt computes them) and the check on configurations known to collide.
+
+use std::path::{Path, PathBuf};
+
+use selfmodel::sim::collision::model::CollisionModel;
+use selfmodel::sim::collision::pairs::{AllowedPairs, PairSampling, Reason};
+use selfmodel::sim::collision::spheres::{SphereFit, surface_points};
+use selfmodel::sim::collision::{computed_pairs, fit_robot};
+use selfmodel::sim::robot::Robot;
+use selfmodel::sim::shape::Shape;
+use selfmodel::sim::srdf::Srdf;
+use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
+
+/// A robot description of `../shared/robots`, loaded with its collision geometry.
+fn shared_robot(path: &str, tip: &str) -> Option<Robot> {
+    let urdf = PathBuf::from("../shared/robots").join(path);
+    if !urdf.is_file() {
+        eprintln!("skipped: {} is not beside the repository", urdf.display());
+        return None;
+    }
+    Some(
+        load_urdf_with(
+            &urdf,
+            &UrdfOptions {
+                tip: Some(tip.into()),
+                geometry: GeometryKind::Collision,
+                ..UrdfOptions::default()
+            },
+        )
+        .unwrap(),
+    )
+}
+
+/// Every vertex of every link's collision mesh inside a sphere of its link, and every point
+/// of its surface (sampled at 2 mm) within the fit's tolerance of one.
+fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
+    let spheres = fit_robot(robot, fit);
+    let mut total = 0;
+    for (link, (geometry, s)) in robot.geometry.iter().zip(&spheres).enumerate() {
+        let shapes = geometry.shapes();
+        total += s.len();
+        assert_eq!(
+            shapes.is_empty(),
+            s.is_empty(),
+            "link {}",
+            robot.chain.links[link]
+        );
+        assert!(s.len() <= fit.max_per_link, "{} spheres", s.len());
+        for shape in shapes {
+            if let Shape::Triangle(t) = shape {
+                for v in t {
+                    assert!(
+                        s.iter().any(|s| s.contains(v, 1e-9)),
+                        "vertex {v} of {} outside its spheres",
+                        robot.chain.links[link]
+                    );
+                }
+            }
+        }
+        for p in surface_points(shapes, 0.002) {
+            assert!(
+                s.iter().any(|s| s.contains(&p, fit.tolerance_m + 1e-9)),
+                "surface point {p} of {} farther than {} m from its spheres",
+                robot.chain.links[link],
+                fit.tolerance_m
+            );
+        }
+    }
+    total
+}
+
+#[test]
+fn spheres_cover_the_exact_collision_meshes_of_the_panda_the_ur5_and_the_g1() {
+    let fit = SphereFit::default();
+    for (path, tip) in [
+        ("franka_description/urdf/panda.urdf", "panda_hand"),
+        ("ur_description/urdf/ur5.urdf", "tool0"),
+        (
+            "g1_description/urdf/g1_29dof_rev_1_0.urdf",
+            "right_rubber_hand",
+        ),
+    ] {
+        let Some(robot) = shared_robot(path, tip) else {
+            continue;
+        };
+        let n = assert_spheres_cover(&robot, &fit);
+        eprintln!("{path}: {n} spheres");
+        assert!(
+            n >= robot
+                .geometry
+                .iter()
+                .filter(|g| !g.shapes().is_empty())
+                .count()
+        );
+    }
+}
+
+#[test]
+fn the_allowed_pairs_read_from_an_srdf_are_the_file_s_pairs() {
+    let text = r#"<robot name="r">
+  <group name="arm"><chain base_link="a" tip_link="c"/></group>
+  <disable_collisions link1="a" link2="b" reason="Adjacent"/>
+  <disable_collisions link1="c" link2="b" reason="Never"/>
+  <disable_collisions link1="a" link2="d" reason="Because"/>
+</robot>"#;
+    let srdf = Srdf::parse(Path::new("r.srdf"), text).unwrap();
+    let allowed = AllowedPairs::from_srdf(srdf.disabled_collisions());
+    let pairs: Vec<_> = allowed
+        .pairs
+        .iter()
+        .map(|((a, b), r)| (a.as_str(), b.as_str(), *r))
+        .collect();
+    assert_eq!(
+        pairs,
+        vec![
+            ("a", "b", Reason::Adjacent),
+            ("a", "d", Reason::User),
+            ("b", "c", Reason::Never),
+        ]
+    );
+    assert!(allowed.allows("b", "a") && allowed.allows("c", "c") && !allowed.allows("a", "c"));
+    let bad = r#"<robot name="r"><disable_collisions link1="a"/></robot>"#;
+    let err = Srdf::parse(Path::new("r.srdf"), bad)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("link1 and link2"), "{err}");
+}
+
+#[test]
+fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
+    let Some(robot) = shared_robot("franka_description/urdf/panda.urdf", "panda_hand") else {
+        return;
+    };
+    let spheres = fit_robot(&robot, &SphereFit::default());
+    let sampling = PairSampling {
+        samples: 2000,
+        ..PairSampling::default()
+    };
+    let allowed = computed_pairs(&robot, &spheres, &sampling);
+    // Every joint's parent and child are allowed, as adjacent (or for a reason found first).
+    for j in &robot.chain.joints {
+        assert!(allowed.allows(&robot.chain.links[j.parent], &robot.chain.links[j.child]));
+    }
+    let model = CollisionModel::new(&robot.chain.links, spheres, &allowed);
+    assert!(!model.pairs.is_empty());
+    // The Panda's ready pose (as its MoveIt config names it) is free with a centimetre to
+    // spare; the elbow folded back until the hand meets the base is not.
+    let ready = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
+    let frames = robot.chain.link_frames(&ready[..robot.dof()]);
+    assert!(
+        !model.self_collides(&frames, 0.0),
+        "ready pose: {:?}",
+        model.colliding_pairs(&frames, 0.0)
+    );
+    let folded = [0.0, 1.7, 0.0, -3.0, 0.0, 0.5, 0.0];
+    let frames = robot.chain.link_frames(&folded[..robot.dof()]);
+    let hits = model.colliding_pairs(&frames, 0.0);
+    assert!(!hits.is_empty(), "the folded arm collides with nothing");
+}
