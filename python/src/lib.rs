@@ -12,6 +12,7 @@ use pyo3::prelude::*;
 
 use selfmodel::ik::pose::PoseTarget;
 use selfmodel::ik::pose_model::{PoseModel, target_columns, target_from_values};
+use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::kinematics::JointGroup;
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
@@ -174,6 +175,11 @@ fn in_blocks<T: Send>(
 #[pyclass(name = "Robot", module = "selfmodel", frozen)]
 struct PyRobot {
     robot: Robot,
+    /// The description as loaded, for its collision geometry; the SRDF named with it.
+    spec: RobotSpec,
+    srdf: Option<PathBuf>,
+    /// Built on the first collision query: spheres and the checked pairs.
+    collision: std::sync::OnceLock<CollisionModel>,
 }
 
 #[pymethods]
@@ -214,6 +220,7 @@ impl PyRobot {
                 Some(&path),
             )
             .map_err(value_error)?;
+            let srdf = srdf.or_else(|| selfmodel::sim::srdf::find_beside(&path).ok());
             let spec = RobotSpec::Urdf {
                 path,
                 base_xyz: [0.0; 3],
@@ -228,7 +235,83 @@ impl PyRobot {
                 "forward kinematics, a self-model or inverse kinematics",
             )
             .map_err(value_error)?;
-            Ok(PyRobot { robot })
+            Ok(PyRobot {
+                robot,
+                spec,
+                srdf,
+                collision: std::sync::OnceLock::new(),
+            })
+        })
+    }
+
+    /// Each link's collision spheres, fitted to its `<collision>` meshes (every vertex inside
+    /// one, every surface point within 4 mm): `{link: array (k, 4)}` of x, y, z (metres, in
+    /// the link's frame) and radius.
+    #[getter]
+    fn collision_spheres<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+        guarded(|| {
+            let model = self.collision_model(py)?;
+            let out = pyo3::types::PyDict::new(py);
+            for (name, spheres) in self.robot.chain.links.iter().zip(&model.spheres) {
+                if spheres.is_empty() {
+                    continue;
+                }
+                let rows: Vec<f64> = spheres
+                    .iter()
+                    .flat_map(|s| [s.center[0], s.center[1], s.center[2], s.radius])
+                    .collect();
+                let a = numpy::ndarray::Array2::from_shape_vec((spheres.len(), 4), rows)
+                    .expect("k x 4");
+                out.set_item(name, a.into_pyarray(py))?;
+            }
+            Ok(out)
+        })
+    }
+
+    /// The pairs of links checked for collisions (all but those the SRDF beside the URDF, or
+    /// `srdf`, disables; without one, those MoveIt's setup assistant would disable).
+    #[getter]
+    fn collision_pairs(&self, py: Python<'_>) -> PyResult<Vec<(String, String)>> {
+        guarded(|| {
+            let model = self.collision_model(py)?;
+            let links = &self.robot.chain.links;
+            Ok(model
+                .pairs
+                .iter()
+                .map(|&(a, b)| (links[a].clone(), links[b].clone()))
+                .collect())
+        })
+    }
+
+    /// Whether each configuration of `q` (N, dof; radians, metres) collides with itself:
+    /// two spheres of a checked pair closer than `margin` (metres).
+    #[pyo3(signature = (q, margin=0.0))]
+    fn collides<'py>(
+        &self,
+        py: Python<'py>,
+        q: Matrix,
+        margin: f64,
+    ) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
+        guarded(|| {
+            let clearance = self.clearances(py, q, margin.max(0.0) + 1.0)?;
+            let hit: Vec<bool> = clearance.iter().map(|&c| c < margin).collect();
+            Ok(numpy::ndarray::Array1::from_vec(hit).into_pyarray(py))
+        })
+    }
+
+    /// The self-collision clearance of each configuration of `q` (N, dof): the smallest signed
+    /// distance (metres) between the spheres of a checked pair, negative where they overlap;
+    /// at most `cap` (a larger clearance is reported as `cap`).
+    #[pyo3(signature = (q, cap=1.0))]
+    fn clearance<'py>(
+        &self,
+        py: Python<'py>,
+        q: Matrix,
+        cap: f64,
+    ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+        guarded(|| {
+            let c = self.clearances(py, q, cap)?;
+            Ok(numpy::ndarray::Array1::from_vec(c).into_pyarray(py))
         })
     }
 
@@ -409,6 +492,44 @@ impl PyRobot {
 }
 
 /// A learned IK model `ik train` saved, with the robot it was trained for.
+impl PyRobot {
+    /// The collision model, built once: the description reloaded with its collision geometry.
+    fn collision_model(&self, py: Python<'_>) -> PyResult<&CollisionModel> {
+        if let Some(m) = self.collision.get() {
+            return Ok(m);
+        }
+        let spec = self.spec.with_geometry(GeometryKind::Collision);
+        let model = py
+            .allow_threads(|| {
+                let robot = spec.load()?;
+                selfmodel::sim::collision::model_for(
+                    &robot,
+                    self.srdf.as_deref(),
+                    &Default::default(),
+                    &Default::default(),
+                )
+            })
+            .map_err(value_error)?;
+        Ok(self.collision.get_or_init(|| model))
+    }
+
+    /// The clearance of every row of `q`, in blocks (Ctrl-C between them).
+    fn clearances(&self, py: Python<'_>, q: Matrix, cap: f64) -> PyResult<Vec<f64>> {
+        let model = self.collision_model(py)?;
+        let chain = &self.robot.chain;
+        let dof = chain.dof();
+        let (n, v) = rows(q, dof, "q")?;
+        let width = dof.max(1);
+        in_blocks(py, n, ROWS_A_BLOCK, |rows| {
+            use rayon::prelude::*;
+            Ok(v[rows.start * width..rows.end * width]
+                .par_chunks(width)
+                .map(|q| model.self_clearance(&chain.link_frames(q), cap))
+                .collect())
+        })
+    }
+}
+
 #[pyclass(name = "IkSolver", module = "selfmodel", frozen)]
 struct PyIkSolver {
     model: PoseModel,

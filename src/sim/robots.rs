@@ -101,6 +101,15 @@ pub fn description_reads(path: &Path) -> usize {
 }
 
 impl RobotSpec {
+    /// The same description with `geometry` (a built-in robot as it is).
+    pub fn with_geometry(&self, geometry: GeometryKind) -> Self {
+        let mut spec = self.clone();
+        if let RobotSpec::Urdf { geometry: g, .. } = &mut spec {
+            *g = geometry;
+        }
+        spec
+    }
+
     /// A URDF placed where the papers' scene places arm4 (base at [0, 0, -0.108], yaw -pi/2),
     /// so the papers' camera sees it as it sees arm4.
     pub fn urdf_in_arm4_scene(path: PathBuf) -> Self {

@@ -38,3 +38,34 @@ pub fn computed_pairs(
         everything.colliding_pairs(frames, 0.0)
     })
 }
+
+/// The collision model of `robot` (loaded with its collision geometry): spheres fitted by
+/// `fit`; the allowed pairs of the SRDF at `srdf` where it has `<disable_collisions>`, else
+/// computed as MoveIt's setup assistant computes them.
+pub fn model_for(
+    robot: &Robot,
+    srdf: Option<&std::path::Path>,
+    fit: &SphereFit,
+    sampling: &PairSampling,
+) -> crate::core::error::Result<CollisionModel> {
+    let spheres = fit_robot(robot, fit);
+    if spheres.iter().all(Vec::is_empty) {
+        return Err(crate::core::error::Error::Config(format!(
+            "{} has no collision geometry to check: load it with its <collision> elements (geometry \"collision\")",
+            robot.name
+        )));
+    }
+    let from_file = match srdf {
+        Some(path) => {
+            let file = crate::sim::srdf::Srdf::read(path)?;
+            let pairs = AllowedPairs::from_srdf(file.disabled_collisions());
+            (!pairs.pairs.is_empty()).then_some(pairs)
+        }
+        None => None,
+    };
+    let allowed = match from_file {
+        Some(pairs) => pairs,
+        None => computed_pairs(robot, &spheres, sampling),
+    };
+    Ok(CollisionModel::new(&robot.chain.links, spheres, &allowed))
+}
