@@ -142,7 +142,7 @@ fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
     for j in &robot.chain.joints {
         assert!(allowed.allows(&robot.chain.links[j.parent], &robot.chain.links[j.child]));
     }
-    let model = CollisionModel::new(&robot.chain.links, spheres, &allowed);
+    let model = CollisionModel::new(&robot.chain, spheres, &allowed);
     assert!(!model.pairs.is_empty());
     // The Panda's ready pose (as its MoveIt config names it) is free with a centimetre to
     // spare; the elbow folded back until the hand meets the base is not.
@@ -157,4 +157,132 @@ fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
     let frames = robot.chain.link_frames(&folded[..robot.dof()]);
     let hits = model.colliding_pairs(&frames, 0.0);
     assert!(!hits.is_empty(), "the folded arm collides with nothing");
+}
+
+mod common;
+
+use nalgebra::Point3;
+use selfmodel::sim::collision::scene::Scene;
+
+const EVERY_KIND: &str = r#"
+cuboid:
+  table:
+    dims: [2.0, 2.0, 0.2]   # x, y, z
+    pose: [0.0, 0.0, -0.1, 1, 0, 0, 0.0]
+    color: [0.6, 0.6, 0.6, 1.0]
+sphere:
+  ball: {radius: 0.05, position: [0.5, 0.0, 0.4]}
+capsule:
+  bar: {radius: 0.03, base: [0, 0, 0], tip: [0, 0, 0.5], pose: [0.4, 0.3, 0, 1, 0, 0, 0]}
+cylinder:
+  post: {radius: 0.05, height: 0.6, pose: [0.4, -0.3, 0.3, 0.7071068, 0, 0, 0.7071068]}
+mesh:
+  bin: {file_path: cube.stl, pose: [0.0, 0.8, 0.1, 1, 0, 0, 0], scale: [1, 1, 1]}
+"#;
+
+#[test]
+fn a_scene_with_every_kind_of_entry_loads_and_measures_distances() {
+    let dir = common::tempdir();
+    std::fs::write(dir.path().join("cube.stl"), common::cube_stl_binary(0.1)).unwrap();
+    let path = dir.path().join("scene.yml");
+    std::fs::write(&path, EVERY_KIND).unwrap();
+    let scene = Scene::read(&path).unwrap();
+    let names: Vec<&str> = scene.obstacles.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["table", "ball", "bar", "post", "bin"]);
+    let at = |name: &str, p: [f64; 3]| {
+        let o = &scene.obstacles.iter().find(|(n, _)| n == name).unwrap().1;
+        o.distance(&Point3::from(p))
+    };
+    // The table's top is at z = 0; inside it the distance is negative.
+    assert!((at("table", [0.3, 0.2, 0.25]) - 0.25).abs() < 1e-12);
+    assert!((at("table", [0.0, 0.0, -0.05]) + 0.05).abs() < 1e-12);
+    assert!((at("ball", [0.5, 0.0, 0.6]) - 0.15).abs() < 1e-12);
+    assert!((at("bar", [0.5, 0.3, 0.25]) - 0.07).abs() < 1e-12);
+    assert!((at("bar", [0.4, 0.3, 0.7]) - 0.17).abs() < 1e-12);
+    // The post stands along z (a turn about z changes nothing), its top at 0.6.
+    assert!((at("post", [0.4, -0.3, 0.8]) - 0.2).abs() < 1e-9);
+    assert!((at("post", [0.5, -0.3, 0.3]) - 0.05).abs() < 1e-9);
+    // The mesh is covered by spheres: conservative, within the fit's tolerance plus.
+    let d = at("bin", [0.0, 0.8, 0.35]);
+    assert!(d <= 0.15 + 1e-9 && d > 0.05, "{d}");
+    assert!(at("bin", [0.0, 0.8, 0.1]) < 0.0);
+    assert!(scene.gap(&Point3::new(0.5, 0.0, 0.5), 0.04) > 0.0);
+    assert!(scene.gap(&Point3::new(0.5, 0.0, 0.5), 0.06) < 0.0);
+}
+
+#[test]
+fn bad_scenes_are_refused_in_one_line() {
+    let dir = common::tempdir();
+    let cases = [
+        (
+            "cuboid:\n  a: {dims: [.nan, 1, 1], pose: [0, 0, 0, 1, 0, 0, 0]}\n",
+            "side (dims) of \"a\" is NaN",
+        ),
+        (
+            "sphere:\n  s: {radius: -0.1, position: [0, 0, 0]}\n",
+            "radius of \"s\" is -0.1",
+        ),
+        (
+            "cuboid:\n  a: {dims: [1, 1, 1], pose: [0, 0, 0, 1, 0, 0, 0], mass: 2}\n",
+            "mass",
+        ),
+        ("capsules:\n  a: {radius: 1}\n", "capsules"),
+        (
+            "mesh:\n  m: {file_path: nowhere.stl, pose: [0, 0, 0, 1, 0, 0, 0]}\n",
+            "is not a file",
+        ),
+        (
+            "cuboid:\n  a: {dims: [1, 1, 1], pose: [0, 0, 0, 0, 0, 0, 0]}\n",
+            "no rotation",
+        ),
+        ("sphere:\n  s: {radius: 0.1}\n", "no pose or position"),
+        ("cuboid: [1, 2\n", "not a scene"),
+    ];
+    for (i, (text, says)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("bad{i}.yml"));
+        std::fs::write(&path, text).unwrap();
+        let err = Scene::read(&path).unwrap_err().to_string();
+        assert!(err.contains(says), "case {i}: {err}");
+        assert!(!err.contains('\n'), "case {i}: more than one line: {err}");
+    }
+}
+
+#[test]
+fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
+    let Some(robot) = shared_robot("franka_description/urdf/panda.urdf", "panda_hand") else {
+        return;
+    };
+    let spheres = fit_robot(&robot, &SphereFit::default());
+    let allowed = computed_pairs(
+        &robot,
+        &spheres,
+        &PairSampling {
+            samples: 500,
+            ..PairSampling::default()
+        },
+    );
+    let model = CollisionModel::new(&robot.chain, spheres, &allowed);
+    assert!(!model.moving[0], "the Panda's base does not move");
+    let ready = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
+    let frames = robot.chain.link_frames(&ready);
+    let table = Scene::parse(
+        Path::new("table.yml"),
+        "cuboid:\n  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n",
+    )
+    .unwrap();
+    assert!(!model.collides(&frames, Some(&table), 0.0));
+    let hand = frames[robot
+        .chain
+        .links
+        .iter()
+        .position(|l| l == "panda_hand")
+        .unwrap()]
+    .translation;
+    let text = format!(
+        "cuboid:\n  table: {{dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}}\n  box: {{dims: [0.05, 0.05, 0.05], pose: [{}, {}, {}, 1, 0, 0, 0]}}\n",
+        hand.x, hand.y, hand.z
+    );
+    let with_box = Scene::parse(Path::new("box.yml"), &text).unwrap();
+    assert!(model.collides(&frames, Some(&with_box), 0.0));
+    assert!(model.clearance(&frames, Some(&with_box), 1.0) < 0.0);
 }

@@ -1,9 +1,11 @@
 //! Collision checking for IK: spheres fitted to each link's collision geometry
 //! (`spheres`), the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
-//! MoveIt's computed matrix) and the check itself (`model`).
+//! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
+//! itself (`model`).
 
 pub mod model;
 pub mod pairs;
+pub mod scene;
 pub mod spheres;
 
 use rayon::prelude::*;
@@ -29,11 +31,7 @@ pub fn computed_pairs(
     sampling: &PairSampling,
 ) -> AllowedPairs {
     // Every pair of links with spheres checked, to find which always or never collide.
-    let everything = CollisionModel::new(
-        &robot.chain.links,
-        spheres.to_vec(),
-        &AllowedPairs::default(),
-    );
+    let everything = CollisionModel::new(&robot.chain, spheres.to_vec(), &AllowedPairs::default());
     pairs::compute(&robot.chain, sampling, &|frames| {
         everything.colliding_pairs(frames, 0.0)
     })
@@ -67,5 +65,5 @@ pub fn model_for(
         Some(pairs) => pairs,
         None => computed_pairs(robot, &spheres, sampling),
     };
-    Ok(CollisionModel::new(&robot.chain.links, spheres, &allowed))
+    Ok(CollisionModel::new(&robot.chain, spheres, &allowed))
 }

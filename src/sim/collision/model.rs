@@ -6,7 +6,9 @@
 use nalgebra::{Isometry3, Point3};
 
 use crate::sim::collision::pairs::AllowedPairs;
+use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::Sphere;
+use crate::sim::kinematics::KinematicChain;
 
 /// Spheres placed in the world: centre and radius, with the link each belongs to.
 #[derive(Clone, Copy, Debug)]
@@ -25,6 +27,9 @@ pub struct CollisionModel {
     /// Each link's spheres' bounding sphere in its frame (none without spheres): a pair
     /// whose bounds are apart needs no closer look.
     bounds: Vec<Option<Sphere>>,
+    /// Whether a link moves with the joints: links fixed to the root (the base resting on a
+    /// table) are not checked against obstacles.
+    pub moving: Vec<bool>,
 }
 
 /// Where two spheres are closest: the signed distance between their surfaces.
@@ -34,9 +39,10 @@ fn gap(a: &Placed, b: &Placed) -> f64 {
 }
 
 impl CollisionModel {
-    /// The model of links named `names` with spheres `spheres`, every pair checked that
+    /// The model of `chain`'s links with spheres `spheres`, every pair checked that
     /// `allowed` does not allow.
-    pub fn new(names: &[String], spheres: Vec<Vec<Sphere>>, allowed: &AllowedPairs) -> Self {
+    pub fn new(chain: &KinematicChain, spheres: Vec<Vec<Sphere>>, allowed: &AllowedPairs) -> Self {
+        let names = &chain.links;
         let mut pairs = Vec::new();
         for a in 0..names.len() {
             for b in a + 1..names.len() {
@@ -49,11 +55,51 @@ impl CollisionModel {
             }
         }
         let bounds = spheres.iter().map(|s| bounding(s)).collect();
+        // A link moves when its frame differs between the joints' lower and upper ends.
+        let ranges = chain.joint_ranges();
+        let lo: Vec<f64> = ranges.iter().map(|r| r[0]).collect();
+        let hi: Vec<f64> = ranges.iter().map(|r| r[1]).collect();
+        let (a, b) = (chain.link_frames(&lo), chain.link_frames(&hi));
+        let moving = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x.inverse() * y).to_homogeneous() != nalgebra::Matrix4::identity())
+            .collect();
         Self {
             spheres,
             pairs,
             bounds,
+            moving,
         }
+    }
+
+    /// The smallest signed distance between a moving link's spheres and the obstacles of
+    /// `scene`, at most `cap`.
+    pub fn scene_clearance(&self, frames: &[Isometry3<f64>], scene: &Scene, cap: f64) -> f64 {
+        let mut best = cap;
+        for ((spheres, f), moving) in self.spheres.iter().zip(frames).zip(&self.moving) {
+            if !moving {
+                continue;
+            }
+            for s in spheres {
+                best = best.min(scene.gap(&(f * s.center()), s.radius));
+            }
+        }
+        best
+    }
+
+    /// The clearance against itself and, where given, the scene: at most `cap`.
+    pub fn clearance(&self, frames: &[Isometry3<f64>], scene: Option<&Scene>, cap: f64) -> f64 {
+        let own = self.self_clearance(frames, cap);
+        match scene {
+            Some(s) => self.scene_clearance(frames, s, own),
+            None => own,
+        }
+    }
+
+    /// Whether the robot at `frames` comes closer than `margin` to itself or the scene.
+    pub fn collides(&self, frames: &[Isometry3<f64>], scene: Option<&Scene>, margin: f64) -> bool {
+        self.clearance(frames, scene, margin) < margin
     }
 
     /// Every link's spheres placed by the link frames.

@@ -1,0 +1,324 @@
+//! Obstacles: a scene in cuRobo's world-configuration YAML, so a cuRobo user's scene loads as
+//! it is. Top-level keys `cuboid`, `sphere`, `capsule`, `cylinder` and `mesh`, each a map from
+//! an obstacle's name to its entry:
+//!
+//! ```yaml
+//! cuboid:
+//!   table: {dims: [2.0, 2.0, 0.2], pose: [0.0, 0.0, -0.1, 1, 0, 0, 0]}  # x y z, qw qx qy qz
+//! sphere:
+//!   ball: {radius: 0.05, pose: [0.5, 0.0, 0.4, 1, 0, 0, 0]}               # or position: [x, y, z]
+//! capsule:
+//!   bar: {radius: 0.03, base: [0, 0, 0], tip: [0, 0, 0.5], pose: [0.4, 0.3, 0, 1, 0, 0, 0]}
+//! cylinder:
+//!   post: {radius: 0.05, height: 0.6, pose: [0.4, -0.3, 0.3, 1, 0, 0, 0]}
+//! mesh:
+//!   bin: {file_path: bin.stl, pose: [0.6, 0, 0, 1, 0, 0, 0], scale: [1, 1, 1]}
+//! ```
+//!
+//! Lengths in metres, poses in the world (the robot's base frame), quaternions w first as
+//! cuRobo writes them; `color` and `texture` are read and ignored; any other key is refused.
+//! A mesh's path is relative to the scene file; it is covered by spheres as a link is
+//! ([`crate::sim::collision::spheres`]), so the check stays conservative.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::Deserialize;
+
+use crate::core::error::{Error, Result};
+use crate::sim::collision::spheres::{Sphere, SphereFit, fit_link};
+
+/// One obstacle in the world frame.
+#[derive(Clone, Debug)]
+pub enum Obstacle {
+    Cuboid {
+        pose: Isometry3<f64>,
+        half: Vector3<f64>,
+    },
+    Sphere {
+        center: Point3<f64>,
+        radius: f64,
+    },
+    /// The segment `a`-`b` swept by `radius`.
+    Capsule {
+        a: Point3<f64>,
+        b: Point3<f64>,
+        radius: f64,
+    },
+    /// Along the local z axis of `pose`, centred on it.
+    Cylinder {
+        pose: Isometry3<f64>,
+        radius: f64,
+        half_height: f64,
+    },
+    /// A mesh, as spheres covering it.
+    Spheres(Vec<Sphere>),
+}
+
+impl Obstacle {
+    /// The signed distance from `p` to the obstacle's surface (negative inside).
+    pub fn distance(&self, p: &Point3<f64>) -> f64 {
+        match self {
+            Obstacle::Cuboid { pose, half } => {
+                let q = pose.inverse_transform_point(p);
+                let d = q.coords.abs() - half;
+                let outside = d.map(|v| v.max(0.0)).norm();
+                outside + d.max().min(0.0)
+            }
+            Obstacle::Sphere { center, radius } => (p - center).norm() - radius,
+            Obstacle::Capsule { a, b, radius } => {
+                let ab = b - a;
+                let t = ((p - a).dot(&ab) / ab.norm_squared().max(1e-300)).clamp(0.0, 1.0);
+                (p - (a + ab * t)).norm() - radius
+            }
+            Obstacle::Cylinder {
+                pose,
+                radius,
+                half_height,
+            } => {
+                let q = pose.inverse_transform_point(p);
+                let radial = (q.x * q.x + q.y * q.y).sqrt() - radius;
+                let axial = q.z.abs() - half_height;
+                radial.max(axial).min(0.0)
+                    + Vector3::new(radial.max(0.0), axial.max(0.0), 0.0).norm()
+            }
+            Obstacle::Spheres(spheres) => spheres
+                .iter()
+                .map(|s| (p - s.center()).norm() - s.radius)
+                .fold(f64::INFINITY, f64::min),
+        }
+    }
+}
+
+/// The obstacles of a scene, with their names.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub obstacles: Vec<(String, Obstacle)>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    #[serde(default)]
+    cuboid: BTreeMap<String, CuboidEntry>,
+    #[serde(default)]
+    sphere: BTreeMap<String, SphereEntry>,
+    #[serde(default)]
+    capsule: BTreeMap<String, CapsuleEntry>,
+    #[serde(default)]
+    cylinder: BTreeMap<String, CylinderEntry>,
+    #[serde(default)]
+    mesh: BTreeMap<String, MeshEntry>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CuboidEntry {
+    dims: [f64; 3],
+    pose: [f64; 7],
+    #[serde(default, rename = "color")]
+    _color: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "texture")]
+    _texture: Option<serde::de::IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SphereEntry {
+    radius: f64,
+    #[serde(default)]
+    pose: Option<[f64; 7]>,
+    #[serde(default)]
+    position: Option<[f64; 3]>,
+    #[serde(default, rename = "color")]
+    _color: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "texture")]
+    _texture: Option<serde::de::IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CapsuleEntry {
+    radius: f64,
+    base: [f64; 3],
+    tip: [f64; 3],
+    pose: [f64; 7],
+    #[serde(default, rename = "color")]
+    _color: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "texture")]
+    _texture: Option<serde::de::IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CylinderEntry {
+    radius: f64,
+    height: f64,
+    pose: [f64; 7],
+    #[serde(default, rename = "color")]
+    _color: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "texture")]
+    _texture: Option<serde::de::IgnoredAny>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshEntry {
+    file_path: PathBuf,
+    pose: [f64; 7],
+    #[serde(default)]
+    scale: Option<[f64; 3]>,
+    #[serde(default, rename = "color")]
+    _color: Option<serde::de::IgnoredAny>,
+    #[serde(default, rename = "texture")]
+    _texture: Option<serde::de::IgnoredAny>,
+}
+
+/// The largest scene file read (a scene is a few dozen lines).
+const MAX_SCENE_BYTES: u64 = 16 << 20;
+/// The largest length a scene may give (m): beyond it, a typo.
+const MAX_LENGTH_M: f64 = 1e4;
+
+impl Scene {
+    /// Read a cuRobo world-configuration YAML file.
+    pub fn read(path: &Path) -> Result<Self> {
+        let text = crate::core::input_file::read_user_file(path, "scene file", MAX_SCENE_BYTES)?;
+        let text = String::from_utf8(text).map_err(|_| {
+            Error::Config(format!(
+                "{}: not a YAML file (not UTF-8 text)",
+                path.display()
+            ))
+        })?;
+        Self::parse(path, &text)
+    }
+
+    /// Parse a scene's text (`path` names it in errors and places its meshes).
+    pub fn parse(path: &Path, text: &str) -> Result<Self> {
+        let bad = |msg: String| Error::Config(format!("{}: {msg}", path.display()));
+        let file: SceneFile = serde_saphyr::from_str(text).map_err(|e| {
+            let first = e.to_string();
+            let first = first.lines().next().unwrap_or("").to_string();
+            bad(format!("not a scene as cuRobo writes one ({first})"))
+        })?;
+        let length = |what: &str, name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 && v <= MAX_LENGTH_M {
+                Ok(v)
+            } else {
+                Err(bad(format!(
+                    "{what} of \"{name}\" is {}: give a positive length in metres",
+                    crate::core::error::short_number(v)
+                )))
+            }
+        };
+        let mut obstacles = Vec::new();
+        for (name, c) in &file.cuboid {
+            let pose = pose_of(&bad, name, &c.pose)?;
+            let mut half = Vector3::zeros();
+            for k in 0..3 {
+                half[k] = length("a side (dims)", name, c.dims[k])? / 2.0;
+            }
+            obstacles.push((name.clone(), Obstacle::Cuboid { pose, half }));
+        }
+        for (name, s) in &file.sphere {
+            let radius = length("the radius", name, s.radius)?;
+            let center = match (&s.pose, &s.position) {
+                (Some(p), _) => Point3::from(pose_of(&bad, name, p)?.translation.vector),
+                (None, Some(p)) => Point3::from(finite3(&bad, name, p)?),
+                (None, None) => {
+                    return Err(bad(format!("sphere \"{name}\" has no pose or position")));
+                }
+            };
+            obstacles.push((name.clone(), Obstacle::Sphere { center, radius }));
+        }
+        for (name, c) in &file.capsule {
+            let pose = pose_of(&bad, name, &c.pose)?;
+            let radius = length("the radius", name, c.radius)?;
+            let (a, b) = (finite3(&bad, name, &c.base)?, finite3(&bad, name, &c.tip)?);
+            obstacles.push((
+                name.clone(),
+                Obstacle::Capsule {
+                    a: pose * Point3::from(a),
+                    b: pose * Point3::from(b),
+                    radius,
+                },
+            ));
+        }
+        for (name, c) in &file.cylinder {
+            let pose = pose_of(&bad, name, &c.pose)?;
+            let radius = length("the radius", name, c.radius)?;
+            let half_height = length("the height", name, c.height)? / 2.0;
+            obstacles.push((
+                name.clone(),
+                Obstacle::Cylinder {
+                    pose,
+                    radius,
+                    half_height,
+                },
+            ));
+        }
+        for (name, m) in &file.mesh {
+            let pose = pose_of(&bad, name, &m.pose)?;
+            let scale = match &m.scale {
+                Some(s) => {
+                    let mut v = Vector3::zeros();
+                    for k in 0..3 {
+                        v[k] = length("a scale", name, s[k])?;
+                    }
+                    v
+                }
+                None => Vector3::new(1.0, 1.0, 1.0),
+            };
+            let file = path.parent().unwrap_or(Path::new(".")).join(&m.file_path);
+            if !file.is_file() {
+                return Err(bad(format!(
+                    "the mesh of \"{name}\", {}, is not a file: give its path relative to the scene file",
+                    file.display()
+                )));
+            }
+            let shapes = crate::sim::mesh_file::load_mesh(&file, scale, &pose)?;
+            let spheres = fit_link(
+                &shapes,
+                &SphereFit {
+                    max_per_link: 64,
+                    ..SphereFit::default()
+                },
+            );
+            obstacles.push((name.clone(), Obstacle::Spheres(spheres)));
+        }
+        Ok(Scene { obstacles })
+    }
+
+    /// The smallest signed distance from a sphere at `center` of `radius` to any obstacle.
+    pub fn gap(&self, center: &Point3<f64>, radius: f64) -> f64 {
+        self.obstacles
+            .iter()
+            .map(|(_, o)| o.distance(center) - radius)
+            .fold(f64::INFINITY, f64::min)
+    }
+}
+
+fn finite3(bad: &dyn Fn(String) -> Error, name: &str, v: &[f64; 3]) -> Result<Vector3<f64>> {
+    if v.iter().all(|x| x.is_finite() && x.abs() <= MAX_LENGTH_M) {
+        Ok(Vector3::from(*v))
+    } else {
+        Err(bad(format!(
+            "\"{name}\" has a coordinate that is not a finite number of metres (at most 1e4)"
+        )))
+    }
+}
+
+/// A cuRobo pose `[x, y, z, qw, qx, qy, qz]` (the quaternion normalised).
+fn pose_of(bad: &dyn Fn(String) -> Error, name: &str, p: &[f64; 7]) -> Result<Isometry3<f64>> {
+    let t = finite3(bad, name, &[p[0], p[1], p[2]])?;
+    let q = Quaternion::new(p[3], p[4], p[5], p[6]);
+    if !p[3..].iter().all(|x| x.is_finite()) || q.norm() < 1e-6 {
+        return Err(bad(format!(
+            "the pose of \"{name}\" has no rotation: its quaternion (qw, qx, qy, qz: the last four numbers) must be finite and not zero"
+        )));
+    }
+    Ok(Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_quaternion(q),
+    ))
+}
