@@ -72,6 +72,20 @@ enum Command {
         /// success threshold, whatever this is).
         #[arg(long, value_name = "MM,DEG", default_value = "0.0001,0.0001")]
         tolerance: String,
+        /// Obstacles (cuRobo's world-configuration YAML: cuboid, sphere, capsule, cylinder,
+        /// mesh): an answer is exact only if it keeps --margin from them and from itself.
+        #[arg(long, value_name = "FILE")]
+        scene: Option<PathBuf>,
+        /// Check each answer against the robot itself (on with --scene).
+        #[arg(long)]
+        self_collision: bool,
+        /// The distance an answer keeps from obstacles and from itself (metres).
+        #[arg(long, default_value_t = 0.005)]
+        margin: f64,
+        /// The SRDF whose <disable_collisions> say which links may touch [default: the one
+        /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
+        #[arg(long, value_name = "FILE")]
+        srdf: Option<PathBuf>,
         /// Where the answers go (CSV: target,solution, one column per joint named after it,
         /// pos_err_mm,rot_err_deg,exact; beside it OUT.json: how they were made).
         #[arg(long)]
@@ -188,6 +202,10 @@ fn main() -> ExitCode {
                 targets: targets_file,
                 k,
                 tolerance,
+                scene,
+                self_collision,
+                margin,
+                srdf,
                 out,
             } => {
                 if !(1..=MAX_K).contains(&k) {
@@ -196,8 +214,29 @@ fn main() -> ExitCode {
                     )));
                 }
                 let provenance = PathBuf::from(format!("{}.json", out.display()));
-                let (model, robot) =
-                    answering(&model_dir, &[&out, &provenance], &[&targets_file], &device)?;
+                let inputs: Vec<&std::path::Path> =
+                    [Some(&targets_file), scene.as_ref(), srdf.as_ref()]
+                        .into_iter()
+                        .flatten()
+                        .map(PathBuf::as_path)
+                        .collect();
+                let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
+                let checking = scene.is_some() || self_collision || srdf.is_some();
+                let check = if checking {
+                    let scene = scene
+                        .as_deref()
+                        .map(selfmodel::sim::collision::scene::Scene::read)
+                        .transpose()?;
+                    Some(selfmodel::ik::collision::CollisionCheck::for_robot(
+                        &model.saved.robot,
+                        srdf.as_deref(),
+                        scene,
+                        true,
+                        margin,
+                    )?)
+                } else {
+                    None
+                };
                 let cfg = model
                     .saved
                     .config
@@ -207,7 +246,17 @@ fn main() -> ExitCode {
                     .map_err(|e| selfmodel::Error::Config(format!("--tolerance: {e}")))?;
                 let targets = read_targets(&targets_file, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
-                let answers = model.solve_with(&robot.chain, &targets, k, &cfg, &device)?;
+                let valid = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
+                let stop = selfmodel::core::interrupt::requested;
+                let answers = model.solve_until(
+                    &robot.chain,
+                    &targets,
+                    k,
+                    &cfg,
+                    &device,
+                    &stop,
+                    valid.as_ref().map(|v| v as &selfmodel::ik::pose::Valid),
+                )?;
                 let seconds = start.elapsed().as_secs_f64();
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];
@@ -244,6 +293,9 @@ fn main() -> ExitCode {
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
                         "solver": &cfg,
+                        "scene": scene,
+                        "collisions_checked": checking,
+                        "margin_m": checking.then_some(margin),
                         "stats": stats,
                         "seconds": seconds,
                         "threads": threads,
@@ -251,8 +303,13 @@ fn main() -> ExitCode {
                         "revision": selfmodel::core::provenance::git_revision(),
                     }),
                 )?;
+                let exact = if checking {
+                    "exactly and collision-free"
+                } else {
+                    "exactly"
+                };
                 println!(
-                    "ik solve: {} targets, {} solved exactly ({:.2}%), {} exact answers ({:.1} distinct per target), {}, {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {threads} threads; wrote {}",
+                    "ik solve: {} targets, {} solved {exact} ({:.2}%), {} exact answers ({:.1} distinct per target), {}, {:.1} iterations and {:.2} starts an answer, {:.0} exact solutions/s on {threads} threads; wrote {}",
                     stats.targets,
                     stats.exact_targets,
                     stats.exact_pct(),

@@ -3,16 +3,16 @@ selfmodel's sphere check. Never a dependency of the crate; tests and benchmarks 
 ours.
 
 Reads the URDF with its collision geometry (`package://` paths resolved from the folder above
-the URDF's package, as selfmodel resolves them), checks every pair of geometry objects of
-different links except the allowed pairs (`--allowed`: a JSON list of [link1, link2], what
-selfmodel's collision model allows; the same links' objects are never checked), and for each
+the URDF's package, as selfmodel resolves them), checks the pairs of geometry objects of the
+link pairs selfmodel checks (`--checked`: a JSON list of [link1, link2], `Robot.collision_pairs`)
+and, with `--scene`, every moving link's objects against the scene's obstacles, and for each
 configuration of `--joints` (CSV: one column per joint of selfmodel's joint vector, named
 after the joints, radians) writes `collides` (0/1) and `distance` (m: the smallest distance
 between checked objects, negative where they overlap, as coal reports it) to `--out`.
 Joints of the description outside the CSV are held at 0, or at the limit nearest 0.
 
     python3 scripts/collision_reference.py --urdf panda.urdf --joints q.csv \
-        --allowed allowed.json --out exact.csv
+        --checked pairs.json --scene table.yml --out exact.csv
 """
 import argparse
 import csv
@@ -24,11 +24,48 @@ import numpy as np
 import pinocchio as pin
 
 
+def add_scene(collision, path):
+    """The scene's obstacles as geometry objects fixed to the world, each paired with every
+    geometry object of a moving link (one whose joint is not the universe)."""
+    import coal
+    import yaml
+
+    with open(path) as f:
+        scene = yaml.safe_load(f) or {}
+    robot_objects = [i for i, g in enumerate(collision.geometryObjects) if g.parentJoint != 0]
+    for kind, entries in scene.items():
+        for name, e in (entries or {}).items():
+            pose = e.get("pose", list(e.get("position", [0, 0, 0])) + [1, 0, 0, 0])
+            x, y, z, qw, qx, qy, qz = pose
+            placement = pin.SE3(pin.Quaternion(qw, qx, qy, qz).normalized().matrix(), np.array([x, y, z]))
+            if kind == "cuboid":
+                shape = coal.Box(*e["dims"])
+            elif kind == "sphere":
+                shape = coal.Sphere(e["radius"])
+            elif kind == "cylinder":
+                shape = coal.Cylinder(e["radius"], e["height"])
+            elif kind == "capsule":
+                base, tip = np.array(e["base"]), np.array(e["tip"])
+                axis = tip - base
+                length = np.linalg.norm(axis)
+                shape = coal.Capsule(e["radius"], length)
+                z_axis = axis / length
+                rot = pin.Quaternion.FromTwoVectors(np.array([0, 0, 1.0]), z_axis).matrix()
+                placement = placement * pin.SE3(rot, (base + tip) / 2)
+            else:
+                sys.exit(f"collision_reference: {kind} obstacles are not supported here")
+            obj = pin.GeometryObject(f"scene/{name}", 0, 0, placement, shape)
+            k = collision.addGeometryObject(obj)
+            for i in robot_objects:
+                collision.addCollisionPair(pin.CollisionPair(i, k))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--urdf", required=True)
     ap.add_argument("--joints", required=True, help="CSV, one column per joint (radians)")
-    ap.add_argument("--allowed", required=True, help="JSON list of [link1, link2] pairs not checked")
+    ap.add_argument("--checked", required=True, help="JSON list of [link1, link2]: the pairs selfmodel checks (Robot.collision_pairs)")
+    ap.add_argument("--scene", help="cuRobo world YAML: its cuboids, spheres, cylinders and capsules checked against every moving link")
     ap.add_argument("--out", required=True)
     ap.add_argument("--distances", action="store_true", help="also the smallest distance (slower)")
     a = ap.parse_args()
@@ -36,8 +73,8 @@ def main():
     urdf = os.path.abspath(a.urdf)
     package_root = os.path.dirname(os.path.dirname(os.path.dirname(urdf)))
     model, collision, _ = pin.buildModelsFromUrdf(urdf, package_dirs=[package_root])
-    with open(a.allowed) as f:
-        allowed = {tuple(sorted(p)) for p in json.load(f)}
+    with open(a.checked) as f:
+        checked = {tuple(sorted(p)) for p in json.load(f)}
 
     def link_of(g):
         return model.frames[g.parentFrame].name
@@ -46,8 +83,10 @@ def main():
     for i in range(len(objects)):
         for j in range(i + 1, len(objects)):
             li, lj = link_of(objects[i]), link_of(objects[j])
-            if li != lj and tuple(sorted((li, lj))) not in allowed:
+            if tuple(sorted((li, lj))) in checked:
                 collision.addCollisionPair(pin.CollisionPair(i, j))
+    if a.scene:
+        add_scene(collision, a.scene)
     data = model.createData()
     cdata = pin.GeometryData(collision)
 

@@ -9,12 +9,12 @@
 
 pub mod calibration;
 pub mod cgan;
+pub mod collision;
 pub mod data;
 pub mod dls;
 pub mod drl;
 pub mod dsl;
 pub mod emssl;
-
 pub mod flow;
 pub mod learning;
 pub mod method;

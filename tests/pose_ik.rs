@@ -455,7 +455,7 @@ fn a_solve_stops_between_blocks_when_asked() {
     let stop = || calls.fetch_add(1, Ordering::Relaxed) >= 1;
     let lm = model.saved.config.lm.clone();
     let err = model
-        .solve_until(&robot.chain, &targets, 2, &lm, &device, &stop)
+        .solve_until(&robot.chain, &targets, 2, &lm, &device, &stop, None)
         .unwrap_err();
     assert!(matches!(err, selfmodel::Error::Interrupted(_)), "{err}");
     assert!(

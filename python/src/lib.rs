@@ -608,8 +608,15 @@ impl PyIkSolver {
             let raised = std::sync::Mutex::new(None);
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
-                self.model
-                    .solve_until(&self.robot.chain, &parsed, k, &lm, &self.device, &stop)
+                self.model.solve_until(
+                    &self.robot.chain,
+                    &parsed,
+                    k,
+                    &lm,
+                    &self.device,
+                    &stop,
+                    None,
+                )
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
                 return Err(e);

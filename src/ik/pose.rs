@@ -205,14 +205,23 @@ pub struct PoseSolution {
     pub iterations: usize,
     /// Starts tried (given and random).
     pub starts: usize,
+    /// Whether the answer was checked and found in collision ([`solve_valid`]); never for
+    /// an answer nobody checked.
+    pub collides: bool,
 }
 
 impl PoseSolution {
-    /// Within both tolerances.
+    /// Within both tolerances, and not in collision.
     pub fn exact(&self, cfg: &LmConfig) -> bool {
-        self.position_error_m <= cfg.tolerance_m && self.rotation_error_rad <= cfg.tolerance_rad
+        !self.collides
+            && self.position_error_m <= cfg.tolerance_m
+            && self.rotation_error_rad <= cfg.tolerance_rad
     }
 }
+
+/// Whether a joint vector is acceptable (collision-free, say): [`solve_valid`] returns a
+/// converged answer only where it is.
+pub type Valid<'a> = dyn Fn(&[f64]) -> bool + Sync + 'a;
 
 /// Iterations without the error halving after which a start is given up.
 const STALL: usize = 5;
@@ -284,6 +293,7 @@ pub fn solve_from(
         let limit = cfg.max_iterations + if exact { POLISH_ITERATIONS } else { 0 };
         if cfg.converged(p_worst, r_worst) || given_up || iterations >= limit {
             return PoseSolution {
+                collides: false,
                 joints: q,
                 position_error_m: p_worst,
                 rotation_error_rad: r_worst,
@@ -393,26 +403,55 @@ pub fn solve(
     cfg: &LmConfig,
     salt: u64,
 ) -> PoseSolution {
+    solve_valid(paths, target, starts, ranges, cfg, salt, None)
+}
+
+/// [`solve`] where an answer counts only if `valid` accepts it (where given): a converged
+/// answer it refuses (one in collision) is marked `collides` and the next start is tried; the
+/// answer returned is the best accepted one, else the best refused one, marked.
+// `solve`'s arguments and the check, each named at its callers.
+#[allow(clippy::too_many_arguments)]
+pub fn solve_valid(
+    paths: &[TipPath],
+    target: &[PoseTarget],
+    starts: &[Vec<f64>],
+    ranges: &[[f64; 2]],
+    cfg: &LmConfig,
+    salt: u64,
+    valid: Option<&Valid>,
+) -> PoseSolution {
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let w = cfg.tolerance_m / cfg.tolerance_rad;
     let cost = |s: &PoseSolution| s.position_error_m.powi(2) + (w * s.rotation_error_rad).powi(2);
+    // Refused answers rank after every accepted one.
+    let rank = |s: &PoseSolution| (s.collides, cost(s));
     let mut best: Option<PoseSolution> = None;
     let (mut iterations, mut tried) = (0, 0);
     let random =
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
-        let s = solve_from(paths, target, &start, ranges, cfg);
+        let mut s = solve_from(paths, target, &start, ranges, cfg);
         iterations += s.iterations;
         tried += 1;
         let converged = cfg.converged(s.position_error_m, s.rotation_error_rad);
-        if best.as_ref().is_none_or(|b| cost(&s) < cost(b)) {
+        // Only answers that could be kept are checked (the check costs microseconds).
+        if let Some(valid) = valid
+            && (converged || s.exact(cfg) || best.is_none())
+        {
+            s.collides = !valid(&s.joints);
+        }
+        let done = converged && !s.collides;
+        if best.as_ref().is_none_or(|b| rank(&s) < rank(b)) {
             best = Some(s);
         }
-        if converged {
+        if done {
             break;
         }
     }
     let mut best = best.expect("at least one start");
+    if let Some(valid) = valid {
+        best.collides = !valid(&best.joints);
+    }
     best.iterations = iterations;
     best.starts = tried;
     best

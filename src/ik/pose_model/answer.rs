@@ -6,7 +6,7 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
 use crate::ik::flow::{sample_rows, sample_rows_from};
-use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, solve};
+use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, Valid, solve_valid};
 use crate::sim::kinematics::KinematicChain;
 
 use super::PoseModel;
@@ -37,14 +37,17 @@ impl PoseModel {
         device: &Device,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         let stop = crate::core::interrupt::requested;
-        self.solve_until(chain, targets, k, cfg, device, &stop)
+        self.solve_until(chain, targets, k, cfg, device, &stop, None)
     }
 
     /// [`Self::solve_with`], asking `stop` on the calling thread before each block of targets
     /// (a few thousand answers, well under a second): `true` ends it with
     /// [`Error::Interrupted`] (Python passes its own signal check). The answers are those of
     /// one pass over all targets: each block samples the flow with the seeds a single pass
-    /// would use.
+    /// would use. With `valid` (a collision check), an answer counts only where it accepts
+    /// it ([`crate::ik::pose::solve_valid`]).
+    // The batch's nouns, each named at its three callers.
+    #[allow(clippy::too_many_arguments)]
     pub fn solve_until(
         &self,
         chain: &KinematicChain,
@@ -53,6 +56,7 @@ impl PoseModel {
         cfg: &LmConfig,
         device: &Device,
         stop: &dyn Fn() -> bool,
+        valid: Option<&Valid>,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         use rayon::prelude::*;
         /// The flow samples this many rows a batch (a block here).
@@ -88,7 +92,8 @@ impl PoseModel {
                         (0..k)
                             .map(|s| {
                                 let start = [samples[s][j].clone()];
-                                solve(&paths, t, &start, ranges, cfg, (i * k + s) as u64)
+                                let salt = (i * k + s) as u64;
+                                solve_valid(&paths, t, &start, ranges, cfg, salt, valid)
                             })
                             .collect()
                     })

@@ -351,6 +351,7 @@ impl Ours<'_> {
             .zip(&errors)
             .map(|(q, &(p, r))| {
                 vec![PoseSolution {
+                    collides: false,
                     joints: q.clone(),
                     position_error_m: p / 1000.0,
                     rotation_error_rad: r.to_radians(),
@@ -801,6 +802,7 @@ mod tests {
         // An answer just inside counts at it; one just outside (or outside the limits) does not.
         let lm = at_equal_precision(&LmConfig::standard());
         let answer = |mm: f64| PoseSolution {
+            collides: false,
             joints: vec![0.0],
             position_error_m: mm / 1e3,
             rotation_error_rad: 0.5e-4_f64.to_radians(),
