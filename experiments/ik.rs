@@ -50,6 +50,9 @@ enum Command {
         n: usize,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Only poses whose joints are collision-free (with --scene, --self-collision).
+        #[command(flatten)]
+        collisions: CollisionArgs,
         /// CSV: x,y,z,qw,qx,qy,qz, then the joints that reach it (q1..qN).
         #[arg(long)]
         out: PathBuf,
@@ -72,25 +75,62 @@ enum Command {
         /// success threshold, whatever this is).
         #[arg(long, value_name = "MM,DEG", default_value = "0.0001,0.0001")]
         tolerance: String,
-        /// Obstacles (cuRobo's world-configuration YAML: cuboid, sphere, capsule, cylinder,
-        /// mesh): an answer is exact only if it keeps --margin from them and from itself.
-        #[arg(long, value_name = "FILE")]
-        scene: Option<PathBuf>,
-        /// Check each answer against the robot itself (on with --scene).
-        #[arg(long)]
-        self_collision: bool,
-        /// The distance an answer keeps from obstacles and from itself (metres).
-        #[arg(long, default_value_t = 0.005)]
-        margin: f64,
-        /// The SRDF whose <disable_collisions> say which links may touch [default: the one
-        /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
-        #[arg(long, value_name = "FILE")]
-        srdf: Option<PathBuf>,
+        #[command(flatten)]
+        collisions: CollisionArgs,
         /// Where the answers go (CSV: target,solution, one column per joint named after it,
         /// pos_err_mm,rot_err_deg,exact; beside it OUT.json: how they were made).
         #[arg(long)]
         out: PathBuf,
     },
+}
+
+/// What answers (and targets) are checked against.
+#[derive(clap::Args)]
+struct CollisionArgs {
+    /// Obstacles (cuRobo's world-configuration YAML: cuboid, sphere, capsule, cylinder,
+    /// mesh): an answer is exact only if it keeps --margin from them and from itself.
+    #[arg(long, value_name = "FILE")]
+    scene: Option<PathBuf>,
+    /// Check each answer against the robot itself (on with --scene).
+    #[arg(long)]
+    self_collision: bool,
+    /// The distance an answer keeps from obstacles and from itself (metres).
+    #[arg(long, default_value_t = 0.005)]
+    margin: f64,
+    /// The SRDF whose <disable_collisions> say which links may touch [default: the one
+    /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
+    #[arg(long, value_name = "FILE")]
+    srdf: Option<PathBuf>,
+}
+
+impl CollisionArgs {
+    /// The files it reads.
+    fn inputs(&self) -> impl Iterator<Item = &std::path::Path> {
+        [self.scene.as_deref(), self.srdf.as_deref()]
+            .into_iter()
+            .flatten()
+    }
+
+    /// The check, where any option asks for one.
+    fn check(
+        &self,
+        spec: &selfmodel::sim::robots::RobotSpec,
+    ) -> selfmodel::Result<Option<selfmodel::ik::collision::CollisionCheck>> {
+        if self.scene.is_none() && !self.self_collision && self.srdf.is_none() {
+            return Ok(None);
+        }
+        let scene = (self.scene.as_deref())
+            .map(selfmodel::sim::collision::scene::Scene::read)
+            .transpose()?;
+        selfmodel::ik::collision::CollisionCheck::for_robot(
+            spec,
+            self.srdf.as_deref(),
+            scene,
+            true,
+            self.margin,
+        )
+        .map(Some)
+    }
 }
 
 /// The most answers per target `ik solve` gives, and targets `ik targets` writes.
@@ -163,6 +203,7 @@ fn main() -> ExitCode {
                 model,
                 n,
                 seed,
+                collisions,
                 out,
             } => {
                 if !(1..=MAX_TARGETS).contains(&n) {
@@ -170,13 +211,21 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                let (model, robot) = answering(&model, &[&out], &[], &device)?;
+                let inputs: Vec<&std::path::Path> = collisions.inputs().collect();
+                let (model, robot) = answering(&model, &[&out], &inputs, &device)?;
+                let check = collisions.check(&model.saved.robot)?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
                 // Ctrl-C ends the rows; the file is then dropped whole.
+                // With a collision check, draws that collide are skipped: at most a thousand
+                // draws a row (a scene that leaves no room ends with a message).
+                let written = std::cell::Cell::new(0usize);
                 let rows = selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, seed)
-                    .take(n)
+                    .take(n.saturating_mul(if check.is_some() { 1000 } else { 1 }))
                     .take_while(|_| !selfmodel::core::interrupt::requested())
+                    .filter(|q| check.as_ref().is_none_or(|c| c.valid(q)))
+                    .take(n)
+                    .inspect(|_| written.set(written.get() + 1))
                     .map(|q| (PoseTarget::of(&robot.chain, &q), q));
                 selfmodel::core::atomic_file::write_atomic(&out, |w| {
                     selfmodel::ik::targets::write_targets_csv(
@@ -188,10 +237,23 @@ fn main() -> ExitCode {
                     .map_err(|e| selfmodel::Error::io(&out, e))?;
                     selfmodel::core::interrupt::check(|| {
                         format!("stopped writing {}; nothing was written", out.display())
-                    })
+                    })?;
+                    if written.get() < n {
+                        return Err(selfmodel::Error::Config(format!(
+                            "only {} of {n} draws ({} tried) were collision-free: the scene leaves the robot little room; nothing was written",
+                            written.get(),
+                            n.saturating_mul(1000)
+                        )));
+                    }
+                    Ok(())
                 })?;
+                let free = if check.is_some() {
+                    " collision-free"
+                } else {
+                    ""
+                };
                 println!(
-                    "ik targets: {n} reachable poses of {}; wrote {}",
+                    "ik targets: {n}{free} reachable poses of {}; wrote {}",
                     model.saved.robot.label(),
                     out.display()
                 );
@@ -202,10 +264,7 @@ fn main() -> ExitCode {
                 targets: targets_file,
                 k,
                 tolerance,
-                scene,
-                self_collision,
-                margin,
-                srdf,
+                collisions,
                 out,
             } => {
                 if !(1..=MAX_K).contains(&k) {
@@ -214,29 +273,11 @@ fn main() -> ExitCode {
                     )));
                 }
                 let provenance = PathBuf::from(format!("{}.json", out.display()));
-                let inputs: Vec<&std::path::Path> =
-                    [Some(&targets_file), scene.as_ref(), srdf.as_ref()]
-                        .into_iter()
-                        .flatten()
-                        .map(PathBuf::as_path)
-                        .collect();
+                let mut inputs = vec![targets_file.as_path()];
+                inputs.extend(collisions.inputs());
                 let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
-                let checking = scene.is_some() || self_collision || srdf.is_some();
-                let check = if checking {
-                    let scene = scene
-                        .as_deref()
-                        .map(selfmodel::sim::collision::scene::Scene::read)
-                        .transpose()?;
-                    Some(selfmodel::ik::collision::CollisionCheck::for_robot(
-                        &model.saved.robot,
-                        srdf.as_deref(),
-                        scene,
-                        true,
-                        margin,
-                    )?)
-                } else {
-                    None
-                };
+                let check = collisions.check(&model.saved.robot)?;
+                let checking = check.is_some();
                 let cfg = model
                     .saved
                     .config
@@ -293,9 +334,9 @@ fn main() -> ExitCode {
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
                         "solver": &cfg,
-                        "scene": scene,
+                        "scene": collisions.scene,
                         "collisions_checked": checking,
-                        "margin_m": checking.then_some(margin),
+                        "margin_m": checking.then_some(collisions.margin),
                         "stats": stats,
                         "seconds": seconds,
                         "threads": threads,

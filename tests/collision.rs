@@ -286,3 +286,88 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
     assert!(model.collides(&frames, Some(&with_box), 0.0));
     assert!(model.clearance(&frames, Some(&with_box), 1.0) < 0.0);
 }
+
+/// Collision-free IK on the Panda with a table and a box: answers that collide are never
+/// exact, and the targets drawn collision-free are answered exactly and collision-free.
+#[test]
+fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
+    use selfmodel::ik::collision::CollisionCheck;
+    use selfmodel::ik::pose::PoseTarget;
+    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    if !urdf.is_file() {
+        eprintln!("skipped: the Panda's description is not beside the repository");
+        return;
+    }
+    let dir = common::tempdir();
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("panda_hand".into()),
+        geometry: GeometryKind::None,
+        joints: Default::default(),
+    };
+    let robot = spec.load_kinematics().unwrap();
+    use selfmodel::core::preset::Preset;
+    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    cfg.data.samples = 1200;
+    cfg.data.train = 1100;
+    cfg.flow.fit.epochs = 2;
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    let model =
+        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.path().join("m"), &device)
+            .unwrap();
+    let scene = Scene::parse(
+        Path::new("scene.yml"),
+        "cuboid:\n  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.3, 0.15, 1, 0, 0, 0]}\n",
+    )
+    .unwrap();
+    let check = CollisionCheck::for_robot(&spec, None, Some(scene), true, 0.005).unwrap();
+    let free: Vec<Vec<f64>> = selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, 4)
+        .filter(|q| check.valid(q))
+        .take(60)
+        .collect();
+    let targets: Vec<Vec<PoseTarget>> = free
+        .iter()
+        .map(|q| PoseTarget::of(&robot.chain, q))
+        .collect();
+    let lm = model.saved.config.lm.clone();
+    let valid = |q: &[f64]| check.valid(q);
+    let answers = model
+        .solve_until(
+            &robot.chain,
+            &targets,
+            2,
+            &lm,
+            &device,
+            &|| false,
+            Some(&valid),
+        )
+        .unwrap();
+    let (mut exact, mut total) = (0, 0);
+    for a in answers.iter().flatten() {
+        total += 1;
+        assert_eq!(
+            a.collides,
+            !check.valid(&a.joints),
+            "the mark is the check's"
+        );
+        if a.exact(&lm) {
+            exact += 1;
+            assert!(
+                check.clearance(&a.joints, 1.0) >= 0.005,
+                "an exact answer collides"
+            );
+        }
+    }
+    assert!(
+        exact as f64 >= 0.95 * total as f64,
+        "{exact} of {total} exact and free"
+    );
+    // Without the check, the same solver knows nothing of the scene: no answer is marked.
+    let plain = model
+        .solve_until(&robot.chain, &targets, 1, &lm, &device, &|| false, None)
+        .unwrap();
+    assert!(plain.iter().flatten().all(|a| !a.collides));
+}

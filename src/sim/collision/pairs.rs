@@ -117,13 +117,17 @@ impl Default for PairSampling {
     }
 }
 
+/// Which pairs of link indices collide at some link frames.
+pub type CollidingPairs<'a> =
+    dyn Fn(&[nalgebra::Isometry3<f64>]) -> Vec<(usize, usize)> + Sync + 'a;
+
 /// The allowed pairs of `chain`'s links as MoveIt's setup assistant computes them, with
 /// `collide(frames)` saying which pairs of link indices are in collision at some link frames
 /// (links without geometry never are).
 pub fn compute(
     chain: &KinematicChain,
     sampling: &PairSampling,
-    collide: &(dyn Fn(&[nalgebra::Isometry3<f64>]) -> Vec<(usize, usize)> + Sync),
+    collide: &CollidingPairs,
 ) -> AllowedPairs {
     use rayon::prelude::*;
     let names = &chain.links;
