@@ -5,8 +5,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// Module path (`sim::kinematics`) -> the modules it refers to.
-fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
+/// `src/`, and every `.rs` file below it.
+fn rs_files() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
     let mut stack = vec![src.clone()];
@@ -16,18 +16,28 @@ fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
             if path.is_dir() {
                 stack.push(path);
             } else if path.extension().is_some_and(|e| e == "rs") {
-                let rel = path.strip_prefix(&src).unwrap().with_extension("");
-                let module = rel
-                    .components()
-                    .map(|c| c.as_os_str().to_string_lossy().into_owned())
-                    .collect::<Vec<_>>()
-                    .join("::");
-                // A folder's `mod.rs` is the folder's module (`sim::kinematics`).
-                let module = module.strip_suffix("::mod").unwrap_or(&module).to_string();
-                if module != "lib" {
-                    files.push((module, path));
-                }
+                files.push(path);
             }
+        }
+    }
+    (src, files)
+}
+
+/// Module path (`sim::kinematics`) -> the modules it refers to.
+fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
+    let (src, paths) = rs_files();
+    let mut files = Vec::new();
+    for path in paths {
+        let rel = path.strip_prefix(&src).unwrap().with_extension("");
+        let module = rel
+            .components()
+            .map(|c| c.as_os_str().to_string_lossy().into_owned())
+            .collect::<Vec<_>>()
+            .join("::");
+        // A folder's `mod.rs` is the folder's module (`sim::kinematics`).
+        let module = module.strip_suffix("::mod").unwrap_or(&module).to_string();
+        if module != "lib" {
+            files.push((module, path));
         }
     }
     let modules: BTreeSet<String> = files.iter().map(|(m, _)| m.clone()).collect();
@@ -214,29 +224,18 @@ fn the_layer_check_finds_an_import_from_a_layer_below() {
 /// Every source file, as ARCHITECTURE.md names it (`sim/robot.rs`): all but `lib.rs` and the
 /// files that open a folder of the same name (`sim.rs`), which the layer list describes.
 fn source_files() -> BTreeSet<String> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = BTreeSet::new();
-    let mut stack = vec![src.clone()];
-    while let Some(dir) = stack.pop() {
-        for entry in std::fs::read_dir(&dir).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else if path.extension().is_some_and(|e| e == "rs")
-                && !path.with_extension("").is_dir()
-            {
-                let rel = path
-                    .strip_prefix(&src)
-                    .unwrap()
-                    .to_string_lossy()
-                    .replace('\\', "/");
-                if rel != "lib.rs" {
-                    files.insert(rel);
-                }
-            }
-        }
-    }
-    files
+    let (src, paths) = rs_files();
+    paths
+        .iter()
+        .filter(|path| !path.with_extension("").is_dir())
+        .map(|path| {
+            path.strip_prefix(&src)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/")
+        })
+        .filter(|rel| rel != "lib.rs")
+        .collect()
 }
 
 #[test]

@@ -308,16 +308,9 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
         joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
-    use selfmodel::core::preset::Preset;
-    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
-    cfg.data.samples = 1200;
-    cfg.data.train = 1100;
-    cfg.flow.fit.epochs = 2;
+    let model = common::quick_pose_model(&spec, &robot, dir.path());
     let device =
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
-    let model =
-        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.path().join("m"), &device)
-            .unwrap();
     let scene = Scene::parse(
         Path::new("scene.yml"),
         "cuboid:\n  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.3, 0.15, 1, 0, 0, 0]}\n",

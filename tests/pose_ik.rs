@@ -133,7 +133,6 @@ fn quick_model(
     selfmodel::sim::robot::Robot,
     selfmodel::ik::pose_model::PoseModel,
 ) {
-    use selfmodel::core::preset::Preset;
     let urdf = common::write_arm(dir, &format!("arm{joints}"), joints, true);
     let spec = selfmodel::sim::robots::RobotSpec::Urdf {
         path: urdf,
@@ -144,14 +143,7 @@ fn quick_model(
         joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
-    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
-    cfg.data.samples = 1200;
-    cfg.data.train = 1100;
-    cfg.flow.fit.epochs = 2;
-    let device =
-        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
-    let model =
-        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.join("model"), &device).unwrap();
+    let model = common::quick_pose_model(&spec, &robot, dir);
     (spec, robot, model)
 }
 

@@ -381,3 +381,21 @@ pub fn the_saved_model_scores_as_its_run<M: selfmodel::self_models::model::SelfM
     let e = loading::load(dir, &device).err().unwrap().to_string();
     assert!(e.contains("damaged or replaced"), "{e}");
 }
+
+/// A pose IK model of `spec`'s robot trained in seconds (the quick preset on 1,200 poses, two
+/// epochs), saved under `dir`.
+#[allow(dead_code)]
+pub fn quick_pose_model(
+    spec: &selfmodel::sim::robots::RobotSpec,
+    robot: &selfmodel::sim::robot::Robot,
+    dir: &std::path::Path,
+) -> selfmodel::ik::pose_model::PoseModel {
+    use selfmodel::core::preset::Preset;
+    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    cfg.data.samples = 1200;
+    cfg.data.train = 1100;
+    cfg.flow.fit.epochs = 2;
+    let device =
+        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
+    selfmodel::ik::pose_model::train(spec, robot, &cfg, &dir.join("model"), &device).unwrap()
+}
