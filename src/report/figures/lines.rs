@@ -80,33 +80,11 @@ pub fn curves(
     save_rgb(path, &buf, w, h)
 }
 
-/// Lines of positive `(x, y)` points, one per run, both axes logarithmic (sweeps over batch
-/// sizes or thread counts), with a marker on every measured point. The x ticks are the
-/// measured x values themselves (counts: 1, 2, 3, 4 threads; 64, 512 batch), the y ticks
-/// 1-2-5 per decade.
-pub fn log_log_lines(
-    path: &Path,
-    title: &str,
-    x_desc: &str,
-    y_desc: &str,
-    runs: &[(String, Vec<(f64, f64)>)],
-) -> Result<()> {
-    marked_lines(path, title, x_desc, y_desc, runs, true)
-}
-
-/// [`log_log_lines`] with a linear y axis (a share in percent against a time, say), its
-/// range padded around the points.
-pub fn lines_log_x(
-    path: &Path,
-    title: &str,
-    x_desc: &str,
-    y_desc: &str,
-    runs: &[(String, Vec<(f64, f64)>)],
-) -> Result<()> {
-    marked_lines(path, title, x_desc, y_desc, runs, false)
-}
-
-fn marked_lines(
+/// Lines of positive `(x, y)` points, one per run, the x axis logarithmic (sweeps over batch
+/// sizes or thread counts) and the y axis too where `log_y`, with a marker on every measured
+/// point. The x ticks are the measured x values themselves (counts: 1, 2, 3, 4 threads; 64,
+/// 512 batch), log-y ticks 1-2-5 per decade; a linear y axis is padded around the points.
+fn log_x_lines(
     path: &Path,
     title: &str,
     x_desc: &str,
@@ -205,19 +183,9 @@ fn marked_lines(
 }
 
 /// Lines of `(x, y)` points, one per run, both axes linear over the points' range (a ROC
-/// curve's unit square, say).
-pub fn lines(
-    path: &Path,
-    title: &str,
-    x_desc: &str,
-    y_desc: &str,
-    runs: &[(String, Vec<(f64, f64)>)],
-) -> Result<()> {
-    lines_marked(path, title, x_desc, y_desc, runs, false)
-}
-
-/// [`lines`] with a dot at every point (runs of one point: a trade-off between two scores).
-pub fn lines_marked(
+/// curve's unit square, say), with a dot at every point where `markers` (runs of one point: a
+/// trade-off between two scores).
+fn linear_lines(
     path: &Path,
     title: &str,
     x_desc: &str,
@@ -277,4 +245,60 @@ pub fn lines_marked(
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
+}
+
+/// How a line plot draws its axes and points.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct LinePlot {
+    /// A logarithmic x axis ticked at the measured x values (sweeps over counts); its points
+    /// are always marked.
+    pub log_x: bool,
+    /// A logarithmic y axis (with `log_x` only).
+    pub log_y: bool,
+    /// A dot at every point (linear axes).
+    pub markers: bool,
+}
+
+impl LinePlot {
+    /// Both axes linear (a ROC curve).
+    pub const LINEAR: Self = Self {
+        log_x: false,
+        log_y: false,
+        markers: false,
+    };
+    /// A log x axis, a linear y axis (a share against a time).
+    pub const LOG_X: Self = Self {
+        log_x: true,
+        log_y: false,
+        markers: true,
+    };
+    /// Both axes logarithmic (a rate against a batch size or thread count).
+    pub const LOG_LOG: Self = Self {
+        log_x: true,
+        log_y: true,
+        markers: true,
+    };
+
+    /// The same with a dot at every point.
+    pub fn marked(self) -> Self {
+        Self {
+            markers: true,
+            ..self
+        }
+    }
+}
+
+/// Lines of `(x, y)` points, one per run (its label and points), drawn as `style` says.
+pub fn line_plot(
+    path: &Path,
+    title: &str,
+    (x_desc, y_desc): (&str, &str),
+    runs: &[(String, Vec<(f64, f64)>)],
+    style: LinePlot,
+) -> Result<()> {
+    if style.log_x {
+        log_x_lines(path, title, x_desc, y_desc, runs, style.log_y)
+    } else {
+        linear_lines(path, title, x_desc, y_desc, runs, style.markers)
+    }
 }

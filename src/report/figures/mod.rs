@@ -11,7 +11,7 @@ mod pareto;
 mod scatter;
 
 pub use images::{GridRow, image_grid, points_over_images};
-pub use lines::{curves, lines, lines_log_x, lines_marked, log_log_lines, training_curves};
+pub use lines::{LinePlot, curves, line_plot, training_curves};
 pub use pareto::{ParetoPoint, pareto_plot};
 pub use scatter::{ScatterPanel, scatter_panels};
 

@@ -84,7 +84,10 @@ pub struct GpuCheck {
     pub exe: PathBuf,
 }
 
-/// One line of the CPU sweep: a figure at a thread count.
+/// One line of the CPU sweep: a figure at a thread count. It repeats six of
+/// [`BenchRow`]'s fields rather than holding one with `#[serde(flatten)]`: the `csv` crate
+/// cannot write a flattened struct ("serializing maps is not supported", BurntSushi/rust-csv
+/// issues 98, 155 and 239; the pull requests adding it are still open).
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ThreadRow {
     pub threads: usize,

@@ -13,7 +13,6 @@ use super::bench::Bench;
 use crate::body::calibration::fit_joint_origins;
 use crate::body::observations::Observed;
 use crate::core::error::{Error, Result};
-use crate::report::figures::log_log_lines;
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::model::Render;
 use crate::self_models::neurokin::neurokin_run;
@@ -137,12 +136,12 @@ pub fn visual_calibration(
             )
         })
         .collect();
-    log_log_lines(
+    crate::report::figures::line_plot(
         &out.join("calibration_vs_k.png"),
         "Link-length error against the number of images",
-        "images k",
-        "mean link error (mm, log)",
+        ("images k", "mean link error (mm, log)"),
         &curves,
+        crate::report::figures::LinePlot::LOG_LOG,
     )?;
     Ok(rows)
 }

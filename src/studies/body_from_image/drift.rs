@@ -12,7 +12,6 @@ use serde::{Deserialize, Serialize};
 use super::bench::Bench;
 use crate::body::observations::{Observed, Perturbation};
 use crate::core::error::Result;
-use crate::report::figures::log_log_lines;
 use crate::report::table::{write_csv, write_markdown_report};
 
 /// Offset recovery against k: a row of `drift.csv`.
@@ -129,12 +128,12 @@ pub fn drift_rows(
                 .collect(),
         ),
     ];
-    log_log_lines(
+    crate::report::figures::line_plot(
         &out.join("drift_vs_k.png"),
         "Encoder offset error against the number of images",
-        "images k",
-        "offset error (degrees, log)",
+        ("images k", "offset error (degrees, log)"),
         &curves,
+        crate::report::figures::LinePlot::LOG_LOG,
     )?;
     Ok(drift_rows)
 }

@@ -179,15 +179,15 @@ pub(super) fn write_detection(cfg: &DamageConfig, out: &Path, found: &Detected) 
             cfg.z_threshold
         ),
     )?;
-    crate::report::figures::lines(
+    crate::report::figures::line_plot(
         &out.join("roc.png"),
         &format!(
             "ROC of the residual score, k = {} images, every link",
             found.roc_k
         ),
-        "false alarm rate",
-        "detection rate",
+        ("false alarm rate", "detection rate"),
         &found.roc,
+        crate::report::figures::LinePlot::LINEAR,
     )?;
     Ok(())
 }

@@ -44,15 +44,15 @@ pub(super) fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
                 )
             })
             .collect();
-        crate::report::figures::lines_log_x(
+        crate::report::figures::line_plot(
             &out.join(file),
             &format!(
                 "PSNR on {what} after recovery from n images ({} {}, link {})",
                 first.damage, first.size, first.link
             ),
-            "images of the damaged arm (n)",
-            "PSNR (dB)",
+            ("images of the damaged arm (n)", "PSNR (dB)"),
             &runs,
+            crate::report::figures::LinePlot::LOG_X,
         )?;
     }
     let mut damages: Vec<(&str, f64, usize)> = Vec::new();
@@ -91,7 +91,7 @@ pub(super) fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
         if !ewc.is_empty() {
             runs.push(("EWC, weight rising".into(), ewc));
         }
-        crate::report::figures::lines_marked(
+        crate::report::figures::line_plot(
             &out.join(format!(
                 "recovery_tradeoff_{}.png",
                 crate::core::atomic_file::file_name(&format!("{damage} {size} link {link}"))
@@ -99,10 +99,12 @@ pub(super) fn draw_recovery(out: &Path, rows: &[RecoveryRow]) -> Result<()> {
             &format!(
                 "Damaged arm against healthy arm, {damage} {size} link {link}, n = {n} images"
             ),
-            "PSNR on the healthy arm (dB)",
-            "PSNR on the damaged arm (dB)",
+            (
+                "PSNR on the healthy arm (dB)",
+                "PSNR on the damaged arm (dB)",
+            ),
             &runs,
-            true,
+            crate::report::figures::LinePlot::LINEAR.marked(),
         )?;
     }
     Ok(())

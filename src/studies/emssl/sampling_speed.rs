@@ -447,23 +447,23 @@ pub fn draw_figures(dir: &Path) -> Result<()> {
         .map(|r| r.cores)
         .find(|&c| c > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    crate::report::figures::log_log_lines(
+    crate::report::figures::line_plot(
         &dir.join("sampling_time_vs_batch.png"),
         &format!(
             "Figure 7(a): sampling {targets} targets against inference batch size ({cores}-core CPU)"
         ),
-        "inference batch size",
-        "seconds per sampling pass (log)",
+        ("inference batch size", "seconds per sampling pass (log)"),
         &lines(&batch_rows, |r| r.inference_batch),
+        crate::report::figures::LinePlot::LOG_LOG,
     )?;
-    crate::report::figures::log_log_lines(
+    crate::report::figures::line_plot(
         &dir.join("sampling_time_vs_threads.png"),
         &format!(
             "Figure 7(b): sampling time against forward-model threads (this CPU has {cores} cores)"
         ),
-        "forward-model threads",
-        "seconds per sampling pass (log)",
+        ("forward-model threads", "seconds per sampling pass (log)"),
         &lines(&thread_rows, |r| r.threads),
+        crate::report::figures::LinePlot::LOG_LOG,
     )
 }
 

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::core::error::Result;
-use crate::report::figures::{GridRow, image_grid, lines_log_x, lines_marked};
+use crate::report::figures::{GridRow, image_grid};
 
 use super::{HeldOutCamera, MultiviewConfig, MultiviewRow};
 
@@ -68,13 +68,12 @@ pub(super) fn draw(
             (m.clone(), pts)
         })
         .collect();
-    lines_marked(
+    crate::report::figures::line_plot(
         &out.join("psnr_vs_angle.png"),
         "PSNR on held-out poses against the angle to the nearest trained camera",
-        "angle to the nearest trained camera (degrees)",
-        "PSNR (dB)",
+        ("angle to the nearest trained camera (degrees)", "PSNR (dB)"),
         &runs,
-        true,
+        crate::report::figures::LinePlot::LINEAR.marked(),
     )?;
     if cfg.cameras.len() > 1 {
         let mut cams = vec!["trained".to_string()];
@@ -97,12 +96,12 @@ pub(super) fn draw(
                 )
             })
             .collect();
-        lines_log_x(
+        crate::report::figures::line_plot(
             &out.join("psnr_vs_cameras.png"),
             "Camera-conditioned NeuroKin: PSNR on held-out poses against trained cameras",
-            "trained cameras (N)",
-            "PSNR (dB)",
+            ("trained cameras (N)", "PSNR (dB)"),
             &runs,
+            crate::report::figures::LinePlot::LOG_X,
         )?;
     }
     Ok(())

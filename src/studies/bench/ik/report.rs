@@ -122,11 +122,14 @@ pub(super) fn draw(out: &Path, rows: &[BenchIkRow]) -> Result<()> {
     let name = Path::new(robot)
         .file_stem()
         .map_or(robot.to_string(), |s| s.to_string_lossy().to_string());
-    crate::report::figures::lines_log_x(
+    crate::report::figures::line_plot(
         &out.join("success_against_time.png"),
         &format!("{name}: targets solved exactly against time a target"),
-        "wall milliseconds a target (log)",
-        "targets solved exactly (%)",
+        (
+            "wall milliseconds a target (log)",
+            "targets solved exactly (%)",
+        ),
         &lines,
+        crate::report::figures::LinePlot::LOG_X,
     )
 }
