@@ -575,16 +575,48 @@ impl PyIkSolver {
     /// every tip is within `tolerance` (millimetres, degrees; 1e-4 and 1e-4 by default).
     /// Returns a dict: `joints` (N, k, dof), `pos_err_mm` and `rot_err_deg` (N, k, the worst
     /// tip's), `exact` (N, k; within 1 mm and 0.572 degrees, the success threshold).
-    #[pyo3(signature = (targets, k=1, tolerance=(1e-4, 1e-4)))]
+    /// With `scene` (a cuRobo world-configuration YAML file) or `self_collision`, an answer is
+    /// exact only if it also keeps `margin` (metres) from the obstacles and from itself
+    /// (`srdf`: the file whose `<disable_collisions>` say which links may touch; default the
+    /// one beside the URDF), and `collides` (N, k) says which answers did not.
+    #[pyo3(signature = (targets, k=1, tolerance=(1e-4, 1e-4), scene=None, self_collision=false, margin=0.005, srdf=None))]
+    // Python's keyword arguments, each named at the call.
+    #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
         &self,
         py: Python<'py>,
         targets: Matrix,
         k: i64,
         tolerance: (f64, f64),
+        scene: Option<PathBuf>,
+        self_collision: bool,
+        margin: f64,
+        srdf: Option<PathBuf>,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         guarded(|| {
             let k = count(k, "k", 1, 1000)?;
+            let check = if scene.is_some() || self_collision || srdf.is_some() {
+                let scene = scene
+                    .as_deref()
+                    .map(selfmodel::sim::collision::scene::Scene::read)
+                    .transpose()
+                    .map_err(value_error)?;
+                let spec = &self.model.saved.robot;
+                Some(
+                    py.allow_threads(|| {
+                        selfmodel::ik::collision::CollisionCheck::for_robot(
+                            spec,
+                            srdf.as_deref(),
+                            scene,
+                            true,
+                            margin,
+                        )
+                    })
+                    .map_err(value_error)?,
+                )
+            } else {
+                None
+            };
             let lm = self
                 .model
                 .saved
@@ -608,6 +640,7 @@ impl PyIkSolver {
             let raised = std::sync::Mutex::new(None);
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
+                let valid = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
                 self.model.solve_until(
                     &self.robot.chain,
                     &parsed,
@@ -615,7 +648,7 @@ impl PyIkSolver {
                     &lm,
                     &self.device,
                     &stop,
-                    None,
+                    valid.as_ref().map(|v| v as &selfmodel::ik::pose::Valid),
                 )
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
@@ -629,11 +662,13 @@ impl PyIkSolver {
                 Vec::with_capacity(n * k),
                 Vec::with_capacity(n * k),
             );
+            let mut collides = Vec::with_capacity(n * k);
             for a in answers.iter().flatten() {
                 joints.extend_from_slice(&a.joints);
                 pos.push(1000.0 * a.position_error_m);
                 rot.push(a.rotation_error_rad.to_degrees());
                 exact.push(a.exact(&lm));
+                collides.push(a.collides);
             }
             let out = pyo3::types::PyDict::new(py);
             let shape2 = |v: Vec<f64>| {
@@ -655,6 +690,14 @@ impl PyIkSolver {
                     .expect("n x k")
                     .into_pyarray(py),
             )?;
+            if check.is_some() {
+                out.set_item(
+                    "collides",
+                    numpy::ndarray::Array2::from_shape_vec((n, k), collides)
+                        .expect("n x k")
+                        .into_pyarray(py),
+                )?;
+            }
             Ok(out)
         })
     }

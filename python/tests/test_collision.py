@@ -75,3 +75,48 @@ def test_the_sphere_check_agrees_with_pinocchio_on_the_exact_meshes():
     print(f"{exact.mean():.1%} collide on the meshes, {ours.mean():.1%} by spheres; "
           f"{agree:.1%} of the mesh-free ones are sphere-free")
     assert agree > 0.8
+
+
+PANDA_MODEL = ROOT / "runs" / "ik_models" / "panda"
+
+
+@needs_panda
+def test_ik_solve_with_a_scene_answers_collision_free(tmp_path):
+    """A quick Panda model (trained here in seconds) answers targets drawn free of a table and
+    a box; no answer marked exact collides, by the scene's check and by the robot's own."""
+    import subprocess
+
+    ik = ROOT / "target" / "release" / "ik"
+    if not ik.is_file():
+        pytest.skip("the ik binary is not built (cargo build --release)")
+    model = tmp_path / "model"
+    out = subprocess.run(
+        [str(ik), "train", "--urdf", str(PANDA), "--tip", "panda_hand", "--preset", "quick", "--out", str(model)],
+        capture_output=True, text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    scene = tmp_path / "scene.yml"
+    scene.write_text(
+        "cuboid:\n"
+        "  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n"
+        "  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.3, 0.15, 1, 0, 0, 0]}\n"
+    )
+    targets = tmp_path / "targets.csv"
+    out = subprocess.run(
+        [str(ik), "targets", "--model", str(model), "--scene", str(scene), "--n", "40", "--out", str(targets)],
+        capture_output=True, text=True,
+    )
+    assert out.returncode == 0, out.stderr
+    solver = selfmodel.IkSolver.load(str(model))
+    rows = np.loadtxt(targets, delimiter=",", skiprows=1)[:, : len(solver.target_columns)]
+    got = solver.solve(rows, k=2, scene=str(scene))
+    assert got["collides"].shape == (40, 2)
+    assert not (got["exact"] & got["collides"]).any()
+    assert got["exact"].mean() >= 0.9, got["exact"].mean()
+    robot = selfmodel.Robot.from_urdf(str(PANDA), tip="panda_hand")
+    exact = got["joints"][got["exact"]]
+    assert not robot.collides(exact, margin=0.005).any()
+    # Without a scene nothing is checked, and there is no `collides`.
+    assert "collides" not in solver.solve(rows[:3])
+    with pytest.raises(ValueError, match="margin"):
+        solver.solve(rows[:1], self_collision=True, margin=-1.0)
