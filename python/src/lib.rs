@@ -283,34 +283,38 @@ impl PyRobot {
         })
     }
 
-    /// Whether each configuration of `q` (N, dof; radians, metres) collides with itself:
-    /// two spheres of a checked pair closer than `margin` (metres).
-    #[pyo3(signature = (q, margin=0.0))]
+    /// Whether each configuration of `q` (N, dof; radians, metres) collides with itself (two
+    /// spheres of a checked pair closer than `margin`, metres) or, with `scene` (a cuRobo
+    /// world-configuration YAML file), with an obstacle.
+    #[pyo3(signature = (q, scene=None, margin=0.0))]
     fn collides<'py>(
         &self,
         py: Python<'py>,
         q: Matrix,
+        scene: Option<PathBuf>,
         margin: f64,
     ) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
         guarded(|| {
-            let clearance = self.clearances(py, q, margin.max(0.0) + 1.0)?;
+            let clearance = self.clearances(py, q, scene, margin.max(0.0) + 1.0)?;
             let hit: Vec<bool> = clearance.iter().map(|&c| c < margin).collect();
             Ok(numpy::ndarray::Array1::from_vec(hit).into_pyarray(py))
         })
     }
 
-    /// The self-collision clearance of each configuration of `q` (N, dof): the smallest signed
-    /// distance (metres) between the spheres of a checked pair, negative where they overlap;
-    /// at most `cap` (a larger clearance is reported as `cap`).
-    #[pyo3(signature = (q, cap=1.0))]
+    /// The clearance of each configuration of `q` (N, dof): the smallest signed distance
+    /// (metres) between the spheres of a checked pair, and with `scene` between a moving
+    /// link's spheres and an obstacle, negative where they overlap; at most `cap` (a larger
+    /// clearance is reported as `cap`).
+    #[pyo3(signature = (q, scene=None, cap=1.0))]
     fn clearance<'py>(
         &self,
         py: Python<'py>,
         q: Matrix,
+        scene: Option<PathBuf>,
         cap: f64,
     ) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
         guarded(|| {
-            let c = self.clearances(py, q, cap)?;
+            let c = self.clearances(py, q, scene, cap)?;
             Ok(numpy::ndarray::Array1::from_vec(c).into_pyarray(py))
         })
     }
@@ -514,8 +518,18 @@ impl PyRobot {
     }
 
     /// The clearance of every row of `q`, in blocks (Ctrl-C between them).
-    fn clearances(&self, py: Python<'_>, q: Matrix, cap: f64) -> PyResult<Vec<f64>> {
+    fn clearances(
+        &self,
+        py: Python<'_>,
+        q: Matrix,
+        scene: Option<PathBuf>,
+        cap: f64,
+    ) -> PyResult<Vec<f64>> {
         let model = self.collision_model(py)?;
+        let scene = (scene.as_deref())
+            .map(selfmodel::sim::collision::scene::Scene::read)
+            .transpose()
+            .map_err(value_error)?;
         let chain = &self.robot.chain;
         let dof = chain.dof();
         let (n, v) = rows(q, dof, "q")?;
@@ -524,7 +538,7 @@ impl PyRobot {
             use rayon::prelude::*;
             Ok(v[rows.start * width..rows.end * width]
                 .par_chunks(width)
-                .map(|q| model.self_clearance(&chain.link_frames(q), cap))
+                .map(|q| model.clearance(&chain.link_frames(q), scene.as_ref(), cap))
                 .collect())
         })
     }

@@ -115,7 +115,8 @@ def test_ik_solve_with_a_scene_answers_collision_free(tmp_path):
     assert got["exact"].mean() >= 0.9, got["exact"].mean()
     robot = selfmodel.Robot.from_urdf(str(PANDA), tip="panda_hand")
     exact = got["joints"][got["exact"]]
-    assert not robot.collides(exact, margin=0.005).any()
+    assert not robot.collides(exact, scene=str(scene), margin=0.005).any()
+    assert (robot.clearance(exact, scene=str(scene)) >= 0.005).all()
     # Without a scene nothing is checked, and there is no `collides`.
     assert "collides" not in solver.solve(rows[:3])
     with pytest.raises(ValueError, match="margin"):
