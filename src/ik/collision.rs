@@ -79,8 +79,11 @@ impl CollisionCheck {
         }
     }
 
-    /// Whether `q` keeps the margin.
+    /// Whether `q` keeps the margin (the first pair or obstacle closer ends the check).
     pub fn valid(&self, q: &[f64]) -> bool {
-        self.clearance(q, self.margin) >= self.margin
+        let frames = self.chain.link_frames(q);
+        !(self.self_collision && self.model.self_collides(&frames, self.margin))
+            && !(self.scene.as_ref())
+                .is_some_and(|s| self.model.scene_collides(&frames, s, self.margin))
     }
 }

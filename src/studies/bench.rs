@@ -1,8 +1,9 @@
 //! The benchmarks, each a binary of the same name in `experiments/`: the decoders and
-//! FFKSM's training step against PyTorch, IK against the references, the GPU check, and CPU
-//! against GPU on the same model. Each warms up, takes the median of repeats and reports a
+//! FFKSM's training step against PyTorch, IK against the references, a collision check, the
+//! GPU check, and CPU against GPU on the same model. Each warms up, takes the median of repeats and reports a
 //! ratio against a reference measured in the same sitting.
 
+pub mod collision;
 pub mod decoders;
 pub mod device_equivalence;
 pub mod ffksm_step;

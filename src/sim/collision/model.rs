@@ -74,11 +74,17 @@ impl CollisionModel {
     }
 
     /// The smallest signed distance between a moving link's spheres and the obstacles of
-    /// `scene`, at most `cap`.
+    /// `scene`, at most `cap`. A link whose bounding sphere is farther than the best so far is
+    /// not looked into (its spheres lie inside it).
     pub fn scene_clearance(&self, frames: &[Isometry3<f64>], scene: &Scene, cap: f64) -> f64 {
         let mut best = cap;
-        for ((spheres, f), moving) in self.spheres.iter().zip(frames).zip(&self.moving) {
-            if !moving {
+        for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
+            if !self.moving[link] {
+                continue;
+            }
+            if let Some(b) = &self.bounds[link]
+                && scene.gap(&(f * b.center()), b.radius) >= best
+            {
                 continue;
             }
             for s in spheres {
@@ -86,6 +92,28 @@ impl CollisionModel {
             }
         }
         best
+    }
+
+    /// Whether a moving link's sphere comes closer than `margin` to an obstacle of `scene`
+    /// (stops at the first).
+    pub fn scene_collides(&self, frames: &[Isometry3<f64>], scene: &Scene, margin: f64) -> bool {
+        for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
+            if !self.moving[link] {
+                continue;
+            }
+            if let Some(b) = &self.bounds[link]
+                && scene.gap(&(f * b.center()), b.radius) >= margin
+            {
+                continue;
+            }
+            if spheres
+                .iter()
+                .any(|s| scene.gap(&(f * s.center()), s.radius) < margin)
+            {
+                return true;
+            }
+        }
+        false
     }
 
     /// The clearance against itself and, where given, the scene: at most `cap`.
@@ -99,7 +127,8 @@ impl CollisionModel {
 
     /// Whether the robot at `frames` comes closer than `margin` to itself or the scene.
     pub fn collides(&self, frames: &[Isometry3<f64>], scene: Option<&Scene>, margin: f64) -> bool {
-        self.clearance(frames, scene, margin) < margin
+        self.self_collides(frames, margin)
+            || scene.is_some_and(|s| self.scene_collides(frames, s, margin))
     }
 
     /// Every link's spheres placed by the link frames.
