@@ -9,3 +9,4 @@ pub mod device_equivalence;
 pub mod ffksm_step;
 pub mod gpu_check;
 pub mod ik;
+pub mod sphere_figure;

@@ -1,7 +1,8 @@
 //! How long a collision check of one configuration takes: the robot's forward kinematics
 //! (every link frame), then its spheres against each other (the checked pairs) and against a
 //! scene's obstacles, on one thread, median of repeats over random configurations; beside it
-//! the forward kinematics alone, so the check's own cost shows.
+//! the forward kinematics alone, so the check's own cost shows; and `spheres.png`, the
+//! spheres over the meshes ([`crate::studies::bench::sphere_figure`]).
 
 use std::path::Path;
 
@@ -66,6 +67,8 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
                 std::hint::black_box(check.valid(q));
             }
         }) / free.len().max(1) as f64;
+    // None free (a scene around another robot): nothing to time.
+    let free_us = if free.is_empty() { f64::NAN } else { free_us };
     let cpu = crate::eval::compute_peak::machine_label(false);
     let revision = crate::core::provenance::git_revision();
     let row = |what: &str, us: f64, obstacles: usize, colliding_pct: f64| CollisionTiming {
@@ -101,6 +104,19 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
             0.0,
         ),
     ];
+    let meshes = spec
+        .with_geometry(crate::sim::urdf_loader::GeometryKind::Collision)
+        .load()?;
+    let uncovered = crate::studies::bench::sphere_figure::draw(
+        &meshes,
+        &check.model.spheres,
+        &out.join("spheres.png"),
+        360,
+    )?;
+    eprintln!(
+        "bench_collision: spheres.png: {:.3}% of the mesh's pixels outside the spheres",
+        100.0 * uncovered
+    );
     crate::report::table::write_table(
         &out.join("results.csv"),
         &rows,
