@@ -101,6 +101,10 @@ struct CollisionArgs {
     /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
     #[arg(long, value_name = "FILE")]
     srdf: Option<PathBuf>,
+    /// Your own collision spheres (cuRobo's robot YAML or spheres file: a collision_spheres
+    /// block) instead of spheres fitted to the description's collision meshes.
+    #[arg(long, value_name = "FILE")]
+    spheres: Option<PathBuf>,
 }
 
 impl CollisionArgs {
@@ -116,14 +120,19 @@ impl CollisionArgs {
         &self,
         spec: &selfmodel::sim::robots::RobotSpec,
     ) -> selfmodel::Result<Option<selfmodel::ik::collision::CollisionCheck>> {
-        if self.scene.is_none() && !self.self_collision && self.srdf.is_none() {
+        if self.scene.is_none()
+            && !self.self_collision
+            && self.srdf.is_none()
+            && self.spheres.is_none()
+        {
             return Ok(None);
         }
         let scene = (self.scene.as_deref())
             .map(selfmodel::sim::collision::scene::Scene::read)
             .transpose()?;
-        selfmodel::ik::collision::CollisionCheck::for_robot(
+        selfmodel::ik::collision::CollisionCheck::with_spheres(
             spec,
+            self.spheres.as_deref(),
             self.srdf.as_deref(),
             scene,
             true,

@@ -364,3 +364,48 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
         .unwrap();
     assert!(plain.iter().flatten().all(|a| !a.collides));
 }
+
+#[test]
+fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
+    use selfmodel::sim::collision::user_spheres;
+    let dir = common::tempdir();
+    let d = dir.path();
+    std::fs::create_dir_all(d.join("spheres")).unwrap();
+    std::fs::write(
+        d.join("spheres/arm.yml"),
+        "collision_spheres:\n  a:\n    - \"center\": [0.0, 0.0, 0.1]\n      \"radius\": 0.05\n    - center: [0.0, 0.0, 0.2]\n      radius: -0.01\n  c:\n    - {center: [0.1, 0, 0], radius: 0.02}\n",
+    )
+    .unwrap();
+    // A robot file naming its spheres file, as cuRobo's configs do.
+    std::fs::write(
+        d.join("robot.yml"),
+        "robot_cfg:\n  kinematics:\n    base_link: a\n    collision_spheres: spheres/arm.yml\n",
+    )
+    .unwrap();
+    let links: Vec<String> = ["a", "b", "c"].map(String::from).to_vec();
+    let spheres = user_spheres::read(&d.join("robot.yml"), &links).unwrap();
+    assert_eq!(
+        spheres[0].len(),
+        1,
+        "the placeholder (radius -0.01) is skipped"
+    );
+    assert_eq!(spheres[0][0].center, [0.0, 0.0, 0.1]);
+    assert!(spheres[1].is_empty());
+    assert_eq!(spheres[2][0].radius, 0.02);
+    let err = user_spheres::read(&d.join("spheres/arm.yml"), &links[..2])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("\"c\", a link the robot does not have"),
+        "{err}"
+    );
+    std::fs::write(
+        d.join("none.yml"),
+        "robot_cfg:\n  kinematics:\n    base_link: a\n",
+    )
+    .unwrap();
+    let err = user_spheres::read(&d.join("none.yml"), &links)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("no collision_spheres block"), "{err}");
+}

@@ -38,6 +38,19 @@ impl CollisionCheck {
         self_collision: bool,
         margin: f64,
     ) -> Result<Self> {
+        Self::with_spheres(spec, None, srdf, scene, self_collision, margin)
+    }
+
+    /// [`Self::for_robot`] with the user's spheres in `spheres` (cuRobo's format) where
+    /// given, instead of spheres fitted to the meshes.
+    pub fn with_spheres(
+        spec: &RobotSpec,
+        spheres: Option<&Path>,
+        srdf: Option<&Path>,
+        scene: Option<Scene>,
+        self_collision: bool,
+        margin: f64,
+    ) -> Result<Self> {
         if !(margin.is_finite() && (0.0..=MAX_MARGIN_M).contains(&margin)) {
             return Err(Error::Config(format!(
                 "--margin {}: give a distance from 0 to 1 m",
@@ -50,10 +63,14 @@ impl CollisionCheck {
             RobotSpec::Builtin(_) => None,
         };
         let srdf = srdf.map(Path::to_path_buf).or(beside);
-        let model = crate::sim::collision::model_for(
+        let fitted = match spheres {
+            Some(file) => crate::sim::collision::user_spheres::read(file, &robot.chain.links)?,
+            None => crate::sim::collision::fit_robot(&robot, &SphereFit::default()),
+        };
+        let model = crate::sim::collision::model_with(
             &robot,
+            fitted,
             srdf.as_deref(),
-            &SphereFit::default(),
             &PairSampling::default(),
         )?;
         Ok(Self {

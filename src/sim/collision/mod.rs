@@ -1,12 +1,13 @@
 //! Collision checking for IK: spheres fitted to each link's collision geometry
 //! (`spheres`), the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
 //! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
-//! itself (`model`).
+//! itself (`model`); spheres a user supplies in cuRobo's format (`user_spheres`).
 
 pub mod model;
 pub mod pairs;
 pub mod scene;
 pub mod spheres;
+pub mod user_spheres;
 
 use rayon::prelude::*;
 
@@ -46,7 +47,16 @@ pub fn model_for(
     fit: &SphereFit,
     sampling: &PairSampling,
 ) -> crate::core::error::Result<CollisionModel> {
-    let spheres = fit_robot(robot, fit);
+    model_with(robot, fit_robot(robot, fit), srdf, sampling)
+}
+
+/// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]).
+pub fn model_with(
+    robot: &Robot,
+    spheres: Vec<Vec<Sphere>>,
+    srdf: Option<&std::path::Path>,
+    sampling: &PairSampling,
+) -> crate::core::error::Result<CollisionModel> {
     if spheres.iter().all(Vec::is_empty) {
         return Err(crate::core::error::Error::Config(format!(
             "{} has no collision geometry to check: load it with its <collision> elements (geometry \"collision\")",
