@@ -177,28 +177,43 @@ fn render_recorded_poses_from_csv() {
 }
 
 /// Run `bin` with `args`; it must fail with one `error:` line holding every needle, and leave
-/// nothing at `out` (the output path it was given).
-fn fails_cleanly(bin: &str, args: &[&str], needles: &[&str], out: &Path) {
+/// nothing at `out` (the output path it was given). `Err` says what went wrong, naming the
+/// command.
+fn refusal(bin: &str, args: &[&str], needles: &[&str], out: &Path) -> Result<(), String> {
+    let name = Path::new(bin)
+        .file_name()
+        .unwrap_or_default()
+        .to_string_lossy();
     let o = Command::new(bin).args(args).output().unwrap();
-    assert!(!o.status.success(), "{bin} {args:?} succeeded");
+    if o.status.success() {
+        return Err(format!("{name} {args:?} succeeded"));
+    }
     let err = String::from_utf8_lossy(&o.stderr);
     let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
     // clap's own errors add a "For more information" line.
-    assert!(lines[0].starts_with("error: "), "{bin} {args:?}: {err}");
-    assert!(
-        lines.len() == 1
-            || lines[1..]
-                .iter()
-                .all(|l| l.starts_with("For more information")),
-        "{bin} {args:?}: more than one line: {err}"
-    );
-    for n in needles {
-        assert!(
-            lines[0].contains(n),
-            "{bin} {args:?}: expected \"{n}\" in: {err}"
-        );
+    if !lines.first().is_some_and(|l| l.starts_with("error: ")) {
+        return Err(format!("{name} {args:?}: not an error line: {err}"));
     }
-    assert!(!out.exists(), "{bin} {args:?} left {}", out.display());
+    if !lines[1..]
+        .iter()
+        .all(|l| l.starts_with("For more information"))
+    {
+        return Err(format!("{name} {args:?}: more than one line: {err}"));
+    }
+    if let Some(n) = needles.iter().find(|n| !lines[0].contains(*n)) {
+        return Err(format!("{name} {args:?}: expected \"{n}\" in: {err}"));
+    }
+    if out.exists() {
+        return Err(format!("{name} {args:?} left {}", out.display()));
+    }
+    Ok(())
+}
+
+/// [`refusal`], failing the test at once.
+fn fails_cleanly(bin: &str, args: &[&str], needles: &[&str], out: &Path) {
+    if let Err(e) = refusal(bin, args, needles, out) {
+        panic!("{e}");
+    }
 }
 
 /// The inputs an adversarial user tried (issue 20): each rejected with one line, a non-zero
@@ -216,6 +231,13 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         std::fs::write(&p, text).unwrap();
         p.to_str().unwrap().to_string()
     };
+    // Every case runs; the test fails at the end naming each command that misbehaved.
+    let failed = std::cell::RefCell::new(Vec::new());
+    let check = |bin: &str, args: &[&str], needles: &[&str], out: &Path| {
+        if let Err(e) = refusal(bin, args, needles, out) {
+            failed.borrow_mut().push(e);
+        }
+    };
     let bin = |name: &str| match name {
         "dataset" => env!("CARGO_BIN_EXE_dataset"),
         "fit" => env!("CARGO_BIN_EXE_fit_arm4_geometry"),
@@ -226,7 +248,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         _ => unreachable!(),
     };
     // Unbounded work is refused before it starts (it aborted on allocation, or ran forever).
-    fails_cleanly(
+    check(
         bin("dataset"),
         &[
             "--preset",
@@ -248,7 +270,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
             &["gives 1 joint vectors", "--grid-step", "--samples"][..],
         ),
     ] {
-        fails_cleanly(
+        check(
             bin("dataset"),
             &[
                 "--preset",
@@ -268,20 +290,20 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     // after training, or "Not a directory").
     let a_file = write("a_file", "x");
     let under_file = format!("{a_file}/out.npz");
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--preset", "quick", "--out", &under_file],
         &["is a file, not a folder"],
         Path::new(&under_file),
     );
     let folder = format!("{}/", d.join("folder").display());
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--preset", "quick", "--out", &folder],
         &["is a folder", "dataset.npz"],
         &d.join("folder"),
     );
-    fails_cleanly(
+    check(
         env!("CARGO_BIN_EXE_ik"),
         &[
             "train",
@@ -293,7 +315,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["is a file, not a folder"],
         &d.join("a_file/model"),
     );
-    fails_cleanly(
+    check(
         env!("CARGO_BIN_EXE_neurokin"),
         &["--preset", "quick", "--out", &format!("{a_file}/run")],
         &["is a file, not a folder"],
@@ -309,7 +331,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     common::assert_ok(&looked_down);
     // A robot with no movable joint (40 identical images were written).
     let arm = common::write_arm(d, "still", 2, false);
-    fails_cleanly(
+    check(
         bin("dataset"),
         &[
             "--preset",
@@ -335,7 +357,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     selfmodel::data::dataset::Dataset { n_train: 0, ..data }
         .save(&empty_train)
         .unwrap();
-    fails_cleanly(
+    check(
         env!("CARGO_BIN_EXE_mean_silhouette"),
         &[
             "--preset",
@@ -349,7 +371,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &out,
     );
     // A camera kilometres away (its frame was NaN at 1e150 m, and 1e300 took a minute).
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--preset", "quick", "--eye", "1e150,0,0", "--out", n],
         &["within 1000 m"],
@@ -357,7 +379,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     );
     // A self-model refusing its settings leaves no folder (it left config.json behind).
     for args in [["--train-samples", "1000000000000"], ["--fov", "0"]] {
-        fails_cleanly(
+        check(
             env!("CARGO_BIN_EXE_neurokin"),
             &["--preset", "quick", args[0], args[1], "--out", o],
             &[],
@@ -366,28 +388,28 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     }
     // A typo in the first row is not a header; a header is a row of names.
     let typo = write("typo.csv", "1O,20,30,40\n1,2,3,4\n");
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--angles", &typo, "--out", n],
         &["line 1", "1O,20,30,40"],
         &npz_out,
     );
     let semi = write("semi.csv", "10;20;30;40\n");
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--angles", &semi, "--out", n],
         &["separate the joints with commas"],
         &npz_out,
     );
     let huge = write("huge.csv", "a,b,c,d\n100000,1,2,3\n");
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--angles", &huge, "--out", n],
         &["row 1", "outside +-360"],
         &npz_out,
     );
     let huger = write("huger.csv", "1,2,3,1e308\n");
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--angles", &huger, "--out", n],
         &["row 1: 1e308 is outside +-360"],
@@ -410,19 +432,19 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         zip.write_all(&npy).unwrap();
         zip.finish().unwrap();
     }
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--angles", forged.to_str().unwrap(), "--out", n],
         &["more elements than the file holds"],
         &npz_out,
     );
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--size", "100000", "--out", n],
         &["GiB limit", "--size"],
         &npz_out,
     );
-    fails_cleanly(
+    check(
         bin("dataset"),
         &["--samples", "-5", "--out", n],
         &["invalid value '-5'"],
@@ -430,21 +452,21 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     );
     let geometry = d.join("g.json");
     for cell in ["0", "-1"] {
-        fails_cleanly(
+        check(
             bin("fit"),
             &["--cell", cell, "--out", geometry.to_str().unwrap()],
             &["not a voxel size"],
             &geometry,
         );
     }
-    fails_cleanly(
+    check(
         bin("reproduce"),
         &["--only", "nonsense", "--root", o],
         &["no such experiment"],
         &out,
     );
     let bench = d.join("b.csv");
-    fails_cleanly(
+    check(
         bin("bench"),
         &[
             "--repeats",
@@ -456,7 +478,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         &["at least one timed step"],
         &bench,
     );
-    fails_cleanly(
+    check(
         bin("speed"),
         &[
             "--preset",
@@ -473,7 +495,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
         "fixed.urdf",
         r#"<robot name="f"><link name="base"/><link name="a"/><joint name="j" type="fixed"><parent link="base"/><child link="a"/></joint></robot>"#,
     );
-    fails_cleanly(
+    check(
         bin("table2"),
         &["--preset", "quick", "--urdf", &fixed, "--out", o],
         &["no movable joints"],
@@ -486,7 +508,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
             r#"<robot name="c"><link name="a"/><link name="b"/><joint name="j1" type="revolute"><parent link="a"/><child link="b"/>{limit}</joint><joint name="j2" type="revolute"><parent link="b"/><child link="a"/>{limit}</joint></robot>"#
         ),
     );
-    fails_cleanly(
+    check(
         bin("table2"),
         &["--preset", "quick", "--urdf", &cycle, "--out", o],
         &["the joints form a cycle"],
@@ -494,18 +516,25 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     );
     // Checked before the first file is written: no config.json left behind.
     let neurokin = env!("CARGO_BIN_EXE_neurokin");
-    fails_cleanly(
+    check(
         neurokin,
         &["--preset", "quick", "--urdf", &fixed, "--out", o],
         &["no movable joints"],
         &out,
     );
     #[cfg(not(feature = "wgpu"))]
-    fails_cleanly(
+    check(
         neurokin,
         &["--preset", "quick", "--device", "wgpu", "--out", o],
         &["not compiled in", "--features wgpu"],
         &out,
+    );
+    let failed = failed.into_inner();
+    assert!(
+        failed.is_empty(),
+        "{} refusals went wrong:\n{}",
+        failed.len(),
+        failed.join("\n")
     );
 }
 
