@@ -101,7 +101,82 @@ impl PoseModel {
                 answers.extend(solved);
             }
         }
+        if let Some(valid) = valid {
+            self.retry_refused(chain, targets, cfg, device, valid, &mut answers);
+        }
         Ok(answers)
+    }
+
+    /// Where an answer is not exact once collisions are checked (every start it tried either
+    /// missed or collided), try again from more of the flow's samples for that target: they
+    /// keep to the poses it learned, where the random starts fold the robot onto itself.
+    /// Only those targets pay for the extra samples.
+    fn retry_refused(
+        &self,
+        chain: &KinematicChain,
+        targets: &[Vec<PoseTarget>],
+        cfg: &LmConfig,
+        device: &Device,
+        valid: &Valid,
+        answers: &mut [Vec<PoseSolution>],
+    ) {
+        use rayon::prelude::*;
+        /// Flow samples a refused answer starts again from.
+        const RETRY_SAMPLES: usize = 256;
+        let retry: Vec<usize> = (0..answers.len())
+            .filter(|&i| answers[i].iter().any(|a| !a.exact(cfg)))
+            .collect();
+        if retry.is_empty() {
+            return;
+        }
+        let sub: Vec<Vec<PoseTarget>> = retry.iter().map(|&i| targets[i].clone()).collect();
+        let rows = condition_rows(&self.data, &sub, self.saved.config.position_only);
+        let samples = sample_rows_from(
+            &self.flow,
+            &self.data,
+            &rows,
+            RETRY_SAMPLES,
+            1024,
+            0xC011,
+            0,
+            device,
+        );
+        let only_samples = LmConfig {
+            random_starts: 0,
+            ..cfg.clone()
+        };
+        let paths = chain.tip_paths();
+        let ranges = &self.saved.ranges;
+        let better: Vec<Vec<(usize, PoseSolution)>> = retry
+            .par_iter()
+            .enumerate()
+            .map(|(r, &i)| {
+                let starts: Vec<Vec<f64>> = samples.iter().map(|s| s[r].clone()).collect();
+                (answers[i].iter().enumerate())
+                    .filter(|(_, a)| !a.exact(cfg))
+                    .filter_map(|(s, a)| {
+                        let salt = (i * answers[i].len() + s) as u64 ^ 0xC011;
+                        let mut b = solve_valid(
+                            &paths,
+                            &targets[i],
+                            &starts,
+                            ranges,
+                            &only_samples,
+                            salt,
+                            Some(valid),
+                        );
+                        b.iterations += a.iterations;
+                        b.starts += a.starts;
+                        b.exact(cfg).then_some((s, b))
+                    })
+                    .collect()
+            })
+            .collect();
+        for (&i, fixed) in retry.iter().zip(better) {
+            for (s, b) in fixed {
+                answers[i][s] = b;
+            }
+        }
     }
 
     /// The flow's own answers (one sample per target, no refinement).
