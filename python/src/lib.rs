@@ -10,6 +10,7 @@ use numpy::{IntoPyArray, PyArray2, PyArray3, PyReadonlyArray2};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 
+use selfmodel::ik::collision::CollisionCheck;
 use selfmodel::ik::pose::PoseTarget;
 use selfmodel::ik::pose_model::{PoseModel, target_columns, target_from_values};
 use selfmodel::sim::collision::model::CollisionModel;
@@ -175,11 +176,12 @@ fn in_blocks<T: Send>(
 #[pyclass(name = "Robot", module = "selfmodel", frozen)]
 struct PyRobot {
     robot: Robot,
-    /// The description as loaded, for its collision geometry; the SRDF named with it.
+    /// The description as loaded, for its collision geometry; the SRDF named with it (else
+    /// the one beside the URDF).
     spec: RobotSpec,
     srdf: Option<PathBuf>,
     /// Built on the first collision query: spheres and the checked pairs.
-    collision: std::sync::OnceLock<CollisionModel>,
+    collision: std::sync::OnceLock<CollisionCheck>,
 }
 
 #[pymethods]
@@ -220,7 +222,6 @@ impl PyRobot {
                 Some(&path),
             )
             .map_err(value_error)?;
-            let srdf = srdf.or_else(|| selfmodel::sim::srdf::find_beside(&path).ok());
             let spec = RobotSpec::Urdf {
                 path,
                 base_xyz: [0.0; 3],
@@ -497,24 +498,18 @@ impl PyRobot {
 
 /// A learned IK model `ik train` saved, with the robot it was trained for.
 impl PyRobot {
-    /// The collision model, built once: the description reloaded with its collision geometry.
+    /// The collision model, built once: the description reloaded with its collision geometry
+    /// (as `ik solve --self-collision` builds it).
     fn collision_model(&self, py: Python<'_>) -> PyResult<&CollisionModel> {
-        if let Some(m) = self.collision.get() {
-            return Ok(m);
+        if let Some(c) = self.collision.get() {
+            return Ok(&c.model);
         }
-        let spec = self.spec.with_geometry(GeometryKind::Collision);
-        let model = py
+        let check = py
             .allow_threads(|| {
-                let robot = spec.load()?;
-                selfmodel::sim::collision::model_for(
-                    &robot,
-                    self.srdf.as_deref(),
-                    &Default::default(),
-                    &Default::default(),
-                )
+                CollisionCheck::for_robot(&self.spec, self.srdf.as_deref(), None, true, 0.0)
             })
             .map_err(value_error)?;
-        Ok(self.collision.get_or_init(|| model))
+        Ok(&self.collision.get_or_init(|| check).model)
     }
 
     /// The clearance of every row of `q`, in blocks (Ctrl-C between them).

@@ -131,12 +131,23 @@ pub fn check_xml_depth(text: &str) -> Result<(), String> {
 /// [`read_regular`] reads (at most [`MAX_DESCRIPTION_BYTES`]), UTF-8, its byte-order mark
 /// dropped. Its nesting is checked by [`check_xml_depth`] where it is parsed.
 pub fn read_xml(path: &Path, what: &str) -> crate::core::error::Result<String> {
+    read_user_text(path, what, MAX_DESCRIPTION_BYTES, "XML")
+}
+
+/// The text of a file a user names in `format` (XML, YAML), read as [`read_regular`] reads
+/// (at most `max` bytes), UTF-8, its byte-order mark dropped.
+pub fn read_user_text(
+    path: &Path,
+    what: &str,
+    max: u64,
+    format: &str,
+) -> crate::core::error::Result<String> {
     use crate::core::error::Error;
-    let bytes = read_regular(path, what, MAX_DESCRIPTION_BYTES).map_err(|e| Error::io(path, e))?;
+    let bytes = read_regular(path, what, max).map_err(|e| Error::io(path, e))?;
     let text = String::from_utf8(bytes).map_err(|_| {
         Error::data(
             path,
-            format!("the {what} is not UTF-8 text (it is XML: save it as UTF-8)"),
+            format!("the {what} is not UTF-8 text (it is {format}: save it as UTF-8)"),
         )
     })?;
     Ok(match text.strip_prefix('\u{feff}') {

@@ -10,7 +10,7 @@ use crate::sim::collision::model::CollisionModel;
 use crate::sim::collision::pairs::PairSampling;
 use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::SphereFit;
-use crate::sim::kinematics::KinematicChain;
+use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 use crate::sim::urdf_loader::GeometryKind;
 
@@ -22,7 +22,8 @@ pub struct CollisionCheck {
     pub self_collision: bool,
     /// The distance kept (m).
     pub margin: f64,
-    chain: KinematicChain,
+    /// The robot with its collision geometry (what the spheres were fitted to).
+    pub robot: Robot,
 }
 
 /// The largest margin accepted (m).
@@ -78,13 +79,13 @@ impl CollisionCheck {
             scene,
             self_collision,
             margin,
-            chain: robot.chain,
+            robot,
         })
     }
 
     /// The clearance at `q` (m, negative where something overlaps), at most `cap`.
     pub fn clearance(&self, q: &[f64], cap: f64) -> f64 {
-        let frames = self.chain.link_frames(q);
+        let frames = self.robot.chain.link_frames(q);
         let own = if self.self_collision {
             self.model.self_clearance(&frames, cap)
         } else {
@@ -98,9 +99,10 @@ impl CollisionCheck {
 
     /// Whether `q` keeps the margin (the first pair or obstacle closer ends the check).
     pub fn valid(&self, q: &[f64]) -> bool {
-        let frames = self.chain.link_frames(q);
-        !(self.self_collision && self.model.self_collides(&frames, self.margin))
-            && !(self.scene.as_ref())
-                .is_some_and(|s| self.model.scene_collides(&frames, s, self.margin))
+        let frames = self.robot.chain.link_frames(q);
+        if self.self_collision && self.model.self_collides(&frames, self.margin) {
+            return false;
+        }
+        !(self.scene.as_ref()).is_some_and(|s| self.model.scene_collides(&frames, s, self.margin))
     }
 }

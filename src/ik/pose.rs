@@ -425,7 +425,8 @@ pub fn solve_valid(
     let cost = |s: &PoseSolution| s.position_error_m.powi(2) + (w * s.rotation_error_rad).powi(2);
     // Refused answers rank after every accepted one.
     let rank = |s: &PoseSolution| (s.collides, cost(s));
-    let mut best: Option<PoseSolution> = None;
+    // The best answer so far, and whether it has been checked.
+    let mut best: Option<(PoseSolution, bool)> = None;
     let (mut iterations, mut tried) = (0, 0);
     let random =
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
@@ -434,22 +435,21 @@ pub fn solve_valid(
         iterations += s.iterations;
         tried += 1;
         let converged = cfg.converged(s.position_error_m, s.rotation_error_rad);
-        // Only answers that could be kept are checked (the check costs microseconds).
-        if let Some(valid) = valid
-            && (converged || s.exact(cfg) || best.is_none())
-        {
+        // Only answers that could count are checked here; the one returned is checked last.
+        let checked = valid.is_some() && (converged || s.exact(cfg));
+        if let Some(valid) = valid.filter(|_| checked) {
             s.collides = !valid(&s.joints);
         }
         let done = converged && !s.collides;
-        if best.as_ref().is_none_or(|b| rank(&s) < rank(b)) {
-            best = Some(s);
+        if best.as_ref().is_none_or(|(b, _)| rank(&s) < rank(b)) {
+            best = Some((s, checked));
         }
         if done {
             break;
         }
     }
-    let mut best = best.expect("at least one start");
-    if let Some(valid) = valid {
+    let (mut best, checked) = best.expect("at least one start");
+    if let Some(valid) = valid.filter(|_| !checked) {
         best.collides = !valid(&best.joints);
     }
     best.iterations = iterations;

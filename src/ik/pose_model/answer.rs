@@ -12,6 +12,9 @@ use crate::sim::kinematics::KinematicChain;
 use super::PoseModel;
 use super::training::condition_rows;
 
+/// The flow samples this many rows a batch (a block of targets between Ctrl-C checks).
+const FLOW_BATCH: usize = 1024;
+
 impl PoseModel {
     /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
     /// (from random starts where it stalls), in target order. Ctrl-C (the command line's
@@ -59,8 +62,6 @@ impl PoseModel {
         valid: Option<&Valid>,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         use rayon::prelude::*;
-        /// The flow samples this many rows a batch (a block here).
-        const FLOW_BATCH: usize = 1024;
         let k = k.max(1);
         // Targets refined between two questions to `stop`: about 4,096 answers.
         let per_check = (4096 / k).max(1);
@@ -136,7 +137,7 @@ impl PoseModel {
             &self.data,
             &rows,
             RETRY_SAMPLES,
-            1024,
+            FLOW_BATCH,
             0xC011,
             0,
             device,
@@ -182,7 +183,7 @@ impl PoseModel {
     /// The flow's own answers (one sample per target, no refinement).
     pub fn sample(&self, targets: &[Vec<PoseTarget>], device: &Device) -> Vec<Vec<f64>> {
         let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
-        sample_rows(&self.flow, &self.data, &rows, 1, 1024, 0x5EED, device)
+        sample_rows(&self.flow, &self.data, &rows, 1, FLOW_BATCH, 0x5EED, device)
             .pop()
             .unwrap_or_default()
     }

@@ -36,7 +36,8 @@ fn register_font() {
 }
 
 /// Encode an RGB buffer as PNG, atomically.
-fn save_rgb(path: &Path, buf: &[u8], w: u32, h: u32) -> Result<()> {
+/// Write an RGB image (`w x h`, row-major) as a PNG, whole or not at all.
+pub fn save_rgb(path: &Path, buf: &[u8], w: u32, h: u32) -> Result<()> {
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
         .write_image(buf, w, h, image::ExtendedColorType::Rgb8)

@@ -16,6 +16,36 @@ use model::CollisionModel;
 use pairs::{AllowedPairs, PairSampling};
 use spheres::{Sphere, SphereFit};
 
+/// The largest YAML file read (a scene or a spheres file is a few hundred lines).
+const MAX_YAML_BYTES: u64 = 16 << 20;
+
+/// The YAML file a user names (`what`: "scene file"), parsed as `T`; `expected` says in the
+/// one-line error what it should have been ("a scene as cuRobo writes one").
+fn read_yaml<T: serde::de::DeserializeOwned>(
+    path: &std::path::Path,
+    what: &str,
+    expected: &str,
+) -> crate::core::error::Result<T> {
+    let text = crate::core::input_file::read_user_text(path, what, MAX_YAML_BYTES, "YAML")?;
+    parse_yaml(path, expected, &text)
+}
+
+/// `text` (of the file at `path`) parsed as `T`, the parser's first line in the error.
+fn parse_yaml<T: serde::de::DeserializeOwned>(
+    path: &std::path::Path,
+    expected: &str,
+    text: &str,
+) -> crate::core::error::Result<T> {
+    serde_saphyr::from_str(text).map_err(|e| {
+        let message = e.to_string();
+        crate::core::error::Error::Config(format!(
+            "{}: not {expected} ({})",
+            path.display(),
+            message.lines().next().unwrap_or("")
+        ))
+    })
+}
+
 /// Spheres for every link of `robot` (loaded with its collision geometry), in its frame.
 pub fn fit_robot(robot: &Robot, fit: &SphereFit) -> Vec<Vec<Sphere>> {
     robot

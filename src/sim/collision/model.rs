@@ -10,7 +10,7 @@ use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::Sphere;
 use crate::sim::kinematics::KinematicChain;
 
-/// Spheres placed in the world: centre and radius, with the link each belongs to.
+/// A sphere placed in the world: its centre and radius.
 #[derive(Clone, Copy, Debug)]
 pub struct Placed {
     pub center: Point3<f64>,

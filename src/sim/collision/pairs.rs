@@ -29,17 +29,7 @@ pub enum Reason {
 }
 
 impl Reason {
-    /// The SRDF's `reason` attribute.
-    pub fn srdf_name(&self) -> &'static str {
-        match self {
-            Reason::Adjacent => "Adjacent",
-            Reason::Default => "Default",
-            Reason::Always => "Always",
-            Reason::Never => "Never",
-            Reason::User => "User",
-        }
-    }
-
+    /// The SRDF's `reason` attribute (another reason: the user's).
     pub fn from_srdf(reason: &str) -> Self {
         match reason {
             "Adjacent" => Reason::Adjacent,
@@ -52,7 +42,7 @@ impl Reason {
 }
 
 /// The allowed pairs, by link name (each pair with its names in sorted order).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct AllowedPairs {
     pub pairs: BTreeMap<(String, String), Reason>,
 }
@@ -81,19 +71,6 @@ impl AllowedPairs {
             allowed.allow(a, b, Reason::from_srdf(r));
         }
         allowed
-    }
-
-    /// The pairs as SRDF `<disable_collisions>` lines.
-    pub fn to_srdf_lines(&self) -> String {
-        self.pairs
-            .iter()
-            .map(|((a, b), r)| {
-                format!(
-                    "  <disable_collisions link1=\"{a}\" link2=\"{b}\" reason=\"{}\"/>\n",
-                    r.srdf_name()
-                )
-            })
-            .collect()
     }
 }
 

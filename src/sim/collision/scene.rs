@@ -175,32 +175,25 @@ struct MeshEntry {
     _texture: Option<serde::de::IgnoredAny>,
 }
 
-/// The largest scene file read (a scene is a few dozen lines).
-const MAX_SCENE_BYTES: u64 = 16 << 20;
+/// What a scene file should be, for the parser's error.
+const SCENE: &str = "a scene as cuRobo writes one";
 /// The largest length a scene may give (m): beyond it, a typo.
 const MAX_LENGTH_M: f64 = 1e4;
 
 impl Scene {
     /// Read a cuRobo world-configuration YAML file.
     pub fn read(path: &Path) -> Result<Self> {
-        let text = crate::core::input_file::read_user_file(path, "scene file", MAX_SCENE_BYTES)?;
-        let text = String::from_utf8(text).map_err(|_| {
-            Error::Config(format!(
-                "{}: not a YAML file (not UTF-8 text)",
-                path.display()
-            ))
-        })?;
-        Self::parse(path, &text)
+        let file = crate::sim::collision::read_yaml(path, "scene file", SCENE)?;
+        Self::from_file(path, file)
     }
 
     /// Parse a scene's text (`path` names it in errors and places its meshes).
     pub fn parse(path: &Path, text: &str) -> Result<Self> {
+        Self::from_file(path, crate::sim::collision::parse_yaml(path, SCENE, text)?)
+    }
+
+    fn from_file(path: &Path, file: SceneFile) -> Result<Self> {
         let bad = |msg: String| Error::Config(format!("{}: {msg}", path.display()));
-        let file: SceneFile = serde_saphyr::from_str(text).map_err(|e| {
-            let first = e.to_string();
-            let first = first.lines().next().unwrap_or("").to_string();
-            bad(format!("not a scene as cuRobo writes one ({first})"))
-        })?;
         let length = |what: &str, name: &str, v: f64| {
             if v.is_finite() && v > 0.0 && v <= MAX_LENGTH_M {
                 Ok(v)

@@ -82,21 +82,8 @@ pub fn read(path: &Path, links: &[String]) -> Result<Vec<Vec<Sphere>>> {
 }
 
 fn read_block(path: &Path, depth: usize) -> Result<Block> {
-    let bytes = crate::core::input_file::read_user_file(path, "spheres file", 16 << 20)?;
-    let text = String::from_utf8(bytes).map_err(|_| {
-        Error::Config(format!(
-            "{}: not a YAML file (not UTF-8 text)",
-            path.display()
-        ))
-    })?;
-    let file: SpheresFile = serde_saphyr::from_str(&text).map_err(|e| {
-        let first = e.to_string();
-        Error::Config(format!(
-            "{}: not a cuRobo spheres file ({})",
-            path.display(),
-            first.lines().next().unwrap_or("")
-        ))
-    })?;
+    let file: SpheresFile =
+        crate::sim::collision::read_yaml(path, "spheres file", "a cuRobo spheres file")?;
     let field = file
         .collision_spheres
         .or(file.robot_cfg.and_then(|r| r.kinematics.collision_spheres))

@@ -36,7 +36,7 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
     let scene = Scene::read(scene)?;
     let obstacles = scene.obstacles.len();
     let check = CollisionCheck::for_robot(spec, None, Some(scene), true, 0.0)?;
-    let robot = spec.load_kinematics()?;
+    let robot = &check.robot;
     let mut rng = StdRng::seed_from_u64(7);
     let ranges = robot.chain.joint_ranges();
     let qs: Vec<Vec<f64>> = (0..n)
@@ -104,11 +104,8 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
             0.0,
         ),
     ];
-    let meshes = spec
-        .with_geometry(crate::sim::urdf_loader::GeometryKind::Collision)
-        .load()?;
     let uncovered = crate::studies::bench::sphere_figure::draw(
-        &meshes,
+        robot,
         &check.model.spheres,
         &out.join("spheres.png"),
         360,

@@ -5,9 +5,7 @@
 
 use std::path::Path;
 
-use image::ImageEncoder;
-
-use crate::core::error::{Error, Result};
+use crate::core::error::Result;
 use crate::sim::bvh::Bvh;
 use crate::sim::camera::Camera;
 use crate::sim::collision::spheres::Sphere;
@@ -87,15 +85,6 @@ pub fn draw(robot: &Robot, spheres: &[Vec<Sphere>], path: &Path, size: usize) ->
             out[dst..dst + size * 3].copy_from_slice(&panel[row * size * 3..(row + 1) * size * 3]);
         }
     }
-    crate::core::atomic_file::write_atomic(path, |w| {
-        image::codecs::png::PngEncoder::new(w)
-            .write_image(
-                &out,
-                width as u32,
-                size as u32,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|e| Error::Config(format!("{}: {e}", path.display())))
-    })?;
+    crate::report::figures::save_rgb(path, &out, width as u32, size as u32)?;
     Ok(uncovered as f64 / mesh.max(1) as f64)
 }
