@@ -296,7 +296,6 @@ fn main() -> ExitCode {
                     .map_err(|e| selfmodel::Error::Config(format!("--tolerance: {e}")))?;
                 let targets = read_targets(&targets_file, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
-                let valid = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
                 let stop = selfmodel::core::interrupt::requested;
                 let answers = model.solve_until(
                     &robot.chain,
@@ -305,7 +304,7 @@ fn main() -> ExitCode {
                     &cfg,
                     &device,
                     &stop,
-                    valid.as_ref().map(|v| v as &selfmodel::ik::pose::Valid),
+                    check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
                 )?;
                 let seconds = start.elapsed().as_secs_f64();
                 let mut header = String::from("target,solution");

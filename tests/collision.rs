@@ -326,7 +326,6 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
         .map(|q| PoseTarget::of(&robot.chain, q))
         .collect();
     let lm = model.saved.config.lm.clone();
-    let valid = |q: &[f64]| check.valid(q);
     let answers = model
         .solve_until(
             &robot.chain,
@@ -335,7 +334,7 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
             &lm,
             &device,
             &|| false,
-            Some(&valid),
+            Some(&check),
         )
         .unwrap();
     let (mut exact, mut total) = (0, 0);
@@ -408,4 +407,85 @@ fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("no collision_spheres block"), "{err}");
+}
+
+/// The contacts' rows the solver pushes apart by (analytic: each link's Jacobian at its
+/// sphere's centre, along the direction apart) equal central differences of the same
+/// contacts' gaps, for the Panda folded onto itself and reaching into a box and a ball; and
+/// pushing a colliding answer apart keeps its pose and ends collision-free.
+#[test]
+fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
+    use selfmodel::ik::collision::CollisionCheck;
+    use selfmodel::ik::pose::{LmConfig, PoseTarget, solve_from};
+    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    if !urdf.is_file() {
+        eprintln!("skipped: the Panda's description is not beside the repository");
+        return;
+    }
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("panda_hand".into()),
+        geometry: GeometryKind::None,
+        joints: Default::default(),
+    };
+    let scene = Scene::parse(
+        Path::new("scene.yml"),
+        "cuboid:\n  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.1, 0.4, 0.9238795, 0, 0.3826834, 0]}\nsphere:\n  ball: {radius: 0.06, position: [0.3, -0.2, 0.5]}\n",
+    )
+    .unwrap();
+    let check = CollisionCheck::for_robot(&spec, None, Some(scene), true, 0.005).unwrap();
+    let folded = [0.3, 1.5, 0.2, -2.9, 0.4, 0.8, 0.1];
+    let reach = [0.2, 0.6, 0.0, -1.4, 0.0, 2.0, 0.7];
+    let h = 1e-6;
+    let mut compared = (0, 0);
+    for q in [&folded[..], &reach[..]] {
+        let rows = check.contact_rows(q, 0.02);
+        assert!(!rows.is_empty(), "no contact at {q:?}");
+        for (c, row) in &rows {
+            let gap_at = |q: &[f64]| {
+                let near = check.contact_rows(q, 1.0);
+                near.iter().find(|(d, _)| d.contact == c.contact).unwrap().0.gap
+            };
+            for k in 0..q.len() {
+                let (mut up, mut down) = (q.to_vec(), q.to_vec());
+                up[k] += h;
+                down[k] -= h;
+                let numeric = (gap_at(&up) - gap_at(&down)) / (2.0 * h);
+                assert!(
+                    (numeric - row[k]).abs() < 1e-5,
+                    "{:?} joint {k}: analytic {} numeric {numeric}",
+                    c.contact,
+                    row[k]
+                );
+            }
+            match c.contact {
+                selfmodel::sim::collision::contacts::Contact::Spheres { .. } => compared.0 += 1,
+                selfmodel::sim::collision::contacts::Contact::Obstacle { .. } => compared.1 += 1,
+            }
+        }
+    }
+    assert!(compared.0 > 0 && compared.1 > 0, "{compared:?}");
+    // A ball at the elbow of an answer whose hand is free: the solver swings the elbow out
+    // of it (the Panda has one joint to spare) and keeps the hand's pose.
+    let robot = spec.load_kinematics().unwrap();
+    let ready = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
+    let elbow = robot.chain.link_frames(&ready)
+        [robot.chain.links.iter().position(|l| l == "panda_link4").unwrap()]
+    .translation;
+    let ball = format!(
+        "sphere:\n  ball: {{radius: 0.03, position: [{}, {}, {}]}}\n",
+        elbow.x, elbow.y, elbow.z
+    );
+    let scene = Scene::parse(Path::new("ball.yml"), &ball).unwrap();
+    let check = CollisionCheck::for_robot(&spec, None, Some(scene), true, 0.005).unwrap();
+    let target = PoseTarget::of(&robot.chain, &ready);
+    assert!(!check.valid(&ready));
+    let cfg = LmConfig::standard();
+    let paths = robot.chain.tip_paths();
+    let ranges = robot.chain.joint_ranges();
+    let pushed = solve_from(&paths, &target, &ready, &ranges, &cfg, Some(&check));
+    assert!(pushed.exact(&cfg), "{pushed:?}");
+    assert!(check.valid(&pushed.joints), "{pushed:?}");
 }

@@ -649,7 +649,6 @@ impl PyIkSolver {
             let raised = std::sync::Mutex::new(None);
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
-                let valid = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
                 self.model.solve_until(
                     &self.robot.chain,
                     &parsed,
@@ -657,7 +656,7 @@ impl PyIkSolver {
                     &lm,
                     &self.device,
                     &stop,
-                    valid.as_ref().map(|v| v as &selfmodel::ik::pose::Valid),
+                    check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
                 )
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {

@@ -5,11 +5,16 @@
 
 use std::path::Path;
 
+use nalgebra::{DMatrix, DVector, Matrix6xX, Point3};
+
 use crate::core::error::{Error, Result};
+use crate::ik::pose::Avoid;
+use crate::sim::collision::contacts::Placement;
 use crate::sim::collision::model::CollisionModel;
 use crate::sim::collision::pairs::PairSampling;
 use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::SphereFit;
+use crate::sim::kinematics::TipPath;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 use crate::sim::urdf_loader::GeometryKind;
@@ -24,7 +29,13 @@ pub struct CollisionCheck {
     pub margin: f64,
     /// The robot with its collision geometry (what the spheres were fitted to).
     pub robot: Robot,
+    /// From the root to each link's origin: the links' Jacobians, for the contacts' rows.
+    link_paths: Vec<TipPath>,
 }
+
+/// How far past the margin the solver pushes a contact (m): an answer pushed apart keeps a
+/// little more than the margin, so the last steps to the target do not bring it back.
+const PUSH_PAST_MARGIN_M: f64 = 0.002;
 
 /// The largest margin accepted (m).
 const MAX_MARGIN_M: f64 = 1.0;
@@ -74,12 +85,16 @@ impl CollisionCheck {
             srdf.as_deref(),
             &PairSampling::default(),
         )?;
+        let link_paths = (0..robot.chain.links.len())
+            .map(|l| robot.chain.path_to(l, Point3::origin()))
+            .collect();
         Ok(Self {
             model,
             scene,
             self_collision,
             margin,
             robot,
+            link_paths,
         })
     }
 
@@ -104,5 +119,69 @@ impl CollisionCheck {
             return false;
         }
         !(self.scene.as_ref()).is_some_and(|s| self.model.scene_collides(&frames, s, self.margin))
+    }
+}
+
+impl CollisionCheck {
+    /// The contacts at `q` closer than `within` (m), each with its row `dgap/dq`: `n . v`
+    /// summed over its two sides, `v` the velocity its sphere's centre gets from each joint
+    /// (the link's linear Jacobian plus its angular one crossed with the centre's offset from
+    /// the link origin), `n` the direction away from the other side. Analytic; a test
+    /// compares it with finite differences of the gaps.
+    pub fn contact_rows(&self, q: &[f64], within: f64) -> Vec<(Placement, DVector<f64>)> {
+        let frames = self.robot.chain.link_frames(q);
+        let near = (self.model).contacts(&frames, self.scene.as_ref(), self.self_collision, within);
+        let n = q.len();
+        let mut jacobians: Vec<Option<(Point3<f64>, Matrix6xX<f64>)>> =
+            vec![None; self.link_paths.len()];
+        near.into_iter()
+            .map(|c| {
+                let mut row = DVector::<f64>::zeros(n);
+                for &(link, center, away) in std::iter::once(&c.first).chain(c.second.as_ref()) {
+                    let (origin, jac) = jacobians[link].get_or_insert_with(|| {
+                        let mut jac = Matrix6xX::zeros(n);
+                        let pose = self.link_paths[link].pose_and_jacobian(q, &mut jac);
+                        (Point3::from(pose.translation.vector), jac)
+                    });
+                    let lever = (center - *origin).cross(&away);
+                    for k in 0..n {
+                        let col = jac.column(k);
+                        row[k] += away.dot(&col.fixed_rows::<3>(0))
+                            + lever.dot(&col.fixed_rows::<3>(3));
+                    }
+                }
+                (c, row)
+            })
+            .collect()
+    }
+}
+
+impl Avoid for CollisionCheck {
+    fn valid(&self, q: &[f64]) -> bool {
+        CollisionCheck::valid(self, q)
+    }
+
+    /// Each contact closer than the margin plus 2 mm: its row ([`Self::contact_rows`]) and
+    /// how far its gap is short of that.
+    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> f64 {
+        let within = self.margin + PUSH_PAST_MARGIN_M;
+        let mut energy = 0.0;
+        for (c, row) in self.contact_rows(q, within) {
+            let short = within - c.gap;
+            jtj.ger(1.0, &row, &row, 1.0);
+            g.axpy(short, &row, 1.0);
+            energy += 0.5 * short * short;
+        }
+        energy
+    }
+
+    fn energy(&self, q: &[f64]) -> f64 {
+        let within = self.margin + PUSH_PAST_MARGIN_M;
+        let frames = self.robot.chain.link_frames(q);
+        (self.model)
+            .contacts(&frames, self.scene.as_ref(), self.self_collision, within)
+            .iter()
+            .map(|c| 0.5 * (within - c.gap).powi(2))
+            .sum()
     }
 }

@@ -21,6 +21,12 @@
 //! damping. A start is
 //! given up when no step lowers `E` or `E` has not halved in 5 iterations (a local minimum or
 //! a limit), for the next start.
+//!
+//! Collisions ([`Avoid`]): an answer on its target that collides is pushed apart from there.
+//! Each contact closer than the margin and 2 mm more (two spheres of a checked pair, or a
+//! sphere and an obstacle) adds a row to `J`: the derivative of its gap, its error how far the
+//! gap is short, in metres like the position's rows; the redundant joints move the links apart
+//! while the tips' rows hold the pose. Only answers found colliding pay for it.
 
 use nalgebra::{DMatrix, DVector, Isometry3, Point3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
@@ -219,9 +225,19 @@ impl PoseSolution {
     }
 }
 
-/// Whether a joint vector is acceptable (collision-free, say): [`solve_valid`] returns a
-/// converged answer only where it is.
-pub type Valid<'a> = dyn Fn(&[f64]) -> bool + Sync + 'a;
+/// What an answer must avoid (collisions): [`solve_valid`] returns a converged answer only
+/// where `valid` accepts it, and a converged answer it refuses is pushed away by the
+/// contacts' rows ([`solve_from`] with `avoid`) before the next start is tried.
+pub trait Avoid: Sync {
+    /// Whether `q` is acceptable.
+    fn valid(&self, q: &[f64]) -> bool;
+    /// Adds the Gauss-Newton terms of the contacts at `q` (each a row `dgap/dq` and the
+    /// distance it is short of its aim, m) to `jtj` and `g`, and returns their energy
+    /// (half the sum of squares), 0 where none is near.
+    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> f64;
+    /// The contacts' energy at `q` alone (a trial step's).
+    fn energy(&self, q: &[f64]) -> f64;
+}
 
 /// Iterations without the error halving after which a start is given up.
 const STALL: usize = 5;
@@ -232,13 +248,16 @@ const POLISH_ITERATIONS: usize = 5;
 
 /// Levenberg-Marquardt from `start` (clamped into `ranges` first), on the paths to the
 /// chain's tips ([`KinematicChain::tip_paths`]), `target` holding one pose per path: the
-/// rows of every tip stacked, exact when every tip is within the tolerances.
+/// rows of every tip stacked, exact when every tip is within the tolerances. With `avoid`, the
+/// contacts' rows join the tips' (each pushes its pair of spheres apart, metres weighing as
+/// the position's) and a start converges only once `avoid` also accepts it.
 pub fn solve_from(
     paths: &[TipPath],
     target: &[PoseTarget],
     start: &[f64],
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
+    avoid: Option<&dyn Avoid>,
 ) -> PoseSolution {
     assert_eq!(paths.len(), target.len(), "one pose per tip");
     let n = start.len();
@@ -258,11 +277,13 @@ pub fn solve_from(
     let energy = |e: &[(Vector3<f64>, Vector3<f64>)]| e.iter().map(|&e| tip_energy(e)).sum::<f64>();
     // The energy at a trial step: poses only, no Jacobian (the step loop's hot path).
     let trial_energy = |q: &[f64]| {
+        let contacts = avoid.map_or(0.0, |a| a.energy(q));
         paths
             .iter()
             .zip(target)
             .map(|(p, t)| tip_energy(errors_at(&p.pose(q), t)))
             .sum::<f64>()
+            + contacts
     };
     let worst = |e: &[(Vector3<f64>, Vector3<f64>)]| {
         e.iter().fold((0f64, 0f64), |(a, b), (p, r)| {
@@ -291,7 +312,8 @@ pub fn solve_from(
         // (quadratically there).
         let exact = p_worst <= cfg.tolerance_m && r_worst <= cfg.tolerance_rad;
         let limit = cfg.max_iterations + if exact { POLISH_ITERATIONS } else { 0 };
-        if cfg.converged(p_worst, r_worst) || given_up || iterations >= limit {
+        let converged = cfg.converged(p_worst, r_worst) && avoid.is_none_or(|a| a.valid(&q));
+        if converged || given_up || iterations >= limit {
             return PoseSolution {
                 collides: false,
                 joints: q,
@@ -301,7 +323,13 @@ pub fn solve_from(
                 starts: 1,
             };
         }
-        let e_now = energy(&err);
+        fill_rows(&mut j, &mut e, &jacs, &err, full, w);
+        let mut jtj = j.tr_mul(&j);
+        let mut g = j.tr_mul(&e);
+        let mut e_now = energy(&err);
+        if let Some(a) = avoid {
+            e_now += a.push_apart(&q, &mut jtj, &mut g);
+        }
         // A start whose error has not halved in the last STALL iterations is in a local
         // minimum or against a limit: give it up for the next start.
         if history.len() >= STALL && e_now > 0.5 * history[history.len() - STALL] {
@@ -310,19 +338,6 @@ pub fn solve_from(
         }
         history.push(e_now);
         iterations += 1;
-        for (t, (jac, (p_err, r_err))) in jacs.iter().zip(&err).enumerate() {
-            let o = t * per_tip;
-            for r in 0..3 {
-                j.row_mut(o + r).copy_from(&jac.row(r));
-                e[o + r] = p_err[r];
-                if full {
-                    j.row_mut(o + 3 + r).copy_from(&(jac.row(3 + r) * w));
-                    e[o + 3 + r] = r_err[r] * w;
-                }
-            }
-        }
-        let jtj = j.tr_mul(&j);
-        let g = j.tr_mul(&e);
         let mut lambda = e_now + 1e-12;
         let mut improved = false;
         for _ in 0..8 {
@@ -342,6 +357,30 @@ pub fn solve_from(
         }
         // No step lowers the error (a limit, a local minimum): give up this start.
         given_up |= !improved;
+    }
+}
+
+/// The tips' rows of the Jacobian and error: position, then the rotation weighted by `w`
+/// (left out for position-only targets).
+fn fill_rows(
+    j: &mut DMatrix<f64>,
+    e: &mut DVector<f64>,
+    jacs: &[nalgebra::Matrix6xX<f64>],
+    err: &[(Vector3<f64>, Vector3<f64>)],
+    full: bool,
+    w: f64,
+) {
+    let per_tip = if full { 6 } else { 3 };
+    for (t, (jac, (p_err, r_err))) in jacs.iter().zip(err).enumerate() {
+        let o = t * per_tip;
+        for r in 0..3 {
+            j.row_mut(o + r).copy_from(&jac.row(r));
+            e[o + r] = p_err[r];
+            if full {
+                j.row_mut(o + 3 + r).copy_from(&(jac.row(3 + r) * w));
+                e[o + 3 + r] = r_err[r] * w;
+            }
+        }
     }
 }
 
@@ -407,8 +446,10 @@ pub fn solve(
 }
 
 /// [`solve`] where an answer counts only if `valid` accepts it (where given): a converged
-/// answer it refuses (one in collision) is marked `collides` and the next start is tried; the
-/// answer returned is the best accepted one, else the best refused one, marked.
+/// answer it refuses (one in collision) is pushed apart from where it is ([`solve_from`] with
+/// the contacts' rows, the pose held by the tips' rows); if that fails, it is marked
+/// `collides` and the next start is tried. The answer returned is the best accepted one, else
+/// the best refused one, marked.
 // `solve`'s arguments and the check, each named at its callers.
 #[allow(clippy::too_many_arguments)]
 pub fn solve_valid(
@@ -418,7 +459,7 @@ pub fn solve_valid(
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
     salt: u64,
-    valid: Option<&Valid>,
+    valid: Option<&dyn Avoid>,
 ) -> PoseSolution {
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let w = cfg.tolerance_m / cfg.tolerance_rad;
@@ -431,16 +472,24 @@ pub fn solve_valid(
     let random =
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
-        let mut s = solve_from(paths, target, &start, ranges, cfg);
+        let mut s = solve_from(paths, target, &start, ranges, cfg, None);
         iterations += s.iterations;
         tried += 1;
-        let converged = cfg.converged(s.position_error_m, s.rotation_error_rad);
         // Only answers that could count are checked here; the one returned is checked last.
-        let checked = valid.is_some() && (converged || s.exact(cfg));
+        let checked = valid.is_some()
+            && (cfg.converged(s.position_error_m, s.rotation_error_rad) || s.exact(cfg));
         if let Some(valid) = valid.filter(|_| checked) {
-            s.collides = !valid(&s.joints);
+            s.collides = !valid.valid(&s.joints);
+            // On the target but in collision: pushed apart from there, the pose held.
+            if s.collides {
+                let pushed = solve_from(paths, target, &s.joints, ranges, cfg, Some(valid));
+                iterations += pushed.iterations;
+                if pushed.exact(cfg) && valid.valid(&pushed.joints) {
+                    s = pushed;
+                }
+            }
         }
-        let done = converged && !s.collides;
+        let done = cfg.converged(s.position_error_m, s.rotation_error_rad) && !s.collides;
         if best.as_ref().is_none_or(|(b, _)| rank(&s) < rank(b)) {
             best = Some((s, checked));
         }
@@ -450,7 +499,7 @@ pub fn solve_valid(
     }
     let (mut best, checked) = best.expect("at least one start");
     if let Some(valid) = valid.filter(|_| !checked) {
-        best.collides = !valid(&best.joints);
+        best.collides = !valid.valid(&best.joints);
     }
     best.iterations = iterations;
     best.starts = tried;

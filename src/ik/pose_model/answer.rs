@@ -6,7 +6,7 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
 use crate::ik::flow::{sample_rows, sample_rows_from};
-use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, Valid, solve_valid};
+use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve_valid};
 use crate::sim::kinematics::KinematicChain;
 
 use super::PoseModel;
@@ -59,7 +59,7 @@ impl PoseModel {
         cfg: &LmConfig,
         device: &Device,
         stop: &dyn Fn() -> bool,
-        valid: Option<&Valid>,
+        valid: Option<&dyn Avoid>,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         use rayon::prelude::*;
         let k = k.max(1);
@@ -118,7 +118,7 @@ impl PoseModel {
         targets: &[Vec<PoseTarget>],
         cfg: &LmConfig,
         device: &Device,
-        valid: &Valid,
+        valid: &dyn Avoid,
         answers: &mut [Vec<PoseSolution>],
     ) {
         use rayon::prelude::*;

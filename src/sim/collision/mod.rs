@@ -1,8 +1,10 @@
 //! Collision checking for IK: spheres fitted to each link's collision geometry
 //! (`spheres`), the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
 //! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
-//! itself (`model`); spheres a user supplies in cuRobo's format (`user_spheres`).
+//! itself (`model`), the contacts an optimiser pushes apart (`contacts`); spheres a user
+//! supplies in cuRobo's format (`user_spheres`).
 
+pub mod contacts;
 pub mod model;
 pub mod pairs;
 pub mod scene;

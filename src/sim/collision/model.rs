@@ -26,7 +26,7 @@ pub struct CollisionModel {
     pub pairs: Vec<(usize, usize)>,
     /// Each link's spheres' bounding sphere in its frame (none without spheres): a pair
     /// whose bounds are apart needs no closer look.
-    bounds: Vec<Option<Sphere>>,
+    pub(super) bounds: Vec<Option<Sphere>>,
     /// Whether a link moves with the joints: links fixed to the root (the base resting on a
     /// table) are not checked against obstacles.
     pub moving: Vec<bool>,
