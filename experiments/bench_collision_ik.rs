@@ -1,0 +1,98 @@
+//! Collision-free IK benchmarked: a saved model's answers with and without the collision
+//! check, checked again by Pinocchio on the exact meshes, beside cuRobo's published figures.
+//!
+//! `cargo run --release --bin bench_collision_ik -- --model runs/ik_models/panda --scene examples/scenes/panda_table.yml --out reports/collision_ik/panda`
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use selfmodel::cli::run_main;
+use selfmodel::studies::bench::collision_ik::{CollisionIkConfig, run};
+
+/// Benchmark collision-free IK on a model `ik train` saved: targets from random
+/// collision-free configurations, the share answered exactly and collision-free and the
+/// answers a second, with the check and without, and the share of those answers Pinocchio
+/// (scripts/collision_reference.py) finds collision-free on the exact meshes.
+#[derive(Parser)]
+#[command(version)]
+struct Args {
+    /// A folder `ik train` wrote (full pose).
+    #[arg(long)]
+    model: PathBuf,
+    /// The obstacles (cuRobo's world-configuration YAML) [default: none: the robot against
+    /// itself only].
+    #[arg(long, value_name = "FILE")]
+    scene: Option<PathBuf>,
+    /// paper (1,000 targets, three timed passes) or quick (40, one).
+    #[arg(long, default_value = "paper")]
+    preset: String,
+    /// The distance kept from the robot itself and the obstacles (m).
+    #[arg(long, default_value_t = 0.005)]
+    margin: f64,
+    /// The Python that runs Pinocchio's check (PyPI pin and pyyaml).
+    #[arg(long, default_value = "python3")]
+    python: PathBuf,
+    /// Leave Pinocchio's check out.
+    #[arg(long)]
+    no_reference: bool,
+    /// Output folder [default: runs/bench_collision_ik/<model folder>; the committed results
+    /// were written with --out reports/collision_ik/<robot>].
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    selfmodel::cli::git_revision();
+    run_main(|| {
+        let cfg = CollisionIkConfig {
+            margin: args.margin,
+            ..CollisionIkConfig::named(&args.preset)?
+        };
+        let out = args.out.clone().unwrap_or_else(|| {
+            let name = args.model.file_name().unwrap_or_default();
+            PathBuf::from("runs/bench_collision_ik").join(name)
+        });
+        let python = (!args.no_reference).then_some(args.python.as_path());
+        let rows = run(&args.model, args.scene.as_deref(), &cfg, python, &out)?;
+        println!(
+            "{:<48} {:>8} {:>9} {:>11} {:>12} {:>10}",
+            "solver", "exact %", "exact/s", "ms a target", "mesh-free %", "hardware"
+        );
+        for r in &rows {
+            let cell = |v: Option<f64>, digits: usize| {
+                v.map_or("-".to_string(), |v| format!("{v:.digits$}"))
+            };
+            println!(
+                "{:<48} {:>8.2} {:>9.0} {:>11} {:>12} {}",
+                r.solver,
+                r.exact_free_pct,
+                r.exact_free_per_s,
+                cell(r.ms_per_target, 4),
+                cell(r.exact_mesh_free_pct, 2),
+                r.hardware
+            );
+        }
+        if let Some(r) = rows.iter().find(|r| r.exact_but_colliding_pct.unwrap_or(0.0) > 0.0) {
+            println!(
+                "without the check, {:.1}% of the exact answers collide (by the spheres)",
+                r.exact_but_colliding_pct.unwrap_or(0.0)
+            );
+        }
+        if let (Some(c), Some(m)) = (rows[0].spheres_conservative_pct, rows[0].spheres_missed_pct) {
+            println!(
+                "the spheres against the exact meshes (zero margin) on {} random configurations: {c:.1}% of the free ones called colliding, {m:.1}% of the colliding ones missed",
+                cfg.targets
+            );
+        }
+        println!(
+            "bench_collision_ik ({} preset, {} targets, {}): wrote {}/results.csv",
+            cfg.preset,
+            cfg.targets,
+            rows[0].hardware,
+            out.display()
+        );
+        Ok(())
+    })
+}
