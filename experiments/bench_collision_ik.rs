@@ -74,7 +74,10 @@ fn main() -> ExitCode {
                 r.hardware
             );
         }
-        if let Some(r) = rows.iter().find(|r| r.exact_but_colliding_pct.unwrap_or(0.0) > 0.0) {
+        if let Some(r) = rows
+            .iter()
+            .find(|r| r.exact_but_colliding_pct.unwrap_or(0.0) > 0.0)
+        {
             println!(
                 "without the check, {:.1}% of the exact answers collide (by the spheres)",
                 r.exact_but_colliding_pct.unwrap_or(0.0)

@@ -36,6 +36,10 @@ enum Command {
         /// Condition on the position only (targets x,y,z).
         #[arg(long)]
         position_only: bool,
+        /// Train on collision-free joint samples only (with --scene, --self-collision): the
+        /// flow then proposes answers that keep clear.
+        #[command(flatten)]
+        collisions: CollisionArgs,
         /// Where the model goes (a folder: model.bpk, model.json).
         #[arg(long)]
         out: PathBuf,
@@ -115,16 +119,30 @@ impl CollisionArgs {
             .flatten()
     }
 
+    /// What `ik train` keeps its samples clear of, where any option asks for it.
+    fn for_training(&self) -> Option<selfmodel::ik::pose_model::TrainingCollisions> {
+        self.any()
+            .then(|| selfmodel::ik::pose_model::TrainingCollisions {
+                scene: self.scene.clone(),
+                srdf: self.srdf.clone(),
+                spheres: self.spheres.clone(),
+                margin: self.margin,
+            })
+    }
+
+    /// Whether any option asks for a collision check.
+    fn any(&self) -> bool {
+        self.scene.is_some() || self.self_collision || self.srdf.is_some() || self.spheres.is_some()
+    }
+
     /// The check, where any option asks for one.
     fn check(
         &self,
         spec: &selfmodel::sim::robots::RobotSpec,
+        model_dir: &std::path::Path,
     ) -> selfmodel::Result<Option<selfmodel::ik::collision::CollisionCheck>> {
-        if self.scene.is_none()
-            && !self.self_collision
-            && self.srdf.is_none()
-            && self.spheres.is_none()
-        {
+        use selfmodel::ik::collision::Spheres;
+        if !self.any() {
             return Ok(None);
         }
         let scene = (self.scene.as_deref())
@@ -132,7 +150,9 @@ impl CollisionArgs {
             .transpose()?;
         selfmodel::ik::collision::CollisionCheck::with_spheres(
             spec,
-            self.spheres.as_deref(),
+            self.spheres
+                .as_deref()
+                .map_or(Spheres::KeptIn(model_dir), Spheres::File),
             self.srdf.as_deref(),
             scene,
             true,
@@ -181,10 +201,12 @@ fn main() -> ExitCode {
                 robot,
                 preset,
                 position_only,
+                collisions,
                 out,
             } => {
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
+                cfg.collisions = collisions.for_training();
                 selfmodel::core::atomic_file::check_out(
                     &out,
                     selfmodel::core::atomic_file::OutKind::Folder,
@@ -198,8 +220,13 @@ fn main() -> ExitCode {
                 } else {
                     format!(", the poses of {}", model.tips().join(" and "))
                 };
+                let free = if cfg.collisions.is_some() {
+                    " collision-free"
+                } else {
+                    ""
+                };
                 println!(
-                    "ik train ({preset} preset): {} joints ({}){tips}, {} poses, {:.0} s; wrote {}/model.json (+ model.bpk)",
+                    "ik train ({preset} preset): {} joints ({}){tips}, {}{free} poses, {:.0} s; wrote {}/model.json (+ model.bpk)",
                     model.dof(),
                     model.saved.joint_names.join(", "),
                     cfg.data.train,
@@ -221,8 +248,9 @@ fn main() -> ExitCode {
                     )));
                 }
                 let inputs: Vec<&std::path::Path> = collisions.inputs().collect();
-                let (model, robot) = answering(&model, &[&out], &inputs, &device)?;
-                let check = collisions.check(&model.saved.robot)?;
+                let model_dir = model;
+                let (model, robot) = answering(&model_dir, &[&out], &inputs, &device)?;
+                let check = collisions.check(&model.saved.robot, &model_dir)?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
                 // Ctrl-C ends the rows; the file is then dropped whole.
@@ -285,7 +313,7 @@ fn main() -> ExitCode {
                 let mut inputs = vec![targets_file.as_path()];
                 inputs.extend(collisions.inputs());
                 let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
-                let check = collisions.check(&model.saved.robot)?;
+                let check = collisions.check(&model.saved.robot, &model_dir)?;
                 let checking = check.is_some();
                 let cfg = model
                     .saved

@@ -446,7 +446,11 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
         for (c, row) in &rows {
             let gap_at = |q: &[f64]| {
                 let near = check.contact_rows(q, 1.0);
-                near.iter().find(|(d, _)| d.contact == c.contact).unwrap().0.gap
+                near.iter()
+                    .find(|(d, _)| d.contact == c.contact)
+                    .unwrap()
+                    .0
+                    .gap
             };
             for k in 0..q.len() {
                 let (mut up, mut down) = (q.to_vec(), q.to_vec());
@@ -471,8 +475,12 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
     // of it (the Panda has one joint to spare) and keeps the hand's pose.
     let robot = spec.load_kinematics().unwrap();
     let ready = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
-    let elbow = robot.chain.link_frames(&ready)
-        [robot.chain.links.iter().position(|l| l == "panda_link4").unwrap()]
+    let elbow = robot.chain.link_frames(&ready)[robot
+        .chain
+        .links
+        .iter()
+        .position(|l| l == "panda_link4")
+        .unwrap()]
     .translation;
     let ball = format!(
         "sphere:\n  ball: {{radius: 0.03, position: [{}, {}, {}]}}\n",
@@ -488,4 +496,47 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
     let pushed = solve_from(&paths, &target, &ready, &ranges, &cfg, Some(&check));
     assert!(pushed.exact(&cfg), "{pushed:?}");
     assert!(check.valid(&pushed.joints), "{pushed:?}");
+}
+
+/// The collision model kept beside a saved model is read back as it was written, and a file
+/// whose key does not match the robot (another description, SRDF or fit) is ignored.
+#[test]
+fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
+    use selfmodel::ik::collision::{CollisionCheck, Spheres};
+    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    if !urdf.is_file() {
+        eprintln!("skipped: the Panda's description is not beside the repository");
+        return;
+    }
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("panda_hand".into()),
+        geometry: GeometryKind::None,
+        joints: Default::default(),
+    };
+    let dir = common::tempdir();
+    let check =
+        |spheres| CollisionCheck::with_spheres(&spec, spheres, None, None, true, 0.0).unwrap();
+    let fitted = check(Spheres::Fitted);
+    fitted.keep_in(dir.path()).unwrap();
+    let file = dir.path().join(selfmodel::sim::collision::cache::FILE);
+    // Read back: the same spheres and pairs.
+    let kept = check(Spheres::KeptIn(dir.path()));
+    assert_eq!(kept.model.spheres, fitted.model.spheres);
+    assert_eq!(kept.model.pairs, fitted.model.pairs);
+    // The file is what is read: a radius changed in it comes back.
+    let text = std::fs::read_to_string(&file).unwrap();
+    let r = fitted.model.spheres.iter().flatten().next().unwrap().radius;
+    let edited = text.replacen(&format!("\"radius\": {r}"), "\"radius\": 0.5", 1);
+    assert_ne!(edited, text);
+    std::fs::write(&file, &edited).unwrap();
+    let read = check(Spheres::KeptIn(dir.path()));
+    assert!(read.model.spheres.iter().flatten().any(|s| s.radius == 0.5));
+    // Another key (as another robot or SRDF would give): ignored, the spheres fitted again.
+    let stale = edited.replacen("\"key\": \"", "\"key\": \"0", 1);
+    std::fs::write(&file, stale).unwrap();
+    let refit = check(Spheres::KeptIn(dir.path()));
+    assert_eq!(refit.model.spheres, fitted.model.spheres);
 }

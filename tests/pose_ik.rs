@@ -95,7 +95,14 @@ fn levenberg_marquardt_converges_within_asymmetric_limits() {
     }
     // From a start near a solution it takes a handful of iterations.
     let near: Vec<f64> = rng_q[0].iter().map(|v| v + 0.05).collect();
-    let s = solve_from(&robot.chain.tip_paths(), &targets[0], &near, &ranges, &cfg, None);
+    let s = solve_from(
+        &robot.chain.tip_paths(),
+        &targets[0],
+        &near,
+        &ranges,
+        &cfg,
+        None,
+    );
     assert!(
         s.exact(&cfg) && s.iterations <= 6,
         "{} iterations",

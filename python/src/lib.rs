@@ -544,6 +544,8 @@ struct PyIkSolver {
     model: PoseModel,
     robot: Robot,
     device: burn::tensor::Device,
+    /// The model's folder (its kept collision model).
+    dir: PathBuf,
 }
 
 #[pymethods]
@@ -561,6 +563,7 @@ impl PyIkSolver {
                     model,
                     robot,
                     device,
+                    dir: model_dir.clone(),
                 })
             })
             .map_err(value_error)
@@ -613,8 +616,9 @@ impl PyIkSolver {
                 let spec = &self.model.saved.robot;
                 Some(
                     py.allow_threads(|| {
-                        selfmodel::ik::collision::CollisionCheck::for_robot(
+                        selfmodel::ik::collision::CollisionCheck::with_spheres(
                             spec,
+                            selfmodel::ik::collision::Spheres::KeptIn(&self.dir),
                             srdf.as_deref(),
                             scene,
                             true,

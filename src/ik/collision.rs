@@ -9,6 +9,7 @@ use nalgebra::{DMatrix, DVector, Matrix6xX, Point3};
 
 use crate::core::error::{Error, Result};
 use crate::ik::pose::Avoid;
+use crate::sim::collision::cache;
 use crate::sim::collision::contacts::Placement;
 use crate::sim::collision::model::CollisionModel;
 use crate::sim::collision::pairs::PairSampling;
@@ -31,6 +32,21 @@ pub struct CollisionCheck {
     pub robot: Robot,
     /// From the root to each link's origin: the links' Jacobians, for the contacts' rows.
     link_paths: Vec<TipPath>,
+    /// What the collision model was computed from ([`cache::key`]).
+    key: String,
+}
+
+/// Where a check's spheres come from.
+#[derive(Clone, Copy, Debug)]
+pub enum Spheres<'a> {
+    /// Fitted to the robot's collision meshes.
+    Fitted,
+    /// The collision model kept in this folder (a saved IK model's, written by
+    /// [`CollisionCheck::keep_in`]) where it was computed from the same robot, SRDF and
+    /// settings; fitted otherwise.
+    KeptIn(&'a Path),
+    /// A user's file in cuRobo's format (a `collision_spheres` block).
+    File(&'a Path),
 }
 
 /// How far past the margin the solver pushes a contact (m): an answer pushed apart keeps a
@@ -50,14 +66,13 @@ impl CollisionCheck {
         self_collision: bool,
         margin: f64,
     ) -> Result<Self> {
-        Self::with_spheres(spec, None, srdf, scene, self_collision, margin)
+        Self::with_spheres(spec, Spheres::Fitted, srdf, scene, self_collision, margin)
     }
 
-    /// [`Self::for_robot`] with the user's spheres in `spheres` (cuRobo's format) where
-    /// given, instead of spheres fitted to the meshes.
+    /// [`Self::for_robot`] with the spheres from `spheres`.
     pub fn with_spheres(
         spec: &RobotSpec,
-        spheres: Option<&Path>,
+        spheres: Spheres,
         srdf: Option<&Path>,
         scene: Option<Scene>,
         self_collision: bool,
@@ -75,16 +90,30 @@ impl CollisionCheck {
             RobotSpec::Builtin(_) => None,
         };
         let srdf = srdf.map(Path::to_path_buf).or(beside);
-        let fitted = match spheres {
-            Some(file) => crate::sim::collision::user_spheres::read(file, &robot.chain.links)?,
-            None => crate::sim::collision::fit_robot(&robot, &SphereFit::default()),
+        let (fit, sampling) = (SphereFit::default(), PairSampling::default());
+        let srdf_text = srdf
+            .as_deref()
+            .and_then(|p| std::fs::read_to_string(p).ok());
+        let mut key = cache::key(&robot, srdf_text.as_deref(), &fit, &sampling);
+        if let Spheres::File(file) = spheres {
+            // A model from a user's spheres is never taken for a fitted one.
+            let text = std::fs::read(file).map_err(|e| Error::io(file, e))?;
+            key += &format!("-{}", crate::core::input_file::fnv(&text));
+        }
+        let kept = match spheres {
+            Spheres::KeptIn(dir) => cache::read(dir, &key, &robot),
+            _ => None,
         };
-        let model = crate::sim::collision::model_with(
-            &robot,
-            fitted,
-            srdf.as_deref(),
-            &PairSampling::default(),
-        )?;
+        let model = match (kept, spheres) {
+            (Some(model), _) => model,
+            (None, Spheres::File(file)) => {
+                let given = crate::sim::collision::user_spheres::read(file, &robot.chain.links)?;
+                crate::sim::collision::model_with(&robot, given, srdf.as_deref(), &sampling)?
+            }
+            (None, _) => {
+                crate::sim::collision::model_for(&robot, srdf.as_deref(), &fit, &sampling)?
+            }
+        };
         let link_paths = (0..robot.chain.links.len())
             .map(|l| robot.chain.path_to(l, Point3::origin()))
             .collect();
@@ -95,6 +124,7 @@ impl CollisionCheck {
             margin,
             robot,
             link_paths,
+            key,
         })
     }
 
@@ -123,6 +153,12 @@ impl CollisionCheck {
 }
 
 impl CollisionCheck {
+    /// Keep the collision model (spheres and checked pairs) in `dir`, for
+    /// [`Spheres::KeptIn`]: the same robot then needs no fitting or pair sampling.
+    pub fn keep_in(&self, dir: &Path) -> Result<()> {
+        cache::write(dir, &self.key, &self.robot, &self.model)
+    }
+
     /// The contacts at `q` closer than `within` (m), each with its row `dgap/dq`: `n . v`
     /// summed over its two sides, `v` the velocity its sphere's centre gets from each joint
     /// (the link's linear Jacobian plus its angular one crossed with the centre's offset from
@@ -146,8 +182,8 @@ impl CollisionCheck {
                     let lever = (center - *origin).cross(&away);
                     for k in 0..n {
                         let col = jac.column(k);
-                        row[k] += away.dot(&col.fixed_rows::<3>(0))
-                            + lever.dot(&col.fixed_rows::<3>(3));
+                        row[k] +=
+                            away.dot(&col.fixed_rows::<3>(0)) + lever.dot(&col.fixed_rows::<3>(3));
                     }
                 }
                 (c, row)

@@ -106,6 +106,16 @@ pub struct IkData {
 impl IkData {
     /// Draw the data for `chain` (seeded), its end positions by forward kinematics.
     pub fn generate(chain: &KinematicChain, cfg: &IkDataConfig) -> Result<Self> {
+        Self::generate_where(chain, cfg, None)
+    }
+
+    /// [`Self::generate`] keeping only the joint samples `keep` accepts (collision-free
+    /// ones): each sample is drawn again until it does, at most a thousand times.
+    pub fn generate_where(
+        chain: &KinematicChain,
+        cfg: &IkDataConfig,
+        keep: Option<&dyn Fn(&[f64]) -> bool>,
+    ) -> Result<Self> {
         if cfg.train == 0 || cfg.train >= cfg.samples {
             return Err(Error::Config(format!(
                 "IK data: train ({}) must be between 1 and samples - 1 ({})",
@@ -137,9 +147,21 @@ impl IkData {
             )));
         }
         let mut rng = StdRng::seed_from_u64(cfg.seed);
+        /// Draws a kept sample may take.
+        const MAX_DRAWS: usize = 1000;
+        let mut draw = || {
+            (0..MAX_DRAWS)
+                .map(|_| crate::sim::trajectory::uniform_in(&mut rng, &ranges))
+                .find(|q| keep.is_none_or(|k| k(q)))
+        };
         let joints: Vec<Vec<f64>> = (0..cfg.samples)
-            .map(|_| crate::sim::trajectory::uniform_in(&mut rng, &ranges))
-            .collect();
+            .map(|_| draw())
+            .collect::<Option<_>>()
+            .ok_or_else(|| {
+                Error::Config(format!(
+                    "IK data: {MAX_DRAWS} joint samples in a row were in collision: the scene leaves the robot little room"
+                ))
+            })?;
         let positions = chain.end_effector_batch(&joints);
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];

@@ -23,7 +23,7 @@ pub use answer::{SolveStats, distinct};
 pub use columns::{
     MAX_TARGET_COORDINATE, joint_columns, read_targets, target_columns, target_from_values,
 };
-pub use saved::{SavedModel, fingerprint};
+pub use saved::SavedModel;
 pub use training::train;
 
 /// How a pose model is trained and answers.
@@ -36,6 +36,22 @@ pub struct PoseModelConfig {
     /// Condition on the position only (the EMSSL paper's setting).
     pub position_only: bool,
     pub lm: LmConfig,
+    /// Train on collision-free joint samples only (`ik train --scene`, `--self-collision`):
+    /// the flow then proposes answers that keep clear. None: every sample within the limits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub collisions: Option<TrainingCollisions>,
+}
+
+/// What the training samples keep clear of: the robot itself (always) and a scene, at a
+/// margin, with the pairs of an SRDF (else the one beside the URDF, else computed) and a
+/// user's spheres (else fitted), as `ik solve`'s collision options name them.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrainingCollisions {
+    pub scene: Option<std::path::PathBuf>,
+    pub srdf: Option<std::path::PathBuf>,
+    pub spheres: Option<std::path::PathBuf>,
+    /// Metres.
+    pub margin: f64,
 }
 
 impl Preset for PoseModelConfig {
@@ -59,6 +75,7 @@ impl Preset for PoseModelConfig {
             flow,
             position_only: false,
             lm: LmConfig::standard(),
+            collisions: None,
         }
     }
 
@@ -81,6 +98,7 @@ impl Preset for PoseModelConfig {
             flow,
             position_only: false,
             lm: LmConfig::standard(),
+            collisions: None,
         }
     }
 }

@@ -8,7 +8,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::core::atomic_file::write_json;
 use crate::core::error::{Error, Result};
-use crate::core::input_file::{file_fnv, fnv};
+use crate::core::input_file::file_fnv;
 use crate::ik::data::IkData;
 use crate::ik::flow::FlowIk;
 use crate::sim::kinematics::KinematicChain;
@@ -151,40 +151,6 @@ impl SavedModel {
     }
 }
 
-/// A stable fingerprint of a chain (FNV-1a over its joints, limits and tip): the same robot
-/// description gives the same string on every machine.
-pub fn fingerprint(chain: &KinematicChain) -> String {
-    let mut text = format!(
-        "tip {} {:?};",
-        chain.links[chain.tip_link], chain.tip_offset
-    );
-    let tips = chain.tips();
-    if tips.len() > 1 {
-        for (l, p) in tips {
-            text += &format!("tips {} {:?};", chain.links[l], p);
-        }
-    }
-    for j in &chain.joints {
-        let (r, p, y) = j.origin.rotation.euler_angles();
-        let t = j.origin.translation.vector;
-        text += &format!(
-            "{} {:?} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:?} {:?} {:?};",
-            j.name,
-            j.kind,
-            t.x,
-            t.y,
-            t.z,
-            r,
-            p,
-            y,
-            j.axis.as_slice(),
-            j.limits,
-            j.mimic.map(|m| (m.leader, m.multiplier, m.offset))
-        );
-    }
-    fnv(text.as_bytes())
-}
-
 impl SavedModel {
     /// What `model.json` will say of a model of `chain` (as `spec` names it) trained with
     /// `cfg` on `data`, answering for `tips`; the weights' hash is set when they are written.
@@ -201,7 +167,7 @@ impl SavedModel {
         SavedModel {
             config,
             robot: spec.clone(),
-            robot_fingerprint: fingerprint(chain),
+            robot_fingerprint: chain.fingerprint(),
             joint_names: chain.joint_names(),
             tips: if tips.len() > 1 { tips } else { Vec::new() },
             weights_fnv: None,
@@ -319,7 +285,7 @@ impl PoseModel {
                 names.join(", ")
             )));
         }
-        let print = fingerprint(&robot.chain);
+        let print = robot.chain.fingerprint();
         if print != self.saved.robot_fingerprint {
             return Err(Error::Config(format!(
                 "this model was trained for another robot ({}, joints {}; fingerprint {} against {}): train one for this robot with `ik train`",

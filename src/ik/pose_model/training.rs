@@ -6,13 +6,15 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use crate::core::error::Result;
+use crate::ik::collision::{CollisionCheck, Spheres};
 use crate::ik::data::IkData;
 use crate::ik::flow::{FlowIk, fit_flow, sample_rows};
 use crate::ik::pose::{PoseTarget, pose_error};
+use crate::sim::collision::scene::Scene;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
-use super::saved::{SavedModel, fingerprint, save_model};
+use super::saved::{SavedModel, save_model};
 use super::{PoseModel, PoseModelConfig};
 
 /// The condition rows of `targets` (for each tip, its position normalised, then its
@@ -52,7 +54,20 @@ pub fn train(
     device: &Device,
 ) -> Result<PoseModel> {
     let chain = &robot.chain;
-    let mut data = IkData::generate(chain, &cfg.data)?;
+    let check = match &cfg.collisions {
+        Some(c) => {
+            let scene = c.scene.as_deref().map(Scene::read).transpose()?;
+            let spheres = c.spheres.as_deref().map_or(Spheres::Fitted, Spheres::File);
+            let srdf = c.srdf.as_deref();
+            Some(CollisionCheck::with_spheres(
+                spec, spheres, srdf, scene, true, c.margin,
+            )?)
+        }
+        None => None,
+    };
+    let keep = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
+    let keep = keep.as_ref().map(|k| k as &dyn Fn(&[f64]) -> bool);
+    let mut data = IkData::generate_where(chain, &cfg.data, keep)?;
     let targets: Vec<Vec<PoseTarget>> = data.joints[data.train()]
         .iter()
         .map(|q| PoseTarget::of(chain, q))
@@ -83,7 +98,7 @@ pub fn train(
     let mut flow_cfg = cfg.flow.clone();
     flow_cfg.fit.checkpoint = Some(crate::train::convergence::FitCheckpoint {
         dir: checkpoint.clone(),
-        settings: serde_json::json!({ "config": cfg, "robot": fingerprint(chain) }),
+        settings: serde_json::json!({ "config": cfg, "robot": chain.fingerprint() }),
     });
     let trained = fit_flow(
         &data,
@@ -115,6 +130,15 @@ pub fn train(
         let _ = std::fs::remove_dir(dir);
     }
     let saved = saved?;
+    // The collision model kept beside the model, so `ik solve --scene` need not fit it again
+    // (a robot without collision geometry has none to keep).
+    let kept = match check {
+        Some(c) => Some(c),
+        None => CollisionCheck::for_robot(spec, None, None, true, 0.0).ok(),
+    };
+    if let Some(c) = kept {
+        c.keep_in(dir)?;
+    }
     Ok(PoseModel {
         saved,
         flow: trained.model,

@@ -2,8 +2,9 @@
 //! (`spheres`), the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
 //! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
 //! itself (`model`), the contacts an optimiser pushes apart (`contacts`); spheres a user
-//! supplies in cuRobo's format (`user_spheres`).
+//! supplies in cuRobo's format (`user_spheres`); the model kept in a file (`cache`).
 
+pub mod cache;
 pub mod contacts;
 pub mod model;
 pub mod pairs;

@@ -54,6 +54,16 @@ impl CollisionModel {
                 }
             }
         }
+        Self::with_pairs(chain, spheres, pairs)
+    }
+
+    /// The model of `chain`'s links with spheres `spheres` checking the pairs `pairs` (link
+    /// indices, `a < b`).
+    pub fn with_pairs(
+        chain: &KinematicChain,
+        spheres: Vec<Vec<Sphere>>,
+        pairs: Vec<(usize, usize)>,
+    ) -> Self {
         let bounds = spheres.iter().map(|s| bounding(s)).collect();
         // A link moves when its frame differs between the joints' lower and upper ends.
         let ranges = chain.joint_ranges();

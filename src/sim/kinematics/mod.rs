@@ -6,9 +6,11 @@
 //!
 //! `joint.rs` (joints, limits, where a joint's value comes from), `group.rs` (which joints
 //! make the joint vector), `chain.rs` (the tree and its joint vector), `forward.rs` (poses and
-//! Jacobians), `tip_path.rs` (the fast path to a tip).
+//! Jacobians), `tip_path.rs` (the fast path to a tip), `fingerprint.rs` (a stable hash of the
+//! chain).
 
 mod chain;
+mod fingerprint;
 mod forward;
 mod group;
 mod joint;

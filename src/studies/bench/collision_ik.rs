@@ -13,7 +13,7 @@ use burn::tensor::Device;
 
 use crate::core::error::{Error, Result};
 use crate::core::timing::{Repeats, median_seconds};
-use crate::ik::collision::CollisionCheck;
+use crate::ik::collision::{CollisionCheck, Spheres};
 use crate::ik::pose::{Avoid, PoseSolution, PoseTarget};
 use crate::ik::pose_model::PoseModel;
 use crate::sim::collision::scene::Scene;
@@ -90,7 +90,15 @@ pub struct CollisionIkRow {
 
 /// A published figure: robot (as our rows name it, `"Franka Panda"` or `"Unitree G1"`),
 /// solver, targets, share exact and collision-free, solutions a second, hardware, source.
-type Published = (&'static str, &'static str, usize, f64, f64, &'static str, &'static str);
+type Published = (
+    &'static str,
+    &'static str,
+    usize,
+    f64,
+    f64,
+    &'static str,
+    &'static str,
+);
 
 /// cuRobo's collision-free IK as published (on a GPU, their own targets and scenes): the
 /// reference rows beside ours, matched to ours by robot.
@@ -213,7 +221,10 @@ impl Reference<'_> {
         if !o.status.success() {
             eprintln!(
                 "bench_collision_ik: Pinocchio's check skipped ({})",
-                String::from_utf8_lossy(&o.stderr).lines().last().unwrap_or("")
+                String::from_utf8_lossy(&o.stderr)
+                    .lines()
+                    .last()
+                    .unwrap_or("")
             );
             return Ok(None);
         }
@@ -272,15 +283,15 @@ pub fn run(
     let spec = &model.saved.robot;
     let obstacles = scene.map(Scene::read).transpose()?;
     let n_obstacles = obstacles.as_ref().map_or(0, |s| s.obstacles.len());
-    let check = CollisionCheck::for_robot(spec, None, obstacles, true, cfg.margin)?;
+    let kept = Spheres::KeptIn(model_dir);
+    let check = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
     let (targets, qs) = free_targets(&robot, &model.saved.ranges, &check, cfg.targets, cfg.seed)?;
     let lm = &model.saved.config.lm;
     let checked = solve_all(&model, &robot, &targets, &device, Some(&check), cfg.repeats)?;
     let unchecked = solve_all(&model, &robot, &targets, &device, None, cfg.repeats)?;
-    let exact_free: Vec<&PoseSolution> =
-        checked.answers.iter().filter(|a| a.exact(lm)).collect();
+    let exact_free: Vec<&PoseSolution> = checked.answers.iter().filter(|a| a.exact(lm)).collect();
     let exact_unchecked: Vec<&PoseSolution> =
         unchecked.answers.iter().filter(|a| a.exact(lm)).collect();
     let colliding = exact_unchecked
@@ -298,7 +309,10 @@ pub fn run(
     joints_csv(
         &out.join("answer_joints.csv"),
         names,
-        &exact_free.iter().map(|a| a.joints.as_slice()).collect::<Vec<_>>(),
+        &exact_free
+            .iter()
+            .map(|a| a.joints.as_slice())
+            .collect::<Vec<_>>(),
     )?;
     let links = &check.robot.chain.links;
     let pairs: Vec<[&str; 2]> = (check.model.pairs.iter())
@@ -307,9 +321,10 @@ pub fn run(
     let pairs_file = out.join("pairs.json");
     crate::core::atomic_file::write_json(&pairs_file, &pairs)?;
     // Random configurations, colliding or not, for the spheres' agreement with the meshes.
-    let random: Vec<Vec<f64>> = crate::sim::trajectory::babbling_rows(&model.saved.ranges, cfg.seed ^ 0xA9)
-        .take(cfg.targets)
-        .collect();
+    let random: Vec<Vec<f64>> =
+        crate::sim::trajectory::babbling_rows(&model.saved.ranges, cfg.seed ^ 0xA9)
+            .take(cfg.targets)
+            .collect();
     joints_csv(
         &out.join("random_joints.csv"),
         names,
@@ -347,18 +362,26 @@ pub fn run(
                     .filter(|&(&m, &s)| m == mesh && s == spheres)
                     .count()
             };
-            let (free, hit) = (count(false, false) + count(false, true), count(true, true) + count(true, false));
+            let (free, hit) = (
+                count(false, false) + count(false, true),
+                count(true, true) + count(true, false),
+            );
             (pct(count(false, true), free), pct(count(true, false), hit))
         });
     } else {
-        eprintln!("bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)");
+        eprintln!(
+            "bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)"
+        );
     }
 
     let n = targets.len();
     let cpu = crate::eval::compute_peak::machine_label(false);
     let revision = crate::core::provenance::git_revision();
     let what = if n_obstacles > 0 {
-        format!("itself and {n_obstacles} obstacles, {} mm margin", 1e3 * cfg.margin)
+        format!(
+            "itself and {n_obstacles} obstacles, {} mm margin",
+            1e3 * cfg.margin
+        )
     } else {
         format!("itself, {} mm margin", 1e3 * cfg.margin)
     };
@@ -366,7 +389,11 @@ pub fn run(
     let mean = |a: &[PoseSolution], f: fn(&PoseSolution) -> usize| {
         a.iter().map(|s| f(s) as f64).sum::<f64>() / a.len().max(1) as f64
     };
-    let ours = |solver: &str, s: &Solved, exact: usize, extra: (Option<f64>, Option<f64>), agree: Option<(f64, f64)>| {
+    let ours = |solver: &str,
+                s: &Solved,
+                exact: usize,
+                extra: (Option<f64>, Option<f64>),
+                agree: Option<(f64, f64)>| {
         CollisionIkRow {
             robot: robot_name.clone(),
             solver: solver.into(),
