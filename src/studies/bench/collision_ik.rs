@@ -416,14 +416,14 @@ pub fn run(
     };
     let mut rows = vec![
         ours(
-            "selfmodel flow + LM, collisions pushed apart",
+            "selfmodel flow + LM (contacts pushed apart)",
             &checked,
             exact_free.len(),
             (mesh_free_answers, Some(0.0)),
             agreement,
         ),
         ours(
-            "selfmodel flow + LM, no collision check",
+            "selfmodel flow + LM (no collision check)",
             &unchecked,
             exact_unchecked.len() - colliding,
             (None, Some(pct(colliding, exact_unchecked.len()))),
