@@ -24,7 +24,7 @@ struct Args {
     /// itself only].
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
-    /// paper (1,000 targets, three timed passes) or quick (40, one).
+    /// paper (1,000 targets, timed over at least three passes and 3 s) or quick (40, one pass).
     #[arg(long, default_value = "paper")]
     preset: String,
     /// The distance kept from the robot itself and the obstacles (m).
