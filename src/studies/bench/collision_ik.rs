@@ -67,7 +67,8 @@ pub struct CollisionIkRow {
     pub solver: String,
     /// What the answers are checked against.
     pub checked: String,
-    pub targets: usize,
+    /// Targets (a published figure's where it says).
+    pub targets: Option<usize>,
     /// Answers exact (1 mm, 0.572 degrees) and collision-free by the solver's own check.
     pub exact_free_pct: f64,
     pub exact_free_per_s: f64,
@@ -99,7 +100,7 @@ pub struct CollisionIkRow {
 type Published = (
     &'static str,
     &'static str,
-    usize,
+    Option<usize>,
     f64,
     f64,
     &'static str,
@@ -112,7 +113,7 @@ const PUBLISHED: [Published; 3] = [
     (
         "Franka Panda",
         "cuRoboV2 collision-free IK",
-        100,
+        Some(100),
         100.0,
         100.0 / 2.73e-3,
         "NVIDIA GPU",
@@ -121,7 +122,7 @@ const PUBLISHED: [Published; 3] = [
     (
         "Franka Panda",
         "cuRobo 0.7 collision-free IK",
-        0,
+        None,
         99.7,
         9100.0,
         "NVIDIA GPU",
@@ -130,7 +131,7 @@ const PUBLISHED: [Published; 3] = [
     (
         "Unitree G1",
         "cuRoboV2 collision-free IK",
-        100,
+        Some(100),
         98.4,
         100.0 / 0.527,
         "NVIDIA GPU",
@@ -138,7 +139,8 @@ const PUBLISHED: [Published; 3] = [
     ),
 ];
 
-/// The robot's name in the published rows' terms, from its description's file name.
+/// The robot's name as the rows give it (the published rows' terms), from its description's
+/// file name; other robots go by their description's path.
 fn published_name(spec: &RobotSpec) -> Option<&'static str> {
     let RobotSpec::Urdf { path, .. } = spec else {
         return None;
@@ -148,6 +150,8 @@ fn published_name(spec: &RobotSpec) -> Option<&'static str> {
         Some("Franka Panda")
     } else if file.starts_with("g1") {
         Some("Unitree G1")
+    } else if file.starts_with("ur5") {
+        Some("Universal Robots UR5")
     } else {
         None
     }
@@ -409,7 +413,7 @@ pub fn run(
             robot: robot_name.clone(),
             solver: solver.into(),
             checked: what.clone(),
-            targets: n,
+            targets: Some(n),
             exact_free_pct: pct(exact, n),
             exact_free_per_s: exact as f64 / s.seconds,
             ms_per_target: Some(1e3 * s.seconds / n.max(1) as f64),
