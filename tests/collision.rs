@@ -540,3 +540,78 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     let refit = check(Spheres::KeptIn(dir.path()));
     assert_eq!(refit.model.spheres, fitted.model.spheres);
 }
+
+/// `ik train --scene` trains on collision-free samples only (every joint sample keeps the
+/// margin, where plain samples do not), says so in model.json, and keeps the collision model
+/// beside the model.
+#[test]
+fn ik_train_with_a_scene_samples_only_collision_free_joints_and_keeps_its_spheres() {
+    use selfmodel::ik::collision::CollisionCheck;
+    use selfmodel::ik::data::{IkData, IkDataConfig};
+    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    if !urdf.is_file() {
+        eprintln!("skipped: the Panda's description is not beside the repository");
+        return;
+    }
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf.clone(),
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("panda_hand".into()),
+        geometry: GeometryKind::None,
+        joints: Default::default(),
+    };
+    let robot = spec.load_kinematics().unwrap();
+    let check = CollisionCheck::for_robot(&spec, None, None, true, 0.005).unwrap();
+    let cfg = IkDataConfig {
+        samples: 400,
+        train: 300,
+        range_deg: 180.0,
+        seed: 3,
+        validation: 0,
+    };
+    let keep = |q: &[f64]| check.valid(q);
+    let free = IkData::generate_where(&robot.chain, &cfg, Some(&keep)).unwrap();
+    let plain = IkData::generate(&robot.chain, &cfg).unwrap();
+    assert!(free.joints.iter().all(|q| check.valid(q)));
+    assert!(
+        plain.joints.iter().any(|q| !check.valid(q)),
+        "no plain sample collides"
+    );
+
+    let dir = common::tempdir();
+    let scene = dir.path().join("table.yml");
+    std::fs::write(
+        &scene,
+        "cuboid:\n  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n",
+    )
+    .unwrap();
+    let out = dir.path().join("model");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ik"))
+        .args([
+            "train",
+            "--preset",
+            "quick",
+            "--tip",
+            "panda_hand",
+            "--geometry",
+            "none",
+        ])
+        .arg("--urdf")
+        .arg(&urdf)
+        .arg("--scene")
+        .arg(&scene)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    common::assert_ok(&run);
+    assert!(String::from_utf8_lossy(&run.stdout).contains("collision-free poses"));
+    let saved: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("model.json")).unwrap()).unwrap();
+    assert_eq!(
+        saved["config"]["collisions"]["scene"].as_str(),
+        Some(scene.to_str().unwrap())
+    );
+    assert!(out.join(selfmodel::sim::collision::cache::FILE).is_file());
+}
