@@ -32,6 +32,24 @@ fn shared_robot(path: &str, tip: &str) -> Option<Robot> {
     )
 }
 
+/// The Panda of `../shared/robots` (its hand the tip, kinematics only), or None (printed) where
+/// it is not beside the repository.
+fn panda_spec() -> Option<selfmodel::sim::robots::RobotSpec> {
+    let path = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    if !path.is_file() {
+        eprintln!("skipped: the Panda's description is not beside the repository");
+        return None;
+    }
+    Some(selfmodel::sim::robots::RobotSpec::Urdf {
+        path,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("panda_hand".into()),
+        geometry: GeometryKind::None,
+        joints: Default::default(),
+    })
+}
+
 /// Every vertex of every link's collision mesh inside a sphere of its link, and every point
 /// of its surface (sampled at 2 mm) within the fit's tolerance of one.
 fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
@@ -293,20 +311,10 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
 fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
     use selfmodel::ik::collision::CollisionCheck;
     use selfmodel::ik::pose::PoseTarget;
-    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
-    if !urdf.is_file() {
-        eprintln!("skipped: the Panda's description is not beside the repository");
+    let Some(spec) = panda_spec() else {
         return;
-    }
-    let dir = common::tempdir();
-    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
-        path: urdf,
-        base_xyz: [0.0; 3],
-        base_rpy: [0.0; 3],
-        tip: Some("panda_hand".into()),
-        geometry: GeometryKind::None,
-        joints: Default::default(),
     };
+    let dir = common::tempdir();
     let robot = spec.load_kinematics().unwrap();
     let model = common::quick_pose_model(&spec, &robot, dir.path());
     let device =
@@ -417,18 +425,8 @@ fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
 fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
     use selfmodel::ik::collision::CollisionCheck;
     use selfmodel::ik::pose::{LmConfig, PoseTarget, solve_from};
-    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
-    if !urdf.is_file() {
-        eprintln!("skipped: the Panda's description is not beside the repository");
+    let Some(spec) = panda_spec() else {
         return;
-    }
-    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
-        path: urdf,
-        base_xyz: [0.0; 3],
-        base_rpy: [0.0; 3],
-        tip: Some("panda_hand".into()),
-        geometry: GeometryKind::None,
-        joints: Default::default(),
     };
     let scene = Scene::parse(
         Path::new("scene.yml"),
@@ -503,18 +501,8 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
 #[test]
 fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     use selfmodel::ik::collision::{CollisionCheck, Spheres};
-    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
-    if !urdf.is_file() {
-        eprintln!("skipped: the Panda's description is not beside the repository");
+    let Some(spec) = panda_spec() else {
         return;
-    }
-    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
-        path: urdf,
-        base_xyz: [0.0; 3],
-        base_rpy: [0.0; 3],
-        tip: Some("panda_hand".into()),
-        geometry: GeometryKind::None,
-        joints: Default::default(),
     };
     let dir = common::tempdir();
     let check =
@@ -548,18 +536,8 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
 fn ik_train_with_a_scene_samples_only_collision_free_joints_and_keeps_its_spheres() {
     use selfmodel::ik::collision::CollisionCheck;
     use selfmodel::ik::data::{IkData, IkDataConfig};
-    let urdf = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
-    if !urdf.is_file() {
-        eprintln!("skipped: the Panda's description is not beside the repository");
+    let Some(spec) = panda_spec() else {
         return;
-    }
-    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
-        path: urdf.clone(),
-        base_xyz: [0.0; 3],
-        base_rpy: [0.0; 3],
-        tip: Some("panda_hand".into()),
-        geometry: GeometryKind::None,
-        joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
     let check = CollisionCheck::for_robot(&spec, None, None, true, 0.005).unwrap();
@@ -598,7 +576,7 @@ fn ik_train_with_a_scene_samples_only_collision_free_joints_and_keeps_its_sphere
             "none",
         ])
         .arg("--urdf")
-        .arg(&urdf)
+        .arg(spec.files().first().unwrap())
         .arg("--scene")
         .arg(&scene)
         .arg("--out")

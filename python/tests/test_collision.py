@@ -117,6 +117,29 @@ def test_ik_solve_with_a_scene_answers_collision_free(tmp_path):
     exact = got["joints"][got["exact"]]
     assert not robot.collides(exact, scene=str(scene), margin=0.005).any()
     assert (robot.clearance(exact, scene=str(scene)) >= 0.005).all()
+    # Pinocchio and coal agree on the exact meshes at zero margin (scripts/collision_reference.py,
+    # the scene's obstacles against every moving link, our pairs against each other).
+    try:
+        import pinocchio  # noqa: F401
+        import yaml  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        import json
+        import sys
+        joints = tmp_path / "answers.csv"
+        np.savetxt(joints, exact, delimiter=",", header=",".join(robot.joint_names), comments="")
+        pairs = tmp_path / "pairs.json"
+        pairs.write_text(json.dumps([list(p) for p in robot.collision_pairs]))
+        verdict = tmp_path / "exact.csv"
+        out = subprocess.run(
+            [sys.executable, str(ROOT / "scripts" / "collision_reference.py"), "--urdf", str(PANDA),
+             "--joints", str(joints), "--checked", str(pairs), "--scene", str(scene), "--out", str(verdict)],
+            capture_output=True, text=True,
+        )
+        assert out.returncode == 0, out.stderr
+        collides = np.loadtxt(verdict, delimiter=",", skiprows=1, ndmin=1)
+        assert collides.shape == (len(exact),) and not collides.any(), out.stdout
     # Without a scene nothing is checked, and there is no `collides`.
     assert "collides" not in solver.solve(rows[:3])
     with pytest.raises(ValueError, match="margin"):

@@ -211,7 +211,7 @@ pub struct PoseSolution {
     pub iterations: usize,
     /// Starts tried (given and random).
     pub starts: usize,
-    /// Whether the answer was checked and found in collision ([`solve_valid`]); never for
+    /// Whether the answer was checked and found in collision ([`solve`]); never for
     /// an answer nobody checked.
     pub collides: bool,
 }
@@ -225,7 +225,7 @@ impl PoseSolution {
     }
 }
 
-/// What an answer must avoid (collisions): [`solve_valid`] returns a converged answer only
+/// What an answer must avoid (collisions): [`solve`] returns a converged answer only
 /// where `valid` accepts it, and a converged answer it refuses is pushed away by the
 /// contacts' rows ([`solve_from`] with `avoid`) before the next start is tried.
 pub trait Avoid: Sync {
@@ -434,6 +434,14 @@ fn limited_step(
 /// that stalls inside the success threshold without converging (a local minimum a fraction of
 /// a millimetre from the target, or a singularity: the UR5's wrist at q5 = 0) is exact but
 /// kept only if no later start converges.
+///
+/// With `avoid` (a collision check), an answer counts only if it accepts it: a converged
+/// answer it refuses is pushed apart from where it is ([`solve_from`] with the contacts' rows,
+/// the pose held by the tips' rows); if that fails, it is marked `collides` and the next start
+/// is tried. The answer returned is the best accepted one, else the best refused one, marked.
+// The target, its starts and ranges, the settings, the seed's salt and the check, each named
+// at its callers.
+#[allow(clippy::too_many_arguments)]
 pub fn solve(
     paths: &[TipPath],
     target: &[PoseTarget],
@@ -441,25 +449,7 @@ pub fn solve(
     ranges: &[[f64; 2]],
     cfg: &LmConfig,
     salt: u64,
-) -> PoseSolution {
-    solve_valid(paths, target, starts, ranges, cfg, salt, None)
-}
-
-/// [`solve`] where an answer counts only if `valid` accepts it (where given): a converged
-/// answer it refuses (one in collision) is pushed apart from where it is ([`solve_from`] with
-/// the contacts' rows, the pose held by the tips' rows); if that fails, it is marked
-/// `collides` and the next start is tried. The answer returned is the best accepted one, else
-/// the best refused one, marked.
-// `solve`'s arguments and the check, each named at its callers.
-#[allow(clippy::too_many_arguments)]
-pub fn solve_valid(
-    paths: &[TipPath],
-    target: &[PoseTarget],
-    starts: &[Vec<f64>],
-    ranges: &[[f64; 2]],
-    cfg: &LmConfig,
-    salt: u64,
-    valid: Option<&dyn Avoid>,
+    avoid: Option<&dyn Avoid>,
 ) -> PoseSolution {
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ salt.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let w = cfg.tolerance_m / cfg.tolerance_rad;
@@ -476,9 +466,9 @@ pub fn solve_valid(
         iterations += s.iterations;
         tried += 1;
         // Only answers that could count are checked here; the one returned is checked last.
-        let checked = valid.is_some()
+        let checked = avoid.is_some()
             && (cfg.converged(s.position_error_m, s.rotation_error_rad) || s.exact(cfg));
-        if let Some(valid) = valid.filter(|_| checked) {
+        if let Some(valid) = avoid.filter(|_| checked) {
             s.collides = !valid.valid(&s.joints);
             // On the target but in collision: pushed apart from there, the pose held.
             if s.collides {
@@ -498,7 +488,7 @@ pub fn solve_valid(
         }
     }
     let (mut best, checked) = best.expect("at least one start");
-    if let Some(valid) = valid.filter(|_| !checked) {
+    if let Some(valid) = avoid.filter(|_| !checked) {
         best.collides = !valid.valid(&best.joints);
     }
     best.iterations = iterations;
@@ -522,7 +512,7 @@ pub fn solve_batch(
         .map(|(i, t)| {
             let empty = Vec::new();
             let s = starts.get(i).unwrap_or(&empty);
-            solve(&paths, t, s, ranges, cfg, i as u64)
+            solve(&paths, t, s, ranges, cfg, i as u64, None)
         })
         .collect()
 }

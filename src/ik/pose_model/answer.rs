@@ -6,7 +6,7 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
 use crate::ik::flow::{sample_rows, sample_rows_from};
-use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve_valid};
+use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve};
 use crate::sim::kinematics::KinematicChain;
 
 use super::PoseModel;
@@ -48,7 +48,7 @@ impl PoseModel {
     /// [`Error::Interrupted`] (Python passes its own signal check). The answers are those of
     /// one pass over all targets: each block samples the flow with the seeds a single pass
     /// would use. With `valid` (a collision check), an answer counts only where it accepts
-    /// it ([`crate::ik::pose::solve_valid`]).
+    /// it ([`crate::ik::pose::solve`]).
     // The batch's nouns, each named at its three callers.
     #[allow(clippy::too_many_arguments)]
     pub fn solve_until(
@@ -94,7 +94,7 @@ impl PoseModel {
                             .map(|s| {
                                 let start = [samples[s][j].clone()];
                                 let salt = (i * k + s) as u64;
-                                solve_valid(&paths, t, &start, ranges, cfg, salt, valid)
+                                solve(&paths, t, &start, ranges, cfg, salt, valid)
                             })
                             .collect()
                     })
@@ -157,7 +157,7 @@ impl PoseModel {
                     .filter(|(_, a)| !a.exact(cfg))
                     .filter_map(|(s, a)| {
                         let salt = (i * answers[i].len() + s) as u64 ^ 0xC011;
-                        let mut b = solve_valid(
+                        let mut b = solve(
                             &paths,
                             &targets[i],
                             &starts,
