@@ -103,6 +103,9 @@ pub struct IkData {
     pub position_bounds: [[f64; 3]; 2],
 }
 
+/// Which joint samples [`IkData::generate_where`] keeps (collision-free ones).
+pub type Keep<'a> = dyn Fn(&[f64]) -> bool + 'a;
+
 impl IkData {
     /// Draw the data for `chain` (seeded), its end positions by forward kinematics.
     pub fn generate(chain: &KinematicChain, cfg: &IkDataConfig) -> Result<Self> {
@@ -114,7 +117,7 @@ impl IkData {
     pub fn generate_where(
         chain: &KinematicChain,
         cfg: &IkDataConfig,
-        keep: Option<&dyn Fn(&[f64]) -> bool>,
+        keep: Option<&Keep>,
     ) -> Result<Self> {
         if cfg.train == 0 || cfg.train >= cfg.samples {
             return Err(Error::Config(format!(

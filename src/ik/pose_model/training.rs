@@ -66,7 +66,7 @@ pub fn train(
         None => None,
     };
     let keep = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));
-    let keep = keep.as_ref().map(|k| k as &dyn Fn(&[f64]) -> bool);
+    let keep = keep.as_ref().map(|k| k as &crate::ik::data::Keep);
     let mut data = IkData::generate_where(chain, &cfg.data, keep)?;
     let targets: Vec<Vec<PoseTarget>> = data.joints[data.train()]
         .iter()

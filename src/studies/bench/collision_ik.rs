@@ -157,6 +157,9 @@ fn published_name(spec: &RobotSpec) -> Option<&'static str> {
     }
 }
 
+/// Targets (each tip's pose) and the configurations that reach them.
+type Drawn = (Vec<Vec<PoseTarget>>, Vec<Vec<f64>>);
+
 /// `n` targets from random configurations within the model's ranges that `check` accepts
 /// (at most a thousand draws a target), and those configurations.
 fn free_targets(
@@ -165,7 +168,7 @@ fn free_targets(
     check: &CollisionCheck,
     n: usize,
     seed: u64,
-) -> Result<(Vec<Vec<PoseTarget>>, Vec<Vec<f64>>)> {
+) -> Result<Drawn> {
     let qs: Vec<Vec<f64>> = crate::sim::trajectory::babbling_rows(ranges, seed)
         .take(n.saturating_mul(1000))
         .filter(|q| check.valid(q))
