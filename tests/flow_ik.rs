@@ -3,7 +3,7 @@
 use burn::tensor::{Tensor, TensorData};
 use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::data::{DistanceErrors, IkData, IkDataConfig, reach_errors};
-use selfmodel::ik::flow::{FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
+use selfmodel::ik::flow::{Draws, FlowConfig, FlowIk, best_of, diversity, sample, train_flow};
 use selfmodel::ik::learning::FitConfig;
 
 fn small() -> FlowConfig {
@@ -138,9 +138,39 @@ fn a_tiny_flow_fit_lowers_its_likelihood_loss_and_samples_many_seeded_solutions(
     let after = nll(&trained.model);
     assert!(after < before - 1.0, "NLL {before} -> {after}");
     // Seeded sampling repeats; another seed gives other answers.
-    let a = sample(&trained.model, &data, targets, 4, 512, 9, &device);
-    let b = sample(&trained.model, &data, targets, 4, 512, 9, &device);
-    let other = sample(&trained.model, &data, targets, 4, 512, 10, &device);
+    let a = sample(
+        &trained.model,
+        &data,
+        targets,
+        Draws {
+            k: 4,
+            batch: 512,
+            seed: 9,
+        },
+        &device,
+    );
+    let b = sample(
+        &trained.model,
+        &data,
+        targets,
+        Draws {
+            k: 4,
+            batch: 512,
+            seed: 9,
+        },
+        &device,
+    );
+    let other = sample(
+        &trained.model,
+        &data,
+        targets,
+        Draws {
+            k: 4,
+            batch: 512,
+            seed: 10,
+        },
+        &device,
+    );
     assert_eq!(a, b);
     assert_ne!(a, other);
     // The answers differ from each other, and the best of 4 beats one sample, which beats an

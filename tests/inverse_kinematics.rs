@@ -53,6 +53,7 @@ use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::cgan::{GanConfig, train_gan};
 use selfmodel::ik::dls::{DlsConfig, solve, solve_batch};
 use selfmodel::ik::dsl::{DistalConfig, dsl};
+use selfmodel::ik::flow::Draws;
 use selfmodel::ik::mlp::InverseModelConfig;
 use selfmodel::ik::{
     drl::drl,
@@ -274,7 +275,17 @@ fn distal_learning_and_the_conditional_gan_learn_something_of_the_arm() {
     let targets = &data.positions[data.test()];
     let one = gan.sample(&data, targets, 512, 7, &device);
     let one = DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, &one));
-    let best = gan.best_of(&robot.chain, &data, targets, 5, 512, 7, &device);
+    let best = gan.best_of(
+        &robot.chain,
+        &data,
+        targets,
+        Draws {
+            k: 5,
+            batch: 512,
+            seed: 7,
+        },
+        &device,
+    );
     let best = DistanceErrors::from_metres(&reach_errors(&robot.chain, targets, &best));
     eprintln!(
         "CGAN {:.2} cm, best of 5 {:.2} cm, input-blind {ignorant:.2} cm",

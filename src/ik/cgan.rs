@@ -459,21 +459,21 @@ impl Generator {
         out
     }
 
-    /// For each position, the one of `k` samples whose forward kinematics lands closest.
-    // The sampler's inputs as `sample` takes them plus `k`; callers name each.
-    #[allow(clippy::too_many_arguments)]
+    /// For each position, the one of `draws.k` samples (seeds `draws.seed`, `+ 1`, ...) whose
+    /// forward kinematics lands closest.
     pub fn best_of(
         &self,
         chain: &KinematicChain,
         data: &IkData,
         positions: &[Point3<f64>],
-        k: usize,
-        batch: usize,
-        seed: u64,
+        draws: crate::ik::flow::Draws,
         device: &Device,
     ) -> Vec<Vec<f64>> {
-        let samples: Vec<Vec<Vec<f64>>> = (0..k.max(1))
-            .map(|s| self.sample(data, positions, batch, seed.wrapping_add(s as u64), device))
+        let samples: Vec<Vec<Vec<f64>>> = (0..draws.k.max(1))
+            .map(|s| {
+                let seed = draws.seed.wrapping_add(s as u64);
+                self.sample(data, positions, draws.batch, seed, device)
+            })
             .collect();
         crate::ik::flow::best_of(chain, positions, &samples)
     }

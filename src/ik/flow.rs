@@ -274,9 +274,19 @@ pub fn train_flow(
         device,
         |m: &FlowIk| {
             let targets = &data.positions[data.validation()];
-            let q = sample(m, data, targets, 1, batch, 0x7A1, device)
-                .pop()
-                .expect("one sample");
+            let q = sample(
+                m,
+                data,
+                targets,
+                Draws {
+                    k: 1,
+                    batch,
+                    seed: 0x7A1,
+                },
+                device,
+            )
+            .pop()
+            .expect("one sample");
             DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
         },
     )
@@ -359,26 +369,24 @@ pub fn fit_flow(
     }
 }
 
-/// `k` samples of joints (radians) per position: `k` vectors of one answer per position,
-/// latent noise seeded by `seed`.
+/// How a sampler draws: `k` samples a target, `batch` targets at a time, latent noise seeded
+/// by `seed`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Draws {
+    pub k: usize,
+    pub batch: usize,
+    pub seed: u64,
+}
+
+/// `k` samples of joints (radians) per position: `k` vectors of one answer per position.
 pub fn sample(
     model: &FlowIk,
     data: &IkData,
     positions: &[Point3<f64>],
-    k: usize,
-    batch: usize,
-    seed: u64,
+    draws: Draws,
     device: &Device,
 ) -> Vec<Vec<Vec<f64>>> {
-    sample_rows(
-        model,
-        data,
-        &data.position_rows(positions),
-        k,
-        batch,
-        seed,
-        device,
-    )
+    sample_rows(model, data, &data.position_rows(positions), draws, device)
 }
 
 /// [`sample`] for targets given as condition rows (`model.target_width()` values each).
@@ -386,28 +394,23 @@ pub fn sample_rows(
     model: &FlowIk,
     data: &IkData,
     targets: &[f32],
-    k: usize,
-    batch: usize,
-    seed: u64,
+    draws: Draws,
     device: &Device,
 ) -> Vec<Vec<Vec<f64>>> {
-    sample_rows_from(model, data, targets, k, batch, seed, 0, device)
+    sample_rows_from(model, data, targets, draws, 0, device)
 }
 
 /// [`sample_rows`] of rows that come after `batches_before` batches of the same pass: the
 /// seeds those batches would have had in one call, so a pass split into blocks samples as one.
-// `sample_rows`' arguments and the batches before this block, each named at its callers.
-#[allow(clippy::too_many_arguments)]
 pub fn sample_rows_from(
     model: &FlowIk,
     data: &IkData,
     targets: &[f32],
-    k: usize,
-    batch: usize,
-    seed: u64,
+    draws: Draws,
     batches_before: usize,
     device: &Device,
 ) -> Vec<Vec<Vec<f64>>> {
+    let Draws { k, batch, seed } = draws;
     let dof = model.dof();
     let width = model.target_width();
     let normal = Normal::new(0.0f32, 1.0).expect("unit normal");
@@ -538,9 +541,11 @@ impl crate::ik::method::IkMethod for FlowMethod {
                 &trained.model,
                 task.data,
                 task.targets,
-                k,
-                task.batch,
-                seed,
+                Draws {
+                    k,
+                    batch: task.batch,
+                    seed,
+                },
                 task.device,
             )
         };

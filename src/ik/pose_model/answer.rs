@@ -5,7 +5,7 @@ use burn::tensor::Device;
 
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
-use crate::ik::flow::{sample_rows, sample_rows_from};
+use crate::ik::flow::{Draws, sample_rows, sample_rows_from};
 use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve};
 use crate::sim::kinematics::KinematicChain;
 
@@ -72,7 +72,16 @@ impl PoseModel {
             let first = b * FLOW_BATCH;
             let rows = condition_rows(&self.data, block, self.saved.config.position_only);
             let samples = sample_rows_from(
-                &self.flow, &self.data, &rows, k, FLOW_BATCH, 0x5EED, b, device,
+                &self.flow,
+                &self.data,
+                &rows,
+                Draws {
+                    k,
+                    batch: FLOW_BATCH,
+                    seed: 0x5EED,
+                },
+                b,
+                device,
             );
             for (c, part) in block.chunks(per_check).enumerate() {
                 if stop() {
@@ -136,9 +145,11 @@ impl PoseModel {
             &self.flow,
             &self.data,
             &rows,
-            RETRY_SAMPLES,
-            FLOW_BATCH,
-            0xC011,
+            Draws {
+                k: RETRY_SAMPLES,
+                batch: FLOW_BATCH,
+                seed: 0xC011,
+            },
             0,
             device,
         );
@@ -183,9 +194,19 @@ impl PoseModel {
     /// The flow's own answers (one sample per target, no refinement).
     pub fn sample(&self, targets: &[Vec<PoseTarget>], device: &Device) -> Vec<Vec<f64>> {
         let rows = condition_rows(&self.data, targets, self.saved.config.position_only);
-        sample_rows(&self.flow, &self.data, &rows, 1, FLOW_BATCH, 0x5EED, device)
-            .pop()
-            .unwrap_or_default()
+        sample_rows(
+            &self.flow,
+            &self.data,
+            &rows,
+            Draws {
+                k: 1,
+                batch: FLOW_BATCH,
+                seed: 0x5EED,
+            },
+            device,
+        )
+        .pop()
+        .unwrap_or_default()
     }
 
     pub fn position_only(&self) -> bool {

@@ -8,7 +8,7 @@ use burn::tensor::Device;
 use crate::core::error::Result;
 use crate::ik::collision::{CollisionCheck, Spheres};
 use crate::ik::data::IkData;
-use crate::ik::flow::{FlowIk, fit_flow, sample_rows};
+use crate::ik::flow::{Draws, FlowIk, fit_flow, sample_rows};
 use crate::ik::pose::{PoseTarget, pose_error};
 use crate::sim::collision::scene::Scene;
 use crate::sim::robot::Robot;
@@ -108,9 +108,19 @@ pub fn train(
         device,
         |m: &FlowIk| {
             // One sample per validation target: its mean position error (cm).
-            let q = sample_rows(m, &data, &val_rows, 1, batch, 0x7A1, device)
-                .pop()
-                .unwrap_or_default();
+            let q = sample_rows(
+                m,
+                &data,
+                &val_rows,
+                Draws {
+                    k: 1,
+                    batch,
+                    seed: 0x7A1,
+                },
+                device,
+            )
+            .pop()
+            .unwrap_or_default();
             let n = q.len().max(1) as f64;
             q.iter()
                 .zip(&validation)

@@ -12,7 +12,7 @@ use crate::core::error::{Error, Result};
 use crate::ik::data::{DistanceErrors, IkData, IkDataConfig, distances};
 use crate::ik::dls::{IkSolution, solve_with_restarts, solver_detail};
 use crate::ik::emssl::EmsslIteration;
-use crate::ik::flow::{FlowIk, sample};
+use crate::ik::flow::{Draws, FlowIk, sample};
 use crate::ik::method::{Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed};
 use crate::sim::robot::Robot;
 
@@ -481,15 +481,7 @@ pub fn run_range(
                 &cfg.restarts,
                 |idx: &[usize]| {
                     let t: Vec<Point3<f64>> = idx.iter().map(|&i| targets[i]).collect();
-                    sample(
-                        &flow,
-                        &r.data,
-                        &t,
-                        cfg.restarts.flow_samples,
-                        batch,
-                        cfg.restarts.seed,
-                        &r.device,
-                    )
+                    sample(&flow, &r.data, &t, Draws { k: cfg.restarts.flow_samples, batch, seed: cfg.restarts.seed }, &r.device)
                 },
             );
             out = sol;
