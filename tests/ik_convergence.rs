@@ -320,7 +320,7 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
 
 #[test]
 fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
-    use selfmodel::ik::emssl::{EmsslConfig, LrPlateau, emssl_checkpointed};
+    use selfmodel::ik::emssl::{EmsslConfig, LrPlateau, emssl};
     let (robot, data) = tiny_ur5(6);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
@@ -343,18 +343,17 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
         ..EmsslConfig::paper()
     };
     let (whole, whole_curve) =
-        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, None).unwrap();
+        emssl(&robot.chain, &data, &model, &fit, &cfg, &device, None).unwrap();
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
     let cut = EmsslConfig {
         max_iterations: 3,
         ..cfg.clone()
     };
-    let (_, first) =
-        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cut, &device, Some(&dir)).unwrap();
+    let (_, first) = emssl(&robot.chain, &data, &model, &fit, &cut, &device, Some(&dir)).unwrap();
     assert_eq!(first.len(), 3);
     let (resumed, curve) =
-        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+        emssl(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
     let key = |c: &[selfmodel::ik::emssl::EmsslIteration]| {
         c.iter()
             .map(|i| {
@@ -377,7 +376,7 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
     use selfmodel::ik::{
-        emssl::{EmsslConfig, emssl_checkpointed},
+        emssl::{EmsslConfig, emssl},
         learning::validation_cm,
     };
     let (robot, data) = tiny_ur5(7);
@@ -397,7 +396,7 @@ fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error(
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
     let (polished, curve) =
-        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+        emssl(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
     let rounds: Vec<_> = curve.iter().filter(|c| c.iteration > 4).collect();
     assert!(!rounds.is_empty() && rounds.len() <= 2);
     assert!(rounds.iter().all(|c| c.exploration == 0.0));
@@ -412,8 +411,7 @@ fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error(
         "returned model {got} cm, lowest on the curve {lowest} cm"
     );
     // A finished checkpoint is polished again without rerunning the iterations.
-    let (_, again) =
-        emssl_checkpointed(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
+    let (_, again) = emssl(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
     assert_eq!(again.len(), curve.len());
 }
 

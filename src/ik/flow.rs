@@ -274,19 +274,9 @@ pub fn train_flow(
         device,
         |m: &FlowIk| {
             let targets = &data.positions[data.validation()];
-            let q = sample(
-                m,
-                data,
-                targets,
-                Draws {
-                    k: 1,
-                    batch,
-                    seed: 0x7A1,
-                },
-                device,
-            )
-            .pop()
-            .expect("one sample");
+            let q = sample(m, data, targets, Draws::one(batch, 0x7A1), device)
+                .pop()
+                .expect("one sample");
             DistanceErrors::from_metres(&reach_errors(chain, targets, &q)).mean_cm
         },
     )
@@ -376,6 +366,13 @@ pub struct Draws {
     pub k: usize,
     pub batch: usize,
     pub seed: u64,
+}
+
+impl Draws {
+    /// One sample a target: what the validation curves score.
+    pub fn one(batch: usize, seed: u64) -> Self {
+        Draws { k: 1, batch, seed }
+    }
 }
 
 /// `k` samples of joints (radians) per position: `k` vectors of one answer per position.

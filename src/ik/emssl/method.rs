@@ -4,7 +4,7 @@ use crate::core::error::Result;
 use crate::ik::learning::{FitConfig, predict};
 use crate::ik::mlp::InverseModelConfig;
 
-use super::{EmsslConfig, emssl_checkpointed};
+use super::{EmsslConfig, emssl};
 
 /// EMSSL as a Table II method: checkpointed in the task's files (a killed run continues), its
 /// answers kept for the refinement that starts from them.
@@ -32,7 +32,7 @@ impl crate::ik::method::IkMethod for EmsslMethod {
         use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
         let t = std::time::Instant::now();
         let checkpoint = task.file(&format!("{} checkpoint", self.name), "");
-        let (model, curve) = emssl_checkpointed(
+        let (model, curve) = emssl(
             task.chain,
             task.data,
             &self.model,

@@ -183,23 +183,13 @@ impl StopRule {
 ///
 /// The disagreement alone cannot pick the model: a network that answers nearly the same
 /// joints everywhere agrees with itself perfectly.
-pub fn emssl(
-    chain: &KinematicChain,
-    data: &IkData,
-    model_cfg: &InverseModelConfig,
-    fit_cfg: &FitConfig,
-    cfg: &EmsslConfig,
-    device: &Device,
-) -> Result<(Mlp, Vec<EmsslIteration>)> {
-    emssl_checkpointed(chain, data, model_cfg, fit_cfg, cfg, device, None)
-}
-
-/// [`emssl`] saving its state after every iteration in `checkpoint` (model, optimiser, best
-/// model, curve and the rules' state) and continuing from it when it holds a run of the same
-/// settings (the iteration cap aside: a run may be continued past its cap): a killed run
+///
+/// With `checkpoint` (a folder), its state is saved there after every iteration (model,
+/// optimiser, best model, curve and the rules' state), and a run continues from it when it
+/// holds a run of the same settings (the iteration cap aside: a run may be continued past its cap): a killed run
 /// resumes to the same result. Runs that train on the pairs of more than one iteration
 /// (`keep_iterations` > 1) are not checkpointed.
-pub fn emssl_checkpointed(
+pub fn emssl(
     chain: &KinematicChain,
     data: &IkData,
     model_cfg: &InverseModelConfig,

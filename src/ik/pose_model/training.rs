@@ -108,19 +108,9 @@ pub fn train(
         device,
         |m: &FlowIk| {
             // One sample per validation target: its mean position error (cm).
-            let q = sample_rows(
-                m,
-                &data,
-                &val_rows,
-                Draws {
-                    k: 1,
-                    batch,
-                    seed: 0x7A1,
-                },
-                device,
-            )
-            .pop()
-            .unwrap_or_default();
+            let q = sample_rows(m, &data, &val_rows, Draws::one(batch, 0x7A1), device)
+                .pop()
+                .unwrap_or_default();
             let n = q.len().max(1) as f64;
             q.iter()
                 .zip(&validation)

@@ -253,6 +253,7 @@ fn base_model(
                 &cfg.base.fit,
                 &cfg.base.emssl,
                 device,
+                None,
             )?;
             let reach = curve
                 .iter()

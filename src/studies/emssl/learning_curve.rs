@@ -63,6 +63,7 @@ pub fn run(
             &cfg.fit,
             &cfg.emssl,
             &device,
+            None,
         )?;
         let last = curve.last().map_or(f64::NAN, |c| c.test.mean_cm);
         let best = curve

@@ -336,7 +336,7 @@ pub fn run(
             eprintln!("emssl_study: +-{range:.0} deg, {}", s.name);
             let model = InverseModelConfig::inverse(cfg.hidden.clone(), robot.dof(), s.output);
             let t = std::time::Instant::now();
-            let (_, curve) = emssl(&robot.chain, data, &model, &s.fit, &s.emssl, &device)?;
+            let (_, curve) = emssl(&robot.chain, data, &model, &s.fit, &s.emssl, &device, None)?;
             let seconds = t.elapsed().as_secs_f64();
             let picked = curve
                 .iter()
