@@ -325,15 +325,12 @@ fn main() -> ExitCode {
                 let targets = read_targets(&targets_file, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
                 let stop = selfmodel::core::interrupt::requested;
-                let answers = model.solve_until(
-                    &robot.chain,
-                    &targets,
-                    k,
-                    &cfg,
-                    &device,
-                    &stop,
-                    check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
-                )?;
+                let how = selfmodel::ik::pose_model::Answering {
+                    lm: &cfg,
+                    stop: &stop,
+                    avoid: check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
+                };
+                let answers = model.solve_until(&robot.chain, &targets, k, &how, &device)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];

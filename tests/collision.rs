@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use selfmodel::ik::pose_model::Answering;
 use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::collision::pairs::{AllowedPairs, PairSampling, Reason};
 use selfmodel::sim::collision::spheres::{SphereFit, surface_points};
@@ -339,10 +340,12 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
             &robot.chain,
             &targets,
             2,
-            &lm,
+            &Answering {
+                lm: &lm,
+                stop: &|| false,
+                avoid: Some(&check),
+            },
             &device,
-            &|| false,
-            Some(&check),
         )
         .unwrap();
     let (mut exact, mut total) = (0, 0);
@@ -367,7 +370,16 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
     );
     // Without the check, the same solver knows nothing of the scene: no answer is marked.
     let plain = model
-        .solve_until(&robot.chain, &targets, 1, &lm, &device, &|| false, None)
+        .solve_until(
+            &robot.chain,
+            &targets,
+            1,
+            &Answering {
+                stop: &|| false,
+                ..Answering::with(&lm)
+            },
+            &device,
+        )
         .unwrap();
     assert!(plain.iter().flatten().all(|a| !a.collides));
 }

@@ -5,6 +5,7 @@ mod common;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
 use selfmodel::ik::pose::{LmConfig, PoseTarget, pose_error, solve_batch, solve_from};
+use selfmodel::ik::pose_model::Answering;
 use selfmodel::sim::kinematics::within;
 use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
 
@@ -454,7 +455,16 @@ fn a_solve_stops_between_blocks_when_asked() {
     let stop = || calls.fetch_add(1, Ordering::Relaxed) >= 1;
     let lm = model.saved.config.lm.clone();
     let err = model
-        .solve_until(&robot.chain, &targets, 2, &lm, &device, &stop, None)
+        .solve_until(
+            &robot.chain,
+            &targets,
+            2,
+            &Answering {
+                stop: &stop,
+                ..Answering::with(&lm)
+            },
+            &device,
+        )
         .unwrap_err();
     assert!(matches!(err, selfmodel::Error::Interrupted(_)), "{err}");
     assert!(

@@ -653,15 +653,13 @@ impl PyIkSolver {
             let raised = std::sync::Mutex::new(None);
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
-                self.model.solve_until(
-                    &self.robot.chain,
-                    &parsed,
-                    k,
-                    &lm,
-                    &self.device,
-                    &stop,
-                    check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
-                )
+                let how = selfmodel::ik::pose_model::Answering {
+                    lm: &lm,
+                    stop: &stop,
+                    avoid: check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
+                };
+                self.model
+                    .solve_until(&self.robot.chain, &parsed, k, &how, &self.device)
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
                 return Err(e);

@@ -12,6 +12,27 @@ use crate::sim::kinematics::KinematicChain;
 use super::PoseModel;
 use super::training::condition_rows;
 
+/// How a batch of targets is answered: the solver's settings, when to stop, what to avoid.
+#[derive(Clone, Copy)]
+pub struct Answering<'a> {
+    pub lm: &'a LmConfig,
+    /// Asked before each block of targets: `true` ends the batch.
+    pub stop: &'a dyn Fn() -> bool,
+    /// A collision check an answer must pass.
+    pub avoid: Option<&'a dyn Avoid>,
+}
+
+impl<'a> Answering<'a> {
+    /// `lm`'s settings, stopped by Ctrl-C ([`crate::core::interrupt`]), nothing avoided.
+    pub fn with(lm: &'a LmConfig) -> Self {
+        Answering {
+            lm,
+            stop: &crate::core::interrupt::requested,
+            avoid: None,
+        }
+    }
+}
+
 /// The flow samples this many rows a batch (a block of targets between Ctrl-C checks).
 const FLOW_BATCH: usize = 1024;
 
@@ -27,41 +48,31 @@ impl PoseModel {
         k: usize,
         device: &Device,
     ) -> Result<Vec<Vec<PoseSolution>>> {
-        self.solve_with(chain, targets, k, &self.saved.config.lm, device)
+        let how = Answering::with(&self.saved.config.lm);
+        self.solve_until(chain, targets, k, &how, device)
     }
 
-    /// [`Self::solve`] with other solver settings (a budget of random starts, tolerances).
-    pub fn solve_with(
-        &self,
-        chain: &KinematicChain,
-        targets: &[Vec<PoseTarget>],
-        k: usize,
-        cfg: &LmConfig,
-        device: &Device,
-    ) -> Result<Vec<Vec<PoseSolution>>> {
-        let stop = crate::core::interrupt::requested;
-        self.solve_until(chain, targets, k, cfg, device, &stop, None)
-    }
-
-    /// [`Self::solve_with`], asking `stop` on the calling thread before each block of targets
-    /// (a few thousand answers, well under a second): `true` ends it with
-    /// [`Error::Interrupted`] (Python passes its own signal check). The answers are those of
-    /// one pass over all targets: each block samples the flow with the seeds a single pass
-    /// would use. With `valid` (a collision check), an answer counts only where it accepts
-    /// it ([`crate::ik::pose::solve`]).
-    // The batch's nouns, each named at its three callers.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Self::solve`] answered as `how` says: with its solver settings (a budget of random
+    /// starts, tolerances), asking `how.stop` on the calling thread before each block of
+    /// targets (a few thousand answers, well under a second: `true` ends it with
+    /// [`Error::Interrupted`]; Python passes its own signal check), and where `how.avoid` is
+    /// given (a collision check) counting an answer only where it accepts it
+    /// ([`crate::ik::pose::solve`]). The answers are those of one pass over all targets: each
+    /// block samples the flow with the seeds a single pass would use.
     pub fn solve_until(
         &self,
         chain: &KinematicChain,
         targets: &[Vec<PoseTarget>],
         k: usize,
-        cfg: &LmConfig,
+        how: &Answering,
         device: &Device,
-        stop: &dyn Fn() -> bool,
-        valid: Option<&dyn Avoid>,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         use rayon::prelude::*;
+        let Answering {
+            lm: cfg,
+            stop,
+            avoid: valid,
+        } = *how;
         let k = k.max(1);
         // Targets refined between two questions to `stop`: about 4,096 answers.
         let per_check = (4096 / k).max(1);

@@ -19,7 +19,7 @@ use crate::ik::data::{IkData, IkDataConfig};
 use crate::ik::flow::{FlowConfig, FlowIk};
 use crate::ik::pose::LmConfig;
 
-pub use answer::{SolveStats, distinct};
+pub use answer::{Answering, SolveStats, distinct};
 pub use columns::{
     MAX_TARGET_COORDINATE, joint_columns, read_targets, target_columns, target_from_values,
 };

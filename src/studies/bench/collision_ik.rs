@@ -15,7 +15,7 @@ use crate::core::error::{Error, Result};
 use crate::core::timing::{Repeats, median_seconds};
 use crate::ik::collision::{CollisionCheck, Spheres};
 use crate::ik::pose::{Avoid, PoseSolution, PoseTarget};
-use crate::ik::pose_model::PoseModel;
+use crate::ik::pose_model::{Answering, PoseModel};
 use crate::sim::collision::scene::Scene;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
@@ -273,7 +273,12 @@ fn solve_all(
     cfg: &CollisionIkConfig,
 ) -> Result<Solved> {
     let lm = model.saved.config.lm.clone();
-    let solve = || model.solve_until(&robot.chain, targets, 1, &lm, device, &|| false, avoid);
+    let how = Answering {
+        lm: &lm,
+        stop: &|| false,
+        avoid,
+    };
+    let solve = || model.solve_until(&robot.chain, targets, 1, &how, device);
     let answers: Vec<PoseSolution> = solve()?.into_iter().flatten().collect();
     let repeats = Repeats {
         warmup: 0,

@@ -23,7 +23,7 @@ use crate::core::error::{Error, Result};
 use crate::core::spread::format_significant;
 use crate::core::timing::{Repeats, median, median_seconds};
 use crate::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
-use crate::ik::pose_model::{PoseModel, SolveStats};
+use crate::ik::pose_model::{Answering, PoseModel, SolveStats};
 use crate::ik::targets::{random_targets, targets_csv};
 
 use references::references;
@@ -407,8 +407,9 @@ impl Ours<'_> {
                 ..standard.clone()
             };
             let solve = || {
+                let how = Answering::with(&lm);
                 self.model
-                    .solve_with(self.chain, self.targets, 1, &lm, self.device)
+                    .solve_until(self.chain, self.targets, 1, &how, self.device)
             };
             let (s, answers) = timed(solve);
             let is_standard = starts == standard.random_starts;
