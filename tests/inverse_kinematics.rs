@@ -176,7 +176,7 @@ fn a_tiny_emssl_beats_direct_regression_on_a_redundant_arm() {
         patience: 5,
         ..EmsslConfig::paper()
     };
-    let (learned, curve) = emssl(&robot.chain, &data, &model, &fit, &rule, &device).unwrap();
+    let (learned, curve) = emssl(&robot.chain, &data, &model, &fit, &rule, &device, None).unwrap();
     let (emssl_err, _) = test_errors(&learned, &robot.chain, &data, 512, &device);
     let ignorant = ignorant_cm(&robot, &data);
     eprintln!(
@@ -203,7 +203,7 @@ fn a_tiny_emssl_beats_direct_regression_on_a_redundant_arm() {
     let per_iteration = 5 * data.train().len().div_ceil(64);
     assert!(curve.iter().all(|c| c.steps == per_iteration), "{curve:?}");
     // Seeded: the same run again gives the same curve.
-    let (_, again) = emssl(&robot.chain, &data, &model, &fit, &rule, &device).unwrap();
+    let (_, again) = emssl(&robot.chain, &data, &model, &fit, &rule, &device, None).unwrap();
     assert_eq!(
         curve.iter().map(|c| c.test.mean_cm).collect::<Vec<_>>(),
         again.iter().map(|c| c.test.mean_cm).collect::<Vec<_>>()
