@@ -138,39 +138,15 @@ fn a_tiny_flow_fit_lowers_its_likelihood_loss_and_samples_many_seeded_solutions(
     let after = nll(&trained.model);
     assert!(after < before - 1.0, "NLL {before} -> {after}");
     // Seeded sampling repeats; another seed gives other answers.
-    let a = sample(
-        &trained.model,
-        &data,
-        targets,
-        Draws {
+    let draw = |seed| {
+        let draws = Draws {
             k: 4,
             batch: 512,
-            seed: 9,
-        },
-        &device,
-    );
-    let b = sample(
-        &trained.model,
-        &data,
-        targets,
-        Draws {
-            k: 4,
-            batch: 512,
-            seed: 9,
-        },
-        &device,
-    );
-    let other = sample(
-        &trained.model,
-        &data,
-        targets,
-        Draws {
-            k: 4,
-            batch: 512,
-            seed: 10,
-        },
-        &device,
-    );
+            seed,
+        };
+        sample(&trained.model, &data, targets, draws, &device)
+    };
+    let (a, b, other) = (draw(9), draw(9), draw(10));
     assert_eq!(a, b);
     assert_ne!(a, other);
     // The answers differ from each other, and the best of 4 beats one sample, which beats an
