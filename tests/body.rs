@@ -6,7 +6,7 @@ mod common;
 
 use selfmodel::body::amortised::{AmortisedConfig, train_estimator};
 use selfmodel::body::drift::{DriftConfig, estimate_offsets};
-use selfmodel::body::observations::Observed;
+use selfmodel::body::observations::{ImageFit, Observed};
 use selfmodel::body::pose::{PoseFitConfig, pose_from_image, trained_ranges};
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::self_models::neurokin::neurokin_run;
@@ -93,10 +93,12 @@ fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted)
     }
     // From the mean pose (the prior: where the model has seen most poses).
     let found = pose_from_image(
-        s.renderer.as_ref(),
-        &s.autodiff,
-        s.image,
-        &observed,
+        ImageFit {
+            renderer: s.renderer.as_ref(),
+            device: &s.autodiff,
+            image: s.image,
+            observed: &observed,
+        },
         &s.ranges,
         Some(&vec![mean.clone(); truth.len()]),
         &PoseFitConfig::refine(80),
@@ -123,10 +125,12 @@ fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted)
     let guess = est.estimate(&observed, &f.device, 64).unwrap();
     let guess_error = mean_abs_error(&guess, &truth);
     let refined = pose_from_image(
-        s.renderer.as_ref(),
-        &s.autodiff,
-        s.image,
-        &observed,
+        ImageFit {
+            renderer: s.renderer.as_ref(),
+            device: &s.autodiff,
+            image: s.image,
+            observed: &observed,
+        },
         &s.ranges,
         Some(&guess),
         &PoseFitConfig::refine(40),
@@ -155,10 +159,12 @@ fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted) {
     // cancels in the difference.
     let fit = |reported: &[Vec<f64>]| {
         estimate_offsets(
-            s.renderer.as_ref(),
-            &s.autodiff,
-            s.image,
-            &observed,
+            ImageFit {
+                renderer: s.renderer.as_ref(),
+                device: &s.autodiff,
+                image: s.image,
+                observed: &observed,
+            },
             reported,
             &DriftConfig::paper(),
         )
@@ -183,10 +189,12 @@ fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
     };
     let fit = |obs: &Observed, guesses: Option<&[Vec<f64>]>| {
         pose_from_image(
-            s.renderer.as_ref(),
-            &s.autodiff,
-            s.image,
-            obs,
+            ImageFit {
+                renderer: s.renderer.as_ref(),
+                device: &s.autodiff,
+                image: s.image,
+                observed: obs,
+            },
             &s.ranges,
             guesses,
             &PoseFitConfig::refine(2),
@@ -203,10 +211,12 @@ fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
     let m = one(fit(&good, Some(&[vec![f64::NAN, 0.0, 0.0, 0.0]])).unwrap_err());
     assert!(m.contains("NaN"), "{m}");
     let m = one(estimate_offsets(
-        s.renderer.as_ref(),
-        &s.autodiff,
-        s.image,
-        &good,
+        ImageFit {
+            renderer: s.renderer.as_ref(),
+            device: &s.autodiff,
+            image: s.image,
+            observed: &good,
+        },
         &[vec![0.0, f64::INFINITY, 0.0, 0.0]],
         &DriftConfig::paper(),
     )
@@ -249,10 +259,12 @@ fn visual_calibration_of_a_tiny_k3dgs_recovers_a_lengthened_link() {
     let autodiff = autodiff_device(&f.device, 0);
     let differentiable = renderer.differentiable(&autodiff).unwrap();
     let fitted = fit_joint_origins(
-        differentiable.as_ref(),
-        &autodiff,
-        [f.data.height, f.data.width],
-        &observed,
+        ImageFit {
+            renderer: differentiable.as_ref(),
+            device: &autodiff,
+            image: [f.data.height, f.data.width],
+            observed: &observed,
+        },
         &angles,
         &VisualCalibrationConfig::paper(),
     )

@@ -1,19 +1,18 @@
 //! Link lengths from images (visual calibration): a self-model that hangs on the kinematic
 //! chain (K-3DGS: Gaussians on the links) renders with the chain's joint origins as
-//! parameters ([`Render::render_with_origins`]); with the Gaussians frozen, Adam fits the
+//! parameters ([`crate::self_models::model::Render::render_with_origins`]); with the Gaussians frozen, Adam fits the
 //! origins' translations to k images of the changed arm at known joint angles. A link's
 //! change is the fitted translation's change along the link (mm). This is the EMSSL paper's
 //! first adaptation approach (learned link parameters, [`crate::ik::calibration`]) fed by a
 //! camera instead of measured tip positions.
 
 use burn::module::{Module, Param};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Tensor, TensorData};
 
 use crate::body::descent::{check_schedule, descend, views};
-use crate::body::observations::{Observed, host};
+use crate::body::observations::{ImageFit, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::{Error, Result};
-use crate::self_models::model::Render;
 
 /// How the joint origins are fitted.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -49,16 +48,19 @@ pub struct FittedOrigins {
     pub change_mm: Vec<f64>,
 }
 
-/// Fit the joint origins of `renderer`'s chain (differentiable, on the autodiff `device`)
-/// to `observed` images of the robot at the known joint `angles` (degrees).
+/// Fit the joint origins of the chain of `fit`'s renderer to the images it observes of the
+/// robot at the known joint `angles` (degrees).
 pub fn fit_joint_origins(
-    renderer: &dyn Render,
-    device: &Device,
-    image: [usize; 2],
-    observed: &Observed,
+    fit: ImageFit,
     angles: &[Vec<f64>],
     cfg: &VisualCalibrationConfig,
 ) -> Result<FittedOrigins> {
+    let ImageFit {
+        renderer,
+        device,
+        image,
+        observed,
+    } = fit;
     check_schedule(cfg.steps, cfg.learning_rate, "visual calibration")?;
     let nominal = renderer.joint_origins().ok_or_else(|| {
         Error::Config("this self-model has no kinematic chain to calibrate (use K-3DGS)".into())

@@ -4,13 +4,12 @@
 //! `d` through the frozen model, from `d = 0`.
 
 use burn::module::{Module, Param};
-use burn::tensor::{Device, Tensor};
+use burn::tensor::Tensor;
 
 use crate::body::descent::{check_schedule, descend, views};
-use crate::body::observations::{Observed, host};
+use crate::body::observations::{ImageFit, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::Result;
-use crate::self_models::model::Render;
 
 /// How the offsets are fitted.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -37,17 +36,19 @@ struct Offset {
     d: Param<Tensor<2>>,
 }
 
-/// The encoder offsets (degrees, one per joint) that explain `observed` given the angles the
-/// encoders `reported` with each image, through `renderer` (differentiable, on the autodiff
-/// `device`) rendering `image`-sized silhouettes.
+/// The encoder offsets (degrees, one per joint) that explain the images `fit` observes given
+/// the angles the encoders `reported` with each image, through its renderer.
 pub fn estimate_offsets(
-    renderer: &dyn Render,
-    device: &Device,
-    image: [usize; 2],
-    observed: &Observed,
+    fit: ImageFit,
     reported: &[Vec<f64>],
     cfg: &DriftConfig,
 ) -> Result<Vec<f64>> {
+    let ImageFit {
+        renderer,
+        device,
+        image,
+        observed,
+    } = fit;
     check_schedule(cfg.steps, cfg.learning_rate, "drift estimation")?;
     let set = views(observed, reported, image, "reported", device)?;
     let dof = set.inputs.dims()[1];

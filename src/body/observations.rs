@@ -8,6 +8,18 @@ use rand::{RngExt, SeedableRng};
 
 use crate::core::error::{Error, Result};
 use crate::data::dataset::Dataset;
+use crate::self_models::model::Render;
+
+/// What a fit to images looks through: the self-model that renders (differentiable, on the
+/// autodiff `device`: [`Render::differentiable`]) `image`-sized silhouettes, and the
+/// silhouettes `observed`.
+#[derive(Clone, Copy)]
+pub struct ImageFit<'a> {
+    pub renderer: &'a dyn Render,
+    pub device: &'a Device,
+    pub image: [usize; 2],
+    pub observed: &'a Observed,
+}
 
 /// Observed silhouettes, on the host.
 #[derive(Clone, Debug, PartialEq)]

@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 
 use crate::body::descent::{check_schedule, descend};
-use crate::body::observations::{Observed, check_angles, host};
+use crate::body::observations::{ImageFit, Observed, check_angles, host};
 use crate::core::error::{Error, Result};
 use crate::self_models::model::Render;
 use crate::train::batcher::TrainSet;
@@ -178,24 +178,22 @@ pub fn pose_losses(
     Ok(out)
 }
 
-/// Fit joint angles to `observed` through `renderer` (differentiable, on the autodiff
-/// `device`: [`Render::differentiable`]), which renders `image`-sized silhouettes of a robot
+/// Fit joint angles to the silhouettes `fit` observes, through its renderer, for a robot
 /// with joint `ranges` (degrees). `guesses`: one starting pose per image, or none.
 /// `progress(done)` is told how many images are finished.
-// Each argument is a different noun the caller names (the renderer, where it runs, the image
-// size, what is observed, the joint ranges, the starting guesses, the settings, the progress
-// callback); no two travel together elsewhere, so a struct would only rename them.
-#[allow(clippy::too_many_arguments)]
 pub fn pose_from_image(
-    renderer: &dyn Render,
-    device: &Device,
-    image: [usize; 2],
-    observed: &Observed,
+    fit: ImageFit,
     ranges: &[[f64; 2]],
     guesses: Option<&[Vec<f64>]>,
     cfg: &PoseFitConfig,
     mut progress: impl FnMut(usize),
 ) -> Result<PoseEstimate> {
+    let ImageFit {
+        renderer,
+        device,
+        image,
+        observed,
+    } = fit;
     cfg.validate()?;
     observed.check_for(image)?;
     let dof = ranges.len();

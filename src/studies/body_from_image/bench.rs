@@ -6,7 +6,7 @@ use burn::tensor::Device;
 use super::BodyFromImageConfig;
 use super::pose::PoseRow;
 use crate::body::drift::estimate_offsets;
-use crate::body::observations::Observed;
+use crate::body::observations::{ImageFit, Observed};
 use crate::body::pose::{PoseFitConfig, pose_from_image, pose_losses};
 use crate::core::error::Result;
 use crate::self_models::harness::Fitted;
@@ -135,10 +135,12 @@ impl Bench<'_> {
         cfg: &PoseFitConfig,
     ) -> Result<Vec<Vec<f64>>> {
         Ok(pose_from_image(
-            through,
-            self.autodiff,
-            self.image,
-            observed,
+            ImageFit {
+                renderer: through,
+                device: self.autodiff,
+                image: self.image,
+                observed,
+            },
             &self.ranges,
             Some(guesses),
             cfg,
@@ -160,10 +162,12 @@ impl Bench<'_> {
             .map(|q| q.iter().zip(offset).map(|(v, o)| v + o).collect())
             .collect();
         estimate_offsets(
-            self.differentiable,
-            self.autodiff,
-            self.image,
-            observed,
+            ImageFit {
+                renderer: self.differentiable,
+                device: self.autodiff,
+                image: self.image,
+                observed,
+            },
             &reported,
             &self.cfg.drift,
         )

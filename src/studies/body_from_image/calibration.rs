@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use super::bench::Bench;
 use crate::body::calibration::fit_joint_origins;
-use crate::body::observations::Observed;
+use crate::body::observations::{ImageFit, Observed};
 use crate::core::error::{Error, Result};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::model::Render;
@@ -75,10 +75,12 @@ pub fn visual_calibration(
                     crate::data::dataset::Dataset::render(arm, &data_cfg, angles.clone(), None)?;
                 let observed = Observed::from_dataset(&images, &(0..k).collect::<Vec<_>>());
                 let fit = fit_joint_origins(
-                    renderer,
-                    bench.autodiff,
-                    [data.height, data.width],
-                    &observed,
+                    ImageFit {
+                        renderer,
+                        device: bench.autodiff,
+                        image: [data.height, data.width],
+                        observed: &observed,
+                    },
                     &angles,
                     &cfg.calibration,
                 )?;

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::bench::{Bench, Ms, Seen};
 use crate::body::amortised::train_estimator;
-use crate::body::observations::{Observed, host};
+use crate::body::observations::{ImageFit, Observed, host};
 use crate::body::pose::pose_from_image;
 use crate::core::error::Result;
 use crate::core::timing::{Repeats, median_seconds};
@@ -130,10 +130,12 @@ pub fn pose_rows(
     let m = cfg.search_poses.min(n);
     let t = std::time::Instant::now();
     let searched = pose_from_image(
-        b.differentiable,
-        b.autodiff,
-        b.image,
-        &observed.select(0..m),
+        ImageFit {
+            renderer: b.differentiable,
+            device: b.autodiff,
+            image: b.image,
+            observed: &observed.select(0..m),
+        },
         &b.ranges,
         None,
         &cfg.search,
