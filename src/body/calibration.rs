@@ -55,12 +55,7 @@ pub fn fit_joint_origins(
     angles: &[Vec<f64>],
     cfg: &VisualCalibrationConfig,
 ) -> Result<FittedOrigins> {
-    let ImageFit {
-        renderer,
-        device,
-        image,
-        observed,
-    } = fit;
+    let (renderer, device, image, observed) = fit.parts();
     check_schedule(cfg.steps, cfg.learning_rate, "visual calibration")?;
     let nominal = renderer.joint_origins().ok_or_else(|| {
         Error::Config("this self-model has no kinematic chain to calibrate (use K-3DGS)".into())

@@ -43,12 +43,7 @@ pub fn estimate_offsets(
     reported: &[Vec<f64>],
     cfg: &DriftConfig,
 ) -> Result<Vec<f64>> {
-    let ImageFit {
-        renderer,
-        device,
-        image,
-        observed,
-    } = fit;
+    let (renderer, device, image, observed) = fit.parts();
     check_schedule(cfg.steps, cfg.learning_rate, "drift estimation")?;
     let set = views(observed, reported, image, "reported", device)?;
     let dof = set.inputs.dims()[1];

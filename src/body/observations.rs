@@ -21,6 +21,13 @@ pub struct ImageFit<'a> {
     pub observed: &'a Observed,
 }
 
+impl<'a> ImageFit<'a> {
+    /// The renderer, its device, the image size and the observed silhouettes.
+    pub fn parts(self) -> (&'a dyn Render, &'a Device, [usize; 2], &'a Observed) {
+        (self.renderer, self.device, self.image, self.observed)
+    }
+}
+
 /// Observed silhouettes, on the host.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Observed {

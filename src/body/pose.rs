@@ -188,12 +188,7 @@ pub fn pose_from_image(
     cfg: &PoseFitConfig,
     mut progress: impl FnMut(usize),
 ) -> Result<PoseEstimate> {
-    let ImageFit {
-        renderer,
-        device,
-        image,
-        observed,
-    } = fit;
+    let (renderer, device, image, observed) = fit.parts();
     cfg.validate()?;
     observed.check_for(image)?;
     let dof = ranges.len();
