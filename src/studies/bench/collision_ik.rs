@@ -291,6 +291,79 @@ fn solve_all(
     Ok(Solved { answers, seconds })
 }
 
+/// The files Pinocchio's check reads, in `out`: each named set of joint vectors
+/// ([`joints_csv`]) and the checked pairs by link name (`pairs.json`, returned).
+fn write_reference_inputs(
+    out: &Path,
+    check: &CollisionCheck,
+    names: &[String],
+    sets: [(&str, Vec<&[f64]>); 3],
+) -> Result<PathBuf> {
+    for (file, rows) in &sets {
+        joints_csv(&out.join(file), names, rows)?;
+    }
+    let links = &check.robot.chain.links;
+    let pairs: Vec<[&str; 2]> = (check.model.pairs.iter())
+        .map(|&(a, b)| [links[a].as_str(), links[b].as_str()])
+        .collect();
+    let pairs_file = out.join("pairs.json");
+    crate::core::atomic_file::write_json(&pairs_file, &pairs)?;
+    Ok(pairs_file)
+}
+
+/// The spheres against the meshes on the same configurations: of those the meshes find free,
+/// the share the spheres call colliding (%), and of those the meshes find colliding, the
+/// share the spheres call free (%).
+fn agreement_pct(meshes: &[bool], spheres: &[bool]) -> (f64, f64) {
+    let count = |mesh: bool, sphere: bool| {
+        (meshes.iter().zip(spheres))
+            .filter(|&(&m, &s)| m == mesh && s == sphere)
+            .count()
+    };
+    let (free, hit) = (
+        count(false, false) + count(false, true),
+        count(true, true) + count(true, false),
+    );
+    (pct(count(false, true), free), pct(count(true, false), hit))
+}
+
+/// What the answers are checked against, as the rows say it.
+fn checked_label(obstacles: usize, margin: f64) -> String {
+    let mm = 1e3 * margin;
+    match obstacles {
+        0 => format!("itself, {mm} mm margin"),
+        n => format!("itself and {n} obstacles, {mm} mm margin"),
+    }
+}
+
+/// The published figures for `robot` (as the rows name it), labelled.
+fn published_rows(robot: &str, preset: &str, revision: &str) -> Vec<CollisionIkRow> {
+    (PUBLISHED.iter())
+        .filter(|p| p.0 == robot)
+        .map(
+            |&(robot, solver, targets, exact, per_s, hardware, source)| CollisionIkRow {
+                robot: robot.into(),
+                solver: format!("{solver} (published)"),
+                checked: "itself and the benchmark's scene".into(),
+                targets,
+                exact_free_pct: exact,
+                exact_free_per_s: per_s,
+                ms_per_target: None,
+                exact_mesh_free_pct: None,
+                exact_but_colliding_pct: None,
+                spheres_conservative_pct: None,
+                spheres_missed_pct: None,
+                iterations_mean: None,
+                starts_mean: None,
+                hardware: hardware.into(),
+                source: source.into(),
+                preset: preset.into(),
+                git_revision: revision.into(),
+            },
+        )
+        .collect()
+}
+
 /// Run the benchmark on the model `ik train` saved in `model_dir`, against `scene` (and
 /// the robot itself), with Pinocchio's check through `python` where given; rows to
 /// `out/results.csv`.
@@ -322,36 +395,25 @@ pub fn run(
         .filter(|a| !check.valid(&a.joints))
         .count();
 
-    // Pinocchio on the exact meshes: the targets' configurations and our answers.
-    let names = &model.saved.joint_names;
-    joints_csv(
-        &out.join("target_joints.csv"),
-        names,
-        &qs.iter().map(Vec::as_slice).collect::<Vec<_>>(),
-    )?;
-    joints_csv(
-        &out.join("answer_joints.csv"),
-        names,
-        &exact_free
-            .iter()
-            .map(|a| a.joints.as_slice())
-            .collect::<Vec<_>>(),
-    )?;
-    let links = &check.robot.chain.links;
-    let pairs: Vec<[&str; 2]> = (check.model.pairs.iter())
-        .map(|&(a, b)| [links[a].as_str(), links[b].as_str()])
-        .collect();
-    let pairs_file = out.join("pairs.json");
-    crate::core::atomic_file::write_json(&pairs_file, &pairs)?;
-    // Random configurations, colliding or not, for the spheres' agreement with the meshes.
+    // Pinocchio on the exact meshes: the targets' configurations, our answers, and random
+    // configurations colliding or not (the spheres' agreement with the meshes).
     let random: Vec<Vec<f64>> =
         crate::sim::trajectory::babbling_rows(&model.saved.ranges, cfg.seed ^ 0xA9)
             .take(cfg.targets)
             .collect();
-    joints_csv(
-        &out.join("random_joints.csv"),
-        names,
-        &random.iter().map(Vec::as_slice).collect::<Vec<_>>(),
+    let answers: Vec<&[f64]> = exact_free.iter().map(|a| a.joints.as_slice()).collect();
+    let pairs_file = write_reference_inputs(
+        out,
+        &check,
+        &model.saved.joint_names,
+        [
+            ("target_joints.csv", qs.iter().map(Vec::as_slice).collect()),
+            ("answer_joints.csv", answers),
+            (
+                "random_joints.csv",
+                random.iter().map(Vec::as_slice).collect(),
+            ),
+        ],
     )?;
     let spheres_collide: Vec<bool> = random
         .iter()
@@ -379,18 +441,7 @@ pub fn run(
             &out.join("random_joints.csv"),
             &out.join("random_joints_exact_meshes.csv"),
         )?;
-        agreement = meshes.map(|meshes| {
-            let count = |mesh: bool, spheres: bool| {
-                (meshes.iter().zip(&spheres_collide))
-                    .filter(|&(&m, &s)| m == mesh && s == spheres)
-                    .count()
-            };
-            let (free, hit) = (
-                count(false, false) + count(false, true),
-                count(true, true) + count(true, false),
-            );
-            (pct(count(false, true), free), pct(count(true, false), hit))
-        });
+        agreement = meshes.map(|meshes| agreement_pct(&meshes, &spheres_collide));
     } else {
         eprintln!(
             "bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)"
@@ -400,14 +451,7 @@ pub fn run(
     let n = targets.len();
     let cpu = crate::eval::compute_peak::machine_label(false);
     let revision = crate::core::provenance::git_revision();
-    let what = if n_obstacles > 0 {
-        format!(
-            "itself and {n_obstacles} obstacles, {} mm margin",
-            1e3 * cfg.margin
-        )
-    } else {
-        format!("itself, {} mm margin", 1e3 * cfg.margin)
-    };
+    let what = checked_label(n_obstacles, cfg.margin);
     let robot_name = published_name(spec).map_or_else(|| spec.label(), String::from);
     let mean = |a: &[PoseSolution], f: fn(&PoseSolution) -> usize| {
         a.iter().map(|s| f(s) as f64).sum::<f64>() / a.len().max(1) as f64
@@ -453,29 +497,7 @@ pub fn run(
             None,
         ),
     ];
-    for (robot, solver, targets, exact, per_s, hardware, source) in PUBLISHED {
-        if robot == robot_name {
-            rows.push(CollisionIkRow {
-                robot: robot.into(),
-                solver: format!("{solver} (published)"),
-                checked: "itself and the benchmark's scene".into(),
-                targets,
-                exact_free_pct: exact,
-                exact_free_per_s: per_s,
-                ms_per_target: None,
-                exact_mesh_free_pct: None,
-                exact_but_colliding_pct: None,
-                spheres_conservative_pct: None,
-                spheres_missed_pct: None,
-                iterations_mean: None,
-                starts_mean: None,
-                hardware: hardware.into(),
-                source: source.into(),
-                preset: cfg.preset.clone(),
-                git_revision: revision.clone(),
-            });
-        }
-    }
+    rows.extend(published_rows(&robot_name, &cfg.preset, &revision));
     let targets_note = mesh_free_targets.map_or(String::new(), |p| {
         format!(" Pinocchio finds {p:.1}% of the targets' configurations collision-free on the exact meshes.")
     });
