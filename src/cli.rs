@@ -135,11 +135,19 @@ pub struct RobotArgs {
     /// Place a URDF as the papers' scene places arm4: base at [0,0,-0.108], yaw -pi/2.
     #[arg(long, conflicts_with_all = ["base_xyz", "base_rpy"])]
     pub arm4_scene: bool,
+    #[command(flatten)]
+    pub parts: UrdfParts,
+}
+
+/// `--tip`, `--geometry` and the joint group: what of a URDF's tree is the robot.
+#[derive(Clone, Debug, clap::Args)]
+pub struct UrdfParts {
     /// The URDF's end-effector link [default: the last link of its longest chain]. The joint
-    /// vector is the chain from the root to it; joints off it are held.
+    /// vector is the chain from the root to it; movable joints off it are held (at 0, or the
+    /// limit nearest 0), as in KDL and TRAC-IK chains.
     #[arg(long, value_name = "LINK", requires = "urdf")]
     pub tip: Option<String>,
-    /// Which of the URDF's geometry is drawn.
+    /// Which of the URDF's geometry the robot has (what is drawn and what a self-model sees).
     #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
     pub geometry: GeometryKind,
     #[command(flatten)]
@@ -147,17 +155,14 @@ pub struct RobotArgs {
 }
 
 /// `--joints` / `--tips`: which movable joints of a URDF's tree are the joint vector.
+/// Each of them reads the URDF (`--urdf`).
 #[derive(Clone, Debug, Default, clap::Args)]
+#[group(requires = "urdf", multiple = true)]
 pub struct JointGroupArgs {
     /// The joint vector: `all` (every movable joint of the tree) or joints by name
     /// (`--joints a,b,c`); the others are held (at 0, or the limit nearest 0). Joints are
     /// ordered depth-first from the root whatever order they are named in.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        value_name = "all|NAMES",
-        requires = "urdf"
-    )]
+    #[arg(long, value_delimiter = ',', value_name = "all|NAMES")]
     pub joints: Option<Vec<String>>,
     /// The joint vector is the union of the chains from the root to these links (both hands
     /// of a humanoid, with the waist they share): `--tips left_hand,right_hand`.
@@ -165,19 +170,13 @@ pub struct JointGroupArgs {
         long,
         value_delimiter = ',',
         value_name = "LINKS",
-        requires = "urdf",
         conflicts_with = "joints"
     )]
     pub tips: Option<Vec<String>>,
     /// The joint vector is a planning group of the robot's SRDF file (MoveIt's format: its
     /// joints, links, chains and subgroups; its chains' tip links are the tips): the one
     /// `.srdf` beside the URDF, in `../config/`, or in a `*_moveit_config` package beside it.
-    #[arg(
-        long,
-        value_name = "NAME",
-        requires = "urdf",
-        conflicts_with_all = ["joints", "tips"]
-    )]
+    #[arg(long, value_name = "NAME", conflicts_with_all = ["joints", "tips"])]
     pub group: Option<String>,
     /// The SRDF file `--group` reads [default: the one beside the URDF].
     #[arg(long, value_name = "FILE", requires = "group")]
@@ -222,9 +221,9 @@ impl RobotArgs {
                     path: path.clone(),
                     base_xyz: [t.x, t.y, t.z],
                     base_rpy: [r, p, y],
-                    tip: self.tip.clone(),
-                    geometry: self.geometry,
-                    joints: self.group.group(Some(path))?,
+                    tip: self.parts.tip.clone(),
+                    geometry: self.parts.geometry,
+                    joints: self.parts.group.group(Some(path))?,
                 }
             }
             None => crate::sim::robots::RobotSpec::Builtin(self.robot),
@@ -233,7 +232,7 @@ impl RobotArgs {
 
     /// A short name for reports: `arm4` or the URDF path.
     pub fn label(&self) -> String {
-        match (&self.urdf, &self.tip) {
+        match (&self.urdf, &self.parts.tip) {
             (Some(p), Some(t)) => format!("{} (tip {t})", p.display()),
             (Some(p), None) => p.display().to_string(),
             (None, _) => self.robot.name().into(),
@@ -328,16 +327,8 @@ pub struct ExperimentArgs {
     /// the papers' camera sees it.
     #[arg(long, requires = "urdf")]
     pub arm4_scene: bool,
-    /// The URDF's end-effector link [default: the last link of its longest chain]. The joint
-    /// vector is the chain from the root to it; movable joints off it are held (at 0, or the
-    /// limit nearest 0), as in KDL and TRAC-IK chains.
-    #[arg(long, value_name = "LINK", requires = "urdf")]
-    pub tip: Option<String>,
-    /// Which of the URDF's geometry a self-model sees.
-    #[arg(long, value_enum, default_value = "visual", requires = "urdf")]
-    pub geometry: GeometryKind,
     #[command(flatten)]
-    pub group: JointGroupArgs,
+    pub parts: UrdfParts,
     #[command(flatten)]
     pub camera: CameraArgs,
     /// Self-models: train and test on this dataset (.npz as `dataset` writes it, or captured
@@ -440,9 +431,9 @@ impl ExperimentArgs {
             robot: self.robot,
             urdf: self.urdf.clone(),
             arm4_scene: self.arm4_scene,
-            tip: self.tip.clone(),
-            geometry: self.geometry,
-            joints: self.group.group(self.urdf.as_deref())?,
+            tip: self.parts.tip.clone(),
+            geometry: self.parts.geometry,
+            joints: self.parts.group.group(self.urdf.as_deref())?,
             camera: self.camera.choice(),
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),

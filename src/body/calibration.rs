@@ -9,7 +9,7 @@
 use burn::module::{Module, Param};
 use burn::tensor::{Tensor, TensorData};
 
-use crate::body::descent::{check_schedule, descend, views};
+use crate::body::descent::{Descent, views};
 use crate::body::observations::{ImageFit, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::{Error, Result};
@@ -56,7 +56,7 @@ pub fn fit_joint_origins(
     cfg: &VisualCalibrationConfig,
 ) -> Result<FittedOrigins> {
     let (renderer, device, image, observed) = fit.parts();
-    check_schedule(cfg.steps, cfg.learning_rate, "visual calibration")?;
+    let descent = Descent::checked(cfg.steps, cfg.learning_rate, "visual calibration")?;
     let nominal = renderer.joint_origins().ok_or_else(|| {
         Error::Config("this self-model has no kinematic chain to calibrate (use K-3DGS)".into())
     })?;
@@ -70,19 +70,12 @@ pub fn fit_joint_origins(
         )),
     };
     let loss = cfg.loss;
-    let fitted = descend(
-        module,
-        &set,
-        cfg.steps,
-        cfg.learning_rate,
-        "visual calibration",
-        |m: &Origins, b| {
-            let s = renderer
-                .render_with_origins(b.inputs.clone(), m.t.val())
-                .expect("checked: the model has a chain");
-            row_losses(loss, s, b.targets[0].clone()).sum()
-        },
-    )?;
+    let fitted = descent.run(module, &set, |m: &Origins, b| {
+        let s = renderer
+            .render_with_origins(b.inputs.clone(), m.t.val())
+            .expect("checked: the model has a chain");
+        row_losses(loss, s, b.targets[0].clone()).sum()
+    })?;
     let t = host(fitted.t.val())?;
     let translations: Vec<[f64; 3]> = t
         .chunks(3)

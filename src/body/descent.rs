@@ -14,14 +14,55 @@ use crate::train::{
     trainer::Trainer,
 };
 
-/// Reject a schedule that cannot descend (`what`: the fit, for the message).
-pub fn check_schedule(steps: usize, learning_rate: f64, what: &str) -> Result<()> {
-    if steps == 0 || !(learning_rate.is_finite() && learning_rate > 0.0) {
-        return Err(Error::Config(format!(
-            "{what} needs at least one step and a positive learning rate"
-        )));
+/// A descent's schedule: `steps` full-batch Adam steps from `learning_rate` along a half
+/// cosine, named `label` (for messages and progress).
+#[derive(Clone, Copy, Debug)]
+pub struct Descent<'a> {
+    pub steps: usize,
+    pub learning_rate: f64,
+    pub label: &'a str,
+}
+
+impl<'a> Descent<'a> {
+    /// The schedule, refused in one line where it cannot descend (no step, a learning rate
+    /// that is not positive and finite).
+    pub fn checked(steps: usize, learning_rate: f64, label: &'a str) -> Result<Self> {
+        if steps == 0 || !(learning_rate.is_finite() && learning_rate > 0.0) {
+            return Err(Error::Config(format!(
+                "{label} needs at least one step and a positive learning rate"
+            )));
+        }
+        Ok(Descent {
+            steps,
+            learning_rate,
+            label,
+        })
     }
-    Ok(())
+
+    /// Descend on `module` over `set`; `loss(module, batch)` renders through the frozen model.
+    pub fn run<M: Module>(
+        self,
+        module: M,
+        set: &TrainSet,
+        loss: impl Fn(&M, &Batch) -> Tensor<1>,
+    ) -> Result<M> {
+        let train = TrainConfig {
+            steps: self.steps,
+            batch: set.len(),
+            learning_rate: self.learning_rate,
+            grad_clip_norm: None,
+            input_noise: 0.0,
+            seed: 0,
+            checkpoint_every: 0,
+            log_every: 0,
+        };
+        let mut schedule = Schedule::cosine(self.steps);
+        let (fitted, _) = Trainer::new(&train, self.label)
+            .quiet()
+            .hooks(&mut schedule)
+            .fit(module, set, loss)?;
+        Ok(fitted)
+    }
 }
 
 /// Images seen at known joint angles, checked (the model's `image` size, no empty image, one
@@ -48,32 +89,4 @@ pub fn views(
         inputs: Tensor::from_data(TensorData::new(q, [observed.n, dof]), device),
         targets: vec![observed.tensor(device)],
     })
-}
-
-/// `steps` full-batch Adam steps on `module` from `learning_rate` along a half cosine;
-/// `loss(module, batch)` renders through the frozen model.
-pub fn descend<M: Module>(
-    module: M,
-    set: &TrainSet,
-    steps: usize,
-    learning_rate: f64,
-    label: &str,
-    loss: impl Fn(&M, &Batch) -> Tensor<1>,
-) -> Result<M> {
-    let train = TrainConfig {
-        steps,
-        batch: set.len(),
-        learning_rate,
-        grad_clip_norm: None,
-        input_noise: 0.0,
-        seed: 0,
-        checkpoint_every: 0,
-        log_every: 0,
-    };
-    let mut schedule = Schedule::cosine(steps);
-    let (fitted, _) = Trainer::new(&train, label)
-        .quiet()
-        .hooks(&mut schedule)
-        .fit(module, set, loss)?;
-    Ok(fitted)
 }

@@ -6,7 +6,7 @@
 use burn::module::{Module, Param};
 use burn::tensor::Tensor;
 
-use crate::body::descent::{check_schedule, descend, views};
+use crate::body::descent::{Descent, views};
 use crate::body::observations::{ImageFit, host};
 use crate::body::pose::{SilhouetteLoss, row_losses};
 use crate::core::error::Result;
@@ -44,25 +44,18 @@ pub fn estimate_offsets(
     cfg: &DriftConfig,
 ) -> Result<Vec<f64>> {
     let (renderer, device, image, observed) = fit.parts();
-    check_schedule(cfg.steps, cfg.learning_rate, "drift estimation")?;
+    let descent = Descent::checked(cfg.steps, cfg.learning_rate, "drift estimation")?;
     let set = views(observed, reported, image, "reported", device)?;
     let dof = set.inputs.dims()[1];
     let module = Offset {
         d: Param::from_tensor(Tensor::zeros([1, dof], device)),
     };
     let loss = cfg.loss;
-    let fitted = descend(
-        module,
-        &set,
-        cfg.steps,
-        cfg.learning_rate,
-        "encoder drift",
-        |m: &Offset, b| {
-            let n = b.inputs.dims()[0];
-            let q = b.inputs.clone() - m.d.val().expand([n, dof]);
-            row_losses(loss, renderer.render(q).0, b.targets[0].clone()).sum()
-        },
-    )?;
+    let fitted = descent.run(module, &set, |m: &Offset, b| {
+        let n = b.inputs.dims()[0];
+        let q = b.inputs.clone() - m.d.val().expand([n, dof]);
+        row_losses(loss, renderer.render(q).0, b.targets[0].clone()).sum()
+    })?;
     let d = host(fitted.d.val())?;
     Ok(d.into_iter().map(f64::from).collect())
 }

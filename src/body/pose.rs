@@ -14,7 +14,7 @@ use burn::tensor::{Device, Int, Tensor, TensorData};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
-use crate::body::descent::{check_schedule, descend};
+use crate::body::descent::Descent;
 use crate::body::observations::{ImageFit, Observed, check_angles, host};
 use crate::core::error::{Error, Result};
 use crate::self_models::model::Render;
@@ -74,7 +74,7 @@ impl PoseFitConfig {
                 "a pose fit needs at least one start and one row per batch".into(),
             ));
         }
-        check_schedule(self.steps, self.learning_rate, "a pose fit")
+        Descent::checked(self.steps, self.learning_rate, "a pose fit").map(|_| ())
     }
 }
 
@@ -232,19 +232,13 @@ pub fn pose_from_image(
             targets: vec![chunk.repeated(starts).tensor(device)],
         };
         let loss_kind = cfg.loss;
-        let fitted = descend(
-            module,
-            &set,
-            cfg.steps,
-            cfg.learning_rate,
-            "pose from image",
-            |m: &Angles, b| {
-                let n = b.inputs.dims()[0];
-                let rows: Tensor<1, Int> = b.inputs.clone().reshape([n]).int();
-                let q = m.q.val().select(0, rows);
-                row_losses(loss_kind, renderer.render(q).0, b.targets[0].clone()).sum()
-            },
-        )?;
+        let descent = Descent::checked(cfg.steps, cfg.learning_rate, "pose from image")?;
+        let fitted = descent.run(module, &set, |m: &Angles, b| {
+            let n = b.inputs.dims()[0];
+            let rows: Tensor<1, Int> = b.inputs.clone().reshape([n]).int();
+            let q = m.q.val().select(0, rows);
+            row_losses(loss_kind, renderer.render(q).0, b.targets[0].clone()).sum()
+        })?;
         // Score every row at its final angles, keep each image's best start.
         let q = fitted.q.val().detach();
         let rendered = renderer.render(q.clone()).0.detach();

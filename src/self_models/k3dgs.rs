@@ -33,7 +33,7 @@ use crate::self_models::result::PaperReference;
 use crate::self_models::{
     camera_input::split_views,
     harness::grid_picks,
-    model::{Fit, Render, ReportContext, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, ReportContext, SelfModel, Trained},
     run_config::SelfModelRun,
 };
 use crate::sim::camera::Camera;
@@ -478,11 +478,7 @@ impl SelfModel for K3dgs {
 
     /// Its Gaussians (as many as densification left, on the links the state names) on the robot's
     /// chain, seen from the saved camera.
-    fn load(
-        &self,
-        weights: &std::path::Path,
-        ctx: &crate::self_models::model::LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+    fn load(&self, weights: &std::path::Path, ctx: &LoadContext) -> Result<Loaded> {
         let state: K3dgsState = serde_json::from_value(ctx.state.clone())
             .map_err(|e| crate::Error::data(weights, format!("its saved state: {e}")))?;
         let robot = ctx

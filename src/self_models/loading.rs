@@ -17,7 +17,7 @@ use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
 use crate::self_models::saved::{FORMAT, SavedSelfModel};
 use crate::self_models::{
     data_spec::DataSpec,
-    model::{LoadContext, Render, SelfModel},
+    model::{LoadContext, Loaded, Render, SelfModel},
 };
 
 /// The kinds whose weights load, each with its loader: one line a kind.
@@ -32,13 +32,13 @@ fn loader(kind: &str) -> Option<Loader> {
     }
 }
 
-type Loader = fn(&SavedSelfModel, &Path, &Device) -> Result<Option<Box<dyn Render + Send + Sync>>>;
+type Loader = fn(&SavedSelfModel, &Path, &Device) -> Result<Loaded>;
 
 fn load_as<M: SelfModel + serde::de::DeserializeOwned>(
     saved: &SavedSelfModel,
     weights: &Path,
     device: &Device,
-) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+) -> Result<Loaded> {
     let model: M = serde_json::from_value(saved.model.clone())
         .map_err(|e| Error::data(weights, format!("its model.json's configuration: {e}")))?;
     // A model that hangs on the robot's chain gets the robot it was trained on, read again.

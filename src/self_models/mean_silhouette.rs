@@ -13,7 +13,7 @@ use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, Render, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained},
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::config::TrainLog;
@@ -132,11 +132,7 @@ impl SelfModel for MeanSilhouette {
         true
     }
 
-    fn load(
-        &self,
-        weights: &std::path::Path,
-        ctx: &crate::self_models::model::LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+    fn load(&self, weights: &std::path::Path, ctx: &LoadContext) -> Result<Loaded> {
         let [h, w] = self.image;
         let template = ConstantImage {
             image: Param::from_tensor(Tensor::zeros([1, 1, h, w], ctx.device)),

@@ -18,9 +18,10 @@ use crate::self_models::run_config::SelfModelRun;
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 use crate::train::{
-    batcher::TrainSet,
+    batcher::{Batch, TrainSet},
     checkpoint::CheckpointPlan,
     config::{TrainConfig, TrainLog},
+    trainer::{StepLoss, Trainer},
 };
 
 /// A visual self-model: joint angles in, the robot's silhouette (and depth) out. Implement
@@ -70,11 +71,7 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     }
     /// The renderer whose weights its renderer saved to `weights` ([`Render::save`], with the
     /// state it returned), built on `ctx.device`; `None`: this kind saves no weights that load.
-    fn load(
-        &self,
-        _weights: &Path,
-        _ctx: &LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+    fn load(&self, _weights: &Path, _ctx: &LoadContext) -> Result<Loaded> {
         Ok(None)
     }
     /// Its run on a preset of [`crate::self_models::run_config::SELF_MODEL_PRESETS`] (what the registry runs).
@@ -82,6 +79,10 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     where
         Self: Sized;
 }
+
+/// A saved self-model's renderer, rebuilt ([`SelfModel::load`]); `None`: its kind saves no
+/// weights that load.
+pub type Loaded = Option<Box<dyn Render + Send + Sync>>;
 
 /// What a saved self-model is rebuilt with ([`SelfModel::load`]).
 pub struct LoadContext<'a> {
@@ -97,12 +98,33 @@ pub struct LoadContext<'a> {
 
 /// [`SelfModel::load`] for a network: `template` (its configuration's untrained network on the
 /// device) given the weights its [`Render::save`] wrote to `weights`.
-pub fn load_network<R>(template: R, weights: &Path) -> Result<Option<Box<dyn Render + Send + Sync>>>
+pub fn load_network<R>(template: R, weights: &Path) -> Result<Loaded>
 where
     R: Render + burn::module::Module + Send + Sync + 'static,
 {
     let network = crate::train::checkpoint::load_module(template, weights)?;
     Ok(Some(Box::new(network)))
+}
+
+/// [`SelfModel::fit`] for a burn network: `network` (untrained, on `fit.train_device`, with
+/// `parameters` trainable parameters) trained by the one training loop on `set` with `loss`,
+/// checkpointed as `fit` plans, then moved off the autodiff graph to render.
+pub fn train_network<N, L, S>(
+    parameters: usize,
+    network: N,
+    fit: &Fit,
+    set: &TrainSet,
+    loss: L,
+) -> Result<Trained>
+where
+    N: burn::module::Module + Render + 'static,
+    L: Fn(&N, &Batch) -> S,
+    S: Into<StepLoss>,
+{
+    let (network, log) = Trainer::new(fit.train, fit.label)
+        .checkpoint(Some(fit.plan))
+        .fit(network, set, loss)?;
+    Ok(Trained::one(network.valid(), parameters, log))
 }
 
 /// What a self-model trains with.

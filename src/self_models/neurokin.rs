@@ -20,6 +20,8 @@
 //! decoder has `upsampling_layers` transposed convolutions; all but the last double the
 //! resolution (channels halve from 256 down to a floor of 16); the last is the k3/s1/p2 layer.
 
+use std::path::Path;
+
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
@@ -32,14 +34,13 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::result::PaperReference;
 use crate::self_models::tree_encoder::TreeEncoder;
 use crate::self_models::{
-    model::{Fit, Render, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network},
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::losses::{bce_with_logits, mse};
 use crate::train::{
     batcher::{Batch, TrainSet},
     config::TrainConfig,
-    trainer::Trainer,
 };
 
 /// Which of the two published NeuroKin architectures.
@@ -494,7 +495,7 @@ impl Render for NeuroKin {
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
         (self.predict(angles), None)
     }
-    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
+    fn save(&self, path: &Path) -> Result<Option<serde_json::Value>> {
         crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
@@ -529,38 +530,34 @@ impl SelfModel for NeuroKinConfig {
     }
 
     fn fit(&self, fit: &Fit) -> Result<Trained> {
-        let model = self.init(fit.train_device, fit.train.seed)?;
-        let parameters = model.trainable_params();
-        let train_set = self.training_set(fit.train_set);
-        let loss = self.training_loss();
-        let (model, log) = Trainer::new(fit.train, fit.label)
-            .checkpoint(Some(fit.plan))
-            .fit(model, &train_set, loss)?;
-        Ok(Trained::one(model.valid(), parameters, log))
+        let network = self.init(fit.train_device, fit.train.seed)?;
+        let set = self.training_set(fit.train_set);
+        train_network(
+            network.trainable_params(),
+            network,
+            fit,
+            &set,
+            self.training_loss(),
+        )
     }
 
-    fn load(
-        &self,
-        weights: &std::path::Path,
-        ctx: &crate::self_models::model::LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::model::load_network(self.init(ctx.device, 0)?, weights)
+    fn load(&self, weights: &Path, ctx: &LoadContext) -> Result<Loaded> {
+        load_network(self.init(ctx.device, 0)?, weights)
     }
 
+    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
+    /// N(0, 0.01) noise on the angles in degrees.
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        neurokin_run(preset)
+        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
+        model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
+        let run = SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?;
+        Ok(run.shorten(200, 32))
     }
 }
 
-/// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
-/// N(0, 0.01) noise on the angles in degrees.
+/// NeuroKin's run on `preset` ([`SelfModel::preset_run`]).
 pub fn neurokin_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
-    let mut model = NeuroKinConfig::preset(model_preset(preset))?;
-    model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
-    Ok(
-        SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?
-            .shorten(200, 32),
-    )
+    NeuroKinConfig::preset_run(preset)
 }
 
 /// NeuroKin with the tree encoder in place of the flat MLP, at its parameter count; the rest

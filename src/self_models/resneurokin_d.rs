@@ -13,6 +13,8 @@
 //! The paper trained the depth head on a heuristic blob; ours learns the simulator's metric
 //! depth (metres along the camera axis, 0 on background pixels).
 
+use std::path::Path;
+
 use burn::module::Module;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig, PaddingConfig2d};
@@ -25,11 +27,11 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::neurokin::resize_bilinear;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, Render, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network},
     run_config::{SelfModelRun, model_preset},
 };
+use crate::train::batcher::Batch;
 use crate::train::losses::{bce, l1_masked, soft_dice};
-use crate::train::trainer::Trainer;
 
 /// ResNeuroKin-D's architecture. Presets: `paper` (the code's facts), `quick` (tiny).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -247,7 +249,7 @@ impl Render for ResNeuroKinD {
         let (s, d) = self.forward(angles);
         (s, Some(d))
     }
-    fn save(&self, path: &std::path::Path) -> Result<Option<serde_json::Value>> {
+    fn save(&self, path: &Path) -> Result<Option<serde_json::Value>> {
         crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
@@ -274,26 +276,25 @@ impl SelfModel for ResNeuroKinDConfig {
     }
 
     fn fit(&self, fit: &Fit) -> Result<Trained> {
-        let model = self.init(fit.train_device, fit.train.seed)?;
-        let parameters = model.trainable_params();
+        let network = self.init(fit.train_device, fit.train.seed)?;
         let w = self.depth_weight;
-        let (model, log) = Trainer::new(fit.train, fit.label)
-            .checkpoint(Some(fit.plan))
-            .fit(model, fit.train_set, |m, b| {
-                let (s, d) = m.forward(b.inputs.clone());
-                let y = b.targets[0].clone();
-                let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
-                sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
-            })?;
-        Ok(Trained::one(model.valid(), parameters, log))
+        let loss = move |m: &ResNeuroKinD, b: &Batch| {
+            let (s, d) = m.forward(b.inputs.clone());
+            let y = b.targets[0].clone();
+            let sil = (bce(s.clone(), y.clone()) + soft_dice(s, y)).div_scalar(2.0);
+            sil + l1_masked(d, b.targets[1].clone(), robot_mask(&b.targets[0])).mul_scalar(w)
+        };
+        train_network(
+            network.trainable_params(),
+            network,
+            fit,
+            fit.train_set,
+            loss,
+        )
     }
 
-    fn load(
-        &self,
-        weights: &std::path::Path,
-        ctx: &crate::self_models::model::LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
-        crate::self_models::model::load_network(self.init(ctx.device, 0)?, weights)
+    fn load(&self, weights: &Path, ctx: &LoadContext) -> Result<Loaded> {
+        load_network(self.init(ctx.device, 0)?, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -185,7 +185,7 @@ pub fn step<M: Module>(
 ) -> M {
     #[cfg(feature = "wgpu")]
     if let Some(fused) = fused::gather(optim, lr, &model, &grads) {
-        return fused.apply(optim, lr, model, grads, clip);
+        return fused.apply(optim, model, grads, clip);
     }
     let mut grads = grads;
     if let Some(max) = clip {

@@ -7,11 +7,64 @@ use super::config::check_memory;
 use super::{Dataset, DatasetConfig, sample_angles};
 use crate::core::error::{Error, Result};
 use crate::sim::camera::Camera;
-use crate::sim::ray_caster::{RayCaster, RenderOptions};
+use crate::sim::ray_caster::{Frame, RayCaster, RenderOptions};
 use crate::sim::robot::Robot;
 
 /// Images rendered between two looks at Ctrl-C.
 const RENDER_BLOCK: usize = 64;
+
+/// Silhouettes and depth maps as they are rendered, one frame after another, by cameras of
+/// one image size and focal length (the first's).
+struct Frames {
+    images: Vec<u8>,
+    depth: Vec<f32>,
+    camera: Camera,
+}
+
+impl Frames {
+    /// Room for `n` frames of `camera`'s size.
+    fn new(n: usize, camera: &Camera) -> Self {
+        let pixels = n * camera.width * camera.height;
+        Frames {
+            images: Vec::with_capacity(pixels),
+            depth: Vec::with_capacity(pixels),
+            camera: camera.clone(),
+        }
+    }
+
+    fn push(&mut self, f: &Frame) {
+        self.images.extend_from_slice(&f.silhouette);
+        self.depth.extend_from_slice(&f.depth);
+    }
+
+    /// The dataset of these frames: sample `i` shows `robot` at `angles[i]` from the camera
+    /// at `poses[i]`; the first `n_train` samples train.
+    fn into_dataset(
+        self,
+        robot: &Robot,
+        angles: Vec<Vec<f64>>,
+        poses: Vec<[f64; 16]>,
+        n_train: usize,
+    ) -> Dataset {
+        Dataset {
+            angles,
+            width: self.camera.width,
+            height: self.camera.height,
+            focal: self.camera.focal_px(),
+            images: self.images,
+            depth: self.depth,
+            poses,
+            n_train,
+            joint_names: robot.chain.joint_names(),
+        }
+    }
+}
+
+/// A camera's pose as a dataset records it: camera-to-world, row-major 4x4.
+fn pose_record(camera: &Camera) -> [f64; 16] {
+    let m = camera.pose_matrix();
+    std::array::from_fn(|i| m[(i / 4, i % 4)])
+}
 
 impl Dataset {
     /// Render `angles` (user units, one row per sample) with `cfg`'s camera and options.
@@ -43,9 +96,7 @@ impl Dataset {
             );
         }
         let caster = RayCaster::new(robot, camera.clone(), cfg.render.clone());
-        let (w, h) = (cfg.camera.width, cfg.camera.height);
-        let mut images = Vec::with_capacity(si.len() * w * h);
-        let mut depth = Vec::with_capacity(si.len() * w * h);
+        let mut frames = Frames::new(si.len(), &camera);
         // In blocks, each copied in as it is rendered (the frames of the whole set are never
         // held twice), with Ctrl-C asked between blocks: a fraction of a second apart.
         for (b, block) in si.chunks(RENDER_BLOCK).enumerate() {
@@ -57,23 +108,11 @@ impl Dataset {
                 )));
             }
             for f in caster.render_batch(block, progress) {
-                images.extend_from_slice(&f.silhouette);
-                depth.extend_from_slice(&f.depth);
+                frames.push(&f);
             }
         }
-        let pose = camera.pose_matrix();
-        let pose: [f64; 16] = std::array::from_fn(|i| pose[(i / 4, i % 4)]);
-        Ok(Dataset {
-            angles,
-            images,
-            depth,
-            width: w,
-            height: h,
-            focal: camera.focal_px(),
-            poses: vec![pose; cfg.samples],
-            n_train: cfg.train,
-            joint_names: robot.chain.joint_names(),
-        })
+        let poses = vec![pose_record(&camera); cfg.samples];
+        Ok(frames.into_dataset(robot, angles, poses, cfg.train))
     }
 
     /// Every pose of `angles` (user units) seen by every camera of `cameras`: sample
@@ -109,36 +148,21 @@ impl Dataset {
             c.validate()?;
         }
         let si: Vec<Vec<f64>> = angles.iter().map(|q| robot.chain.to_si(q)).collect();
-        let frames: Vec<Vec<crate::sim::ray_caster::Frame>> = cameras
+        let frames: Vec<Vec<Frame>> = cameras
             .iter()
             .map(|c| RayCaster::new(robot, c.clone(), render.clone()).render_batch(&si, None))
             .collect();
-        let (w, h) = (first.width, first.height);
         let n = angles.len() * cameras.len();
-        let (mut images, mut depth) =
-            (Vec::with_capacity(n * w * h), Vec::with_capacity(n * w * h));
+        let mut all = Frames::new(n, first);
         let (mut all_angles, mut poses) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for (p, q) in angles.iter().enumerate() {
             for (c, camera) in cameras.iter().enumerate() {
-                let f = &frames[c][p];
-                images.extend_from_slice(&f.silhouette);
-                depth.extend_from_slice(&f.depth);
+                all.push(&frames[c][p]);
                 all_angles.push(q.clone());
-                let m = camera.pose_matrix();
-                poses.push(std::array::from_fn(|i| m[(i / 4, i % 4)]));
+                poses.push(pose_record(camera));
             }
         }
-        Ok(Dataset {
-            angles: all_angles,
-            images,
-            depth,
-            width: w,
-            height: h,
-            focal: first.focal_px(),
-            poses,
-            n_train: train_poses * cameras.len(),
-            joint_names: robot.chain.joint_names(),
-        })
+        Ok(all.into_dataset(robot, all_angles, poses, train_poses * cameras.len()))
     }
 
     /// Sample joint vectors with the config's sampler and render them.

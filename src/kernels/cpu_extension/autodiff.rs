@@ -10,7 +10,7 @@ use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, TensorMetadata};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 
-use super::{CpuKernelOps, conv_transpose2d_x_grad, conv2d_x_grad};
+use super::CpuKernelOps;
 
 impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff<B, C> {
     fn conv2d_fast(
@@ -18,53 +18,7 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
         weight: FloatTensor<Self>,
         options: ConvOptions<2>,
     ) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct Conv2dFast;
-
-        impl<B: Backend + CpuKernelOps> Backward<B, 2> for Conv2dFast {
-            type State = (NodeId, NodeId, ConvOptions<2>);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 2>,
-                grads: &mut Gradients,
-                checkpointer: &mut Checkpointer,
-            ) {
-                let [node_x, node_weight] = ops.parents;
-                let grad = grads.consume::<B>(&ops.node);
-                let (x_state, weight_state, options) = ops.state;
-                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
-                let weight =
-                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
-                if let Some(node) = node_x {
-                    let g = conv2d_x_grad::<B>(x.clone(), weight.clone(), grad.clone(), &options);
-                    grads.register::<B>(node.id, g);
-                }
-                if let Some(node) = node_weight {
-                    grads.register::<B>(node.id, B::conv2d_weight_grad(x, weight, grad, options));
-                }
-            }
-        }
-
-        match Conv2dFast
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let x_state = prep.checkpoint(&x);
-                let weight_state = prep.checkpoint(&weight);
-                prep.finish(
-                    (x_state, weight_state, options.clone()),
-                    B::conv2d_fast(x.into_primitive(), weight.into_primitive(), options),
-                )
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv2d_fast(
-                x.into_primitive(),
-                weight.into_primitive(),
-                options,
-            )),
-        }
+        two_inputs::<B, C, _>(x, weight, options, B::conv2d_fast, B::conv2d_grads)
     }
 
     fn conv_transpose2d_fast(
@@ -72,62 +26,13 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
         weight: FloatTensor<Self>,
         options: ConvTransposeOptions<2>,
     ) -> FloatTensor<Self> {
-        #[derive(Debug)]
-        struct ConvTranspose2dFast;
-
-        impl<B: Backend + CpuKernelOps> Backward<B, 2> for ConvTranspose2dFast {
-            type State = (NodeId, NodeId, ConvTransposeOptions<2>);
-
-            fn backward(
-                self,
-                ops: Ops<Self::State, 2>,
-                grads: &mut Gradients,
-                checkpointer: &mut Checkpointer,
-            ) {
-                let [node_x, node_weight] = ops.parents;
-                let grad = grads.consume::<B>(&ops.node);
-                let (x_state, weight_state, options) = ops.state;
-                let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
-                let weight =
-                    checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(weight_state);
-                match (node_x, node_weight) {
-                    (Some(nx), Some(nw)) => {
-                        let (dx, dw) = B::conv_transpose2d_grads(x, weight, grad, options);
-                        grads.register::<B>(nx.id, dx);
-                        grads.register::<B>(nw.id, dw);
-                    }
-                    (Some(node), None) => {
-                        let g = conv_transpose2d_x_grad::<B>(weight, grad, &options);
-                        grads.register::<B>(node.id, g);
-                    }
-                    (None, Some(node)) => {
-                        let g = B::conv_transpose2d_weight_grad(x, weight, grad, options);
-                        grads.register::<B>(node.id, g);
-                    }
-                    (None, None) => {}
-                }
-            }
-        }
-
-        match ConvTranspose2dFast
-            .prepare::<C>([x.node(), weight.node()])
-            .compute_bound()
-            .stateful()
-        {
-            OpsKind::Tracked(mut prep) => {
-                let x_state = prep.checkpoint(&x);
-                let weight_state = prep.checkpoint(&weight);
-                prep.finish(
-                    (x_state, weight_state, options.clone()),
-                    B::conv_transpose2d_fast(x.into_primitive(), weight.into_primitive(), options),
-                )
-            }
-            OpsKind::UnTracked(prep) => prep.finish(B::conv_transpose2d_fast(
-                x.into_primitive(),
-                weight.into_primitive(),
-                options,
-            )),
-        }
+        two_inputs::<B, C, _>(
+            x,
+            weight,
+            options,
+            B::conv_transpose2d_fast,
+            B::conv_transpose2d_grads,
+        )
     }
 
     fn resize_bilinear_fast(x: FloatTensor<Self>, size: [usize; 2]) -> FloatTensor<Self> {
@@ -196,12 +101,18 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
     }
 
     fn matmul_fast(x: FloatTensor<Self>, w: FloatTensor<Self>) -> FloatTensor<Self> {
-        two_inputs::<B, C>(x, w, B::matmul_fast, |x, w, grad, [need_x, need_w]| {
-            [
-                need_x.then(|| B::linear_x_backward(w, grad.clone())),
-                need_w.then(|| B::linear_weight_backward(x, grad)),
-            ]
-        })
+        two_inputs::<B, C, _>(
+            x,
+            w,
+            (),
+            |x, w, ()| B::matmul_fast(x, w),
+            |x, w, grad, (), need| {
+                (
+                    need[0].then(|| B::linear_x_backward(w, grad.clone())),
+                    need[1].then(|| B::linear_weight_backward(x, grad)),
+                )
+            },
+        )
     }
 
     fn sigmoid_fast(x: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -234,9 +145,10 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
     }
 
     fn bce_with_logits_fast(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
-        two_inputs::<B, C>(z, y, B::bce_with_logits_fast, |z, y, grad, need| {
+        let forward = |z, y, ()| B::bce_with_logits_fast(z, y);
+        two_inputs::<B, C, _>(z, y, (), forward, |z, y, grad, (), need| {
             let (dz, dy) = B::bce_with_logits_grads(z, y, grad);
-            [need[0].then_some(dz), need[1].then_some(dy)]
+            (need[0].then_some(dz), need[1].then_some(dy))
         })
     }
 
@@ -270,24 +182,34 @@ impl<B: Backend + CpuKernelOps, C: CheckpointStrategy> CpuKernelOps for Autodiff
     }
 }
 
-/// The gradients of a two-input op from both inputs and the output's gradient, each where
-/// `need` says its input is tracked.
-type TwoInputGrads<B> =
-    fn(FloatTensor<B>, FloatTensor<B>, FloatTensor<B>, [bool; 2]) -> [Option<FloatTensor<B>>; 2];
+/// The gradients of a two-input op from both inputs, the output's gradient and the op's
+/// `options`, each where `need` says its input is tracked.
+type TwoInputGrads<B, S> = fn(
+    FloatTensor<B>,
+    FloatTensor<B>,
+    FloatTensor<B>,
+    S,
+    [bool; 2],
+) -> (Option<FloatTensor<B>>, Option<FloatTensor<B>>);
 
 /// A two-input op in the autodiff graph whose backward pass reads both inputs: `forward` on
-/// the inner backend, both inputs checkpointed, `grads` in the backward pass.
-fn two_inputs<B: Backend, C: CheckpointStrategy>(
+/// the inner backend with `options` (a convolution's; `()` for none), both inputs
+/// checkpointed, `grads` in the backward pass.
+fn two_inputs<B: Backend, C: CheckpointStrategy, S>(
     a: FloatTensor<Autodiff<B, C>>,
     b: FloatTensor<Autodiff<B, C>>,
-    forward: fn(FloatTensor<B>, FloatTensor<B>) -> FloatTensor<B>,
-    grads: TwoInputGrads<B>,
-) -> FloatTensor<Autodiff<B, C>> {
+    options: S,
+    forward: fn(FloatTensor<B>, FloatTensor<B>, S) -> FloatTensor<B>,
+    grads: TwoInputGrads<B, S>,
+) -> FloatTensor<Autodiff<B, C>>
+where
+    S: Clone + std::fmt::Debug + Send + 'static,
+{
     #[derive(Debug)]
-    struct TwoInputs<B: Backend>(TwoInputGrads<B>);
+    struct TwoInputs<B: Backend, S>(TwoInputGrads<B, S>);
 
-    impl<B: Backend> Backward<B, 2> for TwoInputs<B> {
-        type State = (NodeId, NodeId);
+    impl<B: Backend, S: Clone + std::fmt::Debug + Send + 'static> Backward<B, 2> for TwoInputs<B, S> {
+        type State = (NodeId, NodeId, S);
 
         fn backward(
             self,
@@ -296,10 +218,12 @@ fn two_inputs<B: Backend, C: CheckpointStrategy>(
             checkpointer: &mut Checkpointer,
         ) {
             let grad = gradients.consume::<B>(&ops.node);
-            let a = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.0);
-            let b = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(ops.state.1);
+            let (a, b, options) = ops.state;
+            let a = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(a);
+            let b = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(b);
             let need = ops.parents.each_ref().map(Option::is_some);
-            for (node, g) in ops.parents.into_iter().zip((self.0)(a, b, grad, need)) {
+            let (da, db) = (self.0)(a, b, grad, options, need);
+            for (node, g) in ops.parents.into_iter().zip([da, db]) {
                 if let (Some(node), Some(g)) = (node, g) {
                     gradients.register::<B>(node.id, g);
                 }
@@ -313,9 +237,14 @@ fn two_inputs<B: Backend, C: CheckpointStrategy>(
         .stateful()
     {
         OpsKind::Tracked(mut prep) => {
-            let state = (prep.checkpoint(&a), prep.checkpoint(&b));
-            prep.finish(state, forward(a.into_primitive(), b.into_primitive()))
+            let state = (prep.checkpoint(&a), prep.checkpoint(&b), options.clone());
+            prep.finish(
+                state,
+                forward(a.into_primitive(), b.into_primitive(), options),
+            )
         }
-        OpsKind::UnTracked(prep) => prep.finish(forward(a.into_primitive(), b.into_primitive())),
+        OpsKind::UnTracked(prep) => {
+            prep.finish(forward(a.into_primitive(), b.into_primitive(), options))
+        }
     }
 }

@@ -10,7 +10,10 @@ use burn::tensor::{Shape, TensorData};
 use crate::kernels::conv_gemm::{self, ConvGeometry, weight_grad};
 use crate::kernels::{bilinear_resize, linear, pointwise};
 
-use super::{CpuKernelOps, adam_step_composed, bilinear_options, kernel_supports};
+use super::{
+    CpuKernelOps, adam_step_composed, bilinear_options, conv_transpose2d_x_grad, conv2d_x_grad,
+    kernel_supports,
+};
 
 /// `(data, [batch, channels, h, w])` of a contiguous f32 flex tensor.
 fn f32_nchw(t: &FlexTensor) -> (FlexTensor, [usize; 4]) {
@@ -61,72 +64,34 @@ impl CpuKernelOps for Flex {
         flex_tensor(y, [batch, c_out, out[0], out[1]])
     }
 
-    fn conv2d_weight_grad(
+    fn conv2d_grads(
         x: FlexTensor,
         weight: FlexTensor,
-        output_grad: FlexTensor,
+        dy: FlexTensor,
         options: ConvOptions<2>,
-    ) -> FlexTensor {
-        if !kernel_supports(x.dtype(), &options.dilation, options.groups) || options.is_asymmetric()
-        {
-            return Self::conv2d_weight_backward(x, weight, output_grad, options);
-        }
-        let (x, xd) = f32_nchw(&x);
-        let (go, _) = f32_nchw(&output_grad);
-        let wd = weight.shape().dims::<4>();
-        let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
-        let dw = weight_grad(x.storage::<f32>(), go.storage::<f32>(), &g);
-        flex_tensor(dw, wd)
-    }
-
-    fn conv_transpose2d_weight_grad(
-        x: FlexTensor,
-        weight: FlexTensor,
-        output_grad: FlexTensor,
-        options: ConvTransposeOptions<2>,
-    ) -> FlexTensor {
-        if !kernel_supports(x.dtype(), &options.dilation, options.groups) {
-            return Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
-        }
-        // The transposed convolution is the adjoint of `g`; `g`'s weight gradient with `x` as
-        // the output gradient is ours.
-        let (x, xd) = f32_nchw(&x);
-        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
-        let wd = weight.shape().dims::<4>();
-        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
-        let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
-        flex_tensor(dw, wd)
+        need: [bool; 2],
+    ) -> (Option<FlexTensor>, Option<FlexTensor>) {
+        (
+            need[0].then(|| conv2d_x_grad::<Self>(x.clone(), weight.clone(), dy.clone(), &options)),
+            need[1].then(|| conv2d_weight_grad(x, weight, dy, options)),
+        )
     }
 
     fn conv_transpose2d_grads(
         x: FlexTensor,
         weight: FlexTensor,
-        output_grad: FlexTensor,
+        dy: FlexTensor,
         options: ConvTransposeOptions<2>,
-    ) -> (FlexTensor, FlexTensor) {
-        if !kernel_supports(x.dtype(), &options.dilation, options.groups)
-            || weight.dtype() != DType::F32
-            || options.padding_out != [0, 0]
-        {
-            let dx = Self::conv_transpose2d_x_backward(
-                weight.clone(),
-                output_grad.clone(),
-                options.clone(),
-            );
-            let dw = Self::conv_transpose2d_weight_backward(x, weight, output_grad, options);
-            return (dx, dw);
+        need: [bool; 2],
+    ) -> (Option<FlexTensor>, Option<FlexTensor>) {
+        if need == [true, true] {
+            let (dx, dw) = conv_transpose2d_both_grads(x, weight, dy, options);
+            return (Some(dx), Some(dw));
         }
-        let (x, xd) = f32_nchw(&x);
-        let (go, [_, _, oh, ow]) = f32_nchw(&output_grad);
-        let (weight, wd) = f32_nchw(&weight);
-        let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
-        let (dx, dw) = conv_gemm::transpose_backward(
-            x.storage::<f32>(),
-            weight.storage::<f32>(),
-            go.storage::<f32>(),
-            &g,
-        );
-        (flex_tensor(dx, xd), flex_tensor(dw, wd))
+        (
+            need[0].then(|| conv_transpose2d_x_grad::<Self>(weight.clone(), dy.clone(), &options)),
+            need[1].then(|| conv_transpose2d_weight_grad(x, weight, dy, options)),
+        )
     }
 
     fn resize_bilinear_fast(x: FlexTensor, size: [usize; 2]) -> FlexTensor {
@@ -260,4 +225,71 @@ impl CpuKernelOps for Flex {
         let dx = pointwise::relu_backward(x.storage::<f32>(), grad.storage::<f32>());
         FlexTensor::from_data(TensorData::new(dx, shape))
     }
+}
+
+/// The gradient of `conv2d`'s weight `[c_out, c_in, kh, kw]` on our GEMM (burn's where the
+/// kernel does not apply).
+fn conv2d_weight_grad(
+    x: FlexTensor,
+    weight: FlexTensor,
+    dy: FlexTensor,
+    options: ConvOptions<2>,
+) -> FlexTensor {
+    if !kernel_supports(x.dtype(), &options.dilation, options.groups) || options.is_asymmetric() {
+        return Flex::conv2d_weight_backward(x, weight, dy, options);
+    }
+    let (x, xd) = f32_nchw(&x);
+    let (go, _) = f32_nchw(&dy);
+    let wd = weight.shape().dims::<4>();
+    let g = ConvGeometry::conv(xd, wd, options.stride, options.padding_begin());
+    let dw = weight_grad(x.storage::<f32>(), go.storage::<f32>(), &g);
+    flex_tensor(dw, wd)
+}
+
+/// The gradient of `conv_transpose2d`'s weight `[c_in, c_out, kh, kw]` on our GEMM.
+fn conv_transpose2d_weight_grad(
+    x: FlexTensor,
+    weight: FlexTensor,
+    dy: FlexTensor,
+    options: ConvTransposeOptions<2>,
+) -> FlexTensor {
+    if !kernel_supports(x.dtype(), &options.dilation, options.groups) {
+        return Flex::conv_transpose2d_weight_backward(x, weight, dy, options);
+    }
+    // The transposed convolution is the adjoint of `g`; `g`'s weight gradient with `x` as
+    // the output gradient is ours.
+    let (x, xd) = f32_nchw(&x);
+    let (go, [_, _, oh, ow]) = f32_nchw(&dy);
+    let wd = weight.shape().dims::<4>();
+    let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
+    let dw = weight_grad(go.storage::<f32>(), x.storage::<f32>(), &g);
+    flex_tensor(dw, wd)
+}
+
+/// Both gradients of `conv_transpose2d`, `(input, weight)`, in one pass of our kernel.
+fn conv_transpose2d_both_grads(
+    x: FlexTensor,
+    weight: FlexTensor,
+    dy: FlexTensor,
+    options: ConvTransposeOptions<2>,
+) -> (FlexTensor, FlexTensor) {
+    if !kernel_supports(x.dtype(), &options.dilation, options.groups)
+        || weight.dtype() != DType::F32
+        || options.padding_out != [0, 0]
+    {
+        let dx = Flex::conv_transpose2d_x_backward(weight.clone(), dy.clone(), options.clone());
+        let dw = Flex::conv_transpose2d_weight_backward(x, weight, dy, options);
+        return (dx, dw);
+    }
+    let (x, xd) = f32_nchw(&x);
+    let (go, [_, _, oh, ow]) = f32_nchw(&dy);
+    let (weight, wd) = f32_nchw(&weight);
+    let g = ConvGeometry::transposed(xd, wd, [oh, ow], options.stride, options.padding);
+    let (dx, dw) = conv_gemm::transpose_backward(
+        x.storage::<f32>(),
+        weight.storage::<f32>(),
+        go.storage::<f32>(),
+        &g,
+    );
+    (flex_tensor(dx, xd), flex_tensor(dw, wd))
 }

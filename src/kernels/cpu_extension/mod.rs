@@ -27,7 +27,7 @@ mod flex;
 /// Convolutions with a backend-chosen weight gradient. The default bodies are burn's ops.
 #[backend_extension(Flex, Autodiff)]
 pub trait CpuKernelOps: Backend {
-    /// `conv2d` without bias; its backward pass uses [`Self::conv2d_weight_grad`].
+    /// `conv2d` without bias; its backward pass is [`Self::conv2d_grads`].
     fn conv2d_fast(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -36,8 +36,7 @@ pub trait CpuKernelOps: Backend {
         Self::conv2d(x, weight, None, options)
     }
 
-    /// `conv_transpose2d` without bias; its backward pass uses
-    /// [`Self::conv_transpose2d_weight_grad`].
+    /// `conv_transpose2d` without bias; its backward pass is [`Self::conv_transpose2d_grads`].
     fn conv_transpose2d_fast(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
@@ -46,36 +45,34 @@ pub trait CpuKernelOps: Backend {
         Self::conv_transpose2d(x, weight, None, options)
     }
 
-    /// Gradient of `conv2d`'s weight, `[c_out, c_in, kh, kw]`.
-    fn conv2d_weight_grad(
+    /// The gradients of `conv2d` for its input and its weight `[c_out, c_in, kh, kw]` from
+    /// the output's gradient `dy`, each where `need` asks for it.
+    fn conv2d_grads(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
-        output_grad: FloatTensor<Self>,
+        dy: FloatTensor<Self>,
         options: ConvOptions<2>,
-    ) -> FloatTensor<Self> {
-        Self::conv2d_weight_backward(x, weight, output_grad, options)
+        need: [bool; 2],
+    ) -> (Option<FloatTensor<Self>>, Option<FloatTensor<Self>>) {
+        (
+            need[0].then(|| conv2d_x_grad::<Self>(x.clone(), weight.clone(), dy.clone(), &options)),
+            need[1].then(|| Self::conv2d_weight_backward(x, weight, dy, options)),
+        )
     }
 
-    /// Gradient of `conv_transpose2d`'s weight, `[c_in, c_out, kh, kw]`.
-    fn conv_transpose2d_weight_grad(
-        x: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        output_grad: FloatTensor<Self>,
-        options: ConvTransposeOptions<2>,
-    ) -> FloatTensor<Self> {
-        Self::conv_transpose2d_weight_backward(x, weight, output_grad, options)
-    }
-
-    /// Both gradients of `conv_transpose2d`, `(input, weight)`, when both are needed.
+    /// The gradients of `conv_transpose2d` for its input and its weight
+    /// `[c_in, c_out, kh, kw]` from the output's gradient `dy`, each where `need` asks for it.
     fn conv_transpose2d_grads(
         x: FloatTensor<Self>,
         weight: FloatTensor<Self>,
-        output_grad: FloatTensor<Self>,
+        dy: FloatTensor<Self>,
         options: ConvTransposeOptions<2>,
-    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let dx = conv_transpose2d_x_grad::<Self>(weight.clone(), output_grad.clone(), &options);
-        let dw = Self::conv_transpose2d_weight_grad(x, weight, output_grad, options);
-        (dx, dw)
+        need: [bool; 2],
+    ) -> (Option<FloatTensor<Self>>, Option<FloatTensor<Self>>) {
+        (
+            need[0].then(|| conv_transpose2d_x_grad::<Self>(weight.clone(), dy.clone(), &options)),
+            need[1].then(|| Self::conv_transpose2d_weight_backward(x, weight, dy, options)),
+        )
     }
 
     /// Bilinear resize of `[batch, channels, h, w]` to `size`, align_corners false; its

@@ -10,7 +10,10 @@
 //! The slow reference is the default body of [`super::extension::GpuKernelOps`]'s methods,
 //! burn's own operations; `tests/gpu/kernels.rs` compares the two.
 
+use burn::backend::tensor::FloatTensor;
+use burn::backend::{Backend, ExtensionType};
 use burn::tensor::DType;
+use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
@@ -180,99 +183,148 @@ fn layout(x: &CubeTensor) -> (usize, usize) {
     (dims[1], dims.iter().skip(2).product())
 }
 
-/// `(mean, variance, 1 / std, running mean, running variance)` of [`statistics`].
-pub fn launch_statistics(
-    x: CubeTensor,
-    running_mean: CubeTensor,
-    running_var: CubeTensor,
-    epsilon: f64,
-    momentum: f64,
-) -> [CubeTensor; 5] {
+/// A batch-norm layer in training: `γ`, `β`, the running statistics, its `epsilon` and
+/// `momentum`, and whether a ReLU follows it.
+#[derive(Clone, ExtensionType)]
+#[extension_type(fusion)]
+pub struct Layer<B: Backend> {
+    pub gamma: FloatTensor<B>,
+    pub beta: FloatTensor<B>,
+    pub running_mean: FloatTensor<B>,
+    pub running_var: FloatTensor<B>,
+    pub epsilon: f64,
+    pub momentum: f64,
+    pub relu: bool,
+}
+
+impl<B: Backend> Layer<B> {
+    /// The same layer with each tensor mapped by `f` (onto an inner backend).
+    pub fn map_inner<I: Backend>(self, f: impl Fn(FloatTensor<B>) -> FloatTensor<I>) -> Layer<I> {
+        Layer {
+            gamma: f(self.gamma),
+            beta: f(self.beta),
+            running_mean: f(self.running_mean),
+            running_var: f(self.running_var),
+            epsilon: self.epsilon,
+            momentum: self.momentum,
+            relu: self.relu,
+        }
+    }
+}
+
+/// A batch's statistics: each channel's mean, biased variance and `1 / sqrt(var + epsilon)`,
+/// and the running statistics moved towards them.
+#[derive(ExtensionType)]
+#[extension_type(fusion)]
+pub struct Statistics<B: Backend> {
+    pub mean: FloatTensor<B>,
+    pub var: FloatTensor<B>,
+    pub inv_std: FloatTensor<B>,
+    pub running_mean: FloatTensor<B>,
+    pub running_var: FloatTensor<B>,
+}
+
+/// What the backward pass reads: the layer's input, its output (after the ReLU where
+/// `relu`), the output's gradient, and the batch's mean and `1 / std`.
+#[derive(Clone, ExtensionType)]
+#[extension_type(fusion)]
+pub struct Saved<B: Backend> {
+    pub x: FloatTensor<B>,
+    pub y: FloatTensor<B>,
+    pub dy: FloatTensor<B>,
+    pub mean: FloatTensor<B>,
+    pub inv_std: FloatTensor<B>,
+    pub relu: bool,
+}
+
+/// The `γ` and `β` gradients.
+#[derive(Clone, ExtensionType)]
+#[extension_type(fusion)]
+pub struct ParamGrads<B: Backend> {
+    pub gamma: FloatTensor<B>,
+    pub beta: FloatTensor<B>,
+}
+
+/// [`statistics`] of `x` for `layer`.
+pub fn launch_statistics(x: CubeTensor, layer: Layer<CubeBackend>) -> Statistics<CubeBackend> {
     let (channels, plane) = layout(&x);
-    let out = [(); 5].map(|_| empty_f32(&x, [channels]));
+    let [mean, var, inv_std, running_mean, running_var] =
+        [(); 5].map(|_| empty_f32(&x, [channels]));
     statistics::launch(
         &x.client,
         CubeCount::new_1d(channels as u32),
         CubeDim::new_1d(BLOCK as u32),
         x.clone().into_tensor_arg(),
-        contiguous(running_mean).into_tensor_arg(),
-        contiguous(running_var).into_tensor_arg(),
-        out[0].clone().into_tensor_arg(),
-        out[1].clone().into_tensor_arg(),
-        out[2].clone().into_tensor_arg(),
-        out[3].clone().into_tensor_arg(),
-        out[4].clone().into_tensor_arg(),
+        contiguous(layer.running_mean).into_tensor_arg(),
+        contiguous(layer.running_var).into_tensor_arg(),
+        mean.clone().into_tensor_arg(),
+        var.clone().into_tensor_arg(),
+        inv_std.clone().into_tensor_arg(),
+        running_mean.clone().into_tensor_arg(),
+        running_var.clone().into_tensor_arg(),
         channels as u32,
         plane as u32,
-        epsilon as f32,
-        momentum as f32,
+        layer.epsilon as f32,
+        layer.momentum as f32,
         BLOCK,
     );
-    out
+    Statistics {
+        mean,
+        var,
+        inv_std,
+        running_mean,
+        running_var,
+    }
 }
 
-/// The batch's statistics as the backward pass reads them, and the layer's tensors.
-pub struct Saved {
-    pub x: CubeTensor,
-    /// The layer's output (after the ReLU where there is one).
-    pub y: CubeTensor,
-    pub dy: CubeTensor,
-    pub mean: CubeTensor,
-    pub inv_std: CubeTensor,
-}
-
-/// `(γ gradient, β gradient)` of [`grad_sums`].
-pub fn launch_grad_sums(t: Saved, relu: bool) -> [CubeTensor; 2] {
-    let (x, y, dy) = (t.x, t.y, t.dy);
-    let (channels, plane) = layout(&x);
-    let out = [(); 2].map(|_| empty_f32(&x, [channels]));
+/// The `γ` and `β` gradients of [`grad_sums`].
+pub fn launch_grad_sums(t: Saved<CubeBackend>) -> ParamGrads<CubeBackend> {
+    let (channels, plane) = layout(&t.x);
+    let [gamma, beta] = [(); 2].map(|_| empty_f32(&t.x, [channels]));
     grad_sums::launch(
-        &x.client,
+        &t.x.client,
         CubeCount::new_1d(channels as u32),
         CubeDim::new_1d(BLOCK as u32),
-        x.clone().into_tensor_arg(),
-        y.into_tensor_arg(),
-        dy.into_tensor_arg(),
+        t.x.clone().into_tensor_arg(),
+        t.y.into_tensor_arg(),
+        t.dy.into_tensor_arg(),
         contiguous(t.mean).into_tensor_arg(),
         contiguous(t.inv_std).into_tensor_arg(),
-        out[0].clone().into_tensor_arg(),
-        out[1].clone().into_tensor_arg(),
+        gamma.clone().into_tensor_arg(),
+        beta.clone().into_tensor_arg(),
         channels as u32,
         plane as u32,
-        relu,
+        t.relu,
         BLOCK,
     );
-    out
+    ParamGrads { gamma, beta }
 }
 
-/// The input gradient of [`x_grad`].
+/// The input gradient of [`x_grad`], given the layer's `gamma` and its gradients.
 pub fn launch_x_grad(
-    t: Saved,
+    t: Saved<CubeBackend>,
     gamma: CubeTensor,
-    gamma_grad: CubeTensor,
-    beta_grad: CubeTensor,
-    relu: bool,
+    grads: ParamGrads<CubeBackend>,
 ) -> CubeTensor {
-    let (x, y, dy) = (t.x, t.y, t.dy);
-    let (channels, plane) = layout(&x);
-    let dx = empty_f32(&x, x.meta.shape().clone());
-    let (cube_count, cube_dim) = elementwise(&x, x.meta.num_elements());
+    let (channels, plane) = layout(&t.x);
+    let dx = empty_f32(&t.x, t.x.meta.shape().clone());
+    let (cube_count, cube_dim) = elementwise(&t.x, t.x.meta.num_elements());
     x_grad::launch(
-        &x.client,
+        &t.x.client,
         cube_count,
         cube_dim,
-        x.clone().into_tensor_arg(),
-        y.into_tensor_arg(),
-        dy.into_tensor_arg(),
+        t.x.clone().into_tensor_arg(),
+        t.y.into_tensor_arg(),
+        t.dy.into_tensor_arg(),
         contiguous(t.mean).into_tensor_arg(),
         contiguous(t.inv_std).into_tensor_arg(),
         contiguous(gamma).into_tensor_arg(),
-        contiguous(gamma_grad).into_tensor_arg(),
-        contiguous(beta_grad).into_tensor_arg(),
+        contiguous(grads.gamma).into_tensor_arg(),
+        contiguous(grads.beta).into_tensor_arg(),
         dx.clone().into_tensor_arg(),
         channels as u32,
         plane as u32,
-        relu,
+        t.relu,
     );
     dx
 }

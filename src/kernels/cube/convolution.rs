@@ -26,6 +26,7 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 
 use super::extension::GpuKernelOps;
+use super::im2col::{Fold, Patches};
 
 /// A square kernel's geometry: its size, stride and padding.
 #[derive(Debug, Clone, Copy)]
@@ -36,9 +37,27 @@ struct Geometry {
 }
 
 impl Geometry {
+    fn new(kernel: usize, stride: usize, padding: usize) -> Self {
+        Geometry {
+            kernel,
+            stride,
+            padding,
+        }
+    }
+
     /// A 1x1 kernel over every pixel: its columns are the input itself.
     fn pointwise(&self) -> bool {
         self.kernel == 1 && self.stride == 1 && self.padding == 0
+    }
+
+    /// Its patches over a grid of `grid`.
+    fn patches(&self, grid: [usize; 2]) -> Patches {
+        Patches {
+            grid,
+            kernel: self.kernel,
+            stride: self.stride,
+            padding: self.padding,
+        }
     }
 
     /// The output size of a convolution over `hw`.
@@ -160,7 +179,7 @@ fn conv2d_forward<B: Backend + GpuKernelOps>(
     let cols_t = if g.pointwise() {
         B::float_reshape(x, Shape::new([n, c_in, h * wd]))
     } else {
-        let cols = B::im2col(x, [oh, ow], k, g.stride, g.padding);
+        let cols = B::im2col(x, g.patches([oh, ow]));
         B::float_swap_dims(cols, 1, 2)
     };
     let wm = B::float_reshape(w, Shape::new([1, c_out, c_in * k * k]));
@@ -193,8 +212,13 @@ fn conv_transpose2d_forward<B: Backend + GpuKernelOps>(
     );
     let w = B::float_reshape(w, Shape::new([1, c_in, c_out * k * k]));
     let cols = B::float_matmul(xt, w);
-    let out = [n, c_out, out_h, out_w];
-    B::col2im(cols, b, true, [in_h, in_w], out, k, stride, padding)
+    let patches = Geometry::new(k, stride, padding).patches([in_h, in_w]);
+    let fold = Fold {
+        out: [n, c_out, out_h, out_w],
+        patches,
+        with_bias: true,
+    };
+    B::col2im(cols, b, fold)
 }
 
 /// `GpuKernelOps::conv2d_train` on autodiff: the forward pass on the inner backend, and its
@@ -246,9 +270,12 @@ pub(super) fn conv2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
                 } else {
                     // dcols [N, h·w, q] = dyₙᵀ · W, folded back into the image.
                     let dcols = B::float_matmul(B::float_swap_dims(dy, 1, 2), wm);
-                    let out = [n, c_in, h, w];
-                    let (k, s, p) = (g.kernel, g.stride, g.padding);
-                    B::col2im(dcols, weight, false, [oh, ow], out, k, s, p)
+                    let fold = Fold {
+                        out: [n, c_in, h, w],
+                        patches: g.patches([oh, ow]),
+                        with_bias: false,
+                    };
+                    B::col2im(dcols, weight, fold)
                 };
                 grads.register::<B>(node.id, B::float_reshape(dx, Shape::new([n, c_in, h, w])));
             }
@@ -319,7 +346,8 @@ pub(super) fn conv_transpose2d_train<B: Backend + GpuKernelOps, C: CheckpointStr
             if let Some(node) = node_b {
                 grads.register::<B>(node.id, B::channel_sums(dy.clone()));
             }
-            let cols = B::im2col(dy, [in_h, in_w], k, stride, padding);
+            let patches = Geometry::new(k, stride, padding).patches([in_h, in_w]);
+            let cols = B::im2col(dy, patches);
             if let Some(node) = node_x {
                 // [N·Hi·Wi, q] · [q, c_in], channels last, seen as [N, c_in, Hi, Wi].
                 let flat = B::float_reshape(cols.clone(), Shape::new([n * in_h * in_w, q]));

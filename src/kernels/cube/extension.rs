@@ -23,6 +23,10 @@ use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 
+use super::batch_norm::{
+    Layer, ParamGrads, ParamGradsMetadata, Saved, Statistics, StatisticsMetadata,
+};
+use super::im2col::{Fold, Patches};
 use super::{batch_norm, convolution, im2col, loss};
 
 /// A `[channels]` tensor's spec for an `[N, C, ...]` input.
@@ -59,26 +63,22 @@ fn reaching<B: Backend>(y: FloatTensor<B>, dy: FloatTensor<B>, relu: bool) -> Fl
 /// Operations that burn composes of many launches, as kernels of ours on a GPU.
 #[backend_extension(Cube, Fusion, Autodiff)]
 pub trait GpuKernelOps: Backend {
-    /// A batch-norm layer's statistics in training: each channel's mean, biased variance and
-    /// `1 / sqrt(var + epsilon)` over `x` `[N, C, ...]`, and the running statistics moved
-    /// towards them by `momentum`.
-    #[fusion(meta = |x, _rm, _rv, _epsilon, _momentum| {
+    /// A batch-norm `layer`'s statistics over `x` `[N, C, ...]` in training (see
+    /// [`Statistics`]; `γ`, `β` and `relu` are not read).
+    #[fusion(meta = |x, _layer| {
         let c = per_channel(x);
-        (c.clone(), c.clone(), c.clone(), c.clone(), c)
+        StatisticsMetadata {
+            mean: c.clone(),
+            var: c.clone(),
+            inv_std: c.clone(),
+            running_mean: c.clone(),
+            running_var: c,
+        }
     })]
     fn batch_norm_statistics(
         x: FloatTensor<Self>,
-        running_mean: FloatTensor<Self>,
-        running_var: FloatTensor<Self>,
-        epsilon: f64,
-        momentum: f64,
-    ) -> (
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-    ) {
+        #[extension_type] layer: Layer<Self>,
+    ) -> Statistics<Self> {
         let rank = x.shape().num_dims();
         let c = x.shape()[1];
         let mean = Self::float_mean_dim(by_channel::<Self>(x.clone()), 1);
@@ -91,112 +91,86 @@ pub trait GpuKernelOps: Backend {
         let var = Self::float_reshape(var, Shape::new([c]));
         let inv_std = Self::float_recip(Self::float_sqrt(Self::float_add_scalar(
             var.clone(),
-            Scalar::Float(epsilon),
+            Scalar::Float(layer.epsilon),
         )));
+        let momentum = layer.momentum;
         let moved = |r: FloatTensor<Self>, s: FloatTensor<Self>| {
             Self::float_add(
                 Self::float_mul_scalar(r, Scalar::Float(1.0 - momentum)),
                 Self::float_mul_scalar(s, Scalar::Float(momentum)),
             )
         };
-        let running_mean = moved(running_mean, mean.clone());
-        let running_var = moved(running_var, var.clone());
-        (mean, var, inv_std, running_mean, running_var)
+        Statistics {
+            running_mean: moved(layer.running_mean, mean.clone()),
+            running_var: moved(layer.running_var, var.clone()),
+            mean,
+            var,
+            inv_std,
+        }
     }
 
-    /// A batch-norm layer's `γ` and `β` gradients from its input `x`, output `y` (after the
-    /// ReLU where `relu`), output gradient `dy` and the batch's mean and `1 / std`.
-    #[fusion(meta = |x, _y, _dy, _mean, _inv_std, _relu| (per_channel(x), per_channel(x)))]
-    fn batch_norm_param_grads(
-        x: FloatTensor<Self>,
-        y: FloatTensor<Self>,
-        dy: FloatTensor<Self>,
-        mean: FloatTensor<Self>,
-        inv_std: FloatTensor<Self>,
-        relu: bool,
-    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let rank = x.shape().num_dims();
-        let c = x.shape()[1];
-        let g = reaching::<Self>(y, dy, relu);
-        let centred = Self::float_sub(x, broadcast::<Self>(mean, rank));
+    /// A batch-norm layer's `γ` and `β` gradients from what its backward pass reads.
+    #[fusion(meta = |saved| ParamGradsMetadata {
+        gamma: per_channel(&saved.x),
+        beta: per_channel(&saved.x),
+    })]
+    fn batch_norm_param_grads(#[extension_type] saved: Saved<Self>) -> ParamGrads<Self> {
+        let rank = saved.x.shape().num_dims();
+        let c = saved.x.shape()[1];
+        let g = reaching::<Self>(saved.y, saved.dy, saved.relu);
+        let centred = Self::float_sub(saved.x, broadcast::<Self>(saved.mean, rank));
         let beta = Self::float_sum_dim(by_channel::<Self>(g.clone()), 1);
         let gx = Self::float_sum_dim(by_channel::<Self>(Self::float_mul(g, centred)), 1);
-        let gamma = Self::float_mul(Self::float_reshape(gx, Shape::new([c])), inv_std);
-        (gamma, Self::float_reshape(beta, Shape::new([c])))
+        ParamGrads {
+            gamma: Self::float_mul(Self::float_reshape(gx, Shape::new([c])), saved.inv_std),
+            beta: Self::float_reshape(beta, Shape::new([c])),
+        }
     }
 
-    /// A batch-norm layer's input gradient (see [`Self::batch_norm_param_grads`]; `gamma`,
-    /// and the `γ` and `β` gradients it gave).
-    #[fusion(dtype = x, shape = x)]
-    // A backend operation takes its tensors as arguments (burn records each one for fusion).
-    #[allow(clippy::too_many_arguments)]
+    /// A batch-norm layer's input gradient from what its backward pass reads, its `gamma` and
+    /// the `γ` and `β` gradients [`Self::batch_norm_param_grads`] gave.
+    #[fusion(meta = |saved, _gamma, _grads| saved.x.clone())]
     fn batch_norm_x_grad(
-        x: FloatTensor<Self>,
-        y: FloatTensor<Self>,
-        dy: FloatTensor<Self>,
-        mean: FloatTensor<Self>,
-        inv_std: FloatTensor<Self>,
+        #[extension_type] saved: Saved<Self>,
         gamma: FloatTensor<Self>,
-        gamma_grad: FloatTensor<Self>,
-        beta_grad: FloatTensor<Self>,
-        relu: bool,
+        #[extension_type] grads: ParamGrads<Self>,
     ) -> FloatTensor<Self> {
         // γ/std (g - Σg/M - (x - mean)/std · Σ g (x - mean)/std / M).
-        let rank = x.shape().num_dims();
-        let count = (x.shape().num_elements() / x.shape()[1]) as f64;
+        let rank = saved.x.shape().num_dims();
+        let count = (saved.x.shape().num_elements() / saved.x.shape()[1]) as f64;
         let c = |t| broadcast::<Self>(t, rank);
-        let g = reaching::<Self>(y, dy, relu);
-        let xhat = Self::float_mul(Self::float_sub(x, c(mean)), c(inv_std.clone()));
-        let mean_g = Self::float_div_scalar(beta_grad, Scalar::Float(count));
-        let projection = Self::float_div_scalar(gamma_grad, Scalar::Float(count));
+        let g = reaching::<Self>(saved.y, saved.dy, saved.relu);
+        let centred = Self::float_sub(saved.x, c(saved.mean));
+        let xhat = Self::float_mul(centred, c(saved.inv_std.clone()));
+        let mean_g = Self::float_div_scalar(grads.beta, Scalar::Float(count));
+        let projection = Self::float_div_scalar(grads.gamma, Scalar::Float(count));
         let dx = Self::float_sub(
             Self::float_sub(g, c(mean_g)),
             Self::float_mul(xhat, c(projection)),
         );
-        Self::float_mul(dx, c(Self::float_mul(gamma, inv_std)))
+        Self::float_mul(dx, c(Self::float_mul(gamma, saved.inv_std)))
     }
 
-    /// The columns (im2col) of `t` `[N, C, H, W]` over a grid of `grid` patches:
-    /// `[N, h·w, C·k·k]` (see `kernels::cube::im2col`).
-    #[fusion(meta = |t, grid, kernel, _stride, _padding| {
-        TensorSpec::new(
-            Shape::new([t.shape[0], grid[0] * grid[1], t.shape[1] * kernel * kernel]),
-            t.dtype,
-        )
+    /// The columns (im2col) of `t` `[N, C, H, W]` over `patches`: `[N, h·w, C·k·k]` (see
+    /// `kernels::cube::im2col`).
+    #[fusion(meta = |t, patches| {
+        let [h, w] = patches.grid;
+        TensorSpec::new(Shape::new([t.shape[0], h * w, patches.width(t.shape[1])]), t.dtype)
     })]
-    fn im2col(
-        t: FloatTensor<Self>,
-        grid: [usize; 2],
-        kernel: usize,
-        stride: usize,
-        padding: usize,
-    ) -> FloatTensor<Self> {
+    fn im2col(t: FloatTensor<Self>, patches: Patches) -> FloatTensor<Self> {
         // Only the CubeCL kernel: the layers' references are burn's own convolutions and
         // their backward passes, which `tests/gpu/kernels.rs` compares them with.
-        let _ = (t, grid, kernel, stride, padding);
+        let _ = (t, patches);
         unreachable!("im2col runs on CubeCL devices only")
     }
 
-    /// The image `out` `[N, C, H, W]` whose columns over a grid of `grid` patches are `cols`
-    /// `[N, h·w, C·k·k]`, overlaps summed, plus `bias` `[C]` where `with_bias` (see
+    /// The image `fold.out` `[N, C, H, W]` whose columns over `fold.patches` are `cols`
+    /// `[N, h·w, C·k·k]`, overlaps summed, plus `bias` `[C]` where `fold.with_bias` (see
     /// `kernels::cube::im2col`).
-    #[fusion(meta = |cols, _bias, _with_bias, _grid, out, _kernel, _stride, _padding| {
-        TensorSpec::new(Shape::new(*out), cols.dtype)
-    })]
-    // A backend operation takes its tensors as arguments (burn records each one for fusion).
-    #[allow(clippy::too_many_arguments)]
-    fn col2im(
-        cols: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        with_bias: bool,
-        grid: [usize; 2],
-        out: [usize; 4],
-        kernel: usize,
-        stride: usize,
-        padding: usize,
-    ) -> FloatTensor<Self> {
+    #[fusion(meta = |cols, _bias, fold| TensorSpec::new(Shape::new(fold.out), cols.dtype))]
+    fn col2im(cols: FloatTensor<Self>, bias: FloatTensor<Self>, fold: Fold) -> FloatTensor<Self> {
         // Only the CubeCL kernel (see `im2col`).
-        let _ = (cols, bias, with_bias, grid, out, kernel, stride, padding);
+        let _ = (cols, bias, fold);
         unreachable!("col2im runs on CubeCL devices only")
     }
 
@@ -267,56 +241,42 @@ pub trait GpuKernelOps: Backend {
         Self::float_mul(d, Self::float_div_scalar(g, Scalar::Float(n)))
     }
 
-    /// A batch-norm layer in training (and the ReLU after it where `relu`): the output, and the
-    /// new running mean and variance (burn's `BatchNorm::forward` in training, as one
+    /// A batch-norm `layer` in training (and the ReLU after it where it has one): the output,
+    /// and the new running mean and variance (burn's `BatchNorm::forward` in training, as one
     /// operation of the autodiff graph).
     #[fusion(default)]
-    // A backend operation takes its tensors as arguments (burn records each one for fusion).
-    #[allow(clippy::too_many_arguments)]
     fn batch_norm_train(
         x: FloatTensor<Self>,
-        gamma: FloatTensor<Self>,
-        beta: FloatTensor<Self>,
-        running_mean: FloatTensor<Self>,
-        running_var: FloatTensor<Self>,
-        epsilon: f64,
-        momentum: f64,
-        relu: bool,
+        #[extension_type] layer: Layer<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
-        let (mean, var, _, running_mean, running_var) =
-            Self::batch_norm_statistics(x.clone(), running_mean, running_var, epsilon, momentum);
-        let y = maybe_relu::<Self>(Self::batch_norm(x, gamma, beta, mean, var, epsilon), relu);
-        (y, running_mean, running_var)
+        let (gamma, beta, epsilon, relu) = (
+            layer.gamma.clone(),
+            layer.beta.clone(),
+            layer.epsilon,
+            layer.relu,
+        );
+        let stats = Self::batch_norm_statistics(x.clone(), layer);
+        let y = Self::batch_norm(x, gamma, beta, stats.mean, stats.var, epsilon);
+        (
+            maybe_relu::<Self>(y, relu),
+            stats.running_mean,
+            stats.running_var,
+        )
     }
 }
 
 impl GpuKernelOps for CubeBackend {
-    fn im2col(
-        t: FloatTensor<Self>,
-        grid: [usize; 2],
-        kernel: usize,
-        stride: usize,
-        padding: usize,
-    ) -> FloatTensor<Self> {
-        im2col::launch_columns(t, grid, kernel, stride, padding)
+    fn im2col(t: FloatTensor<Self>, patches: Patches) -> FloatTensor<Self> {
+        im2col::launch_columns(t, patches)
     }
 
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
         im2col::launch_channel_sums(t)
     }
 
-    fn col2im(
-        cols: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        with_bias: bool,
-        grid: [usize; 2],
-        out: [usize; 4],
-        kernel: usize,
-        stride: usize,
-        padding: usize,
-    ) -> FloatTensor<Self> {
-        let bias = with_bias.then_some(bias);
-        im2col::launch_col2im(cols, bias, grid, out, kernel, stride, padding)
+    fn col2im(cols: FloatTensor<Self>, bias: FloatTensor<Self>, fold: Fold) -> FloatTensor<Self> {
+        let bias = fold.with_bias.then_some(bias);
+        im2col::launch_col2im(cols, bias, fold.patches, fold.out)
     }
 
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -331,62 +291,20 @@ impl GpuKernelOps for CubeBackend {
         loss::launch_logits_grad(z, y, grad)
     }
 
-    fn batch_norm_statistics(
-        x: FloatTensor<Self>,
-        running_mean: FloatTensor<Self>,
-        running_var: FloatTensor<Self>,
-        epsilon: f64,
-        momentum: f64,
-    ) -> (
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-        FloatTensor<Self>,
-    ) {
-        let [m, v, s, rm, rv] =
-            batch_norm::launch_statistics(x, running_mean, running_var, epsilon, momentum);
-        (m, v, s, rm, rv)
+    fn batch_norm_statistics(x: FloatTensor<Self>, layer: Layer<Self>) -> Statistics<Self> {
+        batch_norm::launch_statistics(x, layer)
     }
 
-    fn batch_norm_param_grads(
-        x: FloatTensor<Self>,
-        y: FloatTensor<Self>,
-        dy: FloatTensor<Self>,
-        mean: FloatTensor<Self>,
-        inv_std: FloatTensor<Self>,
-        relu: bool,
-    ) -> (FloatTensor<Self>, FloatTensor<Self>) {
-        let saved = batch_norm::Saved {
-            x,
-            y,
-            dy,
-            mean,
-            inv_std,
-        };
-        let [gamma, beta] = batch_norm::launch_grad_sums(saved, relu);
-        (gamma, beta)
+    fn batch_norm_param_grads(saved: Saved<Self>) -> ParamGrads<Self> {
+        batch_norm::launch_grad_sums(saved)
     }
 
     fn batch_norm_x_grad(
-        x: FloatTensor<Self>,
-        y: FloatTensor<Self>,
-        dy: FloatTensor<Self>,
-        mean: FloatTensor<Self>,
-        inv_std: FloatTensor<Self>,
+        saved: Saved<Self>,
         gamma: FloatTensor<Self>,
-        gamma_grad: FloatTensor<Self>,
-        beta_grad: FloatTensor<Self>,
-        relu: bool,
+        grads: ParamGrads<Self>,
     ) -> FloatTensor<Self> {
-        let saved = batch_norm::Saved {
-            x,
-            y,
-            dy,
-            mean,
-            inv_std,
-        };
-        batch_norm::launch_x_grad(saved, gamma, gamma_grad, beta_grad, relu)
+        batch_norm::launch_x_grad(saved, gamma, grads)
     }
 }
 
@@ -451,13 +369,7 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
 
     fn batch_norm_train(
         x: FloatTensor<Self>,
-        gamma: FloatTensor<Self>,
-        beta: FloatTensor<Self>,
-        running_mean: FloatTensor<Self>,
-        running_var: FloatTensor<Self>,
-        epsilon: f64,
-        momentum: f64,
-        relu: bool,
+        layer: Layer<Self>,
     ) -> (FloatTensor<Self>, FloatTensor<Self>, FloatTensor<Self>) {
         #[derive(Debug)]
         struct BatchNormTrain;
@@ -487,73 +399,66 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
                 let x = checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(x_state);
                 let gamma =
                     checkpointer.retrieve_node_output::<B::FloatTensorPrimitive>(gamma_state);
-                let (gamma_grad, beta_grad) = B::batch_norm_param_grads(
-                    x.clone(),
-                    y.clone(),
-                    dy.clone(),
-                    mean.clone(),
-                    inv_std.clone(),
+                let saved = Saved {
+                    x,
+                    y,
+                    dy,
+                    mean,
+                    inv_std,
                     relu,
-                );
+                };
+                let param_grads = B::batch_norm_param_grads(saved.clone());
                 if let Some(node) = node_x {
-                    let dx = B::batch_norm_x_grad(
-                        x,
-                        y,
-                        dy,
-                        mean,
-                        inv_std,
-                        gamma,
-                        gamma_grad.clone(),
-                        beta_grad.clone(),
-                        relu,
-                    );
+                    let dx = B::batch_norm_x_grad(saved, gamma, param_grads.clone());
                     grads.register::<B>(node.id, dx);
                 }
                 if let Some(node) = node_gamma {
-                    grads.register::<B>(node.id, gamma_grad);
+                    grads.register::<B>(node.id, param_grads.gamma);
                 }
                 if let Some(node) = node_beta {
-                    grads.register::<B>(node.id, beta_grad);
+                    grads.register::<B>(node.id, param_grads.beta);
                 }
             }
         }
 
-        let forward = |x: FloatTensor<B>, gamma, beta, rm, rv| {
-            let (mean, var, inv_std, rm, rv) =
-                B::batch_norm_statistics(x.clone(), rm, rv, epsilon, momentum);
-            let y = B::batch_norm(x, gamma, beta, mean.clone(), var, epsilon);
-            (maybe_relu::<B>(y, relu), mean, inv_std, rm, rv)
-        };
+        // The layer on the inner backend (the running statistics are constants).
+        let inner = |x: FloatTensor<Self>| x.into_primitive();
+        let nodes = [x.node(), layer.gamma.node(), layer.beta.node()];
+        let relu = layer.relu;
         let constant = |t: FloatTensor<B>| <Self as AutodiffBackend>::from_inner(t);
-        let (rm, rv) = (running_mean.into_primitive(), running_var.into_primitive());
+        let forward = |x: FloatTensor<B>, layer: Layer<B>| {
+            let (gamma, beta, epsilon) = (layer.gamma.clone(), layer.beta.clone(), layer.epsilon);
+            let stats = B::batch_norm_statistics(x.clone(), layer);
+            let y = B::batch_norm(x, gamma, beta, stats.mean.clone(), stats.var.clone(), epsilon);
+            (maybe_relu::<B>(y, relu), stats)
+        };
         match BatchNormTrain
-            .prepare::<C>([x.node(), gamma.node(), beta.node()])
+            .prepare::<C>(nodes)
             .compute_bound()
             .stateful()
         {
             OpsKind::Tracked(mut prep) => {
                 let x_state = prep.checkpoint(&x);
-                let gamma_state = prep.checkpoint(&gamma);
-                let (y, mean, inv_std, rm, rv) = forward(
-                    x.into_primitive(),
-                    gamma.into_primitive(),
-                    beta.into_primitive(),
-                    rm,
-                    rv,
+                let gamma_state = prep.checkpoint(&layer.gamma);
+                let (y, stats) = forward(inner(x), layer.map_inner(inner));
+                let state = (
+                    x_state,
+                    gamma_state,
+                    y.clone(),
+                    stats.mean,
+                    stats.inv_std,
+                    relu,
                 );
-                let state = (x_state, gamma_state, y.clone(), mean, inv_std, relu);
                 let y = prep.finish(state, y);
-                (y, constant(rm), constant(rv))
+                (y, constant(stats.running_mean), constant(stats.running_var))
             }
             OpsKind::UnTracked(prep) => {
-                let (y, _, _, rm, rv) = forward(
-                    x.into_primitive(),
-                    gamma.into_primitive(),
-                    beta.into_primitive(),
-                    rm,
-                    rv,
-                );
-                (prep.finish(y), constant(rm), constant(rv))
+                let (y, stats) = forward(inner(x), layer.map_inner(inner));
+                (
+                    prep.finish(y),
+                    constant(stats.running_mean),
+                    constant(stats.running_var),
+                )
             }
         }
     }
@@ -576,16 +481,17 @@ pub fn batch_norm<const D: usize>(
     // burn's `RunningState` divides by their count, a launch a layer).
     let running_mean = norm.running_mean.value_sync().to_device(&device);
     let running_var = norm.running_var.value_sync().to_device(&device);
-    let (y, rm, rv) = <Dispatch as GpuKernelOps>::batch_norm_train(
-        x.clone().into_dispatch(),
-        norm.gamma.val().into_dispatch(),
-        norm.beta.val().into_dispatch(),
-        running_mean.into_dispatch(),
-        running_var.into_dispatch(),
-        norm.epsilon,
-        norm.momentum,
+    let layer = Layer {
+        gamma: norm.gamma.val().into_dispatch(),
+        beta: norm.beta.val().into_dispatch(),
+        running_mean: running_mean.into_dispatch(),
+        running_var: running_var.into_dispatch(),
+        epsilon: norm.epsilon,
+        momentum: norm.momentum,
         relu,
-    );
+    };
+    let (y, rm, rv) =
+        <Dispatch as GpuKernelOps>::batch_norm_train(x.clone().into_dispatch(), layer);
     let rm = Tensor::<1>::from_dispatch(rm);
     let rv = Tensor::<1>::from_dispatch(rv);
     norm.running_mean.update(rm.detach());

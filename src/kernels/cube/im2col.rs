@@ -21,31 +21,30 @@ use super::batch_norm::channel_total;
 use super::multi_tensor::{BLOCK, at};
 use super::{elementwise, empty_f32};
 
+/// The patch grid as the kernels read it (see [`Patches`]).
+#[derive(CubeLaunch, CubeType)]
+pub struct PatchGrid {
+    in_h: usize,
+    in_w: usize,
+    kernel: usize,
+    stride: usize,
+    padding: usize,
+}
+
 /// `cols` `[N, h·w, C·k·k]` from `t` `[N, C, H, W]` (any strides) for a grid of `h × w`.
 #[cube(launch)]
-// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
-#[allow(clippy::too_many_arguments)]
-pub fn columns(
-    t: &Tensor<f32>,
-    cols: &mut Tensor<f32>,
-    in_h: u32,
-    in_w: u32,
-    kernel: u32,
-    stride: u32,
-    padding: u32,
-) {
+pub fn columns(t: &Tensor<f32>, cols: &mut Tensor<f32>, grid: PatchGrid) {
     let k = ABSOLUTE_POS;
     if k < cols.len() {
-        let (in_h, in_w) = (in_h as usize, in_w as usize);
-        let (kernel, stride, padding) = (kernel as usize, stride as usize, padding as usize);
         let (c_out, out_h, out_w) = (t.shape(1), t.shape(2), t.shape(3));
+        let (kernel, stride, padding) = (grid.kernel, grid.stride, grid.padding);
         let width = c_out * kernel * kernel;
         let q = k % width;
-        let pix = (k / width) % (in_h * in_w);
-        let n = k / (width * in_h * in_w);
+        let pix = (k / width) % (grid.in_h * grid.in_w);
+        let n = k / (width * grid.in_h * grid.in_w);
         let (co, kk) = (q / (kernel * kernel), q % (kernel * kernel));
         let (ky, kx) = (kk / kernel, kk % kernel);
-        let (iy, ix) = (pix / in_w, pix % in_w);
+        let (iy, ix) = (pix / grid.in_w, pix % grid.in_w);
         // oy = iy s − p + ky, kept unsigned: oy + p = iy s + ky.
         let (oyp, oxp) = (iy * stride + ky, ix * stride + kx);
         let mut v = 0.0;
@@ -62,24 +61,18 @@ pub fn columns(
 /// `y[n, c, oy, ox] = b[c] + Σ cols[n, (iy, ix), (c, ky, kx)]` over `oy = iy·s − p + ky`
 /// (and the same across), contiguous out; `b` only `with_bias`.
 #[cube(launch)]
-// A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
-#[allow(clippy::too_many_arguments)]
 pub fn col2im(
     cols: &Tensor<f32>,
     bias: &Tensor<f32>,
     y: &mut Tensor<f32>,
-    in_h: u32,
-    in_w: u32,
-    kernel: u32,
-    stride: u32,
-    padding: u32,
+    grid: PatchGrid,
     #[comptime] with_bias: bool,
 ) {
     let k = ABSOLUTE_POS;
     if k < y.len() {
-        let (in_h, in_w) = (in_h as usize, in_w as usize);
-        let (kernel, stride, padding) = (kernel as usize, stride as usize, padding as usize);
         let (c_out, out_h, out_w) = (y.shape(1), y.shape(2), y.shape(3));
+        let (kernel, stride, padding) = (grid.kernel, grid.stride, grid.padding);
+        let (in_h, in_w) = (grid.in_h, grid.in_w);
         let ox = k % out_w;
         let oy = (k / out_w) % out_h;
         let co = (k / (out_w * out_h)) % c_out;
@@ -121,20 +114,46 @@ pub fn channel_sums(t: &Tensor<f32>, sums: &mut Tensor<f32>, #[comptime] block: 
     }
 }
 
-/// [`columns`] of `t` over a grid of `in_hw`.
-pub fn launch_columns(
-    t: CubeTensor,
-    in_hw: [usize; 2],
-    kernel: usize,
-    stride: usize,
-    padding: usize,
-) -> CubeTensor {
+/// A convolution's patches: a grid of `grid` `[h, w]` patches of `kernel × kernel` pixels,
+/// `stride` apart, over the image padded by `padding` on every side.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Patches {
+    pub grid: [usize; 2],
+    pub kernel: usize,
+    pub stride: usize,
+    pub padding: usize,
+}
+
+/// What columns fold back into ([`col2im`], PyTorch's `fold`): the image `out`
+/// `[N, C, H, W]`, the patches the columns are of, and whether a bias is added.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fold {
+    pub out: [usize; 4],
+    pub patches: Patches,
+    pub with_bias: bool,
+}
+
+impl Patches {
+    /// The columns' width for `channels` channels: `C·k·k`.
+    pub fn width(&self, channels: usize) -> usize {
+        channels * self.kernel * self.kernel
+    }
+
+    fn launch_arg(&self) -> PatchGridLaunch {
+        let [in_h, in_w] = self.grid;
+        PatchGridLaunch::new(in_h, in_w, self.kernel, self.stride, self.padding)
+    }
+}
+
+/// [`columns`] of `t` over `patches`.
+pub fn launch_columns(t: CubeTensor, patches: Patches) -> CubeTensor {
     let dims = t.meta.shape().clone();
     assert!(
         dims.len() == 4 && t.dtype == DType::F32,
         "an f32 [N, C, H, W] image"
     );
-    let shape = [dims[0], in_hw[0] * in_hw[1], dims[1] * kernel * kernel];
+    let [h, w] = patches.grid;
+    let shape = [dims[0], h * w, patches.width(dims[1])];
     let cols = empty_f32(&t, shape);
     let (cube_count, cube_dim) = elementwise(&t, shape.iter().product());
     columns::launch(
@@ -143,27 +162,18 @@ pub fn launch_columns(
         cube_dim,
         t.clone().into_tensor_arg(),
         cols.clone().into_tensor_arg(),
-        in_hw[0] as u32,
-        in_hw[1] as u32,
-        kernel as u32,
-        stride as u32,
-        padding as u32,
+        patches.launch_arg(),
     );
     cols
 }
 
-/// [`col2im`]: the image `out` `[N, C, H, W]` from its columns over a grid of `in_hw`, plus
-/// `bias` `[C]` where there is one.
-// Launches a kernel that takes its buffers and sizes as arguments.
-#[allow(clippy::too_many_arguments)]
+/// [`col2im`]: the image `out` `[N, C, H, W]` from its columns over `patches`, plus `bias`
+/// `[C]` where there is one.
 pub fn launch_col2im(
     cols: CubeTensor,
     bias: Option<CubeTensor>,
-    in_hw: [usize; 2],
+    patches: Patches,
     out: [usize; 4],
-    kernel: usize,
-    stride: usize,
-    padding: usize,
 ) -> CubeTensor {
     let y = empty_f32(&cols, out);
     let (cube_count, cube_dim) = elementwise(&cols, out.iter().product());
@@ -177,11 +187,7 @@ pub fn launch_col2im(
         cols.clone().into_tensor_arg(),
         bias.into_tensor_arg(),
         y.clone().into_tensor_arg(),
-        in_hw[0] as u32,
-        in_hw[1] as u32,
-        kernel as u32,
-        stride as u32,
-        padding as u32,
+        patches.launch_arg(),
         with_bias,
     );
     y

@@ -19,6 +19,7 @@ use std::path::Path;
 use std::sync::Once;
 
 use image::ImageEncoder;
+use plotters::coord::ranged1d::Ranged;
 use plotters::prelude::*;
 
 use super::canvas::FONT_BYTES;
@@ -45,21 +46,27 @@ pub fn save_rgb(path: &Path, buf: &[u8], w: u32, h: u32) -> Result<()> {
     write_bytes(path, &png)
 }
 
+/// A chart on a drawing backend `DB` with axes `X` and `Y`.
+type Chart<'a, DB, X, Y> = ChartContext<'a, DB, Cartesian2d<X, Y>>;
+
+/// An axis whose values the drawing functions copy into series (plotters' bounds, written once).
+trait Axis: Ranged<ValueType: Clone + 'static> {}
+impl<T: Ranged<ValueType: Clone + 'static>> Axis for T {}
+
+/// An axis of `f64` values.
+trait F64Axis: Ranged<ValueType = f64> {}
+impl<T: Ranged<ValueType = f64>> F64Axis for T {}
+
 fn draw_err(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::data(path, format!("cannot draw figure: {e}"))
 }
 
 /// The series legend every chart draws.
-fn draw_legend<'a, DB, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn draw_legend<'a, DB: DrawingBackend + 'a, X: Ranged, Y: Ranged>(
+    chart: &mut Chart<'a, DB, X, Y>,
     path: &Path,
     position: SeriesLabelPosition,
-) -> Result<()>
-where
-    DB: DrawingBackend + 'a,
-    X: plotters::coord::ranged1d::Ranged,
-    Y: plotters::coord::ranged1d::Ranged,
-{
+) -> Result<()> {
     chart
         .configure_series_labels()
         .position(position)
@@ -71,18 +78,11 @@ where
 }
 
 /// One line per run, each in its palette colour with its label in the legend.
-fn draw_line_runs<'a, DB, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn draw_line_runs<'a, DB: DrawingBackend + 'a, X: Axis, Y: Axis>(
+    chart: &mut Chart<'a, DB, X, Y>,
     path: &Path,
     runs: impl IntoIterator<Item = (String, Vec<(X::ValueType, Y::ValueType)>)>,
-) -> Result<()>
-where
-    DB: DrawingBackend + 'a,
-    X: plotters::coord::ranged1d::Ranged,
-    Y: plotters::coord::ranged1d::Ranged,
-    X::ValueType: Clone + 'static,
-    Y::ValueType: Clone + 'static,
-{
+) -> Result<()> {
     for (i, (label, points)) in runs.into_iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         chart
@@ -97,19 +97,12 @@ where
 }
 
 /// A dot of `radius` pixels at every point of every run, in the run's colour.
-fn draw_markers<'a, DB, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn draw_markers<'a, DB: DrawingBackend + 'a, X: Axis, Y: Axis>(
+    chart: &mut Chart<'a, DB, X, Y>,
     path: &Path,
     runs: &[(String, Vec<(X::ValueType, Y::ValueType)>)],
     radius: i32,
-) -> Result<()>
-where
-    DB: DrawingBackend + 'a,
-    X: plotters::coord::ranged1d::Ranged,
-    Y: plotters::coord::ranged1d::Ranged,
-    X::ValueType: Clone + 'static,
-    Y::ValueType: Clone + 'static,
-{
+) -> Result<()> {
     for (i, (_, points)) in runs.iter().enumerate() {
         let color = Palette99::pick(i).to_rgba();
         chart

@@ -3,10 +3,11 @@
 use std::path::Path;
 
 use plotters::coord::combinators::BindKeyPoints;
-use plotters::coord::ranged1d::Ranged;
 use plotters::prelude::*;
 
-use super::{FONT, draw_err, draw_legend, log_ticks, register_font, save_rgb, tick_label};
+use super::{
+    Chart, F64Axis, FONT, draw_err, draw_legend, log_ticks, register_font, save_rgb, tick_label,
+};
 use crate::core::error::Result;
 use crate::report::canvas::Canvas;
 
@@ -211,17 +212,12 @@ fn ranges(points: &[ParetoPoint], floors: &[(String, f64)]) -> ((f64, f64), (f64
 }
 
 /// The lower bounds as dashed grey lines across the log axis `x0..x1`.
-fn draw_floors<'a, DB, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn draw_floors<'a, DB: DrawingBackend + 'a, X: F64Axis, Y: F64Axis>(
+    chart: &mut Chart<'a, DB, X, Y>,
     floors: &[(String, f64)],
     (x0, x1): (f64, f64),
     path: &Path,
-) -> Result<()>
-where
-    DB: DrawingBackend + 'a,
-    X: Ranged<ValueType = f64>,
-    Y: Ranged<ValueType = f64>,
-{
+) -> Result<()> {
     for (label, q) in floors {
         let grey = BLACK.mix(0.5);
         // Dashes: short segments across the log axis.
@@ -250,16 +246,11 @@ where
 
 /// Our points filled blue, the paper's hollow black, each kind with a key entry where it has
 /// points.
-fn draw_points<'a, DB, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn draw_points<'a, DB: DrawingBackend + 'a, X: F64Axis, Y: F64Axis>(
+    chart: &mut Chart<'a, DB, X, Y>,
     points: &[ParetoPoint],
     path: &Path,
-) -> Result<()>
-where
-    DB: DrawingBackend + 'a,
-    X: Ranged<ValueType = f64>,
-    Y: Ranged<ValueType = f64>,
-{
+) -> Result<()> {
     let ours_style = BLUE.filled();
     let paper_style = BLACK.stroke_width(2);
     for (reference, name) in [(false, "ours (this CPU)"), (true, "paper (T4 GPU)")] {

@@ -11,7 +11,7 @@ use crate::self_models::ffksm::accelerated_marcher::AcceleratedConfig;
 use crate::self_models::ffksm::virtual_frame::{JointsFrame, VirtualFrame};
 use crate::self_models::{
     data_spec::DataSpec,
-    model::{Fit, Render, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained},
     run_config::SelfModelRun,
 };
 use crate::sim::camera::Camera;
@@ -52,11 +52,7 @@ impl SelfModel for Ffksm {
 
     /// Its field, as fitted to the scene, marched by the renderer it was saved with, on the
     /// robot and from the camera it was trained with.
-    fn load(
-        &self,
-        weights: &std::path::Path,
-        ctx: &crate::self_models::model::LoadContext,
-    ) -> Result<Option<Box<dyn Render + Send + Sync>>> {
+    fn load(&self, weights: &std::path::Path, ctx: &LoadContext) -> Result<Loaded> {
         let state: FfksmState = serde_json::from_value(ctx.state.clone())
             .map_err(|e| Error::data(weights, format!("its saved state: {e}")))?;
         let robot = ctx

@@ -101,15 +101,15 @@ pub struct Scene {
 #[serde(deny_unknown_fields)]
 struct SceneFile {
     #[serde(default)]
-    cuboid: BTreeMap<String, CuboidEntry>,
+    cuboid: BTreeMap<String, Drawn<CuboidEntry>>,
     #[serde(default)]
-    sphere: BTreeMap<String, SphereEntry>,
+    sphere: BTreeMap<String, Drawn<SphereEntry>>,
     #[serde(default)]
-    capsule: BTreeMap<String, CapsuleEntry>,
+    capsule: BTreeMap<String, Drawn<CapsuleEntry>>,
     #[serde(default)]
-    cylinder: BTreeMap<String, CylinderEntry>,
+    cylinder: BTreeMap<String, Drawn<CylinderEntry>>,
     #[serde(default)]
-    mesh: BTreeMap<String, MeshEntry>,
+    mesh: BTreeMap<String, Drawn<MeshEntry>>,
 }
 
 #[derive(Deserialize)]
@@ -117,10 +117,6 @@ struct SceneFile {
 struct CuboidEntry {
     dims: [f64; 3],
     pose: [f64; 7],
-    #[serde(default, rename = "color")]
-    _color: Option<serde::de::IgnoredAny>,
-    #[serde(default, rename = "texture")]
-    _texture: Option<serde::de::IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -131,10 +127,6 @@ struct SphereEntry {
     pose: Option<[f64; 7]>,
     #[serde(default)]
     position: Option<[f64; 3]>,
-    #[serde(default, rename = "color")]
-    _color: Option<serde::de::IgnoredAny>,
-    #[serde(default, rename = "texture")]
-    _texture: Option<serde::de::IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -144,10 +136,6 @@ struct CapsuleEntry {
     base: [f64; 3],
     tip: [f64; 3],
     pose: [f64; 7],
-    #[serde(default, rename = "color")]
-    _color: Option<serde::de::IgnoredAny>,
-    #[serde(default, rename = "texture")]
-    _texture: Option<serde::de::IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -156,10 +144,6 @@ struct CylinderEntry {
     radius: f64,
     height: f64,
     pose: [f64; 7],
-    #[serde(default, rename = "color")]
-    _color: Option<serde::de::IgnoredAny>,
-    #[serde(default, rename = "texture")]
-    _texture: Option<serde::de::IgnoredAny>,
 }
 
 #[derive(Deserialize)]
@@ -169,10 +153,71 @@ struct MeshEntry {
     pose: [f64; 7],
     #[serde(default)]
     scale: Option<[f64; 3]>,
-    #[serde(default, rename = "color")]
-    _color: Option<serde::de::IgnoredAny>,
-    #[serde(default, rename = "texture")]
-    _texture: Option<serde::de::IgnoredAny>,
+}
+
+/// A scene entry's geometry `S`, read past its `color` and `texture` (cuRobo's, for drawing;
+/// any value): `S` refuses every other key it does not know.
+struct Drawn<S>(S);
+
+impl<'de, S: Deserialize<'de>> Deserialize<'de> for Drawn<S> {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Entry<S>(std::marker::PhantomData<S>);
+        impl<'de, S: Deserialize<'de>> serde::de::Visitor<'de> for Entry<S> {
+            type Value = S;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a mapping of the entry's fields")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> std::result::Result<S, A::Error> {
+                S::deserialize(SkipDrawing(map))
+            }
+        }
+        d.deserialize_map(Entry(std::marker::PhantomData))
+            .map(Drawn)
+    }
+}
+
+/// A mapping without its `color` and `texture` keys.
+struct SkipDrawing<A>(A);
+
+impl<'de, A: serde::de::MapAccess<'de>> serde::Deserializer<'de> for SkipDrawing<A> {
+    type Error = A::Error;
+    fn deserialize_any<V: serde::de::Visitor<'de>>(
+        self,
+        visitor: V,
+    ) -> std::result::Result<V::Value, A::Error> {
+        visitor.visit_map(self)
+    }
+    serde::forward_to_deserialize_any! {
+        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes byte_buf
+        option unit unit_struct newtype_struct seq tuple tuple_struct map struct enum identifier
+        ignored_any
+    }
+}
+
+impl<'de, A: serde::de::MapAccess<'de>> serde::de::MapAccess<'de> for SkipDrawing<A> {
+    type Error = A::Error;
+    fn next_key_seed<K: serde::de::DeserializeSeed<'de>>(
+        &mut self,
+        seed: K,
+    ) -> std::result::Result<Option<K::Value>, A::Error> {
+        use serde::de::IntoDeserializer;
+        while let Some(key) = self.0.next_key::<String>()? {
+            if key != "color" && key != "texture" {
+                return seed.deserialize(key.into_deserializer()).map(Some);
+            }
+            self.0.next_value::<serde::de::IgnoredAny>()?;
+        }
+        Ok(None)
+    }
+    fn next_value_seed<V: serde::de::DeserializeSeed<'de>>(
+        &mut self,
+        seed: V,
+    ) -> std::result::Result<V::Value, A::Error> {
+        self.0.next_value_seed(seed)
+    }
 }
 
 /// What a scene file should be, for the parser's error.
@@ -205,7 +250,7 @@ impl Scene {
             }
         };
         let mut obstacles = Vec::new();
-        for (name, c) in &file.cuboid {
+        for (name, Drawn(c)) in &file.cuboid {
             let pose = pose_of(&bad, name, &c.pose)?;
             let mut half = Vector3::zeros();
             for k in 0..3 {
@@ -213,7 +258,7 @@ impl Scene {
             }
             obstacles.push((name.clone(), Obstacle::Cuboid { pose, half }));
         }
-        for (name, s) in &file.sphere {
+        for (name, Drawn(s)) in &file.sphere {
             let radius = length("the radius", name, s.radius)?;
             let center = match (&s.pose, &s.position) {
                 (Some(p), _) => Point3::from(pose_of(&bad, name, p)?.translation.vector),
@@ -224,7 +269,7 @@ impl Scene {
             };
             obstacles.push((name.clone(), Obstacle::Sphere { center, radius }));
         }
-        for (name, c) in &file.capsule {
+        for (name, Drawn(c)) in &file.capsule {
             let pose = pose_of(&bad, name, &c.pose)?;
             let radius = length("the radius", name, c.radius)?;
             let (a, b) = (finite3(&bad, name, &c.base)?, finite3(&bad, name, &c.tip)?);
@@ -237,7 +282,7 @@ impl Scene {
                 },
             ));
         }
-        for (name, c) in &file.cylinder {
+        for (name, Drawn(c)) in &file.cylinder {
             let pose = pose_of(&bad, name, &c.pose)?;
             let radius = length("the radius", name, c.radius)?;
             let half_height = length("the height", name, c.height)? / 2.0;
@@ -250,7 +295,7 @@ impl Scene {
                 },
             ));
         }
-        for (name, m) in &file.mesh {
+        for (name, Drawn(m)) in &file.mesh {
             let pose = pose_of(&bad, name, &m.pose)?;
             let scale = match &m.scale {
                 Some(s) => {

@@ -19,6 +19,14 @@ use crate::train::trainer::autodiff_device;
 /// One measured figure, named as torch_reference.py names it.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct BenchRow {
+    /// The CPU threads it ran on, where a sweep over them set it (the GPU check's `cpu` and
+    /// `split` parts); no column otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub threads: Option<usize>,
+    /// The `split` part's multiply-adds a thread must have before a lone image's GEMM takes
+    /// it (0: every thread); no column otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub work_per_thread: Option<usize>,
     pub model: String,
     pub figure: String,
     pub ours: f64,
@@ -45,6 +53,8 @@ impl BenchRow {
         device: DeviceChoice,
     ) -> Self {
         BenchRow {
+            threads: None,
+            work_per_thread: None,
             model: model.into(),
             figure,
             ours,

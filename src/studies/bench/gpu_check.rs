@@ -84,28 +84,6 @@ pub struct GpuCheck {
     pub exe: PathBuf,
 }
 
-/// One line of the CPU sweep: a figure at a thread count. It repeats six of
-/// [`BenchRow`]'s fields rather than holding one with `#[serde(flatten)]`: the `csv` crate
-/// cannot write a flattened struct ("serializing maps is not supported", BurntSushi/rust-csv
-/// issues 98, 155 and 239; the pull requests adding it are still open).
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct ThreadRow {
-    pub threads: usize,
-    /// The `split` part's multiply-adds a thread must have before a lone image's GEMM takes
-    /// it (0: every thread); none in the `cpu` part (every thread).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub work_per_thread: Option<usize>,
-    pub model: String,
-    pub figure: String,
-    pub ours: f64,
-    pub torch: Option<f64>,
-    pub ratio: Option<f64>,
-    /// [`BenchRow::caller_busy`]: the share of the time the calling thread worked alone.
-    #[serde(default)]
-    pub caller_busy: Option<f64>,
-    pub git_revision: String,
-}
-
 /// Kernel launches, host reads and uploads of one training step.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct StepCounts {
@@ -555,16 +533,9 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
         }
         console.say(format!("{t} CPU threads (ours and PyTorch's):"))?;
         console.say(console_table(&rows))?;
-        all.extend(rows.into_iter().map(|r| ThreadRow {
-            threads: t,
-            work_per_thread: None,
-            model: r.model,
-            figure: r.figure,
-            ours: r.ours,
-            torch: r.torch,
-            ratio: r.ratio,
-            caller_busy: r.caller_busy,
-            git_revision: r.git_revision,
+        all.extend(rows.into_iter().map(|r| BenchRow {
+            threads: Some(t),
+            ..r
         }));
         write_csv(&check.out.join("cpu_threads.csv"), &all)?;
     }
@@ -575,7 +546,7 @@ fn cpu(check: &GpuCheck, console: &mut Console) -> Result<()> {
 /// PyTorch at as many threads (measured once, after ours).
 fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
     let threads = check.threads.iter().copied().max().unwrap_or(1);
-    let mut all: Vec<ThreadRow> = Vec::new();
+    let mut all: Vec<BenchRow> = Vec::new();
     let mut torch: Vec<BenchRow> = Vec::new();
     for work in SPLIT_WORK {
         let var = crate::kernels::conv_gemm::WORK_PER_THREAD_VAR;
@@ -586,16 +557,10 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
             "{threads} CPU threads, a lone image's GEMM split at {work} multiply-adds a thread (0: every thread):"
         ))?;
         console.say(console_table(&rows))?;
-        all.extend(rows.iter().map(|r| ThreadRow {
-            threads,
+        all.extend(rows.iter().map(|r| BenchRow {
+            threads: Some(threads),
             work_per_thread: Some(work),
-            model: r.model.clone(),
-            figure: r.figure.clone(),
-            ours: r.ours,
-            torch: None,
-            ratio: None,
-            caller_busy: r.caller_busy,
-            git_revision: r.git_revision.clone(),
+            ..r.clone()
         }));
         if torch.is_empty() {
             torch = rows;

@@ -163,8 +163,12 @@ fn copy_grads<M: Module>(model: &M, grads: &GradientsParams) -> GradientsParams 
     c.to
 }
 
-/// Every parameter of a step, gathered by the first pass.
-pub(super) struct Fused(Vec<Gathered>);
+/// Every parameter of a step, gathered by the first pass at the learning rate `lr` (the
+/// second pass walks the optimiser at the same one).
+pub(super) struct Fused {
+    list: Vec<Gathered>,
+    lr: f64,
+}
 
 /// The first pass: `None` where the step cannot be fused (a parameter off a CubeCL device,
 /// not f32, or an optimiser other than our Adam).
@@ -185,7 +189,9 @@ pub(super) fn gather<M: Module>(
     drop(walked);
     let pass = PASS.with(|p| std::mem::take(&mut *p.borrow_mut()));
     match pass {
-        Pass::Gather(Some(list)) if !list.is_empty() && list.len() == expected => Some(Fused(list)),
+        Pass::Gather(Some(list)) if !list.is_empty() && list.len() == expected => {
+            Some(Fused { list, lr })
+        }
         _ => None,
     }
 }
@@ -195,12 +201,11 @@ impl Fused {
     pub(super) fn apply<M: Module>(
         self,
         optim: &mut ModuleOptimizer,
-        lr: f64,
         model: M,
         grads: GradientsParams,
         clip: Option<f32>,
     ) -> M {
-        let list = self.0;
+        let Fused { list, lr } = self;
         let partials = clip.map(|max| {
             let grads: Vec<LazyTensor> = list.iter().map(|g| g.grad.clone()).collect();
             let n = grads.len() * cube::launch::GROUPS;
