@@ -511,6 +511,18 @@ impl SelfModel for NeuroKinConfig {
         self.image
     }
 
+    fn fit(&self, fit: &Fit) -> Result<Trained> {
+        let network = self.init(fit.train_device, fit.train.seed)?;
+        let set = self.training_set(fit.train_set);
+        train_network(
+            network.trainable_params(),
+            network,
+            fit,
+            &set,
+            self.training_loss(),
+        )
+    }
+
     fn dof(&self) -> Option<usize> {
         Some(self.dof)
     }
@@ -527,18 +539,6 @@ impl SelfModel for NeuroKinConfig {
 
     fn camera_input(&self) -> bool {
         !self.camera.is_none()
-    }
-
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
-        let network = self.init(fit.train_device, fit.train.seed)?;
-        let set = self.training_set(fit.train_set);
-        train_network(
-            network.trainable_params(),
-            network,
-            fit,
-            &set,
-            self.training_loss(),
-        )
     }
 
     fn load(&self, weights: &Path, ctx: &LoadContext) -> Result<Loaded> {

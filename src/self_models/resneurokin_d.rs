@@ -267,14 +267,6 @@ impl SelfModel for ResNeuroKinDConfig {
         self.image
     }
 
-    fn dof(&self) -> Option<usize> {
-        Some(self.dof)
-    }
-
-    fn set_dof(&mut self, dof: usize) {
-        self.dof = dof;
-    }
-
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let w = self.depth_weight;
@@ -291,6 +283,14 @@ impl SelfModel for ResNeuroKinDConfig {
             fit.train_set,
             loss,
         )
+    }
+
+    fn dof(&self) -> Option<usize> {
+        Some(self.dof)
+    }
+
+    fn set_dof(&mut self, dof: usize) {
+        self.dof = dof;
     }
 
     fn load(&self, weights: &Path, ctx: &LoadContext) -> Result<Loaded> {

@@ -21,7 +21,7 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::autodiff::{Autodiff, NodeId};
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Dispatch, TensorMetadata};
+use burn::backend::{Backend, Dispatch, ExtensionType, TensorMetadata};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 
@@ -64,6 +64,25 @@ impl Geometry {
     fn conv_out(&self, hw: [usize; 2]) -> [usize; 2] {
         hw.map(|d| (d + 2 * self.padding - self.kernel) / self.stride + 1)
     }
+}
+
+/// A convolution layer in training: its weight `[c_out, c_in, k, k]`, bias and options.
+#[derive(Clone, ExtensionType)]
+#[extension_type(fusion)]
+pub struct Conv2dLayer<B: Backend> {
+    pub weight: FloatTensor<B>,
+    pub bias: FloatTensor<B>,
+    pub options: ConvOptions<2>,
+}
+
+/// A transposed convolution layer in training: its weight `[c_in, c_out, k, k]`, bias and
+/// options.
+#[derive(Clone, ExtensionType)]
+#[extension_type(fusion)]
+pub struct ConvTranspose2dLayer<B: Backend> {
+    pub weight: FloatTensor<B>,
+    pub bias: FloatTensor<B>,
+    pub options: ConvTransposeOptions<2>,
 }
 
 /// `layer` over `x` in slices along the batch, joined (one slice where the batch fits): the
@@ -118,15 +137,14 @@ pub fn conv2d(
     } else {
         oh * ow * c_in * kh * kw
     };
-    let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
-    let training = x.device().is_autodiff();
-    Some(by_slices(x, per_sample, |x| {
-        let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
-        Tensor::from_dispatch(if training {
-            <Dispatch as GpuKernelOps>::conv2d_train(x, w, b, options.clone())
-        } else {
-            conv2d_forward::<Dispatch>(x, w, b, g).0
-        })
+    let layer = Conv2dLayer {
+        weight: weight.clone().into_dispatch(),
+        bias: bias.clone().into_dispatch(),
+        options: options.clone(),
+    };
+    let train = <Dispatch as GpuKernelOps>::conv2d_train;
+    Some(through(x, per_sample, layer, train, |x, layer| {
+        conv2d_forward::<Dispatch>(x, layer.weight, layer.bias, g).0
     }))
 }
 
@@ -153,16 +171,35 @@ pub fn conv_transpose2d(
     let [_, _, h, w] = x.dims();
     let per_sample = h * w * c_out * kh * kw;
     let (stride, padding) = (options.stride[0], options.padding[0]);
-    let (weight, bias) = (weight.clone().into_dispatch(), bias.clone().into_dispatch());
-    let training = x.device().is_autodiff();
-    Some(by_slices(x, per_sample, |x| {
-        let (x, w, b) = (x.into_dispatch(), weight.clone(), bias.clone());
-        Tensor::from_dispatch(if training {
-            <Dispatch as GpuKernelOps>::conv_transpose2d_train(x, w, b, options.clone())
-        } else {
-            conv_transpose2d_forward::<Dispatch>(x, w, b, stride, padding)
-        })
+    let layer = ConvTranspose2dLayer {
+        weight: weight.clone().into_dispatch(),
+        bias: bias.clone().into_dispatch(),
+        options: options.clone(),
+    };
+    let train = <Dispatch as GpuKernelOps>::conv_transpose2d_train;
+    Some(through(x, per_sample, layer, train, |x, layer| {
+        conv_transpose2d_forward::<Dispatch>(x, layer.weight, layer.bias, stride, padding)
     }))
+}
+
+/// `x` through `layer` on our kernels, in slices along the batch ([`by_slices`]): its
+/// training operation `train` where `x` trains, its forward pass `infer` elsewhere.
+fn through<L: Clone>(
+    x: &Tensor<4>,
+    per_sample: usize,
+    layer: L,
+    train: fn(FloatTensor<Dispatch>, L) -> FloatTensor<Dispatch>,
+    infer: impl Fn(FloatTensor<Dispatch>, L) -> FloatTensor<Dispatch>,
+) -> Tensor<4> {
+    let training = x.device().is_autodiff();
+    by_slices(x, per_sample, |x| {
+        let (x, layer) = (x.into_dispatch(), layer.clone());
+        Tensor::from_dispatch(if training {
+            train(x, layer)
+        } else {
+            infer(x, layer)
+        })
+    })
 }
 
 /// A convolution's forward pass (see the module's table) on any backend with our kernels:
@@ -225,10 +262,13 @@ fn conv_transpose2d_forward<B: Backend + GpuKernelOps>(
 /// backward pass (see the module's table).
 pub(super) fn conv2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
     x: FloatTensor<Autodiff<B, C>>,
-    weight: FloatTensor<Autodiff<B, C>>,
-    bias: FloatTensor<Autodiff<B, C>>,
-    options: ConvOptions<2>,
+    layer: Conv2dLayer<Autodiff<B, C>>,
 ) -> FloatTensor<Autodiff<B, C>> {
+    let Conv2dLayer {
+        weight,
+        bias,
+        options,
+    } = layer;
     #[derive(Debug)]
     struct Conv;
 
@@ -318,10 +358,13 @@ pub(super) fn conv2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
 /// and its backward pass (see the module's table).
 pub(super) fn conv_transpose2d_train<B: Backend + GpuKernelOps, C: CheckpointStrategy>(
     x: FloatTensor<Autodiff<B, C>>,
-    weight: FloatTensor<Autodiff<B, C>>,
-    bias: FloatTensor<Autodiff<B, C>>,
-    options: ConvTransposeOptions<2>,
+    layer: ConvTranspose2dLayer<Autodiff<B, C>>,
 ) -> FloatTensor<Autodiff<B, C>> {
+    let ConvTranspose2dLayer {
+        weight,
+        bias,
+        options,
+    } = layer;
     #[derive(Debug)]
     struct ConvTranspose;
 

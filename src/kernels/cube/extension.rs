@@ -19,13 +19,13 @@ use burn::backend::{
     AutodiffBackend, Backend, Dispatch, Scalar, TensorMetadata, backend_extension,
 };
 use burn::nn::BatchNorm;
-use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 use burn_cubecl::CubeBackend;
 
 use super::batch_norm::{
     Layer, ParamGrads, ParamGradsMetadata, Saved, Statistics, StatisticsMetadata,
 };
+use super::convolution::{Conv2dLayer, ConvTranspose2dLayer};
 use super::im2col::{Fold, Patches};
 use super::{batch_norm, convolution, im2col, loss};
 
@@ -190,11 +190,9 @@ pub trait GpuKernelOps: Backend {
     #[fusion(default)]
     fn conv2d_train(
         x: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        options: ConvOptions<2>,
+        #[extension_type] layer: Conv2dLayer<Self>,
     ) -> FloatTensor<Self> {
-        Self::conv2d(x, weight, Some(bias), options)
+        Self::conv2d(x, layer.weight, Some(layer.bias), layer.options)
     }
 
     /// A transposed convolution with bias as a matrix product and [`Self::col2im`],
@@ -202,11 +200,9 @@ pub trait GpuKernelOps: Backend {
     #[fusion(default)]
     fn conv_transpose2d_train(
         x: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        options: ConvTransposeOptions<2>,
+        #[extension_type] layer: ConvTranspose2dLayer<Self>,
     ) -> FloatTensor<Self> {
-        Self::conv_transpose2d(x, weight, Some(bias), options)
+        Self::conv_transpose2d(x, layer.weight, Some(layer.bias), layer.options)
     }
 
     /// The mean binary cross-entropy of the logits `z` against the targets `y`, a `[1]`
@@ -309,22 +305,15 @@ impl GpuKernelOps for CubeBackend {
 }
 
 impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff<B, C> {
-    fn conv2d_train(
-        x: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        options: ConvOptions<2>,
-    ) -> FloatTensor<Self> {
-        convolution::conv2d_train::<B, C>(x, weight, bias, options)
+    fn conv2d_train(x: FloatTensor<Self>, layer: Conv2dLayer<Self>) -> FloatTensor<Self> {
+        convolution::conv2d_train::<B, C>(x, layer)
     }
 
     fn conv_transpose2d_train(
         x: FloatTensor<Self>,
-        weight: FloatTensor<Self>,
-        bias: FloatTensor<Self>,
-        options: ConvTransposeOptions<2>,
+        layer: ConvTranspose2dLayer<Self>,
     ) -> FloatTensor<Self> {
-        convolution::conv_transpose2d_train::<B, C>(x, weight, bias, options)
+        convolution::conv_transpose2d_train::<B, C>(x, layer)
     }
 
     fn bce_with_logits_mean(z: FloatTensor<Self>, y: FloatTensor<Self>) -> FloatTensor<Self> {
@@ -429,7 +418,14 @@ impl<B: Backend + GpuKernelOps, C: CheckpointStrategy> GpuKernelOps for Autodiff
         let forward = |x: FloatTensor<B>, layer: Layer<B>| {
             let (gamma, beta, epsilon) = (layer.gamma.clone(), layer.beta.clone(), layer.epsilon);
             let stats = B::batch_norm_statistics(x.clone(), layer);
-            let y = B::batch_norm(x, gamma, beta, stats.mean.clone(), stats.var.clone(), epsilon);
+            let y = B::batch_norm(
+                x,
+                gamma,
+                beta,
+                stats.mean.clone(),
+                stats.var.clone(),
+                epsilon,
+            );
             (maybe_relu::<B>(y, relu), stats)
         };
         match BatchNormTrain
