@@ -151,6 +151,9 @@ fn chunks(n: usize, size: usize) -> impl Iterator<Item = (usize, usize)> {
 /// gets no gradient through the ReLU, in dense marching too. The two differ only where a
 /// probe misses positive density inside a cell (the dilation is there for that). Falls back
 /// to dense marching when no cell is occupied (a loss must reach the parameters).
+// The training step's inputs, each named at its one caller (`ffksm::training`): the field and
+// its probe, the view, the rays, the two marching settings, the step's seed and the device.
+#[allow(clippy::too_many_arguments)]
 pub fn render_silhouette_skipping(
     field: &OccupancyField,
     probe: &OccupancyField,

@@ -235,6 +235,9 @@ impl HostField<'_> {
 
     /// Forward and backward through one block of rays: `points` `[n, 3]` (world), `truth` and
     /// `weight` per ray, `scale` = 1/R of the whole step. Adds the block's gradients and loss.
+    // The hot loop's block (see `dense_step`): its slices, the scratch buffers it reuses and
+    // the sums it adds to, each named at its one caller.
+    #[allow(clippy::too_many_arguments)]
     fn block(
         &self,
         points: &[f32],

@@ -143,8 +143,7 @@ impl Rendered {
 pub(super) fn render_all(
     field: &OccupancyField,
     robot: &Robot,
-    camera: &Camera,
-    angles_deg: &[Vec<f64>],
+    (camera, angles_deg): (&Camera, &[Vec<f64>]),
     cfg: &Ffksm,
     accelerated: Option<&AcceleratedConfig>,
     device: &Device,

@@ -55,8 +55,7 @@ impl FfksmRenderer {
         render_all(
             &s.field,
             &s.robot,
-            camera,
-            angles_deg,
+            (camera, angles_deg),
             &s.model,
             self.accelerated.as_ref(),
             &s.device,
