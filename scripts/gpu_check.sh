@@ -37,7 +37,8 @@ pack)
     echo "$1" >"$2/feature"
     (cd "$2/debs" && apt-get download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 libopengl0 libgles2 \
       libx11-6 libxcb1 libxau6 libxdmcp6 libbsd0 libmd0 libxext6 >/dev/null)
-    cp ../shared/bench/torch_reference.py ../shared/bench/torch_gpu_reference.py "$2/bench/"
+    cp ../shared/bench/torch_reference.py ../shared/bench/torch_gpu_reference.py \
+      scripts/torch_step_kernels.py "$2/bench/"
     du -sh "$2"
   done
   ;;

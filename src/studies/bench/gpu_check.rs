@@ -9,7 +9,9 @@
 //!   at a larger one (`--batch 256`), with the quality each reaches;
 //! - `equivalence`: NeuroKin, K-3DGS and FFKSM trained from the same seed on the CPU and the
 //!   GPU ([`crate::studies::bench::device_equivalence`]);
-//! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU;
+//! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU,
+//!   and PyTorch's kernels for the same step counted by torch.profiler
+//!   (`scripts/torch_step_kernels.py`) where `--python` is given;
 //! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
 //!   CPU threads of the same machine (the 5x target);
 //! - `fill`: `decoders` at batches that fill the GPU (inference 4,096, training 1,024), last of
@@ -286,7 +288,83 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
         rows.push(row);
     }
     write_csv(&check.out.join("counts_sources.csv"), &sources)?;
-    write_csv(&check.out.join("counts.csv"), &rows)
+    write_csv(&check.out.join("counts.csv"), &rows)?;
+    if let Some(py) = &check.python {
+        torch_counts(check, py, console)?;
+    }
+    Ok(())
+}
+
+/// PyTorch's step counted by torch.profiler on the same GPU
+/// (`scripts/torch_step_kernels.py`, packed beside the other PyTorch scripts), kept in
+/// `torch_counts.csv`; where it cannot run, the console says why and the part goes on.
+#[cfg(feature = "wgpu")]
+fn torch_counts(check: &GpuCheck, python: &Path, console: &mut Console) -> Result<()> {
+    let packed = check.bench_dir.join("torch_step_kernels.py");
+    let script = if packed.is_file() {
+        packed
+    } else {
+        PathBuf::from("scripts/torch_step_kernels.py")
+    };
+    let out = std::process::Command::new(python)
+        .arg(&script)
+        .arg("--bench")
+        .arg(&check.bench_dir)
+        .output();
+    let text = match out {
+        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
+        Ok(o) => {
+            let why = String::from_utf8_lossy(&o.stderr);
+            let last = why.lines().last().unwrap_or("no message").to_string();
+            return console.say(format!("PyTorch's step was not counted: {last}"));
+        }
+        Err(e) => return console.say(format!("PyTorch's step was not counted: {e}")),
+    };
+    let rows: Vec<TorchCounts> = text.lines().filter_map(TorchCounts::parse).collect();
+    for r in &rows {
+        let what = if r.device == "cuda" {
+            "kernels"
+        } else {
+            "aten operators (no CUDA GPU: not a launch count)"
+        };
+        console.say(format!(
+            "PyTorch's NeuroKin step, batch {} ({}): {:.1} {what}, {:.1} copies or fills",
+            r.batch, r.optimizer, r.kernels_per_step, r.memory_ops_per_step
+        ))?;
+    }
+    write_csv(&check.out.join("torch_counts.csv"), &rows)
+}
+
+/// A line of `torch_step_kernels.py`: what one PyTorch training step launched.
+#[cfg(feature = "wgpu")]
+#[derive(Clone, Debug, serde::Serialize)]
+struct TorchCounts {
+    model: String,
+    batch: usize,
+    /// `adam_foreach` (PyTorch's default) or `adam_fused`.
+    optimizer: String,
+    kernels_per_step: f64,
+    memory_ops_per_step: f64,
+    /// `cuda` (device kernels), or `cpu_aten` (a machine without a GPU: aten operators).
+    device: String,
+}
+
+#[cfg(feature = "wgpu")]
+impl TorchCounts {
+    fn parse(line: &str) -> Option<Self> {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let [model, batch, optimizer, kernels, memory, device] = f[..] else {
+            return None;
+        };
+        Some(TorchCounts {
+            model: model.into(),
+            batch: batch.parse().ok()?,
+            optimizer: optimizer.into(),
+            kernels_per_step: kernels.parse().ok()?,
+            memory_ops_per_step: memory.parse().ok()?,
+            device: device.into(),
+        })
+    }
 }
 
 /// Launches a step of one kernel for one set of operations (a fusion block's kinds).
