@@ -250,12 +250,14 @@ fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
     B::conv2d_fast(grad, weight, conv)
 }
 
-/// Whether `x` lives on the flex backend (with or without autodiff).
+/// Whether `x` is an f32 tensor on the flex backend (with or without autodiff): what our
+/// kernels take; other dtypes (`--precision`) run on burn's ops.
 pub fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
-    matches!(
-        x.device().without_autodiff().as_dispatch(),
-        DispatchDevice::Flex(_)
-    )
+    x.dtype() == DType::F32
+        && matches!(
+            x.device().without_autodiff().as_dispatch(),
+            DispatchDevice::Flex(_)
+        )
 }
 
 /// `[c_out]` -> broadcast over `[batch, c_out, H, W]` (`y` on flex: on our kernel).
