@@ -19,9 +19,17 @@ fn neurokin_trains_in_bf16_on_the_cpu() {
     let [h, w] = cfg.image;
     let set = TrainSet {
         inputs: Tensor::<2>::random([n, cfg.dof], Distribution::Normal(0.0, 30.0), &tdev),
-        targets: vec![Tensor::<4>::random([n, 1, h, w], Distribution::Bernoulli(0.1), &tdev)],
+        targets: vec![Tensor::<4>::random(
+            [n, 1, h, w],
+            Distribution::Bernoulli(0.1),
+            &tdev,
+        )],
     };
-    assert_eq!(set.inputs.dtype(), DType::BF16, "the device's default dtype");
+    assert_eq!(
+        set.inputs.dtype(),
+        DType::BF16,
+        "the device's default dtype"
+    );
     let set = cfg.training_set(&set);
     let train = TrainConfig {
         steps: 20,
