@@ -122,7 +122,7 @@ pub fn conv2d(
         && p2 == p3
         && options.dilation == [1, 1]
         && options.groups == 1;
-    if !plain || !super::is_lazy(&x.clone().inner()) {
+    if !plain || !super::on_kernels(&x.clone().inner()) {
         return None;
     }
     let g = Geometry {
@@ -164,7 +164,7 @@ pub fn conv_transpose2d(
         && options.padding_out == [0, 0]
         && options.dilation == [1, 1]
         && options.groups == 1;
-    if !plain || !super::is_lazy(&x.clone().inner()) {
+    if !plain || !super::on_kernels(&x.clone().inner()) {
         return None;
     }
     // The columns `[N, Hi·Wi, c_out·k·k]`.

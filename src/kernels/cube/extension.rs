@@ -469,7 +469,7 @@ pub fn batch_norm<const D: usize>(
     relu: bool,
 ) -> Option<Tensor<D>> {
     let training = x.device().is_autodiff() && norm.training.is_enabled();
-    if !training || !super::is_lazy(&x.clone().inner()) {
+    if !training || !super::on_kernels(&x.clone().inner()) {
         return None;
     }
     let device = x.device();
@@ -498,7 +498,7 @@ pub fn batch_norm<const D: usize>(
 /// The mean binary cross-entropy of the logits `z` against the targets `y` on our kernels
 /// where `z` is on a GPU; `None` elsewhere.
 pub fn bce_with_logits<const D: usize>(z: &Tensor<D>, y: &Tensor<D>) -> Option<Tensor<1>> {
-    let on_gpu = super::is_lazy(&z.clone().inner()) && super::is_lazy(&y.clone().inner());
+    let on_gpu = super::on_kernels(&z.clone().inner()) && super::on_kernels(&y.clone().inner());
     on_gpu.then(|| {
         Tensor::from_dispatch(<Dispatch as GpuKernelOps>::bce_with_logits_mean(
             z.clone().into_dispatch(),

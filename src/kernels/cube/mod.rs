@@ -96,6 +96,12 @@ pub fn is_lazy<const D: usize>(t: &Tensor<D>) -> bool {
     )
 }
 
+/// Whether `t` is what our kernels take: an f32 tensor on a CubeCL device (another dtype,
+/// `Device::configure`'s lower precision, runs on burn's ops).
+pub fn on_kernels<const D: usize>(t: &Tensor<D>) -> bool {
+    t.dtype() == burn::tensor::DType::F32 && is_lazy(t)
+}
+
 /// The largest buffer `t`'s device allocates, in bytes, where `t` is on a CubeCL device.
 pub fn max_buffer_bytes<const D: usize>(t: &Tensor<D>) -> Option<u64> {
     let (f, _) = lazy(t.clone()).ok()?;
