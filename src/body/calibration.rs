@@ -1,10 +1,10 @@
 //! Link lengths from images (visual calibration): a self-model that hangs on the kinematic
 //! chain (K-3DGS: Gaussians on the links) renders with the chain's joint origins as
-//! parameters ([`crate::self_models::model::Render::render_with_origins`]); with the Gaussians frozen, Adam fits the
-//! origins' translations to k images of the changed arm at known joint angles. A link's
-//! change is the fitted translation's change along the link (mm). This is the EMSSL paper's
-//! first adaptation approach (learned link parameters, [`crate::ik::calibration`]) fed by a
-//! camera instead of measured tip positions.
+//! parameters ([`crate::self_models::model::Render::render_with_origins`]); with the
+//! Gaussians frozen, Adam fits the origins' translations to k images of the changed arm at
+//! known joint angles. A link's change is the fitted translation's change along the link
+//! (mm). This is the EMSSL paper's first adaptation approach (learned link parameters,
+//! [`crate::ik::calibration`]) fed by a camera instead of measured tip positions.
 
 use burn::module::{Module, Param};
 use burn::tensor::{Tensor, TensorData};

@@ -190,6 +190,7 @@ pub fn pose_from_image(
 ) -> Result<PoseEstimate> {
     let (renderer, device, image, observed) = fit.parts();
     cfg.validate()?;
+    let descent = Descent::checked(cfg.steps, cfg.learning_rate, "pose from image")?;
     observed.check_for(image)?;
     let dof = ranges.len();
     if let Some(g) = guesses {
@@ -232,7 +233,6 @@ pub fn pose_from_image(
             targets: vec![chunk.repeated(starts).tensor(device)],
         };
         let loss_kind = cfg.loss;
-        let descent = Descent::checked(cfg.steps, cfg.learning_rate, "pose from image")?;
         let fitted = descent.run(module, &set, |m: &Angles, b| {
             let n = b.inputs.dims()[0];
             let rows: Tensor<1, Int> = b.inputs.clone().reshape([n]).int();

@@ -13,7 +13,7 @@ use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained},
+    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network},
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::config::TrainLog;
@@ -137,7 +137,7 @@ impl SelfModel for MeanSilhouette {
         let template = ConstantImage {
             image: Param::from_tensor(Tensor::zeros([1, 1, h, w], ctx.device)),
         };
-        crate::self_models::model::load_network(template, weights)
+        load_network(template, weights)
     }
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {

@@ -218,17 +218,28 @@ pub fn run_torch(
     extra: bool,
     seconds: Option<f64>,
 ) -> Result<String> {
-    let mut command = std::process::Command::new(python);
-    command
-        .arg(script)
-        .args(["--threads", &threads.to_string()]);
+    let mut args = vec!["--threads".to_string(), threads.to_string()];
     if extra {
-        command.arg("--extra");
+        args.push("--extra".into());
     }
     if let Some(s) = seconds {
-        command.args(["--seconds", &s.to_string()]);
+        args.extend(["--seconds".into(), s.to_string()]);
     }
-    let out = command.output().map_err(|e| crate::Error::io(python, e))?;
+    run_python(python, script, &args)
+}
+
+/// Run `script` with `python` and `args`; its standard output, or an error with the last line
+/// it wrote to standard error.
+pub fn run_python(
+    python: &std::path::Path,
+    script: &std::path::Path,
+    args: &[String],
+) -> Result<String> {
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .args(args)
+        .output()
+        .map_err(|e| crate::Error::io(python, e))?;
     if !out.status.success() {
         return Err(crate::Error::Config(format!(
             "{} failed: {}",

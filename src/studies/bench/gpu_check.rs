@@ -11,7 +11,7 @@
 //!   GPU ([`crate::studies::bench::device_equivalence`]);
 //! - `counts`: kernel launches, host reads and uploads per NeuroKin training step on the GPU,
 //!   and PyTorch's kernels for the same step counted by torch.profiler
-//!   (`scripts/torch_step_kernels.py`) where `--python` is given;
+//!   (`scripts/torch_step_kernels.py`) where `--torch` is given;
 //! - `k3dgs`: K-3DGS's paper preset (three variants) on the GPU, and the isotropic one on 2
 //!   CPU threads of the same machine (the 5x target);
 //! - `fill`: `decoders` at batches that fill the GPU (inference 4,096, training 1,024), last of
@@ -32,6 +32,8 @@ use std::time::Instant;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::table::write_csv;
+#[cfg(feature = "wgpu")]
+use crate::studies::bench::decoders::run_python;
 use crate::studies::bench::decoders::{
     Batches, BenchRow, attach_torch, console_table, run_batches, run_torch,
 };
@@ -306,18 +308,9 @@ fn torch_counts(check: &GpuCheck, python: &Path, console: &mut Console) -> Resul
     } else {
         PathBuf::from("scripts/torch_step_kernels.py")
     };
-    let out = std::process::Command::new(python)
-        .arg(&script)
-        .arg("--bench")
-        .arg(&check.bench_dir)
-        .output();
-    let text = match out {
-        Ok(o) if o.status.success() => String::from_utf8_lossy(&o.stdout).into_owned(),
-        Ok(o) => {
-            let why = String::from_utf8_lossy(&o.stderr);
-            let last = why.lines().last().unwrap_or("no message").to_string();
-            return console.say(format!("PyTorch's step was not counted: {last}"));
-        }
+    let bench = check.bench_dir.to_string_lossy().into_owned();
+    let text = match run_python(python, &script, &["--bench".into(), bench]) {
+        Ok(text) => text,
         Err(e) => return console.say(format!("PyTorch's step was not counted: {e}")),
     };
     let rows: Vec<TorchCounts> = text.lines().filter_map(TorchCounts::parse).collect();
