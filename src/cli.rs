@@ -352,6 +352,12 @@ pub struct ExperimentArgs {
     /// Table I; `neurokin_tree` is added only this way.
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
     pub models: Option<Vec<String>>,
+    /// Self-models (neurokin, resneurokin_d): train the network in this dtype, as PyTorch's
+    /// autocast (f32 master weights, Adam and losses; evaluated in f32). bf16 and f16 reach a
+    /// GPU's tensor cores; flex32 (f32 stored, f16 computed) is a GPU dtype. The results'
+    /// `precision` column says which.
+    #[arg(long, value_enum, default_value_t = crate::train::precision::Precision::F32)]
+    pub precision: crate::train::precision::Precision,
 }
 
 impl ExperimentArgs {
@@ -438,10 +444,12 @@ impl ExperimentArgs {
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),
             models: self.models.clone(),
+            precision: self.precision,
         };
         // Everything that can be checked is checked before the run writes its first file: the
         // device is compiled in, and a robot given by URDF loads and has a joint to move.
-        crate::core::device::select(opts.device)?;
+        opts.precision
+            .check(&crate::core::device::select(opts.device)?)?;
         if opts.urdf.is_some() {
             let spec = opts.robot_spec(crate::sim::robots::BuiltinRobot::Arm4);
             spec.require_movable(&spec.load_kinematics()?, "a self-model or an inverse model")?;

@@ -10,4 +10,5 @@ pub mod convergence;
 pub mod ewc;
 pub mod hooks;
 pub mod losses;
+pub mod precision;
 pub mod trainer;

@@ -50,6 +50,7 @@ impl AmortisedConfig {
             renders: 20_000,
             jitter_deg: 5.0,
             train: TrainConfig {
+                precision: Default::default(),
                 steps: 6000,
                 batch: 64,
                 learning_rate: 1e-3,

@@ -47,6 +47,7 @@ impl<'a> Descent<'a> {
         loss: impl Fn(&M, &Batch) -> Tensor<1>,
     ) -> Result<M> {
         let train = TrainConfig {
+            precision: Default::default(),
             steps: self.steps,
             batch: set.len(),
             learning_rate: self.learning_rate,

@@ -191,6 +191,7 @@ pub fn calibrate(
     let mut optim = crate::train::adam::adam();
     for (i, &(steps, learning_rate)) in cfg.stages.iter().enumerate() {
         let train = TrainConfig {
+            precision: Default::default(),
             steps,
             batch: n,
             learning_rate,

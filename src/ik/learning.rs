@@ -70,6 +70,7 @@ impl FitConfig {
     /// noise, no checkpoints).
     pub fn train_config(&self, samples: usize) -> TrainConfig {
         TrainConfig {
+            precision: Default::default(),
             steps: TrainConfig::steps_for_epochs(self.epochs, samples, self.batch),
             batch: self.batch,
             learning_rate: self.learning_rate,

@@ -54,6 +54,7 @@ pub const PROVENANCE: &[&str] = &[
     "dataset",
     "preset",
     "device",
+    "precision",
     "git_revision",
     "revision",
     "steps_override",

@@ -435,6 +435,7 @@ impl Evaluation<'_> {
             dataset: cfg.data.label().into(),
             preset: cfg.preset.clone(),
             device: self.device_choice.to_string(),
+            precision: cfg.train.precision,
             git_revision: self.git_revision.into(),
             parameters: trained.parameters,
             train_samples: fitted.train_range.len(),

@@ -58,6 +58,11 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn needs_robot(&self) -> bool {
         false
     }
+    /// Whether it trains in a lower precision (`--precision`, [`crate::train::precision`]):
+    /// a network whose every op follows its input's dtype.
+    fn autocasts(&self) -> bool {
+        false
+    }
     /// Whether it takes the camera as input: each sample's inputs are then its joint angles
     /// followed by its camera's [`crate::self_models::camera_input::camera_input`] (`[n, dof + 9]`).
     fn camera_input(&self) -> bool {

@@ -511,6 +511,10 @@ impl SelfModel for NeuroKinConfig {
         self.image
     }
 
+    fn autocasts(&self) -> bool {
+        true
+    }
+
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let set = self.training_set(fit.train_set);

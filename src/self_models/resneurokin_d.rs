@@ -22,6 +22,7 @@ use burn::tensor::{Device, Tensor};
 
 use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
+use crate::kernels::batch_norm;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::neurokin::resize_bilinear;
@@ -107,8 +108,8 @@ impl ResidualBlock {
     }
 
     fn forward(&self, x: Tensor<4>) -> Tensor<4> {
-        let y = relu(self.bn1.forward(conv2d_layer(&self.conv1, x.clone())));
-        let y = self.bn2.forward(conv2d_layer(&self.conv2, y));
+        let y = batch_norm(&self.bn1, conv2d_layer(&self.conv1, x.clone()), true);
+        let y = batch_norm(&self.bn2, conv2d_layer(&self.conv2, y), false);
         relu(y + x)
     }
 }
@@ -234,7 +235,7 @@ impl ResNeuroKinD {
         let mut x = relu(linear_layer(&self.seed, z)).reshape([b, self.seed_channels, 8, 8]);
         x = self.blocks[0].forward(x);
         for (i, up) in self.ups.iter().enumerate() {
-            x = relu(self.norms[i].forward(up.forward(x)));
+            x = batch_norm(&self.norms[i], up.forward(x), true);
             x = self.blocks[i + 1].forward(x);
         }
         let silhouette =
@@ -265,6 +266,10 @@ impl SelfModel for ResNeuroKinDConfig {
 
     fn image(&self) -> [usize; 2] {
         self.image
+    }
+
+    fn autocasts(&self) -> bool {
+        true
     }
 
     fn fit(&self, fit: &Fit) -> Result<Trained> {

@@ -45,6 +45,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
             ..notebook_train("paper")
         },
         "quick" => TrainConfig {
+            precision: Default::default(),
             steps: 200,
             batch: 16,
             learning_rate: 1e-3,
@@ -55,6 +56,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
             log_every: 0,
         },
         _ => TrainConfig {
+            precision: Default::default(),
             steps: 3000,
             batch: 32,
             learning_rate: 1e-3,

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::core::device::DeviceChoice;
-use crate::core::error::Result;
+use crate::core::error::{Error, Result};
 use crate::data::dataset::Dataset;
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::result::ModelResult;
@@ -56,6 +56,8 @@ pub struct RunOptions {
     pub latencies: Option<Vec<crate::ik::sampling_pass::Latency>>,
     /// `table1`'s models (registry names), instead of every one marked for Table I.
     pub models: Option<Vec<String>>,
+    /// Self-models: the dtype the network trains in (`--precision`, f32 master weights).
+    pub precision: crate::train::precision::Precision,
 }
 
 impl RunOptions {
@@ -80,6 +82,7 @@ impl RunOptions {
             dataset: None,
             latencies: None,
             models: None,
+            precision: Default::default(),
         }
     }
 
@@ -161,6 +164,22 @@ impl RunOptions {
         self.camera.apply(&mut cfg.data.dataset, !papers_camera);
         if !cfg.data.robot.is_papers_arm() || self.dataset.is_some() {
             cfg.reference = Default::default();
+        }
+        if !self.precision.is_f32() {
+            if !cfg.model.autocasts() {
+                return Err(Error::Config(format!(
+                    "{}: --precision {} applies to the decoders (neurokin, resneurokin_d); this model trains in f32 only",
+                    cfg.name, self.precision
+                )));
+            }
+            cfg.train.precision = self.precision;
+            add_note(
+                &mut cfg.note,
+                format!(
+                    "trained in {} (autocast: f32 master weights and losses), evaluated in f32",
+                    self.precision
+                ),
+            );
         }
         let rebatched = self.override_batch(&mut cfg.train, &mut cfg.note);
         cfg.steps_override = self

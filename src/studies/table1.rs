@@ -164,6 +164,7 @@ fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResul
     let matches = |r: &ModelResult| {
         r.preset == opts.preset
             && r.dataset == dataset
+            && r.precision == opts.precision
             && match opts.steps {
                 Some(s) => r.train_steps == s,
                 None => r.steps_override.is_none(),

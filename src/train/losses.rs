@@ -1,12 +1,16 @@
-//! Losses of the self-models, with PyTorch's semantics so the notebooks' numbers compare.
+//! Losses of the self-models, with PyTorch's semantics so the notebooks' numbers compare; in
+//! f32 whatever dtype the network computed in (as autocast, [`super::precision`]).
 
 use burn::tensor::Tensor;
+
+use super::precision::widened;
 
 /// Binary cross-entropy of probabilities `p` against targets `y` in [0, 1] (any equal shapes),
 /// mean over all elements. `p` is clamped to [1e-7, 1 - 1e-7] before the logs (PyTorch's
 /// `BCELoss` clamps the logs at -100 instead; in f32 a saturated sigmoid gives exactly 0,
 /// whose log gradient would turn the step into NaN).
 pub fn bce<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    let (p, y) = (widened(p), widened(y));
     let p = p.clamp(1e-7, 1.0 - 1e-7);
     let log_p = p.clone().log();
     let log_1mp = p.neg().add_scalar(1.0).log();
@@ -21,6 +25,7 @@ pub fn bce<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
 /// a GPU two launches forward and one backward (`kernels::cube::loss`); the tests compare each
 /// with [`bce_with_logits_composed`].
 pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    let (z, y) = (widened(z), widened(y));
     if let Some(loss) = crate::kernels::cpu_extension::bce_with_logits(&z, &y) {
         return loss;
     }
@@ -39,6 +44,7 @@ pub fn bce_with_logits_composed<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> T
 
 /// Soft Dice loss `1 - (2 sum(p y) + 1) / (sum(p) + sum(y) + 1)` over the whole batch.
 pub fn soft_dice<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
+    let (p, y) = (widened(p), widened(y));
     let inter = (p.clone() * y.clone()).sum();
     let total = p.sum() + y.sum();
     inter
@@ -51,16 +57,17 @@ pub fn soft_dice<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
 
 /// Mean squared error.
 pub fn mse<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
-    (p - y).square().mean()
+    (widened(p) - widened(y)).square().mean()
 }
 
 /// Mean absolute error.
 pub fn l1<const D: usize>(p: Tensor<D>, y: Tensor<D>) -> Tensor<1> {
-    (p - y).abs().mean()
+    (widened(p) - widened(y)).abs().mean()
 }
 
 /// Mean absolute error over the elements where `mask` is 1 (e.g. depth on robot pixels).
 pub fn l1_masked<const D: usize>(p: Tensor<D>, y: Tensor<D>, mask: Tensor<D>) -> Tensor<1> {
+    let (p, y, mask) = (widened(p), widened(y), widened(mask));
     let count = mask.clone().sum().clamp_min(1.0);
     ((p - y).abs() * mask).sum().div(count)
 }

@@ -355,7 +355,12 @@ where
         let t0 = Instant::now();
         let batch = batcher.batch(step);
         let n = batch.inputs.dims()[0];
-        let step_loss: StepLoss = loss(&model, &batch).into();
+        // Lower precision: the step runs on a cast copy of the f32 parameters.
+        let step_loss: StepLoss = match cfg.precision.autocast(&model) {
+            Some(low) => loss(&low, &cfg.precision.batch(&batch)),
+            None => loss(&model, &batch),
+        }
+        .into();
         losses.push(step, &step_loss);
         let mut grads = step_loss.gradients(&model);
         let mut clip = cfg.grad_clip_norm;

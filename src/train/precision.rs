@@ -1,0 +1,147 @@
+//! Lower precision for training, as PyTorch's autocast does it (`--precision`): the parameters
+//! and Adam's moments stay in f32 (the master weights), each step runs the network on a copy of
+//! the parameters cast to the lower dtype, the batch's inputs cast too, and the gradients flow
+//! back through the casts into the f32 masters. Losses widen their inputs to f32
+//! ([`widened`]), and BatchNorm runs in f32 ([`crate::kernels::batch_norm`]), as autocast keeps
+//! reductions and normalisation in f32. On a GPU, f16 and bf16 matrix products reach tensor
+//! cores (f32 through Vulkan does not); `flex32` stores f32 and lets the GPU compute at f16's
+//! precision. Our CPU and GPU kernels take f32 only: a lower dtype runs on burn's own ops.
+
+use burn::module::{Module, ModuleMapper, Param};
+use burn::tensor::{DType, Device, FloatDType, Tensor};
+
+use crate::core::error::{Error, Result};
+
+use super::batcher::Batch;
+
+/// The dtype a network computes in while it trains.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    /// Everything in f32 (the default, and every committed result).
+    #[default]
+    F32,
+    /// bfloat16: f32's range, 8 bits of mantissa.
+    Bf16,
+    /// IEEE half: 11 bits of mantissa, largest value 65,504.
+    F16,
+    /// burn's flex32: stored as f32, computed at f16's precision where the GPU can.
+    Flex32,
+}
+
+impl Precision {
+    pub fn is_f32(&self) -> bool {
+        *self == Precision::F32
+    }
+
+    /// Refuse a dtype `device` cannot compute in (burn's `supports_dtype`: storage,
+    /// conversion and arithmetic; bf16 on many Vulkan devices converts but has no arithmetic,
+    /// and the CPU has no flex32), naming those it can.
+    pub fn check(&self, device: &Device) -> Result<()> {
+        if device.supports_dtype(self.dtype()) {
+            return Ok(());
+        }
+        let can: Vec<String> = [Self::F32, Self::Bf16, Self::F16, Self::Flex32]
+            .iter()
+            .filter(|p| device.supports_dtype(p.dtype()))
+            .map(|p| p.to_string())
+            .collect();
+        Err(Error::Config(format!(
+            "--precision {self}: this device cannot compute in {self} (it can in {})",
+            can.join(", ")
+        )))
+    }
+
+    /// The dtype the network computes in.
+    pub fn dtype(&self) -> FloatDType {
+        match self {
+            Precision::F32 => FloatDType::F32,
+            Precision::Bf16 => FloatDType::BF16,
+            Precision::F16 => FloatDType::F16,
+            Precision::Flex32 => FloatDType::Flex32,
+        }
+    }
+
+    /// `model` with its parameters cast to this precision, through casts autodiff follows back
+    /// to the f32 parameters; BatchNorm's parameters and running statistics stay f32.
+    /// `None` in f32.
+    pub fn autocast<M: Module>(&self, model: &M) -> Option<M> {
+        if self.is_f32() {
+            return None;
+        }
+        Some(model.clone().map(&mut Autocast {
+            dtype: self.dtype(),
+            in_norm: 0,
+        }))
+    }
+
+    /// `batch` with its inputs cast to this precision (the targets stay f32: the losses widen
+    /// the network's output to meet them).
+    pub fn batch(&self, batch: &Batch) -> Batch {
+        Batch {
+            inputs: batch.inputs.clone().cast(self.dtype()),
+            targets: batch.targets.clone(),
+            step: batch.step,
+            indices: batch.indices.clone(),
+        }
+    }
+}
+
+impl std::fmt::Display for Precision {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Precision::F32 => "f32",
+            Precision::Bf16 => "bf16",
+            Precision::F16 => "f16",
+            Precision::Flex32 => "flex32",
+        })
+    }
+}
+
+/// Casts the parameters outside BatchNorm layers (whose running statistics are the networks'
+/// only buffers).
+struct Autocast {
+    dtype: FloatDType,
+    /// How deep inside a BatchNorm the mapper is.
+    in_norm: usize,
+}
+
+impl ModuleMapper for Autocast {
+    fn enter_module(&mut self, _name: &str, container_type: &str) {
+        if container_type == "Struct:BatchNorm" || self.in_norm > 0 {
+            self.in_norm += 1;
+        }
+    }
+
+    fn exit_module(&mut self, _name: &str, _container_type: &str) {
+        self.in_norm = self.in_norm.saturating_sub(1);
+    }
+
+    fn map_float<const D: usize>(&mut self, param: Param<Tensor<D>>) -> Param<Tensor<D>> {
+        if self.in_norm > 0 {
+            return param;
+        }
+        let dtype = self.dtype;
+        param.map(|t| t.cast(dtype))
+    }
+}
+
+/// `t` in f32: a loss computed from a lower precision's output (autocast computes losses in
+/// f32). No op where it already is.
+pub fn widened<const D: usize>(t: Tensor<D>) -> Tensor<D> {
+    if t.dtype() == DType::F32 {
+        t
+    } else {
+        t.cast(FloatDType::F32)
+    }
+}
