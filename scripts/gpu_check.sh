@@ -17,7 +17,7 @@
 # ICD and runs the check in at most 8 minutes, writing to $OUT/gpu/<GPU name>/ (or
 # reports/gpu/<GPU name>/ without $OUT; .../spirv/ for the SPIR-V pack); ARGS go to the binary
 # (e.g. --threads 2,16); GPU_CHECK_PARTS picks the parts (default: all, in the order below; the
-# SPIR-V pack: decoders, neurokin, warm and equivalence) and GPU_CHECK_SECONDS (default 480) bounds the run.
+# SPIR-V pack: decoders, neurokin, warm, equivalence and precision) and GPU_CHECK_SECONDS (default 480) bounds the run.
 # `warm` runs the neurokin part again in a new process: cubecl keeps its autotune results (and,
 # under SPIR-V, the compiled kernels) in target/environment/, which the first run of the
 # session filled from empty (CUBECL_ENVIRONMENT names a fresh one), so the two give the
@@ -55,10 +55,10 @@ run)
   name=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 | tr -c 'A-Za-z0-9\n' '_' || true)
   name=${name:-unknown_gpu}
   out="${OUT:-reports}/gpu/$name"
-  parts="decoders neurokin warm equivalence counts profile k3dgs fill cpu split"
+  parts="decoders neurokin warm equivalence precision counts profile k3dgs fill cpu split"
   if [ "$(cat "$PACK/feature" 2>/dev/null)" = vulkan ]; then
     out="$out/spirv"
-    parts="decoders neurokin warm equivalence"
+    parts="decoders neurokin warm equivalence precision"
   fi
   mkdir -p "$out"
   # A fresh cubecl environment: the first neurokin run tunes and compiles from nothing.

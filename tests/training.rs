@@ -41,6 +41,7 @@ fn cfg(steps: usize) -> TrainConfig {
         seed: 7,
         checkpoint_every: 5,
         log_every: 0,
+        precision: Default::default(),
     }
 }
 

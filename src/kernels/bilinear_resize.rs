@@ -150,8 +150,12 @@ pub fn resize_matmul(x: burn::tensor::Tensor<4>, size: [usize; 2]) -> burn::tens
     }
     let (rh, rw_t) = resize_matrices(&x.device(), [h, w], size);
     // A lower precision's input (autocast) meets matrices of its own dtype.
-    let dtype: burn::tensor::FloatDType = x.dtype().into();
-    let (rh, rw_t) = (rh.cast(dtype), rw_t.cast(dtype));
+    let (rh, rw_t) = if x.dtype() == rh.dtype() {
+        (rh, rw_t)
+    } else {
+        let dtype: burn::tensor::FloatDType = x.dtype().into();
+        (rh.cast(dtype), rw_t.cast(dtype))
+    };
     let rows = x.matmul(rw_t.unsqueeze::<4>().expand([b, c, w, size[1]]));
     rh.unsqueeze::<4>().expand([b, c, size[0], h]).matmul(rows)
 }

@@ -153,6 +153,7 @@ pub fn fit_run<M: SelfModel>(
     resume: bool,
 ) -> Result<Fitted> {
     let device = crate::core::device::select(device_choice)?;
+    cfg.train.precision.check(&device)?;
     let (robot, data, train_range, test_range) = cfg.data.load_with_robot()?;
     if let Some(dof) = cfg.model.dof()
         && dof != data.dof()

@@ -10,6 +10,9 @@
 //!   1,600, 9,600 samples of one Lorenz trajectory) and test all three on the same 400
 //!   held-out samples (samples 12,000-12,399 of the trajectory), so the rows compare. The
 //!   paper only guessed the 12,000-sample figure ("~25-26 dB").
+//! - `precision` (beyond the paper): trained in f32, bf16, f16 and flex32 (autocast,
+//!   [`crate::train::precision`]), each evaluated in f32; a dtype the device cannot compute
+//!   in (flex32 on the CPU) is skipped and said so.
 
 use std::path::Path;
 
@@ -19,6 +22,7 @@ use crate::report::figures::{pareto_plot, training_curves};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::neurokin::NeuroKinConfig;
 use crate::self_models::{harness::run, run_config::SelfModelRun};
+use crate::train::precision::Precision;
 
 /// One NeuroKin run, as the ablations vary it.
 type NeuroKinRun = SelfModelRun<NeuroKinConfig>;
@@ -31,6 +35,7 @@ pub enum Ablation {
     Depth,
     Latent,
     DataScale,
+    Precision,
 }
 
 /// One setting of an ablation: a label, how it changes the NeuroKin config, the paper's figure.
@@ -48,6 +53,7 @@ impl Ablation {
             Ablation::Depth => "ablation_depth",
             Ablation::Latent => "ablation_latent",
             Ablation::DataScale => "ablation_data_scale",
+            Ablation::Precision => "ablation_precision",
         }
     }
 
@@ -58,6 +64,7 @@ impl Ablation {
             Ablation::Depth,
             Ablation::Latent,
             Ablation::DataScale,
+            Ablation::Precision,
         ]
         .into_iter()
         .find(|a| a.name() == name)
@@ -69,6 +76,19 @@ impl Ablation {
             Ablation::Depth => "NeuroKin ablation: decoder depth (transposed convolutions)",
             Ablation::Latent => "NeuroKin ablation: latent width",
             Ablation::DataScale => "NeuroKin ablation: dataset size",
+            Ablation::Precision => "NeuroKin ablation: training precision (autocast)",
+        }
+    }
+
+    /// What its table says above the rows.
+    pub fn about(self) -> &'static str {
+        match self {
+            Ablation::Precision => {
+                "Each row is a full NeuroKin run trained in one precision (autocast: f32 master weights, Adam and losses; the network's forward and backward in the dtype), all evaluated in f32. On a CPU, bf16 and f16 run on burn's generic ops (our vector kernels take f32 only), so they train slower there: their point is a GPU's tensor cores (`reports/gpu/`). A dtype the device cannot compute in (flex32 on a CPU) has no row. PSNR as the paper computes it; IoU at threshold 0.5."
+            }
+            _ => {
+                "Each row is a full NeuroKin run with one setting changed (config in its folder). `paper_psnr_db` / `paper_fps` are the figures the paper printed for that setting, for reference; the paper published no code for its ablations, so ours are the first measured numbers. PSNR as the paper computes it; IoU at threshold 0.5."
+            }
         }
     }
 
@@ -169,6 +189,27 @@ impl Ablation {
                     })
                     .collect()
             }
+            Ablation::Precision => [
+                Precision::F32,
+                Precision::Bf16,
+                Precision::F16,
+                Precision::Flex32,
+            ]
+            .into_iter()
+            .map(|p| {
+                s(
+                    p.to_string(),
+                    None,
+                    None,
+                    Box::new(move |c: &mut NeuroKinRun| {
+                        c.train.precision = p;
+                        if !p.is_f32() {
+                            crate::studies::run::add_note(&mut c.note, p.note());
+                        }
+                    }),
+                )
+            })
+            .collect(),
         }
     }
 }
@@ -217,9 +258,14 @@ pub fn run_ablation(
     resume: bool,
 ) -> Result<Vec<ModelResult>> {
     let mut rows = Vec::new();
+    let on = crate::core::device::select(device)?;
     for setting in ablation.settings(&base.preset) {
         let mut cfg = base.clone();
         (setting.apply)(&mut cfg);
+        if let Err(e) = cfg.train.precision.check(&on) {
+            eprintln!("{}: {} skipped: {e}", ablation.name(), setting.label);
+            continue;
+        }
         cfg.name = format!("NeuroKin {}", setting.label);
         // The paper's figures are for its arm: none for another robot (or a dataset file).
         cfg.reference = if base.reference == PaperReference::default() {
@@ -239,11 +285,7 @@ pub fn run_ablation(
     }
     let csv = dir.join("results.csv");
     write_csv(&csv, &rows)?;
-    write_markdown_report(
-        &csv,
-        ablation.title(),
-        "Each row is a full NeuroKin run with one setting changed (config in its folder). `paper_psnr_db` / `paper_fps` are the figures the paper printed for that setting, for reference; the paper published no code for its ablations, so ours are the first measured numbers. PSNR as the paper computes it; IoU at threshold 0.5.",
-    )?;
+    write_markdown_report(&csv, ablation.title(), ablation.about())?;
     draw_training_curves(ablation, dir)?;
     let points = pareto_points(&rows, |m| m.to_string());
     pareto_plot(

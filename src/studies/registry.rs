@@ -170,6 +170,14 @@ fn run_ablation_depth(opts: &RunOptions, dir: &Path) -> Result<String> {
 fn run_ablation_latent(opts: &RunOptions, dir: &Path) -> Result<String> {
     ablation(Ablation::Latent, opts, dir)
 }
+fn run_ablation_precision(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if !opts.precision.is_f32() {
+        return Err(crate::Error::Config(
+            "--precision does not apply to ablation_precision: it trains in each precision the device computes in".into(),
+        ));
+    }
+    ablation(Ablation::Precision, opts, dir)
+}
 fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
     if opts.train_samples.is_some() {
         return Err(crate::Error::Config(
@@ -477,6 +485,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_ablation_data_scale,
+    },
+    Experiment {
+        name: "ablation_precision",
+        about: "NeuroKin trained in f32, bf16, f16 and flex32 (autocast; those the device computes in)",
+        default_dir: "reports/ablation_precision",
+        presets: SELF_MODEL_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_ablation_precision,
     },
     Experiment {
         name: "emssl_table2",

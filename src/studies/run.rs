@@ -173,13 +173,7 @@ impl RunOptions {
                 )));
             }
             cfg.train.precision = self.precision;
-            add_note(
-                &mut cfg.note,
-                format!(
-                    "trained in {} (autocast: f32 master weights and losses), evaluated in f32",
-                    self.precision
-                ),
-            );
+            add_note(&mut cfg.note, self.precision.note());
         }
         let rebatched = self.override_batch(&mut cfg.train, &mut cfg.note);
         cfg.steps_override = self
@@ -236,7 +230,7 @@ impl RunOptions {
 }
 
 /// Append `msg` to a run's note, `; `-separated.
-fn add_note(note: &mut String, msg: String) {
+pub(crate) fn add_note(note: &mut String, msg: String) {
     *note = if note.is_empty() {
         msg
     } else {

@@ -128,6 +128,22 @@ pub fn clip_global_norm<M: Module>(
             }
         }
     }
+    let mut v = SquaredNorm { grads, sum: None };
+    model.visit(&mut v);
+    let norm = v.sum?.sqrt();
+    // max / (norm + 1e-6) where the norm is finite and above max, else 1: the same f32
+    // arithmetic the host did when it read the norm.
+    let clip = norm
+        .clone()
+        .is_finite()
+        .bool_and(norm.clone().greater_elem(max_norm));
+    let ratio = norm.zeros_like().add_scalar(max_norm) / norm.clone().add_scalar(1e-6f32);
+    scale_gradients(model, grads, norm.ones_like().mask_where(clip, ratio));
+    Some(norm)
+}
+
+/// Every gradient of `model`'s parameters in `grads` times `scale` (one value, on the device).
+pub fn scale_gradients<M: Module>(model: &M, grads: &mut GradientsParams, scale: Tensor<1>) {
     struct Scale<'a> {
         grads: &'a mut GradientsParams,
         scale: Tensor<1>,
@@ -145,24 +161,11 @@ pub fn clip_global_norm<M: Module>(
             }
         }
     }
-    let mut v = SquaredNorm { grads, sum: None };
-    model.visit(&mut v);
-    let norm = v.sum?.sqrt();
-    // max / (norm + 1e-6) where the norm is finite and above max, else 1: the same f32
-    // arithmetic the host did when it read the norm.
-    let clip = norm
-        .clone()
-        .is_finite()
-        .bool_and(norm.clone().greater_elem(max_norm));
-    let ratio = norm.zeros_like().add_scalar(max_norm) / norm.clone().add_scalar(1e-6f32);
-    let scale = norm.ones_like().mask_where(clip, ratio);
-    let mut s = Scale {
+    model.visit(&mut Scale {
         grads,
         scale,
         ids: Vec::new(),
-    };
-    model.visit(&mut s);
-    Some(norm)
+    });
 }
 
 /// One optimiser step of `model` with `grads`, the global gradient norm first clipped to

@@ -39,9 +39,18 @@ impl From<Tensor<1>> for StepLoss {
 }
 
 impl StepLoss {
-    /// The gradients of `model`'s parameters.
-    fn gradients<M: Module>(self, model: &M) -> GradientsParams {
+    /// The gradients of `model`'s parameters. A graph's loss is first multiplied by
+    /// `loss_scale` and its gradients divided by it again (f16's loss scaling,
+    /// [`crate::train::precision`]; 1: neither).
+    fn gradients<M: Module>(self, model: &M, loss_scale: f32) -> GradientsParams {
         match self {
+            StepLoss::Graph(l) if loss_scale != 1.0 => {
+                let unscale = l.clone().detach().ones_like().div_scalar(loss_scale);
+                let mut grads =
+                    GradientsParams::from_grads(l.mul_scalar(loss_scale).backward(), model);
+                crate::train::adam::scale_gradients(model, &mut grads, unscale);
+                grads
+            }
             StepLoss::Graph(l) => GradientsParams::from_grads(l.backward(), model),
             StepLoss::Computed { gradients, .. } => gradients,
         }
@@ -362,7 +371,7 @@ where
         }
         .into();
         losses.push(step, &step_loss);
-        let mut grads = step_loss.gradients(&model);
+        let mut grads = step_loss.gradients(&model, cfg.precision.loss_scale());
         let mut clip = cfg.grad_clip_norm;
         if hooks.wants_gradients() {
             if let Some(max) = clip.take() {

@@ -59,6 +59,23 @@ fn neurokin_trains_the_same_on_wgpu() {
     same_on_both(neurokin_run("quick").unwrap(), 6, 1e-3, 1e-3);
 }
 
+/// Autocast in f16 (`--precision f16`) trains the same on wgpu as on the CPU, where the device
+/// computes in f16; where it cannot, the precision is refused in one line.
+#[test]
+fn f16_autocast_trains_the_same_on_wgpu() {
+    let device = selfmodel::core::device::select(DeviceChoice::Wgpu).unwrap();
+    let f16 = selfmodel::train::precision::Precision::F16;
+    if let Err(e) = f16.check(&device) {
+        let line = e.to_string();
+        eprintln!("this device has no f16: {line}");
+        assert!(line.contains("f16") && !line.contains('\n'), "{line}");
+        return;
+    }
+    let mut cfg = neurokin_run("quick").unwrap();
+    cfg.train.precision = f16;
+    same_on_both(cfg, 6, 1e-2, 1e-2);
+}
+
 /// K-3DGS trains dense on a GPU (no read of the projected Gaussians at every step): the
 /// CPU trains dense here too, so both run the same arithmetic.
 #[test]

@@ -45,6 +45,9 @@ pub enum Part {
     Counts,
     Decoders,
     Neurokin,
+    /// NeuroKin's paper preset at batch 256 in each precision the GPU computes in
+    /// (`ablation_precision`: f32, bf16, f16, flex32).
+    Precision,
     K3dgs,
     Equivalence,
     Fill,
@@ -57,10 +60,11 @@ pub enum Part {
 pub const SPLIT_WORK: [usize; 5] = [0, 1 << 18, 1 << 20, 1 << 22, 1 << 30];
 
 impl Part {
-    pub const ALL: [Part; 8] = [
+    pub const ALL: [Part; 9] = [
         Part::Decoders,
         Part::Neurokin,
         Part::Equivalence,
+        Part::Precision,
         Part::Counts,
         Part::K3dgs,
         Part::Fill,
@@ -153,6 +157,7 @@ pub fn run(check: &GpuCheck) -> Result<()> {
             Part::Counts => counts(check, &mut console),
             Part::Decoders => decoders(check, &mut console),
             Part::Neurokin => neurokin(check, &mut console),
+            Part::Precision => precision(check, &mut console),
             Part::K3dgs => k3dgs(check, &mut console),
             Part::Equivalence => equivalence(check, &mut console),
             Part::Fill => fill(check, &mut console),
@@ -213,6 +218,7 @@ pub fn neurokin_step_counts(
     });
     let set = cfg.training_set(&set);
     let train = TrainConfig {
+        precision: Default::default(),
         steps,
         batch,
         learning_rate: 1e-3,
@@ -472,6 +478,22 @@ fn neurokin(check: &GpuCheck, console: &mut Console) -> Result<()> {
         ..opts
     };
     experiment("neurokin", &big, &check.out, "neurokin_b256", console)
+}
+
+/// The training precisions side by side at batch 256 (where a step is bound by arithmetic, not
+/// launches, and tensor cores can tell).
+fn precision(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    let opts = RunOptions {
+        batch: Some(256),
+        ..gpu_options(check)
+    };
+    experiment(
+        "ablation_precision",
+        &opts,
+        &check.out,
+        "precision_b256",
+        console,
+    )
 }
 
 fn k3dgs(check: &GpuCheck, console: &mut Console) -> Result<()> {
