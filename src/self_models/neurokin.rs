@@ -511,10 +511,6 @@ impl SelfModel for NeuroKinConfig {
         self.image
     }
 
-    fn autocasts(&self) -> bool {
-        true
-    }
-
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let set = self.training_set(fit.train_set);
@@ -556,6 +552,10 @@ impl SelfModel for NeuroKinConfig {
         model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
         let run = SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?;
         Ok(run.shorten(200, 32))
+    }
+
+    fn autocasts(&self) -> bool {
+        true
     }
 }
 

@@ -268,10 +268,6 @@ impl SelfModel for ResNeuroKinDConfig {
         self.image
     }
 
-    fn autocasts(&self) -> bool {
-        true
-    }
-
     fn fit(&self, fit: &Fit) -> Result<Trained> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let w = self.depth_weight;
@@ -304,6 +300,10 @@ impl SelfModel for ResNeuroKinDConfig {
 
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
         resneurokin_d_run(preset)
+    }
+
+    fn autocasts(&self) -> bool {
+        true
     }
 }
 
