@@ -74,8 +74,10 @@ impl PoseModel {
             avoid: valid,
         } = *how;
         let k = k.max(1);
-        // Targets refined between two questions to `stop`: about 4,096 answers.
-        let per_check = (4096 / k).max(1);
+        // Targets refined between two questions to `stop`: about 256 answers, a few
+        // hundredths of a second on 2 cores where a hard target takes a millisecond (1,024 took
+        // over a second with the cores shared three ways).
+        let per_check = (256 / k).max(1);
         let ranges = &self.saved.ranges;
         let paths = chain.tip_paths();
         let mut answers: Vec<Vec<PoseSolution>> = Vec::with_capacity(targets.len());
