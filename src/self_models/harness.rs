@@ -460,6 +460,7 @@ impl Evaluation<'_> {
                 renderer_note.as_str(),
                 trained.note.as_str(),
                 cfg.note.as_str(),
+                &cfg.train.precision.note(),
             ]
             .iter()
             .filter(|n| !n.is_empty())

@@ -23,6 +23,7 @@ use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::neurokin::NeuroKinConfig;
 use crate::self_models::{harness::run, run_config::SelfModelRun};
 use crate::train::precision::Precision;
+use clap::ValueEnum;
 
 /// One NeuroKin run, as the ablations vary it.
 type NeuroKinRun = SelfModelRun<NeuroKinConfig>;
@@ -189,27 +190,17 @@ impl Ablation {
                     })
                     .collect()
             }
-            Ablation::Precision => [
-                Precision::F32,
-                Precision::Bf16,
-                Precision::F16,
-                Precision::Flex32,
-            ]
-            .into_iter()
-            .map(|p| {
-                s(
-                    p.to_string(),
-                    None,
-                    None,
-                    Box::new(move |c: &mut NeuroKinRun| {
-                        c.train.precision = p;
-                        if !p.is_f32() {
-                            crate::studies::run::add_note(&mut c.note, p.note());
-                        }
-                    }),
-                )
-            })
-            .collect(),
+            Ablation::Precision => Precision::value_variants()
+                .iter()
+                .map(|&p| {
+                    s(
+                        p.to_string(),
+                        None,
+                        None,
+                        Box::new(move |c: &mut NeuroKinRun| c.train.precision = p),
+                    )
+                })
+                .collect(),
         }
     }
 }

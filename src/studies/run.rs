@@ -173,7 +173,6 @@ impl RunOptions {
                 )));
             }
             cfg.train.precision = self.precision;
-            add_note(&mut cfg.note, self.precision.note());
         }
         let rebatched = self.override_batch(&mut cfg.train, &mut cfg.note);
         cfg.steps_override = self
@@ -230,7 +229,7 @@ impl RunOptions {
 }
 
 /// Append `msg` to a run's note, `; `-separated.
-pub(crate) fn add_note(note: &mut String, msg: String) {
+fn add_note(note: &mut String, msg: String) {
     *note = if note.is_empty() {
         msg
     } else {

@@ -3,12 +3,14 @@
 //! the parameters cast to the lower dtype, the batch's inputs cast too, and the gradients flow
 //! back through the casts into the f32 masters. Losses widen their inputs to f32
 //! ([`widened`]), and BatchNorm runs in f32 ([`crate::kernels::batch_norm`]), as autocast keeps
-//! reductions and normalisation in f32; f16 scales the loss ([`LOSS_SCALE`]). On a GPU, f16 and bf16 matrix products reach tensor
-//! cores (f32 through Vulkan does not); `flex32` stores f32 and lets the GPU compute at f16's
-//! precision. Our CPU and GPU kernels take f32 only: a lower dtype runs on burn's own ops.
+//! reductions and normalisation in f32; f16 scales the loss ([`LOSS_SCALE`]). On a GPU, f16
+//! and bf16 matrix products reach tensor cores (f32 through Vulkan does not); `flex32` stores
+//! f32 and lets the GPU compute at f16's precision. Our CPU and GPU kernels take f32 only: a
+//! lower dtype runs on burn's own ops.
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{DType, Device, FloatDType, Tensor};
+use clap::ValueEnum;
 
 use crate::core::error::{Error, Result};
 
@@ -38,7 +40,7 @@ pub const LOSS_SCALE: f32 = 1024.0;
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
-    /// Everything in f32 (the default, and every committed result).
+    /// Everything in f32 (the default).
     #[default]
     F32,
     /// bfloat16: f32's range, 8 bits of mantissa.
@@ -61,7 +63,7 @@ impl Precision {
         if device.supports_dtype(self.dtype()) {
             return Ok(());
         }
-        let can: Vec<String> = [Self::F32, Self::Bf16, Self::F16, Self::Flex32]
+        let can: Vec<String> = Self::value_variants()
             .iter()
             .filter(|p| device.supports_dtype(p.dtype()))
             .map(|p| p.to_string())
@@ -72,8 +74,11 @@ impl Precision {
         )))
     }
 
-    /// What a results row says of a run in this precision.
+    /// What a results row says of a run in this precision (nothing in f32).
     pub fn note(&self) -> String {
+        if self.is_f32() {
+            return String::new();
+        }
         format!("trained in {self} (autocast: f32 master weights and losses), evaluated in f32")
     }
 
@@ -121,14 +126,11 @@ impl Precision {
     }
 }
 
+/// As `--precision` names it.
 impl std::fmt::Display for Precision {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Precision::F32 => "f32",
-            Precision::Bf16 => "bf16",
-            Precision::F16 => "f16",
-            Precision::Flex32 => "flex32",
-        })
+        let name = self.to_possible_value().expect("no variant is skipped");
+        f.write_str(name.get_name())
     }
 }
 
