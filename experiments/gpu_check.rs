@@ -1,11 +1,13 @@
 //! The GPU check of issue 48 in one binary (`studies::bench::gpu_check`): built here with
-//! `--features wgpu`, carried to a GPU machine and run there by `scripts/gpu_check.sh`.
+//! `--features wgpu` (or `wgpu,cuda`: both backends in one binary), carried to a GPU machine and
+//! run there by `scripts/gpu_check.sh`.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
 use selfmodel::cli::run_main;
+use selfmodel::core::device::DeviceChoice;
 use selfmodel::studies::bench::gpu_check::{GpuCheck, Part, cpu_decoders, k3dgs_cpu, run};
 
 /// Measure selfmodel on a GPU beside PyTorch on the same GPU, and on its CPU at several
@@ -32,6 +34,9 @@ struct Args {
     /// Tiny models and the quick presets: a smoke test of the check (on lavapipe).
     #[arg(long)]
     quick: bool,
+    /// The GPU backend to measure [default: cuda where compiled in, else wgpu].
+    #[arg(long, value_enum)]
+    device: Option<DeviceChoice>,
     /// Internal: one measurement in a process of its own thread count.
     #[arg(long, hide = true)]
     child: Option<String>,
@@ -50,6 +55,7 @@ fn main() -> ExitCode {
             parts: args.parts.clone().unwrap_or_else(|| Part::ALL.to_vec()),
             quick: args.quick,
             exe,
+            device: args.device.unwrap_or_else(DeviceChoice::gpu),
         };
         match args.child.as_deref() {
             None => run(&check),

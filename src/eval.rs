@@ -2,7 +2,7 @@
 //! inference speed (warm-up, synchronised, median of repeats) and the machine's compute peak.
 
 pub mod compute_peak;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 pub mod device_counts;
 pub mod evaluation;
 pub mod inference_speed;

@@ -6,7 +6,7 @@
 pub mod bilinear_resize;
 pub mod conv_gemm;
 pub mod cpu_extension;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 pub mod cube;
 pub mod linear;
 pub mod parallel_output;
@@ -29,7 +29,7 @@ pub fn batch_norm<const D: usize>(
         let (own, dtype): (FloatDType, FloatDType) = (own.into(), dtype.into());
         return batch_norm(norm, x.cast(own), relu).cast(dtype);
     }
-    #[cfg(feature = "wgpu")]
+    #[cfg(feature = "cube")]
     if let Some(y) = cube::extension::batch_norm(norm, &x, relu) {
         return y;
     }

@@ -19,6 +19,9 @@ pub enum DeviceChoice {
     Ndarray,
     /// The best GPU wgpu finds (feature `wgpu`; `CUBECL_WGPU_DEFAULT_DEVICE=Cpu` for lavapipe).
     Wgpu,
+    /// The first NVIDIA GPU, through burn's CUDA backend (feature `cuda`, built by
+    /// `scripts/build_cuda.sh`; needs the NVIDIA driver at run time).
+    Cuda,
 }
 
 impl std::fmt::Display for DeviceChoice {
@@ -27,7 +30,24 @@ impl std::fmt::Display for DeviceChoice {
             DeviceChoice::Cpu => "cpu",
             DeviceChoice::Ndarray => "ndarray",
             DeviceChoice::Wgpu => "wgpu",
+            DeviceChoice::Cuda => "cuda",
         })
+    }
+}
+
+impl DeviceChoice {
+    /// A GPU backend (wgpu or CUDA): our CubeCL kernels, lazy tensors, a device to synchronise.
+    pub fn is_gpu(self) -> bool {
+        matches!(self, DeviceChoice::Wgpu | DeviceChoice::Cuda)
+    }
+
+    /// The GPU backend this build runs first: CUDA where compiled in, else wgpu.
+    pub fn gpu() -> DeviceChoice {
+        if cfg!(feature = "cuda") {
+            DeviceChoice::Cuda
+        } else {
+            DeviceChoice::Wgpu
+        }
     }
 }
 
@@ -36,6 +56,9 @@ pub fn available() -> Vec<DeviceChoice> {
     let mut v = Vec::new();
     if cfg!(feature = "flex") {
         v.push(DeviceChoice::Cpu);
+    }
+    if cfg!(feature = "cuda") {
+        v.push(DeviceChoice::Cuda);
     }
     if cfg!(feature = "wgpu") {
         v.push(DeviceChoice::Wgpu);
@@ -79,6 +102,12 @@ pub fn select(choice: DeviceChoice) -> Result<Device> {
             return Ok(Device::wgpu(burn::tensor::DeviceKind::DefaultDevice));
             #[cfg(not(feature = "wgpu"))]
             return Err(missing("wgpu"));
+        }
+        DeviceChoice::Cuda => {
+            #[cfg(feature = "cuda")]
+            return Ok(Device::cuda(0));
+            #[cfg(not(feature = "cuda"))]
+            return Err(missing("cuda"));
         }
     }
 }

@@ -1,7 +1,8 @@
 //! What a GPU does for a piece of work, counted: kernel launches, host reads (device to
 //! host: each one waits for the device to finish what was queued) and uploads (host to
-//! device), from the `tracing` spans of burn's GPU backend (burn-cubecl's `float_into_data`
-//! and `float_from_data`, cubecl's `launch_inner`). Behind the `wgpu` feature.
+//! device), each launch's workgroups and, for our kernels, the elements it works over, from
+//! the `tracing` spans of burn's GPU backend (burn-cubecl's `float_into_data` and
+//! `float_from_data`, cubecl's `launch_inner`). Behind the `cube` feature (`wgpu`, `cuda`).
 //!
 //! A process-wide subscriber is installed on first use and counts for the whole process, so
 //! a region is measured as the difference of two [`snapshot`]s taken on either side of it
@@ -83,19 +84,63 @@ struct Counter {
     next_id: AtomicU64,
 }
 
-/// Reads the `kernel.name` field of a launch span.
-struct KernelName(Option<String>);
+/// Reads the `kernel.name` and `count` (the workgroups, `(x, y, z)`) fields of a launch span.
+#[derive(Default)]
+struct LaunchFields {
+    name: Option<String>,
+    count: Option<String>,
+}
 
-impl tracing::field::Visit for KernelName {
+impl tracing::field::Visit for LaunchFields {
     fn record_debug(&mut self, field: &tracing::field::Field, value: &dyn std::fmt::Debug) {
-        if field.name() == "kernel.name" {
-            self.0 = Some(format!("{value:?}"));
+        match field.name() {
+            "kernel.name" => self.name = Some(format!("{value:?}")),
+            "count" => self.count = Some(format!("{value:?}")),
+            _ => {}
         }
     }
     fn record_str(&mut self, field: &tracing::field::Field, value: &str) {
         if field.name() == "kernel.name" {
-            self.0 = Some(value.to_string());
+            self.name = Some(value.to_string());
         }
+    }
+}
+
+/// The workgroups of a launch from its `count` field (cubecl's `CubeCount` as `Debug` prints
+/// it): `(x, y, z)` -> `x·y·z`; `None` for a count read from a buffer (`binding`).
+pub fn workgroups(count: &str) -> Option<u64> {
+    let inside = count.trim().strip_prefix('(')?.strip_suffix(')')?;
+    inside
+        .split(',')
+        .map(|d| d.trim().parse::<u64>().ok())
+        .product()
+}
+
+/// One kernel launch, as [`launch_log`] keeps it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Launch {
+    /// The kernel's short name ([`short_name`]).
+    pub kernel: String,
+    /// The operations of burn's fusion block it ran for (`?` outside one).
+    pub operations: String,
+    /// Its workgroups (`None`: counted on the device).
+    pub workgroups: Option<u64>,
+    /// The elements it works over, where the launcher says (ours:
+    /// `kernels::cube::over_elements`); `None` for burn's kernels.
+    pub elements: Option<u64>,
+}
+
+impl std::fmt::Display for Launch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let or_q = |v: Option<u64>| v.map_or("?".to_string(), |v| v.to_string());
+        write!(
+            f,
+            "{} <- {} ({} workgroups, {} elements)",
+            self.kernel,
+            self.operations,
+            or_q(self.workgroups),
+            or_q(self.elements)
+        )
     }
 }
 
@@ -138,15 +183,21 @@ impl Subscriber for &'static Counter {
         match span.metadata().name() {
             LAUNCH => {
                 self.launches.fetch_add(1, Ordering::Relaxed);
-                let mut name = KernelName(None);
-                span.record(&mut name);
-                let name = short_name(name.0.as_deref().unwrap_or("?"));
+                let mut fields = LaunchFields::default();
+                span.record(&mut fields);
+                let name = short_name(fields.name.as_deref().unwrap_or("?"));
                 let block = BLOCK.with(|b| b.borrow().clone());
-                let source = format!("{name} <- {}", block.as_deref().unwrap_or("?"));
+                let operations = block.unwrap_or_else(|| "?".into());
+                let source = format!("{name} <- {operations}");
                 if let Some(log) = LOG.get() {
                     let mut log = log.lock().unwrap_or_else(|e| e.into_inner());
                     if log.len() < 100_000 {
-                        log.push(source.clone());
+                        log.push(Launch {
+                            kernel: name.clone(),
+                            operations,
+                            workgroups: fields.count.as_deref().and_then(workgroups),
+                            elements: crate::kernels::cube::launch_elements(),
+                        });
                     }
                 }
                 *self
@@ -269,8 +320,8 @@ impl burn::backend::fusion::observer::FusionObserver for BlockNames {
 
 static COUNTER: OnceLock<&'static Counter> = OnceLock::new();
 
-/// Every launch in order (`kernel <- operations`), once [`log_launches`] was called.
-static LOG: OnceLock<Mutex<Vec<String>>> = OnceLock::new();
+/// Every launch in order, once [`log_launches`] was called.
+static LOG: OnceLock<Mutex<Vec<Launch>>> = OnceLock::new();
 
 /// Keep every launch from now on, in order, for [`launch_log`] (bounded: 100,000 launches).
 pub fn log_launches() {
@@ -278,7 +329,7 @@ pub fn log_launches() {
 }
 
 /// The launches kept since [`log_launches`], in order.
-pub fn launch_log() -> Vec<String> {
+pub fn launch_log() -> Vec<Launch> {
     LOG.get()
         .map(|l| l.lock().unwrap_or_else(|e| e.into_inner()).clone())
         .unwrap_or_default()

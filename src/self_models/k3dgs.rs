@@ -110,7 +110,7 @@ impl TrainSplatting {
         match self {
             TrainSplatting::Culled => Some(cull_sigmas),
             TrainSplatting::Dense => None,
-            TrainSplatting::Auto => (device != DeviceChoice::Wgpu).then_some(cull_sigmas),
+            TrainSplatting::Auto => (!device.is_gpu()).then_some(cull_sigmas),
         }
     }
 }

@@ -66,7 +66,7 @@ impl burn::optim::Optimizer for Adam {
         grad: Tensor<D>,
         state: Option<Self::State<D>>,
     ) -> (Tensor<D>, Option<Self::State<D>>) {
-        #[cfg(feature = "wgpu")]
+        #[cfg(feature = "cube")]
         {
             if fused::gather_one(self, lr, &tensor, &grad, &state) {
                 return (tensor, state);
@@ -186,7 +186,7 @@ pub fn step<M: Module>(
     grads: GradientsParams,
     clip: Option<f32>,
 ) -> M {
-    #[cfg(feature = "wgpu")]
+    #[cfg(feature = "cube")]
     if let Some(fused) = fused::gather(optim, lr, &model, &grads) {
         return fused.apply(optim, model, grads, clip);
     }
@@ -197,5 +197,5 @@ pub fn step<M: Module>(
     optim.step(lr, model, grads)
 }
 
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 mod fused;

@@ -29,7 +29,7 @@ pub fn bce_with_logits<const D: usize>(z: Tensor<D>, y: Tensor<D>) -> Tensor<1> 
     if let Some(loss) = crate::kernels::cpu_extension::bce_with_logits(&z, &y) {
         return loss;
     }
-    #[cfg(feature = "wgpu")]
+    #[cfg(feature = "cube")]
     if let Some(loss) = crate::kernels::cube::extension::bce_with_logits(&z, &y) {
         return loss;
     }

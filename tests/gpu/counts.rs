@@ -6,6 +6,7 @@
 //! intervals: this test fails when a read appears in any other step. Part of `tests/gpu.rs`:
 //! `cargo test --release --features wgpu --test gpu -- counts --nocapture` prints the counts.
 
+use selfmodel::core::device::DeviceChoice;
 use selfmodel::studies::bench::gpu_check::neurokin_step_counts;
 
 /// Launches a NeuroKin step may take here (the log intervals' loss read included): issue 58's
@@ -18,7 +19,8 @@ fn a_neurokin_training_step_reads_nothing_back() {
     // 16 (the quick preset's, as the equivalence test trains), an epoch every 4 steps.
     let (log_every, steps) = (4, 12);
     selfmodel::eval::device_counts::log_launches();
-    let (per_step, log) = neurokin_step_counts("quick", 16, steps, log_every).unwrap();
+    let (per_step, log) =
+        neurokin_step_counts(DeviceChoice::Wgpu, "quick", 16, steps, log_every).unwrap();
     if std::env::var_os("SELFMODEL_PRINT_LAUNCHES").is_some() {
         // The last step's launches in order.
         let all = selfmodel::eval::device_counts::launch_log();
@@ -68,4 +70,67 @@ fn a_neurokin_training_step_reads_nothing_back() {
     for (name, count) in &sources {
         eprintln!("  {count:>4} x {name}");
     }
+}
+
+/// Elements above which a kernel must fill the GPU (issue 71's guard).
+const LARGE: u64 = 1 << 20;
+/// The workgroups such a kernel must launch at least: several per multiprocessor of an H100
+/// or H200 (132), where a workgroup a channel ran 16 to 128.
+const FILLING: u64 = 1024;
+
+#[test]
+fn a_neurokin_step_at_batch_256_fills_the_gpu_with_every_large_kernel() {
+    // The quick model at batch 256: its last layers' tensors hold millions of elements.
+    let (log_every, steps) = (3, 3);
+    selfmodel::eval::device_counts::log_launches();
+    let before = selfmodel::eval::device_counts::launch_log().len();
+    let (per_step, _) =
+        neurokin_step_counts(DeviceChoice::Wgpu, "quick", 256, steps, log_every).unwrap();
+    let all = selfmodel::eval::device_counts::launch_log();
+    // The steps after the first (which compiles and tunes).
+    let first = per_step[0].launches as usize;
+    let counted = &all[before + first..];
+    assert!(!counted.is_empty(), "no launch logged");
+    let measured: Vec<_> = counted.iter().filter(|l| l.elements.is_some()).collect();
+    assert!(
+        measured.len() >= 20,
+        "only {} of {} launches say their elements: our kernels' launchers name them",
+        measured.len(),
+        counted.len()
+    );
+    let mut large: Vec<_> = measured
+        .iter()
+        .filter(|l| l.elements.unwrap_or(0) > LARGE)
+        .collect();
+    large.sort_by_key(|l| l.workgroups);
+    eprintln!(
+        "{} launches of our kernels over more than 2^20 elements, fewest workgroups first:",
+        large.len()
+    );
+    for l in large.iter().take(12) {
+        eprintln!("  {l}");
+    }
+    assert!(
+        large.len() >= 10,
+        "only {} large launches: the step is smaller than this guard needs",
+        large.len()
+    );
+    let short: Vec<String> = large
+        .iter()
+        .filter(|l| l.workgroups.is_none_or(|w| w < FILLING))
+        .map(|l| l.to_string())
+        .collect();
+    assert!(
+        short.is_empty(),
+        "kernels over more than 2^20 elements launched fewer than {FILLING} workgroups (or an unknown count):\n{}",
+        short.join("\n")
+    );
+}
+
+#[test]
+fn a_launch_count_is_read_as_cubecl_prints_it() {
+    use selfmodel::eval::device_counts::workgroups;
+    assert_eq!(workgroups("(16, 2, 1)"), Some(32));
+    assert_eq!(workgroups("(2048, 1, 1)"), Some(2048));
+    assert_eq!(workgroups("binding"), None);
 }

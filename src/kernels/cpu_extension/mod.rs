@@ -342,7 +342,7 @@ pub fn conv2d(
     options: ConvOptions<2>,
 ) -> Tensor<4> {
     if !on_flex(&x) {
-        #[cfg(feature = "wgpu")]
+        #[cfg(feature = "cube")]
         if let Some(b) = &bias
             && let Some(y) = crate::kernels::cube::convolution::conv2d(&x, &weight, b, &options)
         {
@@ -363,7 +363,7 @@ pub fn conv_transpose2d(
     options: ConvTransposeOptions<2>,
 ) -> Tensor<4> {
     if !on_flex(&x) {
-        #[cfg(feature = "wgpu")]
+        #[cfg(feature = "cube")]
         if let Some(b) = &bias
             && let Some(y) =
                 crate::kernels::cube::convolution::conv_transpose2d(&x, &weight, b, &options)

@@ -27,7 +27,7 @@ use super::batch_norm::{
 };
 use super::convolution::{Conv2dLayer, ConvTranspose2dLayer};
 use super::im2col::{Fold, Patches};
-use super::{batch_norm, convolution, im2col, loss};
+use super::{batch_norm, channel_reduce, convolution, im2col, loss};
 
 /// A `[channels]` tensor's spec for an `[N, C, ...]` input.
 fn per_channel(x: &TensorSpec) -> TensorSpec {
@@ -267,7 +267,7 @@ impl GpuKernelOps for CubeBackend {
     }
 
     fn channel_sums(t: FloatTensor<Self>) -> FloatTensor<Self> {
-        im2col::launch_channel_sums(t)
+        channel_reduce::launch_channel_sums(t)
     }
 
     fn col2im(cols: FloatTensor<Self>, bias: FloatTensor<Self>, fold: Fold) -> FloatTensor<Self> {

@@ -1,6 +1,7 @@
 //! Convolutions as matrix products, the GPU kernels around the product: [`columns`] (im2col:
 //! the patches a convolution multiplies, `[N, h·w, C·k·k]`), [`col2im`] (the sum of columns
-//! back into an image, with a bias) and [`channel_sums`] (a layer's bias gradient).
+//! back into an image, with a bias); a layer's bias gradient is
+//! [`super::channel_reduce::launch_channel_sums`].
 //!
 //! For a patch grid of `h × w`, kernel `k`, stride `s` and padding `p`,
 //! `cols[n, (i, j), (c, ky, kx)] = t[n, c, i·s − p + ky, j·s − p + kx]` (0 outside):
@@ -17,9 +18,7 @@ use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use super::batch_norm::channel_total;
-use super::multi_tensor::{BLOCK, at};
-use super::{elementwise, empty_f32};
+use super::{elementwise, empty_f32, over_elements};
 
 /// The patch grid as the kernels read it (see [`Patches`]).
 #[derive(CubeLaunch, CubeType)]
@@ -49,8 +48,12 @@ pub fn columns(t: &Tensor<f32>, cols: &mut Tensor<f32>, grid: PatchGrid) {
         let (oyp, oxp) = (iy * stride + ky, ix * stride + kx);
         let mut v = 0.0;
         if oyp >= padding && oxp >= padding && oyp - padding < out_h && oxp - padding < out_w {
-            let i = ((n * c_out + co) * out_h + oyp - padding) * out_w + oxp - padding;
-            v = t[at(t, i)];
+            // Through the image's strides (a channels-last view is read in place), from the
+            // indices already at hand: no division by its shape per element.
+            v = t[n * t.stride(0)
+                + co * t.stride(1)
+                + (oyp - padding) * t.stride(2)
+                + (oxp - padding) * t.stride(3)];
         }
         cols[k] = v;
     }
@@ -77,7 +80,6 @@ pub fn col2im(
         let oy = (k / out_w) % out_h;
         let co = (k / (out_w * out_h)) % c_out;
         let n = k / (out_w * out_h * c_out);
-        let width = c_out * kernel * kernel;
         let mut acc = 0.0;
         if with_bias {
             acc = bias[co];
@@ -91,26 +93,16 @@ pub fn col2im(
                     let tx = ox + padding;
                     if tx >= kx && (tx - kx) % stride == 0 && (tx - kx) / stride < in_w {
                         let ix = (tx - kx) / stride;
-                        let i = (n * in_h * in_w + iy * in_w + ix) * width
-                            + (co * kernel + ky) * kernel
-                            + kx;
-                        acc += cols[at(cols, i)];
+                        // Through the columns' strides (a product's transposed output is read
+                        // in place).
+                        acc += cols[n * cols.stride(0)
+                            + (iy * in_w + ix) * cols.stride(1)
+                            + ((co * kernel + ky) * kernel + kx) * cols.stride(2)];
                     }
                 }
             }
         }
         y[k] = acc;
-    }
-}
-
-/// `sums[c] = Σ t[n, c, ...]` (any strides): a layer's bias gradient.
-#[cube(launch)]
-pub fn channel_sums(t: &Tensor<f32>, sums: &mut Tensor<f32>, #[comptime] block: usize) {
-    let channels = t.shape(1);
-    let plane = t.len() / (t.shape(0) * channels);
-    let sum = channel_total(t, 0.0, channels, plane, false, block);
-    if UNIT_POS == 0 {
-        sums[CUBE_POS_X as usize] = sum;
     }
 }
 
@@ -156,14 +148,16 @@ pub fn launch_columns(t: CubeTensor, patches: Patches) -> CubeTensor {
     let shape = [dims[0], h * w, patches.width(dims[1])];
     let cols = empty_f32(&t, shape);
     let (cube_count, cube_dim) = elementwise(&t, shape.iter().product());
-    columns::launch(
-        &t.client,
-        cube_count,
-        cube_dim,
-        t.clone().into_tensor_arg(),
-        cols.clone().into_tensor_arg(),
-        patches.launch_arg(),
-    );
+    over_elements(shape.iter().product(), || {
+        columns::launch(
+            &t.client,
+            cube_count,
+            cube_dim,
+            t.clone().into_tensor_arg(),
+            cols.clone().into_tensor_arg(),
+            patches.launch_arg(),
+        )
+    });
     cols
 }
 
@@ -180,30 +174,17 @@ pub fn launch_col2im(
     // Without a bias the kernel reads none: any other buffer stands in (one element).
     let with_bias = bias.is_some();
     let bias = bias.unwrap_or_else(|| empty_f32(&cols, [1]));
-    col2im::launch(
-        &cols.client,
-        cube_count,
-        cube_dim,
-        cols.clone().into_tensor_arg(),
-        bias.into_tensor_arg(),
-        y.clone().into_tensor_arg(),
-        patches.launch_arg(),
-        with_bias,
-    );
+    over_elements(cols.meta.num_elements(), || {
+        col2im::launch(
+            &cols.client,
+            cube_count,
+            cube_dim,
+            cols.clone().into_tensor_arg(),
+            bias.into_tensor_arg(),
+            y.clone().into_tensor_arg(),
+            patches.launch_arg(),
+            with_bias,
+        )
+    });
     y
-}
-
-/// [`channel_sums`] of `t` `[N, C, ...]`.
-pub fn launch_channel_sums(t: CubeTensor) -> CubeTensor {
-    let channels = t.meta.shape()[1];
-    let sums = empty_f32(&t, [channels]);
-    channel_sums::launch(
-        &t.client,
-        CubeCount::new_1d(channels as u32),
-        CubeDim::new_1d(BLOCK as u32),
-        t.clone().into_tensor_arg(),
-        sums.clone().into_tensor_arg(),
-        BLOCK,
-    );
-    sums
 }

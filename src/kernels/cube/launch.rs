@@ -6,11 +6,20 @@ use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{self, AdamScalarsLaunch, BLOCK};
-use super::{contiguous, elementwise, empty_f32};
+use super::{contiguous, elementwise, empty_f32, over_elements};
 use crate::kernels::pointwise::AdamStep;
 
-/// Workgroups a tensor's sum of squares is split over (each sums a strided share).
-pub const GROUPS: usize = 32;
+/// Workgroups a tensor's sum of squares is split over: enough that the largest tensor's
+/// fill the GPU (a few thousand elements each), at least 8 and at most 512 (a smaller tensor's
+/// spare workgroups find nothing to do and end at once).
+fn groups(tensors: &[CubeTensor]) -> usize {
+    let largest = tensors
+        .iter()
+        .map(|t| t.meta.num_elements())
+        .max()
+        .unwrap_or(0);
+    largest.div_ceil(BLOCK * 16).clamp(8, 512)
+}
 
 /// Storage buffers one launch may bind: the device's limit, less one for the kernel's own
 /// metadata.
@@ -26,13 +35,15 @@ fn f32_only(tensors: &[CubeTensor]) {
     );
 }
 
-/// The sum of squares of each tensor's elements, as `GROUPS` partial sums a tensor in one
-/// `[tensors.len() * GROUPS]` tensor (every value of the global norm, in a fixed order).
+/// The sum of squares of every element of `tensors`, `[1]`: partial sums over
+/// [`groups`] workgroups a tensor, then one workgroup adds them up in a fixed order.
 pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
     assert!(!tensors.is_empty(), "the sum of squares of no tensor");
     f32_only(&tensors);
     let first = tensors[0].clone();
-    let partials = empty_f32(&first, [tensors.len() * GROUPS]);
+    let groups = groups(&tensors);
+    let elements: usize = tensors.iter().map(|t| t.meta.num_elements()).sum();
+    let partials = empty_f32(&first, [tensors.len() * groups]);
     // Each launch binds its tensors (any strides) and the partials.
     let per_launch = max_bindings(&first) - 1;
     for (c, chunk) in tensors.chunks(per_launch).enumerate() {
@@ -40,23 +51,34 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
         for t in chunk {
             seq.push(t.clone().into_tensor_arg());
         }
-        multi_tensor::sum_of_squares::launch(
-            &first.client,
-            CubeCount::new_2d(GROUPS as u32, chunk.len() as u32),
-            CubeDim::new_1d(BLOCK as u32),
-            seq,
-            partials.clone().into_tensor_arg(),
-            (c * per_launch) as u32,
-            BLOCK,
-        );
+        over_elements(elements, || {
+            multi_tensor::sum_of_squares::launch(
+                &first.client,
+                CubeCount::new_2d(groups as u32, chunk.len() as u32),
+                CubeDim::new_1d(BLOCK as u32),
+                seq,
+                partials.clone().into_tensor_arg(),
+                (c * per_launch) as u32,
+                BLOCK,
+            )
+        });
     }
-    partials
+    let total = empty_f32(&first, [1]);
+    multi_tensor::sum_all::launch(
+        &first.client,
+        CubeCount::new_1d(1),
+        CubeDim::new_1d(BLOCK as u32),
+        partials.into_tensor_arg(),
+        total.clone().into_tensor_arg(),
+        BLOCK,
+    );
+    total
 }
 
 /// One Adam step of every parameter: `(params, grads, first moments, second moments)` in,
 /// `(params, first moments, second moments)` out, as many parameters a launch as the device
 /// binds. With `clip = Some((partials, max))`, every gradient is first scaled by the global
-/// norm's clipping factor (the partials from [`sum_of_squares`] over every gradient).
+/// norm's clipping factor (the squared norm from [`sum_of_squares`] over every gradient).
 pub fn adam(
     params: Vec<CubeTensor>,
     grads: Vec<CubeTensor>,
@@ -113,29 +135,30 @@ pub fn adam(
         };
         let elements: usize = (start..end).map(|i| params[i].meta.num_elements()).sum();
         let (cube_count, cube_dim) = elementwise(&first, elements);
-        multi_tensor::adam::launch(
-            &first.client,
-            cube_count,
-            cube_dim,
-            seq(&params[start..end]),
-            seq(&grads[start..end]),
-            seq(&moment_1[start..end]),
-            seq(&moment_2[start..end]),
-            out_seq(0),
-            out_seq(1),
-            out_seq(2),
-            partials.clone().into_tensor_arg(),
-            AdamScalarsLaunch::new(
-                step.lr,
-                step.beta_1,
-                step.beta_2,
-                combined,
-                epsilon,
-                max_norm,
-            ),
-            clipping,
-            BLOCK,
-        );
+        over_elements(elements, || {
+            multi_tensor::adam::launch(
+                &first.client,
+                cube_count,
+                cube_dim,
+                seq(&params[start..end]),
+                seq(&grads[start..end]),
+                seq(&moment_1[start..end]),
+                seq(&moment_2[start..end]),
+                out_seq(0),
+                out_seq(1),
+                out_seq(2),
+                partials.clone().into_tensor_arg(),
+                AdamScalarsLaunch::new(
+                    step.lr,
+                    step.beta_1,
+                    step.beta_2,
+                    combined,
+                    epsilon,
+                    max_norm,
+                ),
+                clipping,
+            )
+        });
         out.extend(outs);
     }
     out

@@ -11,10 +11,22 @@ use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{BLOCK, at, tree_sum};
-use super::{elementwise, empty_f32};
+use super::{elementwise, empty_f32, over_elements};
 
-/// Workgroups of the forward pass's partial sums, at most.
-const GROUPS: usize = 256;
+/// Workgroups of the forward pass's partial sums, at most: enough to fill the largest GPUs
+/// (issue 71's guard asks 1,024 of a kernel over more than 2^20 elements).
+const GROUPS: usize = 2048;
+
+/// Element `k` (row-major over the shape) of `t`: read straight where `plain` (contiguous),
+/// else through its strides ([`at`]).
+#[cube]
+fn read(t: &Tensor<f32>, k: usize, #[comptime] plain: bool) -> f32 {
+    let mut i = k;
+    if !plain {
+        i = at(t, k);
+    }
+    t[i]
+}
 
 /// `partials[g]`: the sum of the element losses workgroup `g` visits (strided over all).
 #[cube(launch)]
@@ -22,15 +34,16 @@ pub fn partial_sums(
     z: &Tensor<f32>,
     y: &Tensor<f32>,
     partials: &mut Tensor<f32>,
+    #[comptime] plain: bool,
     #[comptime] block: usize,
 ) {
     let groups = CUBE_COUNT_X as usize;
     let mut acc = 0.0;
     let mut k = CUBE_POS_X as usize * block + UNIT_POS as usize;
     while k < z.len() {
-        let zk = z[at(z, k)];
+        let zk = read(z, k, plain);
         let softplus = f32::log1p(f32::exp(-f32::abs(zk)));
-        acc += f32::max(zk, 0.0) - zk * y[at(y, k)] + softplus;
+        acc += f32::max(zk, 0.0) - zk * read(y, k, plain) + softplus;
         k += groups * block;
     }
     let mut shared = Shared::new_slice(block);
@@ -71,11 +84,12 @@ pub fn logits_grad(
     grad: &Tensor<f32>,
     dz: &mut Tensor<f32>,
     count: f32,
+    #[comptime] plain: bool,
 ) {
     let k = ABSOLUTE_POS;
     if k < z.len() {
-        let s = 1.0 / (1.0 + f32::exp(-z[at(z, k)]));
-        dz[k] = (s - y[at(y, k)]) * (grad[0] / count);
+        let s = 1.0 / (1.0 + f32::exp(-read(z, k, plain)));
+        dz[k] = (s - read(y, k, plain)) * (grad[0] / count);
     }
 }
 
@@ -88,15 +102,19 @@ pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
     let n = z.meta.num_elements();
     let groups = n.div_ceil(BLOCK * 8).clamp(1, GROUPS);
     let partials = empty_f32(&z, [groups]);
-    partial_sums::launch(
-        &z.client,
-        CubeCount::new_1d(groups as u32),
-        CubeDim::new_1d(BLOCK as u32),
-        z.clone().into_tensor_arg(),
-        y.into_tensor_arg(),
-        partials.clone().into_tensor_arg(),
-        BLOCK,
-    );
+    let plain = z.is_contiguous() && y.is_contiguous();
+    over_elements(n, || {
+        partial_sums::launch(
+            &z.client,
+            CubeCount::new_1d(groups as u32),
+            CubeDim::new_1d(BLOCK as u32),
+            z.clone().into_tensor_arg(),
+            y.into_tensor_arg(),
+            partials.clone().into_tensor_arg(),
+            plain,
+            BLOCK,
+        )
+    });
     let loss = empty_f32(&z, [1]);
     mean_of_partials::launch(
         &z.client,
@@ -115,15 +133,19 @@ pub fn launch_logits_grad(z: CubeTensor, y: CubeTensor, grad: CubeTensor) -> Cub
     let n = z.meta.num_elements();
     let dz = empty_f32(&z, z.meta.shape().clone());
     let (cube_count, cube_dim) = elementwise(&z, n);
-    logits_grad::launch(
-        &z.client,
-        cube_count,
-        cube_dim,
-        z.clone().into_tensor_arg(),
-        y.into_tensor_arg(),
-        grad.into_tensor_arg(),
-        dz.clone().into_tensor_arg(),
-        n as f32,
-    );
+    let plain = z.is_contiguous() && y.is_contiguous();
+    over_elements(n, || {
+        logits_grad::launch(
+            &z.client,
+            cube_count,
+            cube_dim,
+            z.clone().into_tensor_arg(),
+            y.into_tensor_arg(),
+            grad.into_tensor_arg(),
+            dz.clone().into_tensor_arg(),
+            n as f32,
+            plain,
+        )
+    });
     dz
 }

@@ -7,6 +7,8 @@
 //!   binding limit);
 //! - [`batch_norm`]: a batch-norm layer's statistics, parameter and input gradients, a launch
 //!   each;
+//! - [`channel_reduce`]: sums by channel (bias gradients, batch-norm statistics and gradients)
+//!   in two launches that fill the GPU;
 //! - [`loss`]: the binary cross-entropy on logits and its gradient;
 //! - [`im2col`]: a convolution's columns and their sum back into an image (col2im), the kernels
 //!   around the matrix products of [`convolution`];
@@ -21,6 +23,7 @@
 //! `tests/gpu/kernels.rs` compares them on lavapipe.
 
 pub mod batch_norm;
+pub mod channel_reduce;
 pub mod convolution;
 pub mod extension;
 pub mod im2col;
@@ -68,6 +71,27 @@ fn elementwise(
         cubecl::calculate_cube_count_elemwise(&like.client, n, dim),
         dim,
     )
+}
+
+thread_local! {
+    /// The elements the kernel being launched on this thread works over ([`over_elements`]).
+    static ELEMENTS: std::cell::Cell<Option<u64>> = const { std::cell::Cell::new(None) };
+}
+
+/// Run `launch` (one of our kernels' launches) saying it works over `elements` elements:
+/// `eval::device_counts` records them beside the launch's workgroups, and the workgroup guard
+/// (`tests/gpu/counts.rs`) holds a large kernel to filling the GPU.
+pub fn over_elements<T>(elements: usize, launch: impl FnOnce() -> T) -> T {
+    let before = ELEMENTS.with(|e| e.replace(Some(elements as u64)));
+    let out = launch();
+    ELEMENTS.with(|e| e.set(before));
+    out
+}
+
+/// The elements of the launch under way on this thread ([`over_elements`]); `None` for
+/// burn's kernels.
+pub fn launch_elements() -> Option<u64> {
+    ELEMENTS.with(|e| e.get())
 }
 
 /// A lazy tensor of burn's fusion backend on a CubeCL device.

@@ -79,6 +79,24 @@ pub fn sum_of_squares(
     }
 }
 
+/// `total[0]`: the sum of every partial sum of [`sum_of_squares`] (one workgroup, a fixed
+/// order): the squared global norm the clipping reads.
+#[cube(launch)]
+pub fn sum_all(partials: &Tensor<f32>, total: &mut Tensor<f32>, #[comptime] block: usize) {
+    let mut shared = Shared::new_slice(block);
+    let mut acc = 0.0;
+    let mut k = UNIT_POS as usize;
+    while k < partials.len() {
+        acc += partials[k];
+        k += block;
+    }
+    shared[UNIT_POS as usize] = acc;
+    let sum = tree_sum(&mut shared);
+    if UNIT_POS == 0 {
+        total[0] = sum;
+    }
+}
+
 /// Adam's scalars for one step, as burn's `Adam` derives them from its settings and the step.
 #[derive(CubeLaunch, CubeType)]
 pub struct AdamScalars {
@@ -93,20 +111,12 @@ pub struct AdamScalars {
     pub max_norm: f32,
 }
 
-/// The global-norm clipping factor from the partial sums of squares: `max / (norm + 1e-6)`
-/// where the norm is finite and above `max`, else 1 (as `train::adam::clip_global_norm`).
-/// Every unit of the workgroup takes part.
+/// The global-norm clipping factor from the squared norm `total[0]` ([`sum_all`]):
+/// `max / (norm + 1e-6)` where the norm is finite and above `max`, else 1 (as
+/// `train::adam::clip_global_norm`).
 #[cube]
-fn clip_scale(partials: &Tensor<f32>, max_norm: f32, #[comptime] block: usize) -> f32 {
-    let mut shared = Shared::new_slice(block);
-    let mut acc = 0.0;
-    let mut k = UNIT_POS as usize;
-    while k < partials.len() {
-        acc += partials[k];
-        k += block;
-    }
-    shared[UNIT_POS as usize] = acc;
-    let norm = f32::sqrt(tree_sum(&mut shared));
+fn clip_scale(total: &Tensor<f32>, max_norm: f32) -> f32 {
+    let norm = f32::sqrt(total[0]);
     let mut scale = 1.0;
     // NaN fails the comparison.
     if norm.is_inf() {
@@ -120,7 +130,7 @@ fn clip_scale(partials: &Tensor<f32>, max_norm: f32, #[comptime] block: usize) -
 /// moments in; new parameters and moments out), each element as burn's `Adam` computes it.
 /// The gradients may have any strides; the rest are contiguous.
 /// With `clip`, each gradient is first scaled by the global-norm clipping factor of
-/// `partials` (the sums of squares of every gradient of the step, from [`sum_of_squares`]).
+/// `total` (the sum of squares of every gradient of the step, from [`sum_all`]).
 #[cube(launch)]
 // A GPU kernel takes its buffers and sizes as arguments (one launch, no host struct).
 #[allow(clippy::too_many_arguments)]
@@ -132,14 +142,13 @@ pub fn adam(
     params_out: &mut Sequence<OwnedTensor<f32>>,
     moment_1_out: &mut Sequence<OwnedTensor<f32>>,
     moment_2_out: &mut Sequence<OwnedTensor<f32>>,
-    partials: &Tensor<f32>,
+    total: &Tensor<f32>,
     scalars: &AdamScalars,
     #[comptime] clip: bool,
-    #[comptime] block: usize,
 ) {
     let mut scale = 1.0;
     if clip {
-        scale = clip_scale(partials, scalars.max_norm, block);
+        scale = clip_scale(total, scalars.max_norm);
     }
     let lr = scalars.lr;
     let beta_1 = scalars.beta_1;

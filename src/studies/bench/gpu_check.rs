@@ -32,7 +32,7 @@ use std::time::Instant;
 use crate::core::device::DeviceChoice;
 use crate::core::error::{Error, Result};
 use crate::report::table::write_csv;
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 use crate::studies::bench::decoders::run_python;
 use crate::studies::bench::decoders::{
     Batches, BenchRow, attach_torch, console_table, run_batches, run_torch,
@@ -53,6 +53,9 @@ pub enum Part {
     Fill,
     Cpu,
     Split,
+    /// Every ratio against PyTorch of the backends measured into the sub-folders of `--out`
+    /// (`cuda/`, `wgpu/`), and which backend is faster at each figure: printed last.
+    Summary,
 }
 
 /// The works per thread (multiply-adds) the `split` part tries: 0 is every thread, 2^30 one
@@ -90,6 +93,9 @@ pub struct GpuCheck {
     /// This binary, run again for what needs its own thread count (`cpu`, K-3DGS on 2 CPU
     /// threads): rayon's pool is sized once per process.
     pub exe: PathBuf,
+    /// The GPU backend measured (`wgpu` or `cuda`; a build with both runs the check once
+    /// for each, `scripts/gpu_check.sh`).
+    pub device: DeviceChoice,
 }
 
 /// Kernel launches, host reads and uploads of one training step.
@@ -120,19 +126,19 @@ impl Console {
     }
 }
 
-/// The shader compiler of this build on the GPU (`wgpu<wgsl>`, `wgpu<spirv>`).
-#[cfg(feature = "wgpu")]
-fn gpu_compiler() -> String {
-    crate::core::device::select(DeviceChoice::Wgpu)
+/// The compiler of this build's kernels on `device` (`wgpu<wgsl>`, `wgpu<spirv>`, `cuda`).
+#[cfg(feature = "cube")]
+fn gpu_compiler(device: DeviceChoice) -> String {
+    crate::core::device::select(device)
         .ok()
         .and_then(|d| crate::kernels::cube::compiler(&d))
         .unwrap_or("no GPU")
         .to_string()
 }
 
-#[cfg(not(feature = "wgpu"))]
-fn gpu_compiler() -> String {
-    "none (built without the wgpu feature)".to_string()
+#[cfg(not(feature = "cube"))]
+fn gpu_compiler(_: DeviceChoice) -> String {
+    "none (built without the wgpu or cuda feature)".to_string()
 }
 
 /// Run the check's parts in order.
@@ -145,10 +151,11 @@ pub fn run(check: &GpuCheck) -> Result<()> {
     let mut console = Console { path, text };
     let preset = if check.quick { "quick" } else { "paper" };
     console.say(format!(
-        "gpu_check at {} ({preset}), CPU: {}, GPU kernels compiled by {}",
+        "gpu_check at {} ({preset}), CPU: {}, --device {}: GPU kernels compiled by {}",
         crate::core::provenance::git_revision(),
         crate::eval::compute_peak::machine_label(true),
-        gpu_compiler()
+        check.device,
+        gpu_compiler(check.device)
     ))?;
     for &part in &check.parts {
         let t0 = Instant::now();
@@ -163,6 +170,7 @@ pub fn run(check: &GpuCheck) -> Result<()> {
             Part::Fill => fill(check, &mut console),
             Part::Cpu => cpu(check, &mut console),
             Part::Split => split(check, &mut console),
+            Part::Summary => summary(check, &mut console),
         };
         // A part that fails is reported and the check goes on to the next.
         if let Err(e) = done {
@@ -177,8 +185,9 @@ pub fn run(check: &GpuCheck) -> Result<()> {
 /// silhouettes, the paper's clipping and input noise; an epoch every 4 steps) asks of the GPU:
 /// one [`DeviceCounts`] per step, from the end of the step before to the end of its own (its
 /// loss read included when the step is a log step), and the run's log.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 pub fn neurokin_step_counts(
+    device: DeviceChoice,
     preset: &str,
     batch: usize,
     steps: usize,
@@ -201,7 +210,7 @@ pub fn neurokin_step_counts(
             "another tracing subscriber is installed".into(),
         ));
     }
-    let device = crate::core::device::select(DeviceChoice::Wgpu)?;
+    let device = crate::core::device::select(device)?;
     let tdev = autodiff_device(&device, 0);
     // The run's model (its image the preset's camera's): the model `device_equivalence`
     // trains, so that on lavapipe the two share their compiled and tuned kernels.
@@ -244,15 +253,34 @@ pub fn neurokin_step_counts(
     Ok((per_step, log))
 }
 
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
     use crate::eval::device_counts::DeviceCounts;
     let mut rows = Vec::new();
     let mut sources = Vec::new();
+    let mut launches = Vec::new();
     let (steps, log_every) = (24, 8);
+    crate::eval::device_counts::log_launches();
     for batch in [32, 256] {
         let preset = if check.quick { "quick" } else { "paper" };
-        let (per_step, _) = neurokin_step_counts(preset, batch, steps, log_every)?;
+        let (per_step, _) = neurokin_step_counts(check.device, preset, batch, steps, log_every)?;
+        // The last step's launches in order, each with its workgroups and (ours) elements:
+        // what a profile of the same steps is read beside (the roofline of issue 71).
+        let log = crate::eval::device_counts::launch_log();
+        let last = per_step.last().map_or(0, |c| c.launches as usize);
+        launches.extend(
+            log[log.len().saturating_sub(last)..]
+                .iter()
+                .enumerate()
+                .map(|(i, l)| StepLaunch {
+                    batch,
+                    index: i,
+                    kernel: l.kernel.clone(),
+                    operations: l.operations.clone(),
+                    workgroups: l.workgroups,
+                    elements: l.elements,
+                }),
+        );
         // Counted from the end of the first epoch (kernels compiled and tuned by then).
         let counted = &per_step[4..];
         let c = counted
@@ -296,6 +324,7 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
         rows.push(row);
     }
     write_csv(&check.out.join("counts_sources.csv"), &sources)?;
+    write_csv(&check.out.join("launches.csv"), &launches)?;
     write_csv(&check.out.join("counts.csv"), &rows)?;
     if let Some(py) = &check.python {
         torch_counts(check, py, console)?;
@@ -306,7 +335,7 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
 /// PyTorch's step counted by torch.profiler on the same GPU
 /// (`scripts/torch_step_kernels.py`, packed beside the other PyTorch scripts), kept in
 /// `torch_counts.csv`; where it cannot run, the console says why and the part goes on.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 fn torch_counts(check: &GpuCheck, python: &Path, console: &mut Console) -> Result<()> {
     let packed = check.bench_dir.join("torch_step_kernels.py");
     let script = if packed.is_file() {
@@ -335,7 +364,7 @@ fn torch_counts(check: &GpuCheck, python: &Path, console: &mut Console) -> Resul
 }
 
 /// A line of `torch_step_kernels.py`: what one PyTorch training step launched.
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 #[derive(Clone, Debug, serde::Serialize)]
 struct TorchCounts {
     model: String,
@@ -348,7 +377,7 @@ struct TorchCounts {
     device: String,
 }
 
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 impl TorchCounts {
     fn parse(line: &str) -> Option<Self> {
         let f: Vec<&str> = line.split_whitespace().collect();
@@ -366,8 +395,20 @@ impl TorchCounts {
     }
 }
 
+/// One launch of a step's, in order.
+#[cfg(feature = "cube")]
+#[derive(Clone, Debug, serde::Serialize)]
+struct StepLaunch {
+    batch: usize,
+    index: usize,
+    kernel: String,
+    operations: String,
+    workgroups: Option<u64>,
+    elements: Option<u64>,
+}
+
 /// Launches a step of one kernel for one set of operations (a fusion block's kinds).
-#[cfg(feature = "wgpu")]
+#[cfg(feature = "cube")]
 #[derive(Clone, Debug, serde::Serialize)]
 struct LaunchSource {
     model: String,
@@ -377,10 +418,10 @@ struct LaunchSource {
     launches_per_step: f64,
 }
 
-#[cfg(not(feature = "wgpu"))]
+#[cfg(not(feature = "cube"))]
 fn counts(_: &GpuCheck, _: &mut Console) -> Result<()> {
     Err(Error::Device(
-        "counting needs the wgpu feature (rebuild with --features wgpu)".into(),
+        "counting needs a GPU backend (rebuild with --features wgpu or cuda)".into(),
     ))
 }
 
@@ -403,7 +444,7 @@ fn gpu_decoders(
     batches: Batches,
     csv: &str,
 ) -> Result<()> {
-    let mut rows = run_batches(DeviceChoice::Wgpu, check.quick, batches, &mut |r| {
+    let mut rows = run_batches(check.device, check.quick, batches, &mut |r| {
         console.say(format!(
             "  {} {}: {:.1} images/s",
             r.model, r.figure, r.ours
@@ -466,7 +507,7 @@ fn experiment(
 
 fn gpu_options(check: &GpuCheck) -> RunOptions {
     let mut opts = RunOptions::preset(if check.quick { "quick" } else { "paper" });
-    opts.device = DeviceChoice::Wgpu;
+    opts.device = check.device;
     opts
 }
 
@@ -538,14 +579,14 @@ fn equivalence(check: &GpuCheck, console: &mut Console) -> Result<()> {
         compare(
             neurokin_run("quick")?,
             6,
-            DeviceChoice::Wgpu,
+            check.device,
             &dir.join("neurokin"),
         )?,
-        compare(k3dgs, 6, DeviceChoice::Wgpu, &dir.join("k3dgs"))?,
+        compare(k3dgs, 6, check.device, &dir.join("k3dgs"))?,
         compare(
             ffksm_run("quick", FfksmVariant::Reimplementation)?,
             6,
-            DeviceChoice::Wgpu,
+            check.device,
             &dir.join("ffksm"),
         )?,
     ];
@@ -680,4 +721,90 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
         write_csv(&check.out.join("gemm_split.csv"), &all)?;
     }
     Ok(())
+}
+
+/// The rows of `csv` under each sub-folder of `out` (a backend's), with the folder's name.
+fn rows_by_backend(out: &Path, csv: &str) -> Result<Vec<(String, BenchRow)>> {
+    let mut all = Vec::new();
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(out)
+        .map_err(|e| Error::io(out, e))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join(csv).is_file())
+        .collect();
+    dirs.sort();
+    for dir in dirs {
+        let backend = dir
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let path = dir.join(csv);
+        let mut reader = csv::Reader::from_path(&path)
+            .map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
+        for row in reader.deserialize::<BenchRow>() {
+            let row = row.map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
+            all.push((backend.clone(), row));
+        }
+    }
+    Ok(all)
+}
+
+/// Every figure of every backend measured under `--out` against PyTorch, and the faster
+/// backend at each: the check's last lines, kept in `summary.csv`.
+fn summary(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    #[derive(serde::Serialize)]
+    struct Line {
+        figure: String,
+        backend: String,
+        threads: Option<usize>,
+        ours: f64,
+        torch: Option<f64>,
+        ratio: Option<f64>,
+        fastest_backend: bool,
+    }
+    let mut lines: Vec<Line> = Vec::new();
+    for csv in ["decoders_gpu.csv", "decoders_fill.csv", "cpu_threads.csv"] {
+        let rows = rows_by_backend(&check.out, csv)?;
+        for (backend, r) in &rows {
+            let figure = format!("{} {}", r.model, r.figure);
+            let best = rows
+                .iter()
+                .filter(|(_, o)| {
+                    o.model == r.model && o.figure == r.figure && o.threads == r.threads
+                })
+                .all(|(_, o)| o.ours <= r.ours);
+            lines.push(Line {
+                figure,
+                backend: if csv == "cpu_threads.csv" {
+                    format!("{backend} cpu")
+                } else {
+                    backend.clone()
+                },
+                threads: r.threads,
+                ours: r.ours,
+                torch: r.torch,
+                ratio: r.ratio,
+                fastest_backend: best,
+            });
+        }
+    }
+    if lines.is_empty() {
+        return console.say("no figures measured under this folder's backends");
+    }
+    console.say("every figure against PyTorch (ratio = ours / PyTorch's, same GPU or threads, same sitting; * the faster backend):")?;
+    for l in &lines {
+        let threads = l
+            .threads
+            .map(|t| format!(" {t} threads"))
+            .unwrap_or_default();
+        let ratio = l.ratio.map_or("-".to_string(), |r| format!("{r:.2}x"));
+        console.say(format!(
+            "  {:<40} {:<10}{threads:<11} {:>10.1} images/s  PyTorch {:>10}  {ratio}{}",
+            l.figure,
+            l.backend,
+            l.ours,
+            l.torch.map_or("-".to_string(), |t| format!("{t:.1}")),
+            if l.fastest_backend { " *" } else { "" }
+        ))?;
+    }
+    write_csv(&check.out.join("summary.csv"), &lines)
 }

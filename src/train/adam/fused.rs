@@ -208,11 +208,10 @@ impl Fused {
         let Fused { list, lr } = self;
         let partials = clip.map(|max| {
             let grads: Vec<LazyTensor> = list.iter().map(|g| g.grad.clone()).collect();
-            let n = grads.len() * cube::launch::GROUPS;
             let out = cube::run_lazily(
                 "sum_of_squares",
                 grads,
-                &[(Shape::new([n]), DType::F32)],
+                &[(Shape::new([1]), DType::F32)],
                 |tensors| vec![cube::launch::sum_of_squares(tensors)],
             );
             (out.into_iter().next().expect("one output"), max)
