@@ -10,8 +10,10 @@ use selfmodel::core::device::DeviceChoice;
 use selfmodel::studies::bench::gpu_check::neurokin_step_counts;
 
 /// Launches a NeuroKin step may take here (the log intervals' loss read included): issue 58's
-/// target.
-const MOST_LAUNCHES: u64 = 100;
+/// target of 100 (99 were reached), and the 14 finishing passes of the sums by channel and one
+/// of the gradients' norm that issue 71 added so that those sums fill the GPU (a launch costs
+/// ~5 µs where a sum on one workgroup a channel took up to 7 ms on an H200).
+const MOST_LAUNCHES: u64 = 115;
 
 #[test]
 fn a_neurokin_training_step_reads_nothing_back() {
@@ -51,10 +53,10 @@ fn a_neurokin_training_step_reads_nothing_back() {
         assert!(c.launches > 0, "step {step}: no kernel launch counted");
         // 310 launches a step before our fused kernels (Adam and the clipping, batch norm,
         // the loss, the transposed convolutions, the head's convolutions); 99 with them here,
-        // 100 at a log step.
+        // 100 at a log step; 113 and 114 with issue 71's two-pass sums.
         assert!(
             c.launches <= MOST_LAUNCHES,
-            "step {step}: {} kernel launches, more than the {MOST_LAUNCHES} of issue 58's target",
+            "step {step}: {} kernel launches, more than the {MOST_LAUNCHES} allowed",
             c.launches
         );
     }

@@ -89,7 +89,7 @@ impl Summand {
 /// Sums `shared[u]` over the units of a workgroup that share `u % lanes` (the rows of one
 /// channel) into `shared[u % lanes]`, in a fixed order.
 #[cube]
-fn sum_rows(shared: &mut Shared<[f32]>, #[comptime] lanes: usize, #[comptime] block: usize) {
+fn sum_rows(shared: &mut Shared<[f32]>, #[comptime] lanes: usize) {
     let u = UNIT_POS as usize;
     // A runtime value (halved in the loop), not a compile-time one.
     let mut active = CUBE_DIM as usize / comptime!(2 * lanes);
@@ -165,14 +165,14 @@ pub fn partial_sums(
     }
     let mut shared = Shared::new_slice(block);
     shared[u] = first;
-    sum_rows(&mut shared, lanes, block);
+    sum_rows(&mut shared, lanes);
     if u < lanes && c < channels {
         partials[chunk * channels + c] = shared[u];
     }
     if shifted || grads {
         sync_cube();
         shared[u] = second;
-        sum_rows(&mut shared, lanes, block);
+        sum_rows(&mut shared, lanes);
         if u < lanes && c < channels {
             partials[(chunks + chunk) * channels + c] = shared[u];
         }
@@ -201,7 +201,7 @@ fn chunk_total(
     }
     let mut shared = Shared::new_slice(block);
     shared[u] = acc;
-    sum_rows(&mut shared, lanes, block);
+    sum_rows(&mut shared, lanes);
     let total = shared[u % lanes];
     sync_cube();
     total
