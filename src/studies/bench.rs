@@ -10,5 +10,6 @@ pub mod decoders;
 pub mod device_equivalence;
 pub mod ffksm_step;
 pub mod gpu_check;
+pub mod gpu_summary;
 pub mod ik;
 pub mod sphere_figure;

@@ -86,6 +86,12 @@ impl Summand {
     }
 }
 
+/// The channel of this unit: `lanes` consecutive channels a workgroup along the grid's x.
+#[cube]
+fn unit_channel(#[comptime] lanes: usize) -> usize {
+    CUBE_POS_X as usize * lanes + UNIT_POS as usize % lanes
+}
+
 /// Sums `shared[u]` over the units of a workgroup that share `u % lanes` (the rows of one
 /// channel) into `shared[u % lanes]`, in a fixed order.
 #[cube]
@@ -130,7 +136,7 @@ pub fn partial_sums(
     let chunks = CUBE_COUNT_Y as usize;
     let chunk = CUBE_POS_Y as usize;
     let u = UNIT_POS as usize;
-    let c = CUBE_POS_X as usize * lanes + u % lanes;
+    let c = unit_channel(lanes);
     let per_chunk = (rows + chunks - 1) / chunks;
     let mut end = (chunk + 1) * per_chunk;
     if end > rows {
@@ -215,7 +221,7 @@ pub fn finish_sums(
     #[comptime] lanes: usize,
     #[comptime] block: usize,
 ) {
-    let c = CUBE_POS_X as usize * lanes + UNIT_POS as usize % lanes;
+    let c = unit_channel(lanes);
     let s = chunk_total(partials, 0, c, lanes, block);
     if (UNIT_POS as usize) < lanes && c < sums.len() {
         sums[c] = s;
@@ -244,7 +250,7 @@ pub fn finish_statistics(
     #[comptime] block: usize,
 ) {
     let channels = x.shape(1);
-    let c = CUBE_POS_X as usize * lanes + UNIT_POS as usize % lanes;
+    let c = unit_channel(lanes);
     let s1 = chunk_total(partials, 0, c, lanes, block);
     let s2 = chunk_total(partials, 1, c, lanes, block);
     if (UNIT_POS as usize) < lanes && c < channels {
@@ -274,7 +280,7 @@ pub fn finish_grad_sums(
     #[comptime] lanes: usize,
     #[comptime] block: usize,
 ) {
-    let c = CUBE_POS_X as usize * lanes + UNIT_POS as usize % lanes;
+    let c = unit_channel(lanes);
     let s = chunk_total(partials, 0, c, lanes, block);
     let p = chunk_total(partials, 1, c, lanes, block);
     if (UNIT_POS as usize) < lanes && c < beta_grad.len() {

@@ -42,7 +42,6 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
     f32_only(&tensors);
     let first = tensors[0].clone();
     let groups = groups(&tensors);
-    let elements: usize = tensors.iter().map(|t| t.meta.num_elements()).sum();
     let partials = empty_f32(&first, [tensors.len() * groups]);
     // Each launch binds its tensors (any strides) and the partials.
     let per_launch = max_bindings(&first) - 1;
@@ -51,6 +50,7 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
         for t in chunk {
             seq.push(t.clone().into_tensor_arg());
         }
+        let elements = chunk.iter().map(|t| t.meta.num_elements()).sum();
         over_elements(elements, || {
             multi_tensor::sum_of_squares::launch(
                 &first.client,
@@ -77,7 +77,7 @@ pub fn sum_of_squares(tensors: Vec<CubeTensor>) -> CubeTensor {
 
 /// One Adam step of every parameter: `(params, grads, first moments, second moments)` in,
 /// `(params, first moments, second moments)` out, as many parameters a launch as the device
-/// binds. With `clip = Some((partials, max))`, every gradient is first scaled by the global
+/// binds. With `clip = Some((squared_norm, max))`, every gradient is first scaled by the global
 /// norm's clipping factor (the squared norm from [`sum_of_squares`] over every gradient).
 pub fn adam(
     params: Vec<CubeTensor>,
@@ -92,9 +92,9 @@ pub fn adam(
     f32_only(&params);
     f32_only(&grads);
     let first = params[0].clone();
-    // Seven tensors a parameter, and the partials.
+    // Seven tensors a parameter, and the squared norm.
     let per_launch = ((max_bindings(&first) - 1) / 7).max(1);
-    let (partials, max_norm, clipping) = match clip {
+    let (squared_norm, max_norm, clipping) = match clip {
         Some((p, max)) => (p, max, true),
         // A kernel argument is needed all the same: a tensor of its own (a buffer bound
         // twice in one launch is not allowed), never read.
@@ -147,7 +147,7 @@ pub fn adam(
                 out_seq(0),
                 out_seq(1),
                 out_seq(2),
-                partials.clone().into_tensor_arg(),
+                squared_norm.clone().into_tensor_arg(),
                 AdamScalarsLaunch::new(
                     step.lr,
                     step.beta_1,

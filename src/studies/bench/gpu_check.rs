@@ -723,88 +723,17 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
     Ok(())
 }
 
-/// The rows of `csv` under each sub-folder of `out` (a backend's), with the folder's name.
-fn rows_by_backend(out: &Path, csv: &str) -> Result<Vec<(String, BenchRow)>> {
-    let mut all = Vec::new();
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(out)
-        .map_err(|e| Error::io(out, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join(csv).is_file())
-        .collect();
-    dirs.sort();
-    for dir in dirs {
-        let backend = dir
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let path = dir.join(csv);
-        let mut reader = csv::Reader::from_path(&path)
-            .map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
-        for row in reader.deserialize::<BenchRow>() {
-            let row = row.map_err(|e| Error::Config(format!("{}: {e}", path.display())))?;
-            all.push((backend.clone(), row));
-        }
-    }
-    Ok(all)
-}
-
 /// Every figure of every backend measured under `--out` against PyTorch, and the faster
-/// backend at each: the check's last lines, kept in `summary.csv`.
+/// backend at each ([`crate::studies::bench::gpu_summary`]): the check's last lines, kept in
+/// `summary.csv`.
 fn summary(check: &GpuCheck, console: &mut Console) -> Result<()> {
-    #[derive(serde::Serialize)]
-    struct Line {
-        figure: String,
-        backend: String,
-        threads: Option<usize>,
-        ours: f64,
-        torch: Option<f64>,
-        ratio: Option<f64>,
-        fastest_backend: bool,
-    }
-    let mut lines: Vec<Line> = Vec::new();
-    for csv in ["decoders_gpu.csv", "decoders_fill.csv", "cpu_threads.csv"] {
-        let rows = rows_by_backend(&check.out, csv)?;
-        for (backend, r) in &rows {
-            let figure = format!("{} {}", r.model, r.figure);
-            let best = rows
-                .iter()
-                .filter(|(_, o)| {
-                    o.model == r.model && o.figure == r.figure && o.threads == r.threads
-                })
-                .all(|(_, o)| o.ours <= r.ours);
-            lines.push(Line {
-                figure,
-                backend: if csv == "cpu_threads.csv" {
-                    format!("{backend} cpu")
-                } else {
-                    backend.clone()
-                },
-                threads: r.threads,
-                ours: r.ours,
-                torch: r.torch,
-                ratio: r.ratio,
-                fastest_backend: best,
-            });
-        }
-    }
+    let lines = crate::studies::bench::gpu_summary::summarise(&check.out)?;
     if lines.is_empty() {
         return console.say("no figures measured under this folder's backends");
     }
     console.say("every figure against PyTorch (ratio = ours / PyTorch's, same GPU or threads, same sitting; * the faster backend):")?;
     for l in &lines {
-        let threads = l
-            .threads
-            .map(|t| format!(" {t} threads"))
-            .unwrap_or_default();
-        let ratio = l.ratio.map_or("-".to_string(), |r| format!("{r:.2}x"));
-        console.say(format!(
-            "  {:<40} {:<10}{threads:<11} {:>10.1} images/s  PyTorch {:>10}  {ratio}{}",
-            l.figure,
-            l.backend,
-            l.ours,
-            l.torch.map_or("-".to_string(), |t| format!("{t:.1}")),
-            if l.fastest_backend { " *" } else { "" }
-        ))?;
+        console.say(l.console_line())?;
     }
     write_csv(&check.out.join("summary.csv"), &lines)
 }

@@ -206,7 +206,7 @@ impl Fused {
         clip: Option<f32>,
     ) -> M {
         let Fused { list, lr } = self;
-        let partials = clip.map(|max| {
+        let squared_norm = clip.map(|max| {
             let grads: Vec<LazyTensor> = list.iter().map(|g| g.grad.clone()).collect();
             let out = cube::run_lazily(
                 "sum_of_squares",
@@ -230,7 +230,7 @@ impl Fused {
                     break;
                 }
             }
-            results.extend(run_group(group, partials.clone()));
+            results.extend(run_group(group, squared_norm.clone()));
         }
         PASS.with(|p| *p.borrow_mut() = Pass::Apply(results));
         let model = optim.step(lr, model, grads);
@@ -272,11 +272,11 @@ fn run_group(group: Vec<Gathered>, clip: Option<(LazyTensor, f32)>) -> Vec<Appli
         }
     }
     let max_norm = clip.as_ref().map(|c| c.1);
-    if let Some((partials, _)) = clip {
-        inputs.push(partials);
+    if let Some((squared_norm, _)) = clip {
+        inputs.push(squared_norm);
     }
     let out = cube::run_lazily("adam", inputs, &outputs, move |mut tensors| {
-        let partials = max_norm.map(|max| (tensors.pop().expect("the partials"), max));
+        let squared_norm = max_norm.map(|max| (tensors.pop().expect("the squared norm"), max));
         let mut parts = tensors.chunks(n).map(|c| c.to_vec());
         let (p, g, m, v) = (
             parts.next().expect("params"),
@@ -284,7 +284,7 @@ fn run_group(group: Vec<Gathered>, clip: Option<(LazyTensor, f32)>) -> Vec<Appli
             parts.next().expect("first moments"),
             parts.next().expect("second moments"),
         );
-        let results = cube::launch::adam(p, g, m, v, step, partials);
+        let results = cube::launch::adam(p, g, m, v, step, squared_norm);
         let mut flat = Vec::with_capacity(3 * n);
         for k in 0..3 {
             flat.extend(results.iter().map(|r| r[k].clone()));
