@@ -12,8 +12,10 @@
 # machines had neither) and PyTorch's reference scripts (git-ignored: carry that one folder;
 # the tree is ~35 MB of the 64 MiB a call carries). `run` measures both backends in one call,
 # the most valuable parts first, in at most GPU_CHECK_SECONDS (default 480) of the machine:
-#   cuda: decoders neurokin counts precision profile;  wgpu: decoders neurokin counts;
-#   then cuda's equivalence, the CPU at 2 and 16 threads, k3dgs, fill, split, as time allows;
+#   cuda: decoders neurokin peak profile (the counts part under cubecl's profiler, then each
+#   kernel of the step against its bound: kernels.csv) precision;  wgpu: decoders neurokin peak
+#   profile; then cuda's counts without the profiler,
+#   equivalence, the CPU at 2 and 16 threads, k3dgs, fill, split, as time allows;
 #   and last a summary of every ratio against PyTorch and which backend is faster.
 # Output in $OUT/gpu/<GPU name>/{cuda,wgpu}/ (or reports/gpu/<GPU name>/ without $OUT); ARGS go
 # to the binary (e.g. --threads 2,16); GPU_CHECK_PLAN overrides the plan ("cuda:decoders
@@ -52,7 +54,7 @@ run)
   name=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 | tr -c 'A-Za-z0-9\n' '_' || true)
   name=${name:-unknown_gpu}
   root="${OUT:-reports}/gpu/$name"
-  plan=${GPU_CHECK_PLAN:-"cuda:decoders cuda:neurokin cuda:counts cuda:precision cuda:profile wgpu:decoders wgpu:neurokin wgpu:counts cuda:equivalence cuda:cpu cuda:k3dgs cuda:fill cuda:split"}
+  plan=${GPU_CHECK_PLAN:-"cuda:decoders cuda:neurokin cuda:peak cuda:profile cuda:precision wgpu:decoders wgpu:neurokin wgpu:peak wgpu:profile cuda:counts cuda:equivalence cuda:cpu cuda:k3dgs cuda:fill cuda:split"}
   mkdir -p "$root"
   export CUBECL_ENVIRONMENT="gpu_check_$(date +%s)"
   nvidia-smi > "$root/nvidia-smi.txt" 2>&1 || true
@@ -89,7 +91,11 @@ run)
     env "${env[@]}" timeout "$limit" "$PACK/gpu_check" --device "$device" --torch python3 --bench-dir "$PACK/bench" \
       --out "$out" --parts "$run_part" "${extra[@]}" "$@" 2>"$out/$part.stderr" || rc=$?
     if [ "$part" = profile ] && [ -f /tmp/cubecl_profile.log ]; then
-      grep '^|' /tmp/cubecl_profile.log | sed 's/  */ /g' | tail -c 8000000 | xz -6 >"$out/profile.txt.xz" || true
+      # Each kernel of the profiled step against its bound (kernels.csv), then the profile kept
+      # compressed.
+      grep '^|' /tmp/cubecl_profile.log | sed 's/  */ /g' | tail -c 8000000 >"$out/profile.txt" || true
+      timeout 60 "$PACK/gpu_check" --device "$device" --out "$out" --parts roofline 2>>"$out/$part.stderr" || true
+      xz -6f "$out/profile.txt" || true
       rm -f /tmp/cubecl_profile.log
     fi
     if [ "$rc" -ne 0 ]; then

@@ -7,3 +7,4 @@ pub mod device_counts;
 pub mod evaluation;
 pub mod inference_speed;
 pub mod metrics;
+pub mod roofline;

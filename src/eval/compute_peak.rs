@@ -100,6 +100,24 @@ pub fn matmul_gflops(device: &Device, n: usize, repeats: usize) -> f64 {
     2.0 * (n as f64).powi(3) / seconds / 1e9
 }
 
+/// GB/s of an elementwise pass over `n` f32 values on `device` (each read once and written
+/// once: `8 n` bytes): one warm-up, then the median of `repeats`, each synchronised with the
+/// device. The bandwidth a memory-bound kernel can reach there.
+pub fn bandwidth_gbytes(device: &Device, n: usize, repeats: usize) -> f64 {
+    let x: Tensor<1> = crate::core::device::with_seed(device, 0, || {
+        Tensor::random([n], Distribution::Default, device)
+    });
+    let seconds = crate::core::timing::median_seconds(
+        crate::core::timing::Repeats::exactly(1, repeats),
+        || {
+            let y = x.clone().add_scalar(1.0);
+            let _ = device.sync();
+            drop(y);
+        },
+    );
+    8.0 * n as f64 / seconds / 1e9
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

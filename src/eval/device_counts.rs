@@ -128,6 +128,60 @@ pub struct Launch {
     /// The elements it works over, where the launcher says (ours:
     /// `kernels::cube::over_elements`); `None` for burn's kernels.
     pub elements: Option<u64>,
+    /// The fusion block it ran for (numbered in order since the process began); `None` outside
+    /// one.
+    pub block: Option<u64>,
+    /// What that whole block moves and computes ([`block_work`]): shared by its launches.
+    pub work: Work,
+}
+
+/// The bytes a block of operations moves to and from memory and the floating-point operations
+/// its matrix products compute, estimated from burn's IR: every tensor it reads that it did
+/// not produce, and every tensor it produces that outlives it (not consumed inside it for the
+/// last time); a product of `[.., m, k]` by `[.., k, n]` is `2·m·n·k` a batch. Elementwise
+/// arithmetic is not counted (it is bound by the bytes).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Work {
+    pub bytes: u64,
+    pub flops: u64,
+}
+
+/// [`Work`] of the operations of one block, in the order they run.
+pub fn block_work<'a>(
+    operations: impl Iterator<Item = &'a burn::backend::ir::OperationIr>,
+) -> Work {
+    use burn::backend::ir::{FloatOperationIr, OperationIr, TensorStatus};
+    use std::collections::{HashMap, HashSet};
+    let size = |t: &burn::backend::ir::TensorIr| (t.shape.num_elements() * t.dtype.size()) as u64;
+    let mut read = HashSet::new();
+    // Produced here: whether it is still needed after the block.
+    let mut produced: HashMap<_, (u64, bool)> = HashMap::new();
+    let mut work = Work::default();
+    for op in operations {
+        if matches!(op, OperationIr::Drop(_)) {
+            continue;
+        }
+        for t in op.inputs() {
+            match produced.get_mut(&t.id) {
+                // Consumed for the last time here: it never reaches memory.
+                Some(p) => p.1 = t.status != TensorStatus::ReadWrite,
+                None => {
+                    if read.insert(t.id) {
+                        work.bytes += size(t);
+                    }
+                }
+            }
+        }
+        for t in op.outputs() {
+            produced.insert(t.id, (size(t), true));
+        }
+        if let OperationIr::Float(_, FloatOperationIr::Matmul(m)) = op {
+            let k = m.lhs.shape.last().copied().unwrap_or(0);
+            work.flops += 2 * m.out.shape.num_elements() as u64 * k as u64;
+        }
+    }
+    work.bytes += produced.values().filter(|p| p.1).map(|p| p.0).sum::<u64>();
+    work
 }
 
 impl std::fmt::Display for Launch {
@@ -187,7 +241,9 @@ impl Subscriber for &'static Counter {
                 span.record(&mut fields);
                 let name = short_name(fields.name.as_deref().unwrap_or("?"));
                 let block = BLOCK.with(|b| b.borrow().clone());
-                let operations = block.unwrap_or_else(|| "?".into());
+                let operations = block
+                    .as_ref()
+                    .map_or_else(|| "?".to_string(), |b| b.names.clone());
                 let source = format!("{name} <- {operations}");
                 if let Some(log) = LOG.get() {
                     let mut log = log.lock().unwrap_or_else(|e| e.into_inner());
@@ -197,6 +253,8 @@ impl Subscriber for &'static Counter {
                             operations,
                             workgroups: fields.count.as_deref().and_then(workgroups),
                             elements: crate::kernels::cube::launch_elements(),
+                            block: block.as_ref().map(|b| b.id),
+                            work: block.map(|b| b.work).unwrap_or_default(),
                         });
                     }
                 }
@@ -248,7 +306,7 @@ thread_local! {
     /// Read spans entered on this thread and not yet left (odd span ids are reads).
     static READ_DEPTH: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
     /// The operations of the fusion block running on this thread (the fusion server's).
-    static BLOCK: std::cell::RefCell<Option<String>> = const { std::cell::RefCell::new(None) };
+    static BLOCK: std::cell::RefCell<Option<Block>> = const { std::cell::RefCell::new(None) };
 }
 
 /// An operation of burn's IR by its kind: `BaseFloat(SwapDims(..))` -> `SwapDims`,
@@ -293,6 +351,17 @@ pub fn operation_name(debug: &str) -> String {
         .unwrap_or_default()
 }
 
+/// The fusion block running on a thread: its operations' kinds, its number and its work.
+#[derive(Clone)]
+struct Block {
+    names: String,
+    id: u64,
+    work: Work,
+}
+
+/// Blocks started since the process began.
+static BLOCKS: AtomicU64 = AtomicU64::new(0);
+
 /// Names the operations of each fusion block on the server's thread while it runs.
 struct BlockNames;
 
@@ -311,7 +380,12 @@ impl burn::backend::fusion::observer::FusionObserver for BlockNames {
         } else {
             names.join("+")
         };
-        BLOCK.with(|b| *b.borrow_mut() = Some(summary));
+        let running = Block {
+            names: summary,
+            id: BLOCKS.fetch_add(1, Ordering::Relaxed),
+            work: block_work(block.iter()),
+        };
+        BLOCK.with(|b| *b.borrow_mut() = Some(running));
     }
     fn block_ran(&self) {
         BLOCK.with(|b| *b.borrow_mut() = None);

@@ -1,6 +1,7 @@
 //! The GPU check: everything issue 48 measures on a GPU machine, in one binary and one run
 //! of a few minutes (a GPU machine here has no Rust toolchain: the binary is built on a CPU
-//! machine with `--features wgpu` and carried; `scripts/gpu_check.sh` packs and runs it).
+//! machine with `--features wgpu,cuda` and carried; `scripts/gpu_check.sh` packs and runs it;
+//! `--device` picks the backend measured).
 //!
 //! Parts, in order (`--parts` picks some):
 //! - `decoders`: `bench_decoders` on the GPU at the paper's batches, beside PyTorch on the
@@ -20,7 +21,10 @@
 //!   threads (`torch_reference.py --threads N`);
 //! - `split`: at the largest of `--threads`, the CPU figures again under each work per thread
 //!   of [`SPLIT_WORK`] (how a lone image's GEMM is split, `SELFMODEL_GEMM_WORK_PER_THREAD`),
-//!   beside PyTorch at as many threads: what batch 1 loses from 8 to 16 threads.
+//!   beside PyTorch at as many threads: what batch 1 loses from 8 to 16 threads;
+//! - outside the default order, run by `scripts/gpu_check.sh`: `peak` (the GPU's bandwidth and
+//!   matrix-product rate), `roofline` (each kernel of the profiled step against its bound,
+//!   [`crate::eval::roofline`]) and `summary` ([`crate::studies::bench::gpu_summary`]).
 //!
 //! Each part appends to `console.txt` and writes its CSV as it finishes, so a run stopped by
 //! the machine's time limit keeps what it measured; `scripts/gpu_check.sh run` starts one
@@ -53,6 +57,12 @@ pub enum Part {
     Fill,
     Cpu,
     Split,
+    /// The bandwidth and matrix-product rate this GPU reaches (`peak.csv`): the roofline's
+    /// bounds.
+    Peak,
+    /// Each kernel of the profiled batch-256 step against its bound (`kernels.csv`): from the
+    /// `profile` run's `profile.txt`, `launches.csv` and `peak.csv` in `--out`.
+    Roofline,
     /// Every ratio against PyTorch of the backends measured into the sub-folders of `--out`
     /// (`cuda/`, `wgpu/`), and which backend is faster at each figure: printed last.
     Summary,
@@ -171,6 +181,8 @@ pub fn run(check: &GpuCheck) -> Result<()> {
             Part::Cpu => cpu(check, &mut console),
             Part::Split => split(check, &mut console),
             Part::Summary => summary(check, &mut console),
+            Part::Peak => peak(check, &mut console),
+            Part::Roofline => roofline(check, &mut console),
         };
         // A part that fails is reported and the check goes on to the next.
         if let Err(e) = done {
@@ -272,13 +284,16 @@ fn counts(check: &GpuCheck, console: &mut Console) -> Result<()> {
             log[log.len().saturating_sub(last)..]
                 .iter()
                 .enumerate()
-                .map(|(i, l)| StepLaunch {
+                .map(|(i, l)| crate::eval::roofline::StepLaunch {
                     batch,
                     index: i,
                     kernel: l.kernel.clone(),
                     operations: l.operations.clone(),
                     workgroups: l.workgroups,
                     elements: l.elements,
+                    block: l.block,
+                    block_bytes: l.work.bytes,
+                    block_flops: l.work.flops,
                 }),
         );
         // Counted from the end of the first epoch (kernels compiled and tuned by then).
@@ -393,18 +408,6 @@ impl TorchCounts {
             device: device.into(),
         })
     }
-}
-
-/// One launch of a step's, in order.
-#[cfg(feature = "cube")]
-#[derive(Clone, Debug, serde::Serialize)]
-struct StepLaunch {
-    batch: usize,
-    index: usize,
-    kernel: String,
-    operations: String,
-    workgroups: Option<u64>,
-    elements: Option<u64>,
 }
 
 /// Launches a step of one kernel for one set of operations (a fusion block's kinds).
@@ -721,6 +724,61 @@ fn split(check: &GpuCheck, console: &mut Console) -> Result<()> {
         write_csv(&check.out.join("gemm_split.csv"), &all)?;
     }
     Ok(())
+}
+
+/// The bandwidth of an elementwise pass over 1 GiB and the rate of an 8,192² matrix product
+/// (1 MiB and 256² with `--quick`), into `peak.csv`.
+fn peak(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    use crate::eval::compute_peak::{bandwidth_gbytes, matmul_gflops};
+    let device = crate::core::device::select(check.device)?;
+    let (elements, n) = if check.quick {
+        (1 << 18, 256)
+    } else {
+        (1 << 28, 8192)
+    };
+    let peak = crate::eval::roofline::Peak {
+        gbytes_per_s: bandwidth_gbytes(&device, elements, 5),
+        gflops: matmul_gflops(&device, n, 5),
+    };
+    console.say(format!(
+        "{}: {:.0} GB/s (an elementwise pass over {} MiB), {:.0} GFLOP/s (f32 product of {n}²)",
+        check.device,
+        peak.gbytes_per_s,
+        elements * 4 >> 20,
+        peak.gflops
+    ))?;
+    write_csv(&check.out.join("peak.csv"), &[peak])
+}
+
+/// Each block of the profiled step at the largest batch against its bound
+/// ([`crate::eval::roofline`]), into `kernels.csv`; the ten slowest said.
+fn roofline(check: &GpuCheck, console: &mut Console) -> Result<()> {
+    use crate::eval::roofline::{Peak, StepLaunch, read_profile, rows};
+    use crate::report::table::read_csv;
+    let launches: Vec<StepLaunch> = read_csv(&check.out.join("launches.csv"))?;
+    let peak: Vec<Peak> = read_csv(&check.out.join("peak.csv"))?;
+    let peak = *peak
+        .first()
+        .ok_or_else(|| Error::Config("peak.csv holds no row: run the peak part".into()))?;
+    let batch = launches.iter().map(|l| l.batch).max().unwrap_or(0);
+    let step: Vec<StepLaunch> = launches.into_iter().filter(|l| l.batch == batch).collect();
+    let profile = read_profile(&check.out.join("profile.txt"))?;
+    let rows = rows(&profile, &step, peak)?;
+    let total: f64 = rows.iter().map(|r| r.time_us).sum();
+    console.say(format!(
+        "a NeuroKin step at batch {batch}: {:.2} ms of kernels, {} blocks; the ten slowest against their bound at {:.0} GB/s and {:.0} GFLOP/s:",
+        total / 1e3,
+        rows.len(),
+        peak.gbytes_per_s,
+        peak.gflops
+    ))?;
+    for r in rows.iter().take(10) {
+        console.say(format!(
+            "  {:>9.1} µs  {:>5.1}x its {} bound ({:.1} µs)  {} <- {}",
+            r.time_us, r.ratio, r.bound_by, r.bound_us, r.kernels, r.operations
+        ))?;
+    }
+    write_csv(&check.out.join("kernels.csv"), &rows)
 }
 
 /// Every figure of every backend measured under `--out` against PyTorch, and the faster
