@@ -76,6 +76,42 @@ fn f16_autocast_trains_the_same_on_wgpu() {
     same_on_both(cfg, 6, 1e-2, 1e-2);
 }
 
+/// Autocast in flex32 (`--precision flex32`: f32 storage, relaxed arithmetic) trains on wgpu
+/// as f32 does there. burn's cast from flex32 to f32 hands the tensor back still marked flex32,
+/// and our batch norm refused it ("an f32 [N, C, ...] tensor": the H200's failure of
+/// 2026-11-28, which followed the f16 run). The CPU has no flex32, so both runs are on wgpu.
+#[test]
+fn neurokin_trains_in_flex32_on_wgpu() {
+    use selfmodel::train::precision::Precision;
+    let dir = crate::common::tempdir();
+    let train = |precision: Precision| {
+        let mut cfg = neurokin_run("quick").unwrap();
+        cfg.train.precision = precision;
+        cfg.train.steps = 6;
+        let out = dir.path().join(precision.to_string());
+        selfmodel::self_models::harness::run(&cfg, &out, DeviceChoice::Wgpu, false)
+            .unwrap_or_else(|e| panic!("{precision}: {e}"))
+    };
+    let (f32, flex32) = (train(Precision::F32), train(Precision::Flex32));
+    let losses = |o: &selfmodel::self_models::harness::RunOutcome| {
+        o.log.curve.iter().map(|p| p.1).collect::<Vec<_>>()
+    };
+    eprintln!(
+        "f32: {:.3} dB, losses {:?}; flex32: {:.3} dB, losses {:?}",
+        f32.result.psnr_db_test,
+        losses(&f32),
+        flex32.result.psnr_db_test,
+        losses(&flex32)
+    );
+    assert!(flex32.result.psnr_db_test.is_finite());
+    assert!(
+        (flex32.result.psnr_db_test - f32.result.psnr_db_test).abs() < 0.1,
+        "flex32 {} dB against f32 {} dB",
+        flex32.result.psnr_db_test,
+        f32.result.psnr_db_test
+    );
+}
+
 /// K-3DGS trains dense on a GPU (no read of the projected Gaussians at every step): the
 /// CPU trains dense here too, so both run the same arithmetic.
 #[test]

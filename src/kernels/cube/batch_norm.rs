@@ -13,7 +13,6 @@
 
 use burn::backend::tensor::FloatTensor;
 use burn::backend::{Backend, ExtensionType};
-use burn::tensor::DType;
 use burn_cubecl::CubeBackend;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
@@ -22,7 +21,7 @@ use super::channel_reduce::{
     Summand, finish_grad_sums, finish_grid, finish_statistics, flat, launch_partial_sums, reaching,
 };
 use super::multi_tensor::{BLOCK, at};
-use super::{contiguous, elementwise, empty_f32, over_elements};
+use super::{contiguous, elementwise, empty_f32, holds_f32, over_elements};
 
 /// The input gradient, element by element:
 /// `γ/std (g - Σg/M - (x - mean)/std · Σ g (x - mean)/std / M)`, `M` a channel's count.
@@ -58,10 +57,7 @@ pub fn x_grad(
 /// `[channels, plane]` of an `[N, C, ...]` tensor.
 fn layout(x: &CubeTensor) -> (usize, usize) {
     let dims = x.meta.shape();
-    assert!(
-        dims.len() >= 2 && x.dtype == DType::F32,
-        "an f32 [N, C, ...] tensor"
-    );
+    assert!(dims.len() >= 2 && holds_f32(x), "an f32 [N, C, ...] tensor");
     (dims[1], dims.iter().skip(2).product())
 }
 

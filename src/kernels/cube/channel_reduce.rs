@@ -19,12 +19,11 @@
 //! The slow references are burn's own operations (the default bodies of
 //! [`super::extension::GpuKernelOps`]), which `tests/gpu/kernels.rs` compares them with.
 
-use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::BLOCK;
-use super::{contiguous, empty_f32, over_elements};
+use super::{contiguous, empty_f32, holds_f32, over_elements};
 
 /// Workgroups a partial-sum launch aims at (as many as there are rows to give them): several
 /// per multiprocessor of the largest GPUs (132 on an H100).
@@ -334,7 +333,7 @@ pub fn launch_partial_sums(
     what: Summand,
 ) -> CubeTensor {
     assert!(
-        a.meta.shape().len() >= 2 && a.dtype == DType::F32,
+        a.meta.shape().len() >= 2 && holds_f32(a),
         "an f32 [N, C, ...] tensor"
     );
     let channels = a.meta.shape()[1];

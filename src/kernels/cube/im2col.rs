@@ -14,11 +14,10 @@
 //! burn's own `conv2d` and `conv_transpose2d` and their backward passes, which
 //! `tests/gpu/kernels.rs` compares them with.
 
-use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
-use super::{elementwise, empty_f32, over_elements};
+use super::{elementwise, empty_f32, holds_f32, over_elements};
 
 /// The patch grid as the kernels read it (see [`Patches`]).
 #[derive(CubeLaunch, CubeType)]
@@ -141,7 +140,7 @@ impl Patches {
 pub fn launch_columns(t: CubeTensor, patches: Patches) -> CubeTensor {
     let dims = t.meta.shape().clone();
     assert!(
-        dims.len() == 4 && t.dtype == DType::F32,
+        dims.len() == 4 && holds_f32(&t),
         "an f32 [N, C, H, W] image"
     );
     let [h, w] = patches.grid;

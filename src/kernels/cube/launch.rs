@@ -1,12 +1,11 @@
 //! Launching the multi-tensor kernels on burn's CubeCL tensors: contiguity, outputs, and the
 //! tensors split into as many launches as the device's binding limit asks.
 
-use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{self, AdamScalarsLaunch, BLOCK};
-use super::{contiguous, elementwise, empty_f32, over_elements};
+use super::{contiguous, elementwise, empty_f32, holds_f32, over_elements};
 use crate::kernels::pointwise::AdamStep;
 
 /// Workgroups a tensor's sum of squares is split over: enough that the largest tensor's
@@ -30,7 +29,7 @@ fn max_bindings(t: &CubeTensor) -> usize {
 
 fn f32_only(tensors: &[CubeTensor]) {
     assert!(
-        tensors.iter().all(|t| t.dtype == DType::F32),
+        tensors.iter().all(holds_f32),
         "the multi-tensor kernels take f32 tensors"
     );
 }

@@ -6,12 +6,11 @@
 //! The slow reference is `train::losses::bce_with_logits_composed`; `tests/gpu/kernels.rs`
 //! compares the two.
 
-use burn::tensor::DType;
 use burn_cubecl::tensor::CubeTensor;
 use cubecl::prelude::*;
 
 use super::multi_tensor::{BLOCK, at, tree_sum};
-use super::{elementwise, empty_f32, over_elements};
+use super::{elementwise, empty_f32, holds_f32, over_elements};
 
 /// Workgroups of the forward pass's partial sums, at most: enough to fill the largest GPUs
 /// (issue 71's guard asks 1,024 of a kernel over more than 2^20 elements).
@@ -95,10 +94,7 @@ pub fn logits_grad(
 
 /// The mean loss, a `[1]` tensor.
 pub fn launch_mean(z: CubeTensor, y: CubeTensor) -> CubeTensor {
-    assert!(
-        z.dtype == DType::F32 && y.dtype == DType::F32,
-        "f32 logits and targets"
-    );
+    assert!(holds_f32(&z) && holds_f32(&y), "f32 logits and targets");
     let n = z.meta.num_elements();
     let groups = n.div_ceil(BLOCK * 8).clamp(1, GROUPS);
     let partials = empty_f32(&z, [groups]);

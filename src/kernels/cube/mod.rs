@@ -50,6 +50,13 @@ fn contiguous(t: CubeTensor) -> CubeTensor {
     }
 }
 
+/// Whether `t` holds f32 values, as our kernels read them: `F32`, or `Flex32`, whose storage is
+/// f32 (burn's cast between the two hands the tensor back unchanged, still marked `Flex32`:
+/// `--precision flex32`'s batch norm, whose input is cast to f32, reached our kernels so).
+pub fn holds_f32(t: &CubeTensor) -> bool {
+    matches!(t.dtype, DType::F32 | DType::Flex32)
+}
+
 /// A new contiguous f32 tensor of `shape` on `like`'s device (its values unset).
 fn empty_f32(like: &CubeTensor, shape: impl Into<Shape>) -> CubeTensor {
     burn_cubecl::ops::numeric::empty_device_dtype(
