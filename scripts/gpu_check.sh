@@ -4,13 +4,14 @@
 #
 #   scripts/gpu_check.sh pack          # here, on a CPU machine with Rust (scripts/build_cuda.sh:
 #                                      # ~30 min clean, minutes after; target/cuda/)
-#   scripts/gpu_check.sh run [ARGS]    # there, from the repository root, target/gpu_check carried
+#   scripts/gpu_check.sh run [ARGS]    # there, from the repository root, target/gpu_check and
+#                                      # target/gpu_check_N carried (a call each, then run)
 #
 # `pack` builds one binary with both GPU backends, burn's CUDA (`--features cuda`) and wgpu
 # (WGSL through naga), stripped and compressed, into target/gpu_check/ with Debian's Vulkan
 # loader and the GL dispatch libraries the NVIDIA driver's Vulkan library links (the GPU
-# machines had neither) and PyTorch's reference scripts (git-ignored: carry that one folder;
-# the tree is ~35 MB of the 64 MiB a call carries). `run` measures both backends in one call,
+# machines had neither) and PyTorch's reference scripts (git-ignored; the binary in 20 MiB
+# parts, a folder each, as the tree is ~35 MB of the 64 MiB a call carries). `run` measures both backends in one call,
 # the most valuable parts first, in at most GPU_CHECK_SECONDS (default 480) of the machine:
 #   cuda: decoders neurokin peak profile (the counts part under cubecl's profiler, then each
 #   kernel of the step against its bound: kernels.csv) precision;  wgpu: decoders neurokin peak
@@ -29,14 +30,24 @@ case "${1:-}" in
 pack)
   FEATURES=wgpu,cuda scripts/build_cuda.sh --bin gpu_check
   dir=target/gpu_check
-  rm -rf "$dir" && mkdir -p "$dir/debs" "$dir/bench"
+  rm -rf "$dir" "$dir"_[0-9] && mkdir -p "$dir/debs" "$dir/bench"
   strip -o "$dir/gpu_check" target/cuda/release/gpu_check
   xz -6 -T2 "$dir/gpu_check"
+  # ~41 MB compressed (CUDA's LLVM inside): with the ~35 MB tree over the 64 MiB a call carries,
+  # so in parts of 20 MiB, one folder each (target/gpu_check, target/gpu_check_1, ...), carried
+  # a call each; `run` joins them.
+  (cd "$dir" && split -b 20M -d -a 2 gpu_check.xz gpu_check.xz.part. && rm gpu_check.xz)
+  n=0
+  for part in "$dir"/gpu_check.xz.part.*; do
+    if [ "$n" -gt 0 ]; then mkdir -p "${dir}_$n" && mv "$part" "${dir}_$n/"; fi
+    n=$((n + 1))
+  done
+  echo "$n" >"$dir/parts"
   (cd "$dir/debs" && apt-get download libvulkan1 libglvnd0 libegl1 libgl1 libglx0 libopengl0 libgles2 \
     libx11-6 libxcb1 libxau6 libxdmcp6 libbsd0 libmd0 libxext6 >/dev/null)
   cp ../shared/bench/torch_reference.py ../shared/bench/torch_gpu_reference.py \
     scripts/torch_step_kernels.py "$dir/bench/"
-  du -sh "$dir"
+  du -sh "$dir" "$dir"_[0-9] 2>/dev/null || true
   ;;
 run)
   shift
@@ -50,7 +61,13 @@ run)
   # libdevice (exp, log, tanh in PTX): CUDA's, where the machine has it.
   libdevice=$(ls /usr/local/cuda*/nvvm/libdevice/libdevice*.bc 2>/dev/null | head -1 || true)
   [ -z "$libdevice" ] || export CUDA_PATH=${libdevice%/nvvm/libdevice/*}
-  xz -dkf "$PACK/gpu_check.xz" && chmod +x "$PACK/gpu_check"
+  # The binary's parts, one folder each (`pack`), joined in order of their numbers.
+  parts=$(ls "$PACK"*/gpu_check.xz.part.* 2>/dev/null | sort -t. -k4 || true)
+  if [ "$(echo "$parts" | grep -c .)" != "$(cat "$PACK/parts" 2>/dev/null)" ]; then
+    echo "error: the pack's parts are not all here (carry $PACK and each ${PACK}_N that pack made)" >&2
+    exit 1
+  fi
+  cat $parts | xz -d >"$PACK/gpu_check" && chmod +x "$PACK/gpu_check"
   name=$(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 | tr -c 'A-Za-z0-9\n' '_' || true)
   name=${name:-unknown_gpu}
   root="${OUT:-reports}/gpu/$name"

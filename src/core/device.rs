@@ -105,10 +105,34 @@ pub fn select(choice: DeviceChoice) -> Result<Device> {
         }
         DeviceChoice::Cuda => {
             #[cfg(feature = "cuda")]
-            return Ok(Device::cuda(0));
+            return cuda_driver().map(|()| Device::cuda(0));
             #[cfg(not(feature = "cuda"))]
             return Err(missing("cuda"));
         }
+    }
+}
+
+/// The NVIDIA driver's library, loaded as cudarc loads it: without it, burn's CUDA backend
+/// panics on its device thread at the first operation; here it is one line at the edge.
+#[cfg(feature = "cuda")]
+fn cuda_driver() -> Result<()> {
+    let loads = |name: &std::ffi::CStr| {
+        // SAFETY: dlopen with a valid C string; the handle is closed at once (cudarc opens the
+        // library again for itself).
+        unsafe {
+            let handle = libc::dlopen(name.as_ptr(), libc::RTLD_LAZY);
+            if !handle.is_null() {
+                libc::dlclose(handle);
+            }
+            !handle.is_null()
+        }
+    };
+    if loads(c"libcuda.so.1") || loads(c"libcuda.so") {
+        Ok(())
+    } else {
+        Err(Error::Device(
+            "--device cuda: no NVIDIA driver here (libcuda.so.1 cannot be loaded; LD_LIBRARY_PATH names where it is): run on a machine with an NVIDIA GPU, or use --device wgpu or cpu".into(),
+        ))
     }
 }
 
