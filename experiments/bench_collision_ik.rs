@@ -28,7 +28,7 @@ struct Args {
     #[arg(long, default_value = "paper")]
     preset: String,
     /// The distance kept from the robot itself and the obstacles (m).
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(long, default_value_t = 0.005, allow_hyphen_values = true)]
     margin: f64,
     /// The Python that runs Pinocchio's check (PyPI pin and pyyaml).
     #[arg(long, default_value = "python3")]

@@ -36,8 +36,8 @@ enum Command {
         /// Condition on the position only (targets x,y,z).
         #[arg(long)]
         position_only: bool,
-        /// Train on collision-free joint samples only (with --scene, --self-collision): the
-        /// flow then proposes answers that keep clear.
+        /// Train on collision-free joint samples only (with --scene, --self-collision, --srdf
+        /// without --group, --spheres): the flow then proposes answers that keep clear.
         #[command(flatten)]
         collisions: CollisionArgs,
         /// Where the model goes (a folder: model.bpk, model.json).
@@ -57,6 +57,8 @@ enum Command {
         /// Only poses whose joints are collision-free (with --scene, --self-collision).
         #[command(flatten)]
         collisions: CollisionArgs,
+        #[command(flatten)]
+        srdf: SrdfArg,
         /// CSV: x,y,z,qw,qx,qy,qz, then the joints that reach it (q1..qN).
         #[arg(long)]
         out: PathBuf,
@@ -77,10 +79,17 @@ enum Command {
         /// Iterate each answer until every tip is within MM millimetres and DEG degrees (the
         /// convergence tolerance; an answer is exact within 1 mm and 0.572 degrees, the
         /// success threshold, whatever this is).
-        #[arg(long, value_name = "MM,DEG", default_value = "0.0001,0.0001")]
+        #[arg(
+            long,
+            value_name = "MM,DEG",
+            default_value = "0.0001,0.0001",
+            allow_hyphen_values = true
+        )]
         tolerance: String,
         #[command(flatten)]
         collisions: CollisionArgs,
+        #[command(flatten)]
+        srdf: SrdfArg,
         /// Where the answers go (CSV: target,solution, one column per joint named after it,
         /// pos_err_mm,rot_err_deg,exact; beside it OUT.json: how they were made).
         #[arg(long)]
@@ -95,44 +104,94 @@ struct CollisionArgs {
     /// mesh): an answer is exact only if it keeps --margin from them and from itself.
     #[arg(long, value_name = "FILE")]
     scene: Option<PathBuf>,
-    /// Check each answer against the robot itself (on with --scene).
+    /// Check each answer against the robot itself (on with --scene, --srdf and --spheres).
     #[arg(long)]
     self_collision: bool,
-    /// The distance an answer keeps from obstacles and from itself (metres).
-    #[arg(long, default_value_t = 0.005)]
-    margin: f64,
-    /// The SRDF whose <disable_collisions> say which links may touch [default: the one
-    /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
-    #[arg(long, value_name = "FILE")]
-    srdf: Option<PathBuf>,
+    /// The distance an answer keeps from obstacles and from itself (metres, 0 to 1) [default:
+    /// 0.005, with a collision option].
+    #[arg(long, value_name = "M", allow_hyphen_values = true)]
+    margin: Option<f64>,
     /// Your own collision spheres (cuRobo's robot YAML or spheres file: a collision_spheres
     /// block) instead of spheres fitted to the description's collision meshes.
     #[arg(long, value_name = "FILE")]
     spheres: Option<PathBuf>,
 }
 
-impl CollisionArgs {
-    /// The files it reads.
-    fn inputs(&self) -> impl Iterator<Item = &std::path::Path> {
-        [self.scene.as_deref(), self.srdf.as_deref()]
-            .into_iter()
-            .flatten()
+/// `--srdf` where it names collisions only (`ik targets`, `ik solve`; `ik train` shares the
+/// one `--group` reads).
+#[derive(clap::Args)]
+struct SrdfArg {
+    /// The SRDF whose <disable_collisions> say which links may touch [default: the one
+    /// beside the URDF; without one, the pairs MoveIt's setup assistant would disable].
+    #[arg(long, value_name = "FILE")]
+    srdf: Option<PathBuf>,
+}
+
+/// The collision options of a command, checked: each one given does something.
+struct Collisions {
+    args: CollisionArgs,
+    srdf: Option<PathBuf>,
+    margin: f64,
+}
+
+/// The margin kept where `--margin` is not given (m).
+const DEFAULT_MARGIN_M: f64 = 0.005;
+
+impl Collisions {
+    /// `args` with `srdf`; `--margin` without a collision option is refused (it would change
+    /// nothing), as is a margin that is not a distance from 0 to 1 m.
+    fn new(args: CollisionArgs, srdf: Option<PathBuf>) -> selfmodel::Result<Self> {
+        let any =
+            args.scene.is_some() || args.self_collision || srdf.is_some() || args.spheres.is_some();
+        if let Some(m) = args.margin {
+            if !any {
+                return Err(selfmodel::Error::Config(format!(
+                    "--margin {}: it is the distance kept from obstacles and from the robot itself, so it needs --scene, --self-collision, --srdf or --spheres",
+                    selfmodel::core::error::short_number(m)
+                )));
+            }
+            if !(m.is_finite() && (0.0..=1.0).contains(&m)) {
+                return Err(selfmodel::Error::Config(format!(
+                    "--margin {}: give a distance from 0 to 1 m",
+                    selfmodel::core::error::short_number(m)
+                )));
+            }
+        }
+        let margin = args.margin.unwrap_or(DEFAULT_MARGIN_M);
+        Ok(Self { args, srdf, margin })
+    }
+
+    /// Whether any option asks for a collision check.
+    fn any(&self) -> bool {
+        self.args.scene.is_some()
+            || self.args.self_collision
+            || self.srdf.is_some()
+            || self.args.spheres.is_some()
+    }
+
+    /// The files a check reads (the scene and its meshes, the spheres files, the SRDF): what
+    /// an `--out` must not be.
+    fn inputs(&self) -> selfmodel::Result<Vec<PathBuf>> {
+        let mut files = Vec::new();
+        if let Some(scene) = &self.args.scene {
+            files.extend(selfmodel::sim::collision::scene::Scene::files(scene)?);
+        }
+        if let Some(spheres) = &self.args.spheres {
+            files.extend(selfmodel::sim::collision::user_spheres::files(spheres)?);
+        }
+        files.extend(self.srdf.clone());
+        Ok(files)
     }
 
     /// What `ik train` keeps its samples clear of, where any option asks for it.
     fn for_training(&self) -> Option<selfmodel::ik::pose_model::TrainingCollisions> {
         self.any()
             .then(|| selfmodel::ik::pose_model::TrainingCollisions {
-                scene: self.scene.clone(),
+                scene: self.args.scene.clone(),
                 srdf: self.srdf.clone(),
-                spheres: self.spheres.clone(),
+                spheres: self.args.spheres.clone(),
                 margin: self.margin,
             })
-    }
-
-    /// Whether any option asks for a collision check.
-    fn any(&self) -> bool {
-        self.scene.is_some() || self.self_collision || self.srdf.is_some() || self.spheres.is_some()
     }
 
     /// The check, where any option asks for one.
@@ -145,12 +204,13 @@ impl CollisionArgs {
         if !self.any() {
             return Ok(None);
         }
-        let scene = (self.scene.as_deref())
+        let scene = (self.args.scene.as_deref())
             .map(selfmodel::sim::collision::scene::Scene::read)
             .transpose()?;
         selfmodel::ik::collision::CollisionCheck::with_spheres(
             spec,
-            self.spheres
+            self.args
+                .spheres
                 .as_deref()
                 .map_or(Spheres::KeptIn(model_dir), Spheres::File),
             self.srdf.as_deref(),
@@ -172,14 +232,15 @@ const MAX_TARGETS: usize = 10_000_000;
 fn answering(
     dir: &std::path::Path,
     outs: &[&std::path::Path],
-    inputs: &[&std::path::Path],
+    inputs: &[PathBuf],
     device: &burn::tensor::Device,
 ) -> selfmodel::Result<(PoseModel, selfmodel::Robot)> {
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite};
     let model_folder = Some(dir).filter(|d| d.join("model.json").is_file());
+    let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
     for out in outs {
         check_out(out, OutKind::File)?;
-        refuse_overwrite(out, inputs, model_folder)?;
+        refuse_overwrite(out, &inputs, model_folder)?;
     }
     let (model, robot) = PoseModel::load_with_robot(dir, device)?;
     // Nor the robot description the model names.
@@ -198,12 +259,19 @@ fn main() -> ExitCode {
         let device = selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
         match args.command {
             Command::Train {
-                robot,
+                mut robot,
                 preset,
                 position_only,
                 collisions,
                 out,
             } => {
+                // One --srdf: --group's file where a group is named (the collision check then
+                // reads it too), else the collision check's alone.
+                let srdf = match robot.parts.group.group {
+                    Some(_) => None,
+                    None => robot.parts.group.srdf.take(),
+                };
+                let collisions = Collisions::new(collisions, srdf)?;
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
                 cfg.collisions = collisions.for_training();
@@ -212,6 +280,16 @@ fn main() -> ExitCode {
                     selfmodel::core::atomic_file::OutKind::Folder,
                 )?;
                 let spec = robot.spec()?;
+                let mut inputs = spec.files();
+                if collisions.any() {
+                    inputs.extend(collisions.inputs()?);
+                }
+                let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
+                selfmodel::core::atomic_file::refuse_writing_over(
+                    &out,
+                    selfmodel::ik::pose_model::WRITTEN,
+                    &inputs,
+                )?;
                 let loaded = spec.load_kinematics()?;
                 let start = std::time::Instant::now();
                 let model = train(&spec, &loaded, &cfg, &out, &device)?;
@@ -240,14 +318,16 @@ fn main() -> ExitCode {
                 n,
                 seed,
                 collisions,
+                srdf,
                 out,
             } => {
+                let collisions = Collisions::new(collisions, srdf.srdf)?;
                 if !(1..=MAX_TARGETS).contains(&n) {
                     return Err(selfmodel::Error::Config(format!(
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                let inputs: Vec<&std::path::Path> = collisions.inputs().collect();
+                let inputs = collisions.inputs()?;
                 let model_dir = model;
                 let (model, robot) = answering(&model_dir, &[&out], &inputs, &device)?;
                 let check = collisions.check(&model.saved.robot, &model_dir)?;
@@ -302,16 +382,18 @@ fn main() -> ExitCode {
                 k,
                 tolerance,
                 collisions,
+                srdf,
                 out,
             } => {
+                let collisions = Collisions::new(collisions, srdf.srdf)?;
                 if !(1..=MAX_K).contains(&k) {
                     return Err(selfmodel::Error::Config(format!(
                         "--k must be 1 to {MAX_K} (answers per target)"
                     )));
                 }
                 let provenance = PathBuf::from(format!("{}.json", out.display()));
-                let mut inputs = vec![targets_file.as_path()];
-                inputs.extend(collisions.inputs());
+                let mut inputs = vec![targets_file.clone()];
+                inputs.extend(collisions.inputs()?);
                 let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
                 let check = collisions.check(&model.saved.robot, &model_dir)?;
                 let checking = check.is_some();
@@ -367,7 +449,7 @@ fn main() -> ExitCode {
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
                         "solver": &cfg,
-                        "scene": collisions.scene,
+                        "scene": collisions.args.scene,
                         "collisions_checked": checking,
                         "margin_m": checking.then_some(collisions.margin),
                         "stats": stats,

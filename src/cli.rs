@@ -178,8 +178,10 @@ pub struct JointGroupArgs {
     /// `.srdf` beside the URDF, in `../config/`, or in a `*_moveit_config` package beside it.
     #[arg(long, value_name = "NAME", conflicts_with_all = ["joints", "tips"])]
     pub group: Option<String>,
-    /// The SRDF file `--group` reads [default: the one beside the URDF].
-    #[arg(long, value_name = "FILE", requires = "group")]
+    /// The SRDF file `--group` reads [default: the one beside the URDF]; `ik train` also
+    /// reads its <disable_collisions> for a collision check (without --group: for that
+    /// alone).
+    #[arg(long, value_name = "FILE")]
     pub srdf: Option<PathBuf>,
 }
 

@@ -269,40 +269,6 @@ fn dataset_never_writes_over_its_inputs() {
     }
 }
 
-/// Run `args` of `binary`, send Ctrl-C (SIGINT) after `after` seconds, and return how long it
-/// took to stop, its exit code and its last line.
-#[cfg(unix)]
-fn interrupt_after(binary: &str, args: &[&str], after: f64) -> (f64, Option<i32>, String) {
-    let mut child = std::process::Command::new(binary)
-        .args(args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(std::time::Duration::from_secs_f64(after));
-    let sent = std::time::Instant::now();
-    // The shell's own `kill` (a machine without procps has no /bin/kill).
-    let kill = std::process::Command::new("sh")
-        .args(["-c", &format!("kill -INT {}", child.id())])
-        .status()
-        .unwrap();
-    assert!(kill.success());
-    let status = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            sent.elapsed().as_secs_f64() < 10.0,
-            "{args:?}: still running 10 s after Ctrl-C"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    };
-    let mut err = String::new();
-    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
-    let last = err.lines().last().unwrap_or_default().to_string();
-    (sent.elapsed().as_secs_f64(), status.code(), last)
-}
-
 /// Ctrl-C stops every long command within a second or two, in whichever phase it is (drawing,
 /// reading a big file, rendering, solving, writing): exit 130, one line, no file left.
 #[cfg(unix)]
@@ -387,7 +353,7 @@ fn ctrl_c_stops_every_long_command_within_seconds_and_leaves_nothing() {
             })
             .collect();
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (waited, code, last) = interrupt_after(binary, &args, after);
+        let (waited, code, last) = common::interrupt_after(binary, &args, after);
         eprintln!("{name}: stopped {waited:.2} s after Ctrl-C, exit {code:?}: {last}");
         let left: Vec<String> = std::fs::read_dir(dir.path())
             .unwrap()

@@ -54,7 +54,7 @@ fn panda_spec() -> Option<selfmodel::sim::robots::RobotSpec> {
 /// Every vertex of every link's collision mesh inside a sphere of its link, and every point
 /// of its surface (sampled at 2 mm) within the fit's tolerance of one.
 fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
-    let spheres = fit_robot(robot, fit);
+    let spheres = fit_robot(robot, fit).unwrap();
     let mut total = 0;
     for (link, (geometry, s)) in robot.geometry.iter().zip(&spheres).enumerate() {
         let shapes = geometry.shapes();
@@ -151,12 +151,12 @@ fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
     let Some(robot) = shared_robot("franka_description/urdf/panda.urdf", "panda_hand") else {
         return;
     };
-    let spheres = fit_robot(&robot, &SphereFit::default());
+    let spheres = fit_robot(&robot, &SphereFit::default()).unwrap();
     let sampling = PairSampling {
         samples: 2000,
         ..PairSampling::default()
     };
-    let allowed = computed_pairs(&robot, &spheres, &sampling);
+    let allowed = computed_pairs(&robot, &spheres, &sampling).unwrap();
     // Every joint's parent and child are allowed, as adjacent (or for a reason found first).
     for j in &robot.chain.joints {
         assert!(allowed.allows(&robot.chain.links[j.parent], &robot.chain.links[j.child]));
@@ -271,7 +271,7 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
     let Some(robot) = shared_robot("franka_description/urdf/panda.urdf", "panda_hand") else {
         return;
     };
-    let spheres = fit_robot(&robot, &SphereFit::default());
+    let spheres = fit_robot(&robot, &SphereFit::default()).unwrap();
     let allowed = computed_pairs(
         &robot,
         &spheres,
@@ -279,7 +279,8 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
             samples: 500,
             ..PairSampling::default()
         },
-    );
+    )
+    .unwrap();
     let model = CollisionModel::new(&robot.chain, spheres, &allowed);
     assert!(!model.moving[0], "the Panda's base does not move");
     let ready = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
@@ -508,8 +509,9 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
     assert!(check.valid(&pushed.joints), "{pushed:?}");
 }
 
-/// The collision model kept beside a saved model is read back as it was written, and a file
-/// whose key does not match the robot (another description, SRDF or fit) is ignored.
+/// The collision model kept beside a saved model is read back as it was written, a file
+/// edited by hand is refused, and a file whose key does not match the robot (another
+/// description, SRDF or fit) is ignored.
 #[test]
 fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     use selfmodel::ik::collision::{CollisionCheck, Spheres};
@@ -526,14 +528,18 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     let kept = check(Spheres::KeptIn(dir.path()));
     assert_eq!(kept.model.spheres, fitted.model.spheres);
     assert_eq!(kept.model.pairs, fitted.model.pairs);
-    // The file is what is read: a radius changed in it comes back.
+    // A radius changed in it by hand: refused (its hash no longer matches), never used.
     let text = std::fs::read_to_string(&file).unwrap();
     let r = fitted.model.spheres.iter().flatten().next().unwrap().radius;
     let edited = text.replacen(&format!("\"radius\": {r}"), "\"radius\": 0.5", 1);
     assert_ne!(edited, text);
     std::fs::write(&file, &edited).unwrap();
-    let read = check(Spheres::KeptIn(dir.path()));
-    assert!(read.model.spheres.iter().flatten().any(|s| s.radius == 0.5));
+    let Err(err) =
+        CollisionCheck::with_spheres(&spec, Spheres::KeptIn(dir.path()), None, None, true, 0.0)
+    else {
+        panic!("an edited collision model was used");
+    };
+    assert!(err.to_string().contains("cannot be used"), "{err}");
     // Another key (as another robot or SRDF would give): ignored, the spheres fitted again.
     let stale = edited.replacen("\"key\": \"", "\"key\": \"0", 1);
     std::fs::write(&file, stale).unwrap();

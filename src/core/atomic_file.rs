@@ -175,6 +175,14 @@ pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
             shown.to_string().trim_end_matches('/')
         )));
     }
+    if kind == OutKind::File
+        && let Ok(meta) = fs::metadata(out)
+        && !meta.is_file()
+    {
+        return Err(Error::Config(format!(
+            "--out {shown} is a device, FIFO or socket, not a file: give a file to write"
+        )));
+    }
     if kind == OutKind::Folder && out.exists() && !out.is_dir() {
         return Err(Error::Config(format!(
             "--out {shown} is a file; give a folder"
@@ -203,40 +211,80 @@ pub enum OutKind {
     Folder,
 }
 
-/// Refuse an output path that is one of a run's `inputs` or lies inside a folder it reads
-/// from (`protected`, a saved model's): a run never overwrites what it reads. Paths are
-/// compared as they resolve (the output need not exist yet).
-pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) -> Result<()> {
-    let resolve = |p: &Path| {
-        let parent = p
-            .parent()
-            .filter(|d| !d.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        fs::canonicalize(parent)
-            .ok()
-            .map(|d| d.join(p.file_name().unwrap_or_default()))
-    };
-    let Some(target) = resolve(out) else {
-        return Ok(());
-    };
-    if let Some(input) = inputs
-        .iter()
-        .find(|i| resolve(i).is_some_and(|i| i == target))
+/// `p` as it resolves: every link followed where it exists, else its folder resolved and its
+/// name joined (an output need not exist yet).
+fn resolved(p: &Path) -> Option<PathBuf> {
+    if let Ok(path) = fs::canonicalize(p) {
+        return Some(path);
+    }
+    let parent = p
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    fs::canonicalize(parent)
+        .ok()
+        .map(|d| d.join(p.file_name().unwrap_or_default()))
+}
+
+/// Whether `a` and `b` are one file: the same path once resolved, or (both existing) the
+/// same file under two names (a hard link).
+fn same_file(a: &Path, b: &Path) -> bool {
+    if resolved(a).is_some_and(|x| resolved(b).is_some_and(|y| x == y)) {
+        return true;
+    }
+    #[cfg(unix)]
     {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (fs::metadata(a), fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    false
+}
+
+/// Refuse an output path that is one of a run's `inputs` (through symbolic and hard links)
+/// or lies inside a folder it reads from (`protected`, a saved model's): a run never
+/// overwrites what it reads.
+pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) -> Result<()> {
+    if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
         return Err(Error::Config(format!(
             "--out {} is the file it reads ({}): choose another --out",
             out.display(),
             input.display()
         )));
     }
-    if let Some(dir) = protected.and_then(|d| fs::canonicalize(d).ok())
-        && target.starts_with(&dir)
+    if let (Some(dir), Some(target)) = (
+        protected.and_then(|d| fs::canonicalize(d).ok()),
+        resolved(out),
+    ) && target.starts_with(&dir)
     {
         return Err(Error::Config(format!(
             "--out {} lies inside the model's folder {}: choose another --out",
             out.display(),
             dir.display()
         )));
+    }
+    Ok(())
+}
+
+/// Refuse a folder `out` a run writes the files `written` into (names in it; a name ending
+/// in `/` a folder of its own) where one of them is one of `inputs`: `ik train --out F`
+/// with `F/collision.json` the scene it reads would replace the scene.
+pub fn refuse_writing_over(out: &Path, written: &[&str], inputs: &[&Path]) -> Result<()> {
+    for name in written {
+        let file = out.join(name.trim_end_matches('/'));
+        for input in inputs {
+            let inside = name.ends_with('/')
+                && (resolved(input).zip(resolved(&file))).is_some_and(|(i, f)| i.starts_with(f));
+            if inside || same_file(&file, input) {
+                return Err(Error::Config(format!(
+                    "--out {}: the run writes {} there, which is a file it reads ({}): choose another --out or move the file",
+                    out.display(),
+                    file.display(),
+                    input.display()
+                )));
+            }
+        }
     }
     Ok(())
 }

@@ -157,14 +157,24 @@ impl IkData {
                 .map(|_| crate::sim::trajectory::uniform_in(&mut rng, &ranges))
                 .find(|q| keep.is_none_or(|k| k(q)))
         };
-        let joints: Vec<Vec<f64>> = (0..cfg.samples)
-            .map(|_| draw())
-            .collect::<Option<_>>()
-            .ok_or_else(|| {
+        let mut joints: Vec<Vec<f64>> = Vec::with_capacity(cfg.samples);
+        for _ in 0..cfg.samples {
+            if keep.is_some() {
+                // A collision check can take milliseconds a draw: Ctrl-C is looked at each.
+                crate::core::interrupt::check(|| {
+                    format!(
+                        "stopped drawing collision-free joint samples ({} of {} drawn); nothing was written",
+                        joints.len(),
+                        cfg.samples
+                    )
+                })?;
+            }
+            joints.push(draw().ok_or_else(|| {
                 Error::Config(format!(
                     "IK data: {MAX_DRAWS} joint samples in a row were in collision: the scene leaves the robot little room"
                 ))
-            })?;
+            })?);
+        }
         let positions = chain.end_effector_batch(&joints);
         let mut lo = [f64::INFINITY; 3];
         let mut hi = [f64::NEG_INFINITY; 3];

@@ -554,8 +554,9 @@ impl SelfModel for NeuroKinConfig {
         Ok(run.shorten(200, 32))
     }
 
+    /// The flat encoder follows its input's dtype; the tree encoder's messages are f32 only.
     fn autocasts(&self) -> bool {
-        true
+        self.encoder.is_flat()
     }
 }
 

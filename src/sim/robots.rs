@@ -210,8 +210,8 @@ impl RobotSpec {
         *self == RobotSpec::Builtin(BuiltinRobot::Arm4)
     }
 
-    /// The files this robot is read from (its URDF, and the SRDF naming its group): what a
-    /// run's `--out` must never name.
+    /// The files this robot is read from (its URDF, the SRDF naming its group or beside it,
+    /// the meshes it names): what a run's `--out` must never name.
     pub fn files(&self) -> Vec<PathBuf> {
         match self {
             RobotSpec::Builtin(_) => Vec::new(),
@@ -220,6 +220,9 @@ impl RobotSpec {
                 if let JointGroup::Srdf { file, .. } = joints {
                     files.push(file.clone());
                 }
+                files.extend(crate::sim::urdf_loader::mesh_files(path));
+                // Read for collisions where none is named.
+                files.extend(crate::sim::srdf::find_beside(path).ok());
                 files
             }
         }

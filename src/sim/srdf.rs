@@ -53,6 +53,11 @@ impl Srdf {
         Self::parse(path, &text)
     }
 
+    /// The file it was read from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
     pub fn parse(path: &Path, text: &str) -> Result<Self> {
         let err = |element: &str, msg: String| Error::Urdf {
             path: path.to_path_buf(),

@@ -486,6 +486,27 @@ fn shapes_from_urdf(
     })
 }
 
+/// Every mesh file the description at `path` names, visual and collision (what an `--out`
+/// must not be); none where it does not parse (its loading then says why).
+pub fn mesh_files(path: &Path) -> Vec<PathBuf> {
+    let Ok(urdf) = parse(path) else {
+        return Vec::new();
+    };
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let geometries = (urdf.links.iter()).flat_map(|l| {
+        (l.visual.iter().map(|v| &v.geometry)).chain(l.collision.iter().map(|c| &c.geometry))
+    });
+    let mut files: Vec<PathBuf> = geometries
+        .filter_map(|g| match g {
+            urdf_rs::Geometry::Mesh { filename, .. } => Some(resolve_mesh_path(dir, filename)),
+            _ => None,
+        })
+        .collect();
+    files.sort();
+    files.dedup();
+    files
+}
+
 /// Where a URDF mesh reference points, relative to the URDF's folder `dir`.
 pub fn resolve_mesh_path(dir: &Path, filename: &str) -> PathBuf {
     if let Some(rest) = filename.strip_prefix("package://") {

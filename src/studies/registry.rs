@@ -322,6 +322,12 @@ fn run_body_from_image(opts: &RunOptions, dir: &Path) -> Result<String> {
 }
 
 fn run_damage(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if !opts.precision.is_f32() {
+        return Err(crate::Error::Config(format!(
+            "--precision {} does not apply to damage: the models it trains and reads through are f32 only",
+            opts.precision
+        )));
+    }
     if opts.paper_compatible || opts.steps.is_some() {
         return Err(crate::Error::Config(
             "--paper-compatible and --steps do not apply to damage (its presets set the self-model it reads through)".into(),
@@ -332,6 +338,12 @@ fn run_damage(opts: &RunOptions, dir: &Path) -> Result<String> {
 }
 
 fn run_multiview(opts: &RunOptions, dir: &Path) -> Result<String> {
+    if !opts.precision.is_f32() {
+        return Err(crate::Error::Config(format!(
+            "--precision {} does not apply to multiview: the models it trains and reads through are f32 only",
+            opts.precision
+        )));
+    }
     if opts.paper_compatible || opts.steps.is_some() {
         return Err(crate::Error::Config(
             "--paper-compatible and --steps do not apply to multiview (its presets set the self-models' training)".into(),

@@ -399,3 +399,38 @@ pub fn quick_pose_model(
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     selfmodel::ik::pose_model::train(spec, robot, &cfg, &dir.join("model"), &device).unwrap()
 }
+
+/// Run `args` of `binary`, send Ctrl-C (SIGINT) after `after` seconds, and return how long it
+/// took to stop, its exit code and its last line.
+#[cfg(unix)]
+#[allow(dead_code)]
+pub fn interrupt_after(binary: &str, args: &[&str], after: f64) -> (f64, Option<i32>, String) {
+    let mut child = std::process::Command::new(binary)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs_f64(after));
+    let sent = std::time::Instant::now();
+    // The shell's own `kill` (a machine without procps has no /bin/kill).
+    let kill = std::process::Command::new("sh")
+        .args(["-c", &format!("kill -INT {}", child.id())])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            sent.elapsed().as_secs_f64() < 10.0,
+            "{args:?}: still running 10 s after Ctrl-C"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    std::io::Read::read_to_string(child.stderr.as_mut().unwrap(), &mut err).unwrap();
+    let last = err.lines().last().unwrap_or_default().to_string();
+    (sent.elapsed().as_secs_f64(), status.code(), last)
+}

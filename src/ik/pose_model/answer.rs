@@ -77,7 +77,8 @@ impl PoseModel {
         // Targets refined between two questions to `stop`: about 256 answers, a few
         // hundredths of a second on 2 cores where a hard target takes a millisecond (1,024 took
         // over a second with the cores shared three ways).
-        let per_check = (256 / k).max(1);
+        // A collision check makes an answer several times dearer: fewer between two looks.
+        let per_check = (if valid.is_some() { 32 } else { 256 } / k).max(1);
         let ranges = &self.saved.ranges;
         let paths = chain.tip_paths();
         let mut answers: Vec<Vec<PoseSolution>> = Vec::with_capacity(targets.len());
@@ -126,6 +127,12 @@ impl PoseModel {
         }
         if let Some(valid) = valid {
             self.retry_refused(chain, targets, cfg, device, valid, &mut answers);
+            if stop() || crate::core::interrupt::requested() {
+                return Err(Error::Interrupted(format!(
+                    "stopped retrying the answers that collided ({} targets); nothing was written",
+                    targets.len()
+                )));
+            }
         }
         Ok(answers)
     }
@@ -133,7 +140,8 @@ impl PoseModel {
     /// Where an answer is not exact once collisions are checked (every start it tried either
     /// missed or collided), try again from more of the flow's samples for that target: they
     /// keep to the poses it learned, where the random starts fold the robot onto itself.
-    /// Only those targets pay for the extra samples.
+    /// Only those targets pay for the extra samples. Ctrl-C ([`crate::core::interrupt`])
+    /// ends it within a target; the caller then says so.
     fn retry_refused(
         &self,
         chain: &KinematicChain,
@@ -176,6 +184,9 @@ impl PoseModel {
             .par_iter()
             .enumerate()
             .map(|(r, &i)| {
+                if crate::core::interrupt::requested() {
+                    return Vec::new();
+                }
                 let starts: Vec<Vec<f64>> = samples.iter().map(|s| s[r].clone()).collect();
                 (answers[i].iter().enumerate())
                     .filter(|(_, a)| !a.exact(cfg))

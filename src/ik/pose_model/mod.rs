@@ -24,7 +24,7 @@ pub use columns::{
     MAX_TARGET_COORDINATE, joint_columns, read_targets, target_columns, target_from_values,
 };
 pub use saved::SavedModel;
-pub use training::train;
+pub use training::{WRITTEN, train};
 
 /// How a pose model is trained and answers.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -45,6 +45,16 @@ pub(super) fn condition_width(position_only: bool, tips: usize) -> usize {
     tips.max(1) * if position_only { 3 } else { 7 }
 }
 
+/// What [`train`] writes into its folder (a name ending in `/`: a folder of its own): no
+/// file a run reads may be one of them.
+pub const WRITTEN: &[&str] = &[
+    "model.json",
+    "model.bpk",
+    "validation_curve.csv",
+    crate::sim::collision::cache::FILE,
+    "checkpoint/",
+];
+
 /// Train a model of `robot` (as `spec` names it) and save it into `dir`.
 pub fn train(
     spec: &RobotSpec,

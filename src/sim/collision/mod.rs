@@ -14,13 +14,15 @@ pub mod user_spheres;
 
 use rayon::prelude::*;
 
+use crate::core::error::{Error, Result};
 use crate::sim::robot::Robot;
+use crate::sim::srdf::Srdf;
 use model::CollisionModel;
 use pairs::{AllowedPairs, PairSampling};
 use spheres::{Sphere, SphereFit};
 
 /// The largest YAML file read (a scene or a spheres file is a few hundred lines).
-const MAX_YAML_BYTES: u64 = 16 << 20;
+pub const MAX_YAML_BYTES: u64 = 16 << 20;
 
 /// The YAML file a user names (`what`: "scene file"), parsed as `T`; `expected` says in the
 /// one-line error what it should have been ("a scene as cuRobo writes one").
@@ -39,7 +41,12 @@ fn parse_yaml<T: serde::de::DeserializeOwned>(
     expected: &str,
     text: &str,
 ) -> crate::core::error::Result<T> {
-    serde_saphyr::from_str(text).map_err(|e| {
+    // `.nan` and `.inf` read as numbers (cuRobo's files carry them in colours): a length or
+    // pose that is not finite is refused where it is read.
+    let options = serde_saphyr::options! {
+        non_finite_float_policy: serde_saphyr::NonFiniteFloatPolicy::PassThrough,
+    };
+    serde_saphyr::from_str_with_options(text, options).map_err(|e| {
         let message = e.to_string();
         crate::core::error::Error::Config(format!(
             "{}: not {expected} ({})",
@@ -49,12 +56,21 @@ fn parse_yaml<T: serde::de::DeserializeOwned>(
     })
 }
 
-/// Spheres for every link of `robot` (loaded with its collision geometry), in its frame.
-pub fn fit_robot(robot: &Robot, fit: &SphereFit) -> Vec<Vec<Sphere>> {
+/// Spheres for every link of `robot` (loaded with its collision geometry), in its frame; a
+/// link whose surface is too large to sample is refused by name.
+pub fn fit_robot(robot: &Robot, fit: &SphereFit) -> Result<Vec<Vec<Sphere>>> {
     robot
         .geometry
         .par_iter()
-        .map(|g| spheres::fit_link(g.shapes(), fit))
+        .zip(&robot.chain.links)
+        .map(|(g, name)| {
+            spheres::fit_link(g.shapes(), fit).map_err(|e| match e {
+                Error::Config(why) => {
+                    Error::Config(format!("{}: link \"{name}\": {why}", robot.name))
+                }
+                other => other,
+            })
+        })
         .collect()
 }
 
@@ -63,7 +79,7 @@ pub fn computed_pairs(
     robot: &Robot,
     spheres: &[Vec<Sphere>],
     sampling: &PairSampling,
-) -> AllowedPairs {
+) -> Result<AllowedPairs> {
     // Every pair of links with spheres checked, to find which always or never collide.
     let everything = CollisionModel::new(&robot.chain, spheres.to_vec(), &AllowedPairs::default());
     pairs::compute(&robot.chain, sampling, &|frames| {
@@ -76,37 +92,54 @@ pub fn computed_pairs(
 /// computed as MoveIt's setup assistant computes them.
 pub fn model_for(
     robot: &Robot,
-    srdf: Option<&std::path::Path>,
+    srdf: Option<&Srdf>,
     fit: &SphereFit,
     sampling: &PairSampling,
-) -> crate::core::error::Result<CollisionModel> {
-    model_with(robot, fit_robot(robot, fit), srdf, sampling)
+) -> Result<CollisionModel> {
+    model_with(robot, fit_robot(robot, fit)?, srdf, sampling)
 }
 
 /// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]).
 pub fn model_with(
     robot: &Robot,
     spheres: Vec<Vec<Sphere>>,
-    srdf: Option<&std::path::Path>,
+    srdf: Option<&Srdf>,
     sampling: &PairSampling,
-) -> crate::core::error::Result<CollisionModel> {
+) -> Result<CollisionModel> {
     if spheres.iter().all(Vec::is_empty) {
-        return Err(crate::core::error::Error::Config(format!(
+        return Err(Error::Config(format!(
             "{} has no collision geometry to check: load it with its <collision> elements (geometry \"collision\")",
             robot.name
         )));
     }
     let from_file = match srdf {
-        Some(path) => {
-            let file = crate::sim::srdf::Srdf::read(path)?;
-            let pairs = AllowedPairs::from_srdf(file.disabled_collisions());
-            (!pairs.pairs.is_empty()).then_some(pairs)
-        }
+        Some(file) => allowed_by_srdf(robot, file)?,
         None => None,
     };
     let allowed = match from_file {
         Some(pairs) => pairs,
-        None => computed_pairs(robot, &spheres, sampling),
+        None => computed_pairs(robot, &spheres, sampling)?,
     };
     Ok(CollisionModel::new(&robot.chain, spheres, &allowed))
+}
+
+/// The pairs `srdf`'s `<disable_collisions>` allow (None: it has none). An SRDF whose
+/// entries name no pair of `robot`'s links is another robot's, and is refused: its pairs
+/// would allow nothing and every pair would be checked.
+pub fn allowed_by_srdf(robot: &Robot, srdf: &Srdf) -> Result<Option<AllowedPairs>> {
+    let entries = srdf.disabled_collisions();
+    if entries.is_empty() {
+        return Ok(None);
+    }
+    let links = &robot.chain.links;
+    let known = |l: &String| links.contains(l);
+    if !entries.iter().any(|(a, b, _)| known(a) && known(b)) {
+        let (a, b, _) = &entries[0];
+        return Err(Error::Config(format!(
+            "{}: its <disable_collisions> name no pair of {}'s links (the first: {a} and {b}): is it this robot's SRDF?",
+            srdf.path().display(),
+            robot.name
+        )));
+    }
+    Ok(Some(AllowedPairs::from_srdf(entries)))
 }

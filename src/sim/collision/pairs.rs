@@ -100,12 +100,12 @@ pub type CollidingPairs<'a> =
 
 /// The allowed pairs of `chain`'s links as MoveIt's setup assistant computes them, with
 /// `collide(frames)` saying which pairs of link indices are in collision at some link frames
-/// (links without geometry never are).
+/// (links without geometry never are). Ctrl-C ends the sampling within a configuration.
 pub fn compute(
     chain: &KinematicChain,
     sampling: &PairSampling,
     collide: &CollidingPairs,
-) -> AllowedPairs {
+) -> crate::core::error::Result<AllowedPairs> {
     use rayon::prelude::*;
     let names = &chain.links;
     let mut allowed = AllowedPairs::default();
@@ -124,7 +124,12 @@ pub fn compute(
         .collect();
     let counts: BTreeMap<(usize, usize), usize> = configurations
         .par_iter()
-        .map(|q| collide(&chain.link_frames(q)))
+        .map(|q| {
+            if crate::core::interrupt::requested() {
+                return Vec::new();
+            }
+            collide(&chain.link_frames(q))
+        })
         .fold(BTreeMap::new, |mut m, pairs| {
             for p in pairs {
                 *m.entry(p).or_insert(0) += 1;
@@ -137,6 +142,7 @@ pub fn compute(
             }
             a
         });
+    crate::core::interrupt::check(|| "stopped sampling which pairs of links collide".into())?;
     let n = configurations.len().max(1) as f64;
     for (&(a, b), &c) in &counts {
         if c as f64 >= sampling.always_share * n {
@@ -150,5 +156,5 @@ pub fn compute(
             }
         }
     }
-    allowed
+    Ok(allowed)
 }

@@ -16,7 +16,8 @@
 //! ```
 //!
 //! Lengths in metres, poses in the world (the robot's base frame), quaternions w first as
-//! cuRobo writes them; `color` and `texture` are read and ignored; any other key is refused.
+//! cuRobo writes them; what an obstacle carries for drawing (`color`, `texture`, `material`,
+//! ...: [`DRAWING`]) is read and ignored; any other key is refused.
 //! A mesh's path is relative to the scene file; it is covered by spheres as a link is
 //! ([`crate::sim::collision::spheres`]), so the check stays conservative.
 
@@ -155,7 +156,7 @@ struct MeshEntry {
     scale: Option<[f64; 3]>,
 }
 
-/// A scene entry's geometry `S`, read past its `color` and `texture` (cuRobo's, for drawing;
+/// A scene entry's geometry `S`, read past what it carries for drawing ([`DRAWING`];
 /// any value): `S` refuses every other key it does not know.
 struct Drawn<S>(S);
 
@@ -179,7 +180,21 @@ impl<'de, S: Deserialize<'de>> Deserialize<'de> for Drawn<S> {
     }
 }
 
-/// A mapping without its `color` and `texture` keys.
+/// What cuRobo's obstacles carry for drawing or bookkeeping (any value): read and ignored.
+const DRAWING: &[&str] = &[
+    "color",
+    "texture",
+    "texture_id",
+    "material",
+    "name",
+    "vertex_colors",
+    "vertex_normals",
+    "face_colors",
+    "voxel_size",
+    "tensor_args",
+];
+
+/// A mapping without the keys of [`DRAWING`].
 struct SkipDrawing<A>(A);
 
 impl<'de, A: serde::de::MapAccess<'de>> serde::Deserializer<'de> for SkipDrawing<A> {
@@ -205,7 +220,7 @@ impl<'de, A: serde::de::MapAccess<'de>> serde::de::MapAccess<'de> for SkipDrawin
     ) -> std::result::Result<Option<K::Value>, A::Error> {
         use serde::de::IntoDeserializer;
         while let Some(key) = self.0.next_key::<String>()? {
-            if key != "color" && key != "texture" {
+            if !DRAWING.contains(&key.as_str()) {
                 return seed.deserialize(key.into_deserializer()).map(Some);
             }
             self.0.next_value::<serde::de::IgnoredAny>()?;
@@ -225,7 +240,23 @@ const SCENE: &str = "a scene as cuRobo writes one";
 /// The largest length a scene may give (m): beyond it, a typo.
 const MAX_LENGTH_M: f64 = 1e4;
 
+/// Where a scene at `scene` finds a mesh it names.
+fn mesh_path(scene: &Path, file: &Path) -> PathBuf {
+    scene.parent().unwrap_or(Path::new(".")).join(file)
+}
+
 impl Scene {
+    /// The files a scene at `path` reads: itself and the meshes it names (what an `--out`
+    /// must not be), from its text alone.
+    pub fn files(path: &Path) -> Result<Vec<PathBuf>> {
+        let file: SceneFile = crate::sim::collision::read_yaml(path, "scene file", SCENE)?;
+        let meshes = file
+            .mesh
+            .values()
+            .map(|Drawn(m)| mesh_path(path, &m.file_path));
+        Ok(std::iter::once(path.to_path_buf()).chain(meshes).collect())
+    }
+
     /// Read a cuRobo world-configuration YAML file.
     pub fn read(path: &Path) -> Result<Self> {
         let file = crate::sim::collision::read_yaml(path, "scene file", SCENE)?;
@@ -307,7 +338,7 @@ impl Scene {
                 }
                 None => Vector3::new(1.0, 1.0, 1.0),
             };
-            let file = path.parent().unwrap_or(Path::new(".")).join(&m.file_path);
+            let file = mesh_path(path, &m.file_path);
             if !file.is_file() {
                 return Err(bad(format!(
                     "the mesh of \"{name}\", {}, is not a file: give its path relative to the scene file",
@@ -315,13 +346,14 @@ impl Scene {
                 )));
             }
             let shapes = crate::sim::mesh_file::load_mesh(&file, scale, &pose)?;
-            let spheres = fit_link(
-                &shapes,
-                &SphereFit {
-                    max_per_link: 64,
-                    ..SphereFit::default()
-                },
-            );
+            let fit = SphereFit {
+                max_per_link: 64,
+                ..SphereFit::default()
+            };
+            let spheres = fit_link(&shapes, &fit).map_err(|e| match e {
+                Error::Config(why) => bad(format!("the mesh of \"{name}\": {why}")),
+                other => other,
+            })?;
             obstacles.push((name.clone(), Obstacle::Spheres(spheres)));
         }
         Ok(Scene { obstacles })
@@ -349,8 +381,11 @@ fn finite3(bad: &dyn Fn(String) -> Error, name: &str, v: &[f64; 3]) -> Result<Ve
 /// A cuRobo pose `[x, y, z, qw, qx, qy, qz]` (the quaternion normalised).
 fn pose_of(bad: &dyn Fn(String) -> Error, name: &str, p: &[f64; 7]) -> Result<Isometry3<f64>> {
     let t = finite3(bad, name, &[p[0], p[1], p[2]])?;
-    let q = Quaternion::new(p[3], p[4], p[5], p[6]);
-    if !p[3..].iter().all(|x| x.is_finite()) || q.norm() < 1e-6 {
+    // Scaled by its largest part before it is normalised: the norm of (1e200, 0, 0, 0)
+    // overflows, and a quaternion is a rotation at any scale.
+    let largest = p[3..].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let q = Quaternion::new(p[3], p[4], p[5], p[6]) / largest;
+    if !p[3..].iter().all(|x| x.is_finite()) || largest == 0.0 {
         return Err(bad(format!(
             "the pose of \"{name}\" has no rotation: its quaternion (qw, qx, qy, qz: the last four numbers) must be finite and not zero"
         )));

@@ -11,6 +11,7 @@
 
 use nalgebra::{Matrix3, Point3, Vector3};
 
+use crate::core::error::{Error, Result};
 use crate::sim::shape::Shape;
 
 /// A sphere in a link's frame (or the world's, for an obstacle).
@@ -94,6 +95,41 @@ pub fn surface_points(shapes: &[Shape], spacing: f64) -> Vec<Point3<f64>> {
         }
     }
     points
+}
+
+/// The most surface samples one link (or a scene's mesh) is fitted from (about 100 MB of
+/// points): a surface that would need more (a mesh scaled 1000x, a cylinder 100 m wide) is
+/// refused before a point is made.
+pub const MAX_SURFACE_POINTS: f64 = 4e6;
+
+/// How many points [`surface_points`] makes of `shapes` at `spacing`, counted without making
+/// them (in floating point: a count beyond any memory does not overflow).
+pub fn surface_point_count(shapes: &[Shape], spacing: f64) -> f64 {
+    let triangle = |t: &[Point3<f64>; 3]| {
+        let longest = (0..3)
+            .map(|i| (t[(i + 1) % 3] - t[i]).norm())
+            .fold(0.0, f64::max);
+        let n = (longest / spacing).ceil().clamp(1.0, 1000.0);
+        (n + 1.0) * (n + 2.0) / 2.0
+    };
+    shapes
+        .iter()
+        .map(|shape| match shape {
+            Shape::Triangle(t) => triangle(t),
+            Shape::Cuboid { half, .. } => cuboid_triangles(half).iter().map(triangle).sum(),
+            Shape::Cylinder {
+                radius,
+                half_length,
+                ..
+            } => {
+                let around = (std::f64::consts::TAU * radius / spacing).ceil().max(8.0);
+                let along = (2.0 * half_length / spacing).ceil().max(1.0);
+                let rings = (radius / spacing).ceil().max(1.0);
+                around * (along + 1.0 + 2.0 * rings)
+            }
+            Shape::Sphere { .. } => 0.0,
+        })
+        .sum()
 }
 
 /// The 12 triangles of a box of half extents `half` about the origin.
@@ -240,8 +276,10 @@ fn clusters(points: &[Point3<f64>], k: usize) -> Vec<Vec<Point3<f64>>> {
     out
 }
 
-/// Spheres covering one link's collision shapes (none for a link without any).
-pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Vec<Sphere> {
+/// Spheres covering one link's collision shapes (none for a link without any). A surface
+/// beyond [`MAX_SURFACE_POINTS`] samples is refused (the caller names the link); Ctrl-C
+/// ends the fit between two of its clusterings.
+pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Result<Vec<Sphere>> {
     let mut spheres: Vec<Sphere> = shapes
         .iter()
         .filter_map(|s| match s {
@@ -253,14 +291,22 @@ pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Vec<Sphere> {
         })
         .collect();
     let spacing = fit.tolerance_m * 3f64.sqrt();
+    let count = surface_point_count(shapes, spacing);
+    if count > MAX_SURFACE_POINTS {
+        return Err(Error::Config(format!(
+            "its collision geometry would take {count:.1e} samples at {} mm to cover (at most {MAX_SURFACE_POINTS:.0e}): is it tens or hundreds of metres across? check its size and scale",
+            1e3 * fit.tolerance_m
+        )));
+    }
     let all = surface_points(shapes, spacing);
     let points = distinct_points(all.clone(), fit.tolerance_m);
     if points.is_empty() {
-        return spheres;
+        return Ok(spheres);
     }
     let width = half_width(&points).max(fit.tolerance_m);
     let mut best = Vec::new();
     for k in 1..=fit.max_per_link.max(1).min(points.len()) {
+        crate::core::interrupt::check(|| "stopped fitting collision spheres".into())?;
         best = clusters(&points, k)
             .iter()
             .map(|c| enclosing_sphere(c))
@@ -284,7 +330,7 @@ pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Vec<Sphere> {
         }
     }
     spheres.extend(best);
-    spheres
+    Ok(spheres)
 }
 
 #[cfg(test)]
@@ -308,13 +354,45 @@ mod tests {
     }
 
     #[test]
+    fn the_samples_are_counted_before_they_are_made_and_a_huge_surface_refused() {
+        let shapes = vec![
+            Shape::Cuboid {
+                pose: nalgebra::Isometry3::identity(),
+                half: Vector3::new(0.3, 0.05, 0.02),
+            },
+            Shape::Cylinder {
+                pose: nalgebra::Isometry3::identity(),
+                radius: 0.04,
+                half_length: 0.2,
+            },
+            Shape::Triangle([
+                Point3::origin(),
+                Point3::new(0.1, 0.0, 0.0),
+                Point3::new(0.0, 0.07, 0.0),
+            ]),
+        ];
+        let made = surface_points(&shapes, 0.007).len() as f64;
+        assert_eq!(surface_point_count(&shapes, 0.007), made);
+        // A cylinder 100 m wide: 2.6e9 samples, refused before one is made.
+        let huge = [Shape::Cylinder {
+            pose: nalgebra::Isometry3::identity(),
+            radius: 100.0,
+            half_length: 50.0,
+        }];
+        let err = fit_link(&huge, &SphereFit::default())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("check its size and scale"), "{err}");
+    }
+
+    #[test]
     fn a_long_box_gets_a_row_of_spheres_that_cover_its_surface() {
         let shapes = vec![Shape::Cuboid {
             pose: nalgebra::Isometry3::identity(),
             half: Vector3::new(0.3, 0.05, 0.05),
         }];
         let fit = SphereFit::default();
-        let spheres = fit_link(&shapes, &fit);
+        let spheres = fit_link(&shapes, &fit).unwrap();
         assert!(spheres.len() >= 3, "{} spheres", spheres.len());
         let largest = spheres.iter().map(|s| s.radius).fold(0.0, f64::max);
         assert!(largest < 0.15, "largest radius {largest}");

@@ -50,6 +50,30 @@ struct SpheresFile {
 /// The most nested spheres files followed (a robot file naming a spheres file).
 const MAX_DEPTH: usize = 4;
 
+/// The largest radius of a link's sphere (m): beyond it a typo (a humanoid is 1.3 m tall).
+const MAX_RADIUS_M: f64 = 10.0;
+/// The farthest a sphere's centre lies from its link's origin (m).
+const MAX_CENTER_M: f64 = 100.0;
+
+/// The files read for the spheres of `path`: it, and the spheres files it names in turn.
+pub fn files(path: &Path) -> Result<Vec<PathBuf>> {
+    let mut files = vec![path.to_path_buf()];
+    let mut at = path.to_path_buf();
+    for _ in 0..MAX_DEPTH {
+        let file: SpheresFile =
+            crate::sim::collision::read_yaml(&at, "spheres file", "a cuRobo spheres file")?;
+        let field = file
+            .collision_spheres
+            .or(file.robot_cfg.and_then(|r| r.kinematics.collision_spheres));
+        let Some(SpheresField::File(next)) = field else {
+            break;
+        };
+        at = at.parent().unwrap_or(Path::new(".")).join(next);
+        files.push(at.clone());
+    }
+    Ok(files)
+}
+
 /// The spheres of `path` for the links `links` (index as in the chain's links).
 pub fn read(path: &Path, links: &[String]) -> Result<Vec<Vec<Sphere>>> {
     let block = read_block(path, 0)?;
@@ -63,10 +87,13 @@ pub fn read(path: &Path, links: &[String]) -> Result<Vec<Vec<Sphere>>> {
             )));
         };
         for e in entries {
-            let finite = e.center.iter().all(|v| v.is_finite() && v.abs() <= 1e4);
-            if !(finite && e.radius.is_finite()) {
+            let finite = e
+                .center
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_CENTER_M);
+            if !(finite && e.radius.is_finite() && e.radius <= MAX_RADIUS_M) {
                 return Err(Error::Config(format!(
-                    "{}: a sphere of \"{link}\" is not finite numbers of metres",
+                    "{}: a sphere of \"{link}\" is not finite numbers of metres (a centre within {MAX_CENTER_M} m of its link, a radius of at most {MAX_RADIUS_M} m)",
                     path.display()
                 )));
             }

@@ -171,9 +171,13 @@ fn free_targets(
 ) -> Result<Drawn> {
     let qs: Vec<Vec<f64>> = crate::sim::trajectory::babbling_rows(ranges, seed)
         .take(n.saturating_mul(1000))
+        .take_while(|_| !crate::core::interrupt::requested())
         .filter(|q| check.valid(q))
         .take(n)
         .collect();
+    crate::core::interrupt::check(|| {
+        "stopped drawing collision-free targets; nothing was kept".into()
+    })?;
     if qs.len() < n {
         return Err(Error::Config(format!(
             "only {} of {n} random configurations were collision-free: the scene leaves the robot little room",
@@ -221,11 +225,16 @@ impl Reference<'_> {
         if let Some(s) = self.scene {
             cmd.arg("--scene").arg(s);
         }
-        let o = match cmd.output() {
+        let rows = std::fs::read_to_string(joints)
+            .map_err(|e| Error::io(joints, e))?
+            .lines()
+            .count()
+            .saturating_sub(1);
+        let o = match run_limited(&mut cmd, REFERENCE_SECONDS)? {
             Ok(o) => o,
-            Err(e) => {
+            Err(why) => {
                 eprintln!(
-                    "bench_collision_ik: Pinocchio's check skipped ({} cannot run: {e})",
+                    "bench_collision_ik: Pinocchio's check skipped ({} {why})",
                     self.python.display()
                 );
                 return Ok(None);
@@ -241,15 +250,118 @@ impl Reference<'_> {
             );
             return Ok(None);
         }
-        eprint!("bench_collision_ik: {}", String::from_utf8_lossy(&o.stdout));
-        let text = std::fs::read_to_string(out).map_err(|e| Error::io(out, e))?;
-        let flags = text
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').next() == Some("1"))
-            .collect();
-        Ok(Some(flags))
+        // Its answer is a CSV of one flag a configuration (`collides,...`, 0 or 1 first): a
+        // Python that printed or wrote anything else did not check them.
+        let text = crate::core::input_file::read_user_text(
+            out,
+            "reference's answer",
+            crate::core::input_file::MAX_TABLE_BYTES,
+            "CSV",
+        )
+        .ok();
+        let flags: Option<Vec<bool>> = text.as_deref().and_then(|text| {
+            let mut lines = text.lines();
+            (lines.next()?.starts_with("collides"))
+                .then(|| {
+                    lines
+                        .map(|l| match l.split(',').next() {
+                            Some("1") => Some(true),
+                            Some("0") => Some(false),
+                            _ => None,
+                        })
+                        .collect::<Option<Vec<bool>>>()
+                })
+                .flatten()
+        });
+        match flags {
+            Some(flags) if flags.len() == rows => {
+                eprint!("bench_collision_ik: {}", String::from_utf8_lossy(&o.stdout));
+                Ok(Some(flags))
+            }
+            _ => {
+                eprintln!(
+                    "bench_collision_ik: Pinocchio's check skipped ({} did not answer with one 0/1 flag for each of the {rows} configurations in {})",
+                    self.python.display(),
+                    out.display()
+                );
+                let _ = std::fs::remove_file(out);
+                Ok(None)
+            }
+        }
     }
+}
+
+/// The longest the reference's Python may take over one file of configurations (s): it
+/// checks a thousand in seconds.
+const REFERENCE_SECONDS: f64 = 600.0;
+
+/// Run `cmd` to its end, its output collected, within `limit` seconds: `Ok(Err(why))` where
+/// it cannot start or runs past the limit (then killed), `Err(Interrupted)` on Ctrl-C (the
+/// child killed first).
+fn run_limited(
+    cmd: &mut std::process::Command,
+    limit: f64,
+) -> Result<std::result::Result<std::process::Output, String>> {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = match (cmd.stdin(Stdio::null()).stdout(Stdio::piped()))
+        .stderr(Stdio::piped())
+        .spawn()
+    {
+        Ok(child) => child,
+        Err(e) => return Ok(Err(format!("cannot run: {e}"))),
+    };
+    // Read on threads of their own: a child that fills a pipe would otherwise wait for ever.
+    let drain = |pipe: Option<Box<dyn Read + Send>>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut p) = pipe {
+                let _ = (&mut p).take(1 << 20).read_to_end(&mut bytes);
+                let _ = std::io::copy(&mut p, &mut std::io::sink());
+            }
+            bytes
+        })
+    };
+    let stdout = drain(
+        child
+            .stdout
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let stderr = drain(
+        child
+            .stderr
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child
+            .try_wait()
+            .map_err(|e| Error::io(cmd.get_program(), e))?
+        {
+            break Some(status);
+        }
+        if crate::core::interrupt::requested() || start.elapsed().as_secs_f64() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    crate::core::interrupt::check(|| "stopped during Pinocchio's check; nothing was kept".into())?;
+    let (stdout, stderr) = (
+        stdout.join().unwrap_or_default(),
+        stderr.join().unwrap_or_default(),
+    );
+    Ok(match status {
+        Some(status) => Ok(std::process::Output {
+            status,
+            stdout,
+            stderr,
+        }),
+        None => Err(format!("ran past {limit:.0} s and was stopped")),
+    })
 }
 
 /// Share (%) of `part` in `whole`.
@@ -275,7 +387,7 @@ fn solve_all(
     let lm = model.saved.config.lm.clone();
     let how = Answering {
         lm: &lm,
-        stop: &|| false,
+        stop: &crate::core::interrupt::requested,
         avoid,
     };
     let solve = || model.solve_until(&robot.chain, targets, 1, &how, device);
@@ -288,6 +400,7 @@ fn solve_all(
     let seconds = median_seconds(repeats, || {
         std::hint::black_box(solve().ok());
     });
+    crate::core::interrupt::check(|| "stopped timing the answers; nothing was kept".into())?;
     Ok(Solved { answers, seconds })
 }
 
@@ -374,19 +487,76 @@ pub fn run(
     python: Option<&Path>,
     out: &Path,
 ) -> Result<Vec<CollisionIkRow>> {
+    use crate::core::atomic_file::{OutKind, check_out, refuse_overwrite, refuse_writing_over};
+    check_out(out, OutKind::Folder)?;
     let device = crate::core::device::select(crate::core::device::DeviceChoice::Cpu)?;
     let (model, robot) = PoseModel::load_with_robot(model_dir, &device)?;
+    let spec = &model.saved.robot;
+    if model.position_only() {
+        return Err(Error::Config(format!(
+            "{}: a position-only model (ik train --position-only) answers positions, and this benchmark asks for full poses: train one without --position-only",
+            model_dir.display()
+        )));
+    }
+    let mut inputs = spec.files();
+    if let Some(scene) = scene {
+        inputs.extend(Scene::files(scene)?);
+    }
+    let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
+    refuse_overwrite(out, &inputs, Some(model_dir))?;
+    refuse_writing_over(out, WRITTEN, &inputs)?;
+    let fresh = !out.exists();
+    let result = measure(&model, &robot, model_dir, scene, cfg, python, out, &device);
+    if result.is_err() {
+        // Nothing of a run that failed or was stopped is left.
+        for name in WRITTEN {
+            let _ = std::fs::remove_file(out.join(name));
+        }
+        if fresh {
+            let _ = std::fs::remove_dir(out);
+        }
+    }
+    result
+}
+
+/// What [`run`] writes into its folder.
+const WRITTEN: &[&str] = &[
+    "config.json",
+    "results.csv",
+    "results.md",
+    "pairs.json",
+    "target_joints.csv",
+    "answer_joints.csv",
+    "random_joints.csv",
+    "target_joints_exact_meshes.csv",
+    "answer_joints_exact_meshes.csv",
+    "random_joints_exact_meshes.csv",
+];
+
+/// [`run`] once its output is checked.
+#[allow(clippy::too_many_arguments)]
+fn measure(
+    model: &PoseModel,
+    robot: &Robot,
+    model_dir: &Path,
+    scene: Option<&Path>,
+    cfg: &CollisionIkConfig,
+    python: Option<&Path>,
+    out: &Path,
+    device: &Device,
+) -> Result<Vec<CollisionIkRow>> {
+    let (robot, device) = (robot.clone(), device.clone());
     let spec = &model.saved.robot;
     let obstacles = scene.map(Scene::read).transpose()?;
     let n_obstacles = obstacles.as_ref().map_or(0, |s| s.obstacles.len());
     let kept = Spheres::KeptIn(model_dir);
     let check = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?;
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
-    crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
     let (targets, qs) = free_targets(&robot, &model.saved.ranges, &check, cfg.targets, cfg.seed)?;
     let lm = &model.saved.config.lm;
-    let checked = solve_all(&model, &robot, &targets, &device, Some(&check), cfg)?;
-    let unchecked = solve_all(&model, &robot, &targets, &device, None, cfg)?;
+    let checked = solve_all(model, &robot, &targets, &device, Some(&check), cfg)?;
+    let unchecked = solve_all(model, &robot, &targets, &device, None, cfg)?;
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    crate::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
     let exact_free: Vec<&PoseSolution> = checked.answers.iter().filter(|a| a.exact(lm)).collect();
     let exact_unchecked: Vec<&PoseSolution> =
         unchecked.answers.iter().filter(|a| a.exact(lm)).collect();
