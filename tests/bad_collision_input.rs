@@ -17,19 +17,10 @@ use selfmodel::sim::urdf_loader::GeometryKind;
 
 const IK: &str = env!("CARGO_BIN_EXE_ik");
 
-/// [`common::arm_urdf`] (six joints and a hand) with each visual also its collision geometry.
+/// The arm with its collision geometry, as `dir/arm.urdf`.
 fn collision_arm(dir: &Path) -> PathBuf {
-    let text = common::arm_urdf(6, true);
-    let (mut out, mut rest) = (String::new(), text.as_str());
-    while let Some(i) = rest.find("<visual>") {
-        let j = i + rest[i..].find("</visual>").unwrap() + "</visual>".len();
-        out += &rest[..j];
-        out += &rest[i..j].replace("visual", "collision");
-        rest = &rest[j..];
-    }
-    out += rest;
     let path = dir.join("arm.urdf");
-    std::fs::write(&path, out).unwrap();
+    std::fs::write(&path, common::collision_arm_urdf()).unwrap();
     path
 }
 

@@ -1,6 +1,7 @@
 //! Bounded fuzzing (stable Rust, seeded, no extra crate): valid inputs of the targets CSV
-//! reader, the URDF loader, the SRDF reader, the saved IK model loader and a saved
-//! self-model's `model.json`, mutated thousands of times (bytes
+//! reader, the URDF loader, the SRDF reader, the saved IK model loader, a saved
+//! self-model's `model.json`, and the collision work's readers (a cuRobo scene, a spheres
+//! file, the collision model kept beside an IK model), mutated thousands of times (bytes
 //! flipped, dropped, repeated, spliced with tokens a parser trips on), must each be read or
 //! refused with one line: never a panic, never a hang. Each target runs for a bounded time.
 
@@ -296,4 +297,99 @@ fn the_saved_self_model_loader_reads_or_refuses_every_mutation() {
         assert!(silhouettes.iter().all(|v| v.is_finite()));
         Ok(())
     });
+}
+
+/// A cuRobo scene with one obstacle of each kind (a mesh among them), mutated: read with every
+/// obstacle at a finite distance from the origin, or refused in one line.
+#[test]
+fn the_scene_reader_reads_or_refuses_every_mutation() {
+    use selfmodel::sim::collision::scene::Scene;
+    let dir = common::tempdir();
+    std::fs::write(dir.path().join("bin.stl"), common::cube_stl_binary(0.05)).unwrap();
+    let path = dir.path().join("scene.yml");
+    let text = "cuboid:
+  table: {dims: [2.0, 2.0, 0.2], pose: [0.0, 0.0, -0.1, 1, 0, 0, 0], color: [0.5, .nan, 0.5, 1]}
+sphere:
+  ball: {radius: 0.05, position: [0.5, 0.0, 0.4]}
+capsule:
+  bar: {radius: 0.03, base: [0, 0, 0], tip: [0, 0, 0.5], pose: [0.4, 0.3, 0, 1, 0, 0, 0]}
+cylinder:
+  post: {radius: 0.05, height: 0.6, pose: [0.4, -0.3, 0.3, 0.7071, 0, 0.7071, 0]}
+mesh:
+  bin: {file_path: bin.stl, pose: [0.6, 0, 0, 1, 0, 0, 0], scale: [1, 2, 1]}
+";
+    let (tried, accepted) = fuzz("scene", text.as_bytes(), |bytes| {
+        let text = String::from_utf8_lossy(bytes);
+        let scene = Scene::parse(&path, &text).map_err(|e| e.to_string())?;
+        let origin = nalgebra::Point3::origin();
+        assert!(scene.obstacles.iter().all(|(_, o)| o.distance(&origin).is_finite()));
+        Ok(())
+    });
+    assert!(tried > 100 && accepted > 0, "{tried} inputs, {accepted} accepted");
+}
+
+/// A cuRobo spheres file, mutated: read with finite spheres of links the robot has, or
+/// refused in one line.
+#[test]
+fn the_spheres_reader_reads_or_refuses_every_mutation() {
+    use selfmodel::sim::collision::user_spheres;
+    let dir = common::tempdir();
+    let path = dir.path().join("spheres.yml");
+    let links: Vec<String> = ["base", "l1", "l2", "hand"].map(String::from).to_vec();
+    let text = "robot_cfg:
+  kinematics:
+    collision_spheres:
+      l1:
+        - {center: [0, 0, 0.02], radius: 0.03}
+        - {center: [0, 0, 0.05], radius: 0.03}
+      hand:
+        - {center: [0.01, -0.02, 0], radius: 0.02}
+        - {center: [0, 0, 0], radius: -10}
+";
+    let (tried, accepted) = fuzz("spheres file", text.as_bytes(), |bytes| {
+        std::fs::write(&path, bytes).unwrap();
+        let spheres = user_spheres::read(&path, &links).map_err(|e| e.to_string())?;
+        assert_eq!(spheres.len(), links.len());
+        assert!(spheres.iter().flatten().all(|s| {
+            s.radius > 0.0 && s.radius <= 10.0 && s.center.iter().all(|c| c.is_finite())
+        }));
+        Ok(())
+    });
+    assert!(tried > 100 && accepted > 0, "{tried} inputs, {accepted} accepted");
+}
+
+/// The collision model `ik train` keeps beside a model, mutated: read back as written (the
+/// seed), ignored as another robot's, or refused in one line; never a model whose spheres
+/// leave the links uncovered.
+#[test]
+fn the_kept_collision_model_reads_or_refuses_every_mutation() {
+    use selfmodel::ik::collision::{CollisionCheck, Spheres};
+    use selfmodel::sim::collision::{cache, pairs::PairSampling, spheres::SphereFit};
+    let dir = common::tempdir();
+    let urdf = dir.path().join("arm.urdf");
+    std::fs::write(&urdf, common::collision_arm_urdf()).unwrap();
+    let spec = selfmodel::sim::robots::RobotSpec::Urdf {
+        path: urdf,
+        base_xyz: [0.0; 3],
+        base_rpy: [0.0; 3],
+        tip: Some("hand".into()),
+        geometry: selfmodel::sim::urdf_loader::GeometryKind::Collision,
+        joints: Default::default(),
+    };
+    let check = CollisionCheck::with_spheres(&spec, Spheres::Fitted, None, None, true, 0.0).unwrap();
+    check.keep_in(dir.path()).unwrap();
+    let file = dir.path().join(cache::FILE);
+    let text = std::fs::read(&file).unwrap();
+    let robot = spec.load().unwrap();
+    let (fit, sampling) = (SphereFit::default(), PairSampling::default());
+    let key = cache::key(&robot, None, &fit, &sampling);
+    let (tried, _) = fuzz("kept collision model", &text, |bytes| {
+        std::fs::write(&file, bytes).unwrap();
+        match cache::read(dir.path(), &key, &robot, &fit).map_err(|e| e.to_string())? {
+            Some(model) => assert_eq!(model.spheres, check.model.spheres),
+            None => {}
+        }
+        Ok(())
+    });
+    assert!(tried > 100, "{tried} inputs");
 }

@@ -434,3 +434,17 @@ pub fn interrupt_after(binary: &str, args: &[&str], after: f64) -> (f64, Option<
     let last = err.lines().last().unwrap_or_default().to_string();
     (sent.elapsed().as_secs_f64(), status.code(), last)
 }
+
+/// [`arm_urdf`] (six joints and a hand) with each visual also its collision geometry.
+#[allow(dead_code)]
+pub fn collision_arm_urdf() -> String {
+    let text = arm_urdf(6, true);
+    let (mut out, mut rest) = (String::new(), text.as_str());
+    while let Some(i) = rest.find("<visual>") {
+        let j = i + rest[i..].find("</visual>").unwrap() + "</visual>".len();
+        out += &rest[..j];
+        out += &rest[i..j].replace("visual", "collision");
+        rest = &rest[j..];
+    }
+    out + rest
+}
