@@ -848,7 +848,7 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
     )
     .unwrap();
     let urdf = urdf.to_str().unwrap();
-    let train = |extra: &[&str]| {
+    let train = |preset: &str, extra: &[&str]| {
         let mut a: Vec<String> = [
             "train",
             "--urdf",
@@ -856,7 +856,7 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
             "--tip",
             "hand",
             "--preset",
-            "quick",
+            preset,
             "--out",
             &d("new"),
         ]
@@ -899,13 +899,14 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
         (
             "ik train --scene, drawing among 10,000 obstacles",
             IK,
-            train(&["--scene", &d("crowd.yml")]),
+            // The paper preset's 210,000 draws: a minute among 10,000 obstacles.
+            train("paper", &["--scene", &d("crowd.yml")]),
             2.0,
         ),
         (
             "ik train --spheres, the pairs of 22,000 spheres",
             IK,
-            train(&["--spheres", &d("many.yml")]),
+            train("quick", &["--spheres", &d("many.yml")]),
             2.0,
         ),
         (
@@ -956,4 +957,30 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// `--precision bf16` or `f16` where the models trained are f32 only (damage, multiview,
+/// NeuroKin's tree encoder): refused in one line before anything is written, not a panic in
+/// burn's CPU backend.
+#[test]
+fn a_precision_the_models_cannot_train_in_is_refused() {
+    let dir = common::tempdir();
+    let cases = [
+        ("damage", env!("CARGO_BIN_EXE_damage")),
+        ("multiview", env!("CARGO_BIN_EXE_multiview")),
+        ("neurokin_tree", env!("CARGO_BIN_EXE_neurokin_tree")),
+    ];
+    for (name, binary) in cases {
+        for precision in ["bf16", "f16"] {
+            let out = dir.path().join(format!("{name}_{precision}"));
+            let run = Command::new(binary)
+                .args(["--preset", "quick", "--precision", precision, "--out"])
+                .arg(&out)
+                .output()
+                .unwrap();
+            let err = refused(&format!("{name} --precision {precision}"), &run);
+            assert!(err.contains("--precision") && err.contains("f32"), "{err}");
+            assert!(!out.exists(), "{name}: {} was written", out.display());
+        }
+    }
 }

@@ -322,10 +322,18 @@ mesh:
         let text = String::from_utf8_lossy(bytes);
         let scene = Scene::parse(&path, &text).map_err(|e| e.to_string())?;
         let origin = nalgebra::Point3::origin();
-        assert!(scene.obstacles.iter().all(|(_, o)| o.distance(&origin).is_finite()));
+        assert!(
+            scene
+                .obstacles
+                .iter()
+                .all(|(_, o)| o.distance(&origin).is_finite())
+        );
         Ok(())
     });
-    assert!(tried > 100 && accepted > 0, "{tried} inputs, {accepted} accepted");
+    assert!(
+        tried > 100 && accepted > 0,
+        "{tried} inputs, {accepted} accepted"
+    );
 }
 
 /// A cuRobo spheres file, mutated: read with finite spheres of links the robot has, or
@@ -355,7 +363,10 @@ fn the_spheres_reader_reads_or_refuses_every_mutation() {
         }));
         Ok(())
     });
-    assert!(tried > 100 && accepted > 0, "{tried} inputs, {accepted} accepted");
+    assert!(
+        tried > 100 && accepted > 0,
+        "{tried} inputs, {accepted} accepted"
+    );
 }
 
 /// The collision model `ik train` keeps beside a model, mutated: read back as written (the
@@ -376,7 +387,8 @@ fn the_kept_collision_model_reads_or_refuses_every_mutation() {
         geometry: selfmodel::sim::urdf_loader::GeometryKind::Collision,
         joints: Default::default(),
     };
-    let check = CollisionCheck::with_spheres(&spec, Spheres::Fitted, None, None, true, 0.0).unwrap();
+    let check =
+        CollisionCheck::with_spheres(&spec, Spheres::Fitted, None, None, true, 0.0).unwrap();
     check.keep_in(dir.path()).unwrap();
     let file = dir.path().join(cache::FILE);
     let text = std::fs::read(&file).unwrap();

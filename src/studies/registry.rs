@@ -310,45 +310,48 @@ pub fn run_emssl_adaptation(opts: &RunOptions, dir: &Path) -> Result<String> {
     crate::studies::emssl::adaptation::run(&cfg, robot, dir, opts.device)
 }
 
+/// The studies whose presets set the self-models they train or read through (`why`): the
+/// switches that would change those models are refused, not ignored (those models train in
+/// f32 only, so `--precision` too).
+fn reject_model_switches(opts: &RunOptions, name: &str, why: &str) -> Result<()> {
+    let given: Vec<String> = [
+        (opts.paper_compatible, "--paper-compatible".to_string()),
+        (opts.steps.is_some(), "--steps".to_string()),
+        (
+            !opts.precision.is_f32(),
+            format!("--precision {}", opts.precision),
+        ),
+    ]
+    .into_iter()
+    .filter_map(|(on, flag)| on.then_some(flag))
+    .collect();
+    if given.is_empty() {
+        return Ok(());
+    }
+    Err(crate::Error::Config(format!(
+        "{} does not apply to {name} ({why}, in f32)",
+        given.join(" and ")
+    )))
+}
+
 /// Reading the body from images through the trained NeuroKin: joint angles and encoder drift.
 fn run_body_from_image(opts: &RunOptions, dir: &Path) -> Result<String> {
-    if opts.paper_compatible || opts.steps.is_some() {
-        return Err(crate::Error::Config(
-            "--paper-compatible and --steps do not apply to body_from_image (its presets set the self-model it reads through)".into(),
-        ));
-    }
+    let why = "its presets set the self-model it reads through";
+    reject_model_switches(opts, "body_from_image", why)?;
     let cfg = crate::studies::body_from_image::BodyFromImageConfig::preset(&opts.preset)?;
     crate::studies::body_from_image::run(&cfg, opts, dir)
 }
 
 fn run_damage(opts: &RunOptions, dir: &Path) -> Result<String> {
-    if !opts.precision.is_f32() {
-        return Err(crate::Error::Config(format!(
-            "--precision {} does not apply to damage: the models it trains and reads through are f32 only",
-            opts.precision
-        )));
-    }
-    if opts.paper_compatible || opts.steps.is_some() {
-        return Err(crate::Error::Config(
-            "--paper-compatible and --steps do not apply to damage (its presets set the self-model it reads through)".into(),
-        ));
-    }
+    let why = "its presets set the self-model it reads through";
+    reject_model_switches(opts, "damage", why)?;
     let cfg = crate::studies::damage::DamageConfig::preset(&opts.preset)?;
     crate::studies::damage::run(&cfg, opts, dir)
 }
 
 fn run_multiview(opts: &RunOptions, dir: &Path) -> Result<String> {
-    if !opts.precision.is_f32() {
-        return Err(crate::Error::Config(format!(
-            "--precision {} does not apply to multiview: the models it trains and reads through are f32 only",
-            opts.precision
-        )));
-    }
-    if opts.paper_compatible || opts.steps.is_some() {
-        return Err(crate::Error::Config(
-            "--paper-compatible and --steps do not apply to multiview (its presets set the self-models' training)".into(),
-        ));
-    }
+    let why = "its presets set the self-models' training";
+    reject_model_switches(opts, "multiview", why)?;
     let cfg = crate::studies::multiview::MultiviewConfig::preset(&opts.preset)?;
     crate::studies::multiview::run(&cfg, opts, dir)
 }
