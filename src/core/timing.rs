@@ -26,14 +26,17 @@ impl Repeats {
     }
 }
 
-/// Seconds of each timed call of `f`.
+/// Seconds of each timed call of `f`; Ctrl-C ([`crate::core::interrupt`]) ends the repeats
+/// after the call it lands in (the caller then says it was stopped).
 pub fn time_calls(r: Repeats, mut f: impl FnMut()) -> Vec<f64> {
     for _ in 0..r.warmup {
         f();
     }
     let start = Instant::now();
     let mut times = Vec::new();
-    while times.len() < r.min_repeats.max(1) || start.elapsed().as_secs_f64() < r.min_seconds {
+    while (times.len() < r.min_repeats.max(1) || start.elapsed().as_secs_f64() < r.min_seconds)
+        && !(crate::core::interrupt::requested() && !times.is_empty())
+    {
         let t = Instant::now();
         f();
         times.push(t.elapsed().as_secs_f64());

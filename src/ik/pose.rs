@@ -462,6 +462,11 @@ pub fn solve(
     let random =
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
+        // A start with a collision check can take tens of milliseconds on a humanoid: Ctrl-C
+        // ends the search (the caller throws the answer away: `PoseModel::solve_until`).
+        if avoid.is_some() && crate::core::interrupt::requested() {
+            break;
+        }
         let mut s = solve_from(paths, target, &start, ranges, cfg, None);
         iterations += s.iterations;
         tried += 1;

@@ -112,6 +112,11 @@ impl PoseModel {
                     .par_iter()
                     .enumerate()
                     .map(|(j, t)| {
+                        // Ctrl-C skips the block's remaining targets (the block is then
+                        // thrown away below): a stop within one target's time.
+                        if crate::core::interrupt::requested() {
+                            return Vec::new();
+                        }
                         let (i, j) = (first + offset + j, offset + j);
                         (0..k)
                             .map(|s| {
@@ -122,6 +127,13 @@ impl PoseModel {
                             .collect()
                     })
                     .collect();
+                if crate::core::interrupt::requested() {
+                    return Err(Error::Interrupted(format!(
+                        "stopped after {} of {} targets; nothing was written",
+                        answers.len(),
+                        targets.len()
+                    )));
+                }
                 answers.extend(solved);
             }
         }
