@@ -1,15 +1,15 @@
 //! The layout is the architecture: no module of `src/` imports one that imports it back, and
 //! the bottom layer (`core`) imports nothing else of the crate. Read from the source text:
-//! every `crate::path` outside comments and test modules is an import of the module it names.
+//! every `crate::`, `super::` and `self::` path (each item of a brace group) outside comments
+//! and test modules is an import of the module it names.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-/// `src/`, and every `.rs` file below it.
-fn rs_files() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+/// Every `.rs` file below `src`.
+fn rs_files_in(src: &Path) -> Vec<std::path::PathBuf> {
     let mut files = Vec::new();
-    let mut stack = vec![src.clone()];
+    let mut stack = vec![src.to_path_buf()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
@@ -20,15 +20,58 @@ fn rs_files() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
             }
         }
     }
+    files
+}
+
+/// `src/`, and every `.rs` file below it.
+fn rs_files() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let files = rs_files_in(&src);
     (src, files)
 }
 
-/// Module path (`sim::kinematics`) -> the modules it refers to.
-fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
-    let (src, paths) = rs_files();
+/// The paths a piece of code names from `start` (just past `crate::`, `super::` or `self::`):
+/// `a::b`, or each item of a brace group `a::{b::C, d}` (one level: `a::b::C`, `a::d`).
+fn named_paths(rest: &str) -> Vec<String> {
+    let is_path = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == ':';
+    let end = rest.find(|c: char| !is_path(c)).unwrap_or(rest.len());
+    let head = rest[..end].trim_end_matches(':');
+    if !rest[end..].starts_with('{') {
+        return vec![head.to_string()];
+    }
+    let Some(close) = rest[end..].find('}') else {
+        return vec![head.to_string()];
+    };
+    let items = &rest[end + 1..end + close];
+    let mut out: Vec<String> = items
+        .split(',')
+        .map(|item| {
+            let item: String = item.chars().filter(|c| !c.is_whitespace()).collect();
+            item.split('{')
+                .next()
+                .unwrap_or("")
+                .trim_end_matches(':')
+                .to_string()
+        })
+        // `self` in a group is the head; a trailing comma leaves an empty item.
+        .filter(|item| !item.is_empty() && item != "self")
+        .map(|item| match head.is_empty() {
+            true => item,
+            false => format!("{head}::{item}"),
+        })
+        .collect();
+    if out.is_empty() {
+        out.push(head.to_string());
+    }
+    out
+}
+
+/// Module path (`sim::kinematics`) -> the modules it refers to, for the tree at `src`: every
+/// `crate::`, `super::` and `self::` path outside comments and test modules.
+fn import_graph_of(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
     let mut files = Vec::new();
-    for path in paths {
-        let rel = path.strip_prefix(&src).unwrap().with_extension("");
+    for path in rs_files_in(src) {
+        let rel = path.strip_prefix(src).unwrap().with_extension("");
         let module = rel
             .components()
             .map(|c| c.as_os_str().to_string_lossy().into_owned())
@@ -46,28 +89,53 @@ fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
         let text = std::fs::read_to_string(path).unwrap();
         // Test modules sit at the end of a file; comments name modules without importing them.
         let code = text.split("#[cfg(test)]\nmod tests").next().unwrap();
+        let code: String = code
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .map(|l| l.to_string() + "\n")
+            .collect();
+        let own: Vec<&str> = module.split("::").collect();
         let mut refs = BTreeSet::new();
-        for line in code.lines().filter(|l| !l.trim_start().starts_with("//")) {
-            for (i, _) in line.match_indices("crate::") {
-                let rest = &line[i + "crate::".len()..];
-                let end = rest
-                    .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == ':'))
-                    .unwrap_or(rest.len());
-                let parts: Vec<&str> = rest[..end].split("::").collect();
-                // The longest prefix that is a module.
-                if let Some(target) = (1..=parts.len())
-                    .rev()
-                    .map(|k| parts[..k].join("::"))
-                    .find(|p| modules.contains(p))
-                    .filter(|t| t != module)
-                {
-                    refs.insert(target);
+        for prefix in ["crate::", "super::", "self::"] {
+            for (i, _) in code.match_indices(prefix) {
+                let before = code[..i].chars().next_back();
+                if before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_') {
+                    continue;
+                }
+                // Where the path starts: the crate's root, this module, or its parents.
+                let mut rest = &code[i + prefix.len()..];
+                let mut base: Vec<&str> = match prefix {
+                    "crate::" => Vec::new(),
+                    "self::" => own.clone(),
+                    _ => own[..own.len() - 1].to_vec(),
+                };
+                while let Some(r) = rest.strip_prefix("super::") {
+                    base.pop();
+                    rest = r;
+                }
+                for named in named_paths(rest) {
+                    let mut parts: Vec<&str> = base.clone();
+                    parts.extend(named.split("::").filter(|p| !p.is_empty()));
+                    // The longest prefix that is a module.
+                    if let Some(target) = (1..=parts.len())
+                        .rev()
+                        .map(|k| parts[..k].join("::"))
+                        .find(|p| modules.contains(p))
+                        .filter(|t| t != module)
+                    {
+                        refs.insert(target);
+                    }
                 }
             }
         }
         graph.insert(module.clone(), refs);
     }
     graph
+}
+
+/// [`import_graph_of`] the crate's `src/`.
+fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
+    import_graph_of(&Path::new(env!("CARGO_MANIFEST_DIR")).join("src"))
 }
 
 /// The import cycles: Tarjan's strongly connected components of more than one module.
@@ -140,6 +208,32 @@ fn no_module_imports_one_that_imports_it_back() {
     );
     let found = cycles(&graph);
     assert!(found.is_empty(), "import cycles: {found:?}");
+}
+
+/// Two files of a folder that import each other through `super::` (and a third through
+/// `self::` and a brace group), planted in a tree of their own: the reader sees the cycle.
+#[test]
+fn a_planted_super_cycle_is_found() {
+    let dir = std::env::temp_dir().join(format!("architecture-{}", std::process::id()));
+    let folder = dir.join("ik");
+    std::fs::create_dir_all(&folder).unwrap();
+    std::fs::write(dir.join("ik.rs"), "pub mod a;\npub mod b;\npub mod c;\n").unwrap();
+    std::fs::write(folder.join("a.rs"), "use super::b::B;\npub struct A;\n").unwrap();
+    std::fs::write(
+        folder.join("b.rs"),
+        "use super::{\n    a::A,\n    c::C,\n};\npub struct B;\n",
+    )
+    .unwrap();
+    std::fs::write(
+        folder.join("c.rs"),
+        "pub struct C;\n// super::a::A in a comment\n",
+    )
+    .unwrap();
+    let graph = import_graph_of(&dir);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(graph["ik::b"], ["ik::a", "ik::c"].map(String::from).into());
+    assert!(graph["ik::c"].is_empty(), "{graph:?}");
+    assert_eq!(cycles(&graph), vec![vec!["ik::a", "ik::b"]]);
 }
 
 #[test]

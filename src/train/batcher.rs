@@ -41,6 +41,19 @@ pub struct Batch {
     pub indices: Vec<usize>,
 }
 
+impl Batch {
+    /// This batch with its inputs cast to `dtype` (a lower precision's: the targets stay f32,
+    /// the losses widen the network's output to meet them).
+    pub fn with_inputs_in(&self, dtype: burn::tensor::FloatDType) -> Batch {
+        Batch {
+            inputs: self.inputs.clone().cast(dtype),
+            targets: self.targets.clone(),
+            step: self.step,
+            indices: self.indices.clone(),
+        }
+    }
+}
+
 /// Draws batches: epoch permutations seeded by `(seed, epoch)`, noise by `(seed, step)`.
 ///
 /// What a batch needs from the host is uploaded once per epoch, not once per step: the

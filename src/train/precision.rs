@@ -14,8 +14,6 @@ use clap::ValueEnum;
 
 use crate::core::error::{Error, Result};
 
-use super::batcher::Batch;
-
 /// f16's loss scale, as PyTorch's `GradScaler` without its dynamic part: a mean over a batch
 /// of images makes each pixel's gradient about 1 / (batch x pixels), 3e-6 for NeuroKin's paper
 /// preset, below f16's smallest normal number (6.1e-5), so the gradients lose their precision or
@@ -112,17 +110,6 @@ impl Precision {
             dtype: self.dtype(),
             in_norm: 0,
         }))
-    }
-
-    /// `batch` with its inputs cast to this precision (the targets stay f32: the losses widen
-    /// the network's output to meet them).
-    pub fn batch(&self, batch: &Batch) -> Batch {
-        Batch {
-            inputs: batch.inputs.clone().cast(self.dtype()),
-            targets: batch.targets.clone(),
-            step: batch.step,
-            indices: batch.indices.clone(),
-        }
     }
 }
 

@@ -366,7 +366,7 @@ where
         let n = batch.inputs.dims()[0];
         // Lower precision: the step runs on a cast copy of the f32 parameters.
         let step_loss: StepLoss = match cfg.precision.autocast(&model) {
-            Some(low) => loss(&low, &cfg.precision.batch(&batch)),
+            Some(low) => loss(&low, &batch.with_inputs_in(cfg.precision.dtype())),
             None => loss(&model, &batch),
         }
         .into();

@@ -10,7 +10,7 @@ use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve};
 use crate::sim::kinematics::KinematicChain;
 
 use super::PoseModel;
-use super::training::condition_rows;
+use super::conditions::condition_rows;
 
 /// How a batch of targets is answered: the solver's settings, when to stop, what to avoid.
 #[derive(Clone, Copy)]

@@ -11,6 +11,7 @@
 
 mod answer;
 mod columns;
+mod conditions;
 mod saved;
 mod training;
 

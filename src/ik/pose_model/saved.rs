@@ -15,7 +15,7 @@ use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
-use super::training::condition_width;
+use super::conditions::condition_width;
 use super::{PoseModel, PoseModelConfig};
 
 /// What `model.json` holds.

@@ -14,36 +14,9 @@ use crate::sim::collision::scene::Scene;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
+use super::conditions::{condition_rows, condition_width};
 use super::saved::{SavedModel, save_model};
 use super::{PoseModel, PoseModelConfig};
-
-/// The condition rows of `targets` (for each tip, its position normalised, then its
-/// quaternion with `w >= 0`).
-pub(super) fn condition_rows(
-    data: &IkData,
-    targets: &[Vec<PoseTarget>],
-    position_only: bool,
-) -> Vec<f32> {
-    let tips = targets.first().map_or(1, Vec::len);
-    let mut rows = Vec::with_capacity(targets.len() * tips * 7);
-    for t in targets.iter().flatten() {
-        rows.extend(data.normalise_position(&t.position));
-        if !position_only {
-            let q = t
-                .orientation
-                .expect("a full-pose model's targets have orientations");
-            let c = q.coords; // (x, y, z, w)
-            let sign = if c.w < 0.0 { -1.0 } else { 1.0 };
-            rows.extend([c.w, c.x, c.y, c.z].map(|v| (sign * v) as f32));
-        }
-    }
-    rows
-}
-
-/// The condition width of a model: 3 or 7 values a tip.
-pub(super) fn condition_width(position_only: bool, tips: usize) -> usize {
-    tips.max(1) * if position_only { 3 } else { 7 }
-}
 
 /// What [`train`] writes into its folder (a name ending in `/`: a folder of its own): no
 /// file a run reads may be one of them.

@@ -21,10 +21,11 @@ use burn::backend::autodiff::grads::Gradients;
 use burn::backend::autodiff::ops::{Backward, Ops, OpsKind};
 use burn::backend::autodiff::{Autodiff, NodeId};
 use burn::backend::tensor::FloatTensor;
-use burn::backend::{Backend, Dispatch, ExtensionType, TensorMetadata};
+use burn::backend::{Backend, Dispatch, TensorMetadata};
 use burn::tensor::ops::{ConvOptions, ConvTransposeOptions};
 use burn::tensor::{Shape, Tensor};
 
+pub use super::conv_layer::{Conv2dLayer, ConvTranspose2dLayer};
 use super::extension::GpuKernelOps;
 use super::im2col::{Fold, Patches};
 
@@ -64,25 +65,6 @@ impl Geometry {
     fn conv_out(&self, hw: [usize; 2]) -> [usize; 2] {
         hw.map(|d| (d + 2 * self.padding - self.kernel) / self.stride + 1)
     }
-}
-
-/// A convolution layer in training: its weight `[c_out, c_in, k, k]`, bias and options.
-#[derive(Clone, ExtensionType)]
-#[extension_type(fusion)]
-pub struct Conv2dLayer<B: Backend> {
-    pub weight: FloatTensor<B>,
-    pub bias: FloatTensor<B>,
-    pub options: ConvOptions<2>,
-}
-
-/// A transposed convolution layer in training: its weight `[c_in, c_out, k, k]`, bias and
-/// options.
-#[derive(Clone, ExtensionType)]
-#[extension_type(fusion)]
-pub struct ConvTranspose2dLayer<B: Backend> {
-    pub weight: FloatTensor<B>,
-    pub bias: FloatTensor<B>,
-    pub options: ConvTransposeOptions<2>,
 }
 
 /// `layer` over `x` in slices along the batch, joined (one slice where the batch fits): the

@@ -22,8 +22,10 @@
 //! Each kernel has its slow reference in burn's own operations beside its caller, and
 //! `tests/gpu/kernels.rs` compares them on lavapipe.
 
+mod autodiff;
 pub mod batch_norm;
 pub mod channel_reduce;
+pub mod conv_layer;
 pub mod convolution;
 pub mod extension;
 pub mod im2col;

@@ -2,9 +2,9 @@
 //! devices) and how an estimate is scored against the true angles.
 
 use burn::tensor::Device;
+use serde::{Deserialize, Serialize};
 
 use super::BodyFromImageConfig;
-use super::pose::PoseRow;
 use crate::body::drift::estimate_offsets;
 use crate::body::observations::{ImageFit, Observed};
 use crate::body::pose::{PoseFitConfig, pose_from_image, pose_losses};
@@ -50,6 +50,31 @@ fn score(robot: &Robot, found: &[Vec<f64>], truth: &[Vec<f64>]) -> Scores {
     }
 }
 
+/// One method on one kind of image: a row of `pose.csv`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseRow {
+    pub method: String,
+    pub images: String,
+    pub poses: usize,
+    pub mean_joint_error_deg: f64,
+    pub median_joint_error_deg: f64,
+    /// Mean error of each joint, "j1 / j2 / ...".
+    pub per_joint_deg: String,
+    pub end_effector_mm: f64,
+    /// Poses with every joint within 2 degrees.
+    pub within_2deg_share: f64,
+    /// Milliseconds per pose, one image at a time (NaN: not timed).
+    pub ms_per_pose_b1: f64,
+    /// Milliseconds per pose over the whole batch.
+    pub ms_per_pose_batched: f64,
+    /// Poses whose estimate the self-model scores better (a lower loss against the observed
+    /// image) than the true angles: there the model's optimum is not the truth, and no
+    /// optimiser could do better through it.
+    pub loss_below_truth_share: f64,
+    pub preset: String,
+    pub device: String,
+    pub git_revision: String,
+}
 /// Everything one run shares: the trained self-model (and its data), the robot, the devices.
 pub struct Bench<'a> {
     pub cfg: &'a BodyFromImageConfig,

@@ -35,9 +35,9 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use serde::{Deserialize, Serialize};
 
+pub use bench::PoseRow;
 pub use calibration::CalibrationRow;
 pub use drift::{DetectionRow, DriftRow};
-pub use pose::PoseRow;
 
 use crate::body::amortised::AmortisedConfig;
 use crate::body::calibration::VisualCalibrationConfig;

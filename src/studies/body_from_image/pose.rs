@@ -5,9 +5,8 @@
 use std::path::Path;
 
 use burn::tensor::{Tensor, TensorData};
-use serde::{Deserialize, Serialize};
 
-use super::bench::{Bench, Ms, Seen};
+use super::bench::{Bench, Ms, PoseRow, Seen};
 use crate::body::amortised::train_estimator;
 use crate::body::observations::{ImageFit, Observed, host};
 use crate::body::pose::pose_from_image;
@@ -17,31 +16,6 @@ use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::model::Render;
 
-/// One method on one kind of image: a row of `pose.csv`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct PoseRow {
-    pub method: String,
-    pub images: String,
-    pub poses: usize,
-    pub mean_joint_error_deg: f64,
-    pub median_joint_error_deg: f64,
-    /// Mean error of each joint, "j1 / j2 / ...".
-    pub per_joint_deg: String,
-    pub end_effector_mm: f64,
-    /// Poses with every joint within 2 degrees.
-    pub within_2deg_share: f64,
-    /// Milliseconds per pose, one image at a time (NaN: not timed).
-    pub ms_per_pose_b1: f64,
-    /// Milliseconds per pose over the whole batch.
-    pub ms_per_pose_batched: f64,
-    /// Poses whose estimate the self-model scores better (a lower loss against the observed
-    /// image) than the true angles: there the model's optimum is not the truth, and no
-    /// optimiser could do better through it.
-    pub loss_below_truth_share: f64,
-    pub preset: String,
-    pub device: String,
-    pub git_revision: String,
-}
 /// The rows of `results.csv` for the test poses `truth` seen in `observed`, written with their
 /// report and `pose_grid.png` into `out`; `seen` are the training poses (the baseline's mean),
 /// `k3dgs` the Gaussian self-model trained on the same data (differentiable, on the autodiff

@@ -285,6 +285,7 @@ pub fn run(
     )?;
     if !recovery.is_empty() {
         write_recovery(cfg, out, &recovery)?;
+        figures::draw_recovery(out, &recovery)?;
     }
     let summary = found
         .detection

@@ -95,7 +95,7 @@ pub(super) fn recover(cfg: &DamageConfig, r: &Recovering) -> Result<Vec<Recovery
     Ok(rows)
 }
 
-/// `recovery.csv` (+ Markdown) and the recovery figures.
+/// `recovery.csv` (+ Markdown); the figures are drawn from it by [`super::figures`].
 pub(super) fn write_recovery(
     cfg: &DamageConfig,
     out: &Path,
@@ -115,8 +115,7 @@ pub(super) fn write_recovery(
             cfg.recovery.fisher_batches,
             cfg.recovery.gate_k
         ),
-    )?;
-    super::figures::draw_recovery(out, recovery)
+    )
 }
 
 /// What every update shares: the healthy model, the poses, the cache of finished rows.
