@@ -131,8 +131,17 @@ fn expand(root: &Path, d: &Directive) -> Result<String> {
                     }
                 }
             }
+            // `first: N`: the first N rows that match (a long table's head: the slowest kernels).
+            let first = match d.option("first") {
+                Some(n) => n.trim().parse::<usize>().map_err(|_| {
+                    Error::data(&path, format!("`first: {n}` is not a number of rows"))
+                })?,
+                None => usize::MAX,
+            };
+            let mut kept = 0;
             for r in &rows {
-                if matches(&header, r, &conditions, &path)? {
+                if kept < first && matches(&header, r, &conditions, &path)? {
+                    kept += 1;
                     let cells: Vec<String> = cols.iter().map(|&c| format_cell(&r[c])).collect();
                     out += &format!("| {} |\n", cells.join(" | "));
                 }
