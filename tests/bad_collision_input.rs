@@ -35,6 +35,11 @@ fn spec(urdf: &Path) -> RobotSpec {
     }
 }
 
+/// `base` then `extra`, as the owned arguments of a command.
+fn with(base: &[&str], extra: &[&str]) -> Vec<String> {
+    base.iter().chain(extra).map(|s| s.to_string()).collect()
+}
+
 fn ik(args: &[&str]) -> Output {
     Command::new(IK).args(args).output().unwrap()
 }
@@ -289,17 +294,13 @@ fn no_output_is_a_file_the_collision_work_reads() {
             .success()
     );
     let train = |extra: &[&str]| {
-        let mut a = vec![
-            "train",
-            "--urdf",
-            urdf.to_str().unwrap(),
-            "--tip",
-            "hand",
-            "--preset",
-            "quick",
-        ];
-        a.extend(extra);
-        a.iter().map(|s| s.to_string()).collect::<Vec<String>>()
+        let urdf = urdf.to_str().unwrap();
+        with(
+            &[
+                "train", "--urdf", urdf, "--tip", "hand", "--preset", "quick",
+            ],
+            extra,
+        )
     };
     let s = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<String>>();
     let (mesh, bin, cube) = (
@@ -474,17 +475,18 @@ fn collision_inputs_that_would_hang_or_abort_are_refused_at_once() {
     std::fs::write(d("cube.stl"), common::cube_stl_binary(0.05)).unwrap();
     std::fs::write(d("big.yml"), "mesh:\n  bin: {file_path: cube.stl, pose: [1, 0, 0, 1, 0, 0, 0], scale: [1000, 1000, 1000]}\n").unwrap();
     let solve = |extra: &[&str]| {
-        let mut a = vec![
-            "solve".to_string(),
-            "--model".into(),
-            model.clone(),
-            "--targets".into(),
-            d("t.csv"),
-            "--out".into(),
-            d("a.csv"),
-        ];
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
+        with(
+            &[
+                "solve",
+                "--model",
+                &model,
+                "--targets",
+                &d("t.csv"),
+                "--out",
+                &d("a.csv"),
+            ],
+            extra,
+        )
     };
     let cases = [
         (
@@ -606,17 +608,18 @@ fn collision_options_that_would_do_nothing_are_refused() {
         "train", "--robot", "ur5", "--preset", "quick", "--out", &ur5,
     ]));
     let solve = |extra: &[&str]| {
-        let mut a = vec![
-            "solve".to_string(),
-            "--model".into(),
-            model.clone(),
-            "--targets".into(),
-            d("t.csv"),
-            "--out".into(),
-            d("a.csv"),
-        ];
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
+        with(
+            &[
+                "solve",
+                "--model",
+                &model,
+                "--targets",
+                &d("t.csv"),
+                "--out",
+                &d("a.csv"),
+            ],
+            extra,
+        )
     };
     let urdf = urdf.to_str().unwrap();
     let cases = [
@@ -849,36 +852,22 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
     .unwrap();
     let urdf = urdf.to_str().unwrap();
     let train = |preset: &str, extra: &[&str]| {
-        let mut a: Vec<String> = [
-            "train",
-            "--urdf",
-            urdf,
-            "--tip",
-            "hand",
-            "--preset",
-            preset,
-            "--out",
-            &d("new"),
-        ]
-        .map(String::from)
-        .to_vec();
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
+        let base = ["train", "--urdf", urdf, "--tip", "hand", "--preset", preset];
+        with(&base, &[&["--out", &d("new")][..], extra].concat())
     };
     let solve = |extra: &[&str]| {
-        let mut a: Vec<String> = [
-            "solve",
-            "--model",
-            &model,
-            "--targets",
-            &d("t.csv"),
-            "--out",
-            &d("a.csv"),
-        ]
-        .map(String::from)
-        .to_vec();
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
+        with(
+            &[
+                "solve",
+                "--model",
+                &model,
+                "--targets",
+                &d("t.csv"),
+                "--out",
+                &d("a.csv"),
+            ],
+            extra,
+        )
     };
     let bench = env!("CARGO_BIN_EXE_bench_collision_ik");
     let bench_args = |python: &str| -> Vec<String> {
@@ -936,26 +925,7 @@ fn ctrl_c_stops_every_collision_phase_within_a_second() {
         "many.yml",
         "forever.sh",
     ];
-    let mut failures = Vec::new();
-    for (what, binary, args, after) in cases {
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (waited, code, last) = common::interrupt_after(binary, &args, after);
-        eprintln!("{what}: stopped {waited:.2} s after Ctrl-C, exit {code:?}: {last}");
-        let left: Vec<String> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|f| !inputs.contains(&f.as_str()))
-            .collect();
-        if code != Some(130)
-            || !last.starts_with("interrupted:")
-            || waited >= 1.0
-            || !left.is_empty()
-        {
-            failures.push(format!(
-                "{what}: exit {code:?} after {waited:.2} s, left {left:?}: {last}"
-            ));
-        }
-    }
+    let failures = common::ctrl_c_failures(dir.path(), &inputs, cases, 1.0);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 

@@ -340,36 +340,24 @@ fn ctrl_c_stops_every_long_command_within_seconds_and_leaves_nothing() {
         ("ik solve, reading its targets", ik, solve.clone(), 0.2),
         ("ik solve, solving", ik, solve, 3.0),
     ];
-    let mut failures = Vec::new();
-    for (name, binary, args, after) in cases {
-        let args: Vec<String> = args
-            .iter()
-            .map(|a| {
-                if a.ends_with(".npz") || *a == "t.csv" || *a == "a.csv" {
-                    d(a)
-                } else {
-                    a.to_string()
-                }
-            })
-            .collect();
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (waited, code, last) = common::interrupt_after(binary, &args, after);
-        eprintln!("{name}: stopped {waited:.2} s after Ctrl-C, exit {code:?}: {last}");
-        let left: Vec<String> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|f| !inputs.contains(&f.as_str()))
-            .collect();
-        if code != Some(130)
-            || !last.starts_with("interrupted:")
-            || waited >= 2.0
-            || !left.is_empty()
-        {
-            failures.push(format!(
-                "{name}: exit {code:?} after {waited:.2} s, left {left:?}: {last}"
-            ));
-        }
-    }
+    // The outputs named in the dataset's folder.
+    let cases = cases
+        .into_iter()
+        .map(|(name, binary, args, after)| {
+            let args: Vec<String> = args
+                .iter()
+                .map(|a| {
+                    if a.ends_with(".npz") || *a == "t.csv" || *a == "a.csv" {
+                        d(a)
+                    } else {
+                        a.to_string()
+                    }
+                })
+                .collect();
+            (name, binary, args, after)
+        })
+        .collect();
+    let failures = common::ctrl_c_failures(dir.path(), &inputs, cases, 2.0);
     assert!(failures.is_empty(), "{failures:#?}");
 }
 

@@ -448,3 +448,37 @@ pub fn collision_arm_urdf() -> String {
     }
     out + rest
 }
+
+/// Each case `(what, binary, args, after)` run and sent Ctrl-C after `after` seconds; a line
+/// for each that did not stop within `within` seconds with exit 130 and one `interrupted:`
+/// line, or that left a file in `dir` beside `inputs`.
+#[cfg(unix)]
+#[allow(dead_code)]
+pub fn ctrl_c_failures(
+    dir: &std::path::Path,
+    inputs: &[&str],
+    cases: Vec<(&str, &str, Vec<String>, f64)>,
+    within: f64,
+) -> Vec<String> {
+    let mut failures = Vec::new();
+    for (what, binary, args, after) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (waited, code, last) = interrupt_after(binary, &args, after);
+        eprintln!("{what}: stopped {waited:.2} s after Ctrl-C, exit {code:?}: {last}");
+        let left: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|f| !inputs.contains(&f.as_str()))
+            .collect();
+        if code != Some(130)
+            || !last.starts_with("interrupted:")
+            || waited >= within
+            || !left.is_empty()
+        {
+            failures.push(format!(
+                "{what}: exit {code:?} after {waited:.2} s, left {left:?}: {last}"
+            ));
+        }
+    }
+    failures
+}
