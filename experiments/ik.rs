@@ -129,9 +129,7 @@ struct SrdfArg {
 
 /// The collision options of a command, checked: each one given does something.
 struct Collisions {
-    args: CollisionArgs,
-    srdf: Option<PathBuf>,
-    margin: f64,
+    options: selfmodel::ik::collision::CollisionOptions,
 }
 
 /// The margin kept where `--margin` is not given (m).
@@ -141,10 +139,15 @@ impl Collisions {
     /// `args` with `srdf`; `--margin` without a collision option is refused (it would change
     /// nothing), as is a margin that is not a distance from 0 to 1 m.
     fn new(args: CollisionArgs, srdf: Option<PathBuf>) -> selfmodel::Result<Self> {
-        let any =
-            args.scene.is_some() || args.self_collision || srdf.is_some() || args.spheres.is_some();
+        let options = selfmodel::ik::collision::CollisionOptions {
+            scene: args.scene,
+            self_collision: args.self_collision,
+            srdf,
+            spheres: args.spheres,
+            margin: args.margin.unwrap_or(DEFAULT_MARGIN_M),
+        };
         if let Some(m) = args.margin {
-            if !any {
+            if !options.any() {
                 return Err(selfmodel::Error::Config(format!(
                     "--margin {}: it is the distance kept from obstacles and from the robot itself, so it needs --scene, --self-collision, --srdf or --spheres",
                     selfmodel::core::error::short_number(m)
@@ -157,68 +160,12 @@ impl Collisions {
                 )));
             }
         }
-        let margin = args.margin.unwrap_or(DEFAULT_MARGIN_M);
-        Ok(Self { args, srdf, margin })
-    }
-
-    /// Whether any option asks for a collision check.
-    fn any(&self) -> bool {
-        self.args.scene.is_some()
-            || self.args.self_collision
-            || self.srdf.is_some()
-            || self.args.spheres.is_some()
-    }
-
-    /// The files a check reads (the scene and its meshes, the spheres files, the SRDF): what
-    /// an `--out` must not be.
-    fn inputs(&self) -> selfmodel::Result<Vec<PathBuf>> {
-        let mut files = Vec::new();
-        if let Some(scene) = &self.args.scene {
-            files.extend(selfmodel::sim::collision::scene::Scene::files(scene)?);
-        }
-        if let Some(spheres) = &self.args.spheres {
-            files.extend(selfmodel::sim::collision::user_spheres::files(spheres)?);
-        }
-        files.extend(self.srdf.clone());
-        Ok(files)
+        Ok(Self { options })
     }
 
     /// What `ik train` keeps its samples clear of, where any option asks for it.
     fn for_training(&self) -> Option<selfmodel::ik::pose_model::TrainingCollisions> {
-        self.any()
-            .then(|| selfmodel::ik::pose_model::TrainingCollisions {
-                scene: self.args.scene.clone(),
-                srdf: self.srdf.clone(),
-                spheres: self.args.spheres.clone(),
-                margin: self.margin,
-            })
-    }
-
-    /// The check, where any option asks for one.
-    fn check(
-        &self,
-        spec: &selfmodel::sim::robots::RobotSpec,
-        model_dir: &std::path::Path,
-    ) -> selfmodel::Result<Option<selfmodel::ik::collision::CollisionCheck>> {
-        use selfmodel::ik::collision::Spheres;
-        if !self.any() {
-            return Ok(None);
-        }
-        let scene = (self.args.scene.as_deref())
-            .map(selfmodel::sim::collision::scene::Scene::read)
-            .transpose()?;
-        selfmodel::ik::collision::CollisionCheck::with_spheres(
-            spec,
-            self.args
-                .spheres
-                .as_deref()
-                .map_or(Spheres::KeptIn(model_dir), Spheres::File),
-            self.srdf.as_deref(),
-            scene,
-            true,
-            self.margin,
-        )
-        .map(Some)
+        self.options.any().then(|| self.options.clone())
     }
 }
 
@@ -281,8 +228,8 @@ fn main() -> ExitCode {
                 )?;
                 let spec = robot.spec()?;
                 let mut inputs = spec.files();
-                if collisions.any() {
-                    inputs.extend(collisions.inputs()?);
+                if collisions.options.any() {
+                    inputs.extend(collisions.options.inputs()?);
                 }
                 let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
                 selfmodel::core::atomic_file::refuse_writing_over(
@@ -327,23 +274,24 @@ fn main() -> ExitCode {
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                let inputs = collisions.inputs()?;
+                let inputs = collisions.options.inputs()?;
                 let model_dir = model;
                 let (model, robot) = answering(&model_dir, &[&out], &inputs, &device)?;
-                let check = collisions.check(&model.saved.robot, &model_dir)?;
+                let check = (collisions.options).check(&model.saved.robot, Some(&model_dir))?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
                 // Ctrl-C ends the rows; the file is then dropped whole.
                 // With a collision check, draws that collide are skipped: at most a thousand
                 // draws a row (a scene that leaves no room ends with a message).
                 let written = std::cell::Cell::new(0usize);
-                let rows = selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, seed)
-                    .take(n.saturating_mul(if check.is_some() { 1000 } else { 1 }))
-                    .take_while(|_| !selfmodel::core::interrupt::requested())
-                    .filter(|q| check.as_ref().is_none_or(|c| c.valid(q)))
-                    .take(n)
-                    .inspect(|_| written.set(written.get() + 1))
-                    .map(|q| (PoseTarget::of(&robot.chain, &q), q));
+                let rows = selfmodel::ik::targets::kept_draws(
+                    &model.saved.ranges,
+                    seed,
+                    n,
+                    check.as_ref(),
+                )
+                .inspect(|_| written.set(written.get() + 1))
+                .map(|q| (PoseTarget::of(&robot.chain, &q), q));
                 selfmodel::core::atomic_file::write_atomic(&out, |w| {
                     selfmodel::ik::targets::write_targets_csv(
                         w,
@@ -359,7 +307,7 @@ fn main() -> ExitCode {
                         return Err(selfmodel::Error::Config(format!(
                             "only {} of {n} draws ({} tried) were collision-free: the scene leaves the robot little room; nothing was written",
                             written.get(),
-                            n.saturating_mul(1000)
+                            n.saturating_mul(selfmodel::ik::targets::MAX_DRAWS_PER_KEPT)
                         )));
                     }
                     Ok(())
@@ -393,9 +341,9 @@ fn main() -> ExitCode {
                 }
                 let provenance = PathBuf::from(format!("{}.json", out.display()));
                 let mut inputs = vec![targets_file.clone()];
-                inputs.extend(collisions.inputs()?);
+                inputs.extend(collisions.options.inputs()?);
                 let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
-                let check = collisions.check(&model.saved.robot, &model_dir)?;
+                let check = (collisions.options).check(&model.saved.robot, Some(&model_dir))?;
                 let checking = check.is_some();
                 let cfg = model
                     .saved
@@ -449,9 +397,9 @@ fn main() -> ExitCode {
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
                         "solver": &cfg,
-                        "scene": collisions.args.scene,
+                        "scene": collisions.options.scene,
                         "collisions_checked": checking,
-                        "margin_m": checking.then_some(collisions.margin),
+                        "margin_m": checking.then_some(collisions.options.margin),
                         "stats": stats,
                         "seconds": seconds,
                         "threads": threads,

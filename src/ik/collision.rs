@@ -49,6 +49,63 @@ pub enum Spheres<'a> {
     File(&'a Path),
 }
 
+/// What answers (or training samples) are checked against, as a command or a caller names it
+/// (`ik train`, `ik targets`, `ik solve`, Python's `IkSolver.solve`): the one value every one of
+/// them builds its check from ([`Self::check`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CollisionOptions {
+    /// Obstacles (cuRobo's world configuration).
+    pub scene: Option<std::path::PathBuf>,
+    /// Check against the robot itself (it always is once any option asks for a check).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub self_collision: bool,
+    /// The SRDF whose `<disable_collisions>` say which links may touch (else the one beside the
+    /// URDF, else the pairs computed).
+    pub srdf: Option<std::path::PathBuf>,
+    /// A user's spheres (cuRobo's format) instead of fitted ones.
+    pub spheres: Option<std::path::PathBuf>,
+    /// The distance kept (m).
+    pub margin: f64,
+}
+
+impl CollisionOptions {
+    /// Whether any option asks for a check.
+    pub fn any(&self) -> bool {
+        self.scene.is_some() || self.self_collision || self.srdf.is_some() || self.spheres.is_some()
+    }
+
+    /// The files a check reads (the scene and the meshes it names, the spheres files, the
+    /// SRDF): what an output must not be.
+    pub fn inputs(&self) -> Result<Vec<std::path::PathBuf>> {
+        let mut files = Vec::new();
+        if let Some(scene) = &self.scene {
+            files.extend(Scene::files(scene)?);
+        }
+        if let Some(spheres) = &self.spheres {
+            files.extend(crate::sim::collision::user_spheres::files(spheres)?);
+        }
+        files.extend(self.srdf.clone());
+        Ok(files)
+    }
+
+    /// The check for `spec`'s robot, where any option asks for one: the user's spheres, else
+    /// the collision model kept in `kept` (a saved IK model's folder) where it was made from the
+    /// same robot and settings, else spheres fitted now.
+    pub fn check(&self, spec: &RobotSpec, kept: Option<&Path>) -> Result<Option<CollisionCheck>> {
+        if !self.any() {
+            return Ok(None);
+        }
+        let scene = self.scene.as_deref().map(Scene::read).transpose()?;
+        let spheres = match (&self.spheres, kept) {
+            (Some(file), _) => Spheres::File(file),
+            (None, Some(dir)) => Spheres::KeptIn(dir),
+            (None, None) => Spheres::Fitted,
+        };
+        let srdf = self.srdf.as_deref();
+        CollisionCheck::with_spheres(spec, spheres, srdf, scene, true, self.margin).map(Some)
+    }
+}
+
 /// How far past the margin the solver pushes a contact (m): an answer pushed apart keeps a
 /// little more than the margin, so the last steps to the target do not bring it back.
 const PUSH_PAST_MARGIN_M: f64 = 0.002;

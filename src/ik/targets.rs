@@ -2,9 +2,34 @@
 //! targets file `ik targets` writes and `ik solve`, `bench_ik` and the reference script read:
 //! `x,y,z,qw,qx,qy,qz` (each tip's `A.x,...` for several), then the joints that reach them.
 
+use crate::ik::collision::CollisionCheck;
 use crate::ik::pose::PoseTarget;
 use crate::ik::pose_model::target_columns;
 use crate::sim::robot::Robot;
+
+/// Draws a kept joint vector may take: past them the scene is said to leave no room.
+pub const MAX_DRAWS_PER_KEPT: usize = 1000;
+
+/// Joint vectors drawn uniformly within `ranges` (seeded) that `check` accepts (every draw
+/// without a check): `n` of them from at most [`MAX_DRAWS_PER_KEPT`] draws each, fewer where
+/// the scene leaves little room or Ctrl-C ([`crate::core::interrupt`]) ends the draws.
+pub fn kept_draws<'a>(
+    ranges: &'a [[f64; 2]],
+    seed: u64,
+    n: usize,
+    check: Option<&'a CollisionCheck>,
+) -> impl Iterator<Item = Vec<f64>> + 'a {
+    let draws = n.saturating_mul(if check.is_some() {
+        MAX_DRAWS_PER_KEPT
+    } else {
+        1
+    });
+    crate::sim::trajectory::babbling_rows(ranges, seed)
+        .take(draws)
+        .take_while(|_| !crate::core::interrupt::requested())
+        .filter(move |q| check.is_none_or(|c| c.valid(q)))
+        .take(n)
+}
 
 /// The random reachable targets of `robot` for `model` and the joints that reach them.
 pub fn random_targets(

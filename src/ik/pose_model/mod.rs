@@ -46,14 +46,7 @@ pub struct PoseModelConfig {
 /// What the training samples keep clear of: the robot itself (always) and a scene, at a
 /// margin, with the pairs of an SRDF (else the one beside the URDF, else computed) and a
 /// user's spheres (else fitted), as `ik solve`'s collision options name them.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TrainingCollisions {
-    pub scene: Option<std::path::PathBuf>,
-    pub srdf: Option<std::path::PathBuf>,
-    pub spheres: Option<std::path::PathBuf>,
-    /// Metres.
-    pub margin: f64,
-}
+pub type TrainingCollisions = crate::ik::collision::CollisionOptions;
 
 impl Preset for PoseModelConfig {
     /// 200,000 samples, the standard flow trained to a validation plateau or 100 epochs

@@ -6,11 +6,10 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use crate::core::error::Result;
-use crate::ik::collision::{CollisionCheck, Spheres};
+use crate::ik::collision::CollisionCheck;
 use crate::ik::data::IkData;
 use crate::ik::flow::{Draws, FlowIk, fit_flow, sample_rows};
 use crate::ik::pose::{PoseTarget, pose_error};
-use crate::sim::collision::scene::Scene;
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
@@ -38,14 +37,7 @@ pub fn train(
 ) -> Result<PoseModel> {
     let chain = &robot.chain;
     let check = match &cfg.collisions {
-        Some(c) => {
-            let scene = c.scene.as_deref().map(Scene::read).transpose()?;
-            let spheres = c.spheres.as_deref().map_or(Spheres::Fitted, Spheres::File);
-            let srdf = c.srdf.as_deref();
-            Some(CollisionCheck::with_spheres(
-                spec, spheres, srdf, scene, true, c.margin,
-            )?)
-        }
+        Some(c) => c.check(spec, None)?,
         None => None,
     };
     let keep = check.as_ref().map(|c| move |q: &[f64]| c.valid(q));

@@ -169,12 +169,7 @@ fn free_targets(
     n: usize,
     seed: u64,
 ) -> Result<Drawn> {
-    let qs: Vec<Vec<f64>> = crate::sim::trajectory::babbling_rows(ranges, seed)
-        .take(n.saturating_mul(1000))
-        .take_while(|_| !crate::core::interrupt::requested())
-        .filter(|q| check.valid(q))
-        .take(n)
-        .collect();
+    let qs: Vec<Vec<f64>> = crate::ik::targets::kept_draws(ranges, seed, n, Some(check)).collect();
     crate::core::interrupt::check(|| {
         "stopped drawing collision-free targets; nothing was kept".into()
     })?;
