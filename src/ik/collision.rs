@@ -52,6 +52,24 @@ pub enum Spheres<'a> {
 /// What answers (or training samples) are checked against, as a command or a caller names it
 /// (`ik train`, `ik targets`, `ik solve`, Python's `IkSolver.solve`): the one value every one of
 /// them builds its check from ([`Self::check`]).
+///
+/// # Examples
+///
+/// Nothing asked, nothing checked; a built-in robot (drawn, not measured) has no collision
+/// geometry to check:
+///
+/// ```
+/// use selfmodel::ik::collision::CollisionOptions;
+/// use selfmodel::{BuiltinRobot, RobotSpec};
+///
+/// let ur5 = RobotSpec::Builtin(BuiltinRobot::Ur5);
+/// let none = CollisionOptions::default();
+/// assert!(!none.any() && none.check(&ur5, None)?.is_none());
+/// let itself = CollisionOptions { self_collision: true, margin: 0.005, ..Default::default() };
+/// let Err(err) = itself.check(&ur5, None) else { panic!("checked") };
+/// assert!(err.to_string().contains("no collision geometry"), "{err}");
+/// # Ok::<(), selfmodel::Error>(())
+/// ```
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CollisionOptions {
     /// Obstacles (cuRobo's world configuration).

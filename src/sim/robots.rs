@@ -47,6 +47,21 @@ pub fn shared_arm_urdf() -> PathBuf {
 
 /// The robot a run uses, as its config records it: a built-in one, or a URDF placed in the
 /// scene (its root link at `base_xyz`, metres, turned by `base_rpy`, radians).
+///
+/// # Examples
+///
+/// A robot's tip pose at some joint values (`examples/forward_kinematics.rs` adds its
+/// Jacobian):
+///
+/// ```
+/// use selfmodel::{BuiltinRobot, RobotSpec};
+///
+/// let robot = RobotSpec::Builtin(BuiltinRobot::Ur5).load_kinematics()?;
+/// assert_eq!(robot.dof(), 6);
+/// let tip = robot.chain.tip_poses(&[0.0; 6])[0];
+/// assert!((tip.translation.vector.norm() - 0.84).abs() < 0.01);
+/// # Ok::<(), selfmodel::Error>(())
+/// ```
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RobotSpec {
