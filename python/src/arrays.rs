@@ -1,11 +1,9 @@
 //! Arrays and values as Python hands them over, checked for size before they are copied,
 //! then for shape and finiteness.
 
-
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-
 
 use crate::calls::*;
 

@@ -1,10 +1,8 @@
 //! How a call of the native module runs: a panic turned into one line, the library's errors
 //! as `ValueError`, long calls in blocks with Python's Ctrl-C asked between them.
 
-
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-
 
 /// `f`, a method's body, with any panic inside it (a bug: the library's errors are values)
 /// turned into a `RuntimeError` of one line that says so, never a `PanicException` that

@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use numpy::{IntoPyArray, PyArray3};
 use pyo3::prelude::*;
 
-
 use crate::arrays::*;
 use crate::calls::*;
 
