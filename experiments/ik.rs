@@ -127,46 +127,29 @@ struct SrdfArg {
     srdf: Option<PathBuf>,
 }
 
-/// The collision options of a command, checked: each one given does something.
-struct Collisions {
-    options: selfmodel::ik::collision::CollisionOptions,
-}
-
 /// The margin kept where `--margin` is not given (m).
 const DEFAULT_MARGIN_M: f64 = 0.005;
 
-impl Collisions {
-    /// `args` with `srdf`; `--margin` without a collision option is refused (it would change
-    /// nothing), as is a margin that is not a distance from 0 to 1 m.
-    fn new(args: CollisionArgs, srdf: Option<PathBuf>) -> selfmodel::Result<Self> {
-        let options = selfmodel::ik::collision::CollisionOptions {
-            scene: args.scene,
-            self_collision: args.self_collision,
-            srdf,
-            spheres: args.spheres,
-            margin: args.margin.unwrap_or(DEFAULT_MARGIN_M),
-        };
-        if let Some(m) = args.margin {
-            if !options.any() {
-                return Err(selfmodel::Error::Config(format!(
-                    "--margin {}: it is the distance kept from obstacles and from the robot itself, so it needs --scene, --self-collision, --srdf or --spheres",
-                    selfmodel::core::error::short_number(m)
-                )));
-            }
-            if !(m.is_finite() && (0.0..=1.0).contains(&m)) {
-                return Err(selfmodel::Error::Config(format!(
-                    "--margin {}: give a distance from 0 to 1 m",
-                    selfmodel::core::error::short_number(m)
-                )));
-            }
-        }
-        Ok(Self { options })
+/// A command's collision options with `srdf`; `--margin` without a collision option is
+/// refused (it would change nothing; the check refuses a margin out of range).
+fn collision_options(
+    args: CollisionArgs,
+    srdf: Option<PathBuf>,
+) -> selfmodel::Result<selfmodel::ik::collision::CollisionOptions> {
+    let options = selfmodel::ik::collision::CollisionOptions {
+        scene: args.scene,
+        self_collision: args.self_collision,
+        srdf,
+        spheres: args.spheres,
+        margin: args.margin.unwrap_or(DEFAULT_MARGIN_M),
+    };
+    if let Some(m) = args.margin.filter(|_| !options.any()) {
+        return Err(selfmodel::Error::Config(format!(
+            "--margin {}: it is the distance kept from obstacles and from the robot itself, so it needs --scene, --self-collision, --srdf or --spheres",
+            selfmodel::core::error::short_number(m)
+        )));
     }
-
-    /// What `ik train` keeps its samples clear of, where any option asks for it.
-    fn for_training(&self) -> Option<selfmodel::ik::pose_model::TrainingCollisions> {
-        self.options.any().then(|| self.options.clone())
-    }
+    Ok(options)
 }
 
 /// The most answers per target `ik solve` gives, and targets `ik targets` writes.
@@ -218,18 +201,18 @@ fn main() -> ExitCode {
                     Some(_) => None,
                     None => robot.parts.group.srdf.take(),
                 };
-                let collisions = Collisions::new(collisions, srdf)?;
+                let collisions = collision_options(collisions, srdf)?;
                 let mut cfg = PoseModelConfig::preset(&preset)?;
                 cfg.position_only = position_only;
-                cfg.collisions = collisions.for_training();
+                cfg.collisions = collisions.any().then(|| collisions.clone());
                 selfmodel::core::atomic_file::check_out(
                     &out,
                     selfmodel::core::atomic_file::OutKind::Folder,
                 )?;
                 let spec = robot.spec()?;
                 let mut inputs = spec.files();
-                if collisions.options.any() {
-                    inputs.extend(collisions.options.inputs()?);
+                if collisions.any() {
+                    inputs.extend(collisions.inputs()?);
                 }
                 let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
                 selfmodel::core::atomic_file::refuse_writing_over(
@@ -268,16 +251,16 @@ fn main() -> ExitCode {
                 srdf,
                 out,
             } => {
-                let collisions = Collisions::new(collisions, srdf.srdf)?;
+                let collisions = collision_options(collisions, srdf.srdf)?;
                 if !(1..=MAX_TARGETS).contains(&n) {
                     return Err(selfmodel::Error::Config(format!(
                         "--n must be 1 to {MAX_TARGETS} targets"
                     )));
                 }
-                let inputs = collisions.options.inputs()?;
+                let inputs = collisions.inputs()?;
                 let model_dir = model;
                 let (model, robot) = answering(&model_dir, &[&out], &inputs, &device)?;
-                let check = (collisions.options).check(&model.saved.robot, Some(&model_dir))?;
+                let check = collisions.check(&model.saved.robot, Some(&model_dir))?;
                 // Streamed: each row's pose is made as it is written (ten million rows of a
                 // humanoid would not fit in memory as text and targets at once).
                 // Ctrl-C ends the rows; the file is then dropped whole.
@@ -333,7 +316,7 @@ fn main() -> ExitCode {
                 srdf,
                 out,
             } => {
-                let collisions = Collisions::new(collisions, srdf.srdf)?;
+                let collisions = collision_options(collisions, srdf.srdf)?;
                 if !(1..=MAX_K).contains(&k) {
                     return Err(selfmodel::Error::Config(format!(
                         "--k must be 1 to {MAX_K} (answers per target)"
@@ -341,9 +324,9 @@ fn main() -> ExitCode {
                 }
                 let provenance = PathBuf::from(format!("{}.json", out.display()));
                 let mut inputs = vec![targets_file.clone()];
-                inputs.extend(collisions.options.inputs()?);
+                inputs.extend(collisions.inputs()?);
                 let (model, robot) = answering(&model_dir, &[&out, &provenance], &inputs, &device)?;
-                let check = (collisions.options).check(&model.saved.robot, Some(&model_dir))?;
+                let check = collisions.check(&model.saved.robot, Some(&model_dir))?;
                 let checking = check.is_some();
                 let cfg = model
                     .saved
@@ -397,9 +380,9 @@ fn main() -> ExitCode {
                         "tolerance_mm": 1e3 * cfg.convergence_m,
                         "tolerance_deg": cfg.convergence_rad.to_degrees(),
                         "solver": &cfg,
-                        "scene": collisions.options.scene,
+                        "scene": collisions.scene,
                         "collisions_checked": checking,
-                        "margin_m": checking.then_some(collisions.options.margin),
+                        "margin_m": checking.then_some(collisions.margin),
                         "stats": stats,
                         "seconds": seconds,
                         "threads": threads,

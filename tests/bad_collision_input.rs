@@ -597,7 +597,10 @@ fn collision_options_that_would_do_nothing_are_refused() {
         "--out",
         &d("t.csv"),
     ]));
-    std::fs::write(d("other.srdf"), "<robot name=\"panda\"><disable_collisions link1=\"panda_link0\" link2=\"panda_link1\" reason=\"Adjacent\"/></robot>").unwrap();
+    // Another robot's SRDF, named only (in a folder of its own: one beside the URDF would be
+    // read for every row).
+    std::fs::create_dir_all(d("panda")).unwrap();
+    std::fs::write(d("panda/other.srdf"), "<robot name=\"panda\"><disable_collisions link1=\"panda_link0\" link2=\"panda_link1\" reason=\"Adjacent\"/></robot>").unwrap();
     std::fs::write(
         d("big.yml"),
         "collision_spheres:\n  l1:\n    - {center: [0, 0, 0], radius: 1e9}\n",
@@ -645,7 +648,7 @@ fn collision_options_that_would_do_nothing_are_refused() {
         ),
         (
             "another robot's SRDF",
-            solve(&["--self-collision", "--srdf", &d("other.srdf")]),
+            solve(&["--self-collision", "--srdf", &d("panda/other.srdf")]),
             "is it this robot's SRDF",
         ),
         (

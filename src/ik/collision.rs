@@ -153,49 +153,47 @@ impl CollisionCheck {
         self_collision: bool,
         margin: f64,
     ) -> Result<Self> {
-        let srdf_named = srdf;
         if !(margin.is_finite() && (0.0..=MAX_MARGIN_M).contains(&margin)) {
             return Err(Error::Config(format!(
                 "--margin {}: give a distance from 0 to 1 m",
                 crate::core::error::short_number(margin)
             )));
         }
-        let robot = spec.with_geometry(GeometryKind::Collision).load()?;
-        if let RobotSpec::Builtin(b) = spec {
-            return Err(Error::Config(format!(
-                "the built-in {} has no collision geometry (its shapes are drawn, not measured): give a URDF with <collision> elements (--urdf) to check collisions",
-                b.name()
-            )));
-        }
-        let beside = match spec {
-            RobotSpec::Urdf { path, .. } => crate::sim::srdf::find_beside(path).ok(),
-            RobotSpec::Builtin(_) => None,
-        };
-        // Read through the bounded reader whether named or found beside the URDF: a FIFO, a
-        // device or a folder is refused, not waited on.
-        let srdf = match srdf.map(Path::to_path_buf).or(beside) {
-            Some(path) => {
-                let text = crate::core::input_file::read_xml(&path, "SRDF file")?;
-                Some((crate::sim::srdf::Srdf::parse(&path, &text)?, text))
-            }
-            None => None,
-        };
-        if let (Some(named), Some((file, _))) = (srdf_named, &srdf) {
-            // One named for collisions must say which links may touch, and of this robot.
-            if crate::sim::collision::allowed_by_srdf(&robot, file)?.is_none() {
+        let path = match spec {
+            RobotSpec::Urdf { path, .. } => path,
+            RobotSpec::Builtin(b) => {
                 return Err(Error::Config(format!(
-                    "--srdf {}: it has no <disable_collisions>, so it would change nothing: give the SRDF that lists them (MoveIt's setup assistant writes one) or leave --srdf out",
-                    named.display()
+                    "the built-in {} has no collision geometry (its shapes are drawn, not measured): give a URDF with <collision> elements (--urdf) to check collisions",
+                    b.name()
                 )));
             }
+        };
+        let robot = spec.with_geometry(GeometryKind::Collision).load()?;
+        // Read through the bounded reader whether named or found beside the URDF: a FIFO, a
+        // device or a folder is refused, not waited on.
+        let (allowed, srdf_text) = match srdf
+            .map(Path::to_path_buf)
+            .or_else(|| crate::sim::srdf::find_beside(path).ok())
+        {
+            Some(file) => {
+                let text = crate::core::input_file::read_xml(&file, "SRDF file")?;
+                let parsed = crate::sim::srdf::Srdf::parse(&file, &text)?;
+                (
+                    crate::sim::collision::allowed_by_srdf(&robot, &parsed)?,
+                    Some(text),
+                )
+            }
+            None => (None, None),
+        };
+        if let (Some(named), None) = (srdf, &allowed) {
+            // One named for collisions must say which links may touch.
+            return Err(Error::Config(format!(
+                "--srdf {}: it has no <disable_collisions>, so it would change nothing: give the SRDF that lists them (MoveIt's setup assistant writes one) or leave --srdf out",
+                named.display()
+            )));
         }
         let (fit, sampling) = (SphereFit::default(), PairSampling::default());
-        let mut key = cache::key(
-            &robot,
-            srdf.as_ref().map(|(_, text)| text.as_str()),
-            &fit,
-            &sampling,
-        );
+        let mut key = cache::key(&robot, srdf_text.as_deref(), &fit, &sampling);
         if let Spheres::File(file) = spheres {
             // A model from a user's spheres is never taken for a fitted one.
             let text = crate::core::input_file::read_user_file(
@@ -209,14 +207,13 @@ impl CollisionCheck {
             Spheres::KeptIn(dir) => cache::read(dir, &key, &robot, &fit)?,
             _ => None,
         };
-        let srdf = srdf.as_ref().map(|(file, _)| file);
         let model = match (kept, spheres) {
             (Some(model), _) => model,
             (None, Spheres::File(file)) => {
                 let given = crate::sim::collision::user_spheres::read(file, &robot.chain.links)?;
-                crate::sim::collision::model_with(&robot, given, srdf, &sampling)?
+                crate::sim::collision::model_with(&robot, given, allowed, &sampling)?
             }
-            (None, _) => crate::sim::collision::model_for(&robot, srdf, &fit, &sampling)?,
+            (None, _) => crate::sim::collision::model_for(&robot, allowed, &fit, &sampling)?,
         };
         let link_paths = (0..robot.chain.links.len())
             .map(|l| robot.chain.path_to(l, Point3::origin()))

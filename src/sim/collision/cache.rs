@@ -97,18 +97,14 @@ pub fn read(
             path.display()
         ))
     };
-    let text = crate::core::input_file::read_user_text(
+    let bytes = crate::core::input_file::read_regular(
         &path,
         "kept collision model",
         crate::core::input_file::MAX_JSON_BYTES,
-        "JSON",
     )
-    .map_err(|e| {
-        let why = e.to_string().replace(&format!("{}: ", path.display()), "");
-        damaged(why.trim_end_matches(": give a file").to_string())
-    })?;
+    .map_err(|e| damaged(e.to_string()))?;
     let cached: Cached =
-        serde_json::from_str(&text).map_err(|e| damaged(format!("not its JSON: {e}")))?;
+        serde_json::from_slice(&bytes).map_err(|e| damaged(format!("not its JSON: {e}")))?;
     let Some(content) = &cached.content else {
         return Ok(None);
     };

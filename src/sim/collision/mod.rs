@@ -88,22 +88,22 @@ pub fn computed_pairs(
 }
 
 /// The collision model of `robot` (loaded with its collision geometry): spheres fitted by
-/// `fit`; the allowed pairs of the SRDF at `srdf` where it has `<disable_collisions>`, else
-/// computed as MoveIt's setup assistant computes them.
+/// `fit`; the pairs `allowed` (an SRDF's: [`allowed_by_srdf`]), else those MoveIt's setup
+/// assistant would compute.
 pub fn model_for(
     robot: &Robot,
-    srdf: Option<&Srdf>,
+    allowed: Option<AllowedPairs>,
     fit: &SphereFit,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
-    model_with(robot, fit_robot(robot, fit)?, srdf, sampling)
+    model_with(robot, fit_robot(robot, fit)?, allowed, sampling)
 }
 
 /// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]).
 pub fn model_with(
     robot: &Robot,
     spheres: Vec<Vec<Sphere>>,
-    srdf: Option<&Srdf>,
+    allowed: Option<AllowedPairs>,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
     if spheres.iter().all(Vec::is_empty) {
@@ -112,11 +112,7 @@ pub fn model_with(
             robot.name
         )));
     }
-    let from_file = match srdf {
-        Some(file) => allowed_by_srdf(robot, file)?,
-        None => None,
-    };
-    let allowed = match from_file {
+    let allowed = match allowed {
         Some(pairs) => pairs,
         None => computed_pairs(robot, &spheres, sampling)?,
     };
