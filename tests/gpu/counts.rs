@@ -10,10 +10,14 @@ use selfmodel::core::device::DeviceChoice;
 use selfmodel::studies::bench::gpu_check::neurokin_step_counts;
 
 /// Launches a NeuroKin step may take here (the log intervals' loss read included): issue 58's
-/// target of 100 (99 were reached), and the 14 finishing passes of the sums by channel and one
-/// of the gradients' norm that issue 71 added so that those sums fill the GPU (a launch costs
-/// ~5 µs where a sum on one workgroup a channel took up to 7 ms on an H200).
-const MOST_LAUNCHES: u64 = 115;
+/// target of 100 (99 were reached), the 14 finishing passes of the sums by channel and one of
+/// the gradients' norm that issue 71 added so that those sums fill the GPU (a launch costs ~5 µs
+/// where a sum on one workgroup a channel took up to 7 ms on an H200), and a margin of 5 for
+/// burn's autotune: it picks a matmul's kernel, whether a matmul runs its elementwise epilogue
+/// in the same kernel, and a reduction's strategy by timing them on the machine at hand, and
+/// some picks take a second launch. The same commit counted 113 a step (114 at a log step) on
+/// a Zen 4 and 115 (116) on CI's machine.
+const MOST_LAUNCHES: u64 = 120;
 
 #[test]
 fn a_neurokin_training_step_reads_nothing_back() {
@@ -23,7 +27,8 @@ fn a_neurokin_training_step_reads_nothing_back() {
     selfmodel::eval::device_counts::log_launches();
     let (per_step, log) =
         neurokin_step_counts(DeviceChoice::Wgpu, "quick", 16, steps, log_every).unwrap();
-    if std::env::var_os("SELFMODEL_PRINT_LAUNCHES").is_some() {
+    let over = per_step.iter().skip(1).any(|c| c.launches > MOST_LAUNCHES);
+    if over || std::env::var_os("SELFMODEL_PRINT_LAUNCHES").is_some() {
         // The last step's launches in order.
         let all = selfmodel::eval::device_counts::launch_log();
         let last = per_step.last().map_or(0, |c| c.launches as usize);
@@ -40,6 +45,18 @@ fn a_neurokin_training_step_reads_nothing_back() {
             c.launches, c.reads, c.uploads
         );
     }
+    let mut kernels: Vec<_> = per_step[1].kernels.iter().collect();
+    kernels.sort_by(|a, b| b.1.cmp(a.1));
+    eprintln!("step 2's kernels, most launched first:");
+    for (name, count) in kernels.iter().take(12) {
+        eprintln!("  {count:>4} x {name}");
+    }
+    let mut sources: Vec<_> = per_step[1].sources.iter().collect();
+    sources.sort_by(|a, b| b.1.cmp(a.1));
+    eprintln!("step 2's kernels by the operations they ran for:");
+    for (name, count) in &sources {
+        eprintln!("  {count:>4} x {name}");
+    }
     // The first step compiles and tunes its kernels; from the second on, a step is what
     // every later step will be.
     for (i, c) in per_step.iter().enumerate().skip(1) {
@@ -53,24 +70,12 @@ fn a_neurokin_training_step_reads_nothing_back() {
         assert!(c.launches > 0, "step {step}: no kernel launch counted");
         // 310 launches a step before our fused kernels (Adam and the clipping, batch norm,
         // the loss, the transposed convolutions, the head's convolutions); 99 with them here,
-        // 100 at a log step; 113 and 114 with issue 71's two-pass sums.
+        // 100 at a log step; 113 and 114 with issue 71's two-pass sums (115 and 116 on CI's machine).
         assert!(
             c.launches <= MOST_LAUNCHES,
             "step {step}: {} kernel launches, more than the {MOST_LAUNCHES} allowed",
             c.launches
         );
-    }
-    let mut kernels: Vec<_> = per_step[1].kernels.iter().collect();
-    kernels.sort_by(|a, b| b.1.cmp(a.1));
-    eprintln!("step 2's kernels, most launched first:");
-    for (name, count) in kernels.iter().take(12) {
-        eprintln!("  {count:>4} x {name}");
-    }
-    let mut sources: Vec<_> = per_step[1].sources.iter().collect();
-    sources.sort_by(|a, b| b.1.cmp(a.1));
-    eprintln!("step 2's kernels by the operations they ran for:");
-    for (name, count) in &sources {
-        eprintln!("  {count:>4} x {name}");
     }
 }
 
