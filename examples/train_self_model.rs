@@ -7,16 +7,15 @@
 //! `cargo run --release --bin neurokin -- --urdf URDF` runs the paper's.
 
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::data::dataset::Framing;
+use selfmodel::data::dataset::CameraChoice;
 use selfmodel::self_models::harness::run;
 use selfmodel::self_models::neurokin::neurokin_run;
 use selfmodel::sim::urdf_loader::GeometryKind;
-use selfmodel::{BuiltinRobot, RobotSpec, SelfModel};
+use selfmodel::{BuiltinRobot, RobotSpec};
 
 fn main() -> selfmodel::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let mut cfg = neurokin_run("quick")?;
-    cfg.data.robot = match args.first() {
+    let robot = match args.first() {
         Some(urdf) => RobotSpec::Urdf {
             path: urdf.into(),
             base_xyz: [0.0; 3],
@@ -27,12 +26,8 @@ fn main() -> selfmodel::Result<()> {
         },
         None => RobotSpec::Builtin(BuiltinRobot::Ur5),
     };
-    // The robot's own joints and camera: its joint count, and a camera that frames it.
-    let robot = cfg.data.robot.load_kinematics()?;
-    cfg.model.set_dof(robot.dof());
-    cfg.data.dataset.framing = Some(Framing::default());
-    // The papers' reference figures are the papers' arm's, not this robot's.
-    cfg.reference = Default::default();
+    // The robot's own joints, and a camera that frames it (no placement asked for).
+    let mut cfg = neurokin_run("quick")?.on_robot(robot, &CameraChoice::default(), false, None)?;
     // Long enough to see the robot (the quick preset's 200 steps only test the pipeline).
     cfg.train.steps = 1500;
     let out = std::env::temp_dir().join("selfmodel_example_self_model");

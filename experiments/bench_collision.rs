@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
+use selfmodel_lab::cli::run_main;
 
 /// Time the sphere check of random configurations of the Panda (or `--urdf`) against itself
 /// and a scene of ten obstacles, on one thread.
@@ -51,7 +51,7 @@ fn main() -> ExitCode {
             .build()
             .map_err(|e| selfmodel::Error::Config(format!("a one-thread pool: {e}")))?
             .install(|| {
-                selfmodel::studies::bench::collision::run(&spec, &args.scene, args.n, &args.out)
+                selfmodel_lab::studies::bench::collision::run(&spec, &args.scene, args.n, &args.out)
             })?;
         for r in &rows {
             println!(

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
-use selfmodel::studies::bench::collision_ik::{CollisionIkConfig, run};
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::bench::collision_ik::{CollisionIkConfig, run};
 
 /// Benchmark collision-free IK on a model `ik train` saved: targets from random
 /// collision-free configurations, the share answered exactly and collision-free and the
@@ -44,7 +44,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         let cfg = CollisionIkConfig {
             margin: args.margin,

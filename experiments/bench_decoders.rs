@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench::decoders::{
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::bench::decoders::{
     Batches, attach_torch, console_table, run_batches, run_torch,
 };
 
@@ -40,7 +40,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     // The revision the run starts from, before it writes anything.
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         let batches = if args.fill {
             Batches::Both

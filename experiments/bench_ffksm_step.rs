@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
+use selfmodel_lab::cli::run_main;
 
 /// Time one dense FFKSM training step of a whole 100x100 image (640,000 network evaluations)
 /// through burn's autodiff (the reference) and through the hand-written step: for each, one
@@ -33,10 +33,10 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     // The revision the run starts from, before it writes anything.
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         let rows =
-            selfmodel::studies::bench::ffksm_step::run(args.device, args.quick, args.repeats)?;
+            selfmodel_lab::studies::bench::ffksm_step::run(args.device, args.quick, args.repeats)?;
         println!(
             "{:<24} {:<13} {:>9} {:>9} {:>9} {:>8}",
             "model", "path", "median s", "min s", "GFLOP/s", "speedup"

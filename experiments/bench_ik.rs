@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
 use selfmodel::core::spread::format_significant;
-use selfmodel::studies::bench::ik::{
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::bench::ik::{
     BenchIkConfig, EQUAL_PRECISION_MM_DEG, default_out, run, summary_rows,
 };
 
@@ -42,7 +42,7 @@ struct Args {
 
 /// The ranking at equal precision in one line a thread count: ours at its default budget
 /// against the reference with the most answers within the common precision a second.
-fn equal_precision_line(rows: &[selfmodel::studies::bench::ik::BenchIkRow]) -> String {
+fn equal_precision_line(rows: &[selfmodel_lab::studies::bench::ik::BenchIkRow]) -> String {
     let (mm, deg) = EQUAL_PRECISION_MM_DEG;
     let mut text = String::new();
     let ours = rows.iter().filter(|r| {
@@ -77,7 +77,7 @@ fn equal_precision_line(rows: &[selfmodel::studies::bench::ik::BenchIkRow]) -> S
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         if args.k == 0 {
             return Err(selfmodel::Error::Config("--k must be at least 1".into()));

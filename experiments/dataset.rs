@@ -7,10 +7,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::{CameraArgs, RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
 use selfmodel::data::dataset::{DatasetConfig, build_and_save, read_angles};
 use selfmodel::sim::trajectory::SamplerKind;
+use selfmodel_lab::cli::{CameraArgs, RobotArgs, run_main};
 
 /// Render a robot from a fixed camera into a dataset (.npz with images, angles, focal, poses, depth).
 #[derive(Parser)]
@@ -52,7 +52,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     // The revision the run starts from, before it writes anything.
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         selfmodel::core::atomic_file::check_out(
             &args.out,

@@ -8,5 +8,5 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    selfmodel::cli::experiment_main("emssl_adaptation", "paper")
+    selfmodel_lab::cli::experiment_main("emssl_adaptation", "paper")
 }

@@ -7,5 +7,5 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    selfmodel::cli::experiment_main("emssl_sampling_speed", "paper")
+    selfmodel_lab::cli::experiment_main("emssl_sampling_speed", "paper")
 }

@@ -6,5 +6,5 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    selfmodel::cli::experiment_main("emssl_seeds", "paper")
+    selfmodel_lab::cli::experiment_main("emssl_seeds", "paper")
 }

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::{run_main, shared_arm_urdf};
 use selfmodel::core::atomic_file::write_bytes;
 use selfmodel::sim::primitive_fit::fit_boxes;
 use selfmodel::sim::urdf_loader::load_urdf;
+use selfmodel_lab::cli::{run_main, shared_arm_urdf};
 
 /// Fit the built-in arm4's box geometry to the mesh robot (needs ../shared/robots).
 #[derive(Parser)]

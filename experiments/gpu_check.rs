@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench::gpu_check::{GpuCheck, Part, cpu_decoders, k3dgs_cpu, run};
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::bench::gpu_check::{GpuCheck, Part, cpu_decoders, k3dgs_cpu, run};
 
 /// Measure selfmodel on a GPU beside PyTorch on the same GPU, and on its CPU at several
 /// thread counts beside PyTorch at as many: kernel launches and host reads per training step,
@@ -44,7 +44,7 @@ struct Args {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         let exe = std::env::current_exe().map_err(|e| selfmodel::Error::io("this binary", e))?;
         let check = GpuCheck {

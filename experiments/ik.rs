@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use selfmodel::cli::{RobotArgs, run_main};
 use selfmodel::core::preset::Preset;
 use selfmodel::ik::pose::PoseTarget;
 use selfmodel::ik::pose_model::{
     PoseModel, PoseModelConfig, SolveStats, joint_columns, read_targets, train,
 };
+use selfmodel_lab::cli::{RobotArgs, run_main};
 
 #[derive(Parser)]
 #[command(
@@ -184,7 +184,7 @@ fn answering(
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         let device = selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
         match args.command {

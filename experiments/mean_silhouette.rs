@@ -5,5 +5,5 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    selfmodel::cli::experiment_main("mean_silhouette", "paper")
+    selfmodel_lab::cli::experiment_main("mean_silhouette", "paper")
 }

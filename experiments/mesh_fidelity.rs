@@ -6,9 +6,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
 use selfmodel::core::preset::Preset;
-use selfmodel::studies::mesh_fidelity::{FidelityConfig, run};
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::mesh_fidelity::{FidelityConfig, run};
 
 /// Compare silhouettes: arm4 (fitted boxes) vs the mesh robot, and both vs PyBullet renders.
 #[derive(Parser)]

@@ -5,5 +5,5 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
-    selfmodel::cli::experiment_main("nearest_pose", "paper")
+    selfmodel_lab::cli::experiment_main("nearest_pose", "paper")
 }

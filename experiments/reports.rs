@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
-use selfmodel::studies::docs;
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::docs;
 
 /// Generate the documents from the results: README.md and docs/*.md from their sources in
 /// docs/src/ (every number read from reports/), and the Markdown tables beside every CSV.

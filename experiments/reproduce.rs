@@ -5,8 +5,8 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::Parser;
-use selfmodel::cli::run_main;
-use selfmodel::studies::registry::EXPERIMENTS;
+use selfmodel_lab::cli::run_main;
+use selfmodel_lab::studies::registry::EXPERIMENTS;
 
 /// Reproduce everything: each experiment of the registry in turn, into its default folder.
 #[derive(Parser)]
@@ -30,7 +30,7 @@ struct Args {
 fn main() -> ExitCode {
     let args = Args::parse();
     // The revision the run starts from, before it writes anything.
-    selfmodel::cli::git_revision();
+    selfmodel_lab::cli::git_revision();
     run_main(|| {
         if args.list {
             for e in EXPERIMENTS {
@@ -50,13 +50,13 @@ fn main() -> ExitCode {
         let root = args
             .root
             .clone()
-            .unwrap_or_else(|| PathBuf::from(selfmodel::studies::run::RUNS));
+            .unwrap_or_else(|| PathBuf::from(selfmodel_lab::studies::run::RUNS));
         for e in EXPERIMENTS
             .iter()
             .filter(|e| args.only.is_empty() || args.only.iter().any(|o| o == e.name))
         {
             let start = Instant::now();
-            let mut opts = selfmodel::studies::registry::RunOptions::preset(&args.preset);
+            let mut opts = selfmodel_lab::studies::registry::RunOptions::preset(&args.preset);
             // table1 gathers the rows the decoders' own experiments just wrote.
             opts.reuse_root = Some(root.clone());
             let summary = e.run_in(&opts, &root.join(e.default_dir))?;

@@ -1,7 +1,10 @@
-//! The layout is the architecture: no module of `src/` imports one that imports it back, and
-//! the bottom layer (`core`) imports nothing else of the crate. Read from the source text:
-//! every `crate::`, `super::` and `self::` path (each item of a brace group) outside comments
-//! and test modules is an import of the module it names.
+//! The layout is the architecture: two crates, the library (`src/`) and the lab (`lab/src/`:
+//! the studies and the command line), which the library cannot import (cargo refuses a
+//! dependency cycle). In each, no module imports one that imports it back, and every module
+//! imports from its own layer or those above it; the bottom layer (`core`) imports nothing
+//! else of the library. Read from the source text: every `crate::`, `super::` and `self::`
+//! path (each item of a brace group) outside comments and test modules is an import of the
+//! module it names.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -23,11 +26,14 @@ fn rs_files_in(src: &Path) -> Vec<std::path::PathBuf> {
     files
 }
 
-/// `src/`, and every `.rs` file below it.
-fn rs_files() -> (std::path::PathBuf, Vec<std::path::PathBuf>) {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let files = rs_files_in(&src);
-    (src, files)
+/// The library's sources (`src/`).
+fn library() -> std::path::PathBuf {
+    selfmodel_lab::workspace().join("src")
+}
+
+/// The lab's sources (`lab/src/`).
+fn lab() -> std::path::PathBuf {
+    selfmodel_lab::workspace().join("lab/src")
 }
 
 /// The paths a piece of code names from `start` (just past `crate::`, `super::` or `self::`):
@@ -133,9 +139,9 @@ fn import_graph_of(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
     graph
 }
 
-/// [`import_graph_of`] the crate's `src/`.
+/// [`import_graph_of`] the library's `src/`.
 fn import_graph() -> BTreeMap<String, BTreeSet<String>> {
-    import_graph_of(&Path::new(env!("CARGO_MANIFEST_DIR")).join("src"))
+    import_graph_of(&library())
 }
 
 /// The import cycles: Tarjan's strongly connected components of more than one module.
@@ -203,11 +209,79 @@ fn no_module_imports_one_that_imports_it_back() {
     let graph = import_graph();
     assert!(graph.len() > 50, "found only {} modules", graph.len());
     assert!(
-        graph["studies::table1"].contains("studies::run"),
+        graph["ik::targets"].contains("sim::robot"),
         "the reader misses imports"
     );
     let found = cycles(&graph);
-    assert!(found.is_empty(), "import cycles: {found:?}");
+    assert!(found.is_empty(), "import cycles in the library: {found:?}");
+    let lab = import_graph_of(&lab());
+    assert!(
+        lab.len() > 20,
+        "found only {} modules of the lab",
+        lab.len()
+    );
+    assert!(
+        lab["studies::table1"].contains("studies::run"),
+        "the reader misses the lab's imports"
+    );
+    let found = cycles(&lab);
+    assert!(found.is_empty(), "import cycles in the lab: {found:?}");
+}
+
+/// The library is the library: no study, no command line, no allocator chosen for its users.
+#[test]
+fn the_library_holds_no_study_and_no_command_line() {
+    let src = library();
+    for gone in ["studies", "studies.rs", "cli.rs"] {
+        assert!(!src.join(gone).exists(), "src/{gone} belongs to the lab");
+    }
+    let lib = std::fs::read_to_string(src.join("lib.rs")).unwrap();
+    assert!(
+        !lib.contains("global_allocator"),
+        "the library chooses an allocator"
+    );
+}
+
+/// A user of the library gets no command-line, allocator or plotting crate unless asked: in
+/// the library's manifest, clap and the plotting crates are optional (the `clap` and
+/// `figures` features, not default ones) and mimalloc is not there.
+#[test]
+fn the_library_pulls_no_cli_allocator_or_plotting_crate_by_default() {
+    let manifest = std::fs::read_to_string(selfmodel_lab::workspace().join("Cargo.toml")).unwrap();
+    let section = |name: &str| -> Vec<String> {
+        let start = manifest
+            .find(&format!("\n[{name}]\n"))
+            .unwrap_or_else(|| panic!("no [{name}] in Cargo.toml"));
+        manifest[start + name.len() + 4..]
+            .lines()
+            .take_while(|l| !l.starts_with('['))
+            .filter(|l| !l.trim_start().starts_with('#') && !l.trim().is_empty())
+            .map(String::from)
+            .collect()
+    };
+    let deps = section("dependencies");
+    for krate in ["clap", "plotters", "plotters-backend", "ab_glyph", "image"] {
+        let line = deps
+            .iter()
+            .find(|l| l.starts_with(&format!("{krate} =")))
+            .unwrap_or_else(|| panic!("{krate} is not a dependency of the library"));
+        assert!(
+            line.contains("optional = true"),
+            "{krate} is not optional: {line}"
+        );
+    }
+    assert!(
+        !deps.iter().any(|l| l.starts_with("mimalloc")),
+        "the library depends on mimalloc"
+    );
+    let default = section("features")
+        .into_iter()
+        .find(|l| l.starts_with("default ="))
+        .expect("default features");
+    assert!(
+        !default.contains("figures") && !default.contains("clap"),
+        "{default}"
+    );
 }
 
 /// Two files of a folder that import each other through `super::` (and a third through
@@ -260,7 +334,7 @@ fn core_imports_nothing_above_it() {
 }
 
 /// The layers of ARCHITECTURE.md, top to bottom: a module imports from its own layer or the
-/// layers above it in this list, never from one below.
+/// layers above it in this list, never from one below. The library's, then the lab's.
 const LAYERS: &[&str] = &[
     "core",
     "sim",
@@ -300,6 +374,11 @@ fn upward_imports(graph: &BTreeMap<String, BTreeSet<String>>) -> Vec<String> {
 fn every_module_imports_only_its_own_layer_or_those_above_it() {
     let wrong = upward_imports(&import_graph());
     assert!(wrong.is_empty(), "imports from a layer below: {wrong:#?}");
+    let wrong = upward_imports(&import_graph_of(&lab()));
+    assert!(
+        wrong.is_empty(),
+        "the lab's imports from a layer below: {wrong:#?}"
+    );
 }
 
 #[test]
@@ -308,35 +387,39 @@ fn the_layer_check_finds_an_import_from_a_layer_below() {
     graph
         .get_mut("sim::robot")
         .expect("sim::robot is read")
-        .insert("studies::run".to_string());
+        .insert("ik::targets".to_string());
     assert_eq!(
         upward_imports(&graph),
-        vec!["sim::robot imports studies::run".to_string()]
+        vec!["sim::robot imports ik::targets".to_string()]
     );
 }
 
-/// Every source file, as ARCHITECTURE.md names it (`sim/robot.rs`): all but `lib.rs` and the
-/// files that open a folder of the same name (`sim.rs`), which the layer list describes.
+/// Every source file of both crates, as ARCHITECTURE.md names it (`sim/robot.rs`,
+/// `studies/run.rs`): all but `lib.rs` and the files that open a folder of the same name
+/// (`sim.rs`), which the layer list describes.
 fn source_files() -> BTreeSet<String> {
-    let (src, paths) = rs_files();
-    paths
-        .iter()
-        .filter(|path| !path.with_extension("").is_dir())
-        .map(|path| {
-            path.strip_prefix(&src)
+    let mut out = BTreeSet::new();
+    for src in [library(), lab()] {
+        for path in rs_files_in(&src) {
+            if path.with_extension("").is_dir() {
+                continue;
+            }
+            let rel = path
+                .strip_prefix(&src)
                 .unwrap()
                 .to_string_lossy()
-                .replace('\\', "/")
-        })
-        .filter(|rel| rel != "lib.rs")
-        .collect()
+                .replace('\\', "/");
+            if rel != "lib.rs" {
+                out.insert(rel);
+            }
+        }
+    }
+    out
 }
 
 #[test]
 fn architecture_md_gives_every_source_file_its_role_and_names_no_file_that_is_gone() {
-    let text =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("ARCHITECTURE.md"))
-            .unwrap();
+    let text = std::fs::read_to_string(selfmodel_lab::workspace().join("ARCHITECTURE.md")).unwrap();
     // The table rows: "| `sim/robot.rs` | what it is |".
     let listed: BTreeSet<String> = text
         .lines()
@@ -347,8 +430,10 @@ fn architecture_md_gives_every_source_file_its_role_and_names_no_file_that_is_go
     let files = source_files();
     assert!(files.len() > 100, "found only {} files", files.len());
     let missing: Vec<_> = files.difference(&listed).collect();
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let gone: Vec<_> = listed.iter().filter(|f| !src.join(f).is_file()).collect();
+    let gone: Vec<_> = listed
+        .iter()
+        .filter(|f| !library().join(f).is_file() && !lab().join(f).is_file())
+        .collect();
     assert!(
         missing.is_empty(),
         "files ARCHITECTURE.md does not describe: {missing:?}"

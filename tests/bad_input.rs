@@ -231,7 +231,9 @@ fn a_collision_only_robot_says_which_geometry_draws_it() {
     };
     let e = load(GeometryKind::Visual).err().unwrap().to_string();
     assert!(
-        e.contains("--geometry collision") && !e.contains('\n'),
+        e.contains("`geometry` collision")
+            && selfmodel_lab::cli::in_flags(&e).contains("--geometry collision")
+            && !e.contains('\n'),
         "{e}"
     );
     assert!(load(GeometryKind::Collision).unwrap().shape_count() > 0);
@@ -380,7 +382,8 @@ fn a_tip_outside_the_named_tips_is_refused() {
     };
     let err = spec("l3").load_kinematics().unwrap_err().to_string();
     assert!(
-        err.contains("is not a tip of --tips (l2, finger_a)"),
+        err.contains("is not a tip of `tips` (l2, finger_a)")
+            && selfmodel_lab::cli::in_flags(&err).contains("is not a tip of --tips (l2, finger_a)"),
         "{err}"
     );
     // One of them is the tip the poses are read at.
@@ -471,7 +474,7 @@ fn a_one_joint_flow_is_refused_in_words() {
     };
     let err = err.to_string();
     assert!(
-        err.contains("at least 2 joints") && err.contains("--tip") && !err.contains("couplings:"),
+        err.contains("at least 2 joints") && err.contains("`tip`") && !err.contains("couplings:"),
         "{err}"
     );
 }

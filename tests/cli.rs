@@ -526,7 +526,7 @@ fn malformed_inputs_are_rejected_with_one_line_and_no_output() {
     check(
         neurokin,
         &["--preset", "quick", "--device", "wgpu", "--out", o],
-        &["not compiled in", "--features wgpu"],
+        &["--device wgpu is not compiled in", "cargo feature `wgpu`"],
         &out,
     );
     let failed = failed.into_inner();
@@ -966,7 +966,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
         .output()
         .unwrap();
     common::assert_ok(&o);
-    let rows: Vec<selfmodel::studies::bench::ik::BenchIkRow> =
+    let rows: Vec<selfmodel_lab::studies::bench::ik::BenchIkRow> =
         selfmodel::report::table::read_csv(&bench.join("results.csv")).unwrap();
     assert!(
         rows.iter()
@@ -1011,7 +1011,7 @@ fn ik_trains_saves_and_solves_targets_of_your_own() {
 /// in one line and writes nothing.
 #[test]
 fn mesh_fidelity_refuses_our_own_dataset_as_the_pybullet_reference() {
-    if !selfmodel::cli::shared_arm_urdf().exists() {
+    if !selfmodel::sim::robots::shared_arm_urdf().exists() {
         eprintln!("skipped: the shared meshes are not beside the repository");
         return;
     }

@@ -141,11 +141,11 @@ fn the_roc_area_is_one_for_separated_scores_and_a_half_for_equal_ones() {
 #[test]
 fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model() {
     let dir = common::tempdir();
-    let opts = selfmodel::studies::registry::RunOptions::preset("quick");
+    let opts = selfmodel_lab::studies::registry::RunOptions::preset("quick");
     let cfg =
-        <selfmodel::studies::damage::DamageConfig as selfmodel::core::preset::Preset>::quick();
-    selfmodel::studies::damage::run(&cfg, &opts, dir.path()).unwrap();
-    let rows: Vec<selfmodel::studies::damage::DetectionRow> =
+        <selfmodel_lab::studies::damage::DamageConfig as selfmodel::core::preset::Preset>::quick();
+    selfmodel_lab::studies::damage::run(&cfg, &opts, dir.path()).unwrap();
+    let rows: Vec<selfmodel_lab::studies::damage::DetectionRow> =
         selfmodel::report::table::read_csv(&dir.path().join("detection.csv")).unwrap();
     let bend = rows
         .iter()
@@ -161,7 +161,7 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
     assert!(one.auc < bend.auc + 1e-12);
     // Every recovery method ran, and fine-tuning on the damaged arm's images moved the model
     // towards it.
-    let recovery: Vec<selfmodel::studies::damage::RecoveryRow> =
+    let recovery: Vec<selfmodel_lab::studies::damage::RecoveryRow> =
         selfmodel::report::table::read_csv(&dir.path().join("recovery.csv")).unwrap();
     for m in [
         "unchanged",
@@ -192,15 +192,15 @@ fn the_residual_score_separates_a_large_bend_from_healthy_images_on_a_tiny_model
     let first = std::fs::read_to_string(dir.path().join("recovery.csv")).unwrap();
     let mut resume = opts.clone();
     resume.resume = true;
-    selfmodel::studies::damage::run(&cfg, &resume, dir.path()).unwrap();
+    selfmodel_lab::studies::damage::run(&cfg, &resume, dir.path()).unwrap();
     assert_eq!(
         std::fs::read_to_string(dir.path().join("recovery.csv")).unwrap(),
         first
     );
     let mut more = cfg.clone();
     more.recovery.ewc_lambdas.push(1e10);
-    selfmodel::studies::damage::run(&more, &resume, dir.path()).unwrap();
-    let again: Vec<selfmodel::studies::damage::RecoveryRow> =
+    selfmodel_lab::studies::damage::run(&more, &resume, dir.path()).unwrap();
+    let again: Vec<selfmodel_lab::studies::damage::RecoveryRow> =
         selfmodel::report::table::read_csv(&dir.path().join("recovery.csv")).unwrap();
     for r in &recovery {
         let same = again
@@ -274,9 +274,9 @@ fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
 fn the_damage_studys_model_is_neurokins_large_preset() {
     use selfmodel::core::preset::Preset;
     use selfmodel::self_models::model::SelfModel;
-    let opts = selfmodel::studies::run::RunOptions::preset("paper");
-    let ours = selfmodel::studies::damage::model_run(
-        &selfmodel::studies::damage::DamageConfig::paper(),
+    let opts = selfmodel_lab::studies::run::RunOptions::preset("paper");
+    let ours = selfmodel_lab::studies::damage::model_run(
+        &selfmodel_lab::studies::damage::DamageConfig::paper(),
         &opts,
     )
     .unwrap();

@@ -11,7 +11,7 @@ use selfmodel::data::npz::{Array, read_npz, write_npz};
 use selfmodel::sim::arm4::arm4;
 
 fn fixture() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/fixtures/papers_format.npz")
+    selfmodel_lab::workspace().join("data/fixtures/papers_format.npz")
 }
 
 #[test]

@@ -201,7 +201,7 @@ fn depth_errors_count_robot_pixels_and_the_constant_baseline_is_the_median() {
 
 #[test]
 fn bench_decoders_quick_measures_every_figure_and_reads_torch_lines() {
-    use selfmodel::studies::bench::decoders::{attach_torch, run};
+    use selfmodel_lab::studies::bench::decoders::{attach_torch, run};
     let mut rows = run(selfmodel::core::device::DeviceChoice::Cpu, true).unwrap();
     // Two models, each: batch 1, batch 256 and training.
     assert_eq!(rows.len(), 6);

@@ -18,5 +18,5 @@ fn a_backend_not_compiled_in_is_a_clear_error() {
         return;
     }
     let err = select(DeviceChoice::Ndarray).unwrap_err().to_string();
-    assert!(err.contains("--features ndarray"), "{err}");
+    assert!(err.contains("cargo feature `ndarray`"), "{err}");
 }

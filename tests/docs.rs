@@ -5,17 +5,17 @@ mod common;
 
 use std::path::Path;
 
-use selfmodel::studies::docs::{generate, render, stale};
+use selfmodel_lab::studies::docs::{generate, render, stale};
 
 #[test]
 fn generated_documents_are_up_to_date() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let stale = stale(root).unwrap();
+    let root = selfmodel_lab::workspace();
+    let stale = stale(&root).unwrap();
     assert!(
         stale.is_empty(),
         "stale generated documents (run `cargo run --release --bin reports`): {stale:?}"
     );
-    let files = generate(root).unwrap();
+    let files = generate(&root).unwrap();
     assert!(files.iter().any(|(p, _)| p == Path::new("README.md")));
     assert!(files.iter().any(|(p, _)| p.starts_with("docs")));
 }
@@ -43,17 +43,17 @@ fn directives_read_the_csv() {
 }
 
 /// The README lists `cargo run --release --bin NAME` for every experiment of the registry:
-/// each must be a binary of the package (a missing one failed a newcomer's first command).
+/// each must be a binary of the lab crate (a missing one failed a newcomer's first command).
 #[test]
 fn every_listed_experiment_is_a_binary() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let manifest = std::fs::read_to_string(root.join("Cargo.toml")).unwrap();
-    let missing: Vec<&str> = selfmodel::studies::registry::EXPERIMENTS
+    let root = selfmodel_lab::workspace();
+    let manifest = std::fs::read_to_string(root.join("lab/Cargo.toml")).unwrap();
+    let missing: Vec<&str> = selfmodel_lab::studies::registry::EXPERIMENTS
         .iter()
         .map(|e| e.name)
         .filter(|name| {
             !manifest.contains(&format!(
-                "[[bin]]\nname = \"{name}\"\npath = \"experiments/{name}.rs\""
+                "[[bin]]\nname = \"{name}\"\npath = \"../experiments/{name}.rs\""
             )) || !root
                 .join("experiments")
                 .join(format!("{name}.rs"))
@@ -106,10 +106,9 @@ fn a_non_numeric_metric_is_an_error_naming_file_row_and_column() {
 /// `runs/`, which git ignores (the committed reports need an explicit `--out reports/...`).
 #[test]
 fn every_default_output_is_under_the_git_ignored_runs_folder() {
-    let ignore =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/.gitignore")).unwrap();
+    let ignore = std::fs::read_to_string(selfmodel_lab::workspace().join(".gitignore")).unwrap();
     assert!(ignore.lines().any(|l| l.trim() == "/runs/"));
-    for e in selfmodel::studies::registry::EXPERIMENTS {
+    for e in selfmodel_lab::studies::registry::EXPERIMENTS {
         for preset in e.presets {
             let dir = e.dir_for(preset);
             assert!(

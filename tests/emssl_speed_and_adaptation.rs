@@ -15,8 +15,7 @@ use selfmodel::ik::mlp::InverseModelConfig;
 use selfmodel::ik::sampling_pass::{ForwardModel, Latency, Workers, sampling_pass};
 use selfmodel::sim::arm_change::ArmChange;
 use selfmodel::sim::tensor_kinematics::TensorChain;
-use selfmodel::studies::emssl::adaptation::{AdaptationConfig, adapt_robot};
-use selfmodel::studies::emssl::sampling_speed::mlp_flop_per_row;
+use selfmodel_lab::studies::emssl::adaptation::{AdaptationConfig, adapt_robot};
 
 fn ur5() -> selfmodel::sim::robot::Robot {
     selfmodel::sim::dh_robot::ur5([-1.6, 1.6])
@@ -112,7 +111,7 @@ fn a_forward_model_latency_costs_time_and_waiting_workers_overlap() {
 #[test]
 fn the_inverse_models_flop_count_is_its_matrix_products() {
     // 2 x (3*1024 + 1024*512 + 512*256 + 256*128 + 128*6) for the paper's network.
-    assert_eq!(mlp_flop_per_row(&InverseModelConfig::paper(6)), 1_383_936.0);
+    assert_eq!(InverseModelConfig::paper(6).flop_per_row(), 1_383_936.0);
 }
 
 #[test]

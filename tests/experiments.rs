@@ -11,7 +11,7 @@ use std::sync::OnceLock;
 
 use libtest_mimic::{Arguments, Failed, Trial};
 use selfmodel::core::preset::Preset;
-use selfmodel::studies::registry::{EXPERIMENTS, Experiment, RunOptions, find};
+use selfmodel_lab::studies::registry::{EXPERIMENTS, Experiment, RunOptions, find};
 
 /// The folder every trial shares (made by `main`, removed when the trials end).
 static ROOT: OnceLock<PathBuf> = OnceLock::new();
@@ -41,7 +41,7 @@ fn run_quick(e: &Experiment) -> Result<String, Failed> {
 
 fn smoke(e: &'static Experiment) -> Trial {
     Trial::test(format!("quick/{}", e.name), move || {
-        if e.name == "mesh_fidelity" && !selfmodel::cli::shared_arm_urdf().exists() {
+        if e.name == "mesh_fidelity" && !selfmodel::sim::robots::shared_arm_urdf().exists() {
             eprintln!("skipped mesh_fidelity: the shared meshes are not beside the repository");
             return Ok(());
         }
@@ -152,13 +152,13 @@ fn copy_dir(from: &Path, to: &Path) {
 }
 
 fn arm4_matches_the_mesh_robot_closely() -> Result<(), Failed> {
-    if !selfmodel::cli::shared_arm_urdf().exists() {
+    if !selfmodel::sim::robots::shared_arm_urdf().exists() {
         eprintln!("skipped: the shared meshes are not beside the repository");
         return Ok(());
     }
     let dir = common::tempdir();
-    let rows = selfmodel::studies::mesh_fidelity::run(
-        &selfmodel::studies::mesh_fidelity::FidelityConfig::quick(),
+    let rows = selfmodel_lab::studies::mesh_fidelity::run(
+        &selfmodel_lab::studies::mesh_fidelity::FidelityConfig::quick(),
         dir.path(),
     )
     .map_err(|e| e.to_string())?;

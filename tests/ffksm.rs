@@ -670,14 +670,14 @@ fn the_step_benchmark_times_both_paths_on_the_same_step() {
     use selfmodel::core::device::DeviceChoice;
     use selfmodel::core::preset::Preset;
     use selfmodel::self_models::ffksm::field::OccupancyFieldConfig;
-    use selfmodel::studies::bench::ffksm_step::{run, step_flop};
+    use selfmodel_lab::studies::bench::ffksm_step::run;
     // Per point, forward: 33x128 + 128x128 (coordinate encoder), 128x128 (first layer's
     // coordinate half), 128x128 + 128x32 + 32x2 = 57,536 multiply-adds; backward twice that
     // less the first layer's input gradient (33x128): 110,848.
     let field = OccupancyFieldConfig::paper()
         .init(&Device::flex(), 0)
         .unwrap();
-    assert_eq!(step_flop(&field, 1), 2.0 * (57_536.0 + 110_848.0));
+    assert_eq!(field.step_flop(1), 2.0 * (57_536.0 + 110_848.0));
     let rows = run(DeviceChoice::Cpu, true, 1).unwrap();
     assert_eq!(rows.len(), 4);
     for pair in rows.chunks(2) {
@@ -772,7 +772,7 @@ fn a_damaged_evaluation_count_is_an_error_on_resume() {
 /// anything of the first model (it checks every checkpoint first).
 #[test]
 fn a_foreign_checkpoint_in_a_later_model_is_refused_before_anything_is_written() {
-    use selfmodel::studies::registry::{RunOptions, find};
+    use selfmodel_lab::studies::registry::{RunOptions, find};
     let dir = common::tempdir();
     let ffksm = find("ffksm").unwrap();
     let mut opts = RunOptions::preset("quick");

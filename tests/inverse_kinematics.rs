@@ -305,11 +305,13 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
     let joints = &data.joints[..targets.len()];
     let reached = robot.chain.end_effector_batch(joints);
     let names = robot.chain.joint_names();
-    selfmodel::studies::emssl::table2::write_predictions(&path, targets, joints, &reached, &names)
-        .unwrap();
+    selfmodel_lab::studies::emssl::table2::write_predictions(
+        &path, targets, joints, &reached, &names,
+    )
+    .unwrap();
     // The joints read back, whatever their columns are named.
     assert_eq!(
-        selfmodel::studies::emssl::table2::read_predictions(&path).unwrap(),
+        selfmodel_lab::studies::emssl::table2::read_predictions(&path).unwrap(),
         joints
             .iter()
             .map(|q| q
@@ -399,7 +401,7 @@ fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
 /// its EMSSL curve carry that run's revision, not the reusing process's.
 #[test]
 fn reused_units_keep_the_revision_that_trained_them() {
-    use selfmodel::studies::emssl::table2::{IkComparisonConfig, run};
+    use selfmodel_lab::studies::emssl::table2::{IkComparisonConfig, run};
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
     let mut cfg = IkComparisonConfig::named("quick").unwrap();
@@ -439,7 +441,7 @@ fn reused_units_keep_the_revision_that_trained_them() {
 /// rewritten as a partial one before the checkpoint was read).
 #[test]
 fn a_damaged_emssl_checkpoint_fails_before_the_report_is_rewritten() {
-    use selfmodel::studies::emssl::table2::{IkComparisonConfig, run};
+    use selfmodel_lab::studies::emssl::table2::{IkComparisonConfig, run};
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
     let mut cfg = IkComparisonConfig::named("quick").unwrap();

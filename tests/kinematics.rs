@@ -80,7 +80,7 @@ fn user_units_round_trip() {
 
 #[test]
 fn the_mesh_urdf_has_the_same_kinematics_as_arm4() {
-    let path = selfmodel::cli::shared_arm_urdf();
+    let path = selfmodel::sim::robots::shared_arm_urdf();
     if !path.exists() {
         eprintln!("skipped: {} not present", path.display());
         return;

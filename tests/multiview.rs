@@ -353,12 +353,12 @@ fn a_tiny_3d_model_trains_on_several_cameras_and_renders_each_sample_from_its_ow
 fn a_multiview_run_resumed_without_its_checkpoints_reuses_every_kept_unit() {
     use selfmodel::core::preset::Preset;
     let dir = common::tempdir();
-    let mut cfg = selfmodel::studies::multiview::MultiviewConfig::quick();
+    let mut cfg = selfmodel_lab::studies::multiview::MultiviewConfig::quick();
     cfg.cameras = vec![2];
     cfg.three_d_cameras = vec![1];
     cfg.steps = Some(20);
-    let mut opts = selfmodel::studies::registry::RunOptions::preset("quick");
-    selfmodel::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
+    let mut opts = selfmodel_lab::studies::registry::RunOptions::preset("quick");
+    selfmodel_lab::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
     let read = |f: &str| std::fs::read(dir.path().join(f)).unwrap();
     let (table, grid) = (read("results.csv"), read("grid.png"));
     let mut units = 0;
@@ -375,7 +375,7 @@ fn a_multiview_run_resumed_without_its_checkpoints_reuses_every_kept_unit() {
     // Camera-conditioned and multi-head NeuroKin, FFKSM, K-3DGS.
     assert_eq!(units, 4);
     opts.resume = true;
-    selfmodel::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
+    selfmodel_lab::studies::multiview::run(&cfg, &opts, dir.path()).unwrap();
     assert!(read("results.csv") == table, "the resumed table differs");
     assert!(read("grid.png") == grid, "the resumed grid differs");
     for unit in std::fs::read_dir(dir.path()).unwrap() {

@@ -141,7 +141,7 @@ fn tip_chooses_the_chain_and_joints_off_it_are_held() {
         .unwrap_err()
         .to_string();
     assert!(
-        err.contains("--tip \"gripper\" is not a link")
+        err.contains("`tip` \"gripper\" is not a link")
             && err.contains("hand")
             && err.contains("finger_a"),
         "{err}"
@@ -380,7 +380,7 @@ fn automatic_framing_keeps_every_sampled_pose_inside_the_image() {
 #[test]
 fn the_papers_arm_keeps_the_papers_camera() {
     let mut cfg = DatasetConfig::quick();
-    let opts = selfmodel::studies::run::CameraChoice::default();
+    let opts = selfmodel::data::dataset::CameraChoice::default();
     opts.apply(&mut cfg, false);
     assert_eq!(cfg.framing, None);
     assert_eq!(cfg.camera, Camera::paper());
@@ -389,7 +389,7 @@ fn the_papers_arm_keeps_the_papers_camera() {
 /// The shipped descriptions, where they sit beside the repository.
 #[test]
 fn the_panda_and_the_ur5_load_as_ros_ships_them() {
-    let shared = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/robots");
+    let shared = selfmodel_lab::workspace().join("../shared/robots");
     let panda = shared.join("franka_description/urdf/panda.urdf");
     if !panda.is_file() {
         eprintln!("skipped: the shared robots are not beside the repository");
@@ -650,7 +650,7 @@ fn srdf_groups_name_the_joint_vector_and_its_tips() {
     // No SRDF yet: --group says where it looked and how to give one.
     let err = find_beside(&path).unwrap_err().to_string();
     assert!(
-        err.contains("no SRDF file") && err.contains("--srdf"),
+        err.contains("no SRDF file") && err.contains("`srdf`"),
         "{err}"
     );
     let srdf = dir.path().join("two_arms.srdf");
@@ -722,7 +722,7 @@ fn srdf_groups_name_the_joint_vector_and_its_tips() {
     std::fs::copy(&srdf, dir.path().join("other.srdf")).unwrap();
     let err = find_beside(&path).unwrap_err().to_string();
     assert!(
-        err.contains("several SRDF files") && err.contains("--srdf"),
+        err.contains("several SRDF files") && err.contains("`srdf`"),
         "{err}"
     );
 }

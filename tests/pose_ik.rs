@@ -485,8 +485,8 @@ fn exact_answers_are_converged_below_the_tolerance() {
         "UR5",
         selfmodel::sim::dh_robot::ur5([-std::f64::consts::PI, std::f64::consts::PI]),
     )];
-    let panda = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/robots/franka_description/urdf/panda.urdf");
+    let panda =
+        selfmodel_lab::workspace().join("../shared/robots/franka_description/urdf/panda.urdf");
     if panda.is_file() {
         let options = UrdfOptions {
             tip: Some("panda_hand".into()),

@@ -178,7 +178,7 @@ def test_bad_input_raises_value_error_in_one_line(trained, tmp_path):
     for bad in [lambda: ik.solve(np.zeros((1, 7)), k=-1), lambda: robot.render(np.zeros((1, 6)), size=-5)]:
         with pytest.raises(ValueError, match="must be 1 to"):
             bad()
-    with pytest.raises(ValueError, match="--group"):
+    with pytest.raises(ValueError, match="`group`"):
         selfmodel.Robot.from_urdf(str(urdf), srdf=str(urdf))
     # What numpy can cast safely is accepted: big-endian, float32, integers, any strides.
     q = np.linspace(-1, 1, 12).reshape(2, 6)

@@ -171,7 +171,7 @@ pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
     let shown = out.display();
     if kind == OutKind::File && (out.is_dir() || out.as_os_str().to_string_lossy().ends_with('/')) {
         return Err(Error::Config(format!(
-            "--out {shown} is a folder; give a file in it (e.g. {}/dataset.npz)",
+            "`out` {shown} is a folder; give a file in it (e.g. {}/dataset.npz)",
             shown.to_string().trim_end_matches('/')
         )));
     }
@@ -180,12 +180,12 @@ pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
         && !meta.is_file()
     {
         return Err(Error::Config(format!(
-            "--out {shown} is a device, FIFO or socket, not a file: give a file to write"
+            "`out` {shown} is a device, FIFO or socket, not a file: give a file to write"
         )));
     }
     if kind == OutKind::Folder && out.exists() && !out.is_dir() {
         return Err(Error::Config(format!(
-            "--out {shown} is a file; give a folder"
+            "`out` {shown} is a file; give a folder"
         )));
     }
     let mut parent = out.parent();
@@ -193,7 +193,7 @@ pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
         if p.exists() {
             if !p.is_dir() {
                 return Err(Error::Config(format!(
-                    "--out {shown}: {} is a file, not a folder; choose another --out",
+                    "`out` {shown}: {} is a file, not a folder; choose another `out`",
                     p.display()
                 )));
             }
@@ -248,7 +248,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
 pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) -> Result<()> {
     if let Some(input) = inputs.iter().find(|i| same_file(out, i)) {
         return Err(Error::Config(format!(
-            "--out {} is the file it reads ({}): choose another --out",
+            "`out` {} is the file it reads ({}): choose another `out`",
             out.display(),
             input.display()
         )));
@@ -259,7 +259,7 @@ pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) 
     ) && target.starts_with(&dir)
     {
         return Err(Error::Config(format!(
-            "--out {} lies inside the model's folder {}: choose another --out",
+            "`out` {} lies inside the model's folder {}: choose another `out`",
             out.display(),
             dir.display()
         )));
@@ -278,7 +278,7 @@ pub fn refuse_writing_over(out: &Path, written: &[&str], inputs: &[&Path]) -> Re
                 && (resolved(input).zip(resolved(&file))).is_some_and(|(i, f)| i.starts_with(f));
             if inside || same_file(&file, input) {
                 return Err(Error::Config(format!(
-                    "--out {}: the run writes {} there, which is a file it reads ({}): choose another --out or move the file",
+                    "`out` {}: the run writes {} there, which is a file it reads ({}): choose another `out` or move the file",
                     out.display(),
                     file.display(),
                     input.display()

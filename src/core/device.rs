@@ -8,9 +8,8 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 
 /// The `--device` choices. Only those compiled in can be selected.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum DeviceChoice {
     /// burn's pure-Rust `flex` CPU backend (default feature `flex`).
@@ -75,7 +74,7 @@ pub fn select(choice: DeviceChoice) -> Result<Device> {
     crate::core::denormals::flush_in_workers();
     let missing = |feature: &str| {
         Error::Device(format!(
-            "--device {choice} is not compiled in: rebuild with `--features {feature}` (compiled in: {})",
+            "`device` {choice} is not compiled in: rebuild with the cargo feature `{feature}` (compiled in: {})",
             available()
                 .iter()
                 .map(|c| c.to_string())
@@ -131,7 +130,7 @@ fn cuda_driver() -> Result<()> {
         Ok(())
     } else {
         Err(Error::Device(
-            "--device cuda: no NVIDIA driver here (libcuda.so.1 cannot be loaded; LD_LIBRARY_PATH names where it is): run on a machine with an NVIDIA GPU, or use --device wgpu or cpu".into(),
+            "`device` cuda: no NVIDIA driver here (libcuda.so.1 cannot be loaded; LD_LIBRARY_PATH names where it is): run on a machine with an NVIDIA GPU, or use `device` wgpu or cpu".into(),
         ))
     }
 }

@@ -23,15 +23,10 @@ pub fn git_revision() -> String {
             let Some(revision) = git(&["describe", "--always", "--abbrev=10"]) else {
                 return "unknown".into();
             };
-            let changed = git(&[
-                "status",
-                "--porcelain",
-                "--",
-                CODE_PATHS[0],
-                CODE_PATHS[1],
-                CODE_PATHS[2],
-                CODE_PATHS[3],
-            ])
+            let changed = git(&["status", "--porcelain", "--"]
+                .into_iter()
+                .chain(CODE_PATHS)
+                .collect::<Vec<_>>())
             .is_none_or(|s| !s.is_empty());
             if changed {
                 format!("{revision}-dirty")
@@ -43,4 +38,4 @@ pub fn git_revision() -> String {
 }
 
 /// What a result depends on: a change here marks a run's revision `-dirty`.
-pub const CODE_PATHS: [&str; 4] = ["src", "experiments", "Cargo.toml", "Cargo.lock"];
+pub const CODE_PATHS: [&str; 5] = ["src", "lab", "experiments", "Cargo.toml", "Cargo.lock"];

@@ -247,7 +247,7 @@ impl Gan {
 fn interrupted(checkpoint: Option<&GanCheckpoint>, epoch: usize) -> crate::Error {
     crate::Error::Interrupted(match checkpoint {
         Some(c) => format!(
-            "CGAN stopped after epoch {epoch}; its checkpoint is in {}: run the same command with --resume to continue",
+            "CGAN stopped after epoch {epoch}; its checkpoint is in {}: run the same command with `resume` to continue",
             c.dir.display()
         ),
         None => format!(

@@ -155,7 +155,7 @@ impl CollisionCheck {
     ) -> Result<Self> {
         if !(margin.is_finite() && (0.0..=MAX_MARGIN_M).contains(&margin)) {
             return Err(Error::Config(format!(
-                "--margin {}: give a distance from 0 to 1 m",
+                "`margin` {}: give a distance from 0 to 1 m",
                 crate::core::error::short_number(margin)
             )));
         }
@@ -163,7 +163,7 @@ impl CollisionCheck {
             RobotSpec::Urdf { path, .. } => path,
             RobotSpec::Builtin(b) => {
                 return Err(Error::Config(format!(
-                    "the built-in {} has no collision geometry (its shapes are drawn, not measured): give a URDF with <collision> elements (--urdf) to check collisions",
+                    "the built-in {} has no collision geometry (its shapes are drawn, not measured): give a URDF with <collision> elements (`urdf`) to check collisions",
                     b.name()
                 )));
             }
@@ -188,7 +188,7 @@ impl CollisionCheck {
         if let (Some(named), None) = (srdf, &allowed) {
             // One named for collisions must say which links may touch.
             return Err(Error::Config(format!(
-                "--srdf {}: it has no <disable_collisions>, so it would change nothing: give the SRDF that lists them (MoveIt's setup assistant writes one) or leave --srdf out",
+                "`srdf` {}: it has no <disable_collisions>, so it would change nothing: give the SRDF that lists them (MoveIt's setup assistant writes one) or leave `srdf` out",
                 named.display()
             )));
         }

@@ -136,7 +136,7 @@ impl FlowIk {
         let condition = target + 1;
         if dof < 2 {
             return Err(Error::Config(format!(
-                "the learned inverse kinematics needs at least 2 joints and this joint vector has {dof}: choose a tip below more joints (--tip), or more joints (--joints, --group)"
+                "the learned inverse kinematics needs at least 2 joints and this joint vector has {dof}: choose a tip below more joints (`tip`), or more joints (`joints`, `group`)"
             )));
         }
         if cfg.couplings == 0 || cfg.hidden.contains(&0) {

@@ -33,6 +33,15 @@ fn yes() -> bool {
 }
 
 impl InverseModelConfig {
+    /// Floating-point operations of its matrix products per input row: 2 per multiply-add of
+    /// every layer.
+    pub fn flop_per_row(&self) -> f64 {
+        let mut widths = vec![self.inputs];
+        widths.extend(&self.hidden);
+        widths.push(self.outputs);
+        widths.windows(2).map(|w| 2.0 * (w[0] * w[1]) as f64).sum()
+    }
+
     /// The paper's: 3 -> 1024 -> 512 -> 256 -> 128 -> `dof`.
     pub fn paper(dof: usize) -> Self {
         Self::inverse(vec![1024, 512, 256, 128], dof, JointOutput::Sigmoid)

@@ -256,7 +256,11 @@ pub fn write_training_curve(
         .map(|&(step, loss)| CurveRow { step, loss })
         .collect();
     write_csv(&dir.join("curve.csv"), &rows)?;
-    draw_training_curve(dir, name)
+    #[cfg(feature = "figures")]
+    draw_training_curve(dir, name)?;
+    #[cfg(not(feature = "figures"))]
+    let _ = name;
+    Ok(())
 }
 
 /// The (step, loss) points of a `curve.csv`.
@@ -268,6 +272,7 @@ pub fn read_curve(path: &Path) -> Result<Vec<(usize, f64)>> {
 }
 
 /// `dir/training_curve.png` from `dir/curve.csv`, titled by the model's `name`.
+#[cfg(feature = "figures")]
 pub fn draw_training_curve(dir: &Path, name: &str) -> Result<()> {
     let points = read_curve(&dir.join("curve.csv"))?;
     // A single point (a model fitted in one pass: the baselines) draws no line.

@@ -131,7 +131,7 @@ impl DataSpec {
                     return Err(Error::data(
                         path,
                         format!(
-                            "its joints are [{}] but the robot description ({}) has [{}]: give the robot that made the dataset (--urdf, --tip, --joints, --tips)",
+                            "its joints are [{}] but the robot description ({}) has [{}]: give the robot that made the dataset (`urdf`, `tip`, `joints`, `tips`)",
                             data.joint_names.join(", "),
                             self.robot.label(),
                             names.join(", ")

@@ -21,6 +21,7 @@ use crate::core::error::{Error, Result};
 use crate::data::dataset::Dataset;
 use crate::eval::evaluation::{Predictions, Quality, score};
 use crate::eval::inference_speed::{Timing, measure};
+#[cfg(feature = "figures")]
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::{write_csv, write_markdown_report};
 use crate::self_models::camera_input::camera_input;
@@ -182,7 +183,7 @@ pub fn fit_run<M: SelfModel>(
     }
     if cfg.model.needs_robot() && robot.dof() != data.dof() {
         return Err(Error::Config(format!(
-            "{}: the model hangs on the robot's kinematic chain, but the robot ({}) has {} joints and the dataset {}: give the robot that made the dataset (--urdf, --tip)",
+            "{}: the model hangs on the robot's kinematic chain, but the robot ({}) has {} joints and the dataset {}: give the robot that made the dataset (`urdf`, `tip`)",
             cfg.name,
             cfg.data.robot.label(),
             robot.dof(),
@@ -360,6 +361,7 @@ pub fn run<M: SelfModel>(
     for (_, renderer) in &fitted.trained.renderers {
         renderer.extra_reports(&ctx)?;
     }
+    #[cfg(feature = "figures")]
     qualitative_figure(
         &dir.join("qualitative.png"),
         truth.0,
@@ -552,6 +554,7 @@ fn write_report<M>(
 
 /// Six test poses spread over the test set: ground truth, prediction, error (and true depth,
 /// and predicted depth where the predicted silhouette is the robot).
+#[cfg(feature = "figures")]
 pub(crate) fn qualitative_figure(
     path: &Path,
     truth: &[f32],
@@ -623,11 +626,13 @@ pub(crate) fn qualitative_figure(
 }
 
 /// Image `i` of a stack of `px`-pixel images.
+#[cfg(feature = "figures")]
 pub(crate) fn nth_image(v: &[f32], i: usize, px: usize) -> &[f32] {
     &v[i * px..(i + 1) * px]
 }
 
 /// The (at most) six samples of `n` a qualitative grid shows, spread evenly.
+#[cfg(feature = "figures")]
 pub(crate) fn grid_picks(n: usize) -> Vec<usize> {
     (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect()
 }

@@ -16,6 +16,7 @@
 
 pub mod gaussians;
 pub mod splatting;
+#[cfg(feature = "figures")]
 use std::path::Path;
 
 use burn::module::Module;
@@ -27,12 +28,13 @@ use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
 use crate::report::table::write_table;
+#[cfg(feature = "figures")]
+use crate::self_models::harness::grid_picks;
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
     camera_input::split_views,
-    harness::grid_picks,
     model::{Fit, LoadContext, Loaded, Render, ReportContext, SelfModel, Trained},
     run_config::SelfModelRun,
 };
@@ -395,7 +397,7 @@ impl SelfModel for K3dgs {
             // Densification changes the parameters' shapes as it trains, so the shared
             // checkpoint (weights loaded into the initial model's shapes) cannot hold it.
             eprintln!(
-                "{}: --resume: K-3DGS keeps no checkpoint (the paper preset trains in about a minute); training starts from step 0",
+                "{}: resuming: K-3DGS keeps no checkpoint (the paper preset trains in about a minute); training starts from step 0",
                 fit.label
             );
         }
@@ -687,6 +689,7 @@ impl Render for K3dgsRenderer {
             .map(|&(step, gaussians)| CountRow { step, gaussians })
             .collect();
         crate::report::table::write_csv(&ctx.dir.join("gaussian_counts.csv"), &counts)?;
+        #[cfg(feature = "figures")]
         gaussians_figure(
             &ctx.dir.join("gaussians.png"),
             &self.model,
@@ -694,11 +697,13 @@ impl Render for K3dgsRenderer {
             ctx.data,
             ctx.test,
             &self.camera,
-        )
+        )?;
+        Ok(())
     }
 }
 
 /// Six test poses: the true silhouette with the Gaussians' projected centres over it.
+#[cfg(feature = "figures")]
 fn gaussians_figure(
     path: &Path,
     model: &KinematicGaussians,

@@ -250,7 +250,7 @@ impl NeuroKinConfig {
         if let JointEncoder::Tree { parents, .. } = &self.encoder {
             if parents.len() != self.dof {
                 return Err(Error::Config(format!(
-                    "neurokin: the tree encoder knows {} joints' parents for {} joints: it needs the robot's description (--urdf), not only a dataset",
+                    "neurokin: the tree encoder knows {} joints' parents for {} joints: it needs the robot's description (`urdf`), not only a dataset",
                     parents.len(),
                     self.dof
                 )));

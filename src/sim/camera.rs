@@ -212,12 +212,12 @@ impl Camera {
         let dir = Vector3::from(direction);
         if points.is_empty() {
             return Err(Error::Config(
-                "nothing to frame: the robot has no geometry (give --eye and --target)".into(),
+                "nothing to frame: the robot has no geometry (give `eye` and `target`)".into(),
             ));
         }
         if !(dir.norm() > 1e-12) || !dir.iter().all(|v| v.is_finite()) {
             return Err(Error::Config(format!(
-                "--view {direction:?}: the direction to look from must be a non-zero vector"
+                "`view` {direction:?}: the direction to look from must be a non-zero vector"
             )));
         }
         if !(0.0..0.9).contains(&margin) {

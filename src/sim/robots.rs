@@ -9,9 +9,8 @@ use crate::sim::robot::Robot;
 use crate::sim::urdf_loader::{GeometryKind, UrdfOptions};
 
 /// Built-in robots.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum BuiltinRobot {
     /// The papers' 4-DOF arm with the project's fitted box geometry.
@@ -250,7 +249,7 @@ impl RobotSpec {
             return Ok(());
         }
         Err(crate::core::error::Error::Config(format!(
-            "{}: this robot has no movable joints (every joint is fixed, or its tip or group has none); {needs} needs at least one: choose a tip below a joint (--tip), a group with joints, or a robot that moves",
+            "{}: this robot has no movable joints (every joint is fixed, or its tip or group has none); {needs} needs at least one: choose a tip below a joint (`tip`), a group with joints, or a robot that moves",
             self.label()
         )))
     }

@@ -180,7 +180,7 @@ impl Srdf {
         let Some(group) = self.groups.iter().find(|g| g.name == name) else {
             return Err(Error::Urdf {
                 path: self.path.clone(),
-                element: "--group".into(),
+                element: "`group`".into(),
                 msg: format!(
                     "\"{name}\" is not a group of this file; its groups: {}",
                     self.group_names().join(", ")
@@ -335,12 +335,12 @@ pub fn find_beside(urdf: &Path) -> Result<PathBuf> {
     match found.len() {
         1 => Ok(found.remove(0)),
         0 => Err(Error::Config(format!(
-            "--group: no SRDF file beside {} (looked in {}); give one with --srdf FILE",
+            "`group`: no SRDF file beside {} (looked in {}); give one with `srdf`",
             urdf.display(),
             list(&places)
         ))),
         _ => Err(Error::Config(format!(
-            "--group: several SRDF files beside {} ({}); choose one with --srdf FILE",
+            "`group`: several SRDF files beside {} ({}); choose one with `srdf`",
             urdf.display(),
             list(&found)
         ))),

@@ -14,7 +14,8 @@ use serde::{Deserialize, Serialize};
 use crate::core::error::{Error, Result};
 
 /// Which sampler, with its parameters.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum SamplerKind {
     /// Two Lorenz-attractor trajectories squashed into the joint ranges (the paper).
@@ -88,7 +89,7 @@ pub fn lorenz(n: usize, ranges: &[[f64; 2]]) -> Result<Vec<Vec<f64>>> {
         .position(|t| t.iter().flatten().any(|v| !v.is_finite()))
     {
         return Err(Error::Config(format!(
-            "the Lorenz sampler's trajectory {} is not finite: use --sampler babbling for this robot",
+            "the Lorenz sampler's trajectory {} is not finite: use `sampler` babbling for this robot",
             k + 3
         )));
     }
@@ -146,7 +147,7 @@ pub fn grid(n: usize, ranges: &[[f64; 2]], steps: &[f64], seed: u64) -> Result<V
             let m = ((r[1] - r[0]) / step + 1e-9).floor();
             if !(m <= MAX_GRID_POINTS as f64) {
                 return Err(Error::Config(format!(
-                    "a grid step of {step} gives {m:.3e} points along a joint's range of {}; at most {MAX_GRID_POINTS} (raise --grid-step)",
+                    "a grid step of {step} gives {m:.3e} points along a joint's range of {}; at most {MAX_GRID_POINTS} (raise `grid_step`)",
                     r[1] - r[0]
                 )));
             }

@@ -28,17 +28,8 @@ use crate::sim::robot::Robot;
 use crate::sim::shape::Shape;
 
 /// Which of a link's geometry the robot is drawn with.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    clap::ValueEnum,
-    serde::Serialize,
-    serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum GeometryKind {
     /// The `<visual>` elements (what a camera sees).
@@ -164,7 +155,7 @@ pub fn load_urdf_with(path: &Path, options: &UrdfOptions) -> Result<Robot> {
         return Err(urdf_err(
             path,
             "robot".into(),
-            "it has <collision> geometry but no <visual> element: load it with --geometry collision (geometry=\"collision\" in Python), or --geometry none for its kinematics alone".into(),
+            "it has <collision> geometry but no <visual> element: load it with `geometry` collision, or `geometry` none for its kinematics alone".into(),
         ));
     }
     // Geometry, stored in the chain's link order.
@@ -357,7 +348,7 @@ fn tip_link(
             path,
             "robot".into(),
             format!(
-                "--tip \"{tip}\" is not a link of this robot; its links: {}",
+                "`tip` \"{tip}\" is not a link of this robot; its links: {}",
                 link_names.join(", ")
             ),
         )),

@@ -37,7 +37,7 @@ pub fn unreadable_checkpoint(file: &Path, dir: &Path, e: impl std::fmt::Display)
     Error::data(
         file,
         format!(
-            "this checkpoint cannot be read ({e}); delete {} to start afresh, or run without --resume",
+            "this checkpoint cannot be read ({e}); delete {} to start afresh, or run without `resume`",
             dir.display()
         ),
     )
@@ -103,7 +103,7 @@ impl CheckpointPlan {
             serde_json::from_str(&text).map_err(|e| unreadable_checkpoint(&path, &self.dir, e))?;
         if state.fingerprint != self.fingerprint {
             return Err(Error::Config(format!(
-                "the checkpoint in {} was made with a different configuration; drop --resume or delete that folder",
+                "the checkpoint in {} was made with a different configuration; drop `resume` or delete that folder",
                 self.dir.display()
             )));
         }
@@ -147,7 +147,7 @@ impl CheckpointPlan {
         }
         if !self.state_path().exists() {
             eprintln!(
-                "{label}: --resume: no checkpoint in {}; training starts from step 0",
+                "{label}: resuming: no checkpoint in {}; training starts from step 0",
                 self.dir.display()
             );
             return Ok((model, optim, None));

@@ -10,7 +10,6 @@
 
 use burn::module::{Module, ModuleMapper, Param};
 use burn::tensor::{DType, Device, FloatDType, Tensor};
-use clap::ValueEnum;
 
 use crate::core::error::{Error, Result};
 
@@ -25,17 +24,8 @@ use crate::core::error::{Error, Result};
 pub const LOSS_SCALE: f32 = 1024.0;
 
 /// The dtype a network computes in while it trains.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    clap::ValueEnum,
-    serde::Serialize,
-    serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Precision {
     /// Everything in f32 (the default).
@@ -50,6 +40,24 @@ pub enum Precision {
 }
 
 impl Precision {
+    /// Every precision, in the order a list of choices gives them.
+    pub const ALL: [Precision; 4] = [
+        Precision::F32,
+        Precision::Bf16,
+        Precision::F16,
+        Precision::Flex32,
+    ];
+
+    /// Its name, as configs and command lines give it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::Bf16 => "bf16",
+            Precision::F16 => "f16",
+            Precision::Flex32 => "flex32",
+        }
+    }
+
     pub fn is_f32(&self) -> bool {
         *self == Precision::F32
     }
@@ -61,13 +69,13 @@ impl Precision {
         if device.supports_dtype(self.dtype()) {
             return Ok(());
         }
-        let can: Vec<String> = Self::value_variants()
+        let can: Vec<String> = Self::ALL
             .iter()
             .filter(|p| device.supports_dtype(p.dtype()))
             .map(|p| p.to_string())
             .collect();
         Err(Error::Config(format!(
-            "--precision {self}: this device cannot compute in {self} (it can in {})",
+            "`precision` {self}: this device cannot compute in {self} (it can in {})",
             can.join(", ")
         )))
     }
@@ -113,11 +121,10 @@ impl Precision {
     }
 }
 
-/// As `--precision` names it.
+/// Its [`Precision::name`].
 impl std::fmt::Display for Precision {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let name = self.to_possible_value().expect("no variant is skipped");
-        f.write_str(name.get_name())
+        f.write_str(self.name())
     }
 }
 

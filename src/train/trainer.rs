@@ -270,7 +270,7 @@ impl Settings<'_> {
         let label = self.label;
         Error::Interrupted(match self.checkpoint {
             Some(plan) => format!(
-                "{label} stopped after step {step}; its checkpoint is in {}: run the same command with --resume to continue",
+                "{label} stopped after step {step}; its checkpoint is in {}: run the same command with `resume` to continue",
                 plan.dir.display()
             ),
             None => format!(

@@ -1,13 +1,13 @@
 //! What one NeuroKin training step asks of a GPU, counted on wgpu (lavapipe in CI): kernel
 //! launches (at most [`MOST_LAUNCHES`]; `SELFMODEL_PRINT_LAUNCHES=1` prints the last step's
 //! in order, each with the operations it ran for), host reads and uploads per step (`eval::device_counts`, through
-//! `studies::bench::gpu_check::neurokin_step_counts`, which `gpu_check` reports on a GPU). A host
+//! `self_models::step_counts::neurokin_step_counts`, which the lab's `gpu_check` reports on a GPU). A host
 //! read inside a step makes the step wait for the device, so the losses are read only at log
 //! intervals: this test fails when a read appears in any other step. Part of `tests/gpu.rs`:
 //! `cargo test --release --features wgpu --test gpu -- counts --nocapture` prints the counts.
 
 use selfmodel::core::device::DeviceChoice;
-use selfmodel::studies::bench::gpu_check::neurokin_step_counts;
+use selfmodel::self_models::step_counts::neurokin_step_counts;
 
 /// Launches a NeuroKin step may take here (the log intervals' loss read included): issue 58's
 /// target of 100 (99 were reached), the 14 finishing passes of the sums by channel and one of

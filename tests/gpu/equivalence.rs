@@ -1,17 +1,17 @@
 //! `--device wgpu` against the CPU (`flex`): a few training steps of tiny NeuroKin, K-3DGS and
 //! FFKSM models from the same seed on both, their losses step by step and their rendered
-//! images compared within a tolerance (`studies::bench::device_equivalence`). Part of `tests/gpu.rs`;
+//! images compared within a tolerance (`selfmodel::self_models::device_equivalence`). Part of `tests/gpu.rs`;
 //! under the SPIR-V compiler, the same with `--features vulkan` (a build of its own:
 //! `CARGO_TARGET_DIR=target/vulkan`),
 //! on a GPU's driver: lavapipe ends the process compiling cubecl's SPIR-V for shared memory
 //! (docs/performance.md), so there only the compiler test below runs.
 
 use selfmodel::core::device::DeviceChoice;
+use selfmodel::self_models::device_equivalence::compare;
 use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
 use selfmodel::self_models::k3dgs::{K3dgsVariant, TrainSplatting, k3dgs_run};
 use selfmodel::self_models::neurokin::neurokin_run;
 use selfmodel::self_models::{model::SelfModel, run_config::SelfModelRun};
-use selfmodel::studies::bench::device_equivalence::compare;
 
 /// Train `cfg` for `steps` steps on the CPU and on wgpu, and compare.
 fn same_on_both<M: SelfModel>(cfg: SelfModelRun<M>, steps: usize, loss_tol: f64, image_tol: f64) {

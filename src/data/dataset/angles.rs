@@ -35,7 +35,7 @@ pub fn sample_angles(robot: &Robot, cfg: &DatasetConfig) -> Result<Vec<Vec<f64>>
             let points = grid(cfg.samples, &ranges, &steps, cfg.seed)?;
             if points.len() < cfg.samples {
                 return Err(Error::Config(format!(
-                    "a grid step of {} degrees gives {} joint vectors, fewer than the {} samples asked: lower --grid-step or ask fewer --samples",
+                    "a grid step of {} degrees gives {} joint vectors, fewer than the {} samples asked: lower `grid_step` or ask fewer `samples`",
                     cfg.grid_step_deg,
                     points.len(),
                     cfg.samples

@@ -165,7 +165,7 @@ impl DatasetConfig {
     pub fn validate(&self) -> Result<()> {
         if self.samples == 0 {
             return Err(Error::Config(
-                "the dataset needs at least 1 sample (--samples)".into(),
+                "the dataset needs at least 1 sample (`samples`)".into(),
             ));
         }
         // Silhouettes (1 byte) and depth (4 bytes) per pixel are held in memory while the
@@ -173,14 +173,14 @@ impl DatasetConfig {
         let pixels = (self.camera.width as u128) * (self.camera.height as u128);
         if self.views.as_ref().is_some_and(|v| v.cameras == 0) {
             return Err(Error::Config(
-                "a multi-view dataset needs at least 1 camera (--cameras)".into(),
+                "a multi-view dataset needs at least 1 camera (`cameras`)".into(),
             ));
         }
         let images = self.samples * self.views.as_ref().map_or(1, |v| v.cameras);
         let bytes = pixels * 5 * images as u128;
         if bytes > MAX_DATASET_BYTES as u128 {
             return Err(Error::Config(format!(
-                "{} images of {}x{} pixels need {:.1} GiB in memory, above the {} GiB limit; lower --samples or --size",
+                "{} images of {}x{} pixels need {:.1} GiB in memory, above the {} GiB limit; lower `samples` or `size`",
                 images,
                 self.camera.width,
                 self.camera.height,
@@ -190,7 +190,7 @@ impl DatasetConfig {
         }
         if self.train > self.samples {
             return Err(Error::Config(format!(
-                "impossible split: {} training samples out of {} (--train must be at most --samples)",
+                "impossible split: {} training samples out of {} (`train` must be at most `samples`)",
                 self.train, self.samples
             )));
         }
@@ -219,7 +219,7 @@ pub(super) fn check_memory(cfg: &DatasetConfig) -> Result<()> {
     if needed > available {
         let gib = |b: u64| b as f64 / (1u64 << 30) as f64;
         return Err(Error::Config(format!(
-            "{images} images of {}x{} need about {:.1} GiB while they are built and saved; this machine has {:.1} GiB available: lower --samples or --size",
+            "{images} images of {}x{} need about {:.1} GiB while they are built and saved; this machine has {:.1} GiB available: lower `samples` or `size`",
             cfg.camera.width,
             cfg.camera.height,
             gib(needed),
@@ -227,4 +227,49 @@ pub(super) fn check_memory(cfg: &DatasetConfig) -> Result<()> {
         )));
     }
     Ok(())
+}
+
+/// A camera asked for in part, as a user asks for one: fixed (`eye`, `target`), or framed
+/// automatically from a `view` direction; its field of view and image size either way.
+/// [`CameraChoice::apply`] sets a dataset's camera from it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CameraChoice {
+    pub eye: Option<[f64; 3]>,
+    pub target: Option<[f64; 3]>,
+    pub fov_deg: Option<f64>,
+    pub size: Option<usize>,
+    /// The direction automatic framing looks from.
+    pub view: Option<[f64; 3]>,
+}
+
+impl CameraChoice {
+    /// Set `data`'s camera: `eye`/`target` fix it; otherwise a robot that is `framed` (every
+    /// robot but the papers' arm), or any robot given a `view`, is framed automatically; the
+    /// field of view and size apply either way.
+    pub fn apply(&self, data: &mut DatasetConfig, framed: bool) {
+        let camera = &mut data.camera;
+        if let Some(fov) = self.fov_deg {
+            camera.fov_deg = fov;
+        }
+        if let Some(size) = self.size {
+            camera.width = size;
+            camera.height = size;
+        }
+        if self.eye.is_some() || self.target.is_some() {
+            if let Some(eye) = self.eye {
+                camera.eye = eye;
+            }
+            if let Some(target) = self.target {
+                camera.target = target;
+            }
+            // Looking straight down (or up): +x is up in the image.
+            *camera = camera.clone().upright();
+            data.framing = None;
+        } else if framed || self.view.is_some() {
+            data.framing = Some(Framing {
+                view: self.view.unwrap_or(Framing::default().view),
+                ..Framing::default()
+            });
+        }
+    }
 }

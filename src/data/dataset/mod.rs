@@ -29,7 +29,7 @@ mod stats;
 
 pub use angles::{MAX_JOINT_VALUE, read_angles, sample_angles};
 pub use build::{BuildReport, build_and_save};
-pub use config::{DatasetConfig, Framing, MAX_DATASET_BYTES, Views, swept_points};
+pub use config::{CameraChoice, DatasetConfig, Framing, MAX_DATASET_BYTES, Views, swept_points};
 pub use stats::{DatasetStats, JointStats, Summary};
 
 use crate::core::error::{Error, Result};
@@ -68,7 +68,7 @@ impl Dataset {
         let empty = self.empty_images();
         if 2 * empty > self.len() {
             return Err(Error::Config(format!(
-                "the robot is out of view in {empty} of {} images: aim the camera at it (--eye, --target, --fov) or let it frame the robot (--view X,Y,Z)",
+                "the robot is out of view in {empty} of {} images: aim the camera at it (`eye`, `target`, `fov`) or let it frame the robot (`view`)",
                 self.len()
             )));
         }

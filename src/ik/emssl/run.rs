@@ -301,7 +301,7 @@ impl Run<'_> {
             // The fit inside an iteration keeps no checkpoint; the iterations do.
             (Error::Interrupted(_), Some(c)) => Error::Interrupted(format!(
                 "EMSSL stopped during iteration {iteration}; its checkpoint after iteration {} \
-                 is in {}: run the same command with --resume to continue from there",
+                 is in {}: run the same command with `resume` to continue from there",
                 iteration - 1,
                 c.dir.display()
             )),

@@ -9,11 +9,13 @@ use burn::tensor::{Device, Tensor};
 use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::evaluation::{Predictions, iou, psnr_db};
+#[cfg(feature = "figures")]
 use crate::report::figures::{GridRow, image_grid};
 use crate::report::table::write_table;
 use crate::self_models::ffksm::accelerated_marcher::{AcceleratedConfig, render_accelerated};
 use crate::self_models::ffksm::field::OccupancyField;
 use crate::self_models::ffksm::marcher::render_dense;
+#[cfg(feature = "figures")]
 use crate::self_models::harness::{grid_picks, nth_image};
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
@@ -252,6 +254,7 @@ pub(super) fn write_reports(
 
 /// For each novel view (camera yaw `yaws_deg`), a row of truths then a row of predictions (six
 /// poses).
+#[cfg(feature = "figures")]
 pub(super) fn novel_view_figure(
     path: &Path,
     views: &[(Vec<f32>, Vec<f32>)],

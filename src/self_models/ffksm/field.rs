@@ -268,6 +268,25 @@ impl OccupancyField {
         (&self.coordinates, &self.kinematics, &self.predictive)
     }
 
+    /// Floating-point operations of the matrix products of one dense step with `points`
+    /// evaluations: per point, the coordinate encoder, the coordinate half of the first
+    /// predictive layer and the rest of the predictive module forward (the kinematic half is
+    /// once per pose), and backward twice that (input and weight gradients) less the first
+    /// layer's input gradient, which is not needed.
+    pub fn step_flop(&self, points: usize) -> f64 {
+        let (coordinates, _, predictive) = self.layers();
+        let shape = |l: &burn::nn::Linear| l.weight.val().dims();
+        let [c_in, c_out] = shape(&coordinates[0]);
+        let [_, coordinate] = shape(&coordinates[1]);
+        let mut forward = c_in * c_out + c_out * coordinate;
+        for (i, layer) in predictive.iter().enumerate() {
+            let [inputs, outputs] = shape(layer);
+            forward += if i == 0 { coordinate } else { inputs } * outputs;
+        }
+        let backward = 2 * forward - c_in * c_out;
+        2.0 * (forward + backward) as f64 * points as f64
+    }
+
     /// Frequency bands of both positional encodings.
     pub fn bands(&self) -> usize {
         self.bands

@@ -20,11 +20,12 @@ use crate::self_models::{
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 
+#[cfg(feature = "figures")]
+use super::evaluation::novel_view_figure;
 use super::{
     config::Ffksm,
     evaluation::{
-        NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, novel_view_figure, render_all,
-        write_reports,
+        NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, render_all, write_reports,
     },
 };
 
@@ -281,11 +282,15 @@ impl Render for FfksmRenderer {
             novel_images.push((vt, r.predictions.silhouettes));
         }
         write_reports(ctx.dir, ctx.name, &renderers, &novel)?;
+        #[cfg(feature = "figures")]
         novel_view_figure(
             &ctx.dir.join("novel_views.png"),
             &novel_images,
             &s.model.novel_views_deg,
             [s.camera.height, s.camera.width],
-        )
+        )?;
+        #[cfg(not(feature = "figures"))]
+        let _ = novel_images;
+        Ok(())
     }
 }

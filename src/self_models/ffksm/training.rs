@@ -89,7 +89,7 @@ pub(super) fn read_kept<T: serde::de::DeserializeOwned>(path: &Path) -> Result<O
         Error::data(
             path,
             format!(
-                "damaged ({e}); delete the checkpoint folder it sits in and train again without --resume"
+                "damaged ({e}); delete the checkpoint folder it sits in and train again without `resume`"
             ),
         )
     })

@@ -365,7 +365,7 @@ fn group_members(
             for t in tips {
                 let l = sorted_links.iter().position(|l| *l == t).ok_or_else(|| {
                     Error::Config(format!(
-                        "--tips: \"{t}\" is not a link of this robot; its links: {}",
+                        "`tips`: \"{t}\" is not a link of this robot; its links: {}",
                         sorted_links
                             .iter()
                             .map(|l| l.as_str())
@@ -374,12 +374,12 @@ fn group_members(
                     ))
                 })?;
                 if group_tips.contains(&l) {
-                    return Err(Error::Config(format!("--tips names \"{t}\" twice")));
+                    return Err(Error::Config(format!("`tips` names \"{t}\" twice")));
                 }
                 mark_path(l);
                 group_tips.push(l);
             }
-            refuse_another_tip(tip_given, tip_link, &group_tips, &sorted_links, "--tips")?;
+            refuse_another_tip(tip_given, tip_link, &group_tips, &sorted_links, "`tips`")?;
         }
         JointGroup::All => on_path.iter_mut().for_each(|p| *p = true),
         JointGroup::Named(names) => {
@@ -389,7 +389,7 @@ fn group_members(
                     .position(|j| &j.name == name && j.kind.is_movable() && j.mimic.is_none())
                     .ok_or_else(|| {
                         Error::Config(format!(
-                            "--joints: \"{name}\" is not a movable joint of this robot (mimic joints follow their leader); its movable joints: {}",
+                            "`joints`: \"{name}\" is not a movable joint of this robot (mimic joints follow their leader); its movable joints: {}",
                             joints
                                 .iter()
                                 .filter(|j| j.kind.is_movable() && j.mimic.is_none())

@@ -52,7 +52,7 @@ impl JointGroup {
         if let Some(group) = group {
             if joints.is_some() || tips.is_some() {
                 return Err(Error::Config(
-                    "--group, --joints and --tips name the joint vector in different ways: give one"
+                    "`group`, `joints` and `tips` name the joint vector in different ways: give one"
                         .into(),
                 ));
             }
@@ -61,7 +61,7 @@ impl JointGroup {
                 (None, Some(urdf)) => crate::sim::srdf::find_beside(urdf)?,
                 (None, None) => {
                     return Err(Error::Config(
-                        "--group needs a robot description (--urdf)".into(),
+                        "`group` needs a robot description (`urdf`)".into(),
                     ));
                 }
             };
@@ -73,19 +73,19 @@ impl JointGroup {
         if srdf.is_some() {
             // As the command line reads it (and Python the same way): the file of a group.
             return Err(Error::Config(
-                "--srdf names the SRDF file of --group: give --group too".into(),
+                "`srdf` names the SRDF file of `group`: give `group` too".into(),
             ));
         }
         match (joints, tips) {
             (Some(_), Some(_)) => Err(Error::Config(
-                "--joints and --tips name the joint vector two ways: give one".into(),
+                "`joints` and `tips` name the joint vector two ways: give one".into(),
             )),
             (Some([all]), None) if all == "all" => Ok(JointGroup::All),
             (Some(names), None) if !names.is_empty() => Ok(JointGroup::Named(names.to_vec())),
             (None, Some(tips)) if !tips.is_empty() => Ok(JointGroup::Tips(tips.to_vec())),
             (None, None) => Ok(JointGroup::Chain),
             _ => Err(Error::Config(
-                "--joints and --tips need at least one name".into(),
+                "`joints` and `tips` need at least one name".into(),
             )),
         }
     }
@@ -105,7 +105,7 @@ pub(super) fn refuse_another_tip(
     }
     let names: Vec<&str> = tips.iter().map(|&t| links[t].as_str()).collect();
     Err(Error::Config(format!(
-        "--tip \"{}\" is not a tip of {group} ({}): name one of them, or leave --tip out",
+        "`tip` \"{}\" is not a tip of {group} ({}): name one of them, or leave `tip` out",
         links[tip],
         names.join(", ")
     )))
