@@ -6,8 +6,8 @@
 //! the system's temporary directory).
 
 use selfmodel::core::device::{DeviceChoice, select};
-use selfmodel::ik::pose::PoseTarget;
-use selfmodel::ik::pose_model::{PoseModel, PoseModelConfig, train};
+use selfmodel::ik::solve::learned::{LearnedIk, LearnedIkConfig, train};
+use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
 use selfmodel::{BuiltinRobot, Preset, RobotSpec};
 
 fn main() -> selfmodel::Result<()> {
@@ -18,18 +18,18 @@ fn main() -> selfmodel::Result<()> {
     let device = select(DeviceChoice::Cpu)?;
     let spec = RobotSpec::Builtin(BuiltinRobot::Ur5);
     let robot = spec.load_kinematics()?;
-    let trained = train(&spec, &robot, &PoseModelConfig::quick(), &dir, &device)?;
+    let trained = train(&spec, &robot, &LearnedIkConfig::quick(), &dir, &device)?;
     println!(
         "trained and saved {} joints into {}",
         trained.dof(),
         dir.display()
     );
 
-    let (model, robot) = PoseModel::load_with_robot(&dir, &device)?;
+    let (model, robot) = LearnedIk::load_with_robot(&dir, &device)?;
     // A pose the robot reaches: its tip at some joint values.
     let q = [0.3, -1.1, 1.4, -0.5, 1.2, 0.7];
     let target = PoseTarget::of(&robot.chain, &q);
-    let answers = model.solve(&robot.chain, &[target], 1, &device)?;
+    let answers = model.solve_until(&robot.chain, &[target], 1, &model.answering())?;
     let a = &answers[0][0];
     println!(
         "answer {:.4?}: {:.2e} mm and {:.2e} degrees from the target, exact: {}",

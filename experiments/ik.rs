@@ -7,10 +7,10 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use selfmodel::core::preset::Preset;
-use selfmodel::ik::pose::PoseTarget;
-use selfmodel::ik::pose_model::{
-    PoseModel, PoseModelConfig, SolveStats, joint_columns, read_targets, train,
+use selfmodel::ik::solve::learned::{
+    LearnedIk, LearnedIkConfig, SolveStats, joint_columns, read_targets, train,
 };
+use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
 use selfmodel_lab::cli::{RobotArgs, run_main};
 
 #[derive(Parser)]
@@ -135,8 +135,8 @@ const DEFAULT_MARGIN_M: f64 = 0.005;
 fn collision_options(
     args: CollisionArgs,
     srdf: Option<PathBuf>,
-) -> selfmodel::Result<selfmodel::ik::collision::CollisionOptions> {
-    let options = selfmodel::ik::collision::CollisionOptions {
+) -> selfmodel::Result<selfmodel::ik::solve::collision::CollisionOptions> {
+    let options = selfmodel::ik::solve::collision::CollisionOptions {
         scene: args.scene,
         self_collision: args.self_collision,
         srdf,
@@ -164,7 +164,7 @@ fn answering(
     outs: &[&std::path::Path],
     inputs: &[PathBuf],
     device: &burn::tensor::Device,
-) -> selfmodel::Result<(PoseModel, selfmodel::Robot)> {
+) -> selfmodel::Result<(LearnedIk, selfmodel::Robot)> {
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite};
     let model_folder = Some(dir).filter(|d| d.join("model.json").is_file());
     let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
@@ -172,7 +172,7 @@ fn answering(
         check_out(out, OutKind::File)?;
         refuse_overwrite(out, &inputs, model_folder)?;
     }
-    let (model, robot) = PoseModel::load_with_robot(dir, device)?;
+    let (model, robot) = LearnedIk::load_with_robot(dir, device)?;
     // Nor the robot description the model names.
     let robot_files = model.saved.robot.files();
     let robot_files: Vec<&std::path::Path> = robot_files.iter().map(|p| p.as_path()).collect();
@@ -202,7 +202,7 @@ fn main() -> ExitCode {
                     None => robot.parts.group.srdf.take(),
                 };
                 let collisions = collision_options(collisions, srdf)?;
-                let mut cfg = PoseModelConfig::preset(&preset)?;
+                let mut cfg = LearnedIkConfig::preset(&preset)?;
                 cfg.position_only = position_only;
                 cfg.collisions = collisions.any().then(|| collisions.clone());
                 selfmodel::core::atomic_file::check_out(
@@ -217,7 +217,7 @@ fn main() -> ExitCode {
                 let inputs: Vec<&std::path::Path> = inputs.iter().map(PathBuf::as_path).collect();
                 selfmodel::core::atomic_file::refuse_writing_over(
                     &out,
-                    selfmodel::ik::pose_model::WRITTEN,
+                    selfmodel::ik::solve::learned::WRITTEN,
                     &inputs,
                 )?;
                 let loaded = spec.load_kinematics()?;
@@ -267,7 +267,7 @@ fn main() -> ExitCode {
                 // With a collision check, draws that collide are skipped: at most a thousand
                 // draws a row (a scene that leaves no room ends with a message).
                 let written = std::cell::Cell::new(0usize);
-                let rows = selfmodel::ik::targets::kept_draws(
+                let rows = selfmodel::ik::solve::targets::kept_draws(
                     &model.saved.ranges,
                     seed,
                     n,
@@ -276,7 +276,7 @@ fn main() -> ExitCode {
                 .inspect(|_| written.set(written.get() + 1))
                 .map(|q| (PoseTarget::of(&robot.chain, &q), q));
                 selfmodel::core::atomic_file::write_atomic(&out, |w| {
-                    selfmodel::ik::targets::write_targets_csv(
+                    selfmodel::ik::solve::targets::write_targets_csv(
                         w,
                         rows,
                         &model.saved.joint_names,
@@ -290,7 +290,7 @@ fn main() -> ExitCode {
                         return Err(selfmodel::Error::Config(format!(
                             "only {} of {n} draws ({} tried) were collision-free: the scene leaves the robot little room; nothing was written",
                             written.get(),
-                            n.saturating_mul(selfmodel::ik::targets::MAX_DRAWS_PER_KEPT)
+                            n.saturating_mul(selfmodel::ik::solve::targets::MAX_DRAWS_PER_KEPT)
                         )));
                     }
                     Ok(())
@@ -338,12 +338,14 @@ fn main() -> ExitCode {
                 let targets = read_targets(&targets_file, model.position_only(), model.tips())?;
                 let start = std::time::Instant::now();
                 let stop = selfmodel::core::interrupt::requested;
-                let how = selfmodel::ik::pose_model::Answering {
+                let how = selfmodel::ik::solve::levenberg_marquardt::Answering {
                     lm: &cfg,
                     stop: &stop,
-                    avoid: check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
+                    avoid: check
+                        .as_ref()
+                        .map(|c| c as &dyn selfmodel::ik::solve::levenberg_marquardt::Avoid),
                 };
-                let answers = model.solve_until(&robot.chain, &targets, k, &how, &device)?;
+                let answers = model.solve_until(&robot.chain, &targets, k, &how)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];

@@ -1,25 +1,17 @@
-//! Learned inverse kinematics (the EMSSL paper). `method` is the IkMethod trait that Table II
-//! runs; the methods are `drl` (direct regression), `emssl` (the paper's method), `dsl`
-//! (distal supervised learning), `cgan` (conditional GAN), `flow` (a normalizing flow, many
-//! solutions) and `dls` (damped least squares, numerical). Beneath them: the data (`data`),
-//! the inverse MLP (`mlp`), the fitting they share (`learning`), link calibration and
-//! EMSSL's batched sampling pass. `pose`: full-pose targets (position and orientation) solved
-//! exactly by Levenberg-Marquardt within the joint limits; `targets`: random reachable ones
-//! and their file.
+//! Inverse kinematics. `solve` is the front door: every solver behind one trait
+//! (`solve::solver::IkSolver`): Levenberg-Marquardt on full-pose targets within the joint
+//! limits (`solve::levenberg_marquardt`), damped least squares on positions
+//! (`solve::damped_least_squares`), a learned model whose samples seed them
+//! (`solve::learned::LearnedIk`, what `ik train` saves), the collision check an answer must
+//! pass (`solve::collision`) and random reachable targets (`solve::targets`). `paper` holds the
+//! EMSSL paper's methods and what its tables run (Table II's `IkMethod`, direct regression,
+//! distal learning, the conditional GAN, EMSSL, the sampling pass, link calibration). Beneath
+//! both: the joint samples (`data`), the inverse MLP (`mlp`), the fitting they share
+//! (`learning`) and the normalizing flow (`flow`).
 
-pub mod calibration;
-pub mod cgan;
-pub mod collision;
 pub mod data;
-pub mod dls;
-pub mod drl;
-pub mod dsl;
-pub mod emssl;
 pub mod flow;
 pub mod learning;
-pub mod method;
 pub mod mlp;
-pub mod pose;
-pub mod pose_model;
-pub mod sampling_pass;
-pub mod targets;
+pub mod paper;
+pub mod solve;

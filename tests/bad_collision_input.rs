@@ -8,7 +8,7 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use selfmodel::ik::collision::{CollisionCheck, Spheres};
+use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
 use selfmodel::sim::collision::cache;
 use selfmodel::sim::collision::pairs::PairSampling;
 use selfmodel::sim::collision::spheres::SphereFit;

@@ -22,7 +22,7 @@ fn readers(path: &Path) -> Vec<(&'static str, String)> {
         (
             "--targets",
             one_line(
-                selfmodel::ik::pose_model::read_targets(path, false, &["tool".into()])
+                selfmodel::ik::solve::learned::read_targets(path, false, &["tool".into()])
                     .map(|t| format!("{} targets", t.len())),
             ),
         ),
@@ -43,7 +43,8 @@ fn readers(path: &Path) -> Vec<(&'static str, String)> {
         (
             "model.json of an IK model",
             one_line(
-                selfmodel::ik::pose_model::PoseModel::load(dir, &device).map(|_| "a model".into()),
+                selfmodel::ik::solve::learned::LearnedIk::load(dir, &device)
+                    .map(|_| "a model".into()),
             ),
         ),
         (

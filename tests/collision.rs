@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use selfmodel::ik::pose_model::Answering;
+use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::collision::pairs::{AllowedPairs, PairSampling, Reason};
 use selfmodel::sim::collision::spheres::{SphereFit, surface_points};
@@ -311,16 +311,14 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
 /// exact, and the targets drawn collision-free are answered exactly and collision-free.
 #[test]
 fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
-    use selfmodel::ik::collision::CollisionCheck;
-    use selfmodel::ik::pose::PoseTarget;
+    use selfmodel::ik::solve::collision::CollisionCheck;
+    use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
     let Some(spec) = panda_spec() else {
         return;
     };
     let dir = common::tempdir();
     let robot = spec.load_kinematics().unwrap();
     let model = common::quick_pose_model(&spec, &robot, dir.path());
-    let device =
-        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     let scene = Scene::parse(
         Path::new("scene.yml"),
         "cuboid:\n  table: {dims: [2, 2, 0.2], pose: [0, 0, -0.1, 1, 0, 0, 0]}\n  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.3, 0.15, 1, 0, 0, 0]}\n",
@@ -346,7 +344,6 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
                 stop: &|| false,
                 avoid: Some(&check),
             },
-            &device,
         )
         .unwrap();
     let (mut exact, mut total) = (0, 0);
@@ -379,7 +376,6 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
                 stop: &|| false,
                 ..Answering::with(&lm)
             },
-            &device,
         )
         .unwrap();
     assert!(plain.iter().flatten().all(|a| !a.collides));
@@ -436,8 +432,8 @@ fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
 /// pushing a colliding answer apart keeps its pose and ends collision-free.
 #[test]
 fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
-    use selfmodel::ik::collision::CollisionCheck;
-    use selfmodel::ik::pose::{LmConfig, PoseTarget, solve_from};
+    use selfmodel::ik::solve::collision::CollisionCheck;
+    use selfmodel::ik::solve::levenberg_marquardt::{LmConfig, PoseTarget, solve_from};
     let Some(spec) = panda_spec() else {
         return;
     };
@@ -514,7 +510,7 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
 /// description, SRDF or fit) is ignored.
 #[test]
 fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
-    use selfmodel::ik::collision::{CollisionCheck, Spheres};
+    use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
     let Some(spec) = panda_spec() else {
         return;
     };
@@ -552,8 +548,8 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
 /// beside the model.
 #[test]
 fn ik_train_with_a_scene_samples_only_collision_free_joints_and_keeps_its_spheres() {
-    use selfmodel::ik::collision::CollisionCheck;
     use selfmodel::ik::data::{IkData, IkDataConfig};
+    use selfmodel::ik::solve::collision::CollisionCheck;
     let Some(spec) = panda_spec() else {
         return;
     };

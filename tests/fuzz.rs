@@ -114,7 +114,7 @@ fn fuzz(
 
 #[test]
 fn the_targets_reader_reads_or_refuses_every_mutation() {
-    use selfmodel::ik::pose_model::read_targets;
+    use selfmodel::ik::solve::learned::read_targets;
     let dir = common::tempdir();
     let path = dir.path().join("t.csv");
     let tips = ["left".to_string(), "right".to_string()];
@@ -177,7 +177,7 @@ fn the_urdf_loader_reads_or_refuses_every_mutation() {
 #[test]
 fn the_saved_model_loader_reads_or_refuses_every_mutation() {
     use selfmodel::core::preset::Preset;
-    use selfmodel::ik::pose_model::{PoseModel, PoseModelConfig, train};
+    use selfmodel::ik::solve::learned::{LearnedIk, LearnedIkConfig, train};
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 3, false);
     let spec = selfmodel::sim::robots::RobotSpec::Urdf {
@@ -189,7 +189,7 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
         joints: Default::default(),
     };
     let robot = spec.load_kinematics().unwrap();
-    let mut cfg = PoseModelConfig::quick();
+    let mut cfg = LearnedIkConfig::quick();
     cfg.data.samples = 600;
     cfg.data.train = 500;
     cfg.flow.fit.epochs = 1;
@@ -199,12 +199,18 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
     train(&spec, &robot, &cfg, &model, &device).unwrap();
     let json = std::fs::read(model.join("model.json")).unwrap();
     let weights = std::fs::read(model.join("model.bpk")).unwrap();
-    let target = selfmodel::ik::pose::PoseTarget::of(&robot.chain, &[0.1, -0.2, 0.3]);
-    let use_model = |m: &PoseModel| {
+    let target =
+        selfmodel::ik::solve::levenberg_marquardt::PoseTarget::of(&robot.chain, &[0.1, -0.2, 0.3]);
+    let use_model = |m: &LearnedIk| {
         // What loads answers within its ranges, or is refused for another robot.
         if m.check_robot(&robot).is_ok() {
             let a = m
-                .solve(&robot.chain, std::slice::from_ref(&target), 1, &device)
+                .solve_until(
+                    &robot.chain,
+                    std::slice::from_ref(&target),
+                    1,
+                    &m.answering(),
+                )
                 .unwrap();
             assert!(selfmodel::sim::kinematics::within(
                 &a[0][0].joints,
@@ -215,14 +221,14 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
     };
     fuzz("model.json", &json, |bytes| {
         std::fs::write(model.join("model.json"), bytes).unwrap();
-        PoseModel::load(&model, &device)
+        LearnedIk::load(&model, &device)
             .map(|m| use_model(&m))
             .map_err(|e| e.to_string())
     });
     std::fs::write(model.join("model.json"), &json).unwrap();
     fuzz("model.bpk", &weights, |bytes| {
         std::fs::write(model.join("model.bpk"), bytes).unwrap();
-        PoseModel::load(&model, &device)
+        LearnedIk::load(&model, &device)
             .map(|m| use_model(&m))
             .map_err(|e| e.to_string())
     });
@@ -374,7 +380,7 @@ fn the_spheres_reader_reads_or_refuses_every_mutation() {
 /// leave the links uncovered.
 #[test]
 fn the_kept_collision_model_reads_or_refuses_every_mutation() {
-    use selfmodel::ik::collision::{CollisionCheck, Spheres};
+    use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
     use selfmodel::sim::collision::{cache, pairs::PairSampling, spheres::SphereFit};
     let dir = common::tempdir();
     let urdf = dir.path().join("arm.urdf");

@@ -6,11 +6,9 @@ mod common;
 use nalgebra::Point3;
 use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
+use selfmodel::ik::learning::{FitConfig, predict, validation_cm};
 use selfmodel::ik::mlp::InverseModelConfig;
-use selfmodel::ik::{
-    drl::drl,
-    learning::{FitConfig, predict, validation_cm},
-};
+use selfmodel::ik::paper::direct_regression::drl;
 use selfmodel::train::convergence::{Convergence, Plateau};
 
 #[test]
@@ -320,7 +318,7 @@ fn a_wrapped_model_answers_targets_at_plus_and_minus_179_degrees_with_nearby_joi
 
 #[test]
 fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
-    use selfmodel::ik::emssl::{EmsslConfig, LrPlateau, emssl};
+    use selfmodel::ik::paper::emssl::{EmsslConfig, LrPlateau, emssl};
     let (robot, data) = tiny_ur5(6);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
@@ -354,7 +352,7 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
     assert_eq!(first.len(), 3);
     let (resumed, curve) =
         emssl(&robot.chain, &data, &model, &fit, &cfg, &device, Some(&dir)).unwrap();
-    let key = |c: &[selfmodel::ik::emssl::EmsslIteration]| {
+    let key = |c: &[selfmodel::ik::paper::emssl::EmsslIteration]| {
         c.iter()
             .map(|i| {
                 (
@@ -375,10 +373,8 @@ fn an_emssl_run_stopped_early_and_continued_from_its_checkpoint_gives_the_uninte
 
 #[test]
 fn emssl_polishing_keeps_a_round_only_when_it_lowers_the_validation_reach_error() {
-    use selfmodel::ik::{
-        emssl::{EmsslConfig, emssl},
-        learning::validation_cm,
-    };
+    use selfmodel::ik::learning::validation_cm;
+    use selfmodel::ik::paper::emssl::{EmsslConfig, emssl};
     let (robot, data) = tiny_ur5(7);
     let device = select(DeviceChoice::Cpu).unwrap();
     let model = InverseModelConfig::inverse(vec![64, 32], 6, JointOutput::Sigmoid);
@@ -546,7 +542,7 @@ fn a_run_to_convergence_killed_and_continued_from_its_checkpoint_gives_the_unint
 /// finished run asked again loads its best generator without training.
 #[test]
 fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
-    use selfmodel::ik::cgan::{GanConfig, train_gan};
+    use selfmodel::ik::paper::cgan::{GanConfig, train_gan};
     use selfmodel::train::convergence::FitCheckpoint;
     let (robot, data) = tiny_ur5(9);
     let device = select(DeviceChoice::Cpu).unwrap();
@@ -593,7 +589,8 @@ fn a_gan_run_continued_from_its_checkpoint_gives_the_uninterrupted_run() {
     };
     assert_eq!(key(&log), key(&whole_log));
     let targets = &data.positions[data.test()];
-    let answers = |g: &selfmodel::ik::cgan::Generator| g.sample(&data, targets, 256, 7, &device);
+    let answers =
+        |g: &selfmodel::ik::paper::cgan::Generator| g.sample(&data, targets, 256, 7, &device);
     assert_eq!(answers(&resumed), answers(&whole));
     // Finished: asked again, it trains nothing and answers the same.
     let t = std::time::Instant::now();

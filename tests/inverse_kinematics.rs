@@ -50,16 +50,16 @@ fn distance_error_statistics_are_in_centimetres() {
 }
 
 use selfmodel::core::device::{DeviceChoice, select};
-use selfmodel::ik::cgan::{GanConfig, train_gan};
-use selfmodel::ik::dls::{DlsConfig, solve, solve_batch};
-use selfmodel::ik::dsl::{DistalConfig, dsl};
 use selfmodel::ik::flow::Draws;
+use selfmodel::ik::learning::{FitConfig, test_errors};
 use selfmodel::ik::mlp::InverseModelConfig;
-use selfmodel::ik::{
-    drl::drl,
+use selfmodel::ik::paper::cgan::{GanConfig, train_gan};
+use selfmodel::ik::paper::distal_learning::{DistalConfig, dsl};
+use selfmodel::ik::paper::{
+    direct_regression::drl,
     emssl::{EmsslConfig, emssl},
-    learning::{FitConfig, test_errors},
 };
+use selfmodel::ik::solve::damped_least_squares::{DlsConfig, solve, solve_batch};
 
 fn ur5_data(samples: usize, range_deg: f64) -> (selfmodel::sim::robot::Robot, IkData) {
     let r = range_deg.to_radians();
@@ -336,7 +336,7 @@ fn predictions_csv_holds_the_answers_and_where_they_reach() {
 
 #[test]
 fn restarts_take_the_solver_to_every_reachable_target_where_one_start_stalls() {
-    use selfmodel::ik::dls::{Restarts, solve_with_restarts};
+    use selfmodel::ik::solve::damped_least_squares::{Restarts, solve_with_restarts};
     let (robot, data) = ur5_data(3_000, 90.0);
     let targets = &data.positions[data.test()];
     let home = vec![vec![0.0; 6]; targets.len()];
@@ -497,11 +497,11 @@ fn dsl_through_the_exact_forward_kinematics_beats_a_learned_forward_model() {
         forward_hidden: vec![128, 64],
         forward_epochs: 20,
         inverse_epochs: 10,
-        forward: selfmodel::ik::dsl::DistalForward::Learned,
+        forward: selfmodel::ik::paper::distal_learning::DistalForward::Learned,
         inverse_steps: None,
     };
     let exact = DistalConfig {
-        forward: selfmodel::ik::dsl::DistalForward::Exact,
+        forward: selfmodel::ik::paper::distal_learning::DistalForward::Exact,
         ..learned.clone()
     };
     let model = InverseModelConfig::quick(6);
@@ -509,7 +509,7 @@ fn dsl_through_the_exact_forward_kinematics_beats_a_learned_forward_model() {
         let d = dsl(&robot.chain, &data, &model, &fit, cfg, &device).unwrap();
         assert_eq!(
             d.forward.is_none(),
-            cfg.forward == selfmodel::ik::dsl::DistalForward::Exact
+            cfg.forward == selfmodel::ik::paper::distal_learning::DistalForward::Exact
         );
         test_errors(&d.inverse, &robot.chain, &data, 512, &device)
             .0
@@ -555,7 +555,7 @@ fn a_matched_budget_trains_the_inverse_network_for_exactly_its_steps() {
         forward_hidden: vec![32],
         forward_epochs: 2,
         inverse_epochs: 2,
-        forward: selfmodel::ik::dsl::DistalForward::Exact,
+        forward: selfmodel::ik::paper::distal_learning::DistalForward::Exact,
         inverse_steps: Some(60),
     };
     let model = InverseModelConfig {

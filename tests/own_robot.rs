@@ -298,7 +298,7 @@ fn samplers_learned_outputs_and_dls_stay_inside_asymmetric_limits() {
         .take(50)
         .copied()
         .collect();
-    let cfg = selfmodel::ik::dls::DlsConfig::standard();
+    let cfg = selfmodel::ik::solve::damped_least_squares::DlsConfig::standard();
     let home = vec![vec![0.0; 7]; targets.len()];
     let home: Vec<Vec<f64>> = home
         .into_iter()
@@ -309,7 +309,13 @@ fn samplers_learned_outputs_and_dls_stay_inside_asymmetric_limits() {
                 .collect()
         })
         .collect();
-    let solved = selfmodel::ik::dls::solve_batch(chain, &targets, &home, &data.ranges, &cfg);
+    let solved = selfmodel::ik::solve::damped_least_squares::solve_batch(
+        chain,
+        &targets,
+        &home,
+        &data.ranges,
+        &cfg,
+    );
     assert!(
         solved
             .iter()

@@ -4,8 +4,10 @@
 mod common;
 
 use nalgebra::{Isometry3, UnitQuaternion, Vector3};
-use selfmodel::ik::pose::{LmConfig, PoseTarget, pose_error, solve_batch, solve_from};
-use selfmodel::ik::pose_model::Answering;
+use selfmodel::ik::solve::levenberg_marquardt::Answering;
+use selfmodel::ik::solve::levenberg_marquardt::{
+    LmConfig, PoseTarget, pose_error, solve_batch, solve_from,
+};
 use selfmodel::sim::kinematics::within;
 use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
 
@@ -139,7 +141,7 @@ fn quick_model(
 ) -> (
     selfmodel::sim::robots::RobotSpec,
     selfmodel::sim::robot::Robot,
-    selfmodel::ik::pose_model::PoseModel,
+    selfmodel::ik::solve::learned::LearnedIk,
 ) {
     let urdf = common::write_arm(dir, &format!("arm{joints}"), joints, true);
     let spec = selfmodel::sim::robots::RobotSpec::Urdf {
@@ -157,7 +159,7 @@ fn quick_model(
 
 #[test]
 fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
-    use selfmodel::ik::pose_model::PoseModel;
+    use selfmodel::ik::solve::learned::LearnedIk;
     let dir = common::tempdir();
     let (_spec, robot, model) = quick_model(dir.path(), 6);
     let device =
@@ -166,10 +168,14 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
     let qs = selfmodel::sim::trajectory::babbling(40, ranges, 5);
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
-    let before = model.solve(&robot.chain, &targets, 3, &device).unwrap();
-    let loaded = PoseModel::load(&dir.path().join("model"), &device).unwrap();
+    let before = model
+        .solve_until(&robot.chain, &targets, 3, &model.answering())
+        .unwrap();
+    let loaded = LearnedIk::load(&dir.path().join("model"), &device).unwrap();
     loaded.check_robot(&robot).unwrap();
-    let after = loaded.solve(&robot.chain, &targets, 3, &device).unwrap();
+    let after = loaded
+        .solve_until(&robot.chain, &targets, 3, &loaded.answering())
+        .unwrap();
     assert_eq!(before, after);
     assert_eq!(
         model.sample(&targets, &device),
@@ -243,7 +249,7 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
 
 #[test]
 fn malformed_target_files_fail_naming_the_line() {
-    use selfmodel::ik::pose_model::read_targets;
+    use selfmodel::ik::solve::learned::read_targets;
     let dir = common::tempdir();
     let path = dir.path().join("t.csv");
     let cases = [
@@ -333,19 +339,26 @@ fn limits_offset_around_pi_are_kept_and_answered() {
     assert_eq!(ranges[2], [0.33, 5.95]);
     assert_eq!(ranges[4], [0.52, 5.76]);
     assert_eq!(ranges[0], [-PI, PI]);
-    let cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    let cfg = selfmodel::ik::solve::learned::LearnedIkConfig::quick();
     let device =
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
-    let model =
-        selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &dir.path().join("model"), &device)
-            .unwrap();
+    let model = selfmodel::ik::solve::learned::train(
+        &spec,
+        &robot,
+        &cfg,
+        &dir.path().join("model"),
+        &device,
+    )
+    .unwrap();
     assert_eq!(model.saved.ranges, ranges);
     // Poses over the whole limits.
     let qs = selfmodel::sim::trajectory::babbling(300, &ranges, 11);
     assert!(qs.iter().filter(|q| q[1] > PI).count() > 100);
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
-    let answers = model.solve(&robot.chain, &targets, 1, &device).unwrap();
+    let answers = model
+        .solve_until(&robot.chain, &targets, 1, &model.answering())
+        .unwrap();
     let exact = answers
         .iter()
         .filter(|a| a.iter().any(|s| s.exact(&model.saved.config.lm)))
@@ -359,7 +372,7 @@ fn limits_offset_around_pi_are_kept_and_answered() {
 #[test]
 fn two_tips_are_solved_together() {
     use selfmodel::core::preset::Preset;
-    use selfmodel::ik::pose_model::{PoseModel, read_targets};
+    use selfmodel::ik::solve::learned::{LearnedIk, read_targets};
     use selfmodel::sim::kinematics::JointGroup;
     let dir = common::tempdir();
     let path = dir.path().join("two_arms.urdf");
@@ -377,9 +390,9 @@ fn two_tips_are_solved_together() {
     let device =
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     let model_dir = dir.path().join("model");
-    let cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
-    selfmodel::ik::pose_model::train(&spec, &robot, &cfg, &model_dir, &device).unwrap();
-    let model = PoseModel::load(&model_dir, &device).unwrap();
+    let cfg = selfmodel::ik::solve::learned::LearnedIkConfig::quick();
+    selfmodel::ik::solve::learned::train(&spec, &robot, &cfg, &model_dir, &device).unwrap();
+    let model = LearnedIk::load(&model_dir, &device).unwrap();
     model.check_robot(&robot).unwrap();
     assert_eq!(model.tips(), ["left_hand", "right_hand"]);
     // Two tips, twice the solver's budget.
@@ -390,8 +403,8 @@ fn two_tips_are_solved_together() {
     );
     assert_eq!(model.saved.config.lm.max_iterations, 60);
     let (targets, joints) =
-        selfmodel::ik::targets::random_targets(&robot, &model.saved.ranges, 100, 3);
-    let text = selfmodel::ik::targets::targets_csv(
+        selfmodel::ik::solve::targets::random_targets(&robot, &model.saved.ranges, 100, 3);
+    let text = selfmodel::ik::solve::targets::targets_csv(
         &targets,
         &joints,
         &model.saved.joint_names,
@@ -408,7 +421,9 @@ fn two_tips_are_solved_together() {
     std::fs::write(&file, text).unwrap();
     let read = read_targets(&file, false, model.tips()).unwrap();
     assert_eq!(read.len(), 100);
-    let answers = model.solve(&robot.chain, &read, 1, &device).unwrap();
+    let answers = model
+        .solve_until(&robot.chain, &read, 1, &model.answering())
+        .unwrap();
     let lm = &model.saved.config.lm;
     let mut exact = 0;
     for (a, t) in answers.iter().map(|a| &a[0]).zip(&targets) {
@@ -447,8 +462,6 @@ fn a_solve_stops_between_blocks_when_asked() {
     use std::sync::atomic::{AtomicUsize, Ordering};
     let dir = common::tempdir();
     let (_spec, robot, model) = quick_model(dir.path(), 4);
-    let device =
-        selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
     let qs = selfmodel::sim::trajectory::babbling(3000, &model.saved.ranges, 9);
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
@@ -464,7 +477,6 @@ fn a_solve_stops_between_blocks_when_asked() {
                 stop: &stop,
                 ..Answering::with(&lm)
             },
-            &device,
         )
         .unwrap_err();
     assert!(matches!(err, selfmodel::Error::Interrupted(_)), "{err}");
@@ -564,4 +576,95 @@ fn a_tolerance_outside_its_range_is_refused() {
     for bad in ["", "1", "1,2,3", "a,b", "0.001;0.01"] {
         assert!(cfg.clone().converging_to_text(bad).is_err(), "{bad}");
     }
+}
+
+/// Every solver answers through one trait: on the same targets of a 6-joint arm,
+/// Levenberg-Marquardt (random starts) and the learned model (its samples as starts) answer
+/// full poses exactly and inside the limits, the learned one in fewer iterations; damped least
+/// squares answers the positions and refuses a target with an orientation; each gives `k`
+/// answers a target, in target order, and stops between blocks when asked.
+#[test]
+fn every_solver_answers_through_the_one_trait() {
+    use selfmodel::ik::solve::solver::{DampedLeastSquares, IkSolver, LevenbergMarquardt};
+    let dir = common::tempdir();
+    let (_spec, robot, model) = quick_model(dir.path(), 6);
+    let ranges = model.saved.ranges.clone();
+    let qs = selfmodel::sim::trajectory::babbling(24, &ranges, 3);
+    let targets: Vec<Vec<PoseTarget>> =
+        qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
+    let lm = model.saved.config.lm.clone();
+    let how = Answering::with(&lm);
+    let lm_solver = LevenbergMarquardt::within(ranges.clone());
+    let dls = DampedLeastSquares {
+        cfg: selfmodel::ik::solve::damped_least_squares::DlsConfig::standard(),
+        ranges: ranges.clone(),
+    };
+    let solvers: [(&str, &dyn IkSolver); 2] = [("LM", &lm_solver), ("learned", &model)];
+    let mut iterations = Vec::new();
+    for (name, solver) in solvers {
+        let answers = solver.solve(&robot.chain, &targets, 2, &how).unwrap();
+        assert_eq!(answers.len(), targets.len(), "{name}");
+        assert!(answers.iter().all(|a| a.len() == 2), "{name}");
+        for (t, a) in targets.iter().zip(&answers) {
+            for s in a {
+                assert!(within(&s.joints, &ranges, 0.0), "{name}");
+                // The answer's own errors are those of the joints it gives.
+                let (p, r) = pose_error(&robot.chain, &s.joints, t);
+                assert!((p - s.position_error_m).abs() < 1e-9, "{name}");
+                assert!((r - s.rotation_error_rad).abs() < 1e-9, "{name}");
+            }
+        }
+        let exact = answers.iter().flatten().filter(|s| s.exact(&lm)).count();
+        assert!(exact >= 44, "{name}: {exact} of 48 exact");
+        iterations.push(
+            answers
+                .iter()
+                .flatten()
+                .map(|s| s.iterations)
+                .sum::<usize>(),
+        );
+    }
+    assert!(
+        iterations[1] < iterations[0],
+        "the learned starts took {} iterations, random starts {}",
+        iterations[1],
+        iterations[0]
+    );
+    // Damped least squares: positions only.
+    let err = dls.solve(&robot.chain, &targets, 1, &how).unwrap_err();
+    assert!(err.to_string().contains("positions"), "{err}");
+    let positions: Vec<Vec<PoseTarget>> = targets
+        .iter()
+        .map(|t| t.iter().map(|p| p.position_only()).collect())
+        .collect();
+    let answers = dls.solve(&robot.chain, &positions, 2, &how).unwrap();
+    let reached = answers
+        .iter()
+        .filter(|a| a.iter().any(|s| s.position_error_m <= dls.cfg.tolerance_m))
+        .count();
+    assert!(reached >= 20, "DLS reached {reached} of 24 positions");
+    for (t, a) in positions.iter().zip(&answers) {
+        for s in a {
+            let (p, _) = pose_error(&robot.chain, &s.joints, t);
+            assert!((p - s.position_error_m).abs() < 1e-9);
+        }
+    }
+    // Asked to stop: an interruption, whichever solver.
+    let stop = || true;
+    let stopped = Answering {
+        stop: &stop,
+        ..Answering::with(&lm)
+    };
+    let asked: [(&dyn IkSolver, &[Vec<PoseTarget>]); 3] = [
+        (&lm_solver, &targets),
+        (&dls, &positions),
+        (&model, &targets),
+    ];
+    for (solver, these) in asked {
+        let err = solver.solve(&robot.chain, these, 1, &stopped).unwrap_err();
+        assert!(matches!(err, selfmodel::Error::Interrupted(_)), "{err}");
+    }
+    // A full-pose model asked for positions alone says so (it cannot be conditioned on them).
+    let err = model.solve(&robot.chain, &positions, 1, &how).unwrap_err();
+    assert!(err.to_string().contains("no orientation"), "{err}");
 }

@@ -402,7 +402,7 @@ pub struct ExperimentArgs {
     /// of the preset's: none, sleep:US (waiting on a real arm) or spin:US (a CPU-bound
     /// simulator), comma-separated, e.g. `--latency none,spin:200`.
     #[arg(long, value_delimiter = ',', value_name = "LATENCY")]
-    pub latency: Option<Vec<selfmodel::ik::sampling_pass::Latency>>,
+    pub latency: Option<Vec<selfmodel::ik::paper::sampling_pass::Latency>>,
     /// table1 only: gather the rows the experiments wrote into their own folders under
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 
-use selfmodel::ik::pose::PoseTarget;
-use selfmodel::ik::pose_model::{PoseModel, target_columns, target_from_values};
+use selfmodel::ik::solve::learned::{LearnedIk, target_columns, target_from_values};
+use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
 use selfmodel::sim::robot::Robot;
 
 use crate::arrays::*;
@@ -15,9 +15,8 @@ use crate::calls::*;
 /// A learned IK model `ik train` saved, with the robot it was trained for.
 #[pyclass(name = "IkSolver", module = "selfmodel", frozen)]
 pub(crate) struct PyIkSolver {
-    model: PoseModel,
+    model: LearnedIk,
     robot: Robot,
-    device: burn::tensor::Device,
     /// The model's folder (its kept collision model).
     dir: PathBuf,
 }
@@ -32,11 +31,10 @@ impl PyIkSolver {
             py.allow_threads(|| {
                 let device =
                     selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-                let (model, robot) = PoseModel::load_with_robot(&model_dir, &device)?;
+                let (model, robot) = LearnedIk::load_with_robot(&model_dir, &device)?;
                 Ok::<_, selfmodel::Error>(PyIkSolver {
                     model,
                     robot,
-                    device,
                     dir: model_dir.clone(),
                 })
             })
@@ -81,7 +79,7 @@ impl PyIkSolver {
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         guarded(|| {
             let k = count(k, "k", 1, 1000)?;
-            let options = selfmodel::ik::collision::CollisionOptions {
+            let options = selfmodel::ik::solve::collision::CollisionOptions {
                 scene,
                 self_collision,
                 srdf,
@@ -115,13 +113,14 @@ impl PyIkSolver {
             let raised = std::sync::Mutex::new(None);
             let answers = py.allow_threads(|| {
                 let stop = || interrupted(&raised);
-                let how = selfmodel::ik::pose_model::Answering {
+                let how = selfmodel::ik::solve::levenberg_marquardt::Answering {
                     lm: &lm,
                     stop: &stop,
-                    avoid: check.as_ref().map(|c| c as &dyn selfmodel::ik::pose::Avoid),
+                    avoid: check
+                        .as_ref()
+                        .map(|c| c as &dyn selfmodel::ik::solve::levenberg_marquardt::Avoid),
                 };
-                self.model
-                    .solve_until(&self.robot.chain, &parsed, k, &how, &self.device)
+                self.model.solve_until(&self.robot.chain, &parsed, k, &how)
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
                 return Err(e);
@@ -182,11 +181,11 @@ impl PyIkSolver {
                 .map_err(|e| value_error(format!("target: {e}")))?;
             let mut a = py
                 .allow_threads(|| {
-                    self.model.solve(
+                    self.model.solve_until(
                         &self.robot.chain,
                         std::slice::from_ref(&row),
                         1,
-                        &self.device,
+                        &self.model.answering(),
                     )
                 })
                 .map_err(value_error)?;
@@ -203,11 +202,11 @@ impl PyIkSolver {
             let mut times: Vec<f64> = (0..repeats.max(1))
                 .map(|_| -> selfmodel::Result<f64> {
                     let t0 = std::time::Instant::now();
-                    let a = self.model.solve(
+                    let a = self.model.solve_until(
                         &self.robot.chain,
                         std::slice::from_ref(&row),
                         1,
-                        &self.device,
+                        &self.model.answering(),
                     )?;
                     std::hint::black_box(a);
                     Ok(t0.elapsed().as_secs_f64())

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::prelude::*;
 
-use selfmodel::ik::collision::CollisionCheck;
+use selfmodel::ik::solve::collision::CollisionCheck;
 use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::kinematics::JointGroup;
 use selfmodel::sim::robot::Robot;

@@ -4,7 +4,7 @@
 //! Gaussians frozen, Adam fits the origins' translations to k images of the changed arm at
 //! known joint angles. A link's change is the fitted translation's change along the link
 //! (mm). This is the EMSSL paper's first adaptation approach (learned link parameters,
-//! [`crate::ik::calibration`]) fed by a camera instead of measured tip positions.
+//! [`crate::ik::paper::calibration`]) fed by a camera instead of measured tip positions.
 
 use burn::module::{Module, Param};
 use burn::tensor::{Tensor, TensorData};

@@ -1,7 +1,7 @@
 //! Fitting the inverse MLP of [`crate::ik::mlp`] (position -> joints) through the shared
 //! training loop: the fit settings, the training sets, a fit for epochs or to convergence,
-//! prediction and test errors. Direct regression ([`crate::ik::drl`]), EMSSL
-//! ([`crate::ik::emssl`]) and DSL's inverse model all fit this way.
+//! prediction and test errors. Direct regression ([`crate::ik::paper::direct_regression`]), EMSSL
+//! ([`crate::ik::paper::emssl`]) and DSL's inverse model all fit this way.
 
 use burn::module::Module;
 use burn::tensor::{Device, Tensor, TensorData};

@@ -389,15 +389,15 @@ pub fn quick_pose_model(
     spec: &selfmodel::sim::robots::RobotSpec,
     robot: &selfmodel::sim::robot::Robot,
     dir: &std::path::Path,
-) -> selfmodel::ik::pose_model::PoseModel {
+) -> selfmodel::ik::solve::learned::LearnedIk {
     use selfmodel::core::preset::Preset;
-    let mut cfg = selfmodel::ik::pose_model::PoseModelConfig::quick();
+    let mut cfg = selfmodel::ik::solve::learned::LearnedIkConfig::quick();
     cfg.data.samples = 1200;
     cfg.data.train = 1100;
     cfg.flow.fit.epochs = 2;
     let device =
         selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu).unwrap();
-    selfmodel::ik::pose_model::train(spec, robot, &cfg, &dir.join("model"), &device).unwrap()
+    selfmodel::ik::solve::learned::train(spec, robot, &cfg, &dir.join("model"), &device).unwrap()
 }
 
 /// Run `args` of `binary`, send Ctrl-C (SIGINT) after `after` seconds, and return how long it

@@ -52,7 +52,7 @@ pub struct RunOptions {
     /// `--size`, `--view`).
     pub camera: CameraChoice,
     /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
-    pub latencies: Option<Vec<selfmodel::ik::sampling_pass::Latency>>,
+    pub latencies: Option<Vec<selfmodel::ik::paper::sampling_pass::Latency>>,
     /// `table1`'s models (registry names), instead of every one marked for Table I.
     pub models: Option<Vec<String>>,
     /// Self-models: the dtype the network trains in (`--precision`, f32 master weights).

@@ -11,7 +11,7 @@ use rand::rngs::StdRng;
 
 use selfmodel::core::error::Result;
 use selfmodel::core::timing::{Repeats, median_seconds};
-use selfmodel::ik::collision::CollisionCheck;
+use selfmodel::ik::solve::collision::CollisionCheck;
 use selfmodel::sim::collision::scene::Scene;
 use selfmodel::sim::robots::RobotSpec;
 

@@ -9,13 +9,12 @@
 
 use std::path::{Path, PathBuf};
 
-use burn::tensor::Device;
-
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::timing::{Repeats, median_seconds};
-use selfmodel::ik::collision::{CollisionCheck, Spheres};
-use selfmodel::ik::pose::{Avoid, PoseSolution, PoseTarget};
-use selfmodel::ik::pose_model::{Answering, PoseModel};
+use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
+use selfmodel::ik::solve::learned::LearnedIk;
+use selfmodel::ik::solve::levenberg_marquardt::Answering;
+use selfmodel::ik::solve::levenberg_marquardt::{Avoid, PoseSolution, PoseTarget};
 use selfmodel::sim::collision::scene::Scene;
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
@@ -170,7 +169,7 @@ fn free_targets(
     seed: u64,
 ) -> Result<Drawn> {
     let qs: Vec<Vec<f64>> =
-        selfmodel::ik::targets::kept_draws(ranges, seed, n, Some(check)).collect();
+        selfmodel::ik::solve::targets::kept_draws(ranges, seed, n, Some(check)).collect();
     selfmodel::core::interrupt::check(|| {
         "stopped drawing collision-free targets; nothing was kept".into()
     })?;
@@ -375,10 +374,9 @@ struct Solved {
 }
 
 fn solve_all(
-    model: &PoseModel,
+    model: &LearnedIk,
     robot: &Robot,
     targets: &[Vec<PoseTarget>],
-    device: &Device,
     avoid: Option<&dyn Avoid>,
     cfg: &CollisionIkConfig,
 ) -> Result<Solved> {
@@ -388,7 +386,7 @@ fn solve_all(
         stop: &selfmodel::core::interrupt::requested,
         avoid,
     };
-    let solve = || model.solve_until(&robot.chain, targets, 1, &how, device);
+    let solve = || model.solve_until(&robot.chain, targets, 1, &how);
     let answers: Vec<PoseSolution> = solve()?.into_iter().flatten().collect();
     let repeats = Repeats {
         warmup: 0,
@@ -488,7 +486,7 @@ pub fn run(
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite, refuse_writing_over};
     check_out(out, OutKind::Folder)?;
     let device = selfmodel::core::device::select(selfmodel::core::device::DeviceChoice::Cpu)?;
-    let (model, robot) = PoseModel::load_with_robot(model_dir, &device)?;
+    let (model, robot) = LearnedIk::load_with_robot(model_dir, &device)?;
     let spec = &model.saved.robot;
     if model.position_only() {
         return Err(Error::Config(format!(
@@ -504,7 +502,7 @@ pub fn run(
     refuse_overwrite(out, &inputs, Some(model_dir))?;
     refuse_writing_over(out, WRITTEN, &inputs)?;
     let fresh = !out.exists();
-    let result = measure(&model, &robot, model_dir, scene, cfg, python, out, &device);
+    let result = measure(&model, &robot, model_dir, scene, cfg, python, out);
     if result.is_err() {
         // Nothing of a run that failed or was stopped is left.
         for name in WRITTEN {
@@ -534,16 +532,15 @@ const WRITTEN: &[&str] = &[
 /// [`run`] once its output is checked.
 #[allow(clippy::too_many_arguments)]
 fn measure(
-    model: &PoseModel,
+    model: &LearnedIk,
     robot: &Robot,
     model_dir: &Path,
     scene: Option<&Path>,
     cfg: &CollisionIkConfig,
     python: Option<&Path>,
     out: &Path,
-    device: &Device,
 ) -> Result<Vec<CollisionIkRow>> {
-    let (robot, device) = (robot.clone(), device.clone());
+    let robot = robot.clone();
     let spec = &model.saved.robot;
     let obstacles = scene.map(Scene::read).transpose()?;
     let n_obstacles = obstacles.as_ref().map_or(0, |s| s.obstacles.len());
@@ -551,8 +548,8 @@ fn measure(
     let check = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?;
     let (targets, qs) = free_targets(&robot, &model.saved.ranges, &check, cfg.targets, cfg.seed)?;
     let lm = &model.saved.config.lm;
-    let checked = solve_all(model, &robot, &targets, &device, Some(&check), cfg)?;
-    let unchecked = solve_all(model, &robot, &targets, &device, None, cfg)?;
+    let checked = solve_all(model, &robot, &targets, Some(&check), cfg)?;
+    let unchecked = solve_all(model, &robot, &targets, None, cfg)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     selfmodel::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
     let exact_free: Vec<&PoseSolution> = checked.answers.iter().filter(|a| a.exact(lm)).collect();

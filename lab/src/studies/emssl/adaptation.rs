@@ -9,7 +9,7 @@
 //!
 //! 1. **learned link parameters**: a small sample of the changed arm's (joints, position)
 //!    pairs fits its link parameters through a differentiable forward model
-//!    ([`selfmodel::ik::calibration`]); EMSSL then runs on that updated model, and the changed
+//!    ([`selfmodel::ik::paper::calibration`]); EMSSL then runs on that updated model, and the changed
 //!    arm is only ever touched for the sample;
 //! 2. **the arm itself**: EMSSL runs with the changed arm as its forward model (no link
 //!    parameters), so every sampling pass moves the real arm once per desired position.
@@ -33,13 +33,11 @@ use selfmodel::core::atomic_file::write_json;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::preset::Preset;
-use selfmodel::ik::calibration::{CalibrationConfig, calibrate};
 use selfmodel::ik::data::{DistanceErrors, IkData, distances};
+use selfmodel::ik::learning::{FitConfig, test_errors};
 use selfmodel::ik::mlp::{InverseModelConfig, Mlp};
-use selfmodel::ik::{
-    emssl::{EmsslConfig, EmsslIteration, emssl, emssl_from},
-    learning::{FitConfig, test_errors},
-};
+use selfmodel::ik::paper::calibration::{CalibrationConfig, calibrate};
+use selfmodel::ik::paper::emssl::{EmsslConfig, EmsslIteration, emssl, emssl_from};
 use selfmodel::sim::arm_change::ArmChange;
 use selfmodel::sim::kinematics::KinematicChain;
 use selfmodel::sim::robot::Robot;

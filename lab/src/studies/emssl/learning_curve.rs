@@ -10,7 +10,7 @@ use selfmodel::core::atomic_file::write_json;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::ik::data::IkData;
-use selfmodel::ik::emssl::{EmsslConfig, EmsslIteration, StopRule, emssl};
+use selfmodel::ik::paper::emssl::{EmsslConfig, EmsslIteration, StopRule, emssl};
 use selfmodel::sim::robot::Robot;
 
 /// Table II's config with `iterations` EMSSL iterations, no stopping and no polishing

@@ -1,6 +1,6 @@
 //! Table III and Figure 7 of the EMSSL paper (section IV-B): how long one EMSSL sampling pass
 //! takes over the desired training positions (70,000 in the paper) under the four strategies
-//! of [`selfmodel::ik::sampling_pass`], and against the inference batch size (Figure 7a) and the
+//! of [`selfmodel::ik::paper::sampling_pass`], and against the inference batch size (Figure 7a) and the
 //! forward model's thread count (Figure 7b).
 //!
 //! Every time is the median of `repeats` full passes over the same targets after a warm-up
@@ -24,7 +24,7 @@ use selfmodel::core::preset::Preset;
 use selfmodel::eval::compute_peak::{CpuPeak, matmul_gflops};
 use selfmodel::ik::data::{IkData, IkDataConfig};
 use selfmodel::ik::mlp::{InverseModelConfig, Mlp};
-use selfmodel::ik::sampling_pass::{
+use selfmodel::ik::paper::sampling_pass::{
     ForwardModel, Latency, SamplingPass, Strategy, Workers, sampling_pass,
 };
 use selfmodel::sim::robot::Robot;

@@ -27,8 +27,8 @@ use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::preset::Preset;
 use selfmodel::ik::data::JointOutput;
-use selfmodel::ik::dsl::{DistalConfig, DistalForward};
-use selfmodel::ik::method::IkMethod;
+use selfmodel::ik::paper::distal_learning::{DistalConfig, DistalForward};
+use selfmodel::ik::paper::method::IkMethod;
 use selfmodel::sim::robot::Robot;
 use selfmodel::train::config::TrainConfig;
 
@@ -85,7 +85,7 @@ impl Preset for SeedsConfig {
                 hidden: vec![64, 32],
                 wrapped_ranges_deg: Vec::new(),
                 prediction_sample_rows: 0,
-                emssl: selfmodel::ik::emssl::EmsslConfig {
+                emssl: selfmodel::ik::paper::emssl::EmsslConfig {
                     max_iterations: 6,
                     ..t.emssl.clone()
                 },
@@ -213,7 +213,7 @@ pub fn run(
     write_json(&dir.join("config.json"), cfg)?;
     let dof = robot.dof();
     let tables: Vec<IkComparisonConfig> = cfg.seeds.iter().map(|&s| seeded(cfg, s)).collect();
-    let quiet = |_: &[IkRow], _: &[selfmodel::ik::method::ValidationRow]| Ok(());
+    let quiet = |_: &[IkRow], _: &[selfmodel::ik::paper::method::ValidationRow]| Ok(());
     let mut runs: Vec<RangeRun> = Vec::new();
     let seed_dirs: Vec<PathBuf> = (cfg.seeds.iter())
         .map(|seed| dir.join("runs").join(format!("seed_{seed}")))

@@ -20,11 +20,9 @@ use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::preset::Preset;
 use selfmodel::ik::data::{IkData, IkDataConfig, JointOutput};
+use selfmodel::ik::learning::FitConfig;
 use selfmodel::ik::mlp::InverseModelConfig;
-use selfmodel::ik::{
-    emssl::{EmsslConfig, LrPlateau, emssl},
-    learning::FitConfig,
-};
+use selfmodel::ik::paper::emssl::{EmsslConfig, LrPlateau, emssl};
 use selfmodel::sim::robot::Robot;
 
 /// One setting of the study: what changed from the baseline, and the configs it runs.

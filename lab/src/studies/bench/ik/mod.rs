@@ -5,7 +5,7 @@
 //! curve), the family of answers for k samples a target, and the learned model alone beside
 //! IKFlow's published Panda errors.
 //!
-//! Ours: the saved model's flow samples refined by Levenberg-Marquardt ([`PoseModel::solve`]),
+//! Ours: the saved model's flow samples refined by Levenberg-Marquardt ([`LearnedIk::solve`]),
 //! the budget being the random starts allowed where the samples stall; the same solver from
 //! random starts only (no model), the model's slow reference. The references come from
 //! `scripts/ik_reference.py` (the Robotics Toolbox's compiled `ik_LM` and TRAC-IK through
@@ -22,9 +22,12 @@ use burn::tensor::Device;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::spread::format_significant;
 use selfmodel::core::timing::{Repeats, median, median_seconds};
-use selfmodel::ik::pose::{LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch};
-use selfmodel::ik::pose_model::{Answering, PoseModel, SolveStats};
-use selfmodel::ik::targets::{random_targets, targets_csv};
+use selfmodel::ik::solve::learned::{LearnedIk, SolveStats};
+use selfmodel::ik::solve::levenberg_marquardt::Answering;
+use selfmodel::ik::solve::levenberg_marquardt::{
+    LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch,
+};
+use selfmodel::ik::solve::targets::{random_targets, targets_csv};
 
 use references::references;
 use report::rank;
@@ -37,7 +40,7 @@ pub use report::{draw_figures, summary_rows, write_report};
 pub const IKFLOW_PANDA_MM_DEG: (f64, f64) = (10.6033, 4.60678);
 
 /// The common precision every solver is ranked at (mm, degrees): our default convergence
-/// tolerance (`ik::pose::CONVERGENCE_M`, `CONVERGENCE_DEG`), which each reference reaches at
+/// tolerance (`ik::solve::levenberg_marquardt::CONVERGENCE_M`, `CONVERGENCE_DEG`), which each reference reaches at
 /// its tightest setting. An answer counts at it when its pose is within both and every joint
 /// inside its limits.
 pub const EQUAL_PRECISION_MM_DEG: (f64, f64) = (1e-4, 1e-4);
@@ -263,7 +266,7 @@ pub fn run(
     device: &Device,
 ) -> Result<Vec<BenchIkRow>> {
     selfmodel::core::atomic_file::refuse_overwrite(out, &[], Some(model_dir))?;
-    let (model, robot) = PoseModel::load_with_robot(model_dir, device)?;
+    let (model, robot) = LearnedIk::load_with_robot(model_dir, device)?;
     if model.position_only() {
         return Err(Error::Config(
             "bench_ik measures full-pose IK: train the model without --position-only".into(),
@@ -325,7 +328,7 @@ fn copy_training_curve(model_dir: &Path, out: &Path) -> Result<()> {
 
 /// Our rows: the model and the solver it feeds, on the sitting's targets.
 struct Ours<'a> {
-    model: &'a PoseModel,
+    model: &'a LearnedIk,
     chain: &'a selfmodel::sim::kinematics::KinematicChain,
     targets: &'a [Vec<PoseTarget>],
     device: &'a Device,
@@ -408,8 +411,7 @@ impl Ours<'_> {
             };
             let solve = || {
                 let how = Answering::with(&lm);
-                self.model
-                    .solve_until(self.chain, self.targets, 1, &how, self.device)
+                self.model.solve_until(self.chain, self.targets, 1, &how)
             };
             let (s, answers) = timed(solve);
             let is_standard = starts == standard.random_starts;
@@ -449,7 +451,10 @@ impl Ours<'_> {
     /// The family: k samples a target, each refined.
     fn family(&self, sitting: &mut Sitting) -> Result<()> {
         let k = sitting.cfg.k;
-        let (s, answers) = timed(|| self.model.solve(self.chain, self.targets, k, self.device));
+        let (s, answers) = timed(|| {
+            self.model
+                .solve_until(self.chain, self.targets, k, &self.model.answering())
+        });
         sitting.push(
             RowLabel {
                 solver: "selfmodel flow + LM",
@@ -510,8 +515,10 @@ mod tests {
     #[test]
     fn the_common_precision_is_the_default_convergence_tolerance() {
         let (mm, deg) = EQUAL_PRECISION_MM_DEG;
-        assert!((mm - 1e3 * selfmodel::ik::pose::CONVERGENCE_M).abs() < 1e-15);
-        assert!((deg - selfmodel::ik::pose::CONVERGENCE_DEG).abs() < 1e-15);
+        assert!(
+            (mm - 1e3 * selfmodel::ik::solve::levenberg_marquardt::CONVERGENCE_M).abs() < 1e-15
+        );
+        assert!((deg - selfmodel::ik::solve::levenberg_marquardt::CONVERGENCE_DEG).abs() < 1e-15);
         // An answer just inside counts at it; one just outside (or outside the limits) does not.
         let lm = at_equal_precision(&LmConfig::standard());
         let answer = |mm: f64| PoseSolution {

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::spread::format_significant;
-use selfmodel::ik::pose_model::PoseModel;
+use selfmodel::ik::solve::learned::LearnedIk;
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
 
@@ -15,7 +15,7 @@ use super::{BenchIkRow, EQUAL_PRECISION_MM_DEG, Sitting};
 /// as we have threads and on one; skipped, saying why, where they cannot run.
 pub(super) fn references(
     sitting: &mut Sitting,
-    model: &PoseModel,
+    model: &LearnedIk,
     robot: &Robot,
     targets_file: &Path,
     out: &Path,

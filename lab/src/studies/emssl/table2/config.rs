@@ -2,16 +2,19 @@
 
 use selfmodel::core::error::Result;
 use selfmodel::core::preset::Preset;
-use selfmodel::ik::cgan::{CganMethod, GanConfig};
 use selfmodel::ik::data::{IkDataConfig, JointOutput};
-use selfmodel::ik::dls::{DlsConfig, DlsFromHome, Restarts};
-use selfmodel::ik::drl::DrlMethod;
-use selfmodel::ik::dsl::{DistalConfig, DslMethod};
-use selfmodel::ik::emssl::EmsslMethod;
-use selfmodel::ik::flow::{FlowConfig, FlowMethod};
-use selfmodel::ik::method::IkMethod;
+use selfmodel::ik::flow::FlowConfig;
+use selfmodel::ik::learning::FitConfig;
 use selfmodel::ik::mlp::InverseModelConfig;
-use selfmodel::ik::{emssl::EmsslConfig, learning::FitConfig};
+use selfmodel::ik::paper::cgan::{CganMethod, GanConfig};
+use selfmodel::ik::paper::direct_regression::DrlMethod;
+use selfmodel::ik::paper::distal_learning::{DistalConfig, DslMethod};
+use selfmodel::ik::paper::dls_from_home::DlsFromHome;
+use selfmodel::ik::paper::emssl::EmsslConfig;
+use selfmodel::ik::paper::emssl::EmsslMethod;
+use selfmodel::ik::paper::flow_method::FlowMethod;
+use selfmodel::ik::paper::method::IkMethod;
+use selfmodel::ik::solve::damped_least_squares::{DlsConfig, Restarts};
 use selfmodel::train::convergence::Convergence;
 
 /// The presets of the inverse-kinematics experiments.

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use selfmodel::core::error::Result;
-use selfmodel::ik::emssl::EmsslIteration;
+use selfmodel::ik::paper::emssl::EmsslIteration;
 
 /// A row of an EMSSL learning curve (Figure 6), flattened for CSV.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use selfmodel::core::error::Result;
-use selfmodel::ik::method::ValidationRow;
+use selfmodel::ik::paper::method::ValidationRow;
 
 use super::predictions::{answers_file, read_reached};
 

@@ -36,7 +36,7 @@ use std::path::Path;
 use selfmodel::core::atomic_file::write_json;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
-use selfmodel::ik::method::ValidationRow;
+use selfmodel::ik::paper::method::ValidationRow;
 use selfmodel::sim::robot::Robot;
 
 mod config;

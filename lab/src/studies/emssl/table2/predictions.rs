@@ -8,7 +8,7 @@ use nalgebra::Point3;
 
 use selfmodel::core::atomic_file::write_atomic;
 use selfmodel::core::error::{Error, Result};
-use selfmodel::ik::method::file_name;
+use selfmodel::ik::paper::method::file_name;
 
 /// The columns of a predictions CSV that are not joints.
 pub(super) const PREDICTION_COLUMNS: [&str; 6] = [
@@ -32,7 +32,7 @@ pub fn write_predictions(
 ) -> Result<()> {
     write_atomic(path, |w| {
         let io = |e| Error::io(path, e);
-        let qs = selfmodel::ik::pose_model::joint_columns(names, &PREDICTION_COLUMNS);
+        let qs = selfmodel::ik::solve::learned::joint_columns(names, &PREDICTION_COLUMNS);
         writeln!(
             w,
             "target_x,target_y,target_z,{},reached_x,reached_y,reached_z",

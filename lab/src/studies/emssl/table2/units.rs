@@ -10,12 +10,12 @@ use selfmodel::core::atomic_file::write_json;
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::ik::data::{DistanceErrors, IkData, IkDataConfig, distances};
-use selfmodel::ik::dls::{IkSolution, solve_with_restarts, solver_detail};
-use selfmodel::ik::emssl::EmsslIteration;
 use selfmodel::ik::flow::{Draws, FlowIk, sample};
-use selfmodel::ik::method::{
+use selfmodel::ik::paper::emssl::EmsslIteration;
+use selfmodel::ik::paper::method::{
     Answers, IkMethod, IkTask, MethodOutput, ValidationRow, file_name, timed,
 };
+use selfmodel::ik::solve::damped_least_squares::{IkSolution, solve_with_restarts, solver_detail};
 use selfmodel::sim::robot::Robot;
 
 use super::{

@@ -33,7 +33,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rayon::prelude::*;
 
-use crate::ik::dls::{keep_in, wraps};
+use crate::ik::solve::damped_least_squares::{keep_in, wraps};
 use crate::sim::kinematics::{KinematicChain, TipPath};
 
 /// The pose of one tip an inverse-kinematics target asks for: a position (m) and, for a
@@ -237,6 +237,27 @@ pub trait Avoid: Sync {
     fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> f64;
     /// The contacts' energy at `q` alone (a trial step's).
     fn energy(&self, q: &[f64]) -> f64;
+}
+
+/// How a batch of targets is answered: the solver's settings, when to stop, what to avoid.
+#[derive(Clone, Copy)]
+pub struct Answering<'a> {
+    pub lm: &'a LmConfig,
+    /// Asked before each block of targets: `true` ends the batch.
+    pub stop: &'a dyn Fn() -> bool,
+    /// A collision check an answer must pass.
+    pub avoid: Option<&'a dyn Avoid>,
+}
+
+impl<'a> Answering<'a> {
+    /// `lm`'s settings, stopped by Ctrl-C ([`crate::core::interrupt`]), nothing avoided.
+    pub fn with(lm: &'a LmConfig) -> Self {
+        Answering {
+            lm,
+            stop: &crate::core::interrupt::requested,
+            avoid: None,
+        }
+    }
 }
 
 /// Iterations without the error halving after which a start is given up.
@@ -463,7 +484,7 @@ pub fn solve(
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
         // A start with a collision check can take tens of milliseconds on a humanoid: Ctrl-C
-        // ends the search (the caller throws the answer away: `PoseModel::solve_until`).
+        // ends the search (the caller throws the answer away: `LearnedIk::solve_until`).
         if avoid.is_some() && crate::core::interrupt::requested() {
             break;
         }

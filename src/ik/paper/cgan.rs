@@ -486,17 +486,20 @@ pub struct CganMethod {
     pub output: JointOutput,
 }
 
-impl crate::ik::method::IkMethod for CganMethod {
+impl crate::ik::paper::method::IkMethod for CganMethod {
     fn name(&self) -> String {
         self.name.clone()
     }
 
     fn settings(&self) -> serde_json::Value {
-        crate::ik::method::settings_json(&(&self.gan, self.output))
+        crate::ik::paper::method::settings_json(&(&self.gan, self.output))
     }
 
-    fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
-        use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
+    fn run(
+        &self,
+        task: &crate::ik::paper::method::IkTask,
+    ) -> Result<crate::ik::paper::method::MethodOutput> {
+        use crate::ik::paper::method::{Answers, MethodOutput, ValidationRow, timed};
         let gan = &self.gan;
         let t = std::time::Instant::now();
         let gan = &GanConfig {

@@ -2,9 +2,9 @@
 //! targets file `ik targets` writes and `ik solve`, `bench_ik` and the reference script read:
 //! `x,y,z,qw,qx,qy,qz` (each tip's `A.x,...` for several), then the joints that reach them.
 
-use crate::ik::collision::CollisionCheck;
-use crate::ik::pose::PoseTarget;
-use crate::ik::pose_model::target_columns;
+use crate::ik::solve::collision::CollisionCheck;
+use crate::ik::solve::learned::target_columns;
+use crate::ik::solve::levenberg_marquardt::PoseTarget;
 use crate::sim::robot::Robot;
 
 /// Draws a kept joint vector may take: past them the scene is said to leave no room.
@@ -72,7 +72,7 @@ pub fn write_targets_csv<Q: AsRef<[f64]>>(
     let columns = target_columns(tips, false);
     let taken: Vec<&str> = columns.iter().map(String::as_str).collect();
     let mut header = columns.join(",");
-    for c in crate::ik::pose_model::joint_columns(names, &taken) {
+    for c in crate::ik::solve::learned::joint_columns(names, &taken) {
         header += &format!(",{c}");
     }
     writeln!(w, "{header}")?;

@@ -6,58 +6,32 @@ use burn::tensor::Device;
 use crate::core::error::{Error, Result};
 use crate::core::spread::Spread;
 use crate::ik::flow::{Draws, sample_rows, sample_rows_from};
-use crate::ik::pose::{Avoid, LmConfig, PoseSolution, PoseTarget, solve};
+use crate::ik::solve::levenberg_marquardt::{
+    Answering, Avoid, LmConfig, PoseSolution, PoseTarget, solve,
+};
 use crate::sim::kinematics::KinematicChain;
 
-use super::PoseModel;
+use super::LearnedIk;
 use super::conditions::condition_rows;
-
-/// How a batch of targets is answered: the solver's settings, when to stop, what to avoid.
-#[derive(Clone, Copy)]
-pub struct Answering<'a> {
-    pub lm: &'a LmConfig,
-    /// Asked before each block of targets: `true` ends the batch.
-    pub stop: &'a dyn Fn() -> bool,
-    /// A collision check an answer must pass.
-    pub avoid: Option<&'a dyn Avoid>,
-}
-
-impl<'a> Answering<'a> {
-    /// `lm`'s settings, stopped by Ctrl-C ([`crate::core::interrupt`]), nothing avoided.
-    pub fn with(lm: &'a LmConfig) -> Self {
-        Answering {
-            lm,
-            stop: &crate::core::interrupt::requested,
-            avoid: None,
-        }
-    }
-}
 
 /// The flow samples this many rows a batch (a block of targets between Ctrl-C checks).
 const FLOW_BATCH: usize = 1024;
 
-impl PoseModel {
-    /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
-    /// (from random starts where it stalls), in target order. Ctrl-C (the command line's
-    /// [`crate::core::interrupt`]) ends it between blocks of targets with
-    /// [`Error::Interrupted`].
-    pub fn solve(
-        &self,
-        chain: &KinematicChain,
-        targets: &[Vec<PoseTarget>],
-        k: usize,
-        device: &Device,
-    ) -> Result<Vec<Vec<PoseSolution>>> {
-        let how = Answering::with(&self.saved.config.lm);
-        self.solve_until(chain, targets, k, &how, device)
+impl LearnedIk {
+    /// How it answers unless told otherwise: its own Levenberg-Marquardt settings (the saved
+    /// config's), stopped by Ctrl-C ([`crate::core::interrupt`]), nothing avoided.
+    pub fn answering(&self) -> Answering<'_> {
+        Answering::with(&self.saved.config.lm)
     }
 
-    /// [`Self::solve`] answered as `how` says: with its solver settings (a budget of random
+    /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
+    /// (from random starts where it stalls), in target order, on the device it was loaded or
+    /// trained on, answered as `how` says ([`Self::answering`]: its own): with its solver settings (a budget of random
     /// starts, tolerances), asking `how.stop` on the calling thread before each block of
     /// targets (a few thousand answers, well under a second: `true` ends it with
     /// [`Error::Interrupted`]; Python passes its own signal check), and where `how.avoid` is
     /// given (a collision check) counting an answer only where it accepts it
-    /// ([`crate::ik::pose::solve`]). The answers are those of one pass over all targets: each
+    /// ([`crate::ik::solve::levenberg_marquardt::solve`]). The answers are those of one pass over all targets: each
     /// block samples the flow with the seeds a single pass would use.
     pub fn solve_until(
         &self,
@@ -65,9 +39,10 @@ impl PoseModel {
         targets: &[Vec<PoseTarget>],
         k: usize,
         how: &Answering,
-        device: &Device,
     ) -> Result<Vec<Vec<PoseSolution>>> {
         use rayon::prelude::*;
+        self.check_targets(targets)?;
+        let device = &self.device;
         let Answering {
             lm: cfg,
             stop,
@@ -243,6 +218,34 @@ impl PoseModel {
         )
         .pop()
         .unwrap_or_default()
+    }
+
+    /// Refuse targets this model cannot be conditioned on: one pose per tip it was trained
+    /// for, each with an orientation unless the model is position-only.
+    fn check_targets(&self, targets: &[Vec<PoseTarget>]) -> Result<()> {
+        let tips = self.tips().len().max(1);
+        if let Some((i, t)) = targets.iter().enumerate().find(|(_, t)| t.len() != tips) {
+            return Err(Error::Config(format!(
+                "target {i} gives {} poses; this model answers {tips} (one a tip: {})",
+                t.len(),
+                self.tips().join(", ")
+            )));
+        }
+        let full = !self.saved.config.position_only;
+        if let Some(i) = targets
+            .iter()
+            .position(|t| full && t.iter().any(|p| p.orientation.is_none()))
+        {
+            return Err(Error::Config(format!(
+                "target {i} has no orientation, and this model answers full poses: give each tip's orientation, or train a position-only model"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Where the flow samples.
+    pub fn device(&self) -> &Device {
+        &self.device
     }
 
     pub fn position_only(&self) -> bool {

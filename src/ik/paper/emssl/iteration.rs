@@ -1,5 +1,5 @@
 //! One EMSSL iteration's record (a point of the learning curve, Figure 6): what the algorithm
-//! ([`crate::ik::emssl`]) writes and Table II's methods report ([`crate::ik::method`]).
+//! ([`crate::ik::paper::emssl`]) writes and Table II's methods report ([`crate::ik::paper::method`]).
 
 use crate::ik::data::DistanceErrors;
 

@@ -15,21 +15,24 @@ pub struct EmsslMethod {
     pub emssl: EmsslConfig,
 }
 
-impl crate::ik::method::IkMethod for EmsslMethod {
+impl crate::ik::paper::method::IkMethod for EmsslMethod {
     fn name(&self) -> String {
         self.name.clone()
     }
 
     fn settings(&self) -> serde_json::Value {
-        crate::ik::method::settings_json(&(&self.model, &self.fit, &self.emssl))
+        crate::ik::paper::method::settings_json(&(&self.model, &self.fit, &self.emssl))
     }
 
-    fn required(&self, task: &crate::ik::method::IkTask) -> Vec<std::path::PathBuf> {
+    fn required(&self, task: &crate::ik::paper::method::IkTask) -> Vec<std::path::PathBuf> {
         vec![task.predictions_path(&self.name)]
     }
 
-    fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
-        use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
+    fn run(
+        &self,
+        task: &crate::ik::paper::method::IkTask,
+    ) -> Result<crate::ik::paper::method::MethodOutput> {
+        use crate::ik::paper::method::{Answers, MethodOutput, ValidationRow, timed};
         let t = std::time::Instant::now();
         let checkpoint = task.file(&format!("{} checkpoint", self.name), "");
         let (model, curve) = emssl(

@@ -16,12 +16,12 @@ use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
 use super::conditions::condition_width;
-use super::{PoseModel, PoseModelConfig};
+use super::{LearnedIk, LearnedIkConfig};
 
 /// What `model.json` holds.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SavedModel {
-    pub config: PoseModelConfig,
+    pub config: LearnedIkConfig,
     pub robot: RobotSpec,
     /// [`fingerprint`] of the robot's chain: a model answers only for the robot it learned.
     pub robot_fingerprint: String,
@@ -155,7 +155,7 @@ impl SavedModel {
     /// What `model.json` will say of a model of `chain` (as `spec` names it) trained with
     /// `cfg` on `data`, answering for `tips`; the weights' hash is set when they are written.
     pub(super) fn describe(
-        cfg: &PoseModelConfig,
+        cfg: &LearnedIkConfig,
         spec: &RobotSpec,
         chain: &KinematicChain,
         tips: Vec<String>,
@@ -201,7 +201,7 @@ pub(super) fn save_model(
     Ok(saved)
 }
 
-impl PoseModel {
+impl LearnedIk {
     /// Load a saved model from `dir`.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let json = dir.join("model.json");
@@ -262,7 +262,12 @@ impl PoseModel {
             ranges: saved.ranges.clone(),
             position_bounds: saved.position_bounds,
         };
-        Ok(PoseModel { saved, flow, data })
+        Ok(LearnedIk {
+            saved,
+            flow,
+            data,
+            device: device.clone(),
+        })
     }
 
     /// [`Self::load`] with the robot description the model names, refused unless it is the

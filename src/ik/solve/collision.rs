@@ -8,7 +8,7 @@ use std::path::Path;
 use nalgebra::{DMatrix, DVector, Matrix6xX, Point3};
 
 use crate::core::error::{Error, Result};
-use crate::ik::pose::Avoid;
+use crate::ik::solve::levenberg_marquardt::Avoid;
 use crate::sim::collision::cache;
 use crate::sim::collision::contacts::Placement;
 use crate::sim::collision::model::CollisionModel;
@@ -59,7 +59,7 @@ pub enum Spheres<'a> {
 /// geometry to check:
 ///
 /// ```
-/// use selfmodel::ik::collision::CollisionOptions;
+/// use selfmodel::ik::solve::collision::CollisionOptions;
 /// use selfmodel::{BuiltinRobot, RobotSpec};
 ///
 /// let ur5 = RobotSpec::Builtin(BuiltinRobot::Ur5);

@@ -2,7 +2,7 @@
 //! the training positions' bounds, then the unit quaternion with `w >= 0`), and their width.
 
 use crate::ik::data::IkData;
-use crate::ik::pose::PoseTarget;
+use crate::ik::solve::levenberg_marquardt::PoseTarget;
 
 /// The condition rows of `targets` (for each tip, its position normalised, then its
 /// quaternion with `w >= 0`).

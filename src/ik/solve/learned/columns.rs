@@ -6,7 +6,7 @@ use std::path::Path;
 use nalgebra::Point3;
 
 use crate::core::error::{Error, Result};
-use crate::ik::pose::PoseTarget;
+use crate::ik::solve::levenberg_marquardt::PoseTarget;
 
 /// The CSV columns of a joint vector: the joints' names, or `q1..qN` where two share a name
 /// or a name is one of `taken` (the file's other columns).

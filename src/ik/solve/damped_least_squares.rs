@@ -252,39 +252,3 @@ pub fn solver_detail(
         restarted.map_or(String::new(), |n| format!(", {n} targets restarted"))
     )
 }
-
-/// DLS from the home pose (all joints 0) as a Table II method.
-pub struct DlsFromHome {
-    pub cfg: DlsConfig,
-}
-
-impl crate::ik::method::IkMethod for DlsFromHome {
-    fn name(&self) -> String {
-        "DLS from home".into()
-    }
-
-    fn settings(&self) -> serde_json::Value {
-        crate::ik::method::settings_json(&self.cfg)
-    }
-
-    fn run(
-        &self,
-        task: &crate::ik::method::IkTask,
-    ) -> crate::Result<crate::ik::method::MethodOutput> {
-        use crate::ik::method::{Answers, MethodOutput, timed};
-        let dof = task.chain.dof();
-        let ranges = task.data.ranges.clone();
-        let home = vec![vec![0.0; dof]; task.targets.len()];
-        let mut solutions = Vec::new();
-        let s = timed(&mut || {
-            solutions = solve_batch(task.chain, task.targets, &home, &ranges, &self.cfg)
-        });
-        let mut a = Answers::new("DLS from home", Vec::new(), 0.0, s);
-        a.detail = solver_detail(&solutions, &self.cfg, None);
-        a.joints = solutions.into_iter().map(|x| x.joints).collect();
-        Ok(MethodOutput {
-            answers: vec![a],
-            ..Default::default()
-        })
-    }
-}

@@ -57,17 +57,20 @@ pub struct DrlMethod {
     pub fixed_epochs: usize,
 }
 
-impl crate::ik::method::IkMethod for DrlMethod {
+impl crate::ik::paper::method::IkMethod for DrlMethod {
     fn name(&self) -> String {
         self.name.clone()
     }
 
     fn settings(&self) -> serde_json::Value {
-        crate::ik::method::settings_json(&(&self.model, &self.fit))
+        crate::ik::paper::method::settings_json(&(&self.model, &self.fit))
     }
 
-    fn run(&self, task: &crate::ik::method::IkTask) -> Result<crate::ik::method::MethodOutput> {
-        use crate::ik::method::{Answers, MethodOutput, ValidationRow, timed};
+    fn run(
+        &self,
+        task: &crate::ik::paper::method::IkTask,
+    ) -> Result<crate::ik::paper::method::MethodOutput> {
+        use crate::ik::paper::method::{Answers, MethodOutput, ValidationRow, timed};
         let t = std::time::Instant::now();
         let fit = task.checkpointed(&self.name, self.settings(), &self.fit);
         let (model, log) = drl(task.chain, task.data, &self.model, &fit, task.device)?;

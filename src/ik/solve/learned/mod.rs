@@ -1,7 +1,7 @@
 //! A learned full-pose IK model people can keep and use: a conditional flow (IKFlow-style,
 //! [`crate::ik::flow`]) conditioned on the target's position and orientation, trained on joint
 //! samples drawn within the robot's limits, saved with the robot's fingerprint, joint names
-//! and limits; answers refined to exact by Levenberg-Marquardt ([`crate::ik::pose`]).
+//! and limits; answers refined to exact by Levenberg-Marquardt ([`crate::ik::solve::levenberg_marquardt`]).
 //!
 //! A saved model is a folder: `model.bpk` (the flow's weights), `model.json` ([`SavedModel`]:
 //! the config, the robot as given and its fingerprint, joint names, ranges, the position
@@ -18,9 +18,9 @@ mod training;
 use crate::core::preset::Preset;
 use crate::ik::data::{IkData, IkDataConfig};
 use crate::ik::flow::{FlowConfig, FlowIk};
-use crate::ik::pose::LmConfig;
+use crate::ik::solve::levenberg_marquardt::LmConfig;
 
-pub use answer::{Answering, SolveStats, distinct};
+pub use answer::{SolveStats, distinct};
 pub use columns::{
     MAX_TARGET_COORDINATE, joint_columns, read_targets, target_columns, target_from_values,
 };
@@ -29,7 +29,7 @@ pub use training::{WRITTEN, train};
 
 /// How a pose model is trained and answers.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PoseModelConfig {
+pub struct LearnedIkConfig {
     pub preset: String,
     /// Joint samples (drawn within the limits, narrowed to +-`range_deg`).
     pub data: IkDataConfig,
@@ -46,9 +46,9 @@ pub struct PoseModelConfig {
 /// What the training samples keep clear of: the robot itself (always) and a scene, at a
 /// margin, with the pairs of an SRDF (else the one beside the URDF, else computed) and a
 /// user's spheres (else fitted), as `ik solve`'s collision options name them.
-pub type TrainingCollisions = crate::ik::collision::CollisionOptions;
+pub type TrainingCollisions = crate::ik::solve::collision::CollisionOptions;
 
-impl Preset for PoseModelConfig {
+impl Preset for LearnedIkConfig {
     /// 200,000 samples, the standard flow trained to a validation plateau or 100 epochs
     /// (about 25 s an epoch on 2 CPU cores).
     fn paper() -> Self {
@@ -57,7 +57,7 @@ impl Preset for PoseModelConfig {
             max_epochs: 100,
             ..crate::train::convergence::Convergence::standard()
         });
-        PoseModelConfig {
+        LearnedIkConfig {
             preset: "paper".into(),
             data: IkDataConfig {
                 samples: 210_000,
@@ -80,7 +80,7 @@ impl Preset for PoseModelConfig {
         flow.hidden = vec![32, 32];
         flow.fit.epochs = 5;
         flow.fit.converge = None;
-        PoseModelConfig {
+        LearnedIkConfig {
             preset: "quick".into(),
             data: IkDataConfig {
                 samples: 3_000,
@@ -97,10 +97,14 @@ impl Preset for PoseModelConfig {
     }
 }
 
-/// A trained model ready to answer.
-pub struct PoseModel {
+/// A learned full-pose IK model, trained ([`train`]) or loaded ([`LearnedIk::load`]), ready to
+/// answer ([`LearnedIk::solve`], or as any solver through
+/// [`crate::ik::solve::solver::IkSolver`]).
+pub struct LearnedIk {
     pub saved: SavedModel,
     pub flow: FlowIk,
     /// The data's normalisations (joints and positions), rebuilt from `saved`.
     data: IkData,
+    /// Where the flow samples (the device it was loaded or trained on).
+    device: burn::tensor::Device,
 }

@@ -6,16 +6,16 @@ use std::path::Path;
 use burn::tensor::Device;
 
 use crate::core::error::Result;
-use crate::ik::collision::CollisionCheck;
 use crate::ik::data::IkData;
 use crate::ik::flow::{Draws, FlowIk, fit_flow, sample_rows};
-use crate::ik::pose::{PoseTarget, pose_error};
+use crate::ik::solve::collision::CollisionCheck;
+use crate::ik::solve::levenberg_marquardt::{PoseTarget, pose_error};
 use crate::sim::robot::Robot;
 use crate::sim::robots::RobotSpec;
 
 use super::conditions::{condition_rows, condition_width};
 use super::saved::{SavedModel, save_model};
-use super::{PoseModel, PoseModelConfig};
+use super::{LearnedIk, LearnedIkConfig};
 
 /// What [`train`] writes into its folder (a name ending in `/`: a folder of its own): no
 /// file a run reads may be one of them.
@@ -31,10 +31,10 @@ pub const WRITTEN: &[&str] = &[
 pub fn train(
     spec: &RobotSpec,
     robot: &Robot,
-    cfg: &PoseModelConfig,
+    cfg: &LearnedIkConfig,
     dir: &Path,
     device: &Device,
-) -> Result<PoseModel> {
+) -> Result<LearnedIk> {
     let chain = &robot.chain;
     let check = match &cfg.collisions {
         Some(c) => c.check(spec, None)?,
@@ -114,9 +114,10 @@ pub fn train(
     if let Some(c) = kept {
         c.keep_in(dir)?;
     }
-    Ok(PoseModel {
+    Ok(LearnedIk {
         saved,
         flow: trained.model,
         data,
+        device: device.clone(),
     })
 }

@@ -11,7 +11,7 @@ use nalgebra::Point3;
 
 use crate::core::error::Result;
 use crate::ik::data::IkData;
-use crate::ik::emssl::iteration::EmsslIteration;
+use crate::ik::paper::emssl::iteration::EmsslIteration;
 use crate::sim::kinematics::KinematicChain;
 use crate::train::convergence::ConvergenceLog;
 
