@@ -250,6 +250,17 @@ pub struct Answering<'a> {
 }
 
 impl<'a> Answering<'a> {
+    /// `Ok` unless `stop` asks to end the batch, then [`crate::Error::Interrupted`] saying how
+    /// far it came (`answered` of `total` targets).
+    pub fn go_on(&self, answered: usize, total: usize) -> crate::Result<()> {
+        if (self.stop)() {
+            return Err(crate::Error::Interrupted(format!(
+                "stopped after {answered} of {total} targets; nothing was written"
+            )));
+        }
+        Ok(())
+    }
+
     /// `lm`'s settings, stopped by Ctrl-C ([`crate::core::interrupt`]), nothing avoided.
     pub fn with(lm: &'a LmConfig) -> Self {
         Answering {

@@ -59,18 +59,12 @@ const BLOCK: usize = 64;
 /// Answer every target in blocks, in parallel within a block, asking `stop` before each.
 fn by_blocks(
     targets: &[Vec<PoseTarget>],
-    stop: &dyn Fn() -> bool,
+    how: &Answering,
     answer: impl Fn(usize, &[PoseTarget]) -> Vec<PoseSolution> + Sync,
 ) -> Result<Vec<Vec<PoseSolution>>> {
     let mut out = Vec::with_capacity(targets.len());
     for (b, block) in targets.chunks(BLOCK).enumerate() {
-        if stop() {
-            return Err(Error::Interrupted(format!(
-                "inverse kinematics stopped after {} of {} targets",
-                out.len(),
-                targets.len()
-            )));
-        }
+        how.go_on(out.len(), targets.len())?;
         let first = b * BLOCK;
         out.par_extend(
             block
@@ -106,7 +100,7 @@ impl IkSolver for LevenbergMarquardt {
         let k = k.max(1);
         let paths = chain.tip_paths();
         let (lm, avoid) = (how.lm, how.avoid);
-        by_blocks(targets, how.stop, |i, target| {
+        by_blocks(targets, how, |i, target| {
             (0..k)
                 .map(|j| {
                     let salt = (i * k + j) as u64;
@@ -150,7 +144,7 @@ impl IkSolver for DampedLeastSquares {
             .map(|&r| damped_least_squares::keep_in(0.0, r))
             .collect();
         let (seed, avoid) = (how.lm.seed, how.avoid);
-        by_blocks(targets, how.stop, |i, target| {
+        by_blocks(targets, how, |i, target| {
             let mut rng = rand::rngs::StdRng::seed_from_u64(
                 seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
             );

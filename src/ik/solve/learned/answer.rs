@@ -73,13 +73,7 @@ impl LearnedIk {
                 device,
             );
             for (c, part) in block.chunks(per_check).enumerate() {
-                if stop() {
-                    return Err(Error::Interrupted(format!(
-                        "stopped after {} of {} targets; nothing was written",
-                        answers.len(),
-                        targets.len()
-                    )));
-                }
+                how.go_on(answers.len(), targets.len())?;
                 let offset = c * per_check;
                 // Each sample refined on its own (the family of answers, not one), from random
                 // starts where it stalls; the random starts differ between samples and targets.
