@@ -11,4 +11,3 @@ pub mod ffksm_step;
 pub mod gpu_check;
 pub mod gpu_summary;
 pub mod ik;
-pub mod sphere_figure;

@@ -1,7 +1,7 @@
 //! Figures generated from results (never drawn by hand), on plotters (PNG) and the image
 //! crate: `pareto.rs` (quality against speed), `lines.rs` (curves and lines, linear or log
 //! axes), `images.rs` (the qualitative grid, points over images), `scatter.rs` (panels of
-//! points); here what every figure shares (the embedded font, PNG writing, legend, lines,
+//! points), `spheres.rs` (a robot's collision spheres over its meshes); here what every figure shares (the embedded font, PNG writing, legend, lines,
 //! markers, ticks). Every figure draws on a `Canvas` (`report::canvas`: the embedded font,
 //! glyphs placed right).
 
@@ -9,11 +9,13 @@ mod images;
 mod lines;
 mod pareto;
 mod scatter;
+mod spheres;
 
 pub use images::{GridRow, image_grid, points_over_images};
 pub use lines::{LinePlot, curves, line_plot, training_curves};
 pub use pareto::{ParetoPoint, pareto_plot};
 pub use scatter::{ScatterPanel, scatter_panels};
+pub use spheres::collision_spheres;
 
 use std::path::Path;
 use std::sync::Once;

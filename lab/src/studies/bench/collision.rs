@@ -2,7 +2,7 @@
 //! (every link frame), then its spheres against each other (the checked pairs) and against a
 //! scene's obstacles, on one thread, median of repeats over random configurations; beside it
 //! the forward kinematics alone, so the check's own cost shows; and `spheres.png`, the
-//! spheres over the meshes ([`crate::studies::bench::sphere_figure`]).
+//! spheres over the meshes ([`selfmodel::report::figures::collision_spheres`]).
 
 use std::path::Path;
 
@@ -104,7 +104,7 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
             0.0,
         ),
     ];
-    let uncovered = crate::studies::bench::sphere_figure::draw(
+    let uncovered = selfmodel::report::figures::collision_spheres(
         robot,
         &check.model.spheres,
         &out.join("spheres.png"),

@@ -5,13 +5,13 @@
 
 use std::path::Path;
 
-use selfmodel::core::error::Result;
-use selfmodel::sim::bvh::Bvh;
-use selfmodel::sim::camera::Camera;
-use selfmodel::sim::collision::spheres::Sphere;
-use selfmodel::sim::ray_caster::{RayCaster, RenderOptions};
-use selfmodel::sim::robot::Robot;
-use selfmodel::sim::shape::Shape;
+use crate::core::error::Result;
+use crate::sim::bvh::Bvh;
+use crate::sim::camera::Camera;
+use crate::sim::collision::spheres::Sphere;
+use crate::sim::ray_caster::{RayCaster, RenderOptions};
+use crate::sim::robot::Robot;
+use crate::sim::shape::Shape;
 
 /// Pixels covered by both, by the spheres alone, by the mesh alone (RGB).
 const BOTH: [u8; 3] = [70, 90, 120];
@@ -21,7 +21,12 @@ const MESH_ONLY: [u8; 3] = [220, 30, 30];
 /// Write `path`: `robot` (loaded with its collision geometry) and `spheres` (per link, in its
 /// frame) with every joint at the middle of its range, seen from the front and from the side, `size` pixels square each.
 /// Returns the share of mesh pixels the spheres do not cover (0 where the cover holds).
-pub fn draw(robot: &Robot, spheres: &[Vec<Sphere>], path: &Path, size: usize) -> Result<f64> {
+pub fn collision_spheres(
+    robot: &Robot,
+    spheres: &[Vec<Sphere>],
+    path: &Path,
+    size: usize,
+) -> Result<f64> {
     let ranges = robot.chain.joint_ranges();
     // Every joint at the middle of its range: a bent arm shows more than a straight one.
     let home: Vec<f64> = ranges.iter().map(|r| 0.5 * (r[0] + r[1])).collect();
@@ -85,6 +90,6 @@ pub fn draw(robot: &Robot, spheres: &[Vec<Sphere>], path: &Path, size: usize) ->
             out[dst..dst + size * 3].copy_from_slice(&panel[row * size * 3..(row + 1) * size * 3]);
         }
     }
-    selfmodel::report::figures::save_rgb(path, &out, width as u32, size as u32)?;
+    super::save_rgb(path, &out, width as u32, size as u32)?;
     Ok(uncovered as f64 / mesh.max(1) as f64)
 }
