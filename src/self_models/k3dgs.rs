@@ -35,7 +35,7 @@ use crate::self_models::k3dgs::splatting::Compositing;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
     camera_input::split_views,
-    model::{Fit, LoadContext, Loaded, Render, ReportContext, SelfModel, Trained},
+    model::{BodyFit, Fit, LoadContext, Loaded, Render, ReportContext, SelfModel, Trained},
     run_config::SelfModelRun,
 };
 use crate::sim::camera::Camera;
@@ -608,38 +608,6 @@ impl Render for K3dgsRenderer {
         Some(self.splat_from(camera, angles, Some(self.cull_sigmas)).0)
     }
 
-    fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
-        Some(Box::new(K3dgsRenderer {
-            model: self.model.clone().fork(autodiff).freeze(),
-            chain: self.chain.clone(),
-            camera: self.camera.clone(),
-            mode: self.mode,
-            cull_sigmas: self.cull_sigmas,
-            dense_batches: self.dense_batches.clone(),
-            counts: self.counts.clone(),
-        }))
-    }
-
-    fn joint_origins(&self) -> Option<Vec<[f32; 3]>> {
-        let (_, t, _) = self.chain.origin_rows();
-        Some(t.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
-    }
-
-    fn render_with_origins(&self, angles: Tensor<2>, origin_t: Tensor<2>) -> Option<Tensor<4>> {
-        let [b, _] = angles.dims();
-        let device = angles.device();
-        let (r, _, _) = self.chain.origin_rows();
-        let joints = self.chain.joint_count();
-        let origin_r = Tensor::<3>::from_data(TensorData::new(r, [joints, 3, 3]), &device);
-        let q = self.chain.from_user(angles);
-        let (fr, ft) = self.chain.link_frames_with(q, origin_r, origin_t);
-        let g = self.model.project_frames(fr, ft, &self.camera);
-        let (s, _) = self
-            .model
-            .composite(g, &self.camera, self.mode, Some(self.cull_sigmas));
-        Some(s.reshape([b, 1, self.camera.height, self.camera.width]))
-    }
-
     /// Depth is drawn where the Gaussians are.
     fn depth_pixels(&self) -> DepthPixels {
         DepthPixels::Drawn
@@ -699,6 +667,40 @@ impl Render for K3dgsRenderer {
             &self.camera,
         )?;
         Ok(())
+    }
+}
+
+impl BodyFit for K3dgsRenderer {
+    fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
+        Some(Box::new(K3dgsRenderer {
+            model: self.model.clone().fork(autodiff).freeze(),
+            chain: self.chain.clone(),
+            camera: self.camera.clone(),
+            mode: self.mode,
+            cull_sigmas: self.cull_sigmas,
+            dense_batches: self.dense_batches.clone(),
+            counts: self.counts.clone(),
+        }))
+    }
+
+    fn joint_origins(&self) -> Option<Vec<[f32; 3]>> {
+        let (_, t, _) = self.chain.origin_rows();
+        Some(t.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    fn render_with_origins(&self, angles: Tensor<2>, origin_t: Tensor<2>) -> Option<Tensor<4>> {
+        let [b, _] = angles.dims();
+        let device = angles.device();
+        let (r, _, _) = self.chain.origin_rows();
+        let joints = self.chain.joint_count();
+        let origin_r = Tensor::<3>::from_data(TensorData::new(r, [joints, 3, 3]), &device);
+        let q = self.chain.from_user(angles);
+        let (fr, ft) = self.chain.link_frames_with(q, origin_r, origin_t);
+        let g = self.model.project_frames(fr, ft, &self.camera);
+        let (s, _) = self
+            .model
+            .composite(g, &self.camera, self.mode, Some(self.cull_sigmas));
+        Some(s.reshape([b, 1, self.camera.height, self.camera.width]))
     }
 }
 

@@ -13,7 +13,7 @@ use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network},
+    model::{BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network},
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::config::TrainLog;
@@ -61,6 +61,9 @@ impl Render for ConstantImage {
         Ok(Some(serde_json::Value::Null))
     }
 }
+
+/// Not differentiable here, no chain of its own: nothing for reading the body back.
+impl BodyFit for ConstantImage {}
 
 /// The threshold in (0, 0.5] whose mask `mean >= t` has the highest mean IoU with `images`.
 fn best_threshold(mean: &[f32], images: &[f32]) -> f32 {

@@ -180,8 +180,9 @@ impl Trained {
     }
 }
 
-/// Rendering with a trained self-model.
-pub trait Render {
+/// Rendering with a trained self-model (and what reading the body back needs of it,
+/// [`BodyFit`]).
+pub trait Render: BodyFit {
     /// `[n, dof]` joint angles (degrees) -> silhouette probabilities in [0, 1]
     /// `[n, 1, H, W]`, and depth in metres where the model predicts it.
     fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>);
@@ -209,6 +210,13 @@ pub trait Render {
     fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
         Ok(())
     }
+}
+
+/// What reading a robot's body back from images ([`crate::body`]: pose, drift, link
+/// lengths) needs of a trained renderer besides rendering: a copy differentiable in the joint
+/// angles, and for a model that hangs on the kinematic chain (K-3DGS) its joint origins and
+/// renders with others in their place. Every default says the model cannot.
+pub trait BodyFit {
     /// The same renderer on `autodiff` (an autodiff device), its weights frozen, so that what
     /// it renders is differentiable in the joint angles given to it: for reading the body
     /// from an image ([`crate::body`]). `None` where the model cannot be differentiated.

@@ -9,7 +9,7 @@ use crate::core::error::Result;
 use crate::core::preset::Preset;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, Render, SelfModel, Trained},
+    model::{BodyFit, Fit, Render, SelfModel, Trained},
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::config::TrainLog;
@@ -76,6 +76,9 @@ impl Render for Table {
         (tensor(sil), Some(tensor(depth)))
     }
 }
+
+/// Not differentiable here, no chain of its own: nothing for reading the body back.
+impl BodyFit for Table {}
 
 impl SelfModel for NearestPose {
     const KIND: &'static str = "nearest_pose";

@@ -34,7 +34,9 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::result::PaperReference;
 use crate::self_models::tree_encoder::TreeEncoder;
 use crate::self_models::{
-    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network},
+    model::{
+        BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network,
+    },
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::losses::{bce_with_logits, mse};
@@ -499,6 +501,9 @@ impl Render for NeuroKin {
         crate::train::checkpoint::save_module(self, path)?;
         Ok(Some(serde_json::Value::Null))
     }
+}
+
+impl BodyFit for NeuroKin {
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
         Some(Box::new(self.clone().fork(autodiff).freeze()))
     }

@@ -28,7 +28,9 @@ use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::neurokin::resize_bilinear;
 use crate::self_models::result::PaperReference;
 use crate::self_models::{
-    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network},
+    model::{
+        BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network,
+    },
     run_config::{SelfModelRun, model_preset},
 };
 use crate::train::batcher::Batch;
@@ -255,6 +257,9 @@ impl Render for ResNeuroKinD {
         Ok(Some(serde_json::Value::Null))
     }
 }
+
+/// Not differentiable here, no chain of its own: nothing for reading the body back.
+impl BodyFit for ResNeuroKinD {}
 
 /// The robot pixels of a silhouette batch (1 where the true silhouette is >= 0.5).
 fn robot_mask(silhouettes: &Tensor<4>) -> Tensor<4> {

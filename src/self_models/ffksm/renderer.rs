@@ -15,7 +15,7 @@ use crate::self_models::ffksm::field::OccupancyField;
 use crate::self_models::{
     camera_input::views_of_rows,
     harness::host_targets,
-    model::{Render, ReportContext},
+    model::{BodyFit, Render, ReportContext},
 };
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
@@ -294,3 +294,6 @@ impl Render for FfksmRenderer {
         Ok(())
     }
 }
+
+/// Not differentiable here, no chain of its own: nothing for reading the body back.
+impl BodyFit for FfksmRenderer {}
