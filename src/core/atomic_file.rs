@@ -164,7 +164,7 @@ pub fn file_name(label: &str) -> String {
         .join("_")
 }
 
-/// Refuse an `--out` that cannot be written, before any work: one whose nearest existing
+/// Refuse an `out` that cannot be written, before any work: one whose nearest existing
 /// ancestor is a file (it cannot hold a folder), or, where `kind` is a file, an existing
 /// folder or a path ending in `/`.
 pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
@@ -204,7 +204,7 @@ pub fn check_out(out: &Path, kind: OutKind) -> Result<()> {
     Ok(())
 }
 
-/// What an `--out` names.
+/// What an `out` names.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutKind {
     File,

@@ -1,13 +1,13 @@
 //! The one place that names a burn backend.
 //!
 //! Model code is backend-agnostic (burn 0.22 tensors carry their backend in the `Device`
-//! value); the binaries call [`select`] with the `--device` flag and pass the device on.
+//! value); the binaries call [`select`] with the device a user chose and pass it on.
 
 use burn::tensor::Device;
 
 use crate::core::error::{Error, Result};
 
-/// The `--device` choices. Only those compiled in can be selected.
+/// The `device` choices. Only those compiled in can be selected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
@@ -68,7 +68,7 @@ pub fn available() -> Vec<DeviceChoice> {
     v
 }
 
-/// Build the burn device for a `--device` choice, or say which features to enable.
+/// Build the burn device for a `device` choice, or say which features to enable.
 pub fn select(choice: DeviceChoice) -> Result<Device> {
     // The kernels run on rayon's workers: subnormals flushed there (core::denormals).
     crate::core::denormals::flush_in_workers();

@@ -30,7 +30,7 @@ pub enum Error {
     /// An impossible configuration or argument (zero samples, a split larger than the data).
     #[error("{}", one_line(.0))]
     Config(String),
-    /// A `--device` that was not compiled in or cannot start.
+    /// A `device` that was not compiled in or cannot start.
     #[error("{}", one_line(.0))]
     Device(String),
     /// Training that cannot go on (a loss that became NaN or infinite).

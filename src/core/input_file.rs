@@ -15,7 +15,7 @@ pub const MAX_DESCRIPTION_BYTES: u64 = 64 << 20;
 /// MB).
 pub const MAX_WEIGHTS_BYTES: u64 = 4 << 30;
 
-/// The largest table or array file read (`--targets`, `--angles`, `.npz`): 10 million poses
+/// The largest table or array file read (`targets`, `angles`, `.npz`): 10 million poses
 /// of a humanoid fit.
 pub const MAX_TABLE_BYTES: u64 = 8 << 30;
 

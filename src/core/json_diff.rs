@@ -1,4 +1,4 @@
-//! Where two JSON values differ, as paths: what a `--resume` that cannot reuse saved work
+//! Where two JSON values differ, as paths: what a `resume` that cannot reuse saved work
 //! says changed.
 
 use serde_json::Value;

@@ -1,5 +1,5 @@
 //! A finished unit of a study (one model trained and scored), kept as JSON beside the unit's
-//! git-ignored `checkpoint/` folder. A study resumed (`--resume`) in a fresh clone, where the
+//! git-ignored `checkpoint/` folder. A study resumed (`resume`) in a fresh clone, where the
 //! checkpoints are gone, takes the units it finds here instead of training them again; a
 //! unit is taken only if the settings it was made with (its fingerprint) are this run's.
 

@@ -13,7 +13,7 @@ use crate::sim::robots::RobotSpec;
 /// The data a run trains and tests on.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DataSpec {
-    /// The robot seen (the papers' arm4 unless `--robot`/`--urdf` says otherwise).
+    /// The robot seen (the papers' arm4 unless `robot`/`urdf` says otherwise).
     #[serde(default)]
     pub robot: RobotSpec,
     /// Rendered in-process (0.4 s for the paper's 2,000 samples).
@@ -22,7 +22,7 @@ pub struct DataSpec {
     pub train_samples: Option<usize>,
     /// Test on these samples instead of the test split (indices into the dataset).
     pub test: Option<Range<usize>>,
-    /// Train and test on this dataset file instead of rendering `dataset` (`--dataset`: what
+    /// Train and test on this dataset file instead of rendering `dataset` (`dataset`: what
     /// the `dataset` binary writes, or silhouettes captured elsewhere in its format; the
     /// camera comes from its `poses` and `focal`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -84,7 +84,7 @@ impl DataSpec {
         }
     }
 
-    /// `clean`, `paper_compatible` or `file` (a dataset read from `--dataset`).
+    /// `clean`, `paper_compatible` or `file` (a dataset read from `dataset`).
     pub fn label(&self) -> &'static str {
         if self.file.is_some() {
             "file"

@@ -7,7 +7,7 @@
 //! and `results.md` (one [`ModelResult`] row per renderer), `curve.csv` and `training_curve.png`
 //! (the figure where training took more than one step),
 //! `qualitative.png` (ground truth, prediction and error for six test poses, plus depth where
-//! the model predicts it), and `checkpoint/` (model, optimizer state, progress; `--resume`
+//! the model predicts it), and `checkpoint/` (model, optimizer state, progress; `resume`
 //! continues).
 
 use std::ops::Range;
@@ -34,7 +34,7 @@ use crate::train::{
 
 /// After a run refused its input or failed before training wrote anything: remove the
 /// `config.json` it wrote (and the folder, if it made it), so a refused run leaves nothing
-/// behind. A run that wrote a checkpoint keeps it (and its config) for `--resume`.
+/// behind. A run that wrote a checkpoint keeps it (and its config) for `resume`.
 fn leave_as_found(dir: &Path, (new_dir, new_config): (bool, bool)) {
     if dir.join("checkpoint").exists() || !new_config {
         return;

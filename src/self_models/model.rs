@@ -58,7 +58,7 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn needs_robot(&self) -> bool {
         false
     }
-    /// Whether it trains in a lower precision (`--precision`, [`crate::train::precision`]):
+    /// Whether it trains in a lower precision (`precision`, [`crate::train::precision`]):
     /// a network whose every op follows its input's dtype.
     fn autocasts(&self) -> bool {
         false
@@ -138,7 +138,7 @@ pub struct Fit<'a> {
     /// silhouettes and depth (metres), each `[n, 1, H, W]`.
     pub train_set: &'a TrainSet,
     pub train: &'a TrainConfig,
-    /// Checkpoints (`--resume`), for the shared training loop.
+    /// Checkpoints (`resume`), for the shared training loop.
     pub plan: &'a CheckpointPlan,
     /// The run's name, for progress bars.
     pub label: &'a str,
@@ -148,7 +148,7 @@ pub struct Fit<'a> {
     /// The robot and the camera the dataset was rendered with (for models with geometry).
     pub robot: &'a Robot,
     pub camera: &'a Camera,
-    /// The device as chosen (`--device`): CPU-only fast paths check it.
+    /// The device as chosen (`device`): CPU-only fast paths check it.
     pub device_choice: DeviceChoice,
     /// Whether each sample's inputs end with its camera's [`crate::self_models::camera_input::camera_input`] (a
     /// camera-conditioned model, or a 3-D model on a multi-view dataset): split them with

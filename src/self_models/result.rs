@@ -41,7 +41,7 @@ pub struct ModelResult {
     pub dataset: String,
     pub preset: String,
     pub device: String,
-    /// The dtype it trained in (`--precision`; rows written before the column: f32).
+    /// The dtype it trained in (`precision`; rows written before the column: f32).
     #[serde(default)]
     pub precision: crate::train::precision::Precision,
     pub git_revision: String,

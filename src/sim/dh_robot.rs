@@ -149,7 +149,7 @@ pub fn dh_geometry(params: &[DhJoint]) -> Vec<Bvh> {
 
 /// The UR5 with every joint in `range` (radians), drawn by [`dh_geometry`] (cylinders of the
 /// UR5's proportions along its DH links: for self-models of the built-in UR5; the ROS UR5's
-/// meshes load with `--urdf`).
+/// meshes load with `urdf`).
 pub fn ur5(range: [f64; 2]) -> Robot {
     let chain = chain_from_dh(&ur5_parameters(), range);
     let geometry = dh_geometry(&ur5_parameters());

@@ -1,4 +1,4 @@
-//! The robots the project knows by name (`--robot`), and where the papers' real arm lies.
+//! The robots the project knows by name (`robot`), and where the papers' real arm lies.
 //! A new built-in robot is one file in `sim/` and one variant here.
 
 use std::path::{Path, PathBuf};
@@ -69,13 +69,13 @@ pub enum RobotSpec {
         path: PathBuf,
         base_xyz: [f64; 3],
         base_rpy: [f64; 3],
-        /// The end-effector link (`--tip`); none: the last link of the longest chain.
+        /// The end-effector link (`tip`); none: the last link of the longest chain.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         tip: Option<String>,
-        /// Visual or collision geometry (`--geometry`).
+        /// Visual or collision geometry (`geometry`).
         #[serde(default, skip_serializing_if = "is_visual")]
         geometry: GeometryKind,
-        /// Which movable joints are the joint vector (`--joints`, `--tips`; the chain to the
+        /// Which movable joints are the joint vector (`joints`, `tips`; the chain to the
         /// tip by default).
         #[serde(default, skip_serializing_if = "JointGroup::is_chain")]
         joints: JointGroup,
@@ -225,7 +225,7 @@ impl RobotSpec {
     }
 
     /// The files this robot is read from (its URDF, the SRDF naming its group or beside it,
-    /// the meshes it names): what a run's `--out` must never name.
+    /// the meshes it names): what a run's `out` must never name.
     pub fn files(&self) -> Vec<PathBuf> {
         match self {
             RobotSpec::Builtin(_) => Vec::new(),

@@ -333,7 +333,7 @@ fn joint_from_urdf(
     })
 }
 
-/// The link `--tip` names (its origin), if it names one.
+/// The link `tip` names (its origin), if it names one.
 fn tip_link(
     path: &Path,
     options: &UrdfOptions,
@@ -477,7 +477,7 @@ fn shapes_from_urdf(
     })
 }
 
-/// Every mesh file the description at `path` names, visual and collision (what an `--out`
+/// Every mesh file the description at `path` names, visual and collision (what an `out`
 /// must not be); none where it does not parse (its loading then says why).
 pub fn mesh_files(path: &Path) -> Vec<PathBuf> {
     let Ok(urdf) = parse(path) else {

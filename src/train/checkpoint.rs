@@ -1,5 +1,5 @@
 //! Checkpoints: model, optimiser state and progress written every N steps (each file renamed
-//! into place, the progress last), and read back by `--resume` when made with the same
+//! into place, the progress last), and read back by `resume` when made with the same
 //! configuration.
 
 use std::path::{Path, PathBuf};
@@ -32,7 +32,7 @@ pub(super) struct CheckpointState {
 }
 
 /// A saved model or optimiser file that cannot be read back: what failed, and that deleting
-/// the checkpoint's folder `dir` (or running without `--resume`) starts afresh.
+/// the checkpoint's folder `dir` (or running without `resume`) starts afresh.
 pub fn unreadable_checkpoint(file: &Path, dir: &Path, e: impl std::fmt::Display) -> Error {
     Error::data(
         file,

@@ -28,7 +28,7 @@ pub struct TrainConfig {
     /// `steps / 200` steps, at least 1 (the default; a saved config without it reads as 0).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub log_every: usize,
-    /// The dtype the network computes in (`--precision`; f32 master weights either way,
+    /// The dtype the network computes in (`precision`; f32 master weights either way,
     /// [`super::precision`]). Absent from a saved config: f32.
     #[serde(default, skip_serializing_if = "Precision::is_f32")]
     pub precision: Precision,

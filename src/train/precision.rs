@@ -1,4 +1,4 @@
-//! Lower precision for training, as PyTorch's autocast does it (`--precision`): the parameters
+//! Lower precision for training, as PyTorch's autocast does it (`precision`): the parameters
 //! and Adam's moments stay in f32 (the master weights), each step runs the network on a copy of
 //! the parameters cast to the lower dtype, the batch's inputs cast too, and the gradients flow
 //! back through the casts into the f32 masters. Losses widen their inputs to f32

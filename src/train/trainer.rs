@@ -1,6 +1,6 @@
 //! The training loop every self-model shares: seeded, Adam, global gradient-norm clipping, a
 //! progress bar with loss and ETA, checkpoints (model, optimizer state and progress) every N
-//! steps, `--resume` from the last checkpoint, and a clean stop when the loss stops being
+//! steps, `resume` from the last checkpoint, and a clean stop when the loss stops being
 //! finite (the last good checkpoint is kept).
 //!
 //! Batches are drawn epoch by epoch from a permutation seeded by `(seed, epoch)`, and input

@@ -251,7 +251,7 @@ fn conv_transpose2d_x_grad<B: Backend + CpuKernelOps>(
 }
 
 /// Whether `x` is an f32 tensor on the flex backend (with or without autodiff): what our
-/// kernels take; other dtypes (`--precision`) run on burn's ops.
+/// kernels take; other dtypes (`precision`) run on burn's ops.
 pub fn on_flex<const D: usize>(x: &Tensor<D>) -> bool {
     x.dtype() == DType::F32
         && matches!(

@@ -130,7 +130,7 @@ pub fn is_lazy<const D: usize>(t: &Tensor<D>) -> bool {
 }
 
 /// Whether `t` is what our kernels take: an f32 tensor on a CubeCL device (another dtype,
-/// `--precision`'s, runs on burn's ops).
+/// `precision`'s, runs on burn's ops).
 pub fn on_kernels<const D: usize>(t: &Tensor<D>) -> bool {
     t.dtype() == burn::tensor::DType::F32 && is_lazy(t)
 }

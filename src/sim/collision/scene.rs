@@ -246,7 +246,7 @@ fn mesh_path(scene: &Path, file: &Path) -> PathBuf {
 }
 
 impl Scene {
-    /// The files a scene at `path` reads: itself and the meshes it names (what an `--out`
+    /// The files a scene at `path` reads: itself and the meshes it names (what an `out`
     /// must not be), from its text alone.
     pub fn files(path: &Path) -> Result<Vec<PathBuf>> {
         let file: SceneFile = crate::sim::collision::read_yaml(path, "scene file", SCENE)?;

@@ -332,7 +332,7 @@ impl SortedTree {
 }
 
 /// What a group marks: the joints it moves (`on_path`, over the sorted joints), its tips
-/// (several), and the tip it sets when it has one (an SRDF group with one tip, no `--tip`).
+/// (several), and the tip it sets when it has one (an SRDF group with one tip, no `tip`).
 struct Members {
     on_path: Vec<bool>,
     tips: Vec<usize>,
@@ -341,7 +341,7 @@ struct Members {
 
 /// The group's joints (indices into the sorted `joints`): the joints on the path from the
 /// root to the tip, or to each of several links, every joint, or joints by name. `links`:
-/// sorted; `tip_given`: whether `--tip` named `tip_link`.
+/// sorted; `tip_given`: whether `tip` named `tip_link`.
 fn group_members(
     group: &JointGroup,
     joints: &[Joint],

@@ -7,7 +7,7 @@ use crate::core::error::{Error, Result};
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum JointGroup {
-    /// The chain from the root to the tip (`--tip`; the default).
+    /// The chain from the root to the tip (`tip`; the default).
     #[default]
     Chain,
     /// The union of the chains from the root to each of these links (`--tips A,B`: both
@@ -28,7 +28,7 @@ pub enum JointGroup {
     },
     /// Joints by name with these links as the tips (what an SRDF group resolves to): fixed
     /// joints among them are skipped, a mimic joint makes its leader an input, and one tip is
-    /// the tip (unless `--tip` names another).
+    /// the tip (unless `tip` names another).
     Members {
         joints: Vec<String>,
         tips: Vec<String>,
@@ -40,7 +40,7 @@ impl JointGroup {
         *self == JointGroup::Chain
     }
 
-    /// `--joints`, `--tips` and `--group` (with `--srdf`, else the SRDF file beside the
+    /// `joints`, `tips` and `group` (with `srdf`, else the SRDF file beside the
     /// description at `urdf`) as given on a command line (none: the chain to the tip).
     pub fn from_args(
         joints: Option<&[String]>,
@@ -91,7 +91,7 @@ impl JointGroup {
     }
 }
 
-/// A `--tip` given beside a group with tips must be one of them: another would train the
+/// A `tip` given beside a group with tips must be one of them: another would train the
 /// group's joints for a link they were not chosen for.
 pub(super) fn refuse_another_tip(
     given: bool,
