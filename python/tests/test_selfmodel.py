@@ -212,6 +212,10 @@ def interrupted(call, after=0.5):
         raised.append(time.monotonic())
         signal.raise_signal(signal.SIGINT)
 
+    # Python's own Ctrl-C handler, whatever this process inherited: a shell that starts a
+    # command in the background (`cmd &`) starts it with SIGINT ignored, and the loop below
+    # would then never end.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     threading.Timer(after, ctrl_c).start()
     completed = 0
     try:
@@ -220,6 +224,8 @@ def interrupted(call, after=0.5):
             completed += 1
     except KeyboardInterrupt:
         return time.monotonic() - raised[0], completed
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_ctrl_c_interrupts_every_long_call_within_a_second(trained, neurokin_run, tmp_path):
