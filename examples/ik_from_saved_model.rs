@@ -8,6 +8,7 @@
 use selfmodel::core::device::{DeviceChoice, select};
 use selfmodel::ik::solve::learned::{LearnedIk, LearnedIkConfig, train};
 use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::{BuiltinRobot, Preset, RobotSpec};
 
 fn main() -> selfmodel::Result<()> {
@@ -29,7 +30,7 @@ fn main() -> selfmodel::Result<()> {
     // A pose the robot reaches: its tip at some joint values.
     let q = [0.3, -1.1, 1.4, -0.5, 1.2, 0.7];
     let target = PoseTarget::of(&robot.chain, &q);
-    let answers = model.solve_until(&robot.chain, &[target], 1, &model.answering())?;
+    let answers = model.solve(&robot.chain, &[target], 1, &model.answering())?;
     let a = &answers[0][0];
     println!(
         "answer {:.4?}: {:.2e} mm and {:.2e} degrees from the target, exact: {}",

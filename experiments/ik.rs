@@ -11,6 +11,7 @@ use selfmodel::ik::solve::learned::{
     LearnedIk, LearnedIkConfig, SolveStats, joint_columns, read_targets, train,
 };
 use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel_lab::cli::{RobotArgs, run_main};
 
 #[derive(Parser)]
@@ -345,7 +346,7 @@ fn main() -> ExitCode {
                         .as_ref()
                         .map(|c| c as &dyn selfmodel::ik::solve::levenberg_marquardt::Avoid),
                 };
-                let answers = model.solve_until(&robot.chain, &targets, k, &how)?;
+                let answers = model.solve(&robot.chain, &targets, k, &how)?;
                 let seconds = start.elapsed().as_secs_f64();
                 let mut header = String::from("target,solution");
                 let taken = ["target", "solution", "pos_err_mm", "rot_err_deg", "exact"];

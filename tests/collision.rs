@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use selfmodel::ik::solve::levenberg_marquardt::Answering;
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::collision::pairs::{AllowedPairs, PairSampling, Reason};
 use selfmodel::sim::collision::spheres::{SphereFit, surface_points};
@@ -335,7 +336,7 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
         .collect();
     let lm = model.saved.config.lm.clone();
     let answers = model
-        .solve_until(
+        .solve(
             &robot.chain,
             &targets,
             2,
@@ -368,7 +369,7 @@ fn collision_free_ik_on_the_panda_answers_without_touching_the_scene() {
     );
     // Without the check, the same solver knows nothing of the scene: no answer is marked.
     let plain = model
-        .solve_until(
+        .solve(
             &robot.chain,
             &targets,
             1,

@@ -178,6 +178,7 @@ fn the_urdf_loader_reads_or_refuses_every_mutation() {
 fn the_saved_model_loader_reads_or_refuses_every_mutation() {
     use selfmodel::core::preset::Preset;
     use selfmodel::ik::solve::learned::{LearnedIk, LearnedIkConfig, train};
+    use selfmodel::ik::solve::solver::IkSolver;
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 3, false);
     let spec = selfmodel::sim::robots::RobotSpec::Urdf {
@@ -205,7 +206,7 @@ fn the_saved_model_loader_reads_or_refuses_every_mutation() {
         // What loads answers within its ranges, or is refused for another robot.
         if m.check_robot(&robot).is_ok() {
             let a = m
-                .solve_until(
+                .solve(
                     &robot.chain,
                     std::slice::from_ref(&target),
                     1,

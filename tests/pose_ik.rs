@@ -8,6 +8,7 @@ use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::levenberg_marquardt::{
     LmConfig, PoseTarget, pose_error, solve_batch, solve_from,
 };
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::sim::kinematics::within;
 use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
 
@@ -169,12 +170,12 @@ fn a_saved_model_solves_identically_after_loading_and_refuses_another_robot() {
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     let before = model
-        .solve_until(&robot.chain, &targets, 3, &model.answering())
+        .solve(&robot.chain, &targets, 3, &model.answering())
         .unwrap();
     let loaded = LearnedIk::load(&dir.path().join("model"), &device).unwrap();
     loaded.check_robot(&robot).unwrap();
     let after = loaded
-        .solve_until(&robot.chain, &targets, 3, &loaded.answering())
+        .solve(&robot.chain, &targets, 3, &loaded.answering())
         .unwrap();
     assert_eq!(before, after);
     assert_eq!(
@@ -357,7 +358,7 @@ fn limits_offset_around_pi_are_kept_and_answered() {
     let targets: Vec<Vec<PoseTarget>> =
         qs.iter().map(|q| PoseTarget::of(&robot.chain, q)).collect();
     let answers = model
-        .solve_until(&robot.chain, &targets, 1, &model.answering())
+        .solve(&robot.chain, &targets, 1, &model.answering())
         .unwrap();
     let exact = answers
         .iter()
@@ -422,7 +423,7 @@ fn two_tips_are_solved_together() {
     let read = read_targets(&file, false, model.tips()).unwrap();
     assert_eq!(read.len(), 100);
     let answers = model
-        .solve_until(&robot.chain, &read, 1, &model.answering())
+        .solve(&robot.chain, &read, 1, &model.answering())
         .unwrap();
     let lm = &model.saved.config.lm;
     let mut exact = 0;
@@ -469,7 +470,7 @@ fn a_solve_stops_between_blocks_when_asked() {
     let stop = || calls.fetch_add(1, Ordering::Relaxed) >= 1;
     let lm = model.saved.config.lm.clone();
     let err = model
-        .solve_until(
+        .solve(
             &robot.chain,
             &targets,
             2,
@@ -585,7 +586,7 @@ fn a_tolerance_outside_its_range_is_refused() {
 /// answers a target, in target order, and stops between blocks when asked.
 #[test]
 fn every_solver_answers_through_the_one_trait() {
-    use selfmodel::ik::solve::solver::{DampedLeastSquares, IkSolver, LevenbergMarquardt};
+    use selfmodel::ik::solve::solver::{DampedLeastSquares, LevenbergMarquardt};
     let dir = common::tempdir();
     let (_spec, robot, model) = quick_model(dir.path(), 6);
     let ranges = model.saved.ranges.clone();

@@ -329,8 +329,8 @@ pub struct CameraArgs {
 }
 
 impl CameraArgs {
-    pub fn choice(&self) -> crate::studies::run::CameraChoice {
-        crate::studies::run::CameraChoice {
+    pub fn choice(&self) -> selfmodel::data::dataset::CameraChoice {
+        selfmodel::data::dataset::CameraChoice {
             eye: self.eye.map(|t| t.0),
             target: self.target.map(|t| t.0),
             fov_deg: self.fov,
@@ -421,19 +421,9 @@ pub struct ExperimentArgs {
 }
 
 impl ExperimentArgs {
-    /// Run the registry's experiment `name` with these arguments and print its summary.
-    pub fn run(&self, name: &str, default_preset: &str) -> Result<()> {
-        let e = crate::studies::registry::find(name)?;
-        let preset = self
-            .preset
-            .clone()
-            .unwrap_or_else(|| default_preset.to_string());
-        if !e.presets.contains(&preset.as_str()) {
-            return Err(selfmodel::Error::Config(format!(
-                "{name} has no preset \"{preset}\" (choose {})",
-                e.presets.join(", ")
-            )));
-        }
+    /// Refuse the options experiment `name` (`e`) does not take, and counts of zero, before
+    /// anything runs.
+    fn refuse_inapplicable(&self, name: &str, e: &crate::studies::run::Experiment) -> Result<()> {
         if self.models.is_some() && name != "table1" {
             return Err(selfmodel::Error::Config(format!(
                 "--models applies to table1 only, not {name}"
@@ -447,7 +437,8 @@ impl ExperimentArgs {
                 "--reuse applies to table1 only, not {name}"
             )));
         }
-        let camera_given = self.camera.choice() != crate::studies::run::CameraChoice::default();
+        let camera_given =
+            self.camera.choice() != selfmodel::data::dataset::CameraChoice::default();
         if (self.robot.is_some() || self.urdf.is_some() || camera_given || self.dataset.is_some())
             && !e.takes_robot
         {
@@ -489,6 +480,23 @@ impl ExperimentArgs {
                 "--train-samples must be at least 1".into(),
             ));
         }
+        Ok(())
+    }
+
+    /// Run the registry's experiment `name` with these arguments and print its summary.
+    pub fn run(&self, name: &str, default_preset: &str) -> Result<()> {
+        let e = crate::studies::registry::find(name)?;
+        let preset = self
+            .preset
+            .clone()
+            .unwrap_or_else(|| default_preset.to_string());
+        if !e.presets.contains(&preset.as_str()) {
+            return Err(selfmodel::Error::Config(format!(
+                "{name} has no preset \"{preset}\" (choose {})",
+                e.presets.join(", ")
+            )));
+        }
+        self.refuse_inapplicable(name, e)?;
         let opts = crate::studies::registry::RunOptions {
             preset,
             device: self.device,
@@ -542,33 +550,12 @@ impl ExperimentArgs {
         let start = std::time::Instant::now();
         let summary = e.run_in(&opts, &dir)?;
         let cpu = selfmodel::eval::compute_peak::machine_label(false);
-        // The tables it wrote (each with its Markdown), as they are in the folder.
-        let mut tables: Vec<String> = std::fs::read_dir(&dir)
-            .map(|entries| {
-                entries
-                    .flatten()
-                    .map(|e| e.file_name().to_string_lossy().to_string())
-                    .filter(|f| f.ends_with(".csv"))
-                    .collect()
-            })
-            .unwrap_or_default();
-        tables.sort();
-        if let Some(i) = tables.iter().position(|t| t == "results.csv") {
-            let r = tables.remove(i);
-            tables.insert(0, r);
-        }
         let done = format!(
             "{name} ({} preset): {:.0} s on {cpu}; wrote {}/{} (+ Markdown, figures)",
             opts.preset,
             start.elapsed().as_secs_f64(),
             dir.display(),
-            if tables.is_empty() {
-                String::new()
-            } else if tables.len() == 1 {
-                tables[0].clone()
-            } else {
-                format!("{{{}}}", tables.join(", "))
-            }
+            tables_written(&dir)
         );
         println!("{summary}\n{done}");
         // What the command printed, for the README (which includes it, not a typed copy).
@@ -577,6 +564,30 @@ impl ExperimentArgs {
             format!("{summary}\n{done}\n").as_bytes(),
         )?;
         Ok(())
+    }
+}
+
+/// The tables a run wrote into `dir` (each beside its Markdown), `results.csv` first, as the
+/// run's last line names them: one name, or `{a.csv, b.csv}`.
+fn tables_written(dir: &Path) -> String {
+    let mut tables: Vec<String> = std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().to_string())
+                .filter(|f| f.ends_with(".csv"))
+                .collect()
+        })
+        .unwrap_or_default();
+    tables.sort();
+    if let Some(i) = tables.iter().position(|t| t == "results.csv") {
+        let r = tables.remove(i);
+        tables.insert(0, r);
+    }
+    match tables.len() {
+        0 => String::new(),
+        1 => tables.remove(0),
+        _ => format!("{{{}}}", tables.join(", ")),
     }
 }
 

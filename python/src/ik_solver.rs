@@ -7,6 +7,7 @@ use pyo3::prelude::*;
 
 use selfmodel::ik::solve::learned::{LearnedIk, target_columns, target_from_values};
 use selfmodel::ik::solve::levenberg_marquardt::PoseTarget;
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::sim::robot::Robot;
 
 use crate::arrays::*;
@@ -120,7 +121,7 @@ impl PyIkSolver {
                         .as_ref()
                         .map(|c| c as &dyn selfmodel::ik::solve::levenberg_marquardt::Avoid),
                 };
-                self.model.solve_until(&self.robot.chain, &parsed, k, &how)
+                self.model.solve(&self.robot.chain, &parsed, k, &how)
             });
             if let Some(e) = raised.into_inner().unwrap_or_else(|p| p.into_inner()) {
                 return Err(e);
@@ -181,7 +182,7 @@ impl PyIkSolver {
                 .map_err(|e| value_error(format!("target: {e}")))?;
             let mut a = py
                 .allow_threads(|| {
-                    self.model.solve_until(
+                    self.model.solve(
                         &self.robot.chain,
                         std::slice::from_ref(&row),
                         1,
@@ -202,7 +203,7 @@ impl PyIkSolver {
             let mut times: Vec<f64> = (0..repeats.max(1))
                 .map(|_| -> selfmodel::Result<f64> {
                     let t0 = std::time::Instant::now();
-                    let a = self.model.solve_until(
+                    let a = self.model.solve(
                         &self.robot.chain,
                         std::slice::from_ref(&row),
                         1,

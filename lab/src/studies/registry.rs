@@ -200,7 +200,7 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         (opts.batch.is_some(), "--batch"),
         (opts.train_samples.is_some(), "--train-samples"),
         (
-            opts.camera != crate::studies::run::CameraChoice::default(),
+            opts.camera != selfmodel::data::dataset::CameraChoice::default(),
             "--eye, --target, --fov, --size and --view",
         ),
         (

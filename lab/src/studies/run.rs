@@ -225,7 +225,7 @@ fn add_note(note: &mut String, msg: String) {
     };
 }
 
-pub use selfmodel::data::dataset::CameraChoice;
+use selfmodel::data::dataset::CameraChoice;
 
 /// Where runs write unless told otherwise (git-ignored).
 pub const RUNS: &str = "runs";

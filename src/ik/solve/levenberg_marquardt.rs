@@ -495,7 +495,7 @@ pub fn solve(
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
         // A start with a collision check can take tens of milliseconds on a humanoid: Ctrl-C
-        // ends the search (the caller throws the answer away: `LearnedIk::solve_until`).
+        // ends the search (the caller throws the answer away: `LearnedIk`'s `IkSolver::solve`).
         if avoid.is_some() && crate::core::interrupt::requested() {
             break;
         }

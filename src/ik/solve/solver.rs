@@ -7,8 +7,8 @@
 //!   tolerances ([`crate::ik::solve::levenberg_marquardt`]);
 //! - [`DampedLeastSquares`]: positions only, from the home pose and then random starts
 //!   ([`crate::ik::solve::damped_least_squares`]);
-//! - [`LearnedIk`]: a trained model's samples as the starts of Levenberg-Marquardt
-//!   ([`crate::ik::solve::learned`]).
+//! - [`crate::ik::solve::learned::LearnedIk`]: a trained model's samples as the starts of
+//!   Levenberg-Marquardt (its implementation sits with the model).
 //!
 //! # Examples
 //!
@@ -34,7 +34,6 @@ use rayon::prelude::*;
 
 use crate::core::error::{Error, Result};
 use crate::ik::solve::damped_least_squares::{self, DlsConfig};
-use crate::ik::solve::learned::LearnedIk;
 use crate::ik::solve::levenberg_marquardt::{self, Answering, PoseSolution, PoseTarget};
 use crate::sim::kinematics::KinematicChain;
 
@@ -172,17 +171,5 @@ impl IkSolver for DampedLeastSquares {
                 })
                 .collect()
         })
-    }
-}
-
-impl IkSolver for LearnedIk {
-    fn solve(
-        &self,
-        chain: &KinematicChain,
-        targets: &[Vec<PoseTarget>],
-        k: usize,
-        how: &Answering,
-    ) -> Result<Vec<Vec<PoseSolution>>> {
-        self.solve_until(chain, targets, k, how)
     }
 }

@@ -15,6 +15,7 @@ use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
 use selfmodel::ik::solve::learned::LearnedIk;
 use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::levenberg_marquardt::{Avoid, PoseSolution, PoseTarget};
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::sim::collision::scene::Scene;
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
@@ -386,7 +387,7 @@ fn solve_all(
         stop: &selfmodel::core::interrupt::requested,
         avoid,
     };
-    let solve = || model.solve_until(&robot.chain, targets, 1, &how);
+    let solve = || model.solve(&robot.chain, targets, 1, &how);
     let answers: Vec<PoseSolution> = solve()?.into_iter().flatten().collect();
     let repeats = Repeats {
         warmup: 0,

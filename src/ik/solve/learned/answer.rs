@@ -9,6 +9,7 @@ use crate::ik::flow::{Draws, sample_rows, sample_rows_from};
 use crate::ik::solve::levenberg_marquardt::{
     Answering, Avoid, LmConfig, PoseSolution, PoseTarget, solve,
 };
+use crate::ik::solve::solver::IkSolver;
 use crate::sim::kinematics::KinematicChain;
 
 use super::LearnedIk;
@@ -23,17 +24,19 @@ impl LearnedIk {
     pub fn answering(&self) -> Answering<'_> {
         Answering::with(&self.saved.config.lm)
     }
+}
 
+impl IkSolver for LearnedIk {
     /// `k` answers per target: the flow's `k` samples, each refined by Levenberg-Marquardt
     /// (from random starts where it stalls), in target order, on the device it was loaded or
-    /// trained on, answered as `how` says ([`Self::answering`]: its own): with its solver settings (a budget of random
+    /// trained on, answered as `how` says ([`LearnedIk::answering`]: its own): with its solver settings (a budget of random
     /// starts, tolerances), asking `how.stop` on the calling thread before each block of
     /// targets (a few thousand answers, well under a second: `true` ends it with
     /// [`Error::Interrupted`]; Python passes its own signal check), and where `how.avoid` is
     /// given (a collision check) counting an answer only where it accepts it
     /// ([`crate::ik::solve::levenberg_marquardt::solve`]). The answers are those of one pass over all targets: each
     /// block samples the flow with the seeds a single pass would use.
-    pub fn solve_until(
+    fn solve(
         &self,
         chain: &KinematicChain,
         targets: &[Vec<PoseTarget>],
@@ -117,7 +120,9 @@ impl LearnedIk {
         }
         Ok(answers)
     }
+}
 
+impl LearnedIk {
     /// Where an answer is not exact once collisions are checked (every start it tried either
     /// missed or collided), try again from more of the flow's samples for that target: they
     /// keep to the poses it learned, where the random starts fold the robot onto itself.
@@ -235,11 +240,6 @@ impl LearnedIk {
             )));
         }
         Ok(())
-    }
-
-    /// Where the flow samples.
-    pub fn device(&self) -> &Device {
-        &self.device
     }
 
     pub fn position_only(&self) -> bool {

@@ -27,6 +27,7 @@ use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::levenberg_marquardt::{
     LmConfig, PoseSolution, PoseTarget, pose_error, solve_batch,
 };
+use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::ik::solve::targets::{random_targets, targets_csv};
 
 use references::references;
@@ -411,7 +412,7 @@ impl Ours<'_> {
             };
             let solve = || {
                 let how = Answering::with(&lm);
-                self.model.solve_until(self.chain, self.targets, 1, &how)
+                self.model.solve(self.chain, self.targets, 1, &how)
             };
             let (s, answers) = timed(solve);
             let is_standard = starts == standard.random_starts;
@@ -453,7 +454,7 @@ impl Ours<'_> {
         let k = sitting.cfg.k;
         let (s, answers) = timed(|| {
             self.model
-                .solve_until(self.chain, self.targets, k, &self.model.answering())
+                .solve(self.chain, self.targets, k, &self.model.answering())
         });
         sitting.push(
             RowLabel {
