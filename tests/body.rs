@@ -17,12 +17,14 @@ use selfmodel::self_models::{
 use selfmodel::train::trainer::autodiff_device;
 
 /// The quick NeuroKin (trained once, for all the checks below: a model is not `Sync`).
-fn fitted() -> Fitted {
+fn fitted() -> Fitted<Box<dyn Render>> {
     let mut cfg = neurokin_run("quick").unwrap();
     cfg.train.steps = 400;
     cfg.train.checkpoint_every = 0;
     let dir = common::tempdir();
-    fit_run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap()
+    fit_run(&cfg, dir.path(), DeviceChoice::Cpu, false)
+        .unwrap()
+        .erased()
 }
 
 #[test]
@@ -40,7 +42,7 @@ struct Setup {
     ranges: Vec<[f64; 2]>,
 }
 
-fn setup(f: &Fitted) -> Setup {
+fn setup(f: &Fitted<Box<dyn Render>>) -> Setup {
     let autodiff = autodiff_device(&f.device, 0);
     let renderer = f.trained.renderers[0]
         .1
@@ -56,7 +58,7 @@ fn setup(f: &Fitted) -> Setup {
 
 /// `n` training poses spread along the dataset's trajectory (consecutive samples are nearly
 /// the same pose).
-fn spread(f: &Fitted, n: usize) -> Vec<usize> {
+fn spread<R>(f: &Fitted<R>, n: usize) -> Vec<usize> {
     let step = f.train_range.len() / n;
     (0..n).map(|i| f.train_range.start + i * step).collect()
 }
@@ -70,7 +72,7 @@ fn mean_abs_error(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
         / n as f64
 }
 
-fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted) {
+fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted<Box<dyn Render>>) {
     let s = setup(f);
     let poses = spread(f, 12);
     let observed = Observed::from_dataset(&f.data, &poses);
@@ -145,7 +147,7 @@ fn pose_from_image_recovers_training_poses_better_than_the_mean_pose(f: &Fitted)
     );
 }
 
-fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted) {
+fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted<Box<dyn Render>>) {
     let s = setup(f);
     let poses = spread(f, 10);
     let observed = Observed::from_dataset(&f.data, &poses);
@@ -180,7 +182,7 @@ fn drift_recovers_a_synthetic_encoder_offset(f: &Fitted) {
     }
 }
 
-fn bad_inputs_are_refused_with_one_line(f: &Fitted) {
+fn bad_inputs_are_refused_with_one_line(f: &Fitted<Box<dyn Render>>) {
     let s = setup(f);
     let one = |e: selfmodel::Error| {
         let m = e.to_string();
@@ -236,7 +238,7 @@ fn visual_calibration_of_a_tiny_k3dgs_recovers_a_lengthened_link() {
     let dir = common::tempdir();
     let f = fit_run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
     let robot = cfg.data.robot.load().unwrap();
-    let renderer = f.trained.renderers[0].1.as_ref();
+    let renderer: &dyn Render = &f.trained.renderers[0].1;
     let nominal = renderer.joint_origins().expect("K-3DGS hangs on the chain");
     // The longest link grows by 5 cm.
     let norm = |v: &[f32; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();

@@ -11,6 +11,7 @@ use selfmodel::self_models::mean_silhouette::MeanSilhouette;
 use selfmodel::self_models::neurokin::NeuroKinConfig;
 use selfmodel::self_models::resneurokin_d::ResNeuroKinDConfig;
 use selfmodel::self_models::{harness::run, model::SelfModel, run_config::SelfModelRun};
+use selfmodel_lab::studies::models::Studied;
 
 #[test]
 fn parameter_counts_match_the_notebooks() {

@@ -396,7 +396,14 @@ fn a_tiny_trained_ffksm_beats_black_and_renders_the_same_with_fewer_evaluations(
     cfg.model.novel_views_deg = vec![30.0];
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
-    let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    // With the study's reports of the field's own (its renderers compared, novel views).
+    let out =
+        selfmodel_lab::studies::models::run_studied(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    assert!(
+        out.rows[1].note.contains("network evaluations per image"),
+        "{}",
+        out.rows[1].note
+    );
     // Its saved field loads with its robot and camera and renders as its run did.
     common::the_saved_model_scores_as_its_run(&cfg, &dir, &out.quality);
     let read = selfmodel::report::table::read_csv::<RendererRow>;

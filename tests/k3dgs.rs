@@ -241,11 +241,13 @@ fn anisotropic_projection_is_the_jacobian_formula_in_f64() {
 #[test]
 fn a_tiny_k3dgs_learns_the_arm_and_keeps_its_gaussians_within_bounds() {
     use selfmodel::core::device::DeviceChoice;
-    use selfmodel::self_models::k3dgs::{CountRow, K3dgsVariant, k3dgs_run};
+    use selfmodel::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+    use selfmodel_lab::studies::models::{k3dgs_reports::CountRow, run_studied};
     let cfg = k3dgs_run("quick", K3dgsVariant::IsotropicAlpha).unwrap();
     let tmp = common::tempdir();
     let dir = tmp.path().to_path_buf();
-    let out = selfmodel::self_models::harness::run(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
+    // With the study's reports of K-3DGS's own (speeds, counts, the Gaussians' figure).
+    let out = run_studied(&cfg, &dir, DeviceChoice::Cpu, false).unwrap();
     let counts: Vec<(usize, usize)> =
         selfmodel::report::table::read_csv::<CountRow>(&dir.join("gaussian_counts.csv"))
             .unwrap()

@@ -183,7 +183,9 @@ fn a_tiny_camera_conditioned_model_renders_a_trained_camera_better_than_a_consta
         let mut run = base.clone();
         run.model.camera = camera_use.clone();
         let dir = common::tempdir();
-        let fitted = fit_run(&run, dir.path(), DeviceChoice::Cpu, false).unwrap();
+        let fitted = fit_run(&run, dir.path(), DeviceChoice::Cpu, false)
+            .unwrap()
+            .erased();
         let data = &fitted.data;
         let px = data.width * data.height;
         // Per camera: the mean training image.
@@ -246,7 +248,7 @@ fn a_tiny_3d_model_trains_on_several_cameras_and_renders_each_sample_from_its_ow
         radius: None,
         elevation_deg: [0.0, 30.0],
     });
-    let check = |name: &str, fitted: Fitted, beat_constant: bool| {
+    let check = |name: &str, fitted: Fitted<Box<dyn selfmodel::Render>>, beat_constant: bool| {
         let data = &fitted.data;
         let px = data.width * data.height;
         let renderer = fitted.trained.renderers.last().unwrap().1.as_ref();
@@ -332,7 +334,9 @@ fn a_tiny_3d_model_trains_on_several_cameras_and_renders_each_sample_from_its_ow
     let dir = common::tempdir();
     check(
         "K-3DGS",
-        fit_run(&run, dir.path(), DeviceChoice::Cpu, false).unwrap(),
+        fit_run(&run, dir.path(), DeviceChoice::Cpu, false)
+            .unwrap()
+            .erased(),
         true,
     );
     let mut run = ffksm_run("quick", FfksmVariant::Original).unwrap();
@@ -341,7 +345,9 @@ fn a_tiny_3d_model_trains_on_several_cameras_and_renders_each_sample_from_its_ow
     let dir = common::tempdir();
     check(
         "FFKSM",
-        fit_run(&run, dir.path(), DeviceChoice::Cpu, false).unwrap(),
+        fit_run(&run, dir.path(), DeviceChoice::Cpu, false)
+            .unwrap()
+            .erased(),
         false,
     );
 }

@@ -201,7 +201,7 @@ fn every_self_model_reloaded_from_its_checkpoint_renders_bit_identically() {
         run_config::SelfModelRun,
     };
 
-    fn images(f: &Fitted) -> Vec<Vec<f32>> {
+    fn images<R: selfmodel::Render>(f: &Fitted<R>) -> Vec<Vec<f32>> {
         let q = f.test_set.inputs.clone().slice([0..4]);
         let host = |t: Tensor<4>| t.into_data().try_into_vec::<f32>().unwrap();
         f.trained

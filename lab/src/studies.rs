@@ -10,6 +10,7 @@ pub mod damage;
 pub mod docs;
 pub mod emssl;
 pub mod mesh_fidelity;
+pub mod models;
 pub mod multiview;
 pub mod pareto;
 pub mod registry;

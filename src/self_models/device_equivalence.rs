@@ -10,7 +10,7 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::self_models::{
     harness::{Fitted, fit_run},
-    model::SelfModel,
+    model::{Render, SelfModel},
     run_config::SelfModelRun,
 };
 
@@ -41,7 +41,7 @@ fn host(t: Tensor<4>) -> Vec<f32> {
 }
 
 /// Every renderer's images (silhouettes, then depth where it has one) of the first test poses.
-fn images(f: &Fitted) -> Vec<(String, Vec<f32>)> {
+fn images<R: Render>(f: &Fitted<R>) -> Vec<(String, Vec<f32>)> {
     let q = f.test_set.inputs.clone().slice([0..POSES]);
     f.trained
         .renderers

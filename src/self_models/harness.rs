@@ -126,9 +126,9 @@ fn predict_all(model: &dyn Render, test: &TrainSet, batch: usize, pixels: usize)
     }
 }
 
-/// A self-model trained by [`fit_run`], with the data it is scored on.
-pub struct Fitted {
-    pub trained: Trained,
+/// A self-model trained by [`fit_run`] (rendered by `R`), with the data it is scored on.
+pub struct Fitted<R> {
+    pub trained: Trained<R>,
     /// Per joint input, whether it is rotational (empty where the robot is not the
     /// dataset's).
     pub rotational: Vec<bool>,
@@ -144,6 +144,49 @@ pub struct Fitted {
     pub truth_depth: Vec<f32>,
 }
 
+impl<R: Render + 'static> Fitted<R> {
+    /// The same, its renderers of any kind: for a study that holds models of several kinds
+    /// alike.
+    pub fn erased(self) -> Fitted<Box<dyn Render>> {
+        let Fitted {
+            trained,
+            rotational,
+            device,
+            data,
+            train_range,
+            test_range,
+            test_set,
+            truth,
+            truth_depth,
+        } = self;
+        let Trained {
+            renderers,
+            parameters,
+            log,
+            note,
+        } = trained;
+        Fitted {
+            trained: Trained {
+                renderers: renderers
+                    .into_iter()
+                    .map(|(label, r)| (label, Box::new(r) as Box<dyn Render>))
+                    .collect(),
+                parameters,
+                log,
+                note,
+            },
+            rotational,
+            device,
+            data,
+            train_range,
+            test_range,
+            test_set,
+            truth,
+            truth_depth,
+        }
+    }
+}
+
 /// Load `cfg`'s data and train its model on `device_choice`, checkpointing into
 /// `checkpoint_dir` (`resume`: continue from there). The first half of [`run`]; the
 /// GPU-against-CPU test calls it directly.
@@ -152,7 +195,7 @@ pub fn fit_run<M: SelfModel>(
     checkpoint_dir: &Path,
     device_choice: DeviceChoice,
     resume: bool,
-) -> Result<Fitted> {
+) -> Result<Fitted<M::Renderer>> {
     let device = crate::core::device::select(device_choice)?;
     cfg.train.precision.check(&device)?;
     let (robot, data, train_range, test_range) = cfg.data.load_with_robot()?;
@@ -304,12 +347,26 @@ pub fn check_resumable<M: SelfModel>(
     .check()
 }
 
-/// Train, evaluate, time and report one self-model into `dir`.
+/// Train, evaluate, time and report one self-model into `dir` ([`run_with`], nothing added).
 pub fn run<M: SelfModel>(
     cfg: &SelfModelRun<M>,
     dir: &Path,
     device_choice: DeviceChoice,
     resume: bool,
+) -> Result<RunOutcome> {
+    run_with(cfg, dir, device_choice, resume, |_, _| Ok(()))
+}
+
+/// Train, evaluate, time and report one self-model into `dir`; `study` sees the run once it
+/// is evaluated and before its rows are written: it may add to the rows (reference columns,
+/// a note, a flag) and write reports of its own from the trained renderers
+/// ([`ReportContext::renderers`]).
+pub fn run_with<M: SelfModel>(
+    cfg: &SelfModelRun<M>,
+    dir: &Path,
+    device_choice: DeviceChoice,
+    resume: bool,
+    study: impl FnOnce(&mut [ModelResult], &ReportContext<M::Renderer>) -> Result<()>,
 ) -> Result<RunOutcome> {
     // Settings that can never render are refused before anything is written.
     if cfg.data.file.is_none() {
@@ -334,14 +391,11 @@ pub fn run<M: SelfModel>(
     let mut qualities = Vec::new();
     let mut rendered: Vec<RenderedSet> = Vec::new();
     for (label, renderer) in &fitted.trained.renderers {
-        let (row, quality, set) = run.evaluate(cfg, &fitted, label, renderer.as_ref());
+        let (row, quality, set) = run.evaluate(cfg, &fitted, label, renderer);
         rows.push(row);
         qualities.push(quality);
         rendered.push(set);
     }
-    let log = &fitted.trained.log;
-    write_report(dir, cfg, &rows, log)?;
-    save_model(cfg, dir, &fitted, &rendered[0], &rows[0], &git_revision)?;
     let data = &fitted.data;
     let truth: (&[f32], &[f32]) = (&fitted.truth, &fitted.truth_depth);
     let ctx = ReportContext {
@@ -357,10 +411,12 @@ pub fn run<M: SelfModel>(
         git_revision: &git_revision,
         device_name: device_choice.to_string(),
         preset: &cfg.preset,
+        renderers: &fitted.trained.renderers,
     };
-    for (_, renderer) in &fitted.trained.renderers {
-        renderer.extra_reports(&ctx)?;
-    }
+    study(&mut rows, &ctx)?;
+    let log = &fitted.trained.log;
+    write_report(dir, cfg, &rows, log)?;
+    save_model(cfg, dir, &fitted, &rendered[0], &rows[0], &git_revision)?;
     #[cfg(feature = "figures")]
     qualitative_figure(
         &dir.join("qualitative.png"),
@@ -390,7 +446,7 @@ impl Evaluation<'_> {
     fn evaluate<M: SelfModel>(
         &self,
         cfg: &SelfModelRun<M>,
-        fitted: &Fitted,
+        fitted: &Fitted<M::Renderer>,
         label: &str,
         renderer: &dyn Render,
     ) -> (ModelResult, Quality, RenderedSet) {
@@ -427,7 +483,6 @@ impl Evaluation<'_> {
             .cloned()
             .unwrap_or(untimed(0));
         let predicts_depth = predictions.depth.is_some();
-        let renderer_note = renderer.note(fitted.test_range.len());
         let log = &trained.log;
         let row = ModelResult {
             model: if label.is_empty() {
@@ -459,7 +514,6 @@ impl Evaluation<'_> {
             paper_latency_ms: None,
             paper_train_time_s: None,
             note: [
-                renderer_note.as_str(),
                 trained.note.as_str(),
                 cfg.note.as_str(),
                 &cfg.train.precision.note(),
@@ -470,9 +524,8 @@ impl Evaluation<'_> {
             .collect::<Vec<_>>()
             .join("; "),
             steps_override: cfg.steps_override,
-            lower_bound: cfg.model.lower_bound(),
-        }
-        .with_reference(&cfg.reference);
+            lower_bound: false,
+        };
         let set = RenderedSet {
             label: label.to_string(),
             predictions,
@@ -487,7 +540,7 @@ impl Evaluation<'_> {
 fn save_model<M: SelfModel>(
     cfg: &SelfModelRun<M>,
     dir: &Path,
-    fitted: &Fitted,
+    fitted: &Fitted<M::Renderer>,
     first: &RenderedSet,
     row: &ModelResult,
     git_revision: &str,
@@ -627,12 +680,12 @@ pub(crate) fn qualitative_figure(
 
 /// Image `i` of a stack of `px`-pixel images.
 #[cfg(feature = "figures")]
-pub(crate) fn nth_image(v: &[f32], i: usize, px: usize) -> &[f32] {
+pub fn nth_image(v: &[f32], i: usize, px: usize) -> &[f32] {
     &v[i * px..(i + 1) * px]
 }
 
 /// The (at most) six samples of `n` a qualitative grid shows, spread evenly.
 #[cfg(feature = "figures")]
-pub(crate) fn grid_picks(n: usize) -> Vec<usize> {
+pub fn grid_picks(n: usize) -> Vec<usize> {
     (0..6.min(n)).map(|k| k * n / 6.min(n).max(1)).collect()
 }

@@ -9,15 +9,13 @@
 //! each change. The faithful image is `sigmoid(T (Σ α − 0.5))` with `T` rising linearly from
 //! 1 to 20 over training; the principled one alpha compositing.
 //!
-//! A run (through the self-model harness) writes `config.json`, `results.csv`/`results.md`
-//! (one row), `render_speed.csv` (culled against dense splatting at batch 1 and 256),
-//! `gaussian_counts.csv`, `curve.csv`, `training_curve.png`, `qualitative.png` and
-//! `gaussians.png` (the Gaussians' centres over the silhouette).
+//! A trained model ([`K3dgsRenderer`]) also answers what its study reports of it: dense
+//! splatting's speed against the culled renders ([`K3dgsRenderer::dense_timings`]), the
+//! Gaussians' count through training ([`K3dgsRenderer::counts`]) and where their centres
+//! project ([`K3dgsRenderer::projected_centres`]).
 
 pub mod gaussians;
 pub mod splatting;
-#[cfg(feature = "figures")]
-use std::path::Path;
 
 use burn::module::Module;
 use burn::optim::GradientsParams;
@@ -27,15 +25,11 @@ use crate::core::device::DeviceChoice;
 use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::inference_speed::{SpeedConfig, Timing, measure};
-use crate::report::table::write_table;
-#[cfg(feature = "figures")]
-use crate::self_models::harness::grid_picks;
 use crate::self_models::k3dgs::gaussians::{GaussianInit, KinematicGaussians};
 use crate::self_models::k3dgs::splatting::Compositing;
-use crate::self_models::result::PaperReference;
 use crate::self_models::{
     camera_input::split_views,
-    model::{BodyFit, Fit, LoadContext, Loaded, Render, ReportContext, SelfModel, Trained},
+    model::{BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained},
     run_config::SelfModelRun,
 };
 use crate::sim::camera::Camera;
@@ -138,19 +132,6 @@ impl K3dgsVariant {
     ];
 }
 
-impl PaperReference {
-    /// K-3DGS in the paper: 17.01 dB at 37 FPS, 50.5 s of training (Table I), on a T4.
-    pub fn k3dgs() -> Self {
-        PaperReference {
-            psnr_db: Some(17.01),
-            fps: Some(37.0),
-            latency_ms: Some(1000.0 / 37.0),
-            // Table I's figure; the text gives 30.3 s for 1,000 iterations.
-            train_time_s: Some(50.5),
-        }
-    }
-}
-
 /// A K-3DGS run on `preset` (`paper`, `short`, `quick`).
 pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3dgs>> {
     let quick = preset == "quick";
@@ -212,7 +193,7 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
         model.densification.max_gaussians = if quick { 100 } else { 500 };
         model.densification.min_gaussians = if quick { 20 } else { 100 };
     }
-    let mut run = SelfModelRun::new(preset, name, model, 32, PaperReference::k3dgs())?;
+    let mut run = SelfModelRun::new(preset, name, model, 32)?;
     run.train = TrainConfig {
         precision: Default::default(),
         steps,
@@ -355,28 +336,9 @@ impl TrainHooks<KinematicGaussians> for Densifier<'_> {
     }
 }
 
-/// Culled against dense splatting.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct RenderSpeedRow {
-    pub model: String,
-    pub splatting: String,
-    pub batch: usize,
-    pub img_per_s: f64,
-    pub gaussians: usize,
-    pub git_revision: String,
-    pub device: String,
-    pub preset: String,
-}
-
-/// The Gaussians' count after each change of the set during training.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct CountRow {
-    pub step: usize,
-    pub gaussians: usize,
-}
-
 impl SelfModel for K3dgs {
     const KIND: &'static str = "k3dgs";
+    type Renderer = K3dgsRenderer;
 
     fn image(&self) -> [usize; 2] {
         self.image
@@ -392,7 +354,7 @@ impl SelfModel for K3dgs {
 
     /// One image per step, the robot pixels weighted, densified and pruned between steps
     /// (no checkpoints: a run takes seconds to minutes and its Gaussians change in number).
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<K3dgsRenderer>> {
         if fit.plan.resume {
             // Densification changes the parameters' shapes as it trains, so the shared
             // checkpoint (weights loaded into the initial model's shapes) cannot hold it.
@@ -465,7 +427,7 @@ impl SelfModel for K3dgs {
             ),
             renderers: vec![(
                 String::new(),
-                Box::new(K3dgsRenderer {
+                K3dgsRenderer {
                     mode: self.mode_at(steps, steps),
                     model,
                     chain,
@@ -473,7 +435,7 @@ impl SelfModel for K3dgs {
                     cull_sigmas: self.cull_sigmas,
                     dense_batches: self.dense_batches.clone(),
                     counts,
-                }),
+                },
             )],
             log,
         })
@@ -507,10 +469,6 @@ impl SelfModel for K3dgs {
             dense_batches: self.dense_batches.clone(),
             counts: Vec::new(),
         })))
-    }
-
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        k3dgs_run(preset, K3dgsVariant::Isotropic)
     }
 }
 
@@ -612,61 +570,47 @@ impl Render for K3dgsRenderer {
     fn depth_pixels(&self) -> DepthPixels {
         DepthPixels::Drawn
     }
+}
 
-    /// `render_speed.csv` (culled, as the harness timed it, against dense splatting),
-    /// `gaussian_counts.csv` and `gaussians.png`.
-    fn extra_reports(&self, ctx: &ReportContext) -> Result<()> {
-        // Dense splatting is the slow reference: one warm-up and one timed call per batch.
+impl K3dgsRenderer {
+    /// Dense splatting timed at each of its `dense_batches` (the slow reference to the
+    /// culled renders the harness times: one warm-up and one timed call per batch), on
+    /// `dof`-joint poses on `device`.
+    pub fn dense_timings(&self, dof: usize, device: &Device) -> Vec<Timing> {
         let dense_speed = SpeedConfig {
             warmup: 1,
             min_repeats: 1,
             min_seconds: 0.0,
             batches: self.dense_batches.clone(),
         };
-        let dense = measure(
-            |q| self.splat(q, None).0,
-            ctx.data.dof(),
-            ctx.device,
-            &dense_speed,
-        );
-        let row = |splatting: &str, t: &Timing| RenderSpeedRow {
-            model: ctx.name.into(),
-            splatting: splatting.into(),
-            batch: t.batch,
-            img_per_s: t.images_per_second(),
-            gaussians: self.model.len(),
-            git_revision: ctx.git_revision.into(),
-            device: ctx.device_name.clone(),
-            preset: ctx.preset.into(),
-        };
-        let speed: Vec<RenderSpeedRow> = ctx.rendered[0]
-            .timings
+        measure(|q| self.splat(q, None).0, dof, device, &dense_speed)
+    }
+
+    /// The camera it renders from.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// Where its Gaussians' centres project (image row, column) in each of `poses` (joint
+    /// angles in degrees).
+    pub fn projected_centres(&self, poses: &[Vec<f64>]) -> Vec<Vec<(f32, f32)>> {
+        let device = self.model.positions.val().device();
+        let dof = self.chain.dof();
+        let q: Vec<f32> = poses
             .iter()
-            .map(|t| row("culled", t))
-            .chain(dense.iter().map(|t| row("dense", t)))
+            .flat_map(|p| p.iter().map(|&a| a as f32))
             .collect();
-        write_table(
-            &ctx.dir.join("render_speed.csv"),
-            &speed,
-            &format!("{}: culled against dense splatting", ctx.name),
-            "Images/s of the trained model, median of synchronised timed calls after warm-up; dense splatting evaluates every (Gaussian, pixel) pair, culled only those within `cull_sigmas` standard deviations.",
-        )?;
-        let counts: Vec<CountRow> = self
-            .counts
-            .iter()
-            .map(|&(step, gaussians)| CountRow { step, gaussians })
-            .collect();
-        crate::report::table::write_csv(&ctx.dir.join("gaussian_counts.csv"), &counts)?;
-        #[cfg(feature = "figures")]
-        gaussians_figure(
-            &ctx.dir.join("gaussians.png"),
-            &self.model,
-            &self.chain,
-            ctx.data,
-            ctx.test,
-            &self.camera,
-        )?;
-        Ok(())
+        let q = self.chain.from_user(Tensor::<2>::from_data(
+            TensorData::new(q, [poses.len(), dof]),
+            &device,
+        ));
+        let g = self.model.project(&self.chain, q, &self.camera);
+        let rows = g.row.into_data().try_into_vec::<f32>().expect("float");
+        let cols = g.col.into_data().try_into_vec::<f32>().expect("float");
+        let m = self.model.len();
+        (0..poses.len())
+            .map(|b| (0..m).map(|k| (rows[b * m + k], cols[b * m + k])).collect())
+            .collect()
     }
 }
 
@@ -702,54 +646,4 @@ impl BodyFit for K3dgsRenderer {
             .composite(g, &self.camera, self.mode, Some(self.cull_sigmas));
         Some(s.reshape([b, 1, self.camera.height, self.camera.width]))
     }
-}
-
-/// Six test poses: the true silhouette with the Gaussians' projected centres over it.
-#[cfg(feature = "figures")]
-fn gaussians_figure(
-    path: &Path,
-    model: &KinematicGaussians,
-    chain: &TensorChain,
-    data: &crate::data::dataset::Dataset,
-    test: &std::ops::Range<usize>,
-    camera: &crate::sim::camera::Camera,
-) -> Result<()> {
-    let picks: Vec<usize> = grid_picks(test.len())
-        .into_iter()
-        .map(|k| test.start + k)
-        .collect();
-    let device = model.positions.val().device();
-    let q: Vec<f32> = picks
-        .iter()
-        .flat_map(|&i| data.angles[i].iter().map(|&a| a as f32))
-        .collect();
-    let dof = data.dof();
-    let q = chain.from_user(Tensor::<2>::from_data(
-        TensorData::new(q, [picks.len(), dof]),
-        &device,
-    ));
-    let g = model.project(chain, q, camera);
-    let rows = g.row.into_data().try_into_vec::<f32>().expect("float");
-    let cols = g.col.into_data().try_into_vec::<f32>().expect("float");
-    let m = model.len();
-    let points: Vec<Vec<(f32, f32)>> = (0..picks.len())
-        .map(|b| (0..m).map(|k| (rows[b * m + k], cols[b * m + k])).collect())
-        .collect();
-    let images: Vec<Vec<f32>> = picks
-        .iter()
-        .map(|&i| data.image(i).iter().map(|&v| v as f32 / 255.0).collect())
-        .collect();
-    let refs: Vec<&[f32]> = images.iter().map(|v| v.as_slice()).collect();
-    let caption = format!(
-        "{m} Gaussians: their projected centres (green) over the true silhouette (grey), six test poses"
-    );
-    crate::report::figures::points_over_images(
-        path,
-        &refs,
-        &points,
-        camera.width,
-        camera.height,
-        3,
-        &caption,
-    )
 }

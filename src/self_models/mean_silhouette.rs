@@ -11,7 +11,6 @@ use burn::tensor::{Device, Tensor, TensorData};
 use crate::core::error::Result;
 use crate::core::preset::Preset;
 use crate::eval::evaluation::iou;
-use crate::self_models::result::PaperReference;
 use crate::self_models::{
     model::{BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network},
     run_config::{SelfModelRun, model_preset},
@@ -82,12 +81,13 @@ fn best_threshold(mean: &[f32], images: &[f32]) -> f32 {
 
 impl SelfModel for MeanSilhouette {
     const KIND: &'static str = "mean_silhouette";
+    type Renderer = ConstantImage;
 
     fn image(&self) -> [usize; 2] {
         self.image
     }
 
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<ConstantImage>> {
         let start = std::time::Instant::now();
         let [n, _, h, w] = fit.train_set.targets[0].dims();
         let images = fit.train_set.targets[0]
@@ -131,10 +131,6 @@ impl SelfModel for MeanSilhouette {
         ))
     }
 
-    fn lower_bound(&self) -> bool {
-        true
-    }
-
     fn load(&self, weights: &std::path::Path, ctx: &LoadContext) -> Result<Loaded> {
         let [h, w] = self.image;
         let template = ConstantImage {
@@ -142,21 +138,15 @@ impl SelfModel for MeanSilhouette {
         };
         load_network(template, weights)
     }
+}
 
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        let mut model = MeanSilhouette::preset(model_preset(preset))?;
-        model.image = SelfModelRun::<Self>::image(preset)?;
-        let mut run = SelfModelRun::new(
-            preset,
-            "MeanSilhouette",
-            model,
-            256,
-            PaperReference::default(),
-        )?;
-        run.note = "the best constant image: a lower bound, not a model".into();
-        // One pass over the training silhouettes.
-        run.train.steps = 1;
-        run.train.batch = run.data.dataset.train;
-        Ok(run)
-    }
+/// MeanSilhouette's run on `preset`: one pass over the training silhouettes.
+pub fn mean_silhouette_run(preset: &str) -> Result<SelfModelRun<MeanSilhouette>> {
+    let mut model = MeanSilhouette::preset(model_preset(preset))?;
+    model.image = SelfModelRun::<MeanSilhouette>::image(preset)?;
+    let mut run = SelfModelRun::new(preset, "MeanSilhouette", model, 256)?;
+    run.note = "the best constant image: a lower bound, not a model".into();
+    run.train.steps = 1;
+    run.train.batch = run.data.dataset.train;
+    Ok(run)
 }

@@ -14,7 +14,6 @@ use crate::data::dataset::Dataset;
 use crate::eval::evaluation::{DepthPixels, Predictions};
 use crate::eval::inference_speed::Timing;
 use crate::self_models::data_spec::DataSpec;
-use crate::self_models::run_config::SelfModelRun;
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 use crate::train::{
@@ -30,17 +29,15 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     /// Its kind in a saved model's `model.json` ([`crate::self_models::saved`]), which
     /// picks its loader ([`crate::self_models::loading`]).
     const KIND: &'static str;
+    /// What its training hands back to render (its network, or its renderers).
+    type Renderer: Render + 'static;
     /// The image it renders, `[height, width]` (the dataset's camera must match).
     fn image(&self) -> [usize; 2];
     /// Train on `fit.train_set` and hand back what renders.
-    fn fit(&self, fit: &Fit) -> Result<Trained>;
+    fn fit(&self, fit: &Fit) -> Result<Trained<Self::Renderer>>;
     /// What a checkpoint must match to be resumed.
     fn fingerprint(&self, train: &TrainConfig, data: &DataSpec) -> serde_json::Value {
         serde_json::json!({"model": self, "train": train, "data": data.fingerprint()})
-    }
-    /// Whether it is a lower bound every model must beat (a constant), not a model.
-    fn lower_bound(&self) -> bool {
-        false
     }
     /// The number of joint values its network takes, where its config fixes one.
     fn dof(&self) -> Option<usize> {
@@ -79,10 +76,6 @@ pub trait SelfModel: Clone + std::fmt::Debug + PartialEq + serde::Serialize {
     fn load(&self, _weights: &Path, _ctx: &LoadContext) -> Result<Loaded> {
         Ok(None)
     }
-    /// Its run on a preset of [`crate::self_models::run_config::SELF_MODEL_PRESETS`] (what the registry runs).
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>>
-    where
-        Self: Sized;
 }
 
 /// A saved self-model's renderer, rebuilt ([`SelfModel::load`]); `None`: its kind saves no
@@ -120,7 +113,7 @@ pub fn train_network<N, L, S>(
     fit: &Fit,
     set: &TrainSet,
     loss: L,
-) -> Result<Trained>
+) -> Result<Trained<N>>
 where
     N: burn::module::Module + Render + 'static,
     L: Fn(&N, &Batch) -> S,
@@ -156,11 +149,11 @@ pub struct Fit<'a> {
     pub cameras_in_inputs: bool,
 }
 
-/// A trained self-model.
-pub struct Trained {
+/// A trained self-model, rendered by `R`.
+pub struct Trained<R> {
     /// What renders, each with its label (empty for a model's one renderer; otherwise its
     /// row is "name (label)"). The first draws the qualitative figure.
-    pub renderers: Vec<(String, Box<dyn Render>)>,
+    pub renderers: Vec<(String, R)>,
     /// Trainable parameters (PyTorch's count).
     pub parameters: usize,
     pub log: TrainLog,
@@ -168,11 +161,11 @@ pub struct Trained {
     pub note: String,
 }
 
-impl Trained {
+impl<R> Trained<R> {
     /// A model with one renderer and nothing of its own to say in its row.
-    pub fn one(renderer: impl Render + 'static, parameters: usize, log: TrainLog) -> Self {
+    pub fn one(renderer: R, parameters: usize, log: TrainLog) -> Self {
         Trained {
-            renderers: vec![(String::new(), Box::new(renderer))],
+            renderers: vec![(String::new(), renderer)],
             parameters,
             log,
             note: String::new(),
@@ -191,10 +184,6 @@ pub trait Render: BodyFit {
     fn depth_pixels(&self) -> DepthPixels {
         DepthPixels::TrueRobot
     }
-    /// Said first in its row's note, once the `test_images` are rendered (empty: nothing).
-    fn note(&self, _test_images: usize) -> String {
-        String::new()
-    }
     /// Silhouettes `[n, 1, H, W]` of `angles` seen from `camera` (same image size) instead
     /// of the camera it was trained with: a 3-D model renders any view. `None`: a model of
     /// the views it was trained on (a camera-conditioned one takes the camera as input).
@@ -205,10 +194,6 @@ pub trait Render: BodyFit {
     /// to be rebuilt (kept in `model.json`); `None`: it saves none.
     fn save(&self, _path: &Path) -> Result<Option<serde_json::Value>> {
         Ok(None)
-    }
-    /// Reports of its own beside the harness's (FFKSM's renderers, K-3DGS's speeds).
-    fn extra_reports(&self, _ctx: &ReportContext) -> Result<()> {
-        Ok(())
     }
 }
 
@@ -237,6 +222,35 @@ pub trait BodyFit {
     }
 }
 
+/// A renderer of any kind renders, as what it holds does (a study holding trained models of
+/// several kinds together, [`crate::self_models::harness::Fitted::erased`]).
+impl Render for Box<dyn Render> {
+    fn render(&self, angles: Tensor<2>) -> (Tensor<4>, Option<Tensor<4>>) {
+        self.as_ref().render(angles)
+    }
+    fn depth_pixels(&self) -> DepthPixels {
+        self.as_ref().depth_pixels()
+    }
+    fn render_view(&self, camera: &Camera, angles: Tensor<2>) -> Option<Tensor<4>> {
+        self.as_ref().render_view(camera, angles)
+    }
+    fn save(&self, path: &Path) -> Result<Option<serde_json::Value>> {
+        self.as_ref().save(path)
+    }
+}
+
+impl BodyFit for Box<dyn Render> {
+    fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
+        self.as_ref().differentiable(autodiff)
+    }
+    fn joint_origins(&self) -> Option<Vec<[f32; 3]>> {
+        self.as_ref().joint_origins()
+    }
+    fn render_with_origins(&self, angles: Tensor<2>, origin_t: Tensor<2>) -> Option<Tensor<4>> {
+        self.as_ref().render_with_origins(angles, origin_t)
+    }
+}
+
 /// One renderer's test predictions and inference timings.
 pub struct RenderedSet {
     pub label: String,
@@ -244,8 +258,9 @@ pub struct RenderedSet {
     pub timings: Vec<Timing>,
 }
 
-/// What a model's own reports may use.
-pub struct ReportContext<'a> {
+/// A run evaluated, before its rows are written: what a study's reports of its own use
+/// ([`crate::self_models::harness::run_with`]), the trained renderers `R` included.
+pub struct ReportContext<'a, R> {
     pub dir: &'a Path,
     pub name: &'a str,
     pub spec: &'a DataSpec,
@@ -261,4 +276,6 @@ pub struct ReportContext<'a> {
     pub git_revision: &'a str,
     pub device_name: String,
     pub preset: &'a str,
+    /// What renders, each with its label, as [`Trained::renderers`].
+    pub renderers: &'a [(String, R)],
 }

@@ -7,7 +7,6 @@ use burn::tensor::{Tensor, TensorData};
 
 use crate::core::error::Result;
 use crate::core::preset::Preset;
-use crate::self_models::result::PaperReference;
 use crate::self_models::{
     model::{BodyFit, Fit, Render, SelfModel, Trained},
     run_config::{SelfModelRun, model_preset},
@@ -82,6 +81,7 @@ impl BodyFit for Table {}
 
 impl SelfModel for NearestPose {
     const KIND: &'static str = "nearest_pose";
+    type Renderer = Table;
 
     fn image(&self) -> [usize; 2] {
         self.image
@@ -89,7 +89,7 @@ impl SelfModel for NearestPose {
 
     /// Store the training set; the "training loss" is the leave-one-out MSE of the lookup on
     /// the training silhouettes.
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<Table>> {
         let start = std::time::Instant::now();
         let host = |t: &Tensor<4>| t.clone().into_data().try_into_vec::<f32>().expect("float");
         let [n, dof] = fit.train_set.inputs.dims();
@@ -133,15 +133,15 @@ impl SelfModel for NearestPose {
             },
         ))
     }
+}
 
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        let mut model = NearestPose::preset(model_preset(preset))?;
-        model.image = SelfModelRun::<Self>::image(preset)?;
-        let mut run =
-            SelfModelRun::new(preset, "NearestPose", model, 256, PaperReference::default())?;
-        run.note = "a lookup table: the training images of the nearest training pose".into();
-        run.train.steps = 1;
-        run.train.batch = run.data.dataset.train;
-        Ok(run)
-    }
+/// NearestPose's run on `preset`: one pass that stores the training set.
+pub fn nearest_pose_run(preset: &str) -> Result<SelfModelRun<NearestPose>> {
+    let mut model = NearestPose::preset(model_preset(preset))?;
+    model.image = SelfModelRun::<NearestPose>::image(preset)?;
+    let mut run = SelfModelRun::new(preset, "NearestPose", model, 256)?;
+    run.note = "a lookup table: the training images of the nearest training pose".into();
+    run.train.steps = 1;
+    run.train.batch = run.data.dataset.train;
+    Ok(run)
 }

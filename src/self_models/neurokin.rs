@@ -31,7 +31,6 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
-use crate::self_models::result::PaperReference;
 use crate::self_models::tree_encoder::TreeEncoder;
 use crate::self_models::{
     model::{
@@ -511,12 +510,13 @@ impl BodyFit for NeuroKin {
 
 impl SelfModel for NeuroKinConfig {
     const KIND: &'static str = "neurokin";
+    type Renderer = NeuroKin;
 
     fn image(&self) -> [usize; 2] {
         self.image
     }
 
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<NeuroKin>> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let set = self.training_set(fit.train_set);
         train_network(
@@ -550,24 +550,19 @@ impl SelfModel for NeuroKinConfig {
         load_network(self.init(ctx.device, 0)?, weights)
     }
 
-    /// NeuroKin as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000 steps, clip 1.0,
-    /// N(0, 0.01) noise on the angles in degrees.
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        let mut model = NeuroKinConfig::preset(model_preset(preset))?;
-        model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
-        let run = SelfModelRun::new(preset, "NeuroKin", model, 256, PaperReference::neurokin())?;
-        Ok(run.shorten(200, 32))
-    }
-
     /// The flat encoder follows its input's dtype; the tree encoder's messages are f32 only.
     fn autocasts(&self) -> bool {
         self.encoder.is_flat()
     }
 }
 
-/// NeuroKin's run on `preset` ([`SelfModel::preset_run`]).
+/// NeuroKin's run on `preset`, as the notebook trained it: BCE, Adam 1e-3, batch 32, 3,000
+/// steps, clip 1.0, N(0, 0.01) noise on the angles in degrees.
 pub fn neurokin_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
-    NeuroKinConfig::preset_run(preset)
+    let mut model = NeuroKinConfig::preset(model_preset(preset))?;
+    model.image = SelfModelRun::<NeuroKinConfig>::image(preset)?;
+    let run = SelfModelRun::new(preset, "NeuroKin", model, 256)?;
+    Ok(run.shorten(200, 32))
 }
 
 /// NeuroKin with the tree encoder in place of the flat MLP, at its parameter count; the rest
@@ -591,13 +586,7 @@ pub fn neurokin64_run(preset: &str) -> Result<SelfModelRun<NeuroKinConfig>> {
         model.seed_channels = 32;
         model.upsampling_layers = 3;
     }
-    let mut cfg = SelfModelRun::new(
-        preset,
-        "NeuroKin-64 (paper text)",
-        model,
-        256,
-        PaperReference::neurokin(),
-    )?;
+    let mut cfg = SelfModelRun::new(preset, "NeuroKin-64 (paper text)", model, 256)?;
     cfg.train.batch = if quick { 32 } else { 128 };
     cfg.train.steps = TrainConfig::steps_for_epochs(
         if quick { 30 } else { 50 },

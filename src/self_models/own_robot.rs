@@ -13,8 +13,7 @@ impl<M: SelfModel> SelfModelRun<M> {
     /// This run on `robot`, its images rendered by `camera`, or read from the dataset `file`:
     /// the model's joint count (and joint tree) become the robot's, or the file's. The papers'
     /// arm keeps the papers' camera, as does any robot given `papers_camera` (a URDF placed in
-    /// the papers' scene); any other is framed automatically unless `camera` places it. The
-    /// papers' reference figures stay only for the papers' arm rendered here.
+    /// the papers' scene); any other is framed automatically unless `camera` places it.
     pub fn on_robot(
         mut self,
         robot: RobotSpec,
@@ -34,9 +33,6 @@ impl<M: SelfModel> SelfModelRun<M> {
         }
         let papers_camera = self.data.robot.is_papers_arm() || papers_camera;
         camera.apply(&mut self.data.dataset, !papers_camera);
-        if !self.data.robot.is_papers_arm() || file.is_some() {
-            self.reference = Default::default();
-        }
         Ok(self)
     }
 }

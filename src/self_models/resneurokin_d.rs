@@ -26,7 +26,6 @@ use crate::kernels::batch_norm;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
 use crate::self_models::neurokin::resize_bilinear;
-use crate::self_models::result::PaperReference;
 use crate::self_models::{
     model::{
         BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, load_network, train_network,
@@ -268,12 +267,13 @@ fn robot_mask(silhouettes: &Tensor<4>) -> Tensor<4> {
 
 impl SelfModel for ResNeuroKinDConfig {
     const KIND: &'static str = "resneurokin_d";
+    type Renderer = ResNeuroKinD;
 
     fn image(&self) -> [usize; 2] {
         self.image
     }
 
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<ResNeuroKinD>> {
         let network = self.init(fit.train_device, fit.train.seed)?;
         let w = self.depth_weight;
         let loss = move |m: &ResNeuroKinD, b: &Batch| {
@@ -303,10 +303,6 @@ impl SelfModel for ResNeuroKinDConfig {
         load_network(self.init(ctx.device, 0)?, weights)
     }
 
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        resneurokin_d_run(preset)
-    }
-
     fn autocasts(&self) -> bool {
         true
     }
@@ -316,13 +312,7 @@ impl SelfModel for ResNeuroKinDConfig {
 pub fn resneurokin_d_run(preset: &str) -> Result<SelfModelRun<ResNeuroKinDConfig>> {
     let mut model = ResNeuroKinDConfig::preset(model_preset(preset))?;
     model.image = SelfModelRun::<ResNeuroKinDConfig>::image(preset)?;
-    Ok(SelfModelRun::new(
-        preset,
-        "ResNeuroKin-D",
-        model,
-        64,
-        PaperReference::resneurokin_d(),
-    )?
-    .shorten(40, 12)
-    .short_test_set(100))
+    Ok(SelfModelRun::new(preset, "ResNeuroKin-D", model, 64)?
+        .shorten(40, 12)
+        .short_test_set(100))
 }

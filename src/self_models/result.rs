@@ -1,36 +1,6 @@
-//! One row of Table I: what every self-model experiment reports, with the paper's figures as
-//! labelled reference columns beside ours. Every self-model experiment writes these rows to
-//! `results.csv`; `table1` gathers them without knowing which models exist.
-
-/// The paper's published figures for a model (self-modeling paper, Table I and Section V).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PaperReference {
-    pub psnr_db: Option<f64>,
-    /// What the paper called FPS (its training-step throughput for the decoders).
-    pub fps: Option<f64>,
-    pub latency_ms: Option<f64>,
-    pub train_time_s: Option<f64>,
-}
-
-impl PaperReference {
-    pub fn neurokin() -> Self {
-        PaperReference {
-            psnr_db: Some(21.88),
-            fps: Some(7400.0),
-            latency_ms: Some(0.135),
-            train_time_s: Some(33.5),
-        }
-    }
-
-    pub fn resneurokin_d() -> Self {
-        PaperReference {
-            psnr_db: Some(21.23),
-            fps: Some(2500.0),
-            latency_ms: Some(0.4),
-            train_time_s: Some(365.5),
-        }
-    }
-}
+//! One row of Table I: what every self-model run reports, with columns for published figures
+//! to stand beside ours (empty unless a study fills them). Every self-model run writes these
+//! rows to `results.csv`; a table gathers them without knowing which models exist.
 
 /// One trained model, measured. Units are in the column names.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -63,7 +33,8 @@ pub struct ModelResult {
     pub infer_b1_img_per_s: f64,
     pub latency_b1_ms: f64,
     pub infer_b256_img_per_s: f64,
-    /// The paper's figures, for reference only.
+    /// A paper's figures for the same model, for reference only (filled by the study that
+    /// compares with them; empty from the library's harness).
     pub paper_psnr_db: Option<f64>,
     pub paper_fps: Option<f64>,
     pub paper_latency_ms: Option<f64>,
@@ -75,20 +46,9 @@ pub struct ModelResult {
     #[serde(default)]
     pub steps_override: Option<usize>,
     /// A lower bound every self-model must beat (the best constant image), not a model:
-    /// figures draw it as a line.
+    /// figures draw it as a line (set by the study that says so).
     #[serde(default)]
     pub lower_bound: bool,
-}
-
-impl ModelResult {
-    /// Attach the paper's reference figures.
-    pub fn with_reference(mut self, r: &PaperReference) -> Self {
-        self.paper_psnr_db = r.psnr_db;
-        self.paper_fps = r.fps;
-        self.paper_latency_ms = r.latency_ms;
-        self.paper_train_time_s = r.train_time_s;
-        self
-    }
 }
 
 /// Read rows written by [`crate::report::table::write_csv`].

@@ -5,7 +5,6 @@
 use crate::core::error::{Error, Result};
 use crate::eval::inference_speed::SpeedConfig;
 use crate::self_models::data_spec::DataSpec;
-use crate::self_models::result::PaperReference;
 use crate::train::config::TrainConfig;
 
 /// Everything that defines one self-model run: the model's config and what every run shares.
@@ -21,7 +20,6 @@ pub struct SelfModelRun<M> {
     pub paper_subset: usize,
     pub eval_batch: usize,
     pub speed: SpeedConfig,
-    pub reference: PaperReference,
     /// Said in the results row (a shortened run, ...).
     pub note: String,
     /// `--steps N` when it changed the preset's step count.
@@ -98,13 +96,7 @@ pub fn model_preset(preset: &str) -> &str {
 impl<M> SelfModelRun<M> {
     /// A run of `model` on a preset's data and speed settings, with the notebooks' training
     /// protocol and PSNR also on the paper's first 100 test images.
-    pub fn new(
-        preset: &str,
-        name: &str,
-        model: M,
-        eval_batch: usize,
-        reference: PaperReference,
-    ) -> Result<Self> {
+    pub fn new(preset: &str, name: &str, model: M, eval_batch: usize) -> Result<Self> {
         let (data, speed) = preset_parts(preset)?;
         Ok(SelfModelRun {
             name: name.into(),
@@ -115,7 +107,6 @@ impl<M> SelfModelRun<M> {
             paper_subset: 100,
             eval_batch,
             speed,
-            reference,
             note: String::new(),
             steps_override: None,
         })

@@ -22,13 +22,14 @@ use selfmodel::core::error::{Error, Result};
 use selfmodel::report::figures::{pareto_plot, training_curves};
 use selfmodel::report::table::{write_csv, write_markdown_report};
 use selfmodel::self_models::neurokin::NeuroKinConfig;
-use selfmodel::self_models::{harness::run, run_config::SelfModelRun};
+use selfmodel::self_models::{harness::run_with, run_config::SelfModelRun};
 use selfmodel::train::precision::Precision;
 
 /// One NeuroKin run, as the ablations vary it.
 type NeuroKinRun = SelfModelRun<NeuroKinConfig>;
+use crate::studies::models::paper_figures::{PaperFigures, on_papers_setup};
 use crate::studies::pareto::pareto_points;
-use selfmodel::self_models::result::{ModelResult, PaperReference};
+use selfmodel::self_models::result::ModelResult;
 
 /// Which ablation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -260,16 +261,26 @@ pub fn run_ablation(
         }
         cfg.name = format!("NeuroKin {}", setting.label);
         // The paper's figures are for its arm: none for another robot (or a dataset file).
-        cfg.reference = if base.reference == PaperReference::default() {
-            PaperReference::default()
-        } else {
-            PaperReference {
-                psnr_db: setting.paper_psnr_db,
-                fps: setting.paper_fps,
-                ..PaperReference::default()
-            }
+        let paper = PaperFigures {
+            psnr_db: setting.paper_psnr_db,
+            fps: setting.paper_fps,
+            ..PaperFigures::default()
         };
-        let out = run(&cfg, &dir.join(setting.folder()), device, resume)?;
+        let paper = if on_papers_setup(&cfg) {
+            paper
+        } else {
+            PaperFigures::default()
+        };
+        let out = run_with(
+            &cfg,
+            &dir.join(setting.folder()),
+            device,
+            resume,
+            |rows, _| {
+                rows.iter_mut().for_each(|row| paper.fill(row));
+                Ok(())
+            },
+        )?;
         rows.push(out.result);
     }
     if rows.is_empty() {

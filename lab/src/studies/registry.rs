@@ -7,8 +7,10 @@ use std::path::Path;
 
 use crate::studies::ablations::{Ablation, run_ablation};
 use crate::studies::emssl::table2::{IK_PRESETS, IkComparisonConfig, TABLE2_PRESETS};
+use crate::studies::models::k3dgs_reports::RenderSpeedRow;
+use crate::studies::models::run_studied;
 use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
-use selfmodel::self_models::k3dgs::{K3dgsVariant, RenderSpeedRow, k3dgs_run};
+use selfmodel::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
 use selfmodel::self_models::mean_silhouette::MeanSilhouette;
 use selfmodel::self_models::neurokin::{
     NeuroKinConfig, neurokin_run, neurokin_tree_run, neurokin64_run,
@@ -58,7 +60,7 @@ fn run_mesh_fidelity(opts: &RunOptions, dir: &Path) -> Result<String> {
 /// documented negative result, kept out of Table I); on the paper-compatible data it trains.
 pub fn run_neurokin64(opts: &RunOptions, dir: &Path) -> Result<String> {
     let cfg = opts.apply(neurokin64_run(&opts.preset)?)?;
-    let out = selfmodel::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    let out = run_studied(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
 
@@ -66,7 +68,7 @@ pub fn run_neurokin64(opts: &RunOptions, dir: &Path) -> Result<String> {
 /// robots of many joints, beside `neurokin` (`table1 --models` adds it to a Table I).
 pub fn run_neurokin_tree(opts: &RunOptions, dir: &Path) -> Result<String> {
     let cfg = opts.apply(neurokin_tree_run(&opts.preset)?)?;
-    let out = selfmodel::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    let out = run_studied(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
 
@@ -93,8 +95,7 @@ pub fn run_ffksm(opts: &RunOptions, dir: &Path) -> Result<String> {
         selfmodel::self_models::harness::check_resumable(cfg, &dir.join(sub), opts.resume)?;
     }
     for (sub, cfg) in runs {
-        let out =
-            selfmodel::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
+        let out = run_studied(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.extend(out.rows);
         // Without the reference renderers (the short preset) there are no comparisons.
         if cfg.model.reference_renderers {
@@ -135,8 +136,7 @@ pub fn run_k3dgs(opts: &RunOptions, dir: &Path) -> Result<String> {
     let mut speed = Vec::new();
     for (sub, variant) in K3dgsVariant::ALL {
         let cfg = opts.apply(k3dgs_run(&opts.preset, variant)?)?;
-        let out =
-            selfmodel::self_models::harness::run(&cfg, &dir.join(sub), opts.device, opts.resume)?;
+        let out = run_studied(&cfg, &dir.join(sub), opts.device, opts.resume)?;
         rows.push(out.result);
         speed.extend(selfmodel::report::table::read_csv::<RenderSpeedRow>(
             &dir.join(sub).join("render_speed.csv"),

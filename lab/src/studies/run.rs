@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use crate::studies::models::{Studied, run_studied};
 use selfmodel::core::device::DeviceChoice;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::report::table::{write_csv, write_markdown_report};
@@ -325,10 +326,10 @@ impl Experiment {
     }
 }
 
-/// One self-model on its preset run ([`SelfModel::preset_run`]) through the harness.
-pub fn run_self_model<M: SelfModel>(opts: &RunOptions, dir: &Path) -> Result<String> {
+/// One self-model on its preset run ([`Studied::preset_run`]) through the harness.
+pub fn run_self_model<M: Studied>(opts: &RunOptions, dir: &Path) -> Result<String> {
     let cfg = opts.apply(M::preset_run(&opts.preset)?)?;
-    let out = selfmodel::self_models::harness::run(&cfg, dir, opts.device, opts.resume)?;
+    let out = run_studied(&cfg, dir, opts.device, opts.resume)?;
     Ok(summary(std::slice::from_ref(&out.result)))
 }
 

@@ -7,7 +7,6 @@ use crate::eval::inference_speed::SpeedConfig;
 use crate::self_models::ffksm::accelerated_marcher::AcceleratedConfig;
 use crate::self_models::ffksm::field::OccupancyFieldConfig;
 use crate::self_models::ffksm::marcher::MarchConfig;
-use crate::self_models::result::PaperReference;
 use crate::self_models::run_config::SelfModelRun;
 use crate::train::config::TrainConfig;
 
@@ -137,27 +136,6 @@ impl FfksmVariant {
     }
 }
 
-impl PaperReference {
-    /// FFKSM in the paper: 17.35 dB at 5.22 FPS (191.6 ms) on a T4, ~50 minutes of training.
-    pub fn ffksm() -> Self {
-        PaperReference {
-            psnr_db: Some(17.35),
-            fps: Some(5.22),
-            latency_ms: Some(191.6),
-            train_time_s: Some(3000.0),
-        }
-    }
-
-    /// The original authors' model: their logs correspond to about 23.4 dB (12,000 samples,
-    /// far longer training); no speed was published with it.
-    pub fn ffksm_original() -> Self {
-        PaperReference {
-            psnr_db: Some(23.4),
-            ..Default::default()
-        }
-    }
-}
-
 /// Training steps of the `short` preset (the main command's few minutes).
 pub(super) const SHORT_STEPS: usize = 300;
 /// Pixels per training step of the `short` preset (of 10,000).
@@ -203,7 +181,7 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
     if quick {
         model.accelerated.grid.block = 2;
     }
-    let mut run = SelfModelRun::new(preset, "FFKSM", model, 16, PaperReference::ffksm())?;
+    let mut run = SelfModelRun::new(preset, "FFKSM", model, 16)?;
     run.train = TrainConfig {
         precision: Default::default(),
         steps: if quick { 400 } else { 8000 },
@@ -259,7 +237,6 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
                 until: m.curriculum.steps * 5,
                 max_restarts: 5,
             });
-            run.reference = PaperReference::ffksm_original();
         }
         FfksmVariant::Skipping => {
             run.name = "FFKSM (trained with skipping)".into();

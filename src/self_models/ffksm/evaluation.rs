@@ -1,22 +1,15 @@
-//! FFKSM's own reports: dense marching against the accelerated marcher on the same model,
-//! and novel views (the camera turned about the vertical), with their tables and figure.
+//! FFKSM's own measurements: dense marching against the accelerated marcher on the same
+//! model, and novel views (the camera turned about the vertical), as rows.
 
-use std::path::Path;
 use std::time::Instant;
 
 use burn::tensor::{Device, Tensor};
 
-use crate::core::error::Result;
 use crate::eval::evaluation::DepthPixels;
 use crate::eval::evaluation::{Predictions, iou, psnr_db};
-#[cfg(feature = "figures")]
-use crate::report::figures::{GridRow, image_grid};
-use crate::report::table::write_table;
 use crate::self_models::ffksm::accelerated_marcher::{AcceleratedConfig, render_accelerated};
 use crate::self_models::ffksm::field::OccupancyField;
 use crate::self_models::ffksm::marcher::render_dense;
-#[cfg(feature = "figures")]
-use crate::self_models::harness::{grid_picks, nth_image};
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 
@@ -230,80 +223,4 @@ pub(super) fn mean_iou(a: &[f32], b: &[f32], pixels: usize) -> f64 {
         })
         .sum::<f64>()
         / n.max(1) as f64
-}
-
-pub(super) fn write_reports(
-    dir: &Path,
-    name: &str,
-    renderers: &[RendererRow],
-    novel: &[NovelViewRow],
-) -> Result<()> {
-    write_table(
-        &dir.join("renderers.csv"),
-        renderers,
-        &format!("{name}: dense marching against the accelerated marcher"),
-        "Same model, same test images. `fewer_evaluations` is dense marching's network evaluations per image over this renderer's (the grid's probes included); `psnr_db_vs_dense` compares the two renderers' images directly. Images/s: median time per image after one warm-up image, batch 1, this machine.",
-    )?;
-    write_table(
-        &dir.join("novel_views.csv"),
-        novel,
-        &format!("{name}: views it was never trained on"),
-        "The training camera turned about the vertical through the point it looks at (the papers' camera: the world z axis); the truth is the simulator's image from that camera. `view_blind_*`: the training camera's true silhouette offered as the prediction, what a 2-D decoder (NeuroKin) can at best output for another camera.",
-    )
-}
-
-/// For each novel view (camera yaw `yaws_deg`), a row of truths then a row of predictions (six
-/// poses).
-#[cfg(feature = "figures")]
-pub(super) fn novel_view_figure(
-    path: &Path,
-    views: &[(Vec<f32>, Vec<f32>)],
-    yaws_deg: &[f64],
-    size: [usize; 2],
-) -> Result<()> {
-    let px = size[0] * size[1];
-    let Some(first) = views.first() else {
-        return Ok(());
-    };
-    // The same six test poses from every view.
-    let picks = grid_picks(first.0.len() / px);
-    let mut rows = Vec::new();
-    for (truth, pred) in views {
-        rows.push(GridRow::Grey(
-            picks.iter().map(|&i| nth_image(truth, i, px)).collect(),
-        ));
-        rows.push(GridRow::Grey(
-            picks.iter().map(|&i| nth_image(pred, i, px)).collect(),
-        ));
-    }
-    let titles: Vec<String> = yaws_deg
-        .iter()
-        .flat_map(|y| {
-            [
-                format!("{y:.0} deg: truth"),
-                format!("{y:.0} deg: prediction"),
-            ]
-        })
-        .collect();
-    let titles: Vec<&str> = titles.iter().map(String::as_str).collect();
-    // Under each column: that pose's PSNR and IoU from each view, a line per view.
-    let captions: Vec<String> = picks
-        .iter()
-        .map(|&i| {
-            views
-                .iter()
-                .zip(yaws_deg)
-                .map(|((truth, pred), yaw)| {
-                    let (t, p) = (nth_image(truth, i, px), nth_image(pred, i, px));
-                    format!(
-                        "{yaw:.0} deg: {:.1} dB IoU {:.2}",
-                        crate::eval::evaluation::psnr_db(p, t),
-                        crate::eval::evaluation::iou(p, t)
-                    )
-                })
-                .collect::<Vec<_>>()
-                .join(", ")
-        })
-        .collect();
-    image_grid(path, &rows, &titles, &captions, size[1], size[0], 2)
 }

@@ -10,12 +10,11 @@
 //! with a fresh model when training collapses to an all-black image (their code restarted
 //! when the validation loss stopped changing, which is what an all-black model does).
 //!
-//! A run writes into its folder: `config.json`, `results.csv`/`results.md` (one row per
-//! renderer: dense marching and the accelerated marcher, the same trained model),
-//! `renderers.csv` (evaluations per image, images/s, PSNR, and the accelerated image's PSNR
-//! against the dense one), `novel_views.csv` (cameras turned about the vertical through the
-//! point they look at, against the simulator's images from there), `curve.csv` and `training_curve.png`, `qualitative.png`,
-//! `novel_views.png`, and `checkpoint/`.
+//! A run writes into its folder what every self-model's does (one row per renderer: dense
+//! marching and the accelerated marcher, the same trained model). The trained renderer also
+//! measures itself ([`FfksmRenderer::comparison`]): evaluations per image, images/s, PSNR,
+//! and the accelerated image's PSNR against the dense one; and novel views, cameras turned
+//! about the vertical through the point they look at, against the simulator's images.
 
 pub mod accelerated_marcher;
 mod config;
@@ -34,4 +33,5 @@ pub use config::{
     CollapseRestart, Curriculum, DenseGradients, Ffksm, FfksmVariant, TrainMarcher, ffksm_run,
 };
 pub use evaluation::{NovelViewRow, RendererRow};
+pub use renderer::{FfksmComparison, FfksmRenderer};
 pub use training::{centre_crop, weighted_mse};

@@ -1,5 +1,5 @@
-//! A trained field as a [`Render`]: images, depth, other views and the extra reports, every
-//! rendered image kept for the reports.
+//! A trained field as a [`Render`]: images, depth, other views, and the field's own
+//! measurements (its marchers compared, novel views), every rendered image kept for them.
 
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
@@ -20,13 +20,9 @@ use crate::self_models::{
 use crate::sim::camera::Camera;
 use crate::sim::robot::Robot;
 
-#[cfg(feature = "figures")]
-use super::evaluation::novel_view_figure;
 use super::{
     config::Ffksm,
-    evaluation::{
-        NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, render_all, write_reports,
-    },
+    evaluation::{NovelViewRow, Rendered, RendererRow, mean_iou, mean_psnr, render_all},
 };
 
 /// How far the papers' arm reaches from its base (m): a framed robot's scene is shrunk to it.
@@ -44,7 +40,7 @@ pub(super) struct FfksmShared {
 }
 
 /// One of a trained field's renderers (dense marching, or the accelerated marcher).
-pub(super) struct FfksmRenderer {
+pub struct FfksmRenderer {
     pub(super) shared: Arc<FfksmShared>,
     pub(super) accelerated: Option<AcceleratedConfig>,
     pub(super) label: String,
@@ -147,8 +143,28 @@ impl Render for FfksmRenderer {
             &self.shared.device,
         ))
     }
+}
 
-    fn note(&self, test_images: usize) -> String {
+/// FFKSM's own measurements ([`FfksmRenderer::comparison`]).
+pub struct FfksmComparison {
+    /// Dense marching, the accelerated marcher, and the accelerated one without early
+    /// termination, on the same test images.
+    pub renderers: Vec<RendererRow>,
+    /// One row per camera: the training camera (yaw 0), then each novel view.
+    pub novel_views: Vec<NovelViewRow>,
+    /// Per novel view: the simulator's test silhouettes and the accelerated marcher's,
+    /// `[n, H * W]` each.
+    pub novel_images: Vec<(Vec<f32>, Vec<f32>)>,
+    /// The novel views' yaws (degrees), in order.
+    pub yaws_deg: Vec<f64>,
+    /// `[height, width]`.
+    pub image: [usize; 2],
+}
+
+impl FfksmRenderer {
+    /// Its network evaluations per image over the first `test_images` it rendered (the test
+    /// set), said in its row.
+    pub fn evaluations_note(&self, test_images: usize) -> String {
         let evals = self
             .shared
             .stats
@@ -159,12 +175,17 @@ impl Render for FfksmRenderer {
         format!("{evals:.0} network evaluations per image; tested on {test_images} images")
     }
 
-    /// The accelerated marcher (the last renderer) writes the field's own reports:
-    /// `renderers.csv` (both marchers, and the accelerated one without early termination)
-    /// and the novel views (`novel_views.csv`, `novel_views.png`).
-    fn extra_reports(&self, ctx: &ReportContext) -> Result<()> {
+    /// The field's own measurements, from the accelerated marcher (the last renderer) once
+    /// the harness has rendered the test set: both marchers and the accelerated one without
+    /// early termination on the same test images, and the novel views (the training camera
+    /// turned about the vertical) against the simulator's images. `None` from dense marching,
+    /// or where the model keeps no reference renderers.
+    pub fn comparison(
+        &self,
+        ctx: &ReportContext<FfksmRenderer>,
+    ) -> Result<Option<FfksmComparison>> {
         if self.accelerated.is_none() || !self.shared.model.reference_renderers {
-            return Ok(());
+            return Ok(None);
         }
         let s = &self.shared;
         let (truth, truth_depth) = ctx.truth;
@@ -281,17 +302,13 @@ impl Render for FfksmRenderer {
             ));
             novel_images.push((vt, r.predictions.silhouettes));
         }
-        write_reports(ctx.dir, ctx.name, &renderers, &novel)?;
-        #[cfg(feature = "figures")]
-        novel_view_figure(
-            &ctx.dir.join("novel_views.png"),
-            &novel_images,
-            &s.model.novel_views_deg,
-            [s.camera.height, s.camera.width],
-        )?;
-        #[cfg(not(feature = "figures"))]
-        let _ = novel_images;
-        Ok(())
+        Ok(Some(FfksmComparison {
+            renderers,
+            novel_views: novel,
+            novel_images,
+            yaws_deg: s.model.novel_views_deg.clone(),
+            image: [s.camera.height, s.camera.width],
+        }))
     }
 }
 

@@ -1,5 +1,4 @@
-//! FFKSM as a [`SelfModel`]: loading, fitting (the field framed to the scene) and the
-//! harness's presets.
+//! FFKSM as a [`SelfModel`]: loading and fitting (the field framed to the scene).
 
 use std::sync::Arc;
 
@@ -11,20 +10,20 @@ use crate::self_models::ffksm::accelerated_marcher::AcceleratedConfig;
 use crate::self_models::ffksm::virtual_frame::{JointsFrame, VirtualFrame};
 use crate::self_models::{
     data_spec::DataSpec,
-    model::{Fit, LoadContext, Loaded, Render, SelfModel, Trained},
-    run_config::SelfModelRun,
+    model::{Fit, LoadContext, Loaded, SelfModel, Trained},
 };
 use crate::sim::camera::Camera;
 use crate::train::config::TrainConfig;
 
 use super::{
-    config::{DenseGradients, Ffksm, FfksmVariant, TrainMarcher, ffksm_run},
+    config::{DenseGradients, Ffksm, TrainMarcher},
     renderer::{FfksmRenderer, FfksmShared, FfksmState, PAPERS_ARM_REACH_M},
     training::{fingerprint, train_field},
 };
 
 impl SelfModel for Ffksm {
     const KIND: &'static str = "ffksm";
+    type Renderer = FfksmRenderer;
 
     fn image(&self) -> [usize; 2] {
         self.image
@@ -79,7 +78,7 @@ impl SelfModel for Ffksm {
 
     /// Train the field; it renders two ways: dense marching (the paper's) and the
     /// accelerated marcher.
-    fn fit(&self, fit: &Fit) -> Result<Trained> {
+    fn fit(&self, fit: &Fit) -> Result<Trained<FfksmRenderer>> {
         let (this, marched) = self.fitted_to_scene(fit);
         let this = &this;
         let hand_written = this.dense_gradients == DenseGradients::HandWrittenOnCpu
@@ -112,12 +111,10 @@ impl SelfModel for Ffksm {
             device: fit.device.clone(),
             stats: Default::default(),
         });
-        let renderer = |accelerated: Option<AcceleratedConfig>, label: &str| -> Box<dyn Render> {
-            Box::new(FfksmRenderer {
-                shared: shared.clone(),
-                accelerated,
-                label: label.to_string(),
-            })
+        let renderer = |accelerated: Option<AcceleratedConfig>, label: &str| FfksmRenderer {
+            shared: shared.clone(),
+            accelerated,
+            label: label.to_string(),
         };
         Ok(Trained {
             parameters: shared.field.num_params(),
@@ -135,10 +132,6 @@ impl SelfModel for Ffksm {
             log,
             note: note.join("; "),
         })
-    }
-
-    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
-        ffksm_run(preset, FfksmVariant::Reimplementation)
     }
 }
 

@@ -79,7 +79,7 @@ pub struct PoseRow {
 pub struct Bench<'a> {
     pub cfg: &'a BodyFromImageConfig,
     pub robot: &'a Robot,
-    pub fitted: &'a Fitted,
+    pub fitted: &'a Fitted<Box<dyn Render>>,
     pub renderer: &'a dyn Render,
     pub differentiable: &'a dyn Render,
     pub device: &'a Device,

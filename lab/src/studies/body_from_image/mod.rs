@@ -163,7 +163,7 @@ pub fn run(
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     // The robot and camera the options name (the papers' arm by default).
     let model_run = opts.apply(neurokin_run(&cfg.preset)?)?;
-    let fitted = fit_run(&model_run, &out.join("checkpoint"), device_choice, resume)?;
+    let fitted = fit_run(&model_run, &out.join("checkpoint"), device_choice, resume)?.erased();
     let device = fitted.device.clone();
     let autodiff = autodiff_device(&device, cfg.seed);
     let renderer = fitted.trained.renderers[0].1.as_ref();
@@ -179,7 +179,8 @@ pub fn run(
         &out.join("k3dgs_checkpoint"),
         device_choice,
         false,
-    )?;
+    )?
+    .erased();
     let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
     let k3dgs = k3dgs_fitted.trained.renderers[0]
         .1

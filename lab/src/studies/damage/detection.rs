@@ -215,7 +215,7 @@ struct Pool<'a> {
 pub(super) fn detect(
     cfg: &DamageConfig,
     model_run: &SelfModelRun<NeuroKinConfig>,
-    fitted: &Fitted,
+    fitted: &Fitted<Box<dyn selfmodel::Render>>,
     robot: &Robot,
     camera: &Camera,
     stamp: (String, String),

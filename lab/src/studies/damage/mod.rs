@@ -258,7 +258,8 @@ pub fn run(
         &out.join("checkpoint"),
         opts.device,
         opts.resume,
-    )?;
+    )?
+    .erased();
     let robot = model_run.data.robot.load()?;
     let camera = model_run.data.camera(&fitted.data);
     let (device, revision) = (opts.device.to_string(), git_revision());

@@ -223,7 +223,8 @@ pub fn run(
             let unit = out.join(format!("{dir}_{n}"));
             let (scored, image_size) =
                 kept_unit(&unit, &unit_fingerprint(cfg, &run)?, opts.resume, || {
-                    let fitted = fit_run(&run, &unit.join("checkpoint"), opts.device, opts.resume)?;
+                    let fitted =
+                        fit_run(&run, &unit.join("checkpoint"), opts.device, opts.resume)?.erased();
                     let robot = run.data.robot.load()?;
                     let renderer = fitted.trained.renderers[0].1.as_ref();
                     let scored = score(

@@ -73,7 +73,7 @@ pub(super) fn inputs(angles: &[Vec<f64>], camera: Option<&Camera>) -> (Vec<f32>,
 /// The renderer a trained model is scored with: its last (the accelerated one, where a
 /// model has two).
 pub(super) fn scored_renderer(
-    fitted: &selfmodel::self_models::harness::Fitted,
+    fitted: &selfmodel::self_models::harness::Fitted<Box<dyn selfmodel::Render>>,
 ) -> &dyn selfmodel::self_models::model::Render {
     fitted
         .trained
@@ -90,7 +90,7 @@ pub(super) struct Scoring<'a> {
     pub(super) name: &'a str,
     /// Trained cameras.
     pub(super) n: usize,
-    pub(super) fitted: &'a selfmodel::self_models::harness::Fitted,
+    pub(super) fitted: &'a selfmodel::self_models::harness::Fitted<Box<dyn selfmodel::Render>>,
     pub(super) robot: &'a selfmodel::sim::robot::Robot,
     pub(super) options: &'a selfmodel::sim::ray_caster::RenderOptions,
     pub(super) revision: &'a str,

@@ -116,7 +116,7 @@ pub(super) fn three_d(
 
 /// A trained 3-D model with its robot and render options.
 pub(super) type FittedScene = (
-    selfmodel::self_models::harness::Fitted,
+    selfmodel::self_models::harness::Fitted<Box<dyn selfmodel::Render>>,
     selfmodel::sim::robot::Robot,
     selfmodel::sim::ray_caster::RenderOptions,
 );
@@ -144,7 +144,7 @@ impl<M: selfmodel::self_models::model::SelfModel> ThreeDRun
         resume: bool,
     ) -> Result<FittedScene> {
         Ok((
-            fit_run(self, checkpoint, device, resume)?,
+            fit_run(self, checkpoint, device, resume)?.erased(),
             self.data.robot.load()?,
             self.data.dataset.render.clone(),
         ))

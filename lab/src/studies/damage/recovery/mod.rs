@@ -59,7 +59,7 @@ pub(super) struct Recovering<'a> {
     pub model_run: &'a selfmodel::self_models::run_config::SelfModelRun<
         selfmodel::self_models::neurokin::NeuroKinConfig,
     >,
-    pub fitted: &'a selfmodel::self_models::harness::Fitted,
+    pub fitted: &'a selfmodel::self_models::harness::Fitted<Box<dyn selfmodel::Render>>,
     pub robot: &'a selfmodel::sim::robot::Robot,
     pub camera: &'a selfmodel::sim::camera::Camera,
     pub out: &'a Path,
