@@ -116,6 +116,11 @@ struct CollisionArgs {
     /// block) instead of spheres fitted to the description's collision meshes.
     #[arg(long, value_name = "FILE")]
     spheres: Option<PathBuf>,
+    /// On what a collision is decided: exact (the spheres as the broad phase, the collision
+    /// meshes and primitives themselves deciding what they cannot rule out) or spheres (the
+    /// spheres alone: faster, and they bulge past flat faces).
+    #[arg(long, value_enum, default_value_t = selfmodel::sim::collision::model::CollisionMode::Exact)]
+    collision: selfmodel::sim::collision::model::CollisionMode,
 }
 
 /// `--srdf` where it names collisions only (`ik targets`, `ik solve`; `ik train` shares the
@@ -143,6 +148,7 @@ fn collision_options(
         srdf,
         spheres: args.spheres,
         margin: args.margin.unwrap_or(DEFAULT_MARGIN_M),
+        mode: args.collision,
     };
     if let Some(m) = args.margin.filter(|_| !options.any()) {
         return Err(selfmodel::Error::Config(format!(

@@ -1,7 +1,7 @@
 //! Collision spheres fitted to the exact collision meshes, the allowed pairs (an SRDF's, or
 //! computed as MoveIt computes them) and the check on configurations known to collide.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::solver::IkSolver;
@@ -16,7 +16,9 @@ use selfmodel::sim::urdf_loader::{GeometryKind, UrdfOptions, load_urdf_with};
 
 /// A robot description of `../shared/robots`, loaded with its collision geometry.
 fn shared_robot(path: &str, tip: &str) -> Option<Robot> {
-    let urdf = PathBuf::from("../shared/robots").join(path);
+    let urdf = selfmodel_lab::workspace()
+        .join("../shared/robots")
+        .join(path);
     if !urdf.is_file() {
         eprintln!("skipped: {} is not beside the repository", urdf.display());
         return None;
@@ -37,7 +39,8 @@ fn shared_robot(path: &str, tip: &str) -> Option<Robot> {
 /// The Panda of `../shared/robots` (its hand the tip, kinematics only), or None (printed) where
 /// it is not beside the repository.
 fn panda_spec() -> Option<selfmodel::sim::robots::RobotSpec> {
-    let path = PathBuf::from("../shared/robots/franka_description/urdf/panda.urdf");
+    let path =
+        selfmodel_lab::workspace().join("../shared/robots/franka_description/urdf/panda.urdf");
     if !path.is_file() {
         eprintln!("skipped: the Panda's description is not beside the repository");
         return None;
@@ -157,7 +160,8 @@ fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
         samples: 2000,
         ..PairSampling::default()
     };
-    let allowed = computed_pairs(&robot, &spheres, &sampling).unwrap();
+    let slack = Some(SphereFit::default().tolerance_m);
+    let allowed = computed_pairs(&robot, &spheres, slack, &sampling).unwrap();
     // Every joint's parent and child are allowed, as adjacent (or for a reason found first).
     for j in &robot.chain.joints {
         assert!(allowed.allows(&robot.chain.links[j.parent], &robot.chain.links[j.child]));
@@ -276,6 +280,7 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
     let allowed = computed_pairs(
         &robot,
         &spheres,
+        Some(SphereFit::default().tolerance_m),
         &PairSampling {
             samples: 500,
             ..PairSampling::default()
@@ -428,9 +433,10 @@ fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
 }
 
 /// The contacts' rows the solver pushes apart by (analytic: each link's Jacobian at its
-/// sphere's centre, along the direction apart) equal central differences of the same
-/// contacts' gaps, for the Panda folded onto itself and reaching into a box and a ball; and
-/// pushing a colliding answer apart keeps its pose and ends collision-free.
+/// sphere's centre, or at its exact closest point, along the direction apart) equal central
+/// differences of the same contacts' gaps, for the Panda folded onto itself and reaching into
+/// a box and a ball, on the spheres alone and on the exact shapes; and pushing a colliding
+/// answer apart keeps its pose and ends collision-free.
 #[test]
 fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
     use selfmodel::ik::solve::collision::CollisionCheck;
@@ -443,17 +449,25 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
         "cuboid:\n  box: {dims: [0.1, 0.1, 0.3], pose: [0.45, 0.1, 0.4, 0.9238795, 0, 0.3826834, 0]}\nsphere:\n  ball: {radius: 0.06, position: [0.3, -0.2, 0.5]}\n",
     )
     .unwrap();
-    let check = CollisionCheck::for_robot(&spec, None, Some(scene), true, 0.005).unwrap();
+    let exact = CollisionCheck::for_robot(&spec, None, Some(scene), true, 0.005).unwrap();
+    let spheres =
+        (exact.clone()).deciding(selfmodel::sim::collision::model::CollisionMode::Spheres);
     let folded = [0.3, 1.5, 0.2, -2.9, 0.4, 0.8, 0.1];
     let reach = [0.2, 0.6, 0.0, -1.4, 0.0, 2.0, 0.7];
     let h = 1e-6;
-    let mut compared = (0, 0);
-    for q in [&folded[..], &reach[..]] {
+    // Contacts compared: spheres with spheres, spheres with obstacles, links with links, and
+    // links with obstacles where one keeps apart from them (an obstacle a link overlaps is
+    // pushed out by the link's spheres).
+    let mut compared = [0; 4];
+    for (check, q) in [&spheres, &exact]
+        .into_iter()
+        .flat_map(|c| [(c, &folded[..]), (c, &reach[..])])
+    {
         let rows = check.contact_rows(q, 0.02);
         assert!(!rows.is_empty(), "no contact at {q:?}");
         for (c, row) in &rows {
             let gap_at = |q: &[f64]| {
-                let near = check.contact_rows(q, 1.0);
+                let near = check.contact_rows(q, 0.05);
                 near.iter()
                     .find(|(d, _)| d.contact == c.contact)
                     .unwrap()
@@ -472,13 +486,16 @@ fn contact_rows_match_finite_differences_and_push_an_answer_apart() {
                     row[k]
                 );
             }
-            match c.contact {
-                selfmodel::sim::collision::contacts::Contact::Spheres { .. } => compared.0 += 1,
-                selfmodel::sim::collision::contacts::Contact::Obstacle { .. } => compared.1 += 1,
-            }
+            use selfmodel::sim::collision::contacts::Contact;
+            compared[match c.contact {
+                Contact::Spheres { .. } => 0,
+                Contact::Obstacle { .. } => 1,
+                Contact::Links { .. } => 2,
+                Contact::LinkObstacle { .. } => 3,
+            }] += 1;
         }
     }
-    assert!(compared.0 > 0 && compared.1 > 0, "{compared:?}");
+    assert!(compared[..3].iter().all(|&n| n > 0), "{compared:?}");
     // A ball at the elbow of an answer whose hand is free: the solver swings the elbow out
     // of it (the Panda has one joint to spare) and keeps the hand's pose.
     let robot = spec.load_kinematics().unwrap();

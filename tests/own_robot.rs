@@ -438,9 +438,10 @@ fn the_tip_path_matches_the_full_chain_pose_and_jacobian() {
     let dir = common::tempdir();
     let urdf = common::write_arm(dir.path(), "arm", 3, true);
     let mut robots = vec![tipped(&urdf, "finger_b", GeometryKind::Visual).unwrap()];
-    let panda = std::path::Path::new("../shared/robots/franka_description/urdf/panda.urdf");
+    let panda =
+        selfmodel_lab::workspace().join("../shared/robots/franka_description/urdf/panda.urdf");
     if panda.exists() {
-        robots.push(tipped(panda, "panda_hand", GeometryKind::None).unwrap());
+        robots.push(tipped(&panda, "panda_hand", GeometryKind::None).unwrap());
     }
     robots.push(selfmodel::sim::dh_robot::ur5([-3.0, 3.0]));
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);

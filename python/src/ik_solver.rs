@@ -63,8 +63,10 @@ impl PyIkSolver {
     /// With `scene` (a cuRobo world-configuration YAML file) or `self_collision`, an answer is
     /// exact only if it also keeps `margin` (metres) from the obstacles and from itself
     /// (`srdf`: the file whose `<disable_collisions>` say which links may touch; default the
-    /// one beside the URDF), and `collides` (N, k) says which answers did not.
-    #[pyo3(signature = (targets, k=1, tolerance=(1e-4, 1e-4), scene=None, self_collision=false, margin=0.005, srdf=None))]
+    /// one beside the URDF), and `collides` (N, k) says which answers did not; `collision`
+    /// says on what: "exact" (the collision meshes themselves, the spheres their broad phase)
+    /// or "spheres" (the spheres alone).
+    #[pyo3(signature = (targets, k=1, tolerance=(1e-4, 1e-4), scene=None, self_collision=false, margin=0.005, srdf=None, collision="exact"))]
     // Python's keyword arguments, each named at the call.
     #[allow(clippy::too_many_arguments)]
     fn solve<'py>(
@@ -77,15 +79,27 @@ impl PyIkSolver {
         self_collision: bool,
         margin: f64,
         srdf: Option<PathBuf>,
+        collision: &str,
     ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         guarded(|| {
             let k = count(k, "k", 1, 1000)?;
+            use selfmodel::sim::collision::model::CollisionMode;
+            let mode = match collision {
+                "exact" => CollisionMode::Exact,
+                "spheres" => CollisionMode::Spheres,
+                other => {
+                    return Err(value_error(format!(
+                        "collision {other:?}: give \"exact\" or \"spheres\""
+                    )));
+                }
+            };
             let options = selfmodel::ik::solve::collision::CollisionOptions {
                 scene,
                 self_collision,
                 srdf,
                 spheres: None,
                 margin,
+                mode,
             };
             let spec = &self.model.saved.robot;
             let check = py

@@ -5,9 +5,11 @@
 //! ratio against a reference measured in the same sitting.
 
 pub mod collision;
+pub mod collision_agreement;
 pub mod collision_ik;
 pub mod decoders;
 pub mod ffksm_step;
 pub mod gpu_check;
 pub mod gpu_summary;
 pub mod ik;
+pub mod pinocchio;

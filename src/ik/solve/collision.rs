@@ -1,7 +1,8 @@
 //! Collision-free answers: the check an IK answer must pass, built from a saved model's robot
 //! (its collision geometry, the SRDF beside it or named) and a scene. An answer is exact and
-//! collision-free only when no checked pair of its spheres, and none of its moving links'
-//! spheres and an obstacle, come closer than the margin.
+//! collision-free only when no checked pair of its links, and none of its moving links and an
+//! obstacle, come closer than the margin: on the links' exact shapes, the spheres their broad
+//! phase (the default, [`CollisionMode::Exact`]), or on the spheres alone.
 
 use std::path::Path;
 
@@ -11,7 +12,7 @@ use crate::core::error::{Error, Result};
 use crate::ik::solve::levenberg_marquardt::Avoid;
 use crate::sim::collision::cache;
 use crate::sim::collision::contacts::Placement;
-use crate::sim::collision::model::CollisionModel;
+use crate::sim::collision::model::{CollisionMode, CollisionModel};
 use crate::sim::collision::pairs::PairSampling;
 use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::SphereFit;
@@ -21,6 +22,7 @@ use crate::sim::robots::RobotSpec;
 use crate::sim::urdf_loader::GeometryKind;
 
 /// What an answer is checked against.
+#[derive(Clone)]
 pub struct CollisionCheck {
     pub model: CollisionModel,
     pub scene: Option<Scene>,
@@ -34,6 +36,9 @@ pub struct CollisionCheck {
     link_paths: Vec<TipPath>,
     /// What the collision model was computed from ([`cache::key`]).
     key: String,
+    /// How far a point of the collision geometry may lie outside the spheres (m): the fitted
+    /// spheres' tolerance; `None` for a user's spheres.
+    sphere_slack: Option<f64>,
 }
 
 /// Where a check's spheres come from.
@@ -84,6 +89,10 @@ pub struct CollisionOptions {
     pub spheres: Option<std::path::PathBuf>,
     /// The distance kept (m).
     pub margin: f64,
+    /// On what a collision is decided: the exact shapes behind the spheres (the default), or
+    /// the spheres alone.
+    #[serde(default)]
+    pub mode: CollisionMode,
 }
 
 impl CollisionOptions {
@@ -120,7 +129,8 @@ impl CollisionOptions {
             (None, None) => Spheres::Fitted,
         };
         let srdf = self.srdf.as_deref();
-        CollisionCheck::with_spheres(spec, spheres, srdf, scene, true, self.margin).map(Some)
+        let check = CollisionCheck::with_spheres(spec, spheres, srdf, scene, true, self.margin)?;
+        Ok(Some(check.deciding(self.mode)))
     }
 }
 
@@ -211,13 +221,14 @@ impl CollisionCheck {
             (Some(model), _) => model,
             (None, Spheres::File(file)) => {
                 let given = crate::sim::collision::user_spheres::read(file, &robot.chain.links)?;
-                crate::sim::collision::model_with(&robot, given, allowed, &sampling)?
+                crate::sim::collision::model_with(&robot, given, None, allowed, &sampling)?
             }
             (None, _) => crate::sim::collision::model_for(&robot, allowed, &fit, &sampling)?,
         };
         let link_paths = (0..robot.chain.links.len())
             .map(|l| robot.chain.path_to(l, Point3::origin()))
             .collect();
+        let sphere_slack = (!matches!(spheres, Spheres::File(_))).then_some(fit.tolerance_m);
         Ok(Self {
             model,
             scene,
@@ -226,7 +237,25 @@ impl CollisionCheck {
             robot,
             link_paths,
             key,
-        })
+            sphere_slack,
+        }
+        .deciding(CollisionMode::Exact))
+    }
+
+    /// This check deciding by `mode`: on the links' exact shapes behind the spheres, or on
+    /// the spheres alone.
+    pub fn deciding(mut self, mode: CollisionMode) -> Self {
+        if mode == self.model.mode() {
+            return self;
+        }
+        self.model = match mode {
+            CollisionMode::Spheres => self.model.spheres_only(),
+            CollisionMode::Exact => {
+                let links = crate::sim::collision::exact_links(&self.robot);
+                self.model.with_exact(links, self.sphere_slack)
+            }
+        };
+        self
     }
 
     /// The clearance at `q` (m, negative where something overlaps), at most `cap`.

@@ -74,6 +74,8 @@ pub fn key(robot: &Robot, srdf: Option<&str>, fit: &SphereFit, sampling: &PairSa
         "srdf": srdf,
         "fit": fit,
         "sampling": sampling,
+        // The pairs are decided on the links' exact shapes (before: on their spheres).
+        "pairs_decided_on": "exact shapes",
     });
     bytes.extend_from_slice(settings.to_string().as_bytes());
     crate::core::input_file::fnv(&bytes)

@@ -1,10 +1,12 @@
 //! The contacts an optimiser pushes apart: each pair of spheres (of two checked links, or of
 //! a moving link and an obstacle) closer than a distance, with its signed distance and the
-//! direction in which that distance grows fastest at each sphere's centre.
+//! direction in which that distance grows fastest at each sphere's centre; where the exact
+//! shapes decide ([`CollisionModel::with_exact`]), each pair of links (or link and obstacle)
+//! closer than it, at their exact closest points.
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use crate::sim::collision::model::CollisionModel;
+use crate::sim::collision::model::{CollisionModel, Placed};
 use crate::sim::collision::scene::{Obstacle, Scene};
 
 /// Two spheres closer than the distance asked for.
@@ -19,11 +21,15 @@ pub enum Contact {
     },
     /// Sphere `i` of link `a` (a moving link) and obstacle `k` of the scene.
     Obstacle { a: usize, i: usize, k: usize },
+    /// Links `a` and `b` (a checked pair) on their exact shapes.
+    Links { a: usize, b: usize },
+    /// Link `a` (a moving link) and obstacle `k` of the scene on their exact shapes.
+    LinkObstacle { a: usize, k: usize },
 }
 
 /// A contact where it is: its signed distance (m, negative where the spheres overlap) and
-/// each side's sphere centre with the unit direction that moving it along increases the
-/// distance (the obstacle's side is fixed: `None`).
+/// each side's sphere centre (or exact closest point) with the unit direction that moving it
+/// along increases the distance (the obstacle's side is fixed: `None`).
 #[derive(Clone, Copy, Debug)]
 pub struct Placement {
     pub contact: Contact,
@@ -57,6 +63,9 @@ impl CollisionModel {
         self_collision: bool,
         within: f64,
     ) -> Vec<Placement> {
+        if self.exact.is_some() {
+            return self.exact_contacts(frames, scene, self_collision, within);
+        }
         let placed = self.place(frames);
         let mut out = Vec::new();
         if self_collision {
@@ -67,21 +76,7 @@ impl CollisionModel {
                         continue;
                     }
                 }
-                for (i, sa) in placed[a].iter().enumerate() {
-                    for (j, sb) in placed[b].iter().enumerate() {
-                        let d = sa.center - sb.center;
-                        let gap = d.norm() - sa.radius - sb.radius;
-                        if gap < within {
-                            let n = d.try_normalize(1e-12).unwrap_or_else(Vector3::z);
-                            out.push(Placement {
-                                contact: Contact::Spheres { a, i, b, j },
-                                gap,
-                                first: (a, sa.center, n),
-                                second: Some((b, sb.center, -n)),
-                            });
-                        }
-                    }
-                }
+                sphere_pair_contacts(&placed, (a, b), within, &mut out);
             }
         }
         let Some(scene) = scene else {
@@ -96,20 +91,122 @@ impl CollisionModel {
             {
                 continue;
             }
-            for (i, s) in spheres.iter().enumerate() {
-                for (k, (_, o)) in scene.obstacles.iter().enumerate() {
-                    let gap = o.distance(&s.center) - s.radius;
-                    if gap < within {
-                        out.push(Placement {
-                            contact: Contact::Obstacle { a, i, k },
-                            gap,
-                            first: (a, s.center, away_from(o, &s.center)),
-                            second: None,
-                        });
-                    }
+            for (k, (_, o)) in scene.obstacles.iter().enumerate() {
+                sphere_obstacle_contacts(spheres, (a, k), o, within, &mut out);
+            }
+        }
+        out
+    }
+
+    /// [`Self::contacts`] on the exact shapes: each checked pair (and moving link and
+    /// obstacle) closer than `within`, at its exact closest points while they keep apart; a
+    /// pair already overlapping is pushed apart by its spheres' contacts instead (a mesh's
+    /// deepest triangle changes as it moves, the spheres' distances change smoothly), or
+    /// where its spheres do not reach each other, by its exact contact still.
+    fn exact_contacts(
+        &self,
+        frames: &[Isometry3<f64>],
+        scene: Option<&Scene>,
+        self_collision: bool,
+        within: f64,
+    ) -> Vec<Placement> {
+        let Some(x) = &self.exact else {
+            return Vec::new();
+        };
+        let placed = self.place(frames);
+        let mut out = Vec::new();
+        if self_collision {
+            for &(a, b) in &self.pairs {
+                let (la, lb) = (&x.links[a], &x.links[b]);
+                let Some(c) = la.contact(&frames[a], lb, &frames[b], within) else {
+                    continue;
+                };
+                let before = out.len();
+                if c.gap < 0.0 {
+                    sphere_pair_contacts(&placed, (a, b), within, &mut out);
+                }
+                if out.len() == before {
+                    out.push(Placement {
+                        contact: Contact::Links { a, b },
+                        gap: c.gap,
+                        first: (a, c.first.0, c.first.1),
+                        second: Some((b, c.second.0, c.second.1)),
+                    });
+                }
+            }
+        }
+        let Some(scene) = scene else {
+            return out;
+        };
+        let world = Isometry3::identity();
+        for (a, f) in frames.iter().enumerate() {
+            if !self.moving[a] {
+                continue;
+            }
+            for (k, o) in scene.exact().iter().enumerate() {
+                let Some(c) = x.links[a].contact(f, o, &world, within) else {
+                    continue;
+                };
+                let before = out.len();
+                if c.gap < 0.0 {
+                    let obstacle = &scene.obstacles[k].1;
+                    sphere_obstacle_contacts(&placed[a], (a, k), obstacle, within, &mut out);
+                }
+                if out.len() == before {
+                    out.push(Placement {
+                        contact: Contact::LinkObstacle { a, k },
+                        gap: c.gap,
+                        first: (a, c.first.0, c.first.1),
+                        second: None,
+                    });
                 }
             }
         }
         out
+    }
+}
+
+/// The contacts of link `a`'s and link `b`'s spheres closer than `within`.
+fn sphere_pair_contacts(
+    placed: &[Vec<Placed>],
+    (a, b): (usize, usize),
+    within: f64,
+    out: &mut Vec<Placement>,
+) {
+    for (i, sa) in placed[a].iter().enumerate() {
+        for (j, sb) in placed[b].iter().enumerate() {
+            let d = sa.center - sb.center;
+            let gap = d.norm() - sa.radius - sb.radius;
+            if gap < within {
+                let n = d.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+                out.push(Placement {
+                    contact: Contact::Spheres { a, i, b, j },
+                    gap,
+                    first: (a, sa.center, n),
+                    second: Some((b, sb.center, -n)),
+                });
+            }
+        }
+    }
+}
+
+/// The contacts of link `a`'s spheres with obstacle `k` (`o`) closer than `within`.
+fn sphere_obstacle_contacts(
+    spheres: &[Placed],
+    (a, k): (usize, usize),
+    o: &Obstacle,
+    within: f64,
+    out: &mut Vec<Placement>,
+) {
+    for (i, s) in spheres.iter().enumerate() {
+        let gap = o.distance(&s.center) - s.radius;
+        if gap < within {
+            out.push(Placement {
+                contact: Contact::Obstacle { a, i, k },
+                gap,
+                first: (a, s.center, away_from(o, &s.center)),
+                second: None,
+            });
+        }
     }
 }

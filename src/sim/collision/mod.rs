@@ -1,11 +1,13 @@
 //! Collision checking for IK: spheres fitted to each link's collision geometry
-//! (`spheres`), the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
+//! (`spheres`) as the broad phase, the exact geometry behind them (`exact`) as the narrow
+//! phase, the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
 //! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
 //! itself (`model`), the contacts an optimiser pushes apart (`contacts`); spheres a user
 //! supplies in cuRobo's format (`user_spheres`); the model kept in a file (`cache`).
 
 pub mod cache;
 pub mod contacts;
+pub mod exact;
 pub mod model;
 pub mod pairs;
 pub mod scene;
@@ -74,17 +76,29 @@ pub fn fit_robot(robot: &Robot, fit: &SphereFit) -> Result<Vec<Vec<Sphere>>> {
         .collect()
 }
 
-/// The allowed pairs MoveIt's setup assistant would compute for `robot` with `spheres`.
+/// The allowed pairs MoveIt's setup assistant would compute for `robot`, decided as it
+/// decides them, on the links' exact shapes (`spheres` their broad phase, which may fall short
+/// of the shapes by `sphere_slack`: [`model::ExactLinks::sphere_slack`]): a pair is never
+/// switched off because its spheres bulge into each other where its meshes do not.
 pub fn computed_pairs(
     robot: &Robot,
     spheres: &[Vec<Sphere>],
+    sphere_slack: Option<f64>,
     sampling: &PairSampling,
 ) -> Result<AllowedPairs> {
     // Every pair of links with spheres checked, to find which always or never collide.
-    let everything = CollisionModel::new(&robot.chain, spheres.to_vec(), &AllowedPairs::default());
+    let everything = CollisionModel::new(&robot.chain, spheres.to_vec(), &AllowedPairs::default())
+        .with_exact(exact_links(robot), sphere_slack);
     pairs::compute(&robot.chain, sampling, &|frames| {
         everything.colliding_pairs(frames, 0.0)
     })
+}
+
+/// Each link's exact shapes (`robot` loaded with its collision geometry).
+pub fn exact_links(robot: &Robot) -> Vec<exact::ExactShapes> {
+    (robot.geometry.iter())
+        .map(|g| exact::ExactShapes::of_link(g.shapes()))
+        .collect()
 }
 
 /// The collision model of `robot` (loaded with its collision geometry): spheres fitted by
@@ -96,13 +110,21 @@ pub fn model_for(
     fit: &SphereFit,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
-    model_with(robot, fit_robot(robot, fit)?, allowed, sampling)
+    model_with(
+        robot,
+        fit_robot(robot, fit)?,
+        Some(fit.tolerance_m),
+        allowed,
+        sampling,
+    )
 }
 
-/// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]).
+/// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]), which may fall
+/// short of the links' shapes by `sphere_slack` (`None`: by any distance).
 pub fn model_with(
     robot: &Robot,
     spheres: Vec<Vec<Sphere>>,
+    sphere_slack: Option<f64>,
     allowed: Option<AllowedPairs>,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
@@ -114,7 +136,7 @@ pub fn model_with(
     }
     let allowed = match allowed {
         Some(pairs) => pairs,
-        None => computed_pairs(robot, &spheres, sampling)?,
+        None => computed_pairs(robot, &spheres, sphere_slack, sampling)?,
     };
     Ok(CollisionModel::new(&robot.chain, spheres, &allowed))
 }

@@ -2,9 +2,17 @@
 //! configuration collides where two spheres of a checked pair overlap, or a sphere overlaps
 //! an obstacle, by more than `-margin` (a margin keeps them that far apart). The clearance is
 //! the smallest signed distance between them (negative: overlapping).
+//!
+//! With the exact shapes behind them ([`CollisionModel::with_exact`]) the spheres are only
+//! the broad phase: a pair they cannot tell apart is decided on the links' own shapes
+//! ([`crate::sim::collision::exact`]), so a configuration collides only where the geometry
+//! itself comes closer than the margin.
+
+use std::sync::Arc;
 
 use nalgebra::{Isometry3, Point3};
 
+use crate::sim::collision::exact::ExactShapes;
 use crate::sim::collision::pairs::AllowedPairs;
 use crate::sim::collision::scene::Scene;
 use crate::sim::collision::spheres::Sphere;
@@ -30,6 +38,40 @@ pub struct CollisionModel {
     /// Whether a link moves with the joints: links fixed to the root (the base resting on a
     /// table) are not checked against obstacles.
     pub moving: Vec<bool>,
+    /// The links' exact shapes, where the check decides on them (none: the spheres decide).
+    pub exact: Option<Arc<ExactLinks>>,
+}
+
+/// Each link's exact shapes (in its frame), and how far the spheres may fall short of them.
+#[derive(Debug)]
+pub struct ExactLinks {
+    pub links: Vec<ExactShapes>,
+    /// How far a point of a link's shapes may lie outside its spheres (m; fitted spheres: their
+    /// tolerance). Known, the spheres rule out what is farther apart than the margin plus this
+    /// on each side before the exact shapes are looked at; `None` (a user's spheres, which
+    /// need not cover the shapes): only the shapes' own bounds do.
+    pub sphere_slack: Option<f64>,
+}
+
+/// How a check decides: on the spheres alone, or on the exact shapes behind them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum CollisionMode {
+    /// The spheres alone (fast, conservative: they bulge past flat faces).
+    Spheres,
+    /// The spheres as the broad phase, the links' own shapes as the narrow one.
+    #[default]
+    Exact,
+}
+
+impl std::fmt::Display for CollisionMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            CollisionMode::Spheres => "spheres",
+            CollisionMode::Exact => "exact",
+        })
+    }
 }
 
 /// Where two spheres are closest: the signed distance between their surfaces.
@@ -80,13 +122,104 @@ impl CollisionModel {
             pairs,
             bounds,
             moving,
+            exact: None,
         }
+    }
+
+    /// This model deciding on `links`' exact shapes (one a link, in its frame) behind its
+    /// spheres, which may fall short of them by `sphere_slack` ([`ExactLinks::sphere_slack`]).
+    pub fn with_exact(mut self, links: Vec<ExactShapes>, sphere_slack: Option<f64>) -> Self {
+        self.exact = Some(Arc::new(ExactLinks {
+            links,
+            sphere_slack,
+        }));
+        self
+    }
+
+    /// This model deciding on its spheres alone.
+    pub fn spheres_only(mut self) -> Self {
+        self.exact = None;
+        self
+    }
+
+    /// How it decides.
+    pub fn mode(&self) -> CollisionMode {
+        if self.exact.is_some() {
+            CollisionMode::Exact
+        } else {
+            CollisionMode::Spheres
+        }
+    }
+
+    /// The spheres' shortfall where the exact shapes decide with spheres that bound them
+    /// (`None`: the spheres rule nothing out).
+    fn slack(&self) -> Option<f64> {
+        self.exact.as_ref().and_then(|x| x.sphere_slack)
+    }
+
+    /// Whether the checked pair `(a, b)` comes closer than `margin`: on the spheres, or where
+    /// they cannot rule it out, on the exact shapes.
+    fn pair_closer(
+        &self,
+        placed: &[Vec<Placed>],
+        frames: &[Isometry3<f64>],
+        (a, b): (usize, usize),
+        margin: f64,
+    ) -> bool {
+        let Some(x) = &self.exact else {
+            return self.pair_gap(placed, frames, a, b, margin) < margin;
+        };
+        if let Some(slack) = x.sphere_slack {
+            let wide = margin + 2.0 * slack;
+            if self.pair_gap(placed, frames, a, b, wide) >= wide {
+                return false;
+            }
+        }
+        x.links[a].closer_than(&frames[a], &x.links[b], &frames[b], margin)
+    }
+
+    /// Whether moving link `link` comes closer than `margin` to obstacle `k` of `scene`, the
+    /// exact shapes deciding what its spheres cannot rule out.
+    fn obstacle_closer(
+        &self,
+        x: &ExactLinks,
+        frames: &[Isometry3<f64>],
+        link: usize,
+        (scene, k): (&Scene, usize),
+        margin: f64,
+    ) -> bool {
+        if let Some(slack) = x.sphere_slack {
+            let o = &scene.obstacles[k].1;
+            let f = &frames[link];
+            let wide = margin + slack;
+            if self.spheres[link]
+                .iter()
+                .all(|s| o.distance(&(f * s.center())) - s.radius >= wide)
+            {
+                return false;
+            }
+        }
+        let world = Isometry3::identity();
+        x.links[link].closer_than(&frames[link], &scene.exact()[k], &world, margin)
     }
 
     /// The smallest signed distance between a moving link's spheres and the obstacles of
     /// `scene`, at most `cap`. A link whose bounding sphere is farther than the best so far is
     /// not looked into (its spheres lie inside it).
     pub fn scene_clearance(&self, frames: &[Isometry3<f64>], scene: &Scene, cap: f64) -> f64 {
+        if let Some(x) = &self.exact {
+            let world = Isometry3::identity();
+            let mut best = cap;
+            for (link, f) in frames.iter().enumerate() {
+                if !self.moving[link] {
+                    continue;
+                }
+                for o in scene.exact() {
+                    best = best.min(x.links[link].gap(f, o, &world, best));
+                }
+            }
+            return best;
+        }
         let mut best = cap;
         for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
             if !self.moving[link] {
@@ -107,6 +240,12 @@ impl CollisionModel {
     /// Whether a moving link's sphere comes closer than `margin` to an obstacle of `scene`
     /// (stops at the first).
     pub fn scene_collides(&self, frames: &[Isometry3<f64>], scene: &Scene, margin: f64) -> bool {
+        if let Some(x) = &self.exact {
+            return (0..frames.len()).filter(|&l| self.moving[l]).any(|link| {
+                (0..scene.obstacles.len())
+                    .any(|k| self.obstacle_closer(x, frames, link, (scene, k), margin))
+            });
+        }
         for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
             if !self.moving[link] {
                 continue;
@@ -188,7 +327,7 @@ impl CollisionModel {
         self.pairs
             .iter()
             .copied()
-            .filter(|&(a, b)| self.pair_gap(&placed, frames, a, b, margin) < margin)
+            .filter(|&pair| self.pair_closer(&placed, frames, pair, margin))
             .collect()
     }
 
@@ -196,14 +335,32 @@ impl CollisionModel {
     /// further than `cap` is not needed).
     pub fn self_clearance(&self, frames: &[Isometry3<f64>], cap: f64) -> f64 {
         let placed = self.place(frames);
+        let Some(x) = &self.exact else {
+            return self.pairs.iter().fold(cap, |m, &(a, b)| {
+                m.min(self.pair_gap(&placed, frames, a, b, m))
+            });
+        };
+        let slack = self.slack();
         self.pairs.iter().fold(cap, |m, &(a, b)| {
-            m.min(self.pair_gap(&placed, frames, a, b, m))
+            if let Some(slack) = slack {
+                let wide = m + 2.0 * slack;
+                if self.pair_gap(&placed, frames, a, b, wide) >= wide {
+                    return m;
+                }
+            }
+            m.min(x.links[a].gap(&frames[a], &x.links[b], &frames[b], m))
         })
     }
 
     /// Whether a checked pair is closer than `margin` at `frames`.
     pub fn self_collides(&self, frames: &[Isometry3<f64>], margin: f64) -> bool {
-        self.self_clearance(frames, margin) < margin
+        if self.exact.is_none() {
+            return self.self_clearance(frames, margin) < margin;
+        }
+        let placed = self.place(frames);
+        self.pairs
+            .iter()
+            .any(|&pair| self.pair_closer(&placed, frames, pair, margin))
     }
 }
 

@@ -21,6 +21,7 @@
 //! A mesh's path is relative to the scene file; it is covered by spheres as a link is
 //! ([`crate::sim::collision::spheres`]), so the check stays conservative.
 
+use crate::sim::collision::exact::ExactShapes;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -58,6 +59,24 @@ pub enum Obstacle {
 }
 
 impl Obstacle {
+    /// Its exact shape, for the narrow phase.
+    pub fn exact(&self) -> ExactShapes {
+        match self {
+            Obstacle::Cuboid { pose, half } => ExactShapes::cuboid(pose, half),
+            Obstacle::Sphere { center, radius } => ExactShapes::balls(&[Sphere {
+                center: [center.x, center.y, center.z],
+                radius: *radius,
+            }]),
+            Obstacle::Capsule { a, b, radius } => ExactShapes::capsule(a, b, *radius),
+            Obstacle::Cylinder {
+                pose,
+                radius,
+                half_height,
+            } => ExactShapes::cylinder(pose, *radius, *half_height),
+            Obstacle::Spheres(spheres) => ExactShapes::balls(spheres),
+        }
+    }
+
     /// The signed distance from `p` to the obstacle's surface (negative inside).
     pub fn distance(&self, p: &Point3<f64>) -> f64 {
         match self {
@@ -96,6 +115,8 @@ impl Obstacle {
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
     pub obstacles: Vec<(String, Obstacle)>,
+    /// The obstacles' exact shapes, built the first time the exact check asks.
+    exact: std::sync::OnceLock<Vec<ExactShapes>>,
 }
 
 #[derive(Deserialize)]
@@ -356,7 +377,16 @@ impl Scene {
             })?;
             obstacles.push((name.clone(), Obstacle::Spheres(spheres)));
         }
-        Ok(Scene { obstacles })
+        Ok(Scene {
+            obstacles,
+            exact: Default::default(),
+        })
+    }
+
+    /// Each obstacle's exact shapes (in the world), in order.
+    pub fn exact(&self) -> &[ExactShapes] {
+        self.exact
+            .get_or_init(|| (self.obstacles.iter()).map(|(_, o)| o.exact()).collect())
     }
 
     /// The smallest signed distance from a sphere at `center` of `radius` to any obstacle.

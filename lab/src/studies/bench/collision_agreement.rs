@@ -1,0 +1,177 @@
+//! Our collision checks against the exact meshes: random configurations of a robot (uniform
+//! in its joint ranges, seeded), the robot against itself, each decided by the spheres alone,
+//! by the exact narrow phase behind them, and by Pinocchio and coal on the exact collision
+//! meshes ([`super::pinocchio`]), the same pairs checked, at zero margin. False alarms: of the
+//! configurations free on the meshes, the share a check calls colliding; misses: of those
+//! colliding on the meshes, the share it calls free. Each check's time a configuration
+//! (forward kinematics included, one thread) beside them.
+
+use std::path::Path;
+
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+
+use selfmodel::core::error::{Error, Result};
+use selfmodel::core::timing::{Repeats, median_seconds};
+use selfmodel::ik::solve::collision::CollisionCheck;
+use selfmodel::sim::collision::model::CollisionMode;
+use selfmodel::sim::robots::RobotSpec;
+
+use super::pinocchio::{Reference, agreement_pct, pct, write_reference_inputs};
+
+/// What the comparison runs.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct AgreementConfig {
+    /// Random configurations.
+    pub configurations: usize,
+    pub seed: u64,
+}
+
+/// One check on the robot's random configurations.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct AgreementRow {
+    pub robot: String,
+    /// `spheres` (alone) or `exact` (the narrow phase behind them).
+    pub check: String,
+    pub configurations: usize,
+    pub checked_pairs: usize,
+    pub spheres: usize,
+    /// The share of the configurations colliding on the exact meshes (Pinocchio).
+    pub mesh_colliding_pct: Option<f64>,
+    /// Of the configurations free on the meshes, the share this check calls colliding.
+    pub false_alarms_pct: Option<f64>,
+    /// Of the configurations colliding on the meshes, the share this check calls free.
+    pub misses_pct: Option<f64>,
+    /// The share this check calls colliding.
+    pub colliding_pct: f64,
+    /// Forward kinematics and the check, one thread, median of repeats.
+    pub us_per_configuration: f64,
+    pub cpu: String,
+    pub git_revision: String,
+}
+
+/// What [`run`] writes into its folder.
+const WRITTEN: &[&str] = &[
+    "config.json",
+    "results.csv",
+    "results.md",
+    "pairs.json",
+    "random_joints.csv",
+    "random_joints_exact_meshes.csv",
+];
+
+/// Compare both checks of `spec`'s robot (its collision geometry, the pairs its SRDF or the
+/// computed matrix leaves checked) with Pinocchio's, through `python` where given, into `out`.
+pub fn run(
+    spec: &RobotSpec,
+    cfg: &AgreementConfig,
+    python: Option<&Path>,
+    out: &Path,
+) -> Result<Vec<AgreementRow>> {
+    use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite, refuse_writing_over};
+    if cfg.configurations == 0 {
+        return Err(Error::Config("`configurations`: give at least one".into()));
+    }
+    check_out(out, OutKind::Folder)?;
+    let inputs = spec.files();
+    let inputs: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
+    refuse_overwrite(out, &inputs, None)?;
+    refuse_writing_over(out, WRITTEN, &inputs)?;
+    let fresh = !out.exists();
+    let result = measure(spec, cfg, python, out);
+    if result.is_err() {
+        for name in WRITTEN {
+            let _ = std::fs::remove_file(out.join(name));
+        }
+        if fresh {
+            let _ = std::fs::remove_dir(out);
+        }
+    }
+    result
+}
+
+fn measure(
+    spec: &RobotSpec,
+    cfg: &AgreementConfig,
+    python: Option<&Path>,
+    out: &Path,
+) -> Result<Vec<AgreementRow>> {
+    let exact = CollisionCheck::for_robot(spec, None, None, true, 0.0)?;
+    let robot = &exact.robot;
+    let ranges = robot.chain.joint_ranges();
+    let mut rng = StdRng::seed_from_u64(cfg.seed);
+    let qs: Vec<Vec<f64>> = (0..cfg.configurations)
+        .map(|_| selfmodel::sim::trajectory::uniform_in(&mut rng, &ranges))
+        .collect();
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    selfmodel::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
+    let names = robot.chain.joint_names();
+    let pairs = write_reference_inputs(
+        out,
+        &exact,
+        &names,
+        &[("random_joints.csv", qs.iter().map(Vec::as_slice).collect())],
+    )?;
+    let meshes = match (python, spec) {
+        (Some(python), RobotSpec::Urdf { path, .. }) => Reference {
+            python,
+            urdf: path,
+            pairs,
+            scene: None,
+        }
+        .collides(
+            &out.join("random_joints.csv"),
+            &out.join("random_joints_exact_meshes.csv"),
+        )?,
+        _ => None,
+    };
+    let spheres =
+        CollisionCheck::for_robot(spec, None, None, true, 0.0)?.deciding(CollisionMode::Spheres);
+    let cpu = selfmodel::eval::compute_peak::machine_label(false);
+    let revision = selfmodel::core::provenance::git_revision();
+    let row = |check: &CollisionCheck| -> Result<AgreementRow> {
+        let calls: Vec<bool> = qs.iter().map(|q| !check.valid(q)).collect();
+        selfmodel::core::interrupt::check(|| "stopped checking; nothing was kept".into())?;
+        let seconds = median_seconds(
+            Repeats {
+                warmup: 0,
+                min_repeats: 3,
+                min_seconds: 0.0,
+            },
+            || {
+                for q in &qs {
+                    std::hint::black_box(check.valid(q));
+                }
+            },
+        );
+        let agreement = meshes.as_deref().map(|m| agreement_pct(m, &calls));
+        Ok(AgreementRow {
+            robot: spec.label(),
+            check: check.model.mode().to_string(),
+            configurations: qs.len(),
+            checked_pairs: check.model.pairs.len(),
+            spheres: check.model.spheres.iter().map(Vec::len).sum(),
+            mesh_colliding_pct: (meshes.as_deref())
+                .map(|m| pct(m.iter().filter(|c| **c).count(), m.len())),
+            false_alarms_pct: agreement.map(|a| a.0),
+            misses_pct: agreement.map(|a| a.1),
+            colliding_pct: pct(calls.iter().filter(|c| **c).count(), calls.len()),
+            us_per_configuration: 1e6 * seconds / qs.len() as f64,
+            cpu: cpu.clone(),
+            git_revision: revision.clone(),
+        })
+    };
+    let rows = vec![row(&spheres)?, row(&exact)?];
+    selfmodel::report::table::write_table(
+        &out.join("results.csv"),
+        &rows,
+        "Collision checks against the exact meshes",
+        &format!(
+            "{} random configurations (seed {}), the robot against itself at zero margin, the same {} pairs checked by each. The reference: Pinocchio and coal on the URDF's collision meshes (a mesh is its surface). `false_alarms_pct`: of the configurations free on the meshes, the share the check calls colliding; `misses_pct`: of those colliding on the meshes, the share it calls free. Time: forward kinematics and the check, one thread, median of three passes.",
+            qs.len(),
+            cfg.seed,
+            exact.model.pairs.len()
+        ),
+    )?;
+    Ok(rows)
+}
