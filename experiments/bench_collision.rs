@@ -55,7 +55,7 @@ fn main() -> ExitCode {
             })?;
         for r in &rows {
             println!(
-                "{:<44} {:>7.2} us  ({} spheres, {} checked pairs, {} obstacles, {:.1}% colliding)",
+                "{:<70} {:>7.2} us  ({} spheres, {} checked pairs, {} obstacles, {:.1}% colliding)",
                 r.what,
                 r.us_per_configuration,
                 r.spheres,

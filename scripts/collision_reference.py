@@ -9,7 +9,9 @@ and, with `--scene`, every moving link's objects against the scene's obstacles, 
 configuration of `--joints` (CSV: one column per joint of selfmodel's joint vector, named
 after the joints, radians) writes `collides` (0/1) and `distance` (m: the smallest distance
 between checked objects, negative where they overlap, as coal reports it) to `--out`.
-Joints of the description outside the CSV are held at 0, or at the limit nearest 0.
+Joints of the description outside the CSV are held at 0, or at the limit nearest 0, except a
+joint that mimics another (`<mimic>`, a gripper's second finger), which follows it as selfmodel's
+kinematics makes it follow.
 
     python3 scripts/collision_reference.py --urdf panda.urdf --joints q.csv \
         --checked pairs.json --scene table.yml --out exact.csv
@@ -105,11 +107,26 @@ def main():
             sys.exit(f"collision_reference: joint {n} is not in {a.urdf}")
         index.append(model.idx_qs[model.getJointId(n)])
 
+    mimics = []
+    import xml.etree.ElementTree as ET
+    for joint in ET.parse(urdf).getroot().iter("joint"):
+        m = joint.find("mimic")
+        if m is not None and model.existJointName(joint.get("name")) and model.existJointName(m.get("joint")):
+            mimics.append((
+                model.idx_qs[model.getJointId(joint.get("name"))],
+                model.idx_qs[model.getJointId(m.get("joint"))],
+                float(m.get("multiplier", 1.0)),
+                float(m.get("offset", 0.0)),
+            ))
+
     out = []
     for r in rows:
         q = q0.copy()
         for k, v in zip(index, r):
             q[k] = v
+        for k, source, multiplier, offset in mimics:
+            if k not in index:
+                q[k] = multiplier * q[source] + offset
         hit = pin.computeCollisions(model, data, collision, cdata, q, True)
         row = {"collides": int(bool(hit))}
         if a.distances:

@@ -1,11 +1,19 @@
 //! A robot's collision spheres drawn over its collision meshes: both rendered by the ray
 //! caster from two sides, every joint at the middle of its range, the pixels coloured by which covers them (mesh and
 //! spheres; spheres only, the check's conservative excess; mesh only, which would be a hole
-//! in the cover and should not appear).
+//! in the cover and should not appear). A title, a legend of the three colours and a 10 cm
+//! scale bar in each view say what is drawn.
 
 use std::path::Path;
 
+use plotters::prelude::*;
+
+use super::{FONT, draw_err, register_font};
+use crate::report::canvas::Canvas;
+
 use crate::core::error::Result;
+use nalgebra::Point3;
+
 use crate::sim::bvh::Bvh;
 use crate::sim::camera::Camera;
 use crate::sim::collision::spheres::Sphere;
@@ -58,9 +66,14 @@ pub fn collision_spheres(
         ..Camera::paper()
     };
     let mut panels = Vec::new();
+    let mut scales = Vec::new();
     let (mut uncovered, mut mesh) = (0usize, 0usize);
     for direction in [[1.0, -0.6, 0.35], [0.0, 1.0, 0.2]] {
         let camera = base.framing(&points, direction, 0.12)?;
+        // Pixels per metre at the point the camera looks at (the robot's middle).
+        let distance = (Point3::from(camera.eye) - Point3::from(camera.target)).norm();
+        let metres_across = 2.0 * distance * (camera.fov_deg.to_radians() / 2.0).tan();
+        scales.push(size as f64 / metres_across.max(1e-9));
         let render =
             |r: &Robot| RayCaster::new(r, camera.clone(), RenderOptions::default()).render(&home);
         let (m, b) = (render(robot), render(&ball_robot));
@@ -80,16 +93,75 @@ pub fn collision_spheres(
             .count();
         panels.push(rgb);
     }
-    // The two views side by side, a white column between them.
+    // The two views side by side, a white column between them, under the title and legend.
     let gap = 8;
+    let top = 48;
     let width = 2 * size + gap;
-    let mut out = vec![255u8; width * size * 3];
+    let height = top + size;
+    let mut out = vec![255u8; width * height * 3];
     for (p, panel) in panels.iter().enumerate() {
         for row in 0..size {
-            let dst = (row * width + p * (size + gap)) * 3;
+            let dst = ((top + row) * width + p * (size + gap)) * 3;
             out[dst..dst + size * 3].copy_from_slice(&panel[row * size * 3..(row + 1) * size * 3]);
         }
     }
-    super::save_rgb(path, &out, width as u32, size as u32)?;
+    let count: usize = spheres.iter().map(Vec::len).sum();
+    let title = format!(
+        "{}: {count} collision spheres over its collision meshes, every joint at mid-range",
+        robot.name
+    );
+    label(
+        &mut out,
+        (width, height),
+        &title,
+        &scales,
+        (size, gap, top),
+        path,
+    )?;
+    super::save_rgb(path, &out, width as u32, height as u32)?;
     Ok(uncovered as f64 / mesh.max(1) as f64)
+}
+
+/// The title, the colours' legend and a 10 cm bar in each view (`px_per_m` each), drawn into
+/// `buf` (`size` pixels a view, `gap` between them, the views `top` pixels down).
+fn label(
+    buf: &mut [u8],
+    (width, height): (usize, usize),
+    title: &str,
+    px_per_m: &[f64],
+    (size, gap, top): (usize, usize, usize),
+    path: &Path,
+) -> Result<()> {
+    register_font();
+    let root = Canvas::with_buffer(buf, (width as u32, height as u32)).into_drawing_area();
+    let text = |px: f64| (FONT, px).into_font().color(&BLACK);
+    let err = |e| draw_err(path, e);
+    root.draw(&Text::new(title.to_string(), (6, 4), text(13.0)))
+        .map_err(err)?;
+    let mut x = 6;
+    for (colour, what) in [
+        (BOTH, "mesh and spheres"),
+        (SPHERES_ONLY, "spheres only (the check's excess)"),
+        (MESH_ONLY, "mesh only (a hole: none expected)"),
+    ] {
+        let rgb = RGBColor(colour[0], colour[1], colour[2]);
+        root.draw(&Rectangle::new([(x, 26), (x + 12, 38)], rgb.filled()))
+            .map_err(err)?;
+        root.draw(&Text::new(what.to_string(), (x + 16, 25), text(12.0)))
+            .map_err(err)?;
+        x += 24 + 7 * what.len() as i32;
+    }
+    for (p, &scale) in px_per_m.iter().enumerate() {
+        let bar = (0.1 * scale).round() as i32;
+        let (x0, y0) = ((p * (size + gap)) as i32 + 10, (top + size) as i32 - 12);
+        root.draw(&Rectangle::new(
+            [(x0, y0), (x0 + bar, y0 + 3)],
+            BLACK.filled(),
+        ))
+        .map_err(err)?;
+        root.draw(&Text::new("10 cm".to_string(), (x0, y0 - 15), text(12.0)))
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
 }

@@ -246,6 +246,16 @@ impl ExactShapes {
                     }
                 };
                 match (trimesh(a), trimesh(b)) {
+                    (Some(ma), Some(mb)) if margin <= 0.0 => {
+                        // Both triangles in the first mesh's frame, tested directly.
+                        let ab = wa.inv_mul(&wb);
+                        near_triangles(ma, &wa, mb, &wb, margin).any(|(i, j)| {
+                            let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+                            let tb_in_a = [ab * tb.a, ab * tb.b, ab * tb.c];
+                            triangles_intersect(&[ta.a, ta.b, ta.c], &tb_in_a)
+                                .unwrap_or_else(|| closer(&ta, &Pose::IDENTITY, &tb, &ab))
+                        })
+                    }
                     (Some(ma), Some(mb)) => near_triangles(ma, &wa, mb, &wb, margin)
                         .any(|(i, j)| closer(&ma.triangle(i), &wa, &mb.triangle(j), &wb)),
                     _ => closer(a.shape.as_ref(), &wa, b.shape.as_ref(), &wb),
@@ -336,6 +346,63 @@ fn near_triangles<'a>(
     })
 }
 
+/// Whether two triangles (in one frame) meet: Möller's test ("A fast triangle-triangle
+/// intersection test", 1997), each triangle against the other's plane, then their spans along
+/// the line where the planes meet. `None` where they lie in one plane (the caller asks GJK).
+fn triangles_intersect(t: &[Vector; 3], u: &[Vector; 3]) -> Option<bool> {
+    // Distances this close to a plane count as on it (metres; far below any mesh's detail).
+    const ON_PLANE: f64 = 1e-12;
+    let side = |tri: &[Vector; 3], of: &[Vector; 3]| {
+        let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+        let d = of.map(|p| {
+            let v = n.dot(p - tri[0]);
+            if v.abs() < ON_PLANE * n.length().max(1.0) {
+                0.0
+            } else {
+                v
+            }
+        });
+        (n, d)
+    };
+    let (nt, du) = side(t, u);
+    if du.iter().all(|&d| d > 0.0) || du.iter().all(|&d| d < 0.0) {
+        return Some(false);
+    }
+    let (nu, dt) = side(u, t);
+    if dt.iter().all(|&d| d > 0.0) || dt.iter().all(|&d| d < 0.0) {
+        return Some(false);
+    }
+    let line = nt.cross(nu);
+    if du.iter().all(|&d| d == 0.0) || line.length_squared() == 0.0 {
+        return None;
+    }
+    // Project onto the line's largest axis (the spans' order is all that matters).
+    let axis = line.abs().max_position();
+    let span = |tri: &[Vector; 3], d: [f64; 3]| -> Option<(f64, f64)> {
+        let p = tri.map(|v| v[axis]);
+        // The vertex alone on its side of the other plane, and the other two.
+        let (a, b, c) = if d[0] * d[1] > 0.0 {
+            (2, 0, 1)
+        } else if d[0] * d[2] > 0.0 {
+            (1, 0, 2)
+        } else if d[1] * d[2] > 0.0 || d[0] != 0.0 {
+            (0, 1, 2)
+        } else if d[1] != 0.0 {
+            (1, 0, 2)
+        } else if d[2] != 0.0 {
+            (2, 0, 1)
+        } else {
+            return None;
+        };
+        let at = |o: usize| p[a] + (p[o] - p[a]) * d[a] / (d[a] - d[o]);
+        let (x, y) = (at(b), at(c));
+        Some((x.min(y), x.max(y)))
+    };
+    let (t0, t1) = span(t, dt)?;
+    let (u0, u1) = span(u, du)?;
+    Some(t0 <= u1 && u0 <= t1)
+}
+
 impl std::fmt::Debug for ExactShapes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ExactShapes")
@@ -343,5 +410,52 @@ impl std::fmt::Debug for ExactShapes {
             .field("bound", &self.bound)
             .field("hull", &self.hull.is_some())
             .finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// Möller's test against parry's GJK (the slow reference) on random pairs of small
+    /// triangles near each other, touching and crossing ones among them.
+    #[test]
+    fn the_triangle_test_agrees_with_gjk() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let mut point = |rng: &mut rand::rngs::StdRng| {
+            Vector::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let (mut meeting, mut apart) = (0, 0);
+        for _ in 0..20_000 {
+            let t = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            let u = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            let reference = query::intersection_test(
+                &Pose::IDENTITY,
+                &parry3d_f64::shape::Triangle::new(t[0], t[1], t[2]),
+                &Pose::IDENTITY,
+                &parry3d_f64::shape::Triangle::new(u[0], u[1], u[2]),
+            )
+            .unwrap()
+            .intersecting;
+            let fast = triangles_intersect(&t, &u).expect("not coplanar");
+            assert_eq!(fast, reference, "{t:?} {u:?}");
+            if fast {
+                meeting += 1;
+            } else {
+                apart += 1;
+            }
+        }
+        assert!(
+            meeting > 1000 && apart > 1000,
+            "{meeting} meeting, {apart} apart"
+        );
+        // Coplanar triangles are left to GJK.
+        let flat = [Vector::ZERO, Vector::X, Vector::Y];
+        assert_eq!(triangles_intersect(&flat, &flat.map(|v| v * 0.5)), None);
     }
 }

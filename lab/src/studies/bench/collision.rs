@@ -1,6 +1,6 @@
 //! How long a collision check of one configuration takes: the robot's forward kinematics
-//! (every link frame), then its spheres against each other (the checked pairs) and against a
-//! scene's obstacles, on one thread, median of repeats over random configurations; beside it
+//! (every link frame), then its links against each other (the checked pairs) and against a
+//! scene's obstacles, on the spheres alone and on the exact shapes behind them, on one thread, median of repeats over random configurations; beside it
 //! the forward kinematics alone, so the check's own cost shows; and `spheres.png`, the
 //! spheres over the meshes ([`selfmodel::report::figures::collision_spheres`]).
 
@@ -12,6 +12,7 @@ use rand::rngs::StdRng;
 use selfmodel::core::error::Result;
 use selfmodel::core::timing::{Repeats, median_seconds};
 use selfmodel::ik::solve::collision::CollisionCheck;
+use selfmodel::sim::collision::model::CollisionMode;
 use selfmodel::sim::collision::scene::Scene;
 use selfmodel::sim::robots::RobotSpec;
 
@@ -53,27 +54,11 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
             std::hint::black_box(robot.chain.link_frames(q));
         }
     }));
-    let full = per(median_seconds(repeats, || {
-        for q in &qs {
-            std::hint::black_box(check.valid(q));
-        }
-    }));
-    let colliding = qs.iter().filter(|q| !check.valid(q)).count();
-    // A free configuration is checked to the end (a colliding one stops at its first hit).
-    let free: Vec<&Vec<f64>> = qs.iter().filter(|q| check.valid(q)).collect();
-    let free_us =
-        1e6 * median_seconds(repeats, || {
-            for q in &free {
-                std::hint::black_box(check.valid(q));
-            }
-        }) / free.len().max(1) as f64;
-    // None free (a scene around another robot): nothing to time.
-    let free_us = if free.is_empty() { f64::NAN } else { free_us };
     let cpu = selfmodel::eval::compute_peak::machine_label(false);
     let revision = selfmodel::core::provenance::git_revision();
-    let row = |what: &str, us: f64, obstacles: usize, colliding_pct: f64| CollisionTiming {
+    let row = |what: String, us: f64, obstacles: usize, colliding_pct: f64| CollisionTiming {
         robot: spec.label(),
-        what: what.into(),
+        what,
         spheres: check.model.spheres.iter().map(Vec::len).sum(),
         checked_pairs: check.model.pairs.len(),
         obstacles,
@@ -83,27 +68,51 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
         cpu: cpu.clone(),
         git_revision: revision.clone(),
     };
-    let rows = vec![
-        row("forward kinematics (every link frame)", fk, 0, 0.0),
-        row(
-            "forward kinematics + self and scene check",
-            full,
-            obstacles,
-            100.0 * colliding as f64 / n.max(1) as f64,
-        ),
-        row(
-            "the check alone (the difference)",
-            full - fk,
-            obstacles,
-            0.0,
-        ),
-        row(
-            "forward kinematics + check, collision-free configurations only",
-            free_us,
-            obstacles,
-            0.0,
-        ),
-    ];
+    let mut rows = vec![row(
+        "forward kinematics (every link frame)".into(),
+        fk,
+        0,
+        0.0,
+    )];
+    for mode in [CollisionMode::Spheres, CollisionMode::Exact] {
+        let check = check.clone().deciding(mode);
+        let full = per(median_seconds(repeats, || {
+            for q in &qs {
+                std::hint::black_box(check.valid(q));
+            }
+        }));
+        let colliding = qs.iter().filter(|q| !check.valid(q)).count();
+        // A free configuration is checked to the end (a colliding one stops at its first hit).
+        let free: Vec<&Vec<f64>> = qs.iter().filter(|q| check.valid(q)).collect();
+        let free_us =
+            1e6 * median_seconds(repeats, || {
+                for q in &free {
+                    std::hint::black_box(check.valid(q));
+                }
+            }) / free.len().max(1) as f64;
+        // None free (a scene around another robot): nothing to time.
+        let free_us = if free.is_empty() { f64::NAN } else { free_us };
+        rows.extend([
+            row(
+                format!("forward kinematics + self and scene check ({mode})"),
+                full,
+                obstacles,
+                100.0 * colliding as f64 / n.max(1) as f64,
+            ),
+            row(
+                format!("the check alone, the difference ({mode})"),
+                full - fk,
+                obstacles,
+                0.0,
+            ),
+            row(
+                format!("forward kinematics + check, free configurations only ({mode})"),
+                free_us,
+                obstacles,
+                0.0,
+            ),
+        ]);
+    }
     let uncovered = selfmodel::report::figures::collision_spheres(
         robot,
         &check.model.spheres,
@@ -118,7 +127,7 @@ pub fn run(spec: &RobotSpec, scene: &Path, n: usize, out: &Path) -> Result<Vec<C
         &out.join("results.csv"),
         &rows,
         "A collision check of one configuration",
-        "One thread, median of at least five passes over the same random configurations within the joint limits, after a warm-up pass; margin 0.",
+        "One thread, median of at least five passes over the same random configurations within the joint limits, after a warm-up pass; margin 0. `spheres`: decided on the spheres alone; `exact`: the spheres and convex hulls as the broad phase, the collision meshes and primitives deciding the rest.",
     )?;
     Ok(rows)
 }
