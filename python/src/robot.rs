@@ -129,9 +129,10 @@ impl PyRobot {
         })
     }
 
-    /// Whether each configuration of `q` (N, dof; radians, metres) collides with itself (two
-    /// spheres of a checked pair closer than `margin`, metres) or, with `scene` (a cuRobo
-    /// world-configuration YAML file), with an obstacle.
+    /// Whether each configuration of `q` (N, dof; radians, metres) collides with itself (a
+    /// checked pair of links closer than `margin`, metres, on their collision meshes, the
+    /// spheres their broad phase) or, with `scene` (a cuRobo world-configuration YAML file),
+    /// with an obstacle.
     #[pyo3(signature = (q, scene=None, margin=0.0))]
     fn collides<'py>(
         &self,
@@ -141,16 +142,17 @@ impl PyRobot {
         margin: f64,
     ) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
         guarded(|| {
-            let clearance = self.clearances(py, q, scene, margin.max(0.0) + 1.0)?;
-            let hit: Vec<bool> = clearance.iter().map(|&c| c < margin).collect();
+            let hit = self.per_configuration(py, q, scene, |model, frames, scene| {
+                model.collides(frames, scene, margin)
+            })?;
             Ok(numpy::ndarray::Array1::from_vec(hit).into_pyarray(py))
         })
     }
 
     /// The clearance of each configuration of `q` (N, dof): the smallest signed distance
-    /// (metres) between the spheres of a checked pair, and with `scene` between a moving
-    /// link's spheres and an obstacle, negative where they overlap; at most `cap` (a larger
-    /// clearance is reported as `cap`).
+    /// (metres) between a checked pair of links on their collision meshes, and with `scene`
+    /// between a moving link and an obstacle, negative where they overlap; at most `cap` (a
+    /// larger clearance is reported as `cap`).
     #[pyo3(signature = (q, scene=None, cap=1.0))]
     fn clearance<'py>(
         &self,
@@ -363,6 +365,25 @@ impl PyRobot {
         scene: Option<PathBuf>,
         cap: f64,
     ) -> PyResult<Vec<f64>> {
+        self.per_configuration(py, q, scene, |model, frames, scene| {
+            model.clearance(frames, scene, cap)
+        })
+    }
+
+    /// `f` of the collision model at every row of `q` (its link frames) and the scene read
+    /// from `scene`, in blocks (Ctrl-C between them).
+    fn per_configuration<T: Send>(
+        &self,
+        py: Python<'_>,
+        q: Matrix,
+        scene: Option<PathBuf>,
+        f: impl Fn(
+            &CollisionModel,
+            &[nalgebra::Isometry3<f64>],
+            Option<&selfmodel::sim::collision::scene::Scene>,
+        ) -> T
+        + Sync,
+    ) -> PyResult<Vec<T>> {
         let model = self.collision_model(py)?;
         let scene = (scene.as_deref())
             .map(selfmodel::sim::collision::scene::Scene::read)
@@ -376,7 +397,7 @@ impl PyRobot {
             use rayon::prelude::*;
             Ok(v[rows.start * width..rows.end * width]
                 .par_chunks(width)
-                .map(|q| model.clearance(&chain.link_frames(q), scene.as_ref(), cap))
+                .map(|q| f(model, &chain.link_frames(q), scene.as_ref()))
                 .collect())
         })
     }

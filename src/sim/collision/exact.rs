@@ -249,15 +249,19 @@ impl ExactShapes {
                     (Some(ma), Some(mb)) if margin <= 0.0 => {
                         // Both triangles in the first mesh's frame, tested directly.
                         let ab = wa.inv_mul(&wb);
-                        near_triangles(ma, &wa, mb, &wb, margin).any(|(i, j)| {
+                        let reach = std::cell::Cell::new(margin);
+                        near_triangles(ma, &wa, mb, &wb, &reach).any(|(i, j)| {
                             let (ta, tb) = (ma.triangle(i), mb.triangle(j));
                             let tb_in_a = [ab * tb.a, ab * tb.b, ab * tb.c];
                             triangles_intersect(&[ta.a, ta.b, ta.c], &tb_in_a)
                                 .unwrap_or_else(|| closer(&ta, &Pose::IDENTITY, &tb, &ab))
                         })
                     }
-                    (Some(ma), Some(mb)) => near_triangles(ma, &wa, mb, &wb, margin)
-                        .any(|(i, j)| closer(&ma.triangle(i), &wa, &mb.triangle(j), &wb)),
+                    (Some(ma), Some(mb)) => {
+                        let reach = std::cell::Cell::new(margin);
+                        near_triangles(ma, &wa, mb, &wb, &reach)
+                            .any(|(i, j)| closer(&ma.triangle(i), &wa, &mb.triangle(j), &wb))
+                    }
                     _ => closer(a.shape.as_ref(), &wa, b.shape.as_ref(), &wb),
                 }
             })
@@ -285,13 +289,7 @@ impl ExactShapes {
             for b in &other.pieces {
                 let (wa, wb) = (pa * a.pose, pb * b.pose);
                 let contact = match (trimesh(a), trimesh(b)) {
-                    (Some(ma), Some(mb)) => near_triangles(ma, &wa, mb, &wb, within)
-                        .filter_map(|(i, j)| {
-                            query::contact(&wa, &ma.triangle(i), &wb, &mb.triangle(j), within)
-                                .ok()
-                                .flatten()
-                        })
-                        .min_by(|x, y| x.dist.total_cmp(&y.dist)),
+                    (Some(ma), Some(mb)) => closest_triangles(ma, &wa, mb, &wb, within),
                     _ => query::contact(&wa, a.shape.as_ref(), &wb, b.shape.as_ref(), within)
                         .ok()
                         .flatten(),
@@ -328,22 +326,45 @@ fn trimesh(piece: &Piece) -> Option<&TriMesh> {
 }
 
 /// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes come within
-/// `margin` of each other: both meshes' trees traversed together, so only the triangles near
-/// the other mesh are ever looked at.
+/// `reach` of each other: both meshes' trees traversed together, so only the triangles near
+/// the other mesh are ever looked at. `reach` is read as the traversal goes: a caller that
+/// lowers it (the closest pair so far) prunes what is left.
 fn near_triangles<'a>(
     ma: &'a TriMesh,
     wa: &Pose,
     mb: &'a TriMesh,
     wb: &Pose,
-    margin: f64,
+    reach: &'a std::cell::Cell<f64>,
 ) -> impl Iterator<Item = (u32, u32)> + 'a {
     let ab = wa.inv_mul(wb);
-    let loosen = margin.max(0.0);
     ma.bvh().leaf_pairs(mb.bvh(), move |n1, n2| {
         n1.aabb()
-            .loosened(loosen)
+            .loosened(reach.get().max(0.0))
             .intersects(&n2.aabb().transform_by(&ab))
     })
+}
+
+/// The closest (or deepest) pair of triangles of `ma` at `wa` and `mb` at `wb` within
+/// `within`, as parry's contact: the search narrows to the closest pair found so far.
+fn closest_triangles(
+    ma: &TriMesh,
+    wa: &Pose,
+    mb: &TriMesh,
+    wb: &Pose,
+    within: f64,
+) -> Option<query::Contact> {
+    let reach = std::cell::Cell::new(within);
+    let mut best: Option<query::Contact> = None;
+    for (i, j) in near_triangles(ma, wa, mb, wb, &reach) {
+        let found = query::contact(wa, &ma.triangle(i), wb, &mb.triangle(j), reach.get());
+        if let Ok(Some(c)) = found
+            && best.is_none_or(|b| c.dist < b.dist)
+        {
+            reach.set(c.dist.max(0.0));
+            best = Some(c);
+        }
+    }
+    best
 }
 
 /// Whether two triangles (in one frame) meet: Möller's test ("A fast triangle-triangle

@@ -40,6 +40,9 @@ pub struct CollisionModel {
     pub moving: Vec<bool>,
     /// The links' exact shapes, where the check decides on them (none: the spheres decide).
     pub exact: Option<Arc<ExactLinks>>,
+    /// The pairs not checked, each with its reason, where the model was made from them (none:
+    /// read back from a file, which keeps the checked pairs only).
+    pub allowed: Option<AllowedPairs>,
 }
 
 /// Each link's exact shapes (in its frame), and how far the spheres may fall short of them.
@@ -96,7 +99,10 @@ impl CollisionModel {
                 }
             }
         }
-        Self::with_pairs(chain, spheres, pairs)
+        Self {
+            allowed: Some(allowed.clone()),
+            ..Self::with_pairs(chain, spheres, pairs)
+        }
     }
 
     /// The model of `chain`'s links with spheres `spheres` checking the pairs `pairs` (link
@@ -123,6 +129,7 @@ impl CollisionModel {
             bounds,
             moving,
             exact: None,
+            allowed: None,
         }
     }
 

@@ -60,6 +60,11 @@ impl AllowedPairs {
         self.pairs.entry(Self::key(a, b)).or_insert(reason);
     }
 
+    /// Why the pair `a`, `b` is allowed (None: it is checked).
+    pub fn reason(&self, a: &str, b: &str) -> Option<Reason> {
+        self.pairs.get(&Self::key(a, b)).copied()
+    }
+
     pub fn allows(&self, a: &str, b: &str) -> bool {
         a == b || self.pairs.contains_key(&Self::key(a, b))
     }

@@ -4,7 +4,10 @@
 //! meshes ([`super::pinocchio`]), the same pairs checked, at zero margin. False alarms: of the
 //! configurations free on the meshes, the share a check calls colliding; misses: of those
 //! colliding on the meshes, the share it calls free. Each check's time a configuration
-//! (forward kinematics included, one thread) beside them.
+//! (forward kinematics included, one thread) beside them. And the pairs themselves: every
+//! pair of links with geometry, checked or why not (`pairs.csv`), and how many configurations
+//! a check calls free collide on the meshes in a pair skipped as never colliding (Pinocchio on
+//! those pairs): a pair switched off wrongly shows there.
 
 use std::path::Path;
 
@@ -24,6 +27,8 @@ use super::pinocchio::{Reference, agreement_pct, pct, write_reference_inputs};
 pub struct AgreementConfig {
     /// Random configurations.
     pub configurations: usize,
+    /// Their seed: another than the pairs' sampling's (0), so a pair skipped as never
+    /// colliding is tested on configurations it was not decided on.
     pub seed: u64,
 }
 
@@ -44,6 +49,9 @@ pub struct AgreementRow {
     pub misses_pct: Option<f64>,
     /// The share this check calls colliding.
     pub colliding_pct: f64,
+    /// Of the configurations this check calls free, the share colliding on the meshes in a
+    /// pair of links skipped as never colliding (or by an SRDF's reason of its own).
+    pub colliding_in_never_pairs_pct: Option<f64>,
     /// Forward kinematics and the check, one thread, median of repeats.
     pub us_per_configuration: f64,
     pub cpu: String,
@@ -58,7 +66,21 @@ const WRITTEN: &[&str] = &[
     "pairs.json",
     "random_joints.csv",
     "random_joints_exact_meshes.csv",
+    "never_pairs.json",
+    "random_joints_never_pairs_exact_meshes.csv",
+    "pairs.csv",
 ];
+
+/// One pair of links with geometry: checked, or why not.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct PairRow {
+    pub link_a: String,
+    pub link_b: String,
+    /// `checked`, or the reason it is not: `adjacent` (a joint's parent and child),
+    /// `default` (colliding at home), `always`, `never` (over the sampled configurations) or
+    /// `user` (an SRDF's other reason).
+    pub status: String,
+}
 
 /// Compare both checks of `spec`'s robot (its collision geometry, the pairs its SRDF or the
 /// computed matrix leaves checked) with Pinocchio's, through `python` where given, into `out`.
@@ -69,6 +91,12 @@ pub fn run(
     out: &Path,
 ) -> Result<Vec<AgreementRow>> {
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite, refuse_writing_over};
+    if cfg.seed == selfmodel::sim::collision::pairs::PairSampling::default().seed {
+        return Err(Error::Config(format!(
+            "`seed` {}: the pairs checked are decided on the configurations of that seed, so a pair skipped as never colliding would never collide in them; give another",
+            cfg.seed
+        )));
+    }
     if cfg.configurations == 0 {
         return Err(Error::Config("`configurations`: give at least one".into()));
     }
@@ -112,18 +140,38 @@ fn measure(
         &names,
         &[("random_joints.csv", qs.iter().map(Vec::as_slice).collect())],
     )?;
-    let meshes = match (python, spec) {
-        (Some(python), RobotSpec::Urdf { path, .. }) => Reference {
-            python,
-            urdf: path,
-            pairs,
-            scene: None,
+    let never_pairs = out.join("never_pairs.json");
+    let statuses = pair_statuses(&exact);
+    // Adjacent pairs and those touching at home or always are allowed to touch by design.
+    let never: Vec<[&str; 2]> = (statuses.iter())
+        .filter(|p| !["checked", "adjacent", "default", "always"].contains(&p.status.as_str()))
+        .map(|p| [p.link_a.as_str(), p.link_b.as_str()])
+        .collect();
+    selfmodel::core::atomic_file::write_json(&never_pairs, &never)?;
+    selfmodel::report::table::write_table(
+        &out.join("pairs.csv"),
+        &statuses,
+        "The pairs of links with collision geometry: checked, or why not",
+        "As MoveIt's setup assistant decides where no SRDF says: `adjacent` (a joint's parent and child), `default` (colliding at the home pose), `always` and `never` (colliding at nearly every or at none of the sampled configurations), each decided on the links' exact shapes; `user`: an SRDF's other reason.",
+    )?;
+    let (meshes, meshes_never) = match (python, spec) {
+        (Some(python), RobotSpec::Urdf { path, .. }) => {
+            let reference = |pairs| Reference {
+                python,
+                urdf: path,
+                pairs,
+                scene: None,
+            };
+            let joints = out.join("random_joints.csv");
+            (
+                reference(pairs).collides(&joints, &out.join("random_joints_exact_meshes.csv"))?,
+                reference(never_pairs).collides(
+                    &joints,
+                    &out.join("random_joints_never_pairs_exact_meshes.csv"),
+                )?,
+            )
         }
-        .collides(
-            &out.join("random_joints.csv"),
-            &out.join("random_joints_exact_meshes.csv"),
-        )?,
-        _ => None,
+        _ => (None, None),
     };
     let spheres =
         CollisionCheck::for_robot(spec, None, None, true, 0.0)?.deciding(CollisionMode::Spheres);
@@ -145,6 +193,13 @@ fn measure(
             },
         );
         let agreement = meshes.as_deref().map(|m| agreement_pct(m, &calls));
+        let free = calls.iter().filter(|c| !**c).count();
+        let in_never = meshes_never.as_deref().map(|never| {
+            let hit = (never.iter().zip(&calls))
+                .filter(|(n, c)| **n && !**c)
+                .count();
+            pct(hit, free)
+        });
         Ok(AgreementRow {
             robot: spec.label(),
             check: check.model.mode().to_string(),
@@ -156,6 +211,7 @@ fn measure(
             false_alarms_pct: agreement.map(|a| a.0),
             misses_pct: agreement.map(|a| a.1),
             colliding_pct: pct(calls.iter().filter(|c| **c).count(), calls.len()),
+            colliding_in_never_pairs_pct: in_never,
             us_per_configuration: 1e6 * seconds / qs.len() as f64,
             cpu: cpu.clone(),
             git_revision: revision.clone(),
@@ -167,11 +223,36 @@ fn measure(
         &rows,
         "Collision checks against the exact meshes",
         &format!(
-            "{} random configurations (seed {}), the robot against itself at zero margin, the same {} pairs checked by each. The reference: Pinocchio and coal on the URDF's collision meshes (a mesh is its surface). `false_alarms_pct`: of the configurations free on the meshes, the share the check calls colliding; `misses_pct`: of those colliding on the meshes, the share it calls free. Time: forward kinematics and the check, one thread, median of three passes.",
+            "{} random configurations (seed {}), the robot against itself at zero margin, the same {} pairs checked by each. The reference: Pinocchio and coal on the URDF's collision meshes (a mesh is its surface). `false_alarms_pct`: of the configurations free on the meshes, the share the check calls colliding; `misses_pct`: of those colliding on the meshes, the share it calls free; `colliding_in_never_pairs_pct`: of those the check calls free, the share colliding on the meshes in a pair skipped as never colliding (`pairs.csv` says why each pair is not checked; adjacent pairs and those touching at home or always may touch by design). Time: forward kinematics and the check, one thread, median of three passes.",
             qs.len(),
             cfg.seed,
             exact.model.pairs.len()
         ),
     )?;
     Ok(rows)
+}
+
+/// Every pair of `check`'s links with geometry: checked, or the reason it is not.
+fn pair_statuses(check: &CollisionCheck) -> Vec<PairRow> {
+    let links = &check.robot.chain.links;
+    let has = |l: usize| !check.robot.geometry[l].is_empty();
+    let mut rows = Vec::new();
+    for a in (0..links.len()).filter(|&l| has(l)) {
+        for b in (a + 1..links.len()).filter(|&l| has(l)) {
+            let checked = check.model.pairs.contains(&(a, b));
+            let reason = (check.model.allowed.as_ref())
+                .and_then(|allowed| allowed.reason(&links[a], &links[b]));
+            let status = match (checked, reason) {
+                (true, _) => "checked".to_string(),
+                (false, Some(r)) => format!("{r:?}").to_lowercase(),
+                (false, None) => "not checked".to_string(),
+            };
+            rows.push(PairRow {
+                link_a: links[a].clone(),
+                link_b: links[b].clone(),
+                status,
+            });
+        }
+    }
+    rows
 }
