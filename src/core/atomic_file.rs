@@ -267,6 +267,27 @@ pub fn refuse_overwrite(out: &Path, inputs: &[&Path], protected: Option<&Path>) 
     Ok(())
 }
 
+/// `run`, which writes the files named `written` into the folder `out`; where it fails (or is
+/// stopped), those files are removed, and the folder too if `run` made it: nothing of a run
+/// that did not finish is left.
+pub fn nothing_left_on_failure<T>(
+    out: &Path,
+    written: &[&str],
+    run: impl FnOnce() -> Result<T>,
+) -> Result<T> {
+    let fresh = !out.exists();
+    let result = run();
+    if result.is_err() {
+        for name in written {
+            let _ = std::fs::remove_file(out.join(name));
+        }
+        if fresh {
+            let _ = std::fs::remove_dir(out);
+        }
+    }
+    result
+}
+
 /// Refuse a folder `out` a run writes the files `written` into (names in it; a name ending
 /// in `/` a folder of its own) where one of them is one of `inputs`: `ik train --out F`
 /// with `F/collision.json` the scene it reads would replace the scene.

@@ -105,17 +105,9 @@ pub fn run(
     let inputs: Vec<&Path> = inputs.iter().map(|p| p.as_path()).collect();
     refuse_overwrite(out, &inputs, None)?;
     refuse_writing_over(out, WRITTEN, &inputs)?;
-    let fresh = !out.exists();
-    let result = measure(spec, cfg, python, out);
-    if result.is_err() {
-        for name in WRITTEN {
-            let _ = std::fs::remove_file(out.join(name));
-        }
-        if fresh {
-            let _ = std::fs::remove_dir(out);
-        }
-    }
-    result
+    selfmodel::core::atomic_file::nothing_left_on_failure(out, WRITTEN, || {
+        measure(spec, cfg, python, out)
+    })
 }
 
 fn measure(

@@ -285,18 +285,9 @@ pub fn run(
     let inputs: Vec<&Path> = inputs.iter().map(PathBuf::as_path).collect();
     refuse_overwrite(out, &inputs, Some(model_dir))?;
     refuse_writing_over(out, WRITTEN, &inputs)?;
-    let fresh = !out.exists();
-    let result = measure(&model, &robot, model_dir, scene, cfg, python, out);
-    if result.is_err() {
-        // Nothing of a run that failed or was stopped is left.
-        for name in WRITTEN {
-            let _ = std::fs::remove_file(out.join(name));
-        }
-        if fresh {
-            let _ = std::fs::remove_dir(out);
-        }
-    }
-    result
+    selfmodel::core::atomic_file::nothing_left_on_failure(out, WRITTEN, || {
+        measure(&model, &robot, model_dir, scene, cfg, python, out)
+    })
 }
 
 /// What [`run`] writes into its folder.
