@@ -79,13 +79,13 @@ fn main() -> ExitCode {
             .find(|r| r.exact_but_colliding_pct.unwrap_or(0.0) > 0.0)
         {
             println!(
-                "without the check, {:.1}% of the exact answers collide (by the spheres)",
+                "without the check, {:.1}% of the exact answers collide (by the check)",
                 r.exact_but_colliding_pct.unwrap_or(0.0)
             );
         }
         if let (Some(c), Some(m)) = (rows[0].spheres_conservative_pct, rows[0].spheres_missed_pct) {
             println!(
-                "the spheres against the exact meshes (zero margin) on {} random configurations: {c:.1}% of the free ones called colliding, {m:.1}% of the colliding ones missed",
+                "our check against the exact meshes (zero margin) on {} random configurations: {c:.1}% of the free ones called colliding, {m:.1}% of the colliding ones missed",
                 cfg.targets
             );
         }

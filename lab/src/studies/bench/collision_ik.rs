@@ -78,13 +78,14 @@ pub struct CollisionIkRow {
     /// Ours: of those answers, the share Pinocchio finds collision-free on the exact meshes
     /// at zero margin.
     pub exact_mesh_free_pct: Option<f64>,
-    /// Ours: of the exact answers, the share our spheres find in collision (without the
+    /// Ours: of the exact answers, the share our check finds in collision (without the
     /// check, what would have been returned).
     pub exact_but_colliding_pct: Option<f64>,
-    /// Ours, the spheres against the exact meshes at zero margin on as many random
-    /// configurations (free or not) as targets: of those the meshes find free, the share the
-    /// spheres call colliding (their conservativeness), and of those the meshes find
-    /// colliding, the share the spheres call free (missed: should be none).
+    /// Ours, our check against the exact meshes at zero margin on as many random
+    /// configurations (free or not) as targets: of those the meshes find free, the share it
+    /// calls colliding (its conservativeness), and of those the meshes find colliding, the
+    /// share it calls free (missed: should be none). Named for the spheres, which decided
+    /// alone before the exact check (rows before 302bbeb).
     pub spheres_conservative_pct: Option<f64>,
     pub spheres_missed_pct: Option<f64>,
     pub iterations_mean: Option<f64>,
