@@ -203,10 +203,6 @@ impl ExactShapes {
         }
     }
 
-    pub fn is_empty(&self) -> bool {
-        self.pieces.is_empty()
-    }
-
     /// The distance between the two bounding spheres at `fa` and `fb` (negative: they
     /// overlap); infinite where either has no pieces.
     fn bound_gap(&self, fa: &Isometry3<f64>, other: &Self, fb: &Isometry3<f64>) -> f64 {

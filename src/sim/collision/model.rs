@@ -158,12 +158,6 @@ impl CollisionModel {
         }
     }
 
-    /// The spheres' shortfall where the exact shapes decide with spheres that bound them
-    /// (`None`: the spheres rule nothing out).
-    fn slack(&self) -> Option<f64> {
-        self.exact.as_ref().and_then(|x| x.sphere_slack)
-    }
-
     /// Whether the checked pair `(a, b)` comes closer than `margin`: on the spheres, or where
     /// they cannot rule it out, on the exact shapes.
     fn pair_closer(
@@ -347,9 +341,8 @@ impl CollisionModel {
                 m.min(self.pair_gap(&placed, frames, a, b, m))
             });
         };
-        let slack = self.slack();
         self.pairs.iter().fold(cap, |m, &(a, b)| {
-            if let Some(slack) = slack {
+            if let Some(slack) = x.sphere_slack {
                 let wide = m + 2.0 * slack;
                 if self.pair_gap(&placed, frames, a, b, wide) >= wide {
                     return m;

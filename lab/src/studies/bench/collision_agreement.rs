@@ -165,8 +165,8 @@ fn measure(
         }
         _ => (None, None),
     };
-    let spheres =
-        CollisionCheck::for_robot(spec, None, None, true, 0.0)?.deciding(CollisionMode::Spheres);
+    // The same model (spheres and pairs, computed once) deciding on the spheres alone.
+    let spheres = exact.clone().deciding(CollisionMode::Spheres);
     let cpu = selfmodel::eval::compute_peak::machine_label(false);
     let revision = selfmodel::core::provenance::git_revision();
     let row = |check: &CollisionCheck| -> Result<AgreementRow> {
