@@ -34,6 +34,12 @@ struct Args {
     /// The Python that runs Pinocchio's check (PyPI pin).
     #[arg(long, default_value = "python3")]
     python: PathBuf,
+    /// Spheres of another's to score beside ours (cuRobo's robot file or spheres file, a
+    /// collision_spheres block), on the same pairs.
+    #[arg(long, value_name = "FILE")]
+    spheres: Option<PathBuf>,
+    #[command(flatten)]
+    fit: selfmodel_lab::cli::SphereFitArgs,
     /// Leave Pinocchio's check out (then no agreement is measured).
     #[arg(long)]
     no_reference: bool,
@@ -57,6 +63,8 @@ fn main() -> ExitCode {
         let cfg = AgreementConfig {
             configurations: args.configurations,
             seed: args.seed,
+            fit: args.fit.fit()?,
+            spheres_file: args.spheres.clone(),
         };
         let python = (!args.no_reference).then_some(args.python.as_path());
         let rows = rayon::ThreadPoolBuilder::new()
@@ -64,15 +72,39 @@ fn main() -> ExitCode {
             .build()
             .map_err(|e| selfmodel::Error::Config(format!("a one-thread pool: {e}")))?
             .install(|| run(&spec, &cfg, python, &args.out))?;
+        let (rows, links) = rows;
+        println!(
+            "{:<16} {:<18} {:>7} {:>12} {:>14} {:>14}",
+            "spheres", "link", "spheres", "coverage %", "protrusion max", "mean (mm)"
+        );
+        for l in &links {
+            println!(
+                "{:<16} {:<18} {:>7} {:>12.2} {:>14.1} {:>14.2}",
+                l.spheres_from,
+                l.link,
+                l.spheres,
+                l.coverage_pct,
+                l.protrusion_max_mm,
+                l.protrusion_mean_mm
+            );
+        }
         let cell = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
         println!(
-            "{:<8} {:>6} {:>7} {:>12} {:>14} {:>9} {:>10}",
-            "check", "pairs", "spheres", "colliding %", "false alarm %", "missed %", "us a conf"
+            "{:<8} {:<16} {:>6} {:>7} {:>12} {:>14} {:>9} {:>10}",
+            "check",
+            "spheres from",
+            "pairs",
+            "spheres",
+            "colliding %",
+            "false alarm %",
+            "missed %",
+            "us a conf"
         );
         for r in &rows {
             println!(
-                "{:<8} {:>6} {:>7} {:>12.2} {:>14} {:>9} {:>10.2}",
+                "{:<8} {:<16} {:>6} {:>7} {:>12.2} {:>14} {:>9} {:>10.2}",
                 r.check,
+                r.spheres_from,
                 r.checked_pairs,
                 r.spheres,
                 r.colliding_pct,

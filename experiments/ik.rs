@@ -121,6 +121,8 @@ struct CollisionArgs {
     /// spheres alone: faster, and they bulge past flat faces).
     #[arg(long, value_enum, default_value_t = selfmodel::sim::collision::model::CollisionMode::Exact)]
     collision: selfmodel::sim::collision::model::CollisionMode,
+    #[command(flatten)]
+    fit: selfmodel_lab::cli::SphereFitArgs,
 }
 
 /// `--srdf` where it names collisions only (`ik targets`, `ik solve`; `ik train` shares the
@@ -149,7 +151,19 @@ fn collision_options(
         spheres: args.spheres,
         margin: args.margin.unwrap_or(DEFAULT_MARGIN_M),
         mode: args.collision,
+        fit: args.fit.fit()?,
     };
+    let fitting = args.fit.spheres_per_link.is_some() || args.fit.protrusion_mm.is_some();
+    if fitting && options.spheres.is_some() {
+        return Err(selfmodel::Error::Config(
+            "--spheres-per-link and --protrusion-mm say how spheres are fitted, and --spheres gives your own: give one".into(),
+        ));
+    }
+    if fitting && !options.any() {
+        return Err(selfmodel::Error::Config(
+            "--spheres-per-link and --protrusion-mm fit the collision spheres, so they need --scene, --self-collision or --srdf".into(),
+        ));
+    }
     if let Some(m) = args.margin.filter(|_| !options.any()) {
         return Err(selfmodel::Error::Config(format!(
             "--margin {}: it is the distance kept from obstacles and from the robot itself, so it needs --scene, --self-collision, --srdf or --spheres",

@@ -87,8 +87,15 @@ fn a_tampered_collision_cache_is_refused_never_used() {
     let model_dir = Path::new(&model_dir);
     let spec = spec(&urdf);
     let use_kept = || {
-        CollisionCheck::with_spheres(&spec, Spheres::KeptIn(model_dir), None, None, true, 0.005)
-            .map(|_| "used".to_string())
+        CollisionCheck::with_spheres(
+            &spec,
+            Spheres::KeptIn(model_dir, Default::default()),
+            None,
+            None,
+            true,
+            0.005,
+        )
+        .map(|_| "used".to_string())
     };
     assert!(use_kept().is_ok(), "the file as written is used");
     let file = model_dir.join(cache::FILE);
@@ -166,10 +173,16 @@ fn a_tampered_collision_cache_is_refused_never_used() {
     let (fit, sampling) = (SphereFit::default(), PairSampling::default());
     let key = cache::key(&robot, None, &fit, &sampling);
     std::fs::write(&file, &original).unwrap();
-    let kept =
-        CollisionCheck::with_spheres(&spec, Spheres::KeptIn(model_dir), None, None, true, 0.0)
-            .unwrap()
-            .model;
+    let kept = CollisionCheck::with_spheres(
+        &spec,
+        Spheres::KeptIn(model_dir, Default::default()),
+        None,
+        None,
+        true,
+        0.0,
+    )
+    .unwrap()
+    .model;
     let hand = robot.chain.links.iter().position(|l| l == "hand").unwrap();
     let forgeries: Vec<(
         &str,
@@ -662,6 +675,37 @@ fn collision_options_that_would_do_nothing_are_refused() {
             "needs --scene",
         ),
         (
+            "--spheres-per-link 0",
+            solve(&["--self-collision", "--spheres-per-link", "0"]),
+            "give 1 to 256",
+        ),
+        (
+            "--protrusion-mm NaN",
+            solve(&["--self-collision", "--protrusion-mm", "NaN"]),
+            "above 0 and at most 1000 mm",
+        ),
+        (
+            "--protrusion-mm with --spheres-per-link",
+            solve(&[
+                "--self-collision",
+                "--protrusion-mm",
+                "5",
+                "--spheres-per-link",
+                "4",
+            ]),
+            "not both",
+        ),
+        (
+            "--spheres-per-link with --spheres",
+            solve(&["--spheres", &d("big.yml"), "--spheres-per-link", "4"]),
+            "give one",
+        ),
+        (
+            "--protrusion-mm without a collision option",
+            solve(&["--protrusion-mm", "5"]),
+            "need --scene",
+        ),
+        (
             "--margin NaN",
             solve(&["--self-collision", "--margin", "NaN"]),
             "from 0 to 1 m",
@@ -767,7 +811,7 @@ fn valid_collision_inputs_once_refused_are_read() {
     let allowed = selfmodel::sim::collision::computed_pairs(
         &robot,
         &spheres,
-        Some(SphereFit::default().tolerance_m),
+        Some(0.0),
         &PairSampling::default(),
     )
     .unwrap();

@@ -7,7 +7,8 @@ use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::solver::IkSolver;
 use selfmodel::sim::collision::model::CollisionModel;
 use selfmodel::sim::collision::pairs::{AllowedPairs, PairSampling, Reason};
-use selfmodel::sim::collision::spheres::{SphereFit, surface_points};
+use selfmodel::sim::collision::sphere_score::score_link;
+use selfmodel::sim::collision::spheres::{SphereBudget, SphereFit};
 use selfmodel::sim::collision::{computed_pairs, fit_robot};
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::shape::Shape;
@@ -56,37 +57,35 @@ fn panda_spec() -> Option<selfmodel::sim::robots::RobotSpec> {
 }
 
 /// Every vertex of every link's collision mesh inside a sphere of its link, and every point
-/// of its surface (sampled at 2 mm) within the fit's tolerance of one.
+/// of its surface (sampled at 1.7 mm, points the fit never saw): coverage 100%, no slack.
 fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
     let spheres = fit_robot(robot, fit).unwrap();
     let mut total = 0;
     for (link, (geometry, s)) in robot.geometry.iter().zip(&spheres).enumerate() {
-        let shapes = geometry.shapes();
+        let (shapes, name) = (geometry.shapes(), &robot.chain.links[link]);
         total += s.len();
-        assert_eq!(
-            shapes.is_empty(),
-            s.is_empty(),
-            "link {}",
-            robot.chain.links[link]
-        );
-        assert!(s.len() <= fit.max_per_link, "{} spheres", s.len());
+        assert_eq!(shapes.is_empty(), s.is_empty(), "link {name}");
         for shape in shapes {
             if let Shape::Triangle(t) = shape {
                 for v in t {
                     assert!(
-                        s.iter().any(|s| s.contains(v, 1e-9)),
-                        "vertex {v} of {} outside its spheres",
-                        robot.chain.links[link]
+                        s.iter().any(|s| s.contains(v, 0.0)),
+                        "vertex {v} of {name} outside its spheres"
                     );
                 }
             }
         }
-        for p in surface_points(shapes, 0.002) {
+        let Some(score) = score_link(name, shapes, s, 0.0017) else {
+            continue;
+        };
+        assert_eq!(score.coverage_pct, 100.0, "{score:?}");
+        // The fit's promise: no sphere stands farther out than its target and the samples'
+        // reach (1.7 mm at 3 mm), measured on the exact surface (the G1's torso measures up to
+        // 0.8 mm past that: its inside and outside are told apart by a winding number).
+        if let SphereBudget::Protrusion { mm, .. } = fit.budget {
             assert!(
-                s.iter().any(|s| s.contains(&p, fit.tolerance_m + 1e-9)),
-                "surface point {p} of {} farther than {} m from its spheres",
-                robot.chain.links[link],
-                fit.tolerance_m
+                score.protrusion_max_mm <= mm + 3.0,
+                "{name}: {score:?} past {mm} mm"
             );
         }
     }
@@ -95,7 +94,8 @@ fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
 
 #[test]
 fn spheres_cover_the_exact_collision_meshes_of_the_panda_the_ur5_and_the_g1() {
-    let fit = SphereFit::default();
+    let shaped = SphereFit::default();
+    let bounded = SphereFit::with_budget(None, Some(20.0)).unwrap();
     for (path, tip) in [
         ("franka_description/urdf/panda.urdf", "panda_hand"),
         ("ur_description/urdf/ur5.urdf", "tool0"),
@@ -107,15 +107,17 @@ fn spheres_cover_the_exact_collision_meshes_of_the_panda_the_ur5_and_the_g1() {
         let Some(robot) = shared_robot(path, tip) else {
             continue;
         };
-        let n = assert_spheres_cover(&robot, &fit);
-        eprintln!("{path}: {n} spheres");
+        let links = (robot.geometry.iter())
+            .filter(|g| !g.shapes().is_empty())
+            .count();
+        let n = assert_spheres_cover(&robot, &shaped);
+        let m = assert_spheres_cover(&robot, &bounded);
+        eprintln!("{path}: {n} spheres shaped after the links, {m} within 20 mm");
         assert!(
-            n >= robot
-                .geometry
-                .iter()
-                .filter(|g| !g.shapes().is_empty())
-                .count()
+            n >= links && n <= 16 * links,
+            "{n} spheres on {links} links"
         );
+        assert!(m >= links, "{m} spheres on {links} links");
     }
 }
 
@@ -160,7 +162,7 @@ fn the_panda_folded_onto_itself_collides_and_its_home_pose_does_not() {
         samples: 2000,
         ..PairSampling::default()
     };
-    let slack = Some(SphereFit::default().tolerance_m);
+    let slack = Some(0.0);
     let allowed = computed_pairs(&robot, &spheres, slack, &sampling).unwrap();
     // Every joint's parent and child are allowed, as adjacent (or for a reason found first).
     for j in &robot.chain.joints {
@@ -280,7 +282,7 @@ fn the_panda_clears_a_table_below_it_and_hits_a_box_at_its_hand() {
     let allowed = computed_pairs(
         &robot,
         &spheres,
-        Some(SphereFit::default().tolerance_m),
+        Some(0.0),
         &PairSampling {
             samples: 500,
             ..PairSampling::default()
@@ -432,6 +434,37 @@ fn spheres_a_user_supplies_in_curobo_s_format_are_read() {
     assert!(err.contains("no collision_spheres block"), "{err}");
 }
 
+/// cuRobo's own Franka file (its 61 hand-placed spheres, `data/fixtures/curobo`) loads onto the
+/// Panda as ROS ships it, and scored against the exact meshes it leaves part of every link
+/// uncovered (its spheres are not conservative: they miss collisions), where ours cover all.
+#[test]
+fn curobo_s_own_franka_spheres_load_and_leave_part_of_every_link_uncovered() {
+    use selfmodel::sim::collision::{sphere_score::score_robot, user_spheres};
+    let urdf =
+        selfmodel_lab::workspace().join("../shared/robots/franka_description/urdf/panda.urdf");
+    if !urdf.is_file() {
+        eprintln!("skipped: {} is not beside the repository", urdf.display());
+        return;
+    }
+    let options = UrdfOptions {
+        geometry: GeometryKind::Collision,
+        ..UrdfOptions::default()
+    };
+    let robot = load_urdf_with(&urdf, &options).unwrap();
+    let file = selfmodel_lab::workspace().join("data/fixtures/curobo/franka.yml");
+    let theirs = user_spheres::read(&file, &robot.chain.links).unwrap();
+    assert_eq!(theirs.iter().map(Vec::len).sum::<usize>(), 61);
+    let scored = score_robot(&robot, &theirs, 0.003, "cuRobo");
+    assert_eq!(scored.len(), 11, "{scored:?}");
+    for s in &scored {
+        assert!(s.coverage_pct < 50.0, "{s:?}");
+    }
+    let ours = fit_robot(&robot, &SphereFit::default()).unwrap();
+    for s in score_robot(&robot, &ours, 0.003, "fitted") {
+        assert_eq!(s.coverage_pct, 100.0, "{s:?}");
+    }
+}
+
 /// The contacts' rows the solver pushes apart by (analytic: each link's Jacobian at its
 /// sphere's centre, or at its exact closest point, along the direction apart) equal central
 /// differences of the same contacts' gaps, for the Panda folded onto itself and reaching into
@@ -535,11 +568,11 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     let dir = common::tempdir();
     let check =
         |spheres| CollisionCheck::with_spheres(&spec, spheres, None, None, true, 0.0).unwrap();
-    let fitted = check(Spheres::Fitted);
+    let fitted = check(Spheres::Fitted(Default::default()));
     fitted.keep_in(dir.path()).unwrap();
     let file = dir.path().join(selfmodel::sim::collision::cache::FILE);
     // Read back: the same spheres and pairs.
-    let kept = check(Spheres::KeptIn(dir.path()));
+    let kept = check(Spheres::KeptIn(dir.path(), Default::default()));
     assert_eq!(kept.model.spheres, fitted.model.spheres);
     assert_eq!(kept.model.pairs, fitted.model.pairs);
     // A radius changed in it by hand: refused (its hash no longer matches), never used.
@@ -548,16 +581,21 @@ fn a_kept_collision_model_is_read_back_and_a_stale_one_ignored() {
     let edited = text.replacen(&format!("\"radius\": {r}"), "\"radius\": 0.5", 1);
     assert_ne!(edited, text);
     std::fs::write(&file, &edited).unwrap();
-    let Err(err) =
-        CollisionCheck::with_spheres(&spec, Spheres::KeptIn(dir.path()), None, None, true, 0.0)
-    else {
+    let Err(err) = CollisionCheck::with_spheres(
+        &spec,
+        Spheres::KeptIn(dir.path(), Default::default()),
+        None,
+        None,
+        true,
+        0.0,
+    ) else {
         panic!("an edited collision model was used");
     };
     assert!(err.to_string().contains("cannot be used"), "{err}");
     // Another key (as another robot or SRDF would give): ignored, the spheres fitted again.
     let stale = edited.replacen("\"key\": \"", "\"key\": \"0", 1);
     std::fs::write(&file, stale).unwrap();
-    let refit = check(Spheres::KeptIn(dir.path()));
+    let refit = check(Spheres::KeptIn(dir.path(), Default::default()));
     assert_eq!(refit.model.spheres, fitted.model.spheres);
 }
 

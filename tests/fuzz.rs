@@ -394,8 +394,15 @@ fn the_kept_collision_model_reads_or_refuses_every_mutation() {
         geometry: selfmodel::sim::urdf_loader::GeometryKind::Collision,
         joints: Default::default(),
     };
-    let check =
-        CollisionCheck::with_spheres(&spec, Spheres::Fitted, None, None, true, 0.0).unwrap();
+    let check = CollisionCheck::with_spheres(
+        &spec,
+        Spheres::Fitted(Default::default()),
+        None,
+        None,
+        true,
+        0.0,
+    )
+    .unwrap();
     check.keep_in(dir.path()).unwrap();
     let file = dir.path().join(cache::FILE);
     let text = std::fs::read(&file).unwrap();

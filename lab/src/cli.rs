@@ -57,7 +57,9 @@ const FLAGS: &[(&str, &str)] = &[
     ("resume", "--resume"),
     ("sampler", "--sampler"),
     ("samples", "--samples"),
+    ("protrusion_mm", "--protrusion-mm"),
     ("size", "--size"),
+    ("spheres_per_link", "--spheres-per-link"),
     ("srdf", "--srdf"),
     ("target", "--target"),
     ("tip", "--tip"),
@@ -195,6 +197,29 @@ pub struct RobotArgs {
     pub arm4_scene: bool,
     #[command(flatten)]
     pub parts: UrdfParts,
+}
+
+/// How collision spheres are fitted: `--spheres-per-link` or `--protrusion-mm`.
+#[derive(Clone, Debug, Default, clap::Args)]
+pub struct SphereFitArgs {
+    /// Fit this many collision spheres to each link [default: the fewest within
+    /// --protrusion-mm 10, at most 16].
+    #[arg(long, value_name = "N")]
+    pub spheres_per_link: Option<usize>,
+    /// Fit each link the fewest spheres (at most 256) whose outer surface stands at most MM
+    /// millimetres outside it.
+    #[arg(long, value_name = "MM", allow_hyphen_values = true)]
+    pub protrusion_mm: Option<f64>,
+}
+
+impl SphereFitArgs {
+    /// The fit these flags ask for.
+    pub fn fit(&self) -> Result<selfmodel::sim::collision::spheres::SphereFit> {
+        selfmodel::sim::collision::spheres::SphereFit::with_budget(
+            self.spheres_per_link,
+            self.protrusion_mm,
+        )
+    }
 }
 
 /// `--tip`, `--geometry` and the joint group: what of a URDF's tree is the robot.

@@ -100,6 +100,7 @@ impl PyIkSolver {
                 spheres: None,
                 margin,
                 mode,
+                fit: Default::default(),
             };
             let spec = &self.model.saved.robot;
             let check = py

@@ -90,9 +90,9 @@ impl PyRobot {
         })
     }
 
-    /// Each link's collision spheres, fitted to its `<collision>` meshes (every vertex inside
-    /// one, every surface point within 4 mm): `{link: array (k, 4)}` of x, y, z (metres, in
-    /// the link's frame) and radius.
+    /// Each link's collision spheres, fitted to its `<collision>` meshes (every point of their
+    /// surface inside one): `{link: array (k, 4)}` of x, y, z (metres, in the link's frame) and
+    /// radius.
     #[getter]
     fn collision_spheres<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
         guarded(|| {

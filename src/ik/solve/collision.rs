@@ -36,8 +36,8 @@ pub struct CollisionCheck {
     link_paths: Vec<TipPath>,
     /// What the collision model was computed from ([`cache::key`]).
     key: String,
-    /// How far a point of the collision geometry may lie outside the spheres (m): the fitted
-    /// spheres' tolerance; `None` for a user's spheres.
+    /// How far a point of the collision geometry may lie outside the spheres (m): 0 for
+    /// fitted spheres (they cover every point); `None` for a user's spheres.
     sphere_slack: Option<f64>,
 }
 
@@ -45,11 +45,11 @@ pub struct CollisionCheck {
 #[derive(Clone, Copy, Debug)]
 pub enum Spheres<'a> {
     /// Fitted to the robot's collision meshes.
-    Fitted,
+    Fitted(SphereFit),
     /// The collision model kept in this folder (a saved IK model's, written by
     /// [`CollisionCheck::keep_in`]) where it was computed from the same robot, SRDF and
-    /// settings; fitted otherwise.
-    KeptIn(&'a Path),
+    /// settings (the fit included); fitted otherwise.
+    KeptIn(&'a Path, SphereFit),
     /// A user's file in cuRobo's format (a `collision_spheres` block).
     File(&'a Path),
 }
@@ -87,6 +87,9 @@ pub struct CollisionOptions {
     pub srdf: Option<std::path::PathBuf>,
     /// A user's spheres (cuRobo's format) instead of fitted ones.
     pub spheres: Option<std::path::PathBuf>,
+    /// How spheres are fitted where no user's are given.
+    #[serde(default)]
+    pub fit: SphereFit,
     /// The distance kept (m).
     pub margin: f64,
     /// On what a collision is decided: the exact shapes behind the spheres (the default), or
@@ -125,8 +128,8 @@ impl CollisionOptions {
         let scene = self.scene.as_deref().map(Scene::read).transpose()?;
         let spheres = match (&self.spheres, kept) {
             (Some(file), _) => Spheres::File(file),
-            (None, Some(dir)) => Spheres::KeptIn(dir),
-            (None, None) => Spheres::Fitted,
+            (None, Some(dir)) => Spheres::KeptIn(dir, self.fit),
+            (None, None) => Spheres::Fitted(self.fit),
         };
         let srdf = self.srdf.as_deref();
         let check = CollisionCheck::with_spheres(spec, spheres, srdf, scene, true, self.margin)?;
@@ -151,7 +154,14 @@ impl CollisionCheck {
         self_collision: bool,
         margin: f64,
     ) -> Result<Self> {
-        Self::with_spheres(spec, Spheres::Fitted, srdf, scene, self_collision, margin)
+        Self::with_spheres(
+            spec,
+            Spheres::Fitted(SphereFit::default()),
+            srdf,
+            scene,
+            self_collision,
+            margin,
+        )
     }
 
     /// [`Self::for_robot`] with the spheres from `spheres`.
@@ -202,7 +212,11 @@ impl CollisionCheck {
                 named.display()
             )));
         }
-        let (fit, sampling) = (SphereFit::default(), PairSampling::default());
+        let fit = match spheres {
+            Spheres::Fitted(fit) | Spheres::KeptIn(_, fit) => fit,
+            Spheres::File(_) => SphereFit::default(),
+        };
+        let sampling = PairSampling::default();
         let mut key = cache::key(&robot, srdf_text.as_deref(), &fit, &sampling);
         if let Spheres::File(file) = spheres {
             // A model from a user's spheres is never taken for a fitted one.
@@ -214,7 +228,7 @@ impl CollisionCheck {
             key += &format!("-{}", crate::core::input_file::fnv(&text));
         }
         let kept = match spheres {
-            Spheres::KeptIn(dir) => cache::read(dir, &key, &robot, &fit)?,
+            Spheres::KeptIn(dir, _) => cache::read(dir, &key, &robot, &fit)?,
             _ => None,
         };
         let model = match (kept, spheres) {
@@ -228,7 +242,8 @@ impl CollisionCheck {
         let link_paths = (0..robot.chain.links.len())
             .map(|l| robot.chain.path_to(l, Point3::origin()))
             .collect();
-        let sphere_slack = (!matches!(spheres, Spheres::File(_))).then_some(fit.tolerance_m);
+        // Fitted spheres cover every point of the links' surfaces; a user's may not.
+        let sphere_slack = (!matches!(spheres, Spheres::File(_))).then_some(0.0);
         Ok(Self {
             model,
             scene,

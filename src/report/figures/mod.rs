@@ -1,10 +1,12 @@
 //! Figures generated from results (never drawn by hand), on plotters (PNG) and the image
 //! crate: `pareto.rs` (quality against speed), `lines.rs` (curves and lines, linear or log
 //! axes), `images.rs` (the qualitative grid, points over images), `scatter.rs` (panels of
-//! points), `spheres.rs` (a robot's collision spheres over its meshes); here what every figure shares (the embedded font, PNG writing, legend, lines,
+//! points), `spheres.rs` (a robot's collision spheres over its meshes), `bars.rs` (each link's
+//! sphere protrusion); here what every figure shares (the embedded font, PNG writing, legend, lines,
 //! markers, ticks). Every figure draws on a `Canvas` (`report::canvas`: the embedded font,
 //! glyphs placed right).
 
+pub mod bars;
 mod images;
 mod lines;
 mod pareto;

@@ -170,7 +170,7 @@ fn covers(
             false => Err("spheres on a link without collision geometry".into()),
         };
     }
-    let points = surface_points(shapes, fit.tolerance_m * 3f64.sqrt());
+    let points = surface_points(shapes, fit.spacing_m);
     let given: Vec<(nalgebra::Point3<f64>, f64)> = shapes
         .iter()
         .filter_map(|s| match s {

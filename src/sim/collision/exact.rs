@@ -11,7 +11,7 @@ use parry3d_f64::math::{Pose, Vector};
 use parry3d_f64::query;
 use parry3d_f64::shape::{SharedShape, TriMesh};
 
-use crate::sim::collision::spheres::Sphere;
+use crate::sim::collision::sphere::Sphere;
 use crate::sim::shape::Shape;
 
 /// One convex piece or mesh of a link (or an obstacle), where it sits in the link's frame.
@@ -308,12 +308,49 @@ impl ExactShapes {
         best
     }
 
+    /// The distance from `p` (in these shapes' frame) to the nearest of their surfaces.
+    pub fn surface_distance(&self, p: &Point3<f64>) -> f64 {
+        let q = Vector::new(p.x, p.y, p.z);
+        (self.pieces.iter())
+            .map(|piece| piece.shape.distance_to_point(&piece.pose, q, false))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Whether `p` (in these shapes' frame) lies inside them: inside a primitive, or inside a
+    /// mesh by its winding number (the solid angle its triangles subtend, over 4 pi: 1 inside
+    /// a closed mesh, 0 outside, whichever way its triangles turn).
+    pub fn contains(&self, p: &Point3<f64>) -> bool {
+        let q = Vector::new(p.x, p.y, p.z);
+        self.pieces
+            .iter()
+            .any(|piece| match piece.shape.as_trimesh() {
+                Some(mesh) => winding_number(mesh, piece.pose.inverse() * q).abs() > 0.5,
+                None => piece.shape.contains_point(&piece.pose, q),
+            })
+    }
+
     /// The signed distance between these shapes at `fa` and `other`'s at `fb`, `cap` where
     /// it is at least `cap`.
     pub fn gap(&self, fa: &Isometry3<f64>, other: &Self, fb: &Isometry3<f64>, cap: f64) -> f64 {
         self.contact(fa, other, fb, cap)
             .map_or(cap, |c| c.gap.min(cap))
     }
+}
+
+/// The winding number of `mesh` about `q` (its frame): the solid angle of each triangle seen
+/// from `q` (Van Oosterom and Strackee), summed, over 4 pi.
+fn winding_number(mesh: &TriMesh, q: Vector) -> f64 {
+    let total: f64 = mesh
+        .triangles()
+        .map(|t| {
+            let (a, b, c) = (t.a - q, t.b - q, t.c - q);
+            let (la, lb, lc) = (a.length(), b.length(), c.length());
+            let num = a.dot(b.cross(c));
+            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+            2.0 * num.atan2(den)
+        })
+        .sum();
+    total / (4.0 * std::f64::consts::PI)
 }
 
 /// The piece's triangle mesh, if it is one.
@@ -440,7 +477,7 @@ mod tests {
     #[test]
     fn the_triangle_test_agrees_with_gjk() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let mut point = |rng: &mut rand::rngs::StdRng| {
+        let point = |rng: &mut rand::rngs::StdRng| {
             Vector::new(
                 rng.random_range(-1.0..1.0),
                 rng.random_range(-1.0..1.0),

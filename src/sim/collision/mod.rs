@@ -11,6 +11,8 @@ pub mod exact;
 pub mod model;
 pub mod pairs;
 pub mod scene;
+pub mod sphere;
+pub mod sphere_score;
 pub mod spheres;
 pub mod user_spheres;
 
@@ -110,13 +112,7 @@ pub fn model_for(
     fit: &SphereFit,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
-    model_with(
-        robot,
-        fit_robot(robot, fit)?,
-        Some(fit.tolerance_m),
-        allowed,
-        sampling,
-    )
+    model_with(robot, fit_robot(robot, fit)?, Some(0.0), allowed, sampling)
 }
 
 /// [`model_for`] with the spheres given (a user's: [`user_spheres::read`]), which may fall

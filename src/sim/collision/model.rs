@@ -49,10 +49,10 @@ pub struct CollisionModel {
 #[derive(Debug)]
 pub struct ExactLinks {
     pub links: Vec<ExactShapes>,
-    /// How far a point of a link's shapes may lie outside its spheres (m; fitted spheres: their
-    /// tolerance). Known, the spheres rule out what is farther apart than the margin plus this
-    /// on each side before the exact shapes are looked at; `None` (a user's spheres, which
-    /// need not cover the shapes): only the shapes' own bounds do.
+    /// How far a point of a link's shapes may lie outside its spheres (m; fitted spheres: 0,
+    /// they cover every point). Known, the spheres rule out what is farther apart than the
+    /// margin plus this on each side before the exact shapes are looked at; `None` (a user's
+    /// spheres, which need not cover the shapes): only the shapes' own bounds do.
     pub sphere_slack: Option<f64>,
 }
 

@@ -29,7 +29,7 @@ use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vect
 use serde::Deserialize;
 
 use crate::core::error::{Error, Result};
-use crate::sim::collision::spheres::{Sphere, SphereFit, fit_link};
+use crate::sim::collision::spheres::{Sphere, SphereBudget, SphereFit, fit_link};
 
 /// One obstacle in the world frame.
 #[derive(Clone, Debug)]
@@ -368,7 +368,7 @@ impl Scene {
             }
             let shapes = crate::sim::mesh_file::load_mesh(&file, scale, &pose)?;
             let fit = SphereFit {
-                max_per_link: 64,
+                budget: SphereBudget::Shaped { most: 64 },
                 ..SphereFit::default()
             };
             let spheres = fit_link(&shapes, &fit).map_err(|e| match e {

@@ -9,15 +9,17 @@
 //! a check calls free collide on the meshes in a pair skipped as never colliding (Pinocchio on
 //! those pairs): a pair switched off wrongly shows there.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::timing::{Repeats, median_seconds};
-use selfmodel::ik::solve::collision::CollisionCheck;
+use selfmodel::ik::solve::collision::{CollisionCheck, Spheres};
 use selfmodel::sim::collision::model::CollisionMode;
+use selfmodel::sim::collision::sphere_score::{LinkFitScore, score_robot};
+use selfmodel::sim::collision::spheres::SphereFit;
 use selfmodel::sim::robots::RobotSpec;
 
 use super::pinocchio::{Reference, agreement_pct, pct, write_reference_inputs};
@@ -30,6 +32,10 @@ pub struct AgreementConfig {
     /// Their seed: another than the pairs' sampling's (0), so a pair skipped as never
     /// colliding is tested on configurations it was not decided on.
     pub seed: u64,
+    /// How our spheres are fitted.
+    pub fit: SphereFit,
+    /// Spheres of another's (cuRobo's robot file) scored beside ours, on the same pairs.
+    pub spheres_file: Option<PathBuf>,
 }
 
 /// One check on the robot's random configurations.
@@ -38,6 +44,8 @@ pub struct AgreementRow {
     pub robot: String,
     /// `spheres` (alone) or `exact` (the narrow phase behind them).
     pub check: String,
+    /// `fitted` (ours), or the file they were read from.
+    pub spheres_from: String,
     pub configurations: usize,
     pub checked_pairs: usize,
     pub spheres: usize,
@@ -69,6 +77,9 @@ const WRITTEN: &[&str] = &[
     "never_pairs.json",
     "random_joints_never_pairs_exact_meshes.csv",
     "pairs.csv",
+    "links.csv",
+    "links.md",
+    "protrusion.png",
 ];
 
 /// One pair of links with geometry: checked, or why not.
@@ -82,14 +93,14 @@ pub struct PairRow {
     pub status: String,
 }
 
-/// Compare both checks of `spec`'s robot (its collision geometry, the pairs its SRDF or the
+/// Compare both checks of `spec`'s robot (and the spheres of `cfg.spheres_file`, alone) (its collision geometry, the pairs its SRDF or the
 /// computed matrix leaves checked) with Pinocchio's, through `python` where given, into `out`.
 pub fn run(
     spec: &RobotSpec,
     cfg: &AgreementConfig,
     python: Option<&Path>,
     out: &Path,
-) -> Result<Vec<AgreementRow>> {
+) -> Result<(Vec<AgreementRow>, Vec<LinkFitScore>)> {
     use selfmodel::core::atomic_file::{OutKind, check_out, refuse_overwrite, refuse_writing_over};
     if cfg.seed == selfmodel::sim::collision::pairs::PairSampling::default().seed {
         return Err(Error::Config(format!(
@@ -115,8 +126,13 @@ fn measure(
     cfg: &AgreementConfig,
     python: Option<&Path>,
     out: &Path,
-) -> Result<Vec<AgreementRow>> {
-    let exact = CollisionCheck::for_robot(spec, None, None, true, 0.0)?;
+) -> Result<(Vec<AgreementRow>, Vec<LinkFitScore>)> {
+    let fitted = Spheres::Fitted(cfg.fit);
+    let exact = CollisionCheck::with_spheres(spec, fitted, None, None, true, 0.0)?;
+    let given = (cfg.spheres_file.as_deref())
+        .map(|file| CollisionCheck::with_spheres(spec, Spheres::File(file), None, None, true, 0.0))
+        .transpose()?
+        .map(|c| c.deciding(CollisionMode::Spheres));
     let robot = &exact.robot;
     let ranges = robot.chain.joint_ranges();
     let mut rng = StdRng::seed_from_u64(cfg.seed);
@@ -169,7 +185,7 @@ fn measure(
     let spheres = exact.clone().deciding(CollisionMode::Spheres);
     let cpu = selfmodel::eval::compute_peak::machine_label(false);
     let revision = selfmodel::core::provenance::git_revision();
-    let row = |check: &CollisionCheck| -> Result<AgreementRow> {
+    let row = |check: &CollisionCheck, from: &str| -> Result<AgreementRow> {
         let calls: Vec<bool> = qs.iter().map(|q| !check.valid(q)).collect();
         selfmodel::core::interrupt::check(|| "stopped checking; nothing was kept".into())?;
         let seconds = median_seconds(
@@ -195,6 +211,7 @@ fn measure(
         Ok(AgreementRow {
             robot: spec.label(),
             check: check.model.mode().to_string(),
+            spheres_from: from.to_string(),
             configurations: qs.len(),
             checked_pairs: check.model.pairs.len(),
             spheres: check.model.spheres.iter().map(Vec::len).sum(),
@@ -209,7 +226,20 @@ fn measure(
             git_revision: revision.clone(),
         })
     };
-    let rows = vec![row(&spheres)?, row(&exact)?];
+    let mut rows = vec![row(&spheres, "fitted")?];
+    let file_label = (cfg.spheres_file.as_deref())
+        .and_then(|f| f.file_name())
+        .map(|f| f.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if let Some(given) = &given {
+        rows.push(row(given, &file_label)?);
+    }
+    rows.push(row(&exact, "fitted")?);
+    let links = write_link_scores(
+        &exact,
+        given.as_ref().map(|g| (g, file_label.as_str())),
+        out,
+    )?;
     selfmodel::report::table::write_table(
         &out.join("results.csv"),
         &rows,
@@ -220,6 +250,69 @@ fn measure(
             cfg.seed,
             exact.model.pairs.len()
         ),
+    )?;
+    Ok((rows, links))
+}
+
+/// How far apart the link scores sample the surface (m).
+const SCORE_SPACING_M: f64 = 0.001;
+
+/// Each link's spheres scored (ours, and another's where given): `links.csv`, `links.md` and
+/// `protrusion.png`.
+fn write_link_scores(
+    ours: &CollisionCheck,
+    theirs: Option<(&CollisionCheck, &str)>,
+    out: &Path,
+) -> Result<Vec<LinkFitScore>> {
+    let robot = &ours.robot;
+    let mut rows = score_robot(robot, &ours.model.spheres, SCORE_SPACING_M, "fitted");
+    if let Some((check, from)) = theirs {
+        rows.extend(score_robot(
+            robot,
+            &check.model.spheres,
+            SCORE_SPACING_M,
+            from,
+        ));
+    }
+    selfmodel::report::table::write_table(
+        &out.join("links.csv"),
+        &rows,
+        "Each link's spheres against its exact geometry",
+        "`coverage_pct`: the share of the link's surface (sampled `spacing_mm` apart) inside some sphere, 100 where the spheres are conservative; `protrusion_max_mm` and `protrusion_mean_mm`: how far the outer surface of the link's spheres (256 points a sphere, those inside another sphere left out) lies outside the link, the farthest and the mean (0 where it lies inside), measured to the exact surface.",
+    )?;
+    // One series a set of spheres, its label saying how many and how much of the links they
+    // cover.
+    let mut series: Vec<(String, Vec<(String, f64, f64)>)> = Vec::new();
+    let mut seen: Vec<&str> = Vec::new();
+    for from in rows.iter().map(|r| r.spheres_from.as_str()) {
+        if seen.contains(&from) {
+            continue;
+        }
+        seen.push(from);
+        let mine: Vec<&LinkFitScore> = rows.iter().filter(|r| r.spheres_from == from).collect();
+        let count: usize = mine.iter().map(|r| r.spheres).sum();
+        let (lo, hi) = (mine.iter()).fold((f64::INFINITY, 0.0f64), |(lo, hi), r| {
+            (lo.min(r.coverage_pct), hi.max(r.coverage_pct))
+        });
+        let coverage = match lo == hi {
+            true => format!("{lo:.0}%"),
+            false => format!("{lo:.0}-{hi:.0}%"),
+        };
+        let bars = (mine.iter())
+            .map(|r| (r.link.clone(), r.protrusion_max_mm, r.protrusion_mean_mm))
+            .collect();
+        series.push((
+            format!("{from}: {count} spheres, {coverage} of each link covered"),
+            bars,
+        ));
+    }
+    selfmodel::report::figures::bars::protrusion_bars(
+        &out.join("protrusion.png"),
+        &format!(
+            "{}: how far each link's spheres stand outside it",
+            robot.name
+        ),
+        &series,
     )?;
     Ok(rows)
 }

@@ -320,7 +320,7 @@ fn measure(
     let spec = &model.saved.robot;
     let obstacles = scene.map(Scene::read).transpose()?;
     let n_obstacles = obstacles.as_ref().map_or(0, |s| s.obstacles.len());
-    let kept = Spheres::KeptIn(model_dir);
+    let kept = Spheres::KeptIn(model_dir, Default::default());
     let check = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?;
     let (targets, qs) = free_targets(&robot, &model.saved.ranges, &check, cfg.targets, cfg.seed)?;
     let lm = &model.saved.config.lm;
