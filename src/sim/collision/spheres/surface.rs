@@ -7,7 +7,7 @@ use crate::sim::shape::Shape;
 
 /// Points of the surface of `shapes`: every triangle's corners and the corners of its
 /// sub-triangles with edges at most `spacing` long; primitives sampled as finely (a sphere
-/// gives its own centre and radius instead: see [`fit_link`]).
+/// gives its own centre and radius instead: see [`super::fit_link`]).
 pub fn surface_points(shapes: &[Shape], spacing: f64) -> Vec<Point3<f64>> {
     let mut points = Vec::new();
     for shape in shapes {
