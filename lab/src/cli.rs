@@ -202,8 +202,8 @@ pub struct RobotArgs {
 /// How collision spheres are fitted: `--spheres-per-link` or `--protrusion-mm`.
 #[derive(Clone, Debug, Default, clap::Args)]
 pub struct SphereFitArgs {
-    /// Fit this many collision spheres to each link [default: the fewest within
-    /// --protrusion-mm 10, at most 16].
+    /// Fit this many collision spheres to each link (clustered) [default: the fewest, up to
+    /// 16, no wider than 1.25 times the link's half-width].
     #[arg(long, value_name = "N")]
     pub spheres_per_link: Option<usize>,
     /// Fit each link the fewest spheres (at most 256) whose outer surface stands at most MM

@@ -93,8 +93,9 @@ pub struct PairRow {
     pub status: String,
 }
 
-/// Compare both checks of `spec`'s robot (and the spheres of `cfg.spheres_file`, alone) (its collision geometry, the pairs its SRDF or the
-/// computed matrix leaves checked) with Pinocchio's, through `python` where given, into `out`.
+/// Compare both checks of `spec`'s robot (its collision geometry, the pairs its SRDF or the
+/// computed matrix leaves checked), and the spheres of `cfg.spheres_file` alone, with
+/// Pinocchio's, through `python` where given, into `out`; each link's spheres scored.
 pub fn run(
     spec: &RobotSpec,
     cfg: &AgreementConfig,

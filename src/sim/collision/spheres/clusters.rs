@@ -100,29 +100,27 @@ fn clusters(points: &[Point3<f64>], k: usize) -> Vec<Vec<Point3<f64>>> {
 /// How wide a sphere may be against the link's half-width (the clustered fit's rule).
 pub const ROUNDNESS: f64 = 1.25;
 
-/// The clustered spheres of `points`: `count` of them, or (None) the fewest up to `most`
-/// whose largest radius is at most [`ROUNDNESS`] times the link's half-width. Ctrl-C ends it
-/// between two clusterings.
-pub fn clustered(
+/// `k` clusters of `points` (fewer where there are fewer points), each enclosed.
+pub fn enclosed(points: &[Point3<f64>], k: usize) -> Vec<Sphere> {
+    clusters(points, k.clamp(1, points.len().max(1)))
+        .iter()
+        .map(|c| enclosing_sphere(c))
+        .collect()
+}
+
+/// The fewest enclosed clusters of `points` (up to `most`) whose largest radius is at most
+/// [`ROUNDNESS`] times the link's half-width (at least `floor`). Ctrl-C ends it between two
+/// clusterings.
+pub fn shaped(
     points: &[Point3<f64>],
-    count: Option<usize>,
     most: usize,
-    tolerance: f64,
+    floor: f64,
 ) -> crate::core::error::Result<Vec<Sphere>> {
-    let enclose = |k: usize| -> Vec<Sphere> {
-        clusters(points, k)
-            .iter()
-            .map(|c| enclosing_sphere(c))
-            .collect()
-    };
-    if let Some(k) = count {
-        return Ok(enclose(k.clamp(1, points.len())));
-    }
-    let width = half_width(points).max(tolerance);
+    let width = half_width(points).max(floor);
     let mut best = Vec::new();
     for k in 1..=most.max(1).min(points.len()) {
         crate::core::interrupt::check(|| "stopped fitting collision spheres".into())?;
-        best = enclose(k);
+        best = enclosed(points, k);
         let largest = best.iter().map(|s| s.radius).fold(0.0, f64::max);
         if largest <= ROUNDNESS * width {
             break;

@@ -1,16 +1,14 @@
 //! Spheres fitted to a link's collision geometry, as cuRobo's robot files give them, covering
-//! all of its surface and standing out of it as little as a budget allows: the surface
-//! sampled (`surface`: every mesh vertex, and points no farther apart than `spacing_m`), the
-//! link's inside found on a grid (`volume`), and the spheres chosen by a greedy cover
-//! (`cover`): each centred inside the link (or on its surface) with a radius that keeps it
-//! within a protrusion `p` of the link, the one covering most of what is left first. Every
-//! sample is inside a sphere, and each radius grows at the end by the farthest a point of
-//! the surface lies from its nearest sample: every point of the surface is inside a sphere,
-//! so a pair of links whose surfaces meet has spheres that meet, and no sphere stands more
-//! than `p` plus that reach outside its link.
+//! all of its surface: the surface sampled (`surface`: every mesh vertex, and points no
+//! farther apart than `spacing_m`), the spheres placed by a budget ([`SphereBudget`]), then
+//! grown until every sample is inside one and each radius by the farthest a point of the
+//! surface lies from its nearest sample: every point of the surface is inside a sphere, so a
+//! pair of links whose surfaces meet has spheres that meet.
 //!
-//! How many spheres ([`SphereBudget`]): a number a link (the least protrusion that many reach),
-//! or the fewest within a protrusion target (up to a most).
+//! Placed as `clusters` places them (the samples clustered, each cluster enclosed: the fewest
+//! no wider than the link, or a number a link), or as `cover` does (a greedy cover by spheres
+//! centred inside the link, found on a grid by `volume`, or on its surface, each standing at
+//! most a protrusion `p` outside it, so none stands more than `p` plus that reach outside).
 
 pub mod clusters;
 pub mod cover;
@@ -95,7 +93,7 @@ impl SphereFit {
 
 /// Spheres covering one link's collision shapes (none for a link without any; a sphere among
 /// them is its own). A surface beyond [`MAX_SURFACE_POINTS`] samples is refused (the caller
-/// names the link); Ctrl-C ends the fit between two covers.
+/// names the link); Ctrl-C ends the fit between two clusterings or covers.
 pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Result<Vec<Sphere>> {
     let mut spheres: Vec<Sphere> = shapes
         .iter()
@@ -122,8 +120,8 @@ pub fn fit_link(shapes: &[Shape], fit: &SphereFit) -> Result<Vec<Sphere>> {
         return Ok(spheres);
     }
     let mut best = match fit.budget {
-        SphereBudget::Shaped { most } => clusters::clustered(&samples, None, most, spacing)?,
-        SphereBudget::PerLink(n) => clusters::clustered(&samples, Some(n), n, spacing)?,
+        SphereBudget::Shaped { most } => clusters::shaped(&samples, most, spacing)?,
+        SphereBudget::PerLink(n) => clusters::enclosed(&samples, n),
         SphereBudget::Protrusion { mm, most } => {
             // The cover's spheres are chosen for the surface alone: each shrunk to what only
             // it covers. (A clustered fit is left whole: its spheres fill the link's inside,

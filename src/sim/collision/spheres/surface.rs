@@ -24,7 +24,7 @@ pub fn surface_points(shapes: &[Shape], spacing: f64) -> Vec<Point3<f64>> {
                 radius,
                 half_length,
             } => {
-                let around = ((std::f64::consts::TAU * radius / spacing).ceil() as usize).max(8);
+                let around = around_cylinder(*radius, spacing) as usize;
                 let along = ((2.0 * half_length / spacing).ceil() as usize).max(1);
                 let rings = ((radius / spacing).ceil() as usize).max(1);
                 for i in 0..around {
@@ -73,7 +73,7 @@ pub fn surface_point_count(shapes: &[Shape], spacing: f64) -> f64 {
                 half_length,
                 ..
             } => {
-                let around = (std::f64::consts::TAU * radius / spacing).ceil().max(8.0);
+                let around = around_cylinder(*radius, spacing);
                 let along = (2.0 * half_length / spacing).ceil().max(1.0);
                 let rings = (radius / spacing).ceil().max(1.0);
                 around * (along + 1.0 + 2.0 * rings)
@@ -137,6 +137,11 @@ pub fn distinct_points(points: Vec<Point3<f64>>, cell: f64) -> Vec<Point3<f64>> 
         .collect()
 }
 
+/// How many samples go around a cylinder of `radius` at `spacing` (at least 8).
+fn around_cylinder(radius: f64, spacing: f64) -> f64 {
+    (std::f64::consts::TAU * radius / spacing).ceil().max(8.0)
+}
+
 /// The smallest box around `points` (its lowest and highest corners).
 pub fn bounds(points: &[Point3<f64>]) -> (Point3<f64>, Point3<f64>) {
     let mut lo = Point3::from(Vector3::repeat(f64::INFINITY));
@@ -157,7 +162,7 @@ pub fn sample_reach(shapes: &[Shape], spacing: f64) -> f64 {
         .iter()
         .map(|shape| match shape {
             Shape::Cylinder { radius, .. } => {
-                let around = ((std::f64::consts::TAU * radius / spacing).ceil()).max(8.0);
+                let around = around_cylinder(*radius, spacing);
                 let sagitta = radius * (1.0 - (std::f64::consts::PI / around).cos());
                 spacing / 2f64.sqrt() + sagitta
             }
