@@ -32,7 +32,12 @@ pub fn protrusion_bars(
         .flat_map(|(_, r)| r.iter().map(|x| x.1))
         .fold(1.0, f64::max);
     let top = (top * 1.05 / 10.0).ceil() * 10.0;
-    let (w, h) = (900u32, 120 + (22 * k as u32 + 8) * n as u32);
+    // A row below the links' holds the legend, clear of every bar.
+    let legend_rows = (12 + 18 * k as u32).div_ceil(22 * k as u32 + 8) as f64;
+    let (w, h) = (
+        900u32,
+        120 + (22 * k as u32 + 8) * (n as u32 + legend_rows as u32),
+    );
     let mut buf = vec![255u8; (w * h * 3) as usize];
     {
         let root = Canvas::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -45,7 +50,7 @@ pub fn protrusion_bars(
             .margin_right(30)
             .x_label_area_size(40)
             .y_label_area_size(190)
-            .build_cartesian_2d(0.0..top, 0.0..n as f64)
+            .build_cartesian_2d(0.0..top, -legend_rows..n as f64)
             .map_err(|e| draw_err(path, e))?;
         let label_of = |v: &f64| {
             let i = (n as f64 - v - 0.5).round();
@@ -59,7 +64,7 @@ pub fn protrusion_bars(
             .configure_mesh()
             .x_desc("protrusion outside the link (mm): largest (light), mean over the spheres' outer surface (dark)")
             .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_labels(2 * n + 1)
+            .y_labels(2 * (n + legend_rows as usize) + 1)
             .y_label_formatter(&label_of)
             .label_style((FONT, 13))
             .disable_y_mesh()
