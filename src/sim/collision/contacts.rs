@@ -6,6 +6,7 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
+use crate::sim::collision::exact::Near;
 use crate::sim::collision::model::{CollisionModel, Placed};
 use crate::sim::collision::scene::{Obstacle, Scene};
 
@@ -99,10 +100,11 @@ impl CollisionModel {
     }
 
     /// [`Self::contacts`] on the exact shapes: each checked pair (and moving link and
-    /// obstacle) closer than `within`, at its exact closest points while they keep apart; a
-    /// pair already overlapping is pushed apart by its spheres' contacts instead (a mesh's
-    /// deepest triangle changes as it moves, the spheres' distances change smoothly), or
-    /// where its spheres do not reach each other, by its exact contact still.
+    /// obstacle) closer than `within` that the spheres cannot rule out, at its exact closest
+    /// points while they keep apart; a pair already overlapping is pushed apart by its
+    /// spheres' contacts instead (a mesh's deepest triangle changes as it moves, the spheres'
+    /// distances change smoothly), or where its spheres do not reach each other, by its
+    /// deepest exact contact.
     fn exact_contacts(
         &self,
         frames: &[Isometry3<f64>],
@@ -117,22 +119,32 @@ impl CollisionModel {
         let mut out = Vec::new();
         if self_collision {
             for &(a, b) in &self.pairs {
-                let (la, lb) = (&x.links[a], &x.links[b]);
-                let Some(c) = la.contact(&frames[a], lb, &frames[b], within) else {
+                if self.spheres_keep_pair_apart(x, &placed, frames, (a, b), within) {
                     continue;
+                }
+                let (la, lb) = (&x.links[a], &x.links[b]);
+                let (fa, fb) = (&frames[a], &frames[b]);
+                let c = match la.near(fa, lb, fb, within) {
+                    None => continue,
+                    Some(Near::Apart(c)) => c,
+                    Some(Near::Overlapping) => {
+                        let before = out.len();
+                        sphere_pair_contacts(&placed, (a, b), within, &mut out);
+                        if out.len() > before {
+                            continue;
+                        }
+                        let Some(c) = la.contact(fa, lb, fb, within) else {
+                            continue;
+                        };
+                        c
+                    }
                 };
-                let before = out.len();
-                if c.gap < 0.0 {
-                    sphere_pair_contacts(&placed, (a, b), within, &mut out);
-                }
-                if out.len() == before {
-                    out.push(Placement {
-                        contact: Contact::Links { a, b },
-                        gap: c.gap,
-                        first: (a, c.first.0, c.first.1),
-                        second: Some((b, c.second.0, c.second.1)),
-                    });
-                }
+                out.push(Placement {
+                    contact: Contact::Links { a, b },
+                    gap: c.gap,
+                    first: (a, c.first.0, c.first.1),
+                    second: Some((b, c.second.0, c.second.1)),
+                });
             }
         }
         let Some(scene) = scene else {
@@ -144,22 +156,31 @@ impl CollisionModel {
                 continue;
             }
             for (k, o) in scene.exact().iter().enumerate() {
-                let Some(c) = x.links[a].contact(f, o, &world, within) else {
+                let obstacle = &scene.obstacles[k].1;
+                if self.spheres_keep_obstacle_apart(x, frames, a, obstacle, within) {
                     continue;
+                }
+                let c = match x.links[a].near(f, o, &world, within) {
+                    None => continue,
+                    Some(Near::Apart(c)) => c,
+                    Some(Near::Overlapping) => {
+                        let before = out.len();
+                        sphere_obstacle_contacts(&placed[a], (a, k), obstacle, within, &mut out);
+                        if out.len() > before {
+                            continue;
+                        }
+                        let Some(c) = x.links[a].contact(f, o, &world, within) else {
+                            continue;
+                        };
+                        c
+                    }
                 };
-                let before = out.len();
-                if c.gap < 0.0 {
-                    let obstacle = &scene.obstacles[k].1;
-                    sphere_obstacle_contacts(&placed[a], (a, k), obstacle, within, &mut out);
-                }
-                if out.len() == before {
-                    out.push(Placement {
-                        contact: Contact::LinkObstacle { a, k },
-                        gap: c.gap,
-                        first: (a, c.first.0, c.first.1),
-                        second: None,
-                    });
-                }
+                out.push(Placement {
+                    contact: Contact::LinkObstacle { a, k },
+                    gap: c.gap,
+                    first: (a, c.first.0, c.first.1),
+                    second: None,
+                });
             }
         }
         out

@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Point3};
 
 use crate::sim::collision::exact::ExactShapes;
 use crate::sim::collision::pairs::AllowedPairs;
-use crate::sim::collision::scene::Scene;
+use crate::sim::collision::scene::{Obstacle, Scene};
 use crate::sim::collision::spheres::Sphere;
 use crate::sim::kinematics::KinematicChain;
 
@@ -170,13 +170,42 @@ impl CollisionModel {
         let Some(x) = &self.exact else {
             return self.pair_gap(placed, frames, a, b, margin) < margin;
         };
-        if let Some(slack) = x.sphere_slack {
+        !self.spheres_keep_pair_apart(x, placed, frames, (a, b), margin)
+            && x.links[a].closer_than(&frames[a], &x.links[b], &frames[b], margin)
+    }
+
+    /// Whether the spheres of links `a` and `b` show their exact shapes keep `margin` apart:
+    /// they keep the margin plus how far each link's shapes may stand outside its spheres.
+    pub(super) fn spheres_keep_pair_apart(
+        &self,
+        x: &ExactLinks,
+        placed: &[Vec<Placed>],
+        frames: &[Isometry3<f64>],
+        (a, b): (usize, usize),
+        margin: f64,
+    ) -> bool {
+        x.sphere_slack.is_some_and(|slack| {
             let wide = margin + 2.0 * slack;
-            if self.pair_gap(placed, frames, a, b, wide) >= wide {
-                return false;
-            }
-        }
-        x.links[a].closer_than(&frames[a], &x.links[b], &frames[b], margin)
+            self.pair_gap(placed, frames, a, b, wide) >= wide
+        })
+    }
+
+    /// Whether moving link `link`'s spheres show its exact shapes keep `margin` from obstacle
+    /// `o`.
+    pub(super) fn spheres_keep_obstacle_apart(
+        &self,
+        x: &ExactLinks,
+        frames: &[Isometry3<f64>],
+        link: usize,
+        o: &Obstacle,
+        margin: f64,
+    ) -> bool {
+        x.sphere_slack.is_some_and(|slack| {
+            let f = &frames[link];
+            let wide = margin + slack;
+            let apart = |s: &Sphere| o.distance(&(f * s.center())) - s.radius >= wide;
+            self.bounds[link].as_ref().is_some_and(apart) || self.spheres[link].iter().all(apart)
+        })
     }
 
     /// Whether moving link `link` comes closer than `margin` to obstacle `k` of `scene`, the
@@ -189,16 +218,8 @@ impl CollisionModel {
         (scene, k): (&Scene, usize),
         margin: f64,
     ) -> bool {
-        if let Some(slack) = x.sphere_slack {
-            let o = &scene.obstacles[k].1;
-            let f = &frames[link];
-            let wide = margin + slack;
-            if self.spheres[link]
-                .iter()
-                .all(|s| o.distance(&(f * s.center())) - s.radius >= wide)
-            {
-                return false;
-            }
+        if self.spheres_keep_obstacle_apart(x, frames, link, &scene.obstacles[k].1, margin) {
+            return false;
         }
         let world = Isometry3::identity();
         x.links[link].closer_than(&frames[link], &scene.exact()[k], &world, margin)

@@ -54,9 +54,10 @@ impl IkSolver for LearnedIk {
         let k = k.max(1);
         // Targets refined between two questions to `stop`: about 256 answers, a few
         // hundredths of a second on 2 cores where a hard target takes a millisecond (1,024 took
-        // over a second with the cores shared three ways).
-        // A collision check makes an answer several times dearer: fewer between two looks.
-        let per_check = (if valid.is_some() { 32 } else { 256 } / k).max(1);
+        // over a second with the cores shared three ways). The same with a collision check:
+        // a block waits for its slowest target, and the few answers pushed apart are the slow
+        // ones (blocks of 32 left a core idle for most of the time they took).
+        let per_check = (256 / k).max(1);
         let ranges = &self.saved.ranges;
         let paths = chain.tip_paths();
         let mut answers: Vec<Vec<PoseSolution>> = Vec::with_capacity(targets.len());

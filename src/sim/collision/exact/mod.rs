@@ -6,13 +6,19 @@
 //! triangles meet and one wholly inside the other does not.
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use parry3d_f64::bounding_volume::BoundingVolume;
 use parry3d_f64::math::{Pose, Vector};
 use parry3d_f64::query;
 use parry3d_f64::shape::{SharedShape, TriMesh};
 
 use crate::sim::collision::sphere::Sphere;
 use crate::sim::shape::Shape;
+
+mod triangles;
+
+use triangles::{
+    closest_pair, closest_to_convex, closest_triangles, near_convex, near_triangles,
+    nearest_triangle, triangles_intersect, winding_number,
+};
 
 /// One convex piece or mesh of a link (or an obstacle), where it sits in the link's frame.
 #[derive(Clone)]
@@ -41,6 +47,15 @@ pub struct ExactContact {
     pub gap: f64,
     pub first: (Point3<f64>, Vector3<f64>),
     pub second: (Point3<f64>, Vector3<f64>),
+}
+
+/// How two shapes stand within a distance ([`ExactShapes::near`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Near {
+    /// They overlap (or touch).
+    Overlapping,
+    /// They keep apart: where they are closest.
+    Apart(ExactContact),
 }
 
 fn pose_of(iso: &Isometry3<f64>) -> Pose {
@@ -229,43 +244,14 @@ impl ExactShapes {
             return false;
         }
         self.pieces.iter().any(|a| {
-            other.pieces.iter().any(|b| {
-                let (wa, wb) = (pa * a.pose, pb * b.pose);
-                let closer = |sa: &dyn parry3d_f64::shape::Shape,
-                              wa: &Pose,
-                              sb: &dyn parry3d_f64::shape::Shape,
-                              wb: &Pose| {
-                    if margin <= 0.0 {
-                        query::intersection_test(wa, sa, wb, sb).is_ok_and(|i| i.intersecting)
-                    } else {
-                        query::distance(wa, sa, wb, sb).is_ok_and(|d| d.distance < margin)
-                    }
-                };
-                match (trimesh(a), trimesh(b)) {
-                    (Some(ma), Some(mb)) if margin <= 0.0 => {
-                        // Both triangles in the first mesh's frame, tested directly.
-                        let ab = wa.inv_mul(&wb);
-                        let reach = std::cell::Cell::new(margin);
-                        near_triangles(ma, &wa, mb, &wb, &reach).any(|(i, j)| {
-                            let (ta, tb) = (ma.triangle(i), mb.triangle(j));
-                            let tb_in_a = [ab * tb.a, ab * tb.b, ab * tb.c];
-                            triangles_intersect(&[ta.a, ta.b, ta.c], &tb_in_a)
-                                .unwrap_or_else(|| closer(&ta, &Pose::IDENTITY, &tb, &ab))
-                        })
-                    }
-                    (Some(ma), Some(mb)) => {
-                        let reach = std::cell::Cell::new(margin);
-                        near_triangles(ma, &wa, mb, &wb, &reach)
-                            .any(|(i, j)| closer(&ma.triangle(i), &wa, &mb.triangle(j), &wb))
-                    }
-                    _ => closer(a.shape.as_ref(), &wa, b.shape.as_ref(), &wb),
-                }
-            })
+            (other.pieces.iter())
+                .any(|b| pieces_closer(a, &(pa * a.pose), b, &(pb * b.pose), margin))
         })
     }
 
     /// The closest pair of points between these shapes at `fa` and `other`'s at `fb`, where
-    /// they come within `within` (m); `None` where they are farther apart.
+    /// they come within `within` (m); `None` where they are farther apart. Where they overlap,
+    /// the deepest pair the query finds.
     pub fn contact(
         &self,
         fa: &Isometry3<f64>,
@@ -283,29 +269,53 @@ impl ExactShapes {
         let mut best: Option<ExactContact> = None;
         for a in &self.pieces {
             for b in &other.pieces {
-                let (wa, wb) = (pa * a.pose, pb * b.pose);
-                let contact = match (trimesh(a), trimesh(b)) {
-                    (Some(ma), Some(mb)) => closest_triangles(ma, &wa, mb, &wb, within),
-                    _ => query::contact(&wa, a.shape.as_ref(), &wb, b.shape.as_ref(), within)
-                        .ok()
-                        .flatten(),
-                };
-                let Some(c) = contact else {
+                let reach = best.map_or(within, |b| b.gap.clamp(0.0, within));
+                let Some(c) = pieces_contact(a, &(pa * a.pose), b, &(pb * b.pose), reach) else {
                     continue;
                 };
                 if c.dist < within && best.is_none_or(|b| c.dist < b.gap) {
-                    // `normal1` leaves the first shape towards the second: the first moves
-                    // away along its opposite, and the second along the opposite of
-                    // `normal2`.
-                    best = Some(ExactContact {
-                        gap: c.dist,
-                        first: (point_of(c.point1), -vector_of(c.normal1)),
-                        second: (point_of(c.point2), -vector_of(c.normal2)),
-                    });
+                    best = Some(exact_contact(&c));
                 }
             }
         }
         best
+    }
+
+    /// How these shapes at `fa` and `other`'s at `fb` stand within `within` (m): apart, with
+    /// their closest points, or overlapping (how deep is not computed: an optimiser pushes an
+    /// overlap apart by the spheres, whose distances change smoothly); `None` where they keep
+    /// `within` apart. What an optimiser asks at every step, so the cheap question: one
+    /// search for the closest pair of triangles, ended by the first pair that meets.
+    pub fn near(
+        &self,
+        fa: &Isometry3<f64>,
+        other: &Self,
+        fb: &Isometry3<f64>,
+        within: f64,
+    ) -> Option<Near> {
+        if self.bound_gap(fa, other, fb) >= within {
+            return None;
+        }
+        let (pa, pb) = (pose_of(fa), pose_of(fb));
+        if self.hulls_apart(&pa, other, &pb, within) {
+            return None;
+        }
+        let mut best: Option<ExactContact> = None;
+        for a in &self.pieces {
+            for b in &other.pieces {
+                let reach = best.map_or(within, |b| b.gap.clamp(0.0, within));
+                match pieces_closest(a, &(pa * a.pose), b, &(pb * b.pose), reach) {
+                    None => {}
+                    Some(Found::Meet) => return Some(Near::Overlapping),
+                    Some(Found::Apart(c)) => {
+                        if c.dist < within && best.is_none_or(|b| c.dist < b.gap) {
+                            best = Some(exact_contact(&c));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(Near::Apart)
     }
 
     /// The distance from `p` (in these shapes' frame) to the nearest of their surfaces.
@@ -337,124 +347,126 @@ impl ExactShapes {
     }
 }
 
-/// The winding number of `mesh` about `q` (its frame): the solid angle of each triangle seen
-/// from `q` (Van Oosterom and Strackee), summed, over 4 pi.
-fn winding_number(mesh: &TriMesh, q: Vector) -> f64 {
-    let total: f64 = mesh
-        .triangles()
-        .map(|t| {
-            let (a, b, c) = (t.a - q, t.b - q, t.c - q);
-            let (la, lb, lc) = (a.length(), b.length(), c.length());
-            let num = a.dot(b.cross(c));
-            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
-            2.0 * num.atan2(den)
-        })
-        .sum();
-    total / (4.0 * std::f64::consts::PI)
-}
-
 /// The piece's triangle mesh, if it is one.
 fn trimesh(piece: &Piece) -> Option<&TriMesh> {
     piece.shape.as_trimesh()
 }
 
-/// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes come within
-/// `reach` of each other: both meshes' trees traversed together, so only the triangles near
-/// the other mesh are ever looked at. `reach` is read as the traversal goes: a caller that
-/// lowers it (the closest pair so far) prunes what is left.
-fn near_triangles<'a>(
-    ma: &'a TriMesh,
-    wa: &Pose,
-    mb: &'a TriMesh,
-    wb: &Pose,
-    reach: &'a std::cell::Cell<f64>,
-) -> impl Iterator<Item = (u32, u32)> + 'a {
-    let ab = wa.inv_mul(wb);
-    ma.bvh().leaf_pairs(mb.bvh(), move |n1, n2| {
-        n1.aabb()
-            .loosened(reach.get().max(0.0))
-            .intersects(&n2.aabb().transform_by(&ab))
-    })
+/// Parry's contact (`normal1` leaving the first shape towards the second) as ours: each side
+/// moves away along the opposite of its normal.
+fn exact_contact(c: &query::Contact) -> ExactContact {
+    ExactContact {
+        gap: c.dist,
+        first: (point_of(c.point1), -vector_of(c.normal1)),
+        second: (point_of(c.point2), -vector_of(c.normal2)),
+    }
 }
 
-/// The closest (or deepest) pair of triangles of `ma` at `wa` and `mb` at `wb` within
-/// `within`, as parry's contact: the search narrows to the closest pair found so far.
-fn closest_triangles(
-    ma: &TriMesh,
+/// Whether piece `a` at `wa` comes closer than `margin` to piece `b` at `wb`: two meshes
+/// triangle against triangle (Möller's test at zero margin), a mesh and a convex shape each
+/// near triangle against the shape, two convex shapes by GJK; the first pair closer ends it.
+fn pieces_closer(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, margin: f64) -> bool {
+    let closer = |sa: &dyn parry3d_f64::shape::Shape,
+                  wa: &Pose,
+                  sb: &dyn parry3d_f64::shape::Shape,
+                  wb: &Pose| {
+        if margin <= 0.0 {
+            query::intersection_test(wa, sa, wb, sb).is_ok_and(|i| i.intersecting)
+        } else {
+            query::distance(wa, sa, wb, sb).is_ok_and(|d| d.distance < margin)
+        }
+    };
+    let reach = std::cell::Cell::new(margin);
+    match (trimesh(a), trimesh(b)) {
+        (Some(ma), Some(mb)) if margin <= 0.0 => {
+            // Both triangles in the first mesh's frame, tested directly.
+            let ab = wa.inv_mul(wb);
+            near_triangles(ma, wa, mb, wb, &reach).any(|(i, j)| {
+                let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+                let tb_in_a = [ab * tb.a, ab * tb.b, ab * tb.c];
+                triangles_intersect(&[ta.a, ta.b, ta.c], &tb_in_a)
+                    .unwrap_or_else(|| closer(&ta, &Pose::IDENTITY, &tb, &ab))
+            })
+        }
+        (Some(ma), Some(mb)) => closest_pair(ma, wa, mb, wb, margin, margin).is_some(),
+        (Some(m), None) if margin > 0.0 => {
+            nearest_triangle(m, wa, b.shape.as_ref(), wb, margin, margin).is_some()
+        }
+        (None, Some(m)) if margin > 0.0 => {
+            nearest_triangle(m, wb, a.shape.as_ref(), wa, margin, margin).is_some()
+        }
+        (Some(m), None) => near_convex(m, wa, b.shape.as_ref(), wb, &reach)
+            .any(|i| closer(&m.triangle(i), wa, b.shape.as_ref(), wb)),
+        (None, Some(m)) => near_convex(m, wb, a.shape.as_ref(), wa, &reach)
+            .any(|i| closer(a.shape.as_ref(), wa, &m.triangle(i), wb)),
+        (None, None) => closer(a.shape.as_ref(), wa, b.shape.as_ref(), wb),
+    }
+}
+
+/// Two pieces within a distance: meeting, or apart with their closest points.
+enum Found {
+    Meet,
+    Apart(query::Contact),
+}
+
+/// Whether piece `a` at `wa` and piece `b` at `wb` meet, else their closest points, where
+/// within `within`. Of meshes, the closest pair of triangles is found by distance alone and
+/// its contact computed once.
+fn pieces_closest(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, within: f64) -> Option<Found> {
+    let apart = |ta: &parry3d_f64::shape::Triangle, sb: &dyn parry3d_f64::shape::Shape, wb| {
+        let c = query::contact(wa, ta, wb, sb, within).ok().flatten()?;
+        Some(Found::Apart(c))
+    };
+    match (trimesh(a), trimesh(b)) {
+        (Some(ma), Some(mb)) => match closest_pair(ma, wa, mb, wb, within, f64::NEG_INFINITY)? {
+            (i, j, d) if d > 0.0 => apart(&ma.triangle(i), &mb.triangle(j), wb),
+            _ => Some(Found::Meet),
+        },
+        (Some(m), None) => {
+            let shape = b.shape.as_ref();
+            match nearest_triangle(m, wa, shape, wb, within, f64::NEG_INFINITY)? {
+                (i, d) if d > 0.0 => apart(&m.triangle(i), shape, wb),
+                _ => Some(Found::Meet),
+            }
+        }
+        (None, Some(_)) => match pieces_closest(b, wb, a, wa, within)? {
+            Found::Apart(c) => Some(Found::Apart(c.flipped())),
+            Found::Meet => Some(Found::Meet),
+        },
+        (None, None) => {
+            let c = query::contact(wa, a.shape.as_ref(), wb, b.shape.as_ref(), within).ok()??;
+            Some(if c.dist > 0.0 {
+                Found::Apart(c)
+            } else {
+                Found::Meet
+            })
+        }
+    }
+}
+
+/// The closest (or deepest) pair of points of piece `a` at `wa` and piece `b` at `wb` within
+/// `within`, as parry's contact (`point1` and `normal1` on `a`): where they meet, every pair
+/// of triangles that meets is asked for its contact and the deepest kept.
+fn pieces_contact(
+    a: &Piece,
     wa: &Pose,
-    mb: &TriMesh,
+    b: &Piece,
     wb: &Pose,
     within: f64,
 ) -> Option<query::Contact> {
-    let reach = std::cell::Cell::new(within);
-    let mut best: Option<query::Contact> = None;
-    for (i, j) in near_triangles(ma, wa, mb, wb, &reach) {
-        let found = query::contact(wa, &ma.triangle(i), wb, &mb.triangle(j), reach.get());
-        if let Ok(Some(c)) = found
-            && best.is_none_or(|b| c.dist < b.dist)
-        {
-            reach.set(c.dist.max(0.0));
-            best = Some(c);
-        }
-    }
-    best
-}
-
-/// Whether two triangles (in one frame) meet: Möller's test ("A fast triangle-triangle
-/// intersection test", 1997), each triangle against the other's plane, then their spans along
-/// the line where the planes meet. `None` where they lie in one plane (the caller asks GJK).
-fn triangles_intersect(t: &[Vector; 3], u: &[Vector; 3]) -> Option<bool> {
-    // Distances this close to a plane count as on it (metres; far below any mesh's detail).
-    const ON_PLANE: f64 = 1e-12;
-    let side = |tri: &[Vector; 3], of: &[Vector; 3]| {
-        let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
-        let d = of.map(|p| {
-            let v = n.dot(p - tri[0]);
-            if v.abs() < ON_PLANE * n.length().max(1.0) {
-                0.0
-            } else {
-                v
+    match pieces_closest(a, wa, b, wb, within)? {
+        Found::Apart(c) => Some(c),
+        Found::Meet => match (trimesh(a), trimesh(b)) {
+            (Some(ma), Some(mb)) => closest_triangles(ma, wa, mb, wb, within),
+            (Some(m), None) => closest_to_convex(m, wa, b.shape.as_ref(), wb, within),
+            (None, Some(m)) => {
+                closest_to_convex(m, wb, a.shape.as_ref(), wa, within).map(|c| c.flipped())
             }
-        });
-        (n, d)
-    };
-    let (nt, du) = side(t, u);
-    if du.iter().all(|&d| d > 0.0) || du.iter().all(|&d| d < 0.0) {
-        return Some(false);
+            (None, None) => query::contact(wa, a.shape.as_ref(), wb, b.shape.as_ref(), within)
+                .ok()
+                .flatten(),
+        },
     }
-    let (nu, dt) = side(u, t);
-    if dt.iter().all(|&d| d > 0.0) || dt.iter().all(|&d| d < 0.0) {
-        return Some(false);
-    }
-    let line = nt.cross(nu);
-    if du.iter().all(|&d| d == 0.0) || line.length_squared() == 0.0 {
-        return None;
-    }
-    // Project onto the line's largest axis (the spans' order is all that matters).
-    let axis = line.abs().max_position();
-    let span = |tri: &[Vector; 3], d: [f64; 3]| -> Option<(f64, f64)> {
-        let p = tri.map(|v| v[axis]);
-        // The vertex alone on its side of the other plane, and the other two.
-        let (a, b, c) = if d[0] * d[1] > 0.0 {
-            (2, 0, 1)
-        } else if d[0] * d[2] > 0.0 {
-            (1, 0, 2)
-        } else if d[1] * d[2] > 0.0 || d[0] != 0.0 {
-            (0, 1, 2)
-        } else if d[1] != 0.0 {
-            (1, 0, 2)
-        } else if d[2] != 0.0 {
-            (2, 0, 1)
-        } else {
-            return None;
-        };
-        let at = |o: usize| p[a] + (p[o] - p[a]) * d[a] / (d[a] - d[o]);
-        let (x, y) = (at(b), at(c));
-        Some((x.min(y), x.max(y)))
-    };
-    let (t0, t1) = span(t, dt)?;
-    let (u0, u1) = span(u, du)?;
-    Some(t0 <= u1 && u0 <= t1)
 }
 
 impl std::fmt::Debug for ExactShapes {
@@ -464,52 +476,5 @@ impl std::fmt::Debug for ExactShapes {
             .field("bound", &self.bound)
             .field("hull", &self.hull.is_some())
             .finish()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::{RngExt, SeedableRng};
-
-    /// Möller's test against parry's GJK (the slow reference) on random pairs of small
-    /// triangles near each other, touching and crossing ones among them.
-    #[test]
-    fn the_triangle_test_agrees_with_gjk() {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let point = |rng: &mut rand::rngs::StdRng| {
-            Vector::new(
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-                rng.random_range(-1.0..1.0),
-            )
-        };
-        let (mut meeting, mut apart) = (0, 0);
-        for _ in 0..20_000 {
-            let t = [point(&mut rng), point(&mut rng), point(&mut rng)];
-            let u = [point(&mut rng), point(&mut rng), point(&mut rng)];
-            let reference = query::intersection_test(
-                &Pose::IDENTITY,
-                &parry3d_f64::shape::Triangle::new(t[0], t[1], t[2]),
-                &Pose::IDENTITY,
-                &parry3d_f64::shape::Triangle::new(u[0], u[1], u[2]),
-            )
-            .unwrap()
-            .intersecting;
-            let fast = triangles_intersect(&t, &u).expect("not coplanar");
-            assert_eq!(fast, reference, "{t:?} {u:?}");
-            if fast {
-                meeting += 1;
-            } else {
-                apart += 1;
-            }
-        }
-        assert!(
-            meeting > 1000 && apart > 1000,
-            "{meeting} meeting, {apart} apart"
-        );
-        // Coplanar triangles are left to GJK.
-        let flat = [Vector::ZERO, Vector::X, Vector::Y];
-        assert_eq!(triangles_intersect(&flat, &flat.map(|v| v * 0.5)), None);
     }
 }

@@ -1,0 +1,345 @@
+//! Triangle-level queries of the exact check: which triangles of two meshes (or of a mesh and
+//! a convex shape) come near each other, the closest pair of them, whether two triangles
+//! meet, and a mesh's winding number about a point.
+
+use parry3d_f64::bounding_volume::BoundingVolume;
+use parry3d_f64::math::{Pose, Vector};
+use parry3d_f64::query;
+use parry3d_f64::shape::{Shape, TriMesh, Triangle};
+
+/// The winding number of `mesh` about `q` (its frame): the solid angle of each triangle seen
+/// from `q` (Van Oosterom and Strackee), summed, over 4 pi.
+pub(super) fn winding_number(mesh: &TriMesh, q: Vector) -> f64 {
+    let total: f64 = mesh
+        .triangles()
+        .map(|t| {
+            let (a, b, c) = (t.a - q, t.b - q, t.c - q);
+            let (la, lb, lc) = (a.length(), b.length(), c.length());
+            let num = a.dot(b.cross(c));
+            let den = la * lb * lc + a.dot(b) * lc + a.dot(c) * lb + b.dot(c) * la;
+            2.0 * num.atan2(den)
+        })
+        .sum();
+    total / (4.0 * std::f64::consts::PI)
+}
+
+/// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes come within
+/// `reach` of each other: both meshes' trees traversed together, so only the triangles near
+/// the other mesh are ever looked at. `reach` is read as the traversal goes: a caller that
+/// lowers it (the closest pair so far) prunes what is left.
+pub(super) fn near_triangles<'a>(
+    ma: &'a TriMesh,
+    wa: &Pose,
+    mb: &'a TriMesh,
+    wb: &Pose,
+    reach: &'a std::cell::Cell<f64>,
+) -> impl Iterator<Item = (u32, u32)> + 'a {
+    let ab = wa.inv_mul(wb);
+    ma.bvh().leaf_pairs(mb.bvh(), move |n1, n2| {
+        n1.aabb()
+            .loosened(reach.get().max(0.0))
+            .intersects(&n2.aabb().transform_by(&ab))
+    })
+}
+
+/// The closest (or deepest) pair of triangles of `ma` at `wa` and `mb` at `wb` within
+/// `within`, as parry's contact: the search narrows to the closest pair found so far.
+pub(super) fn closest_triangles(
+    ma: &TriMesh,
+    wa: &Pose,
+    mb: &TriMesh,
+    wb: &Pose,
+    within: f64,
+) -> Option<query::Contact> {
+    let reach = std::cell::Cell::new(within);
+    let mut best: Option<query::Contact> = None;
+    for (i, j) in near_triangles(ma, wa, mb, wb, &reach) {
+        let found = query::contact(wa, &ma.triangle(i), wb, &mb.triangle(j), reach.get());
+        if let Ok(Some(c)) = found
+            && best.is_none_or(|b| c.dist < b.dist)
+        {
+            reach.set(c.dist.max(0.0));
+            best = Some(c);
+        }
+    }
+    best
+}
+
+/// The closest pair of triangles of `ma` at `wa` and `mb` at `wb` closer than `within`, with
+/// their distance (0 where they meet); the search narrows to the closest pair found so far
+/// and ends at the first pair closer than `enough` (a test that asks only whether they come
+/// that close), or that meets. Each pair the trees bring is first put to [`triangles_apart`]'s
+/// cheap bounds, then to Möller's test: GJK is asked only of the few that neither decides.
+pub(super) fn closest_pair(
+    ma: &TriMesh,
+    wa: &Pose,
+    mb: &TriMesh,
+    wb: &Pose,
+    within: f64,
+    enough: f64,
+) -> Option<(u32, u32, f64)> {
+    let reach = std::cell::Cell::new(within);
+    let ab = wa.inv_mul(wb);
+    // The distance of triangles `i` and `j`, where the bounds cannot show it is `reach` or more.
+    let distance = |i: u32, j: u32| {
+        let (ta, tb) = (ma.triangle(i), mb.triangle(j));
+        let tb = Triangle::new(ab * tb.a, ab * tb.b, ab * tb.c);
+        if triangles_apart(&ta, &tb, reach.get()) {
+            return None;
+        }
+        match triangles_intersect(&[ta.a, ta.b, ta.c], &[tb.a, tb.b, tb.c]) {
+            Some(true) => Some(0.0),
+            _ => (query::distance(&Pose::IDENTITY, &ta, &Pose::IDENTITY, &tb).ok())
+                .map(|d| d.distance),
+        }
+    };
+    let key = (address(ma), address(mb));
+    let hint = LAST.with(|m| m.borrow().get(&key).copied());
+    let triangles = |m: &TriMesh| m.indices().len() as u32;
+    let hint = hint.filter(|&(i, j)| i < triangles(ma) && j < triangles(mb));
+    let mut best = None;
+    for (i, j) in hint
+        .into_iter()
+        .chain(near_triangles(ma, wa, mb, wb, &reach))
+    {
+        let Some(d) = distance(i, j) else {
+            continue;
+        };
+        if d < reach.get() || (d <= 0.0 && best.is_none()) {
+            reach.set(d.max(0.0));
+            best = Some((i, j, d));
+            if d < enough || d <= 0.0 {
+                break;
+            }
+        }
+    }
+    if let Some((i, j, _)) = best {
+        LAST.with(|m| m.borrow_mut().insert(key, (i, j)));
+    }
+    best
+}
+
+thread_local! {
+    /// The pair of triangles (or triangle and shape: `u32::MAX` for the shape) each search
+    /// last found closest, by the two shapes' addresses: tried first the next time the same
+    /// two are asked about, which is most often at a nearby configuration (an optimiser's next
+    /// step), so the search starts with its reach at about the distance it ends with and
+    /// looks at few other pairs. A guess only: whatever it names, the search is exact.
+    static LAST: std::cell::RefCell<std::collections::HashMap<(usize, usize), (u32, u32)>> =
+        Default::default();
+}
+
+/// Where a shape lives: its key in [`LAST`].
+fn address<T: ?Sized>(shape: &T) -> usize {
+    shape as *const T as *const () as usize
+}
+
+/// Whether two triangles (in one frame) are shown `limit` or more apart by cheap bounds:
+/// their boxes, or either one's plane with the other wholly on one side, `limit` or more
+/// from it.
+fn triangles_apart(t: &Triangle, u: &Triangle, limit: f64) -> bool {
+    let (tl, th) = (t.a.min(t.b).min(t.c), t.a.max(t.b).max(t.c));
+    let (ul, uh) = (u.a.min(u.b).min(u.c), u.a.max(u.b).max(u.c));
+    let gap = (ul - th).max(tl - uh).max(Vector::ZERO);
+    if gap.length_squared() >= limit * limit {
+        return true;
+    }
+    let beside = |p: &Triangle, q: &Triangle| {
+        let Some(n) = (p.b - p.a).cross(p.c - p.a).try_normalize() else {
+            return false;
+        };
+        let d = [q.a, q.b, q.c].map(|v| n.dot(v - p.a));
+        d.iter().all(|&x| x >= limit) || d.iter().all(|&x| x <= -limit)
+    };
+    beside(t, u) || beside(u, t)
+}
+
+/// The triangle of `mesh` at `wm` nearest the convex `shape` at `ws`, where closer than
+/// `within`, with its distance (0 where they meet); the search narrows to the nearest found
+/// so far and ends at the first closer than `enough`.
+pub(super) fn nearest_triangle(
+    mesh: &TriMesh,
+    wm: &Pose,
+    shape: &dyn Shape,
+    ws: &Pose,
+    within: f64,
+    enough: f64,
+) -> Option<(u32, f64)> {
+    let reach = std::cell::Cell::new(within);
+    let key = (address(mesh), address(shape));
+    let hint = LAST.with(|m| m.borrow().get(&key).map(|h| h.0));
+    let hint = hint.filter(|&i| i < mesh.indices().len() as u32);
+    let mut best = None;
+    for i in hint
+        .into_iter()
+        .chain(near_convex(mesh, wm, shape, ws, &reach))
+    {
+        let Ok(d) = query::distance(wm, &mesh.triangle(i), ws, shape) else {
+            continue;
+        };
+        let d = d.distance;
+        if d < reach.get() || (d <= 0.0 && best.is_none()) {
+            reach.set(d.max(0.0));
+            best = Some((i, d));
+            if d < enough || d <= 0.0 {
+                break;
+            }
+        }
+    }
+    if let Some((i, _)) = best {
+        LAST.with(|m| m.borrow_mut().insert(key, (i, u32::MAX)));
+    }
+    best
+}
+
+/// The triangles of `mesh` at `wm` whose bounding boxes come within `reach` of the convex
+/// `shape` at `ws`: a node of the mesh's tree is looked into only while its box, loosened by
+/// `reach`, meets the shape's box and the ball around it comes within `reach` of the shape
+/// (a table's box, turned into a link's frame, bounds little; its distance to a point is
+/// exact). `reach` is read as the traversal goes.
+pub(super) fn near_convex<'a>(
+    mesh: &'a TriMesh,
+    wm: &Pose,
+    shape: &'a dyn Shape,
+    ws: &Pose,
+    reach: &'a std::cell::Cell<f64>,
+) -> impl Iterator<Item = u32> + 'a {
+    let in_mesh = wm.inv_mul(ws);
+    let bounds = shape.compute_aabb(&in_mesh);
+    mesh.bvh().leaves(move |node| {
+        let r = reach.get().max(0.0);
+        let aabb = node.aabb();
+        aabb.loosened(r).intersects(&bounds) && {
+            let ball = aabb.bounding_sphere();
+            shape.distance_to_point(&in_mesh, ball.center, true) - ball.radius <= r
+        }
+    })
+}
+
+/// The closest (or deepest) pair of points of `mesh` at `wm` and the convex `shape` at `ws`
+/// within `within`, as parry's contact (`point1` on the mesh): the search narrows to the
+/// closest triangle found so far.
+pub(super) fn closest_to_convex(
+    mesh: &TriMesh,
+    wm: &Pose,
+    shape: &dyn Shape,
+    ws: &Pose,
+    within: f64,
+) -> Option<query::Contact> {
+    let reach = std::cell::Cell::new(within);
+    let mut best: Option<query::Contact> = None;
+    for i in near_convex(mesh, wm, shape, ws, &reach) {
+        let found = query::contact(wm, &mesh.triangle(i), ws, shape, reach.get());
+        if let Ok(Some(c)) = found
+            && best.is_none_or(|b| c.dist < b.dist)
+        {
+            reach.set(c.dist.max(0.0));
+            best = Some(c);
+        }
+    }
+    best
+}
+
+/// Whether two triangles (in one frame) meet: Möller's test ("A fast triangle-triangle
+/// intersection test", 1997), each triangle against the other's plane, then their spans along
+/// the line where the planes meet. `None` where they lie in one plane (the caller asks GJK).
+pub(super) fn triangles_intersect(t: &[Vector; 3], u: &[Vector; 3]) -> Option<bool> {
+    // Distances this close to a plane count as on it (metres; far below any mesh's detail).
+    const ON_PLANE: f64 = 1e-12;
+    let side = |tri: &[Vector; 3], of: &[Vector; 3]| {
+        let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+        let d = of.map(|p| {
+            let v = n.dot(p - tri[0]);
+            if v.abs() < ON_PLANE * n.length().max(1.0) {
+                0.0
+            } else {
+                v
+            }
+        });
+        (n, d)
+    };
+    let (nt, du) = side(t, u);
+    if du.iter().all(|&d| d > 0.0) || du.iter().all(|&d| d < 0.0) {
+        return Some(false);
+    }
+    let (nu, dt) = side(u, t);
+    if dt.iter().all(|&d| d > 0.0) || dt.iter().all(|&d| d < 0.0) {
+        return Some(false);
+    }
+    let line = nt.cross(nu);
+    if du.iter().all(|&d| d == 0.0) || line.length_squared() == 0.0 {
+        return None;
+    }
+    // Project onto the line's largest axis (the spans' order is all that matters).
+    let axis = line.abs().max_position();
+    let span = |tri: &[Vector; 3], d: [f64; 3]| -> Option<(f64, f64)> {
+        let p = tri.map(|v| v[axis]);
+        // The vertex alone on its side of the other plane, and the other two.
+        let (a, b, c) = if d[0] * d[1] > 0.0 {
+            (2, 0, 1)
+        } else if d[0] * d[2] > 0.0 {
+            (1, 0, 2)
+        } else if d[1] * d[2] > 0.0 || d[0] != 0.0 {
+            (0, 1, 2)
+        } else if d[1] != 0.0 {
+            (1, 0, 2)
+        } else if d[2] != 0.0 {
+            (2, 0, 1)
+        } else {
+            return None;
+        };
+        let at = |o: usize| p[a] + (p[o] - p[a]) * d[a] / (d[a] - d[o]);
+        let (x, y) = (at(b), at(c));
+        Some((x.min(y), x.max(y)))
+    };
+    let (t0, t1) = span(t, dt)?;
+    let (u0, u1) = span(u, du)?;
+    Some(t0 <= u1 && u0 <= t1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// Möller's test against parry's GJK (the slow reference) on random pairs of small
+    /// triangles near each other, touching and crossing ones among them.
+    #[test]
+    fn the_triangle_test_agrees_with_gjk() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let point = |rng: &mut rand::rngs::StdRng| {
+            Vector::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+        };
+        let (mut meeting, mut apart) = (0, 0);
+        for _ in 0..20_000 {
+            let t = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            let u = [point(&mut rng), point(&mut rng), point(&mut rng)];
+            let reference = query::intersection_test(
+                &Pose::IDENTITY,
+                &parry3d_f64::shape::Triangle::new(t[0], t[1], t[2]),
+                &Pose::IDENTITY,
+                &parry3d_f64::shape::Triangle::new(u[0], u[1], u[2]),
+            )
+            .unwrap()
+            .intersecting;
+            let fast = triangles_intersect(&t, &u).expect("not coplanar");
+            assert_eq!(fast, reference, "{t:?} {u:?}");
+            if fast {
+                meeting += 1;
+            } else {
+                apart += 1;
+            }
+        }
+        assert!(
+            meeting > 1000 && apart > 1000,
+            "{meeting} meeting, {apart} apart"
+        );
+        // Coplanar triangles are left to GJK.
+        let flat = [Vector::ZERO, Vector::X, Vector::Y];
+        assert_eq!(triangles_intersect(&flat, &flat.map(|v| v * 0.5)), None);
+    }
+}
