@@ -9,7 +9,7 @@ use std::path::Path;
 use nalgebra::{DMatrix, DVector, Matrix6xX, Point3};
 
 use crate::core::error::{Error, Result};
-use crate::ik::solve::levenberg_marquardt::Avoid;
+use crate::ik::solve::levenberg_marquardt::{Avoid, Pushed};
 use crate::sim::collision::cache;
 use crate::sim::collision::contacts::Placement;
 use crate::sim::collision::model::{CollisionMode, CollisionModel};
@@ -343,26 +343,45 @@ impl Avoid for CollisionCheck {
     }
 
     /// Each contact closer than the margin plus 2 mm: its row ([`Self::contact_rows`]) and
-    /// how far its gap is short of that.
-    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> f64 {
+    /// how far its gap is short of that; at a trial step, each contact's gap moved by how far
+    /// its points, carried by their links, move along its directions.
+    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> Pushed<'_> {
         let within = self.margin + PUSH_PAST_MARGIN_M;
         let mut energy = 0.0;
-        for (c, row) in self.contact_rows(q, within) {
-            let short = within - c.gap;
-            jtj.ger(1.0, &row, &row, 1.0);
-            g.axpy(short, &row, 1.0);
-            energy += 0.5 * short * short;
-        }
-        energy
-    }
-
-    fn energy(&self, q: &[f64]) -> f64 {
-        let within = self.margin + PUSH_PAST_MARGIN_M;
+        let contacts = self.contact_rows(q, within);
         let frames = self.robot.chain.link_frames(q);
-        (self.model)
-            .contacts(&frames, self.scene.as_ref(), self.self_collision, within)
-            .iter()
-            .map(|c| 0.5 * (within - c.gap).powi(2))
-            .sum()
+        // Each contact's gap, and each side's link, point in the link's frame and world, and
+        // direction.
+        let mut carried = Vec::with_capacity(contacts.len());
+        for (c, row) in &contacts {
+            let short = within - c.gap;
+            jtj.ger(1.0, row, row, 1.0);
+            g.axpy(short, row, 1.0);
+            energy += 0.5 * short * short;
+            let sides: Vec<_> = std::iter::once(&c.first)
+                .chain(c.second.as_ref())
+                .map(|&(link, p, away)| (link, frames[link].inverse_transform_point(&p), p, away))
+                .collect();
+            carried.push((c.gap, sides));
+        }
+        let at = move |q: &[f64]| {
+            if carried.is_empty() {
+                return 0.0;
+            }
+            let frames = self.robot.chain.link_frames(q);
+            carried
+                .iter()
+                .map(|(gap, sides)| {
+                    let moved: f64 = (sides.iter())
+                        .map(|(link, local, p, away)| away.dot(&(frames[*link] * local - p)))
+                        .sum();
+                    0.5 * (within - gap - moved).max(0.0).powi(2)
+                })
+                .sum()
+        };
+        Pushed {
+            energy,
+            at: Box::new(at),
+        }
     }
 }

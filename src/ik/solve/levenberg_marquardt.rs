@@ -233,10 +233,17 @@ pub trait Avoid: Sync {
     fn valid(&self, q: &[f64]) -> bool;
     /// Adds the Gauss-Newton terms of the contacts at `q` (each a row `dgap/dq` and the
     /// distance it is short of its aim, m) to `jtj` and `g`, and returns their energy
-    /// (half the sum of squares), 0 where none is near.
-    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> f64;
-    /// The contacts' energy at `q` alone (a trial step's).
-    fn energy(&self, q: &[f64]) -> f64;
+    /// (half the sum of squares, 0 where none is near) and what it would be at a trial step.
+    fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> Pushed<'_>;
+}
+
+/// The contacts an iteration pushes apart: their energy, and their energy at a trial step
+/// from there (the same contacts, each side's point carried along by its link: a step is
+/// judged without a new search of the geometry, and a contact the step runs into is found
+/// by the next iteration, before any answer is accepted by [`Avoid::valid`]).
+pub struct Pushed<'a> {
+    pub energy: f64,
+    pub at: Box<dyn Fn(&[f64]) -> f64 + 'a>,
 }
 
 /// How a batch of targets is answered: the solver's settings, when to stop, what to avoid.
@@ -307,9 +314,10 @@ pub fn solve_from(
     let tip_energy =
         |(p, r): (Vector3<f64>, Vector3<f64>)| 0.5 * (p.norm_squared() + w * w * r.norm_squared());
     let energy = |e: &[(Vector3<f64>, Vector3<f64>)]| e.iter().map(|&e| tip_energy(e)).sum::<f64>();
-    // The energy at a trial step: poses only, no Jacobian (the step loop's hot path).
-    let trial_energy = |q: &[f64]| {
-        let contacts = avoid.map_or(0.0, |a| a.energy(q));
+    // The energy at a trial step: poses only, no Jacobian (the step loop's hot path), and
+    // the contacts' by the iteration's contacts.
+    let trial_energy = |q: &[f64], contacts: &Option<Pushed>| {
+        let contacts = contacts.as_ref().map_or(0.0, |c| (c.at)(q));
         paths
             .iter()
             .zip(target)
@@ -359,9 +367,8 @@ pub fn solve_from(
         let mut jtj = j.tr_mul(&j);
         let mut g = j.tr_mul(&e);
         let mut e_now = energy(&err);
-        if let Some(a) = avoid {
-            e_now += a.push_apart(&q, &mut jtj, &mut g);
-        }
+        let contacts = avoid.map(|a| a.push_apart(&q, &mut jtj, &mut g));
+        e_now += contacts.as_ref().map_or(0.0, |c| c.energy);
         // A start whose error has not halved in the last STALL iterations is in a local
         // minimum or against a limit: give it up for the next start.
         if history.len() >= STALL && e_now > 0.5 * history[history.len() - STALL] {
@@ -380,7 +387,7 @@ pub fn solve_from(
             for (t, ((&v, &d), &r)) in trial.iter_mut().zip(q.iter().zip(dq.iter()).zip(ranges)) {
                 *t = keep_in(v + d, r);
             }
-            if trial_energy(&trial) < e_now {
+            if trial_energy(&trial, &contacts) < e_now {
                 std::mem::swap(&mut q, &mut trial);
                 improved = true;
                 break;

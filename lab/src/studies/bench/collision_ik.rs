@@ -1,11 +1,14 @@
 //! Collision-free IK, benchmarked: a saved model's answers to targets made from random
-//! configurations that keep the margin from the robot itself and a scene (by our spheres,
-//! then checked on the exact meshes), with the collision check and without it (what the check
-//! costs, and how many answers would have collided), their share exact and collision-free by
-//! our spheres and, for the same answers, by Pinocchio and coal on the exact collision meshes
-//! at zero margin (`scripts/collision_reference.py`, run as a child process; skipped, with the
-//! reason printed, when Python or `pin` is absent); cuRobo's published figures beside them as
-//! labelled reference rows, never measured here.
+//! configurations that keep the margin from the robot itself and a scene by the exact check
+//! (the links' own meshes and primitives, as Pinocchio and coal decide, the spheres only their
+//! broad phase), answered three ways: with the exact check, with the spheres alone deciding,
+//! and without a check (what the check costs, and how many answers would have collided). For
+//! each, the share exact and collision-free by its own check and, for the same answers, by
+//! Pinocchio and coal on the exact collision meshes at zero margin
+//! (`scripts/collision_reference.py`, run as a child process; skipped, with the reason
+//! printed, when Python or `pin` is absent), on the pairs checked and on every other pair of
+//! links no joint joins (a pair left unchecked that the answers hit). cuRobo's published
+//! figures beside them as labelled reference rows, never measured here.
 
 use std::path::{Path, PathBuf};
 
@@ -16,6 +19,7 @@ use selfmodel::ik::solve::learned::LearnedIk;
 use selfmodel::ik::solve::levenberg_marquardt::Answering;
 use selfmodel::ik::solve::levenberg_marquardt::{Avoid, PoseSolution, PoseTarget};
 use selfmodel::ik::solve::solver::IkSolver;
+use selfmodel::sim::collision::model::CollisionMode;
 use selfmodel::sim::collision::scene::Scene;
 use selfmodel::sim::robot::Robot;
 use selfmodel::sim::robots::RobotSpec;
@@ -67,6 +71,11 @@ impl CollisionIkConfig {
 pub struct CollisionIkRow {
     pub robot: String,
     pub solver: String,
+    /// What decides a collision: `exact` (the links' meshes and primitives, spheres their
+    /// broad phase), `spheres` (the spheres alone) or `none` (no check); a published row's
+    /// as its source says.
+    #[serde(default)]
+    pub collision: String,
     /// What the answers are checked against.
     pub checked: String,
     /// Targets (a published figure's where it says).
@@ -76,12 +85,17 @@ pub struct CollisionIkRow {
     pub exact_free_per_s: f64,
     pub ms_per_target: Option<f64>,
     /// Ours: of those answers, the share Pinocchio finds collision-free on the exact meshes
-    /// at zero margin.
+    /// at zero margin, on the pairs checked (and the scene).
     pub exact_mesh_free_pct: Option<f64>,
+    /// Ours: of those answers, how many Pinocchio finds colliding on the exact meshes in a
+    /// pair of links the check leaves out although they may collide (neither adjacent nor
+    /// touching at the home pose: [`unchecked_pairs`]).
+    #[serde(default)]
+    pub colliding_in_unchecked_pairs: Option<usize>,
     /// Ours: of the exact answers, the share our check finds in collision (without the
     /// check, what would have been returned).
     pub exact_but_colliding_pct: Option<f64>,
-    /// Ours, our check against the exact meshes at zero margin on as many random
+    /// Ours, the row's check against the exact meshes at zero margin on as many random
     /// configurations (free or not) as targets: of those the meshes find free, the share it
     /// calls colliding (its conservativeness), and of those the meshes find colliding, the
     /// share it calls free (missed: should be none). Named for the spheres, which decided
@@ -238,12 +252,14 @@ fn published_rows(robot: &str, preset: &str, revision: &str) -> Vec<CollisionIkR
             |&(robot, solver, targets, exact, per_s, hardware, source)| CollisionIkRow {
                 robot: robot.into(),
                 solver: format!("{solver} (published)"),
+                collision: "spheres".into(),
                 checked: "itself and the benchmark's scene".into(),
                 targets,
                 exact_free_pct: exact,
                 exact_free_per_s: per_s,
                 ms_per_target: None,
                 exact_mesh_free_pct: None,
+                colliding_in_unchecked_pairs: None,
                 exact_but_colliding_pct: None,
                 spheres_conservative_pct: None,
                 spheres_missed_pct: None,
@@ -297,13 +313,77 @@ const WRITTEN: &[&str] = &[
     "results.csv",
     "results.md",
     "pairs.json",
+    "unchecked_pairs.json",
     "target_joints.csv",
-    "answer_joints.csv",
-    "random_joints.csv",
     "target_joints_exact_meshes.csv",
-    "answer_joints_exact_meshes.csv",
+    "random_joints.csv",
     "random_joints_exact_meshes.csv",
+    "answer_joints_exact.csv",
+    "answer_joints_exact_exact_meshes.csv",
+    "answer_joints_exact_unchecked_pairs.csv",
+    "answer_joints_spheres.csv",
+    "answer_joints_spheres_exact_meshes.csv",
+    "answer_joints_spheres_unchecked_pairs.csv",
 ];
+
+/// The rows of `v` as slices.
+fn rows_of(v: &[Vec<f64>]) -> Vec<&[f64]> {
+    v.iter().map(Vec::as_slice).collect()
+}
+
+/// What Pinocchio says of one row's answers and check, where it ran.
+#[derive(Clone, Copy, Default)]
+struct Verdict {
+    /// Of the answers, the share free on the exact meshes on the pairs checked (%).
+    mesh_free_pct: Option<f64>,
+    /// Of the answers, how many collide on the exact meshes in a pair left unchecked.
+    in_unchecked_pairs: Option<usize>,
+    /// The check against the meshes on random configurations: false alarms and misses (%).
+    agreement: Option<(f64, f64)>,
+}
+
+/// The pairs of `check`'s links with collision geometry that it does not check although
+/// they may collide: not adjacent as MoveIt's setup assistant counts adjacency (a joint's
+/// parent and child, a link without geometry between them passed through: the Panda's
+/// `panda_link7` and `panda_hand`), and apart at the home pose on their exact shapes (a pair
+/// touching there is allowed by design, as MoveIt allows it), by name; and how many pairs
+/// touch at home.
+fn unchecked_pairs(check: &CollisionCheck) -> (Vec<[String; 2]>, usize) {
+    let chain = &check.robot.chain;
+    let has = |l: usize| !check.robot.geometry[l].is_empty();
+    let mut parent = vec![None; chain.links.len()];
+    for j in &chain.joints {
+        parent[j.child] = Some(j.parent);
+    }
+    // The nearest link above `l` that has geometry.
+    let above = |l: usize| {
+        let mut p = parent[l];
+        while let Some(x) = p.filter(|&x| !has(x)) {
+            p = parent[x];
+        }
+        p
+    };
+    let adjacent = |a: usize, b: usize| above(a) == Some(b) || above(b) == Some(a);
+    let home: Vec<f64> = (chain.joint_ranges().iter())
+        .map(|r| 0f64.clamp(r[0], r[1]))
+        .collect();
+    let frames = chain.link_frames(&home);
+    let x = selfmodel::sim::collision::exact_links(&check.robot);
+    let (mut pairs, mut at_home) = (Vec::new(), 0);
+    for a in (0..chain.links.len()).filter(|&l| has(l)) {
+        for b in (a + 1..chain.links.len()).filter(|&l| has(l)) {
+            if check.model.pairs.contains(&(a, b)) || adjacent(a, b) {
+                continue;
+            }
+            if x[a].closer_than(&frames[a], &x[b], &frames[b], 0.0) {
+                at_home += 1;
+                continue;
+            }
+            pairs.push([chain.links[a].clone(), chain.links[b].clone()]);
+        }
+    }
+    (pairs, at_home)
+}
 
 /// [`run`] once its output is checked.
 #[allow(clippy::too_many_arguments)]
@@ -321,49 +401,55 @@ fn measure(
     let obstacles = scene.map(Scene::read).transpose()?;
     let n_obstacles = obstacles.as_ref().map_or(0, |s| s.obstacles.len());
     let kept = Spheres::KeptIn(model_dir, Default::default());
-    let check = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?;
-    let (targets, qs) = free_targets(&robot, &model.saved.ranges, &check, cfg.targets, cfg.seed)?;
+    let exact = CollisionCheck::with_spheres(spec, kept, None, obstacles, true, cfg.margin)?
+        .deciding(CollisionMode::Exact);
+    let spheres = exact.clone().deciding(CollisionMode::Spheres);
+    let (targets, qs) = free_targets(&robot, &model.saved.ranges, &exact, cfg.targets, cfg.seed)?;
     let lm = &model.saved.config.lm;
-    let checked = solve_all(model, &robot, &targets, Some(&check), cfg)?;
+    let by_exact = solve_all(model, &robot, &targets, Some(&exact), cfg)?;
+    let by_spheres = solve_all(model, &robot, &targets, Some(&spheres), cfg)?;
     let unchecked = solve_all(model, &robot, &targets, None, cfg)?;
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     selfmodel::core::atomic_file::write_json(&out.join("config.json"), cfg)?;
-    let exact_free: Vec<&PoseSolution> = checked.answers.iter().filter(|a| a.exact(lm)).collect();
-    let exact_unchecked: Vec<&PoseSolution> =
-        unchecked.answers.iter().filter(|a| a.exact(lm)).collect();
-    let colliding = exact_unchecked
-        .iter()
-        .filter(|a| !check.valid(&a.joints))
-        .count();
+    let exact_of = |s: &Solved| -> Vec<Vec<f64>> {
+        (s.answers.iter())
+            .filter(|a| a.exact(lm))
+            .map(|a| a.joints.clone())
+            .collect()
+    };
+    let (exact_answers, sphere_answers) = (exact_of(&by_exact), exact_of(&by_spheres));
+    let exact_unchecked = exact_of(&unchecked);
+    let colliding = exact_unchecked.iter().filter(|q| !exact.valid(q)).count();
 
-    // Pinocchio on the exact meshes: the targets' configurations, our answers, and random
-    // configurations colliding or not (the spheres' agreement with the meshes).
+    // Pinocchio on the exact meshes: the targets' configurations, each check's answers, and
+    // random configurations colliding or not (each check's agreement with the meshes).
     let random: Vec<Vec<f64>> =
         selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, cfg.seed ^ 0xA9)
             .take(cfg.targets)
             .collect();
-    let answers: Vec<&[f64]> = exact_free.iter().map(|a| a.joints.as_slice()).collect();
     let pairs_file = write_reference_inputs(
         out,
-        &check,
+        &exact,
         &model.saved.joint_names,
         &[
-            ("target_joints.csv", qs.iter().map(Vec::as_slice).collect()),
-            ("answer_joints.csv", answers),
-            (
-                "random_joints.csv",
-                random.iter().map(Vec::as_slice).collect(),
-            ),
+            ("target_joints.csv", rows_of(&qs)),
+            ("random_joints.csv", rows_of(&random)),
+            ("answer_joints_exact.csv", rows_of(&exact_answers)),
+            ("answer_joints_spheres.csv", rows_of(&sphere_answers)),
         ],
     )?;
-    let spheres_collide: Vec<bool> = random
-        .iter()
-        .map(|q| {
-            let frames = check.robot.chain.link_frames(q);
-            check.model.collides(&frames, check.scene.as_ref(), 0.0)
-        })
-        .collect();
-    let (mut mesh_free_answers, mut mesh_free_targets, mut agreement) = (None, None, None);
+    let unchecked_file = out.join("unchecked_pairs.json");
+    let (unchecked_list, touching_at_home) = unchecked_pairs(&exact);
+    selfmodel::core::atomic_file::write_json(&unchecked_file, &unchecked_list)?;
+    let ours_at_zero = |check: &CollisionCheck| -> Vec<bool> {
+        (random.iter())
+            .map(|q| {
+                let frames = check.robot.chain.link_frames(q);
+                check.model.collides(&frames, check.scene.as_ref(), 0.0)
+            })
+            .collect()
+    };
+    let (mut verdicts, mut mesh_free_targets) = ([Verdict::default(); 2], None);
     if let (Some(python), RobotSpec::Urdf { path, .. }) = (python, spec) {
         let reference = Reference {
             python,
@@ -371,18 +457,28 @@ fn measure(
             pairs: pairs_file,
             scene,
         };
-        let on_meshes = |file: &str, out_file: &str| {
-            reference
-                .collides(&out.join(file), &out.join(out_file))
-                .map(|f| f.map(|f| pct(f.iter().filter(|c| !**c).count(), f.len())))
+        let every_other = Reference {
+            python,
+            urdf: path,
+            pairs: unchecked_file,
+            scene: None,
         };
-        mesh_free_targets = on_meshes("target_joints.csv", "target_joints_exact_meshes.csv")?;
-        mesh_free_answers = on_meshes("answer_joints.csv", "answer_joints_exact_meshes.csv")?;
-        let meshes = reference.collides(
-            &out.join("random_joints.csv"),
-            &out.join("random_joints_exact_meshes.csv"),
-        )?;
-        agreement = meshes.map(|meshes| agreement_pct(&meshes, &spheres_collide));
+        let free_pct = |f: Vec<bool>| pct(f.iter().filter(|c| !**c).count(), f.len());
+        let on = |r: &Reference, stem: &str, suffix: &str| {
+            let (input, output) = (format!("{stem}.csv"), format!("{stem}_{suffix}.csv"));
+            r.collides(&out.join(input), &out.join(output))
+        };
+        mesh_free_targets = on(&reference, "target_joints", "exact_meshes")?.map(free_pct);
+        let meshes = on(&reference, "random_joints", "exact_meshes")?;
+        for (v, (stem, check)) in verdicts.iter_mut().zip([
+            ("answer_joints_exact", &exact),
+            ("answer_joints_spheres", &spheres),
+        ]) {
+            v.mesh_free_pct = on(&reference, stem, "exact_meshes")?.map(free_pct);
+            v.in_unchecked_pairs = on(&every_other, stem, "unchecked_pairs")?
+                .map(|f| f.iter().filter(|c| **c).count());
+            v.agreement = (meshes.as_ref()).map(|m| agreement_pct(m, &ours_at_zero(check)));
+        }
     } else {
         eprintln!(
             "bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)"
@@ -397,23 +493,21 @@ fn measure(
     let mean = |a: &[PoseSolution], f: fn(&PoseSolution) -> usize| {
         a.iter().map(|s| f(s) as f64).sum::<f64>() / a.len().max(1) as f64
     };
-    let ours = |solver: &str,
-                s: &Solved,
-                exact: usize,
-                extra: (Option<f64>, Option<f64>),
-                agree: Option<(f64, f64)>| {
+    let ours = |solver: &str, collision: &str, s: &Solved, exact: usize, v: Verdict| {
         CollisionIkRow {
             robot: robot_name.clone(),
             solver: solver.into(),
+            collision: collision.into(),
             checked: what.clone(),
             targets: Some(n),
             exact_free_pct: pct(exact, n),
             exact_free_per_s: exact as f64 / s.seconds,
             ms_per_target: Some(1e3 * s.seconds / n.max(1) as f64),
-            exact_mesh_free_pct: extra.0,
-            exact_but_colliding_pct: extra.1,
-            spheres_conservative_pct: agree.map(|a| a.0),
-            spheres_missed_pct: agree.map(|a| a.1),
+            exact_mesh_free_pct: v.mesh_free_pct,
+            colliding_in_unchecked_pairs: v.in_unchecked_pairs,
+            exact_but_colliding_pct: Some(0.0),
+            spheres_conservative_pct: v.agreement.map(|a| a.0),
+            spheres_missed_pct: v.agreement.map(|a| a.1),
             iterations_mean: Some(mean(&s.answers, |a| a.iterations)),
             starts_mean: Some(mean(&s.answers, |a| a.starts)),
             hardware: cpu.clone(),
@@ -422,21 +516,20 @@ fn measure(
             git_revision: revision.clone(),
         }
     };
+    let pushed = "selfmodel flow + LM (contacts pushed apart)";
     let mut rows = vec![
-        ours(
-            "selfmodel flow + LM (contacts pushed apart)",
-            &checked,
-            exact_free.len(),
-            (mesh_free_answers, Some(0.0)),
-            agreement,
-        ),
-        ours(
-            "selfmodel flow + LM (no collision check)",
-            &unchecked,
-            exact_unchecked.len() - colliding,
-            (None, Some(pct(colliding, exact_unchecked.len()))),
-            None,
-        ),
+        ours(pushed, "exact", &by_exact, exact_answers.len(), verdicts[0]),
+        ours(pushed, "spheres", &by_spheres, sphere_answers.len(), verdicts[1]),
+        CollisionIkRow {
+            exact_but_colliding_pct: Some(pct(colliding, exact_unchecked.len())),
+            ..ours(
+                "selfmodel flow + LM (no collision check)",
+                "none",
+                &unchecked,
+                exact_unchecked.len() - colliding,
+                Verdict::default(),
+            )
+        },
     ];
     rows.extend(published_rows(&robot_name, &cfg.preset, &revision));
     let targets_note = mesh_free_targets.map_or(String::new(), |p| {
@@ -447,8 +540,10 @@ fn measure(
         &rows,
         "Collision-free IK",
         &format!(
-            "{n} targets, each the tips' poses at a random configuration our spheres find collision-free; one answer a target; the median of at least {} passes over {} s after a warm-up pass, every thread of the machine. Exact: within 1 mm and 0.572 degrees and no checked pair of spheres, nor a sphere and an obstacle, closer than the margin.{targets_note} Published rows: cuRobo's own targets, scenes and GPU, not measured here.",
-            cfg.repeats, cfg.min_seconds
+            "{n} targets, each the tips' poses at a random configuration the exact check finds collision-free (the links' collision meshes and primitives keep the margin); one answer a target; the median of at least {} passes over {} s after a warm-up pass, every thread of the machine. `collision`: what decides a collision when answering (`exact`: the meshes, spheres their broad phase; `spheres`: the spheres alone; `none`: no check, its answers judged by the exact check afterwards). Exact: within 1 mm and 0.572 degrees and collision-free by the row's own check.{targets_note} `exact_mesh_free_pct`: the answers Pinocchio and coal find free on the exact meshes (the pairs checked and the scene, zero margin); `colliding_in_unchecked_pairs`: the answers they find colliding in one of the {} pairs of links the check leaves out although they may collide (`unchecked_pairs.json`: neither adjacent, as MoveIt's setup assistant counts it, nor touching at the home pose; {touching_at_home} more touch there and are allowed by design). Published rows: cuRobo's own targets, scenes and GPU, not measured here.",
+            cfg.repeats,
+            cfg.min_seconds,
+            unchecked_list.len()
         ),
     )?;
     Ok(rows)

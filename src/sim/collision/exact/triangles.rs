@@ -87,9 +87,11 @@ pub(super) fn closest_pair(
         if triangles_apart(&ta, &tb, reach.get()) {
             return None;
         }
-        match triangles_intersect(&[ta.a, ta.b, ta.c], &[tb.a, tb.b, tb.c]) {
+        let (t, u) = ([ta.a, ta.b, ta.c], [tb.a, tb.b, tb.c]);
+        match triangles_intersect(&t, &u) {
             Some(true) => Some(0.0),
-            _ => (query::distance(&Pose::IDENTITY, &ta, &Pose::IDENTITY, &tb).ok())
+            Some(false) => Some(apart_triangles_distance(&t, &u)),
+            None => (query::distance(&Pose::IDENTITY, &ta, &Pose::IDENTITY, &tb).ok())
                 .map(|d| d.distance),
         }
     };
@@ -240,6 +242,117 @@ pub(super) fn closest_to_convex(
     best
 }
 
+/// The distance between two triangles (in one frame) that do not meet: the closest pair of
+/// points of two disjoint triangles is a vertex of one and a point of the other, or a point
+/// of an edge of each (Ericson, "Real-Time Collision Detection", 5.1.5 and 5.1.9): the
+/// smallest of those fifteen, in closed form (several times cheaper than GJK).
+fn apart_triangles_distance(t: &[Vector; 3], u: &[Vector; 3]) -> f64 {
+    let mut best = f64::INFINITY;
+    for (p, tri) in [(t, u), (u, t)] {
+        for v in p {
+            best = best.min((closest_on_triangle(v, tri) - *v).length_squared());
+        }
+    }
+    for i in 0..3 {
+        for j in 0..3 {
+            let d = segments_distance_squared(t[i], t[(i + 1) % 3], u[j], u[(j + 1) % 3]);
+            best = best.min(d);
+        }
+    }
+    best.sqrt()
+}
+
+/// The point of triangle `tri` closest to `p` (Ericson 5.1.5: by `p`'s Voronoi region).
+fn closest_on_triangle(p: &Vector, tri: &[Vector; 3]) -> Vector {
+    let [a, b, c] = *tri;
+    let (ab, ac, ap) = (b - a, c - a, *p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = *p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = *p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() < f64::MIN_POSITIVE {
+        // A degenerate (flat) triangle: its edges answer.
+        return [(a, b), (b, c), (c, a)]
+            .map(|(s, e)| closest_on_segment(p, s, e))
+            .into_iter()
+            .min_by(|x, y| {
+                (*x - *p)
+                    .length_squared()
+                    .total_cmp(&(*y - *p).length_squared())
+            })
+            .unwrap_or(a);
+    }
+    a + ab * (vb / denom) + ac * (vc / denom)
+}
+
+/// The point of the segment `s`-`e` closest to `p`.
+fn closest_on_segment(p: &Vector, s: Vector, e: Vector) -> Vector {
+    let d = e - s;
+    let len = d.length_squared();
+    if len <= 0.0 {
+        return s;
+    }
+    s + d * ((*p - s).dot(d) / len).clamp(0.0, 1.0)
+}
+
+/// The squared distance between the segments `p1`-`q1` and `p2`-`q2` (Ericson 5.1.9).
+fn segments_distance_squared(p1: Vector, q1: Vector, p2: Vector, q2: Vector) -> f64 {
+    let (d1, d2, r) = (q1 - p1, q2 - p2, p1 - p2);
+    let (a, e, f) = (d1.length_squared(), d2.length_squared(), d2.dot(r));
+    const EPS: f64 = 1e-300;
+    let (s, t) = if a <= EPS && e <= EPS {
+        (0.0, 0.0)
+    } else if a <= EPS {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = d1.dot(r);
+        if e <= EPS {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = d1.dot(d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > 0.0 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    ((p1 + d1 * s) - (p2 + d2 * t)).length_squared()
+}
+
 /// Whether two triangles (in one frame) meet: Möller's test ("A fast triangle-triangle
 /// intersection test", 1997), each triangle against the other's plane, then their spans along
 /// the line where the planes meet. `None` where they lie in one plane (the caller asks GJK).
@@ -300,6 +413,40 @@ pub(super) fn triangles_intersect(t: &[Vector; 3], u: &[Vector; 3]) -> Option<bo
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The closed-form distance of two triangles that do not meet agrees with parry's GJK (the
+    /// slow reference) on random pairs, near, far and nearly parallel.
+    #[test]
+    fn the_closed_form_triangle_distance_agrees_with_gjk() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let mut checked = 0;
+        for k in 0..20_000 {
+            let spread = [0.05, 1.0, 3.0][k % 3];
+            let mut point = |o: f64| {
+                Vector::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    o + spread * rng.random_range(-1.0..1.0),
+                )
+            };
+            let t = [point(0.0), point(0.0), point(0.0)];
+            let u = [point(1.0), point(1.0), point(1.0)];
+            if triangles_intersect(&t, &u) != Some(false) {
+                continue;
+            }
+            let tri = |v: &[Vector; 3]| parry3d_f64::shape::Triangle::new(v[0], v[1], v[2]);
+            let reference =
+                query::distance(&Pose::IDENTITY, &tri(&t), &Pose::IDENTITY, &tri(&u)).unwrap();
+            let fast = apart_triangles_distance(&t, &u);
+            assert!(
+                (fast - reference.distance).abs() < 1e-9,
+                "{fast} {} {t:?} {u:?}",
+                reference.distance
+            );
+            checked += 1;
+        }
+        assert!(checked > 10_000, "{checked}");
+    }
     use rand::{RngExt, SeedableRng};
 
     /// Möller's test against parry's GJK (the slow reference) on random pairs of small
