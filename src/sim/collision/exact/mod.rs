@@ -207,8 +207,11 @@ impl ExactShapes {
     /// Whether the convex hulls at `pa` and `pb` keep at least `margin` apart (then so do
     /// the shapes inside them); false where either has none.
     fn hulls_apart(&self, pa: &Pose, other: &Self, pb: &Pose, margin: f64) -> bool {
-        static NOHULL: std::sync::LazyLock<bool> = std::sync::LazyLock::new(|| std::env::var("NOHULL").is_ok());
-        if *NOHULL { return false; }
+        static NOHULL: std::sync::LazyLock<bool> =
+            std::sync::LazyLock::new(|| std::env::var("NOHULL").is_ok());
+        if *NOHULL {
+            return false;
+        }
         let (Some(ha), Some(hb)) = (&self.hull, &other.hull) else {
             return false;
         };
@@ -503,5 +506,139 @@ impl std::fmt::Debug for ExactShapes {
             .field("bound", &self.bound)
             .field("hull", &self.hull.is_some())
             .finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// A closed, lumpy mesh of `n` by `2n` quads about the origin: a ball of radius about 0.1
+    /// whose radius varies with direction.
+    fn lumpy(n: usize, seed: u64) -> Vec<Shape> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let bumps: Vec<f64> = (0..(n + 1) * 2 * n)
+            .map(|_| rng.random_range(0.08..0.12))
+            .collect();
+        let at = |i: usize, j: usize| {
+            let (th, ph) = (
+                std::f64::consts::PI * i as f64 / n as f64,
+                std::f64::consts::PI * j as f64 / n as f64,
+            );
+            let r = bumps[i * 2 * n + j % (2 * n)];
+            Point3::new(
+                r * th.sin() * ph.cos(),
+                r * th.sin() * ph.sin(),
+                r * th.cos(),
+            )
+        };
+        let mut shapes = Vec::new();
+        for i in 0..n {
+            for j in 0..2 * n {
+                let q = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                shapes.push(Shape::Triangle([q[0], q[1], q[2]]));
+                shapes.push(Shape::Triangle([q[0], q[2], q[3]]));
+            }
+        }
+        shapes
+    }
+
+    /// The distance between two meshes over every pair of triangles (GJK): the slow reference.
+    fn brute(a: &[Shape], fa: &Isometry3<f64>, b: &[Shape], fb: &Isometry3<f64>) -> f64 {
+        let tri = |s: &Shape, f: &Isometry3<f64>| match s {
+            Shape::Triangle(t) => {
+                let p = t.map(|p| f * p);
+                parry3d_f64::shape::Triangle::new(
+                    Vector::new(p[0].x, p[0].y, p[0].z),
+                    Vector::new(p[1].x, p[1].y, p[1].z),
+                    Vector::new(p[2].x, p[2].y, p[2].z),
+                )
+            }
+            _ => unreachable!("triangles only"),
+        };
+        let mut best = f64::INFINITY;
+        for s in a {
+            for t in b {
+                let d = query::distance(&Pose::IDENTITY, &tri(s, fa), &Pose::IDENTITY, &tri(t, fb));
+                best = best.min(d.expect("triangles").distance);
+            }
+        }
+        best
+    }
+
+    /// The fast questions an optimiser asks agree with the slow ones: `near` (the cheap bounds,
+    /// Möller's test, the closed-form distance, the warm start) and `closer_than` give what
+    /// every pair of triangles gives, for two meshes and a mesh and a box, apart, close and
+    /// overlapping, asked twice at nearby poses (the second time from the first's guess).
+    #[test]
+    fn near_and_closer_than_agree_with_every_pair_of_triangles() {
+        let (ma, mb) = (lumpy(6, 1), lumpy(5, 2));
+        let (a, b) = (ExactShapes::of_link(&ma), ExactShapes::of_link(&mb));
+        let half = Vector3::new(0.05, 0.2, 0.1);
+        let cuboid = ExactShapes::cuboid(&Isometry3::identity(), &half);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let within = 0.03;
+        let (mut apart, mut overlapping) = (0, 0);
+        for _ in 0..80 {
+            let fa = Isometry3::new(
+                Vector3::from_fn(|_, _| rng.random_range(-0.02..0.02)),
+                Vector3::from_fn(|_, _| rng.random_range(-3.0..3.0)),
+            );
+            let fb = Isometry3::new(
+                Vector3::new(
+                    rng.random_range(0.1..0.25),
+                    0.0,
+                    rng.random_range(-0.05..0.05),
+                ),
+                Vector3::from_fn(|_, _| rng.random_range(-3.0..3.0)),
+            );
+            for nudge in [0.0, 1e-3] {
+                let fb = Isometry3::translation(nudge, 0.0, 0.0) * fb;
+                let reference = brute(&ma, &fa, &mb, &fb);
+                match a.near(&fa, &b, &fb, within) {
+                    None => assert!(reference >= within, "{reference}"),
+                    Some(Near::Overlapping) => {
+                        assert!(reference <= 1e-12, "{reference}");
+                        overlapping += 1;
+                    }
+                    Some(Near::Apart(c)) => {
+                        assert!((c.gap - reference).abs() < 1e-7, "{} {reference}", c.gap);
+                        apart += 1;
+                    }
+                }
+                for margin in [0.0, 0.01, within] {
+                    let closer = a.closer_than(&fa, &b, &fb, margin);
+                    assert_eq!(
+                        closer,
+                        reference < margin || reference <= 0.0,
+                        "{reference} {margin}"
+                    );
+                }
+                // A mesh and a box (at the origin): against each triangle's distance to it.
+                let shape = parry3d_f64::shape::Cuboid::new(Vector::new(half.x, half.y, half.z));
+                let to_box = (ma.iter())
+                    .map(|s| {
+                        let Shape::Triangle(t) = s else {
+                            unreachable!()
+                        };
+                        let p = t.map(|p| fa * p).map(|p| Vector::new(p.x, p.y, p.z));
+                        let t = parry3d_f64::shape::Triangle::new(p[0], p[1], p[2]);
+                        query::distance(&Pose::IDENTITY, &t, &Pose::IDENTITY, &shape)
+                            .expect("a triangle and a box")
+                            .distance
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                match a.near(&fa, &cuboid, &Isometry3::identity(), within) {
+                    None => assert!(to_box >= within, "{to_box}"),
+                    Some(Near::Overlapping) => assert!(to_box <= 1e-12, "{to_box}"),
+                    Some(Near::Apart(c)) => assert!((c.gap - to_box).abs() < 1e-7),
+                }
+            }
+        }
+        assert!(
+            apart > 10 && overlapping > 10,
+            "{apart} apart, {overlapping} overlapping"
+        );
     }
 }
