@@ -493,8 +493,8 @@ fn measure(
     let mean = |a: &[PoseSolution], f: fn(&PoseSolution) -> usize| {
         a.iter().map(|s| f(s) as f64).sum::<f64>() / a.len().max(1) as f64
     };
-    let ours = |solver: &str, collision: &str, s: &Solved, exact: usize, v: Verdict| {
-        CollisionIkRow {
+    let ours =
+        |solver: &str, collision: &str, s: &Solved, exact: usize, v: Verdict| CollisionIkRow {
             robot: robot_name.clone(),
             solver: solver.into(),
             collision: collision.into(),
@@ -514,12 +514,17 @@ fn measure(
             source: "measured".into(),
             preset: cfg.preset.clone(),
             git_revision: revision.clone(),
-        }
-    };
+        };
     let pushed = "selfmodel flow + LM (contacts pushed apart)";
     let mut rows = vec![
         ours(pushed, "exact", &by_exact, exact_answers.len(), verdicts[0]),
-        ours(pushed, "spheres", &by_spheres, sphere_answers.len(), verdicts[1]),
+        ours(
+            pushed,
+            "spheres",
+            &by_spheres,
+            sphere_answers.len(),
+            verdicts[1],
+        ),
         CollisionIkRow {
             exact_but_colliding_pct: Some(pct(colliding, exact_unchecked.len())),
             ..ours(
