@@ -241,13 +241,9 @@ impl ExactShapes {
         fb: &Isometry3<f64>,
         margin: f64,
     ) -> bool {
-        if self.bound_gap(fa, other, fb) >= margin {
+        let Some((pa, pb)) = self.poses_within(fa, other, fb, margin) else {
             return false;
-        }
-        let (pa, pb) = (pose_of(fa), pose_of(fb));
-        if self.hulls_apart(&pa, other, &pb, margin) {
-            return false;
-        }
+        };
         self.pieces.iter().any(|a| {
             (other.pieces.iter())
                 .any(|b| pieces_closer(a, &(pa * a.pose), b, &(pb * b.pose), margin))
@@ -264,26 +260,14 @@ impl ExactShapes {
         fb: &Isometry3<f64>,
         within: f64,
     ) -> Option<ExactContact> {
-        if self.bound_gap(fa, other, fb) >= within {
-            return None;
+        let (pa, pb) = self.poses_within(fa, other, fb, within)?;
+        let each = |a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, reach| {
+            pieces_contact(a, wa, b, wb, reach).map(Found::Closest)
+        };
+        match self.closest_of_pieces(&pa, other, &pb, within, each)? {
+            Found::Closest(c) => Some(exact_contact(&c)),
+            Found::Meet => None,
         }
-        let (pa, pb) = (pose_of(fa), pose_of(fb));
-        if self.hulls_apart(&pa, other, &pb, within) {
-            return None;
-        }
-        let mut best: Option<ExactContact> = None;
-        for a in &self.pieces {
-            for b in &other.pieces {
-                let reach = best.map_or(within, |b| b.gap.clamp(0.0, within));
-                let Some(c) = pieces_contact(a, &(pa * a.pose), b, &(pb * b.pose), reach) else {
-                    continue;
-                };
-                if c.dist < within && best.is_none_or(|b| c.dist < b.gap) {
-                    best = Some(exact_contact(&c));
-                }
-            }
-        }
-        best
     }
 
     /// How these shapes at `fa` and `other`'s at `fb` stand within `within` (m): apart, with
@@ -298,54 +282,57 @@ impl ExactShapes {
         fb: &Isometry3<f64>,
         within: f64,
     ) -> Option<Near> {
+        let (pa, pb) = self.poses_within(fa, other, fb, within)?;
+        Some(
+            match self.closest_of_pieces(&pa, other, &pb, within, pieces_closest)? {
+                Found::Closest(c) => Near::Apart(exact_contact(&c)),
+                Found::Meet => Near::Overlapping,
+            },
+        )
+    }
+
+    /// The poses of these shapes at `fa` and `other`'s at `fb`, where neither their bounding
+    /// spheres nor their hulls keep `within` apart.
+    fn poses_within(
+        &self,
+        fa: &Isometry3<f64>,
+        other: &Self,
+        fb: &Isometry3<f64>,
+        within: f64,
+    ) -> Option<(Pose, Pose)> {
         if self.bound_gap(fa, other, fb) >= within {
             return None;
         }
         let (pa, pb) = (pose_of(fa), pose_of(fb));
-        if self.hulls_apart(&pa, other, &pb, within) {
-            return None;
-        }
-        let mut best: Option<ExactContact> = None;
+        (!self.hulls_apart(&pa, other, &pb, within)).then_some((pa, pb))
+    }
+
+    /// The closest of what `each` finds of every pair of pieces within `within` (each asked
+    /// within the closest so far); a pair that meets ends it.
+    fn closest_of_pieces(
+        &self,
+        pa: &Pose,
+        other: &Self,
+        pb: &Pose,
+        within: f64,
+        each: impl Fn(&Piece, &Pose, &Piece, &Pose, f64) -> Option<Found>,
+    ) -> Option<Found> {
+        let mut best: Option<query::Contact> = None;
         for a in &self.pieces {
             for b in &other.pieces {
-                let reach = best.map_or(within, |b| b.gap.clamp(0.0, within));
-                match pieces_closest(a, &(pa * a.pose), b, &(pb * b.pose), reach) {
+                let reach = best.map_or(within, |b| b.dist.clamp(0.0, within));
+                match each(a, &(pa * a.pose), b, &(pb * b.pose), reach) {
                     None => {}
-                    Some(Found::Meet) => return Some(Near::Overlapping),
-                    Some(Found::Apart(c)) => {
-                        if c.dist < within && best.is_none_or(|b| c.dist < b.gap) {
-                            best = Some(exact_contact(&c));
+                    Some(Found::Meet) => return Some(Found::Meet),
+                    Some(Found::Closest(c)) => {
+                        if c.dist < within && best.is_none_or(|b| c.dist < b.dist) {
+                            best = Some(c);
                         }
                     }
                 }
             }
         }
-        best.map(Near::Apart)
-    }
-
-    #[doc(hidden)]
-    pub fn scratch_parry_distance(
-        &self,
-        fa: &Isometry3<f64>,
-        other: &Self,
-        fb: &Isometry3<f64>,
-    ) -> f64 {
-        let (pa, pb) = (pose_of(fa), pose_of(fb));
-        let mut best = f64::INFINITY;
-        for a in &self.pieces {
-            for b in &other.pieces {
-                best = best.min(
-                    query::distance(
-                        &(pa * a.pose),
-                        a.shape.as_ref(),
-                        &(pb * b.pose),
-                        b.shape.as_ref(),
-                    )
-                    .map_or(f64::NAN, |d| d.distance),
-                );
-            }
-        }
-        best
+        best.map(Found::Closest)
     }
 
     /// The distance from `p` (in these shapes' frame) to the nearest of their surfaces.
@@ -433,10 +420,11 @@ fn pieces_closer(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, margin: f64) -> boo
     }
 }
 
-/// Two pieces within a distance: meeting, or apart with their closest points.
+/// Two pieces within a distance: meeting, or where they are closest (apart; or, as
+/// [`pieces_contact`] finds it, the deepest pair of an overlap).
 enum Found {
     Meet,
-    Apart(query::Contact),
+    Closest(query::Contact),
 }
 
 /// Whether piece `a` at `wa` and piece `b` at `wb` meet, else their closest points, where
@@ -445,7 +433,7 @@ enum Found {
 fn pieces_closest(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, within: f64) -> Option<Found> {
     let apart = |ta: &parry3d_f64::shape::Triangle, sb: &dyn parry3d_f64::shape::Shape, wb| {
         let c = query::contact(wa, ta, wb, sb, within).ok().flatten()?;
-        Some(Found::Apart(c))
+        Some(Found::Closest(c))
     };
     match (trimesh(a), trimesh(b)) {
         (Some(ma), Some(mb)) => match closest_pair(ma, wa, mb, wb, within, f64::NEG_INFINITY)? {
@@ -460,13 +448,13 @@ fn pieces_closest(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, within: f64) -> Op
             }
         }
         (None, Some(_)) => match pieces_closest(b, wb, a, wa, within)? {
-            Found::Apart(c) => Some(Found::Apart(c.flipped())),
+            Found::Closest(c) => Some(Found::Closest(c.flipped())),
             Found::Meet => Some(Found::Meet),
         },
         (None, None) => {
             let c = query::contact(wa, a.shape.as_ref(), wb, b.shape.as_ref(), within).ok()??;
             Some(if c.dist > 0.0 {
-                Found::Apart(c)
+                Found::Closest(c)
             } else {
                 Found::Meet
             })
@@ -485,7 +473,7 @@ fn pieces_contact(
     within: f64,
 ) -> Option<query::Contact> {
     match pieces_closest(a, wa, b, wb, within)? {
-        Found::Apart(c) => Some(c),
+        Found::Closest(c) => Some(c),
         Found::Meet => match (trimesh(a), trimesh(b)) {
             (Some(ma), Some(mb)) => closest_triangles(ma, wa, mb, wb, within),
             (Some(m), None) => closest_to_convex(m, wa, b.shape.as_ref(), wb, within),
