@@ -463,18 +463,21 @@ fn measure(
             pairs: unchecked_file,
             scene: None,
         };
-        let free_pct = |f: Vec<bool>| pct(f.iter().filter(|c| !**c).count(), f.len());
+        // No answers: no share of them.
+        let free_pct = |f: Vec<bool>| {
+            (!f.is_empty()).then(|| pct(f.iter().filter(|c| !**c).count(), f.len()))
+        };
         let on = |r: &Reference, stem: &str, suffix: &str| {
             let (input, output) = (format!("{stem}.csv"), format!("{stem}_{suffix}.csv"));
             r.collides(&out.join(input), &out.join(output))
         };
-        mesh_free_targets = on(&reference, "target_joints", "exact_meshes")?.map(free_pct);
+        mesh_free_targets = on(&reference, "target_joints", "exact_meshes")?.and_then(free_pct);
         let meshes = on(&reference, "random_joints", "exact_meshes")?;
         for (v, (stem, check)) in verdicts.iter_mut().zip([
             ("answer_joints_exact", &exact),
             ("answer_joints_spheres", &spheres),
         ]) {
-            v.mesh_free_pct = on(&reference, stem, "exact_meshes")?.map(free_pct);
+            v.mesh_free_pct = on(&reference, stem, "exact_meshes")?.and_then(free_pct);
             v.in_unchecked_pairs = on(&every_other, stem, "unchecked_pairs")?
                 .map(|f| f.iter().filter(|c| **c).count());
             v.agreement = (meshes.as_ref()).map(|m| agreement_pct(m, &ours_at_zero(check)));
