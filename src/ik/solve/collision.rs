@@ -310,8 +310,17 @@ impl CollisionCheck {
     /// the link origin), `n` the direction away from the other side. Analytic; a test
     /// compares it with finite differences of the gaps.
     pub fn contact_rows(&self, q: &[f64], within: f64) -> Vec<(Placement, DVector<f64>)> {
-        let frames = self.robot.chain.link_frames(q);
-        let near = (self.model).contacts(&frames, self.scene.as_ref(), self.self_collision, within);
+        self.contact_rows_at(q, &self.robot.chain.link_frames(q), within)
+    }
+
+    /// [`Self::contact_rows`] with `q`'s link frames already computed.
+    fn contact_rows_at(
+        &self,
+        q: &[f64],
+        frames: &[nalgebra::Isometry3<f64>],
+        within: f64,
+    ) -> Vec<(Placement, DVector<f64>)> {
+        let near = (self.model).contacts(frames, self.scene.as_ref(), self.self_collision, within);
         let n = q.len();
         let mut jacobians: Vec<Option<(Point3<f64>, Matrix6xX<f64>)>> =
             vec![None; self.link_paths.len()];
@@ -348,8 +357,8 @@ impl Avoid for CollisionCheck {
     fn push_apart(&self, q: &[f64], jtj: &mut DMatrix<f64>, g: &mut DVector<f64>) -> Pushed<'_> {
         let within = self.margin + PUSH_PAST_MARGIN_M;
         let mut energy = 0.0;
-        let contacts = self.contact_rows(q, within);
         let frames = self.robot.chain.link_frames(q);
+        let contacts = self.contact_rows_at(q, &frames, within);
         // Each contact's gap, and each side's link, point in the link's frame and world, and
         // direction.
         let mut carried = Vec::with_capacity(contacts.len());

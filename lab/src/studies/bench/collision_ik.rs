@@ -385,6 +385,97 @@ fn unchecked_pairs(check: &CollisionCheck) -> (Vec<[String; 2]>, usize) {
     (pairs, at_home)
 }
 
+/// What Pinocchio says of the answers of the two checks (exact, spheres), where it ran: the
+/// targets' share free on the meshes, each check's [`Verdict`], and how many pairs may
+/// collide unchecked and how many touch at home.
+struct Judged {
+    verdicts: [Verdict; 2],
+    mesh_free_targets: Option<f64>,
+    unchecked_pairs: usize,
+    touching_at_home: usize,
+}
+
+/// Pinocchio on the exact meshes (`python` and the URDF, where given): the targets'
+/// configurations, each check's answers (on the pairs checked, and on those left unchecked
+/// that may collide), and random configurations colliding or not (each check's agreement
+/// with the meshes). `sets`: the targets', the random, and the two checks' answers' joints,
+/// written to `out` for the script.
+fn on_the_meshes(
+    out: &Path,
+    checks: [&CollisionCheck; 2],
+    joint_names: &[String],
+    sets: [&[Vec<f64>]; 4],
+    python: Option<(&Path, &Path)>,
+    scene: Option<&Path>,
+) -> Result<Judged> {
+    let [targets, random, exact_answers, sphere_answers] = sets;
+    let pairs_file = write_reference_inputs(
+        out,
+        checks[0],
+        joint_names,
+        &[
+            ("target_joints.csv", rows_of(targets)),
+            ("random_joints.csv", rows_of(random)),
+            ("answer_joints_exact.csv", rows_of(exact_answers)),
+            ("answer_joints_spheres.csv", rows_of(sphere_answers)),
+        ],
+    )?;
+    let unchecked_file = out.join("unchecked_pairs.json");
+    let (unchecked_list, touching_at_home) = unchecked_pairs(checks[0]);
+    selfmodel::core::atomic_file::write_json(&unchecked_file, &unchecked_list)?;
+    let mut judged = Judged {
+        verdicts: [Verdict::default(); 2],
+        mesh_free_targets: None,
+        unchecked_pairs: unchecked_list.len(),
+        touching_at_home,
+    };
+    let Some((python, urdf)) = python else {
+        eprintln!(
+            "bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)"
+        );
+        return Ok(judged);
+    };
+    let reference = Reference {
+        python,
+        urdf,
+        pairs: pairs_file,
+        scene,
+    };
+    let every_other = Reference {
+        python,
+        urdf,
+        pairs: unchecked_file,
+        scene: None,
+    };
+    let ours_at_zero = |check: &CollisionCheck| -> Vec<bool> {
+        (random.iter())
+            .map(|q| {
+                let frames = check.robot.chain.link_frames(q);
+                check.model.collides(&frames, check.scene.as_ref(), 0.0)
+            })
+            .collect()
+    };
+    // No answers: no share of them.
+    let free_pct =
+        |f: Vec<bool>| (!f.is_empty()).then(|| pct(f.iter().filter(|c| !**c).count(), f.len()));
+    let on = |r: &Reference, stem: &str, suffix: &str| {
+        let (input, output) = (format!("{stem}.csv"), format!("{stem}_{suffix}.csv"));
+        r.collides(&out.join(input), &out.join(output))
+    };
+    judged.mesh_free_targets = on(&reference, "target_joints", "exact_meshes")?.and_then(free_pct);
+    let meshes = on(&reference, "random_joints", "exact_meshes")?;
+    for (v, (stem, check)) in judged.verdicts.iter_mut().zip([
+        ("answer_joints_exact", checks[0]),
+        ("answer_joints_spheres", checks[1]),
+    ]) {
+        v.mesh_free_pct = on(&reference, stem, "exact_meshes")?.and_then(free_pct);
+        v.in_unchecked_pairs =
+            on(&every_other, stem, "unchecked_pairs")?.map(|f| f.iter().filter(|c| **c).count());
+        v.agreement = (meshes.as_ref()).map(|m| agreement_pct(m, &ours_at_zero(check)));
+    }
+    Ok(judged)
+}
+
 /// [`run`] once its output is checked.
 #[allow(clippy::too_many_arguments)]
 fn measure(
@@ -421,72 +512,23 @@ fn measure(
     let exact_unchecked = exact_of(&unchecked);
     let colliding = exact_unchecked.iter().filter(|q| !exact.valid(q)).count();
 
-    // Pinocchio on the exact meshes: the targets' configurations, each check's answers, and
-    // random configurations colliding or not (each check's agreement with the meshes).
+    let python = python.zip(match spec {
+        RobotSpec::Urdf { path, .. } => Some(path.as_path()),
+        RobotSpec::Builtin(_) => None,
+    });
     let random: Vec<Vec<f64>> =
         selfmodel::sim::trajectory::babbling_rows(&model.saved.ranges, cfg.seed ^ 0xA9)
             .take(cfg.targets)
             .collect();
-    let pairs_file = write_reference_inputs(
+    let judged = on_the_meshes(
         out,
-        &exact,
+        [&exact, &spheres],
         &model.saved.joint_names,
-        &[
-            ("target_joints.csv", rows_of(&qs)),
-            ("random_joints.csv", rows_of(&random)),
-            ("answer_joints_exact.csv", rows_of(&exact_answers)),
-            ("answer_joints_spheres.csv", rows_of(&sphere_answers)),
-        ],
+        [&qs, &random, &exact_answers, &sphere_answers],
+        python,
+        scene,
     )?;
-    let unchecked_file = out.join("unchecked_pairs.json");
-    let (unchecked_list, touching_at_home) = unchecked_pairs(&exact);
-    selfmodel::core::atomic_file::write_json(&unchecked_file, &unchecked_list)?;
-    let ours_at_zero = |check: &CollisionCheck| -> Vec<bool> {
-        (random.iter())
-            .map(|q| {
-                let frames = check.robot.chain.link_frames(q);
-                check.model.collides(&frames, check.scene.as_ref(), 0.0)
-            })
-            .collect()
-    };
-    let (mut verdicts, mut mesh_free_targets) = ([Verdict::default(); 2], None);
-    if let (Some(python), RobotSpec::Urdf { path, .. }) = (python, spec) {
-        let reference = Reference {
-            python,
-            urdf: path,
-            pairs: pairs_file,
-            scene,
-        };
-        let every_other = Reference {
-            python,
-            urdf: path,
-            pairs: unchecked_file,
-            scene: None,
-        };
-        // No answers: no share of them.
-        let free_pct = |f: Vec<bool>| {
-            (!f.is_empty()).then(|| pct(f.iter().filter(|c| !**c).count(), f.len()))
-        };
-        let on = |r: &Reference, stem: &str, suffix: &str| {
-            let (input, output) = (format!("{stem}.csv"), format!("{stem}_{suffix}.csv"));
-            r.collides(&out.join(input), &out.join(output))
-        };
-        mesh_free_targets = on(&reference, "target_joints", "exact_meshes")?.and_then(free_pct);
-        let meshes = on(&reference, "random_joints", "exact_meshes")?;
-        for (v, (stem, check)) in verdicts.iter_mut().zip([
-            ("answer_joints_exact", &exact),
-            ("answer_joints_spheres", &spheres),
-        ]) {
-            v.mesh_free_pct = on(&reference, stem, "exact_meshes")?.and_then(free_pct);
-            v.in_unchecked_pairs = on(&every_other, stem, "unchecked_pairs")?
-                .map(|f| f.iter().filter(|c| **c).count());
-            v.agreement = (meshes.as_ref()).map(|m| agreement_pct(m, &ours_at_zero(check)));
-        }
-    } else {
-        eprintln!(
-            "bench_collision_ik: Pinocchio's check skipped (no --python, or a built-in robot)"
-        );
-    }
+    let (verdicts, mesh_free_targets) = (judged.verdicts, judged.mesh_free_targets);
 
     let n = targets.len();
     let cpu = selfmodel::eval::compute_peak::machine_label(false);
@@ -548,10 +590,8 @@ fn measure(
         &rows,
         "Collision-free IK",
         &format!(
-            "{n} targets, each the tips' poses at a random configuration the exact check finds collision-free (the links' collision meshes and primitives keep the margin); one answer a target; the median of at least {} passes over {} s after a warm-up pass, every thread of the machine. `collision`: what decides a collision when answering (`exact`: the meshes, spheres their broad phase; `spheres`: the spheres alone; `none`: no check, its answers judged by the exact check afterwards). Exact: within 1 mm and 0.572 degrees and collision-free by the row's own check.{targets_note} `exact_mesh_free_pct`: the answers Pinocchio and coal find free on the exact meshes (the pairs checked and the scene, zero margin); `colliding_in_unchecked_pairs`: the answers they find colliding in one of the {} pairs of links the check leaves out although they may collide (`unchecked_pairs.json`: neither adjacent, as MoveIt's setup assistant counts it, nor touching at the home pose; {touching_at_home} more touch there and are allowed by design). Published rows: cuRobo's own targets, scenes and GPU, not measured here.",
-            cfg.repeats,
-            cfg.min_seconds,
-            unchecked_list.len()
+            "{n} targets, each the tips' poses at a random configuration the exact check finds collision-free (the links' collision meshes and primitives keep the margin); one answer a target; the median of at least {} passes over {} s after a warm-up pass, every thread of the machine. `collision`: what decides a collision when answering (`exact`: the meshes, spheres their broad phase; `spheres`: the spheres alone; `none`: no check, its answers judged by the exact check afterwards). Exact: within 1 mm and 0.572 degrees and collision-free by the row's own check.{targets_note} `exact_mesh_free_pct`: the answers Pinocchio and coal find free on the exact meshes (the pairs checked and the scene, zero margin); `colliding_in_unchecked_pairs`: the answers they find colliding in one of the {} pairs of links the check leaves out although they may collide (`unchecked_pairs.json`: neither adjacent, as MoveIt's setup assistant counts it, nor touching at the home pose; {} more touch there and are allowed by design). Published rows: cuRobo's own targets, scenes and GPU, not measured here.",
+            cfg.repeats, cfg.min_seconds, judged.unchecked_pairs, judged.touching_at_home
         ),
     )?;
     Ok(rows)
