@@ -8,13 +8,15 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 use parry3d_f64::math::{Pose, Vector};
 use parry3d_f64::query;
-use parry3d_f64::shape::{SharedShape, TriMesh};
+use parry3d_f64::shape::SharedShape;
 
 use crate::sim::collision::sphere::Sphere;
 use crate::sim::shape::Shape;
 
+mod tree;
 mod triangles;
 
+use tree::{Mesh, TriangleTree};
 use triangles::{
     closest_pair, closest_to_convex, closest_triangles, near_convex, near_triangles,
     nearest_triangle, triangles_intersect, winding_number,
@@ -25,6 +27,19 @@ use triangles::{
 struct Piece {
     pose: Pose,
     shape: SharedShape,
+    /// A mesh's tree over its triangles (none for a primitive).
+    tree: Option<std::sync::Arc<TriangleTree>>,
+}
+
+impl Piece {
+    /// A primitive (a convex shape) at `pose`.
+    fn convex(pose: Pose, shape: SharedShape) -> Self {
+        Self {
+            pose,
+            shape,
+            tree: None,
+        }
+    }
 }
 
 /// A link's (or an obstacle's) exact shapes and what bounds them, in its frame.
@@ -94,22 +109,22 @@ impl ExactShapes {
                 Shape::Triangle(t) => {
                     vertices.extend(t.iter().map(|p| Vector::new(p.x, p.y, p.z)));
                 }
-                Shape::Cuboid { pose, half } => pieces.push(Piece {
-                    pose: pose_of(pose),
-                    shape: SharedShape::cuboid(half.x, half.y, half.z),
-                }),
+                Shape::Cuboid { pose, half } => pieces.push(Piece::convex(
+                    pose_of(pose),
+                    SharedShape::cuboid(half.x, half.y, half.z),
+                )),
                 Shape::Cylinder {
                     pose,
                     radius,
                     half_length,
-                } => pieces.push(Piece {
-                    pose: cylinder_pose(pose),
-                    shape: SharedShape::cylinder(*half_length, *radius),
-                }),
-                Shape::Sphere { center, radius } => pieces.push(Piece {
-                    pose: Pose::from_translation(Vector::new(center.x, center.y, center.z)),
-                    shape: SharedShape::ball(*radius),
-                }),
+                } => pieces.push(Piece::convex(
+                    cylinder_pose(pose),
+                    SharedShape::cylinder(*half_length, *radius),
+                )),
+                Shape::Sphere { center, radius } => pieces.push(Piece::convex(
+                    Pose::from_translation(Vector::new(center.x, center.y, center.z)),
+                    SharedShape::ball(*radius),
+                )),
             }
         }
         let triangles = vertices.len() / 3;
@@ -120,9 +135,13 @@ impl ExactShapes {
             // A triangle soup parry cannot index (none: it takes any finite one) is left out
             // rather than failing the link.
             if let Ok(mesh) = SharedShape::trimesh(vertices, indices) {
+                let tree = mesh
+                    .as_trimesh()
+                    .map(|m| std::sync::Arc::new(TriangleTree::of(m)));
                 pieces.push(Piece {
                     pose: Pose::IDENTITY,
                     shape: mesh,
+                    tree,
                 });
             }
         }
@@ -131,10 +150,10 @@ impl ExactShapes {
 
     /// A box with half extents `half` about `pose`.
     pub fn cuboid(pose: &Isometry3<f64>, half: &Vector3<f64>) -> Self {
-        Self::new(vec![Piece {
-            pose: pose_of(pose),
-            shape: SharedShape::cuboid(half.x, half.y, half.z),
-        }])
+        Self::new(vec![Piece::convex(
+            pose_of(pose),
+            SharedShape::cuboid(half.x, half.y, half.z),
+        )])
     }
 
     /// Balls (a mesh obstacle read as the spheres covering it; one for a sphere).
@@ -142,9 +161,11 @@ impl ExactShapes {
         Self::new(
             spheres
                 .iter()
-                .map(|s| Piece {
-                    pose: Pose::from_translation(Vector::from(s.center)),
-                    shape: SharedShape::ball(s.radius),
+                .map(|s| {
+                    Piece::convex(
+                        Pose::from_translation(Vector::from(s.center)),
+                        SharedShape::ball(s.radius),
+                    )
                 })
                 .collect(),
         )
@@ -152,22 +173,22 @@ impl ExactShapes {
 
     /// The segment `a`-`b` swept by `radius`.
     pub fn capsule(a: &Point3<f64>, b: &Point3<f64>, radius: f64) -> Self {
-        Self::new(vec![Piece {
-            pose: Pose::IDENTITY,
-            shape: SharedShape::capsule(
+        Self::new(vec![Piece::convex(
+            Pose::IDENTITY,
+            SharedShape::capsule(
                 Vector::new(a.x, a.y, a.z),
                 Vector::new(b.x, b.y, b.z),
                 radius,
             ),
-        }])
+        )])
     }
 
     /// A cylinder along the local z axis of `pose`, centred on it.
     pub fn cylinder(pose: &Isometry3<f64>, radius: f64, half_height: f64) -> Self {
-        Self::new(vec![Piece {
-            pose: cylinder_pose(pose),
-            shape: SharedShape::cylinder(half_height, radius),
-        }])
+        Self::new(vec![Piece::convex(
+            cylinder_pose(pose),
+            SharedShape::cylinder(half_height, radius),
+        )])
     }
 
     fn new(pieces: Vec<Piece>) -> Self {
@@ -207,9 +228,7 @@ impl ExactShapes {
     /// Whether the convex hulls at `pa` and `pb` keep at least `margin` apart (then so do
     /// the shapes inside them); false where either has none.
     fn hulls_apart(&self, pa: &Pose, other: &Self, pb: &Pose, margin: f64) -> bool {
-        static NOHULL: std::sync::LazyLock<bool> =
-            std::sync::LazyLock::new(|| std::env::var("NOHULL").is_ok());
-        if *NOHULL {
+        if std::env::var("NOHULL").is_ok() {
             return false;
         }
         let (Some(ha), Some(hb)) = (&self.hull, &other.hull) else {
@@ -364,9 +383,12 @@ impl ExactShapes {
     }
 }
 
-/// The piece's triangle mesh, if it is one.
-fn trimesh(piece: &Piece) -> Option<&TriMesh> {
-    piece.shape.as_trimesh()
+/// The piece's triangle mesh with its tree, if it is one.
+fn trimesh(piece: &Piece) -> Option<Mesh<'_>> {
+    Some(Mesh {
+        triangles: piece.shape.as_trimesh()?,
+        tree: piece.tree.as_deref()?,
+    })
 }
 
 /// Parry's contact (`normal1` leaving the first shape towards the second) as ours: each side

@@ -2,7 +2,7 @@
 //! a convex shape) come near each other, the closest pair of them, whether two triangles
 //! meet, and a mesh's winding number about a point.
 
-use parry3d_f64::bounding_volume::BoundingVolume;
+use super::tree::{Mesh, near_pairs, near_shape};
 use parry3d_f64::math::{Pose, Vector};
 use parry3d_f64::query;
 use parry3d_f64::shape::{Shape, TriMesh, Triangle};
@@ -23,31 +23,26 @@ pub(super) fn winding_number(mesh: &TriMesh, q: Vector) -> f64 {
     total / (4.0 * std::f64::consts::PI)
 }
 
-/// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes come within
-/// `reach` of each other: both meshes' trees traversed together, so only the triangles near
-/// the other mesh are ever looked at. `reach` is read as the traversal goes: a caller that
-/// lowers it (the closest pair so far) prunes what is left.
+/// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes may come
+/// within `reach` of each other: both meshes' trees walked together ([`near_pairs`]), so only
+/// the triangles near the other mesh are ever looked at. `reach` is read as the walk goes: a
+/// caller that lowers it (the closest pair so far) prunes what is left.
 pub(super) fn near_triangles<'a>(
-    ma: &'a TriMesh,
+    ma: Mesh<'a>,
     wa: &Pose,
-    mb: &'a TriMesh,
+    mb: Mesh<'a>,
     wb: &Pose,
     reach: &'a std::cell::Cell<f64>,
 ) -> impl Iterator<Item = (u32, u32)> + 'a {
-    let ab = wa.inv_mul(wb);
-    ma.bvh().leaf_pairs(mb.bvh(), move |n1, n2| {
-        n1.aabb()
-            .loosened(reach.get().max(0.0))
-            .intersects(&n2.aabb().transform_by(&ab))
-    })
+    near_pairs(ma.tree, wa, mb.tree, wb, reach)
 }
 
 /// The closest (or deepest) pair of triangles of `ma` at `wa` and `mb` at `wb` within
 /// `within`, as parry's contact: the search narrows to the closest pair found so far.
 pub(super) fn closest_triangles(
-    ma: &TriMesh,
+    ma: Mesh,
     wa: &Pose,
-    mb: &TriMesh,
+    mb: Mesh,
     wb: &Pose,
     within: f64,
 ) -> Option<query::Contact> {
@@ -71,9 +66,9 @@ pub(super) fn closest_triangles(
 /// that close), or that meets. Each pair the trees bring is first put to [`triangles_apart`]'s
 /// cheap bounds, then to Möller's test: GJK is asked only of the few that neither decides.
 pub(super) fn closest_pair(
-    ma: &TriMesh,
+    ma: Mesh,
     wa: &Pose,
-    mb: &TriMesh,
+    mb: Mesh,
     wb: &Pose,
     within: f64,
     enough: f64,
@@ -95,10 +90,10 @@ pub(super) fn closest_pair(
                 .map(|d| d.distance),
         }
     };
-    let key = (address(ma), address(mb));
+    let key = (address(ma.triangles), address(mb.triangles));
     let hint = LAST.with(|m| m.borrow().get(&key).copied());
     let triangles = |m: &TriMesh| m.indices().len() as u32;
-    let hint = hint.filter(|&(i, j)| i < triangles(ma) && j < triangles(mb));
+    let hint = hint.filter(|&(i, j)| i < triangles(ma.triangles) && j < triangles(mb.triangles));
     let mut best = None;
     for (i, j) in hint
         .into_iter()
@@ -160,7 +155,7 @@ fn triangles_apart(t: &Triangle, u: &Triangle, limit: f64) -> bool {
 /// `within`, with its distance (0 where they meet); the search narrows to the nearest found
 /// so far and ends at the first closer than `enough`.
 pub(super) fn nearest_triangle(
-    mesh: &TriMesh,
+    mesh: Mesh,
     wm: &Pose,
     shape: &dyn Shape,
     ws: &Pose,
@@ -168,7 +163,7 @@ pub(super) fn nearest_triangle(
     enough: f64,
 ) -> Option<(u32, f64)> {
     let reach = std::cell::Cell::new(within);
-    let key = (address(mesh), address(shape));
+    let key = (address(mesh.triangles), address(shape));
     let hint = LAST.with(|m| m.borrow().get(&key).map(|h| h.0));
     let hint = hint.filter(|&i| i < mesh.indices().len() as u32);
     let mut best = None;
@@ -194,35 +189,24 @@ pub(super) fn nearest_triangle(
     best
 }
 
-/// The triangles of `mesh` at `wm` whose bounding boxes come within `reach` of the convex
-/// `shape` at `ws`: a node of the mesh's tree is looked into only while its box, loosened by
-/// `reach`, meets the shape's box and the ball around it comes within `reach` of the shape
-/// (a table's box, turned into a link's frame, bounds little; its distance to a point is
-/// exact). `reach` is read as the traversal goes.
+/// The triangles of `mesh` at `wm` whose bounding boxes may come within `reach` of the
+/// convex `shape` at `ws` ([`near_shape`]: the nearer first). `reach` is read as the walk
+/// goes.
 pub(super) fn near_convex<'a>(
-    mesh: &'a TriMesh,
+    mesh: Mesh<'a>,
     wm: &Pose,
     shape: &'a dyn Shape,
     ws: &Pose,
     reach: &'a std::cell::Cell<f64>,
 ) -> impl Iterator<Item = u32> + 'a {
-    let in_mesh = wm.inv_mul(ws);
-    let bounds = shape.compute_aabb(&in_mesh);
-    mesh.bvh().leaves(move |node| {
-        let r = reach.get().max(0.0);
-        let aabb = node.aabb();
-        aabb.loosened(r).intersects(&bounds) && {
-            let ball = aabb.bounding_sphere();
-            shape.distance_to_point(&in_mesh, ball.center, true) - ball.radius <= r
-        }
-    })
+    near_shape(mesh.tree, wm, shape, ws, reach)
 }
 
 /// The closest (or deepest) pair of points of `mesh` at `wm` and the convex `shape` at `ws`
 /// within `within`, as parry's contact (`point1` on the mesh): the search narrows to the
 /// closest triangle found so far.
 pub(super) fn closest_to_convex(
-    mesh: &TriMesh,
+    mesh: Mesh,
     wm: &Pose,
     shape: &dyn Shape,
     ws: &Pose,
