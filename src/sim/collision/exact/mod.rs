@@ -73,6 +73,9 @@ pub enum Near {
     Apart(ExactContact),
 }
 
+/// The most vertices a hull may have and still be kept to rule pairs out.
+const MAX_HULL_VERTICES: usize = 256;
+
 fn pose_of(iso: &Isometry3<f64>) -> Pose {
     let t = iso.translation.vector;
     let q = iso.rotation.quaternion();
@@ -218,6 +221,13 @@ impl ExactShapes {
         let hull = (points.len() >= 4)
             .then(|| SharedShape::convex_hull(&points))
             .flatten();
+        // A hull of many vertices costs GJK more than the triangle trees it would spare
+        // (measured on the G1's hulls of 418 to 2,167 vertices; the Panda's, of at most 152,
+        // pay).
+        let hull = hull.filter(|h| {
+            h.as_convex_polyhedron()
+                .is_some_and(|c| c.points().len() <= MAX_HULL_VERTICES)
+        });
         Self {
             pieces,
             bound,
@@ -228,9 +238,6 @@ impl ExactShapes {
     /// Whether the convex hulls at `pa` and `pb` keep at least `margin` apart (then so do
     /// the shapes inside them); false where either has none.
     fn hulls_apart(&self, pa: &Pose, other: &Self, pb: &Pose, margin: f64) -> bool {
-        if std::env::var("NOHULL").is_ok() {
-            return false;
-        }
         let (Some(ha), Some(hb)) = (&self.hull, &other.hull) else {
             return false;
         };

@@ -157,13 +157,18 @@ impl Relative {
     }
 
     /// The square of a lower bound of the distance between box `a` (first mesh) and box `b`
-    /// (second): in each one's frame, the distance from it to the other's bounds there.
-    fn gap_squared(&self, a: &Node, b: &Node) -> f64 {
+    /// (second): in each one's frame, the distance from it to the other's bounds there (the
+    /// second frame's only where the first's is `limit` or less).
+    fn gap_squared(&self, a: &Node, b: &Node, limit: f64) -> f64 {
         let d = self.rotation * b.center + self.translation - a.center;
         let in_a = (d.abs() - a.half - self.abs * b.half).max(Vector::ZERO);
+        let in_a = in_a.length_squared();
+        if in_a > limit {
+            return in_a;
+        }
         let in_b =
             ((self.turned_back * d).abs() - b.half - self.abs_back * a.half).max(Vector::ZERO);
-        in_a.length_squared().max(in_b.length_squared())
+        in_a.max(in_b.length_squared())
     }
 }
 
@@ -180,7 +185,7 @@ pub(super) fn near_pairs<'a>(
     let relative = Relative::of(&wa.inv_mul(wb));
     let mut stack = Vec::with_capacity(64);
     if let (Some(a), Some(b)) = (ta.nodes.first(), tb.nodes.first()) {
-        stack.push((0, 0, relative.gap_squared(a, b)));
+        stack.push((0, 0, relative.gap_squared(a, b, f64::INFINITY)));
     }
     NearPairs {
         a: &ta.nodes,
@@ -221,7 +226,8 @@ impl Iterator for NearPairs<'_> {
                 [(i, j + 1), (i, nb.right)]
             };
             let [first, second] = children.map(|(ci, cj)| {
-                let g = (self.relative).gap_squared(&self.a[ci as usize], &self.b[cj as usize]);
+                let g =
+                    (self.relative).gap_squared(&self.a[ci as usize], &self.b[cj as usize], r * r);
                 (ci, cj, g)
             });
             let (far, near) = if first.2 <= second.2 {
