@@ -439,6 +439,15 @@ pub(super) fn triangles_intersect(t: &[Vector; 3], u: &[Vector; 3]) -> Option<bo
 mod tests {
     use super::*;
 
+    /// A point uniform in the unit square in x and y, and `o` plus up to `spread` in z.
+    fn random_point(rng: &mut rand::rngs::StdRng, o: f64, spread: f64) -> Vector {
+        Vector::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            o + spread * rng.random_range(-1.0..1.0),
+        )
+    }
+
     /// The segment-triangle distance agrees with parry's GJK between the triangle and the
     /// segment (the slow reference) on random pairs, crossing and apart, and a cylinder's
     /// axis bound never exceeds its GJK distance.
@@ -448,13 +457,7 @@ mod tests {
         let mut crossing = 0;
         for k in 0..5_000 {
             let spread = [0.05, 1.0][k % 2];
-            let mut point = |o: f64| {
-                Vector::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    o + spread * rng.random_range(-1.0..1.0),
-                )
-            };
+            let mut point = |o: f64| random_point(&mut rng, o, spread);
             let t = [point(0.0), point(0.0), point(0.0)];
             let (p, q) = (point(0.5), point(-0.5));
             let tri = parry3d_f64::shape::Triangle::new(t[0], t[1], t[2]);
@@ -483,13 +486,7 @@ mod tests {
         let mut checked = 0;
         for k in 0..20_000 {
             let spread = [0.05, 1.0, 3.0][k % 3];
-            let mut point = |o: f64| {
-                Vector::new(
-                    rng.random_range(-1.0..1.0),
-                    rng.random_range(-1.0..1.0),
-                    o + spread * rng.random_range(-1.0..1.0),
-                )
-            };
+            let mut point = |o: f64| random_point(&mut rng, o, spread);
             let t = [point(0.0), point(0.0), point(0.0)];
             let u = [point(1.0), point(1.0), point(1.0)];
             if triangles_intersect(&t, &u) != Some(false) {
