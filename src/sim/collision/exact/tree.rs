@@ -1,5 +1,6 @@
 //! A bounding-box tree over one mesh's triangles, built once, and the pairs of triangles of
-//! two meshes that come within a distance of each other, found by walking both trees at once.
+//! two meshes (or the triangles of a mesh and a convex shape) that may come within a
+//! distance of each other, found by walking both trees at once.
 //!
 //! Why our own tree beside parry's (each `TriMesh` has one): a pair of nodes is pruned by a
 //! lower bound of the distance between their boxes, taken in each mesh's frame (the other
@@ -8,8 +9,8 @@
 //! and the nearer of two children is looked into first. parry's walk tests one box, loosened
 //! by the distance on each axis, against the other's turned box, when a pair is put on the
 //! stack. On the G1's arm and torso meshes (up to 19,000 triangles a link), a closest-pair
-//! search that looked at about 2,600 pairs of triangles through parry's walk looks at
-//! about a tenth of that through this one.
+//! search of an IK solve brought about 2,600 pairs of triangles through parry's walk and
+//! brings about 580 through this one.
 
 use std::cell::Cell;
 
