@@ -6,6 +6,11 @@
 //! Candidates: the link's inside on a lattice (`D` measured exactly, to its exact shapes) and
 //! its surface samples; chosen greedily (set cover), the one covering the most samples not yet
 //! covered first, until every sample is covered. The smaller `p`, the more spheres.
+//!
+//! `p` may differ from sample to sample ([`cover_within`]): a sphere then stands out no more
+//! than the least allowance of the samples near it, so a link's spheres can be fine only
+//! where another link comes close (each sample's allowance from its clearance) and coarse
+//! elsewhere.
 
 use std::collections::{BinaryHeap, HashMap};
 
@@ -93,13 +98,45 @@ impl PointGrid {
 /// The spheres, each standing at most `p` outside the link, that the greedy cover of
 /// `samples` picks from `candidates` (every sample inside one).
 pub fn cover(candidates: &Candidates, samples: &[Point3<f64>], p: f64) -> Vec<Sphere> {
-    let grid = PointGrid::new(samples, (2.0 * p).max(candidates.deepest() / 4.0).max(1e-4));
-    let covers = |i: usize| grid.within(samples, &candidates.centres[i], candidates.depth[i] + p);
+    cover_within(candidates, samples, &vec![p; samples.len()])
+}
+
+/// [`cover`] with an allowance of its own for each sample (`allowance[k]` for `samples[k]`,
+/// m): a candidate stands out at most the least allowance of the samples within its depth
+/// and twice the largest allowance of its centre (where any part of it that stands out
+/// lies nearest the link), so spheres are small where the allowance is, and large elsewhere.
+pub fn cover_within(
+    candidates: &Candidates,
+    samples: &[Point3<f64>],
+    allowance: &[f64],
+) -> Vec<Sphere> {
+    let most = allowance.iter().copied().fold(0.0, f64::max);
+    let grid = PointGrid::new(
+        samples,
+        (2.0 * most).max(candidates.deepest() / 4.0).max(1e-4),
+    );
+    // How far a sphere centred at `c`, `depth` inside, may stand out; each candidate's, then
+    // the samples it covers.
+    let uniform = allowance.iter().all(|&a| a == most);
+    let allowed = |c: &Point3<f64>, depth: f64| {
+        if uniform {
+            return most;
+        }
+        let near = grid.within(samples, c, depth + 2.0 * most);
+        (near.iter().map(|&s| allowance[s as usize])).fold(most, f64::min)
+    };
+    let protrusion: Vec<f64> = (0..candidates.centres.len())
+        .map(|i| allowed(&candidates.centres[i], candidates.depth[i]))
+        .collect();
+    let covers = |i: usize| {
+        let r = candidates.depth[i] + protrusion[i];
+        grid.within(samples, &candidates.centres[i], r)
+    };
     let mut covered = vec![false; samples.len()];
     let mut left = samples.len();
     // Lazy greedy: a candidate's count only falls, so one still above the next best is best.
-    // What each covers is found again when it is looked at, not kept (a large `p` would
-    // keep every sample for every candidate).
+    // What each covers is found again when it is looked at, not kept (a large allowance
+    // would keep every sample for every candidate).
     let mut heap: BinaryHeap<(usize, usize)> = (0..candidates.centres.len())
         .map(|i| (covers(i).len(), i))
         .collect();
@@ -126,12 +163,13 @@ pub fn cover(candidates: &Candidates, samples: &[Point3<f64>], p: f64) -> Vec<Sp
         let c = candidates.centres[i];
         chosen.push(Sphere {
             center: [c.x, c.y, c.z],
-            radius: candidates.depth[i] + p,
+            radius: candidates.depth[i] + protrusion[i],
         });
     }
     // A sample no candidate reaches (the surface's candidates are thinned) is a centre itself.
     for i in 0..samples.len() {
         if !covered[i] {
+            let p = allowed(&samples[i], 0.0);
             for s in grid.within(samples, &samples[i], p) {
                 covered[s as usize] = true;
             }
@@ -183,5 +221,52 @@ mod tests {
             counts.push(spheres.len());
         }
         assert!(counts[0] > counts[1] && counts[1] > counts[2], "{counts:?}");
+    }
+
+    /// Where one face's samples allow 2 mm and the rest 20 mm, no sphere that reaches within
+    /// 1 cm of that face's plane stands more than 2 mm past any face, none stands more than
+    /// 20 mm out, and the cover takes fewer spheres than 2 mm everywhere does.
+    #[test]
+    fn a_small_allowance_keeps_the_spheres_near_it_small() {
+        let shapes = [Shape::Cuboid {
+            pose: nalgebra::Isometry3::identity(),
+            half: nalgebra::Vector3::new(0.1, 0.04, 0.02),
+        }];
+        let spacing = 0.003;
+        let samples = surface_points(&shapes, spacing);
+        let reach = surface::sample_reach(&shapes, spacing);
+        let volume = Volume::of(&samples, spacing, reach, 0.01).unwrap();
+        let candidates = Candidates::of(&volume, &ExactShapes::of_link(&shapes), &samples);
+        let tight = |p: &Point3<f64>| p.x > 0.1 - 1e-9;
+        let allowance: Vec<f64> = (samples.iter())
+            .map(|p| if tight(p) { 0.002 } else { 0.02 })
+            .collect();
+        let spheres = cover_within(&candidates, &samples, &allowance);
+        for s in &samples {
+            assert!(spheres.iter().any(|x| x.contains(s, 1e-12)), "{s}");
+        }
+        for x in &spheres {
+            let c = x.center();
+            let out = [
+                c.x.abs() + x.radius - 0.1,
+                c.y.abs() + x.radius - 0.04,
+                c.z.abs() + x.radius - 0.02,
+            ];
+            let worst = out.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            assert!(worst <= 0.02 + 1e-9, "stands {worst} out");
+            if c.x + x.radius > 0.1 - 0.01 {
+                assert!(
+                    worst <= 0.002 + 1e-9,
+                    "near the tight face, stands {worst} out"
+                );
+            }
+        }
+        let uniform = cover(&candidates, &samples, 0.002);
+        assert!(
+            spheres.len() < uniform.len(),
+            "{} {}",
+            spheres.len(),
+            uniform.len()
+        );
     }
 }
