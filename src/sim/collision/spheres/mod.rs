@@ -10,6 +10,7 @@
 //! centred inside the link, found on a grid by `volume`, or on its surface, each standing at
 //! most a protrusion `p` outside it, so none stands more than `p` plus that reach outside).
 
+pub mod clearance;
 pub mod clusters;
 pub mod cover;
 pub mod surface;
