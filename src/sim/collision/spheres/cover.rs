@@ -189,8 +189,9 @@ mod tests {
     use crate::sim::collision::spheres::{surface, surface_points};
     use crate::sim::shape::Shape;
 
-    #[test]
-    fn every_sample_is_covered_and_no_sphere_stands_out_further_than_asked() {
+    /// The test box (half extents 100, 40 and 20 mm): its surface samples 3 mm apart and the
+    /// cover's candidates.
+    fn box_samples_and_candidates() -> (Vec<Point3<f64>>, Candidates) {
         let shapes = [Shape::Cuboid {
             pose: nalgebra::Isometry3::identity(),
             half: nalgebra::Vector3::new(0.1, 0.04, 0.02),
@@ -199,23 +200,33 @@ mod tests {
         let samples = surface_points(&shapes, spacing);
         let reach = surface::sample_reach(&shapes, spacing);
         let volume = Volume::of(&samples, spacing, reach, 0.01).unwrap();
-        let exact = ExactShapes::of_link(&shapes);
-        let candidates = Candidates::of(&volume, &exact, &samples);
+        let candidates = Candidates::of(&volume, &ExactShapes::of_link(&shapes), &samples);
+        (samples, candidates)
+    }
+
+    /// How far sphere `x` stands past the test box (a box's outside distance is exact: its
+    /// farthest reach past each face).
+    fn past_the_box(x: &Sphere) -> f64 {
+        let c = x.center();
+        let out = [
+            c.x.abs() + x.radius - 0.1,
+            c.y.abs() + x.radius - 0.04,
+            c.z.abs() + x.radius - 0.02,
+        ];
+        out.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    #[test]
+    fn every_sample_is_covered_and_no_sphere_stands_out_further_than_asked() {
+        let (samples, candidates) = box_samples_and_candidates();
         let mut counts = Vec::new();
         for p in [0.002, 0.005, 0.02] {
             let spheres = cover(&candidates, &samples, p);
             for s in &samples {
                 assert!(spheres.iter().any(|x| x.contains(s, 1e-12)), "{s}");
             }
-            // A box's outside distance is exact: each sphere's farthest reach past each face.
             for x in &spheres {
-                let c = x.center();
-                let out = [
-                    c.x.abs() + x.radius - 0.1,
-                    c.y.abs() + x.radius - 0.04,
-                    c.z.abs() + x.radius - 0.02,
-                ];
-                let worst = out.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                let worst = past_the_box(x);
                 assert!(worst <= p + 1e-9, "p {p}: stands {worst} out");
             }
             counts.push(spheres.len());
@@ -228,15 +239,7 @@ mod tests {
     /// 20 mm out, and the cover takes fewer spheres than 2 mm everywhere does.
     #[test]
     fn a_small_allowance_keeps_the_spheres_near_it_small() {
-        let shapes = [Shape::Cuboid {
-            pose: nalgebra::Isometry3::identity(),
-            half: nalgebra::Vector3::new(0.1, 0.04, 0.02),
-        }];
-        let spacing = 0.003;
-        let samples = surface_points(&shapes, spacing);
-        let reach = surface::sample_reach(&shapes, spacing);
-        let volume = Volume::of(&samples, spacing, reach, 0.01).unwrap();
-        let candidates = Candidates::of(&volume, &ExactShapes::of_link(&shapes), &samples);
+        let (samples, candidates) = box_samples_and_candidates();
         let tight = |p: &Point3<f64>| p.x > 0.1 - 1e-9;
         let allowance: Vec<f64> = (samples.iter())
             .map(|p| if tight(p) { 0.002 } else { 0.02 })
@@ -246,13 +249,7 @@ mod tests {
             assert!(spheres.iter().any(|x| x.contains(s, 1e-12)), "{s}");
         }
         for x in &spheres {
-            let c = x.center();
-            let out = [
-                c.x.abs() + x.radius - 0.1,
-                c.y.abs() + x.radius - 0.04,
-                c.z.abs() + x.radius - 0.02,
-            ];
-            let worst = out.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (c, worst) = (x.center(), past_the_box(x));
             assert!(worst <= 0.02 + 1e-9, "stands {worst} out");
             if c.x + x.radius > 0.1 - 0.01 {
                 assert!(
