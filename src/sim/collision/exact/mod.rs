@@ -16,10 +16,10 @@ use crate::sim::shape::Shape;
 mod tree;
 mod triangles;
 
-use tree::{Mesh, TriangleTree};
+use tree::{Mesh, TriangleTree, near_pairs, near_shape};
 use triangles::{
-    closest_pair, closest_to_convex, closest_triangles, near_convex, near_triangles,
-    nearest_triangle, triangles_intersect, winding_number,
+    closest_pair, closest_to_convex, closest_triangles, nearest_triangle, triangles_intersect,
+    winding_number,
 };
 
 /// One convex piece or mesh of a link (or an obstacle), where it sits in the link's frame.
@@ -427,7 +427,7 @@ fn pieces_closer(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, margin: f64) -> boo
         (Some(ma), Some(mb)) if margin <= 0.0 => {
             // Both triangles in the first mesh's frame, tested directly.
             let ab = wa.inv_mul(wb);
-            near_triangles(ma, wa, mb, wb, &reach).any(|(i, j)| {
+            near_pairs(ma.tree, wa, mb.tree, wb, &reach).any(|(i, j)| {
                 let (ta, tb) = (ma.triangle(i), mb.triangle(j));
                 let tb_in_a = [ab * tb.a, ab * tb.b, ab * tb.c];
                 triangles_intersect(&[ta.a, ta.b, ta.c], &tb_in_a)
@@ -441,9 +441,9 @@ fn pieces_closer(a: &Piece, wa: &Pose, b: &Piece, wb: &Pose, margin: f64) -> boo
         (None, Some(m)) if margin > 0.0 => {
             nearest_triangle(m, wb, a.shape.as_ref(), wa, margin, margin).is_some()
         }
-        (Some(m), None) => near_convex(m, wa, b.shape.as_ref(), wb, &reach)
+        (Some(m), None) => near_shape(m.tree, wa, b.shape.as_ref(), wb, &reach)
             .any(|i| closer(&m.triangle(i), wa, b.shape.as_ref(), wb)),
-        (None, Some(m)) => near_convex(m, wb, a.shape.as_ref(), wa, &reach)
+        (None, Some(m)) => near_shape(m.tree, wb, a.shape.as_ref(), wa, &reach)
             .any(|i| closer(a.shape.as_ref(), wa, &m.triangle(i), wb)),
         (None, None) => closer(a.shape.as_ref(), wa, b.shape.as_ref(), wb),
     }

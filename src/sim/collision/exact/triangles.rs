@@ -23,20 +23,6 @@ pub(super) fn winding_number(mesh: &TriMesh, q: Vector) -> f64 {
     total / (4.0 * std::f64::consts::PI)
 }
 
-/// The pairs of triangles of `ma` at `wa` and `mb` at `wb` whose bounding boxes may come
-/// within `reach` of each other: both meshes' trees walked together ([`near_pairs`]), so only
-/// the triangles near the other mesh are ever looked at. `reach` is read as the walk goes: a
-/// caller that lowers it (the closest pair so far) prunes what is left.
-pub(super) fn near_triangles<'a>(
-    ma: Mesh<'a>,
-    wa: &Pose,
-    mb: Mesh<'a>,
-    wb: &Pose,
-    reach: &'a std::cell::Cell<f64>,
-) -> impl Iterator<Item = (u32, u32)> + 'a {
-    near_pairs(ma.tree, wa, mb.tree, wb, reach)
-}
-
 /// The closest (or deepest) pair of triangles of `ma` at `wa` and `mb` at `wb` within
 /// `within`, as parry's contact: the search narrows to the closest pair found so far.
 pub(super) fn closest_triangles(
@@ -48,7 +34,7 @@ pub(super) fn closest_triangles(
 ) -> Option<query::Contact> {
     let reach = std::cell::Cell::new(within);
     let mut best: Option<query::Contact> = None;
-    for (i, j) in near_triangles(ma, wa, mb, wb, &reach) {
+    for (i, j) in near_pairs(ma.tree, wa, mb.tree, wb, &reach) {
         let found = query::contact(wa, &ma.triangle(i), wb, &mb.triangle(j), reach.get());
         if let Ok(Some(c)) = found
             && best.is_none_or(|b| c.dist < b.dist)
@@ -97,7 +83,7 @@ pub(super) fn closest_pair(
     let mut best = None;
     for (i, j) in hint
         .into_iter()
-        .chain(near_triangles(ma, wa, mb, wb, &reach))
+        .chain(near_pairs(ma.tree, wa, mb.tree, wb, &reach))
     {
         let Some(d) = distance(i, j) else {
             continue;
@@ -171,7 +157,7 @@ pub(super) fn nearest_triangle(
     let mut best = None;
     for i in hint
         .into_iter()
-        .chain(near_convex(mesh, wm, shape, ws, &reach))
+        .chain(near_shape(mesh.tree, wm, shape, ws, &reach))
     {
         let t = mesh.triangle(i);
         if let Some((a, b, r)) = axis
@@ -230,19 +216,6 @@ fn segment_triangle_distance(p: Vector, q: Vector, tri: &[Vector; 3]) -> f64 {
     best.sqrt()
 }
 
-/// The triangles of `mesh` at `wm` whose bounding boxes may come within `reach` of the
-/// convex `shape` at `ws` ([`near_shape`]: the nearer first). `reach` is read as the walk
-/// goes.
-pub(super) fn near_convex<'a>(
-    mesh: Mesh<'a>,
-    wm: &Pose,
-    shape: &'a dyn Shape,
-    ws: &Pose,
-    reach: &'a std::cell::Cell<f64>,
-) -> impl Iterator<Item = u32> + 'a {
-    near_shape(mesh.tree, wm, shape, ws, reach)
-}
-
 /// The closest (or deepest) pair of points of `mesh` at `wm` and the convex `shape` at `ws`
 /// within `within`, as parry's contact (`point1` on the mesh): the search narrows to the
 /// closest triangle found so far.
@@ -255,7 +228,7 @@ pub(super) fn closest_to_convex(
 ) -> Option<query::Contact> {
     let reach = std::cell::Cell::new(within);
     let mut best: Option<query::Contact> = None;
-    for i in near_convex(mesh, wm, shape, ws, &reach) {
+    for i in near_shape(mesh.tree, wm, shape, ws, &reach) {
         let found = query::contact(wm, &mesh.triangle(i), ws, shape, reach.get());
         if let Ok(Some(c)) = found
             && best.is_none_or(|b| c.dist < b.dist)
