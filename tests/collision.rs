@@ -79,11 +79,11 @@ fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
             continue;
         };
         assert_eq!(score.coverage_pct, 100.0, "{score:?}");
-        // The fit's promise: no sphere stands farther out than its target and the samples'
-        // reach (1.7 mm at 3 mm), measured on the exact surface.
+        // The fit's promise: no sphere stands farther out than its target, measured on the
+        // exact surface (the cover holds each triangle whole: no samples' reach past it).
         if let SphereBudget::Protrusion { mm, .. } = fit.budget {
             assert!(
-                score.protrusion_max_mm <= mm + 1.8,
+                score.protrusion_max_mm <= mm + 1e-3,
                 "{name}: {score:?} past {mm} mm"
             );
         }
@@ -94,7 +94,7 @@ fn assert_spheres_cover(robot: &Robot, fit: &SphereFit) -> usize {
 #[test]
 fn spheres_cover_the_exact_collision_meshes_of_the_panda_the_ur5_and_the_g1() {
     let shaped = SphereFit::default();
-    let bounded = SphereFit::with_budget(None, Some(20.0)).unwrap();
+    let bounded = SphereFit::with_budget(None, Some(20.0), false).unwrap();
     for (path, tip) in [
         ("franka_description/urdf/panda.urdf", "panda_hand"),
         ("ur_description/urdf/ur5.urdf", "tool0"),
@@ -124,6 +124,84 @@ fn spheres_cover_the_exact_collision_meshes_of_the_panda_the_ur5_and_the_g1() {
         eprintln!("{path}: {m} spheres within 20 mm");
         assert!(m > n, "{m} spheres within 20 mm, {n} shaped");
     }
+}
+
+/// On an arm whose second link swings down onto its base, spheres fine where the links come
+/// close (`--where-close`) call fewer of the configurations free on the exact shapes
+/// colliding than spheres standing out the same 20 mm everywhere (by over a fifth), miss
+/// none that collide, and cover every link.
+#[test]
+fn spheres_fine_where_links_come_close_raise_fewer_false_alarms() {
+    use rand::SeedableRng;
+    let dir = common::tempdir();
+    let urdf = dir.path().join("swing.urdf");
+    let link = |name: &str, geometry: &str, z: f64| {
+        format!(
+            "<link name=\"{name}\"><visual><origin xyz=\"0 0 {z}\"/><geometry>{geometry}</geometry></visual></link>"
+        )
+    };
+    let joint = |name: &str, parent: &str, child: &str, z: f64, axis: &str| {
+        format!(
+            "<joint name=\"{name}\" type=\"revolute\"><parent link=\"{parent}\"/><child link=\"{child}\"/><origin xyz=\"0 0 {z}\"/><axis xyz=\"{axis}\"/><limit lower=\"-2.6\" upper=\"2.6\" effort=\"1\" velocity=\"1\"/></joint>"
+        )
+    };
+    let text = [
+        "<robot name=\"swing\">".to_string(),
+        link("base", "<box size=\"0.3 0.3 0.1\"/>", 0.05),
+        link("post", "<cylinder radius=\"0.03\" length=\"0.2\"/>", 0.1),
+        link("swing", "<box size=\"0.06 0.06 0.3\"/>", 0.15),
+        joint("turn", "base", "post", 0.1, "0 0 1"),
+        joint("tilt", "post", "swing", 0.2, "0 1 0"),
+        "</robot>".to_string(),
+    ]
+    .concat();
+    std::fs::write(&urdf, text).unwrap();
+    let robot = load_urdf_with(
+        &urdf,
+        &UrdfOptions {
+            geometry: GeometryKind::Visual,
+            ..UrdfOptions::default()
+        },
+    )
+    .unwrap();
+    let sampling = PairSampling {
+        samples: 2_000,
+        ..PairSampling::default()
+    };
+    let model = |close: bool| {
+        let fit = SphereFit::with_budget(None, Some(20.0), close).unwrap();
+        selfmodel::sim::collision::model_for(&robot, None, &fit, &sampling).unwrap()
+    };
+    let (uniform, close) = (model(false), model(true));
+    assert_eq!(uniform.pairs, close.pairs);
+    assert!(!close.pairs.is_empty());
+    for (g, s) in robot.geometry.iter().zip(&close.spheres) {
+        for p in selfmodel::sim::collision::spheres::surface_points(g.shapes(), 0.002) {
+            assert!(s.iter().any(|x| x.contains(&p, 0.0)), "{p} uncovered");
+        }
+    }
+    let exact = close
+        .clone()
+        .with_exact(selfmodel::sim::collision::exact_links(&robot), Some(0.0));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let ranges = robot.chain.joint_ranges();
+    let (mut free, mut alarms) = (0, [0, 0]);
+    for _ in 0..2_000 {
+        let q = selfmodel::sim::trajectory::uniform_in(&mut rng, &ranges);
+        let frames = robot.chain.link_frames(&q);
+        let colliding = exact.self_collides(&frames, 0.0);
+        for (k, m) in [&uniform, &close].into_iter().enumerate() {
+            let says = m.self_collides(&frames, 0.0);
+            assert!(says || !colliding, "a collision missed at {q:?}");
+            alarms[k] += usize::from(says && !colliding);
+        }
+        free += usize::from(!colliding);
+    }
+    eprintln!("{free} free; false alarms: {alarms:?} (20 mm everywhere, fine where close)");
+    assert!(free > 100 && alarms[0] > 20, "{free} {alarms:?}");
+    // At most 256 spheres a link: the base's wide top face, close to the swinging link
+    // wherever it passes, is covered coarser than its allowance asks (see the docs).
+    assert!(10 * alarms[1] < 8 * alarms[0], "{alarms:?}");
 }
 
 #[test]

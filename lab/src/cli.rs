@@ -67,6 +67,7 @@ const FLAGS: &[(&str, &str)] = &[
     ("train", "--train"),
     ("urdf", "--urdf"),
     ("view", "--view"),
+    ("where_close", "--where-close"),
 ];
 
 /// A library message in the command line's terms: each setting it names in backticks
@@ -210,6 +211,11 @@ pub struct SphereFitArgs {
     /// millimetres outside it.
     #[arg(long, value_name = "MM", allow_hyphen_values = true)]
     pub protrusion_mm: Option<f64>,
+    /// With --protrusion-mm: each point's spheres stand out at most half the least distance
+    /// the links checked against it come to it, over 2,000 random collision-free
+    /// configurations (fine where links come close, coarse elsewhere).
+    #[arg(long)]
+    pub where_close: bool,
 }
 
 impl SphereFitArgs {
@@ -218,6 +224,7 @@ impl SphereFitArgs {
         selfmodel::sim::collision::spheres::SphereFit::with_budget(
             self.spheres_per_link,
             self.protrusion_mm,
+            self.where_close,
         )
     }
 }

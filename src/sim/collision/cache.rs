@@ -76,6 +76,9 @@ pub fn key(robot: &Robot, srdf: Option<&str>, fit: &SphereFit, sampling: &PairSa
         "sampling": sampling,
         // The pairs are decided on the links' exact shapes (before: on their spheres).
         "pairs_decided_on": "exact shapes",
+        // Spheres hold every triangle of the surface whole (before: every sample, grown by
+        // how far the surface lies from its samples).
+        "spheres_hold": "triangles",
     });
     bytes.extend_from_slice(settings.to_string().as_bytes());
     crate::core::input_file::fnv(&bytes)

@@ -3,7 +3,8 @@
 //! phase, the pairs of links checked (`pairs`: an SRDF's `<disable_collisions>` or
 //! MoveIt's computed matrix), obstacles in cuRobo's scene format (`scene`) and the check
 //! itself (`model`), the contacts an optimiser pushes apart (`contacts`); spheres a user
-//! supplies in cuRobo's format (`user_spheres`); the model kept in a file (`cache`).
+//! supplies in cuRobo's format (`user_spheres`); spheres fine only where links come close
+//! (`where_close`); the model kept in a file (`cache`).
 
 pub mod cache;
 pub mod contacts;
@@ -15,6 +16,7 @@ pub mod sphere;
 pub mod sphere_score;
 pub mod spheres;
 pub mod user_spheres;
+pub mod where_close;
 
 use rayon::prelude::*;
 
@@ -112,6 +114,16 @@ pub fn model_for(
     fit: &SphereFit,
     sampling: &PairSampling,
 ) -> Result<CollisionModel> {
+    if let spheres::SphereBudget::WhereClose { .. } = fit.budget {
+        // Fine where the links checked come close: which those are, from the default fit.
+        let default = fit_robot(robot, &SphereFit::default())?;
+        let base = model_with(robot, default, Some(0.0), allowed, sampling)?;
+        let fitted = where_close::fit_robot(robot, &base, fit)?;
+        return Ok(CollisionModel {
+            allowed: base.allowed.clone(),
+            ..CollisionModel::with_pairs(&robot.chain, fitted, base.pairs)
+        });
+    }
     model_with(robot, fit_robot(robot, fit)?, Some(0.0), allowed, sampling)
 }
 

@@ -129,7 +129,11 @@ fn measure(
     out: &Path,
 ) -> Result<(Vec<AgreementRow>, Vec<LinkFitScore>)> {
     let fitted = Spheres::Fitted(cfg.fit);
-    let exact = CollisionCheck::with_spheres(spec, fitted, None, None, true, 0.0)?;
+    // Fitted on every core (the checks are timed on one: the caller's pool).
+    let exact = rayon::ThreadPoolBuilder::new()
+        .build()
+        .map_err(|e| Error::Config(format!("a thread pool: {e}")))?
+        .install(|| CollisionCheck::with_spheres(spec, fitted, None, None, true, 0.0))?;
     let given = (cfg.spheres_file.as_deref())
         .map(|file| CollisionCheck::with_spheres(spec, Spheres::File(file), None, None, true, 0.0))
         .transpose()?

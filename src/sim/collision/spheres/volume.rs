@@ -126,6 +126,11 @@ impl Volume {
         outside
     }
 
+    /// A voxel's side (m).
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
     /// Where `p` lies: in the voxel whose centre is nearest; outside beyond the grid.
     pub fn place(&self, p: &Point3<f64>) -> Place {
         let u = (p - self.origin) / self.cell;
