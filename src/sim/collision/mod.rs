@@ -69,15 +69,16 @@ pub fn fit_robot(robot: &Robot, fit: &SphereFit) -> Result<Vec<Vec<Sphere>>> {
         .geometry
         .par_iter()
         .zip(&robot.chain.links)
-        .map(|(g, name)| {
-            spheres::fit_link(g.shapes(), fit).map_err(|e| match e {
-                Error::Config(why) => {
-                    Error::Config(format!("{}: link \"{name}\": {why}", robot.name))
-                }
-                other => other,
-            })
-        })
+        .map(|(g, name)| spheres::fit_link(g.shapes(), fit).map_err(in_link(robot, name)))
         .collect()
+}
+
+/// A link's fit's error, naming the robot and the link.
+pub(crate) fn in_link<'a>(robot: &'a Robot, name: &'a str) -> impl Fn(Error) -> Error + 'a {
+    move |e| match e {
+        Error::Config(why) => Error::Config(format!("{}: link \"{name}\": {why}", robot.name)),
+        other => other,
+    }
 }
 
 /// The allowed pairs MoveIt's setup assistant would compute for `robot`, decided as it

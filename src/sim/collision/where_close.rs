@@ -14,7 +14,7 @@ use rand::SeedableRng;
 use rand::rngs::StdRng;
 use rayon::prelude::*;
 
-use crate::core::error::{Error, Result};
+use crate::core::error::Result;
 use crate::sim::collision::model::CollisionModel;
 use crate::sim::collision::spheres::{self, Sphere, SphereBudget, SphereFit, Surface};
 use crate::sim::robot::Robot;
@@ -70,14 +70,8 @@ pub fn fit_robot(
             let allowance: Vec<f64> = (c.iter())
                 .map(|&d| (share * d).clamp(FLOOR_M.min(most_m), most_m))
                 .collect();
-            spheres::fit_link_within(g.shapes(), fit.spacing_m, &allowance, most).map_err(|e| {
-                match e {
-                    Error::Config(why) => {
-                        Error::Config(format!("{}: link \"{name}\": {why}", robot.name))
-                    }
-                    other => other,
-                }
-            })
+            spheres::fit_link_within(g.shapes(), fit.spacing_m, &allowance, most)
+                .map_err(crate::sim::collision::in_link(robot, name))
         })
         .collect()
 }

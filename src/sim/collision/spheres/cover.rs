@@ -20,7 +20,7 @@ use nalgebra::Point3;
 use crate::sim::collision::exact::ExactShapes;
 use crate::sim::collision::sphere::Sphere;
 use crate::sim::collision::spheres::holding::Holding;
-use crate::sim::collision::spheres::surface::Surface;
+use crate::sim::collision::spheres::surface::{Surface, centroid};
 use crate::sim::collision::spheres::volume::Volume;
 
 /// The most candidate centres of each kind (inside, on the surface) a link is given.
@@ -64,7 +64,7 @@ impl<'a> Candidates<'a> {
     /// into the link, 1 to 64 voxels deep, deepest first, where the grid says inside; each
     /// with its exact depth.
     fn beneath(&self, t: &[Point3<f64>; 3]) -> Vec<(Point3<f64>, f64)> {
-        let m = Point3::from((t[0].coords + t[1].coords + t[2].coords) / 3.0);
+        let m = centroid(t);
         let Some(n) = (t[1] - t[0]).cross(&(t[2] - t[0])).try_normalize(1e-18) else {
             return Vec::new();
         };
@@ -125,13 +125,13 @@ pub fn cover_within(candidates: &Candidates, surface: &Surface, allowance: &[f64
         if covered[t] {
             continue;
         }
-        let corners = surface.triangles[t].map(|k| points[k as usize]);
+        let corners = surface.corners(t as u32);
         let holds = |c: &Point3<f64>, r: f64| holding.reach_of(c, t as u32) <= r;
         let deep = (candidates.beneath(&corners).into_iter())
             .map(|(c, depth)| (c, depth + allowed(&holding, &c, depth)))
             .find(|(c, r)| holds(c, *r) && candidates.exact.contains(c));
         let (c, r) = deep.unwrap_or_else(|| {
-            let c = Point3::from((corners[0].coords + corners[1].coords + corners[2].coords) / 3.0);
+            let c = centroid(&corners);
             (c, holding.reach_of(&c, t as u32))
         });
         for h in holding.held(&c, r) {

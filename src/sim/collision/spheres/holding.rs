@@ -120,6 +120,17 @@ impl<'a> Holding<'a> {
         self.held(&sphere.center(), sphere.radius)
     }
 
+    /// How many of `spheres` hold each triangle whole.
+    pub fn holders(&mut self, spheres: &[Sphere]) -> Vec<u32> {
+        let mut holders = vec![0u32; self.surface.triangles.len()];
+        for s in spheres {
+            for t in self.held_by(s) {
+                holders[t as usize] += 1;
+            }
+        }
+        holders
+    }
+
     /// The smallest ball about `c` that holds triangle `t` whole (its farthest corner's
     /// distance).
     pub fn reach_of(&self, c: &Point3<f64>, t: u32) -> f64 {

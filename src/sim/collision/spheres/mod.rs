@@ -257,15 +257,9 @@ fn covered(
 /// held, and a sphere the cover needed when it was chosen but others made redundant since no
 /// longer stands out.
 fn tighten(spheres: &mut Vec<Sphere>, surface: &Surface) {
-    let cell = spheres.iter().map(|s| s.radius).fold(1e-4, f64::max) / 2.0;
-    let mut holding = holding::Holding::new(surface, cell);
+    let mut holding = holding_for(surface, spheres);
     // How many kept spheres hold each triangle.
-    let mut holders = vec![0u32; surface.triangles.len()];
-    for s in spheres.iter() {
-        for t in holding.held_by(s) {
-            holders[t as usize] += 1;
-        }
-    }
+    let mut holders = holding.holders(spheres);
     let mut order: Vec<usize> = (0..spheres.len()).collect();
     order.sort_by(|&a, &b| spheres[b].radius.total_cmp(&spheres[a].radius));
     let mut keep = vec![true; spheres.len()];
@@ -290,6 +284,13 @@ fn tighten(spheres: &mut Vec<Sphere>, surface: &Surface) {
     spheres.retain(|_| k.next().unwrap_or(true));
 }
 
+/// `surface`'s triangles ready to be asked which of `spheres` hold them (kept in cubes of half
+/// the largest radius).
+fn holding_for<'a>(surface: &'a Surface, spheres: &[Sphere]) -> holding::Holding<'a> {
+    let cell = spheres.iter().map(|s| s.radius).fold(1e-4, f64::max) / 2.0;
+    holding::Holding::new(surface, cell)
+}
+
 /// Every triangle of `surface` no sphere holds put inside the sphere that must grow least to
 /// hold it, then every radius grown by the surface's `curvature` (how far it lies outside its
 /// triangles).
@@ -297,26 +298,13 @@ fn grow(spheres: &mut [Sphere], surface: &Surface) {
     if spheres.is_empty() {
         return;
     }
-    let cell = spheres.iter().map(|s| s.radius).fold(1e-4, f64::max) / 2.0;
-    let mut held = vec![false; surface.triangles.len()];
-    {
-        let mut holding = holding::Holding::new(surface, cell);
-        for s in spheres.iter() {
-            for t in holding.held_by(s) {
-                held[t as usize] = true;
-            }
-        }
-    }
-    let corner = |k: u32| surface.points[k as usize];
-    for (t, corners) in surface.triangles.iter().enumerate() {
-        if held[t] {
+    let mut holding = holding_for(surface, spheres);
+    let holders = holding.holders(spheres);
+    for t in 0..holders.len() {
+        if holders[t] > 0 {
             continue;
         }
-        let need = |s: &Sphere| {
-            (corners.iter())
-                .map(|&k| (corner(k) - s.center()).norm())
-                .fold(0.0, f64::max)
-        };
+        let need = |s: &Sphere| holding.reach_of(&s.center(), t as u32);
         let grown = (spheres.iter_mut())
             .min_by(|a, b| (need(a) - a.radius).total_cmp(&(need(b) - b.radius)))
             .expect("a sphere");

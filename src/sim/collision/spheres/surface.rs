@@ -46,6 +46,11 @@ impl Surface {
         surface
     }
 
+    /// Triangle `t`'s three corners.
+    pub fn corners(&self, t: u32) -> [Point3<f64>; 3] {
+        self.triangles[t as usize].map(|k| self.points[k as usize])
+    }
+
     /// A triangle's corners and the corners of its subdivision into `n^2` sub-triangles, `n`
     /// the fewest with edges at most `spacing` long; the sub-triangles.
     fn add_triangle(&mut self, t: &[Point3<f64>; 3], spacing: f64) {
@@ -126,6 +131,11 @@ impl Surface {
         let sagitta = radius * (1.0 - (std::f64::consts::PI / around as f64).cos());
         self.curvature = self.curvature.max(sagitta);
     }
+}
+
+/// A triangle's centroid.
+pub fn centroid(t: &[Point3<f64>; 3]) -> Point3<f64> {
+    Point3::from((t[0].coords + t[1].coords + t[2].coords) / 3.0)
 }
 
 /// Points of the surface of `shapes`: the corners of [`Surface::of`]'s triangles.
