@@ -70,30 +70,20 @@ impl CollisionModel {
         let placed = self.place(frames);
         let mut out = Vec::new();
         if self_collision {
-            for &(a, b) in &self.pairs {
-                if let (Some(ba), Some(bb)) = (&self.bounds[a], &self.bounds[b]) {
-                    let (pa, pb) = (frames[a] * ba.center(), frames[b] * bb.center());
-                    if (pa - pb).norm() - ba.radius - bb.radius >= within {
-                        continue;
-                    }
-                }
-                sphere_pair_contacts(&placed, (a, b), within, &mut out);
+            for &pair in &self.pairs {
+                self.sphere_pair_contacts(frames, &placed, pair, within, &mut out);
             }
         }
         let Some(scene) = scene else {
             return out;
         };
-        for (a, spheres) in placed.iter().enumerate() {
-            if !self.moving[a] {
+        let gap = |c: &Point3<f64>, r: f64| scene.gap(c, r);
+        for a in 0..placed.len() {
+            if !self.moving[a] || !self.trees[a].closer_to(&frames[a], gap, within) {
                 continue;
             }
-            if let Some(b) = &self.bounds[a]
-                && scene.gap(&(frames[a] * b.center()), b.radius) >= within
-            {
-                continue;
-            }
-            for (k, (_, o)) in scene.obstacles.iter().enumerate() {
-                sphere_obstacle_contacts(spheres, (a, k), o, within, &mut out);
+            for k in 0..scene.obstacles.len() {
+                self.sphere_obstacle_contacts(frames, &placed, (a, k), scene, within, &mut out);
             }
         }
         out
@@ -119,7 +109,7 @@ impl CollisionModel {
         let mut out = Vec::new();
         if self_collision {
             for &(a, b) in &self.pairs {
-                if self.spheres_keep_pair_apart(x, &placed, frames, (a, b), within) {
+                if self.spheres_keep_pair_apart(x, frames, (a, b), within) {
                     continue;
                 }
                 let (la, lb) = (&x.links[a], &x.links[b]);
@@ -129,7 +119,7 @@ impl CollisionModel {
                     Some(Near::Apart(c)) => c,
                     Some(Near::Overlapping) => {
                         let before = out.len();
-                        sphere_pair_contacts(&placed, (a, b), within, &mut out);
+                        self.sphere_pair_contacts(frames, &placed, (a, b), within, &mut out);
                         if out.len() > before {
                             continue;
                         }
@@ -165,7 +155,8 @@ impl CollisionModel {
                     Some(Near::Apart(c)) => c,
                     Some(Near::Overlapping) => {
                         let before = out.len();
-                        sphere_obstacle_contacts(&placed[a], (a, k), obstacle, within, &mut out);
+                        let at = (a, k);
+                        self.sphere_obstacle_contacts(frames, &placed, at, scene, within, &mut out);
                         if out.len() > before {
                             continue;
                         }
@@ -187,44 +178,53 @@ impl CollisionModel {
     }
 }
 
-/// The contacts of link `a`'s and link `b`'s spheres closer than `within`.
-fn sphere_pair_contacts(
-    placed: &[Vec<Placed>],
-    (a, b): (usize, usize),
-    within: f64,
-    out: &mut Vec<Placement>,
-) {
-    for (i, sa) in placed[a].iter().enumerate() {
-        for (j, sb) in placed[b].iter().enumerate() {
+impl CollisionModel {
+    /// The contacts of link `a`'s and link `b`'s spheres closer than `within` (in the order
+    /// of their spheres).
+    fn sphere_pair_contacts(
+        &self,
+        frames: &[Isometry3<f64>],
+        placed: &[Vec<Placed>],
+        (a, b): (usize, usize),
+        within: f64,
+        out: &mut Vec<Placement>,
+    ) {
+        let (ta, tb) = (&self.trees[a], &self.trees[b]);
+        let mut pairs = ta.pairs_within(&frames[a], tb, &frames[b], within);
+        pairs.sort_unstable();
+        for (i, j) in pairs {
+            let (sa, sb) = (&placed[a][i], &placed[b][j]);
             let d = sa.center - sb.center;
-            let gap = d.norm() - sa.radius - sb.radius;
-            if gap < within {
-                let n = d.try_normalize(1e-12).unwrap_or_else(Vector3::z);
-                out.push(Placement {
-                    contact: Contact::Spheres { a, i, b, j },
-                    gap,
-                    first: (a, sa.center, n),
-                    second: Some((b, sb.center, -n)),
-                });
-            }
+            let n = d.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+            out.push(Placement {
+                contact: Contact::Spheres { a, i, b, j },
+                gap: d.norm() - sa.radius - sb.radius,
+                first: (a, sa.center, n),
+                second: Some((b, sb.center, -n)),
+            });
         }
     }
-}
 
-/// The contacts of link `a`'s spheres with obstacle `k` (`o`) closer than `within`.
-fn sphere_obstacle_contacts(
-    spheres: &[Placed],
-    (a, k): (usize, usize),
-    o: &Obstacle,
-    within: f64,
-    out: &mut Vec<Placement>,
-) {
-    for (i, s) in spheres.iter().enumerate() {
-        let gap = o.distance(&s.center) - s.radius;
-        if gap < within {
+    /// The contacts of link `a`'s spheres with obstacle `k` of `scene` closer than `within`
+    /// (in the order of the spheres).
+    fn sphere_obstacle_contacts(
+        &self,
+        frames: &[Isometry3<f64>],
+        placed: &[Vec<Placed>],
+        (a, k): (usize, usize),
+        scene: &Scene,
+        within: f64,
+        out: &mut Vec<Placement>,
+    ) {
+        let o = &scene.obstacles[k].1;
+        let gap = |c: &Point3<f64>, r: f64| o.distance(c) - r;
+        let mut near = self.trees[a].within_of(&frames[a], gap, within);
+        near.sort_unstable();
+        for i in near {
+            let s = &placed[a][i];
             out.push(Placement {
                 contact: Contact::Obstacle { a, i, k },
-                gap,
+                gap: o.distance(&s.center) - s.radius,
                 first: (a, s.center, away_from(o, &s.center)),
                 second: None,
             });

@@ -14,6 +14,7 @@ pub mod pairs;
 pub mod scene;
 pub mod sphere;
 pub mod sphere_score;
+pub mod sphere_tree;
 pub mod spheres;
 pub mod user_spheres;
 pub mod where_close;

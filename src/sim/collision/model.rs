@@ -15,6 +15,7 @@ use nalgebra::{Isometry3, Point3};
 use crate::sim::collision::exact::ExactShapes;
 use crate::sim::collision::pairs::AllowedPairs;
 use crate::sim::collision::scene::{Obstacle, Scene};
+use crate::sim::collision::sphere_tree::SphereTree;
 use crate::sim::collision::spheres::Sphere;
 use crate::sim::kinematics::KinematicChain;
 
@@ -32,9 +33,9 @@ pub struct CollisionModel {
     pub spheres: Vec<Vec<Sphere>>,
     /// The checked pairs of link indices (`a < b`), both with spheres.
     pub pairs: Vec<(usize, usize)>,
-    /// Each link's spheres' bounding sphere in its frame (none without spheres): a pair
-    /// whose bounds are apart needs no closer look.
-    pub(super) bounds: Vec<Option<Sphere>>,
+    /// Each link's spheres' bounding-sphere tree in its frame: a pair of links is checked
+    /// by walking their trees, not by testing every sphere against every other.
+    pub(super) trees: Vec<SphereTree>,
     /// Whether a link moves with the joints: links fixed to the root (the base resting on a
     /// table) are not checked against obstacles.
     pub moving: Vec<bool>,
@@ -77,12 +78,6 @@ impl std::fmt::Display for CollisionMode {
     }
 }
 
-/// Where two spheres are closest: the signed distance between their surfaces.
-#[inline]
-fn gap(a: &Placed, b: &Placed) -> f64 {
-    (a.center - b.center).norm() - a.radius - b.radius
-}
-
 impl CollisionModel {
     /// The model of `chain`'s links with spheres `spheres`, every pair checked that
     /// `allowed` does not allow.
@@ -112,7 +107,7 @@ impl CollisionModel {
         spheres: Vec<Vec<Sphere>>,
         pairs: Vec<(usize, usize)>,
     ) -> Self {
-        let bounds = spheres.iter().map(|s| bounding(s)).collect();
+        let trees = spheres.iter().map(|s| SphereTree::of(s)).collect();
         // A link moves when its frame differs between the joints' lower and upper ends.
         let ranges = chain.joint_ranges();
         let lo: Vec<f64> = ranges.iter().map(|r| r[0]).collect();
@@ -126,7 +121,7 @@ impl CollisionModel {
         Self {
             spheres,
             pairs,
-            bounds,
+            trees,
             moving,
             exact: None,
             allowed: None,
@@ -160,17 +155,11 @@ impl CollisionModel {
 
     /// Whether the checked pair `(a, b)` comes closer than `margin`: on the spheres, or where
     /// they cannot rule it out, on the exact shapes.
-    fn pair_closer(
-        &self,
-        placed: &[Vec<Placed>],
-        frames: &[Isometry3<f64>],
-        (a, b): (usize, usize),
-        margin: f64,
-    ) -> bool {
+    fn pair_closer(&self, frames: &[Isometry3<f64>], (a, b): (usize, usize), margin: f64) -> bool {
         let Some(x) = &self.exact else {
-            return self.pair_gap(placed, frames, a, b, margin) < margin;
+            return self.spheres_closer(frames, (a, b), margin);
         };
-        !self.spheres_keep_pair_apart(x, placed, frames, (a, b), margin)
+        !self.spheres_keep_pair_apart(x, frames, (a, b), margin)
             && x.links[a].closer_than(&frames[a], &x.links[b], &frames[b], margin)
     }
 
@@ -179,15 +168,22 @@ impl CollisionModel {
     pub(super) fn spheres_keep_pair_apart(
         &self,
         x: &ExactLinks,
-        placed: &[Vec<Placed>],
+        frames: &[Isometry3<f64>],
+        pair: (usize, usize),
+        margin: f64,
+    ) -> bool {
+        x.sphere_slack
+            .is_some_and(|slack| !self.spheres_closer(frames, pair, margin + 2.0 * slack))
+    }
+
+    /// Whether a sphere of link `a` comes closer than `margin` to one of link `b`.
+    fn spheres_closer(
+        &self,
         frames: &[Isometry3<f64>],
         (a, b): (usize, usize),
         margin: f64,
     ) -> bool {
-        x.sphere_slack.is_some_and(|slack| {
-            let wide = margin + 2.0 * slack;
-            self.pair_gap(placed, frames, a, b, wide) >= wide
-        })
+        self.trees[a].closer_than(&frames[a], &self.trees[b], &frames[b], margin)
     }
 
     /// Whether moving link `link`'s spheres show its exact shapes keep `margin` from obstacle
@@ -201,10 +197,8 @@ impl CollisionModel {
         margin: f64,
     ) -> bool {
         x.sphere_slack.is_some_and(|slack| {
-            let f = &frames[link];
-            let wide = margin + slack;
-            let apart = |s: &Sphere| o.distance(&(f * s.center())) - s.radius >= wide;
-            self.bounds[link].as_ref().is_some_and(apart) || self.spheres[link].iter().all(apart)
+            let gap = |c: &Point3<f64>, r: f64| o.distance(c) - r;
+            !self.trees[link].closer_to(&frames[link], gap, margin + slack)
         })
     }
 
@@ -226,8 +220,7 @@ impl CollisionModel {
     }
 
     /// The smallest signed distance between a moving link's spheres and the obstacles of
-    /// `scene`, at most `cap`. A link whose bounding sphere is farther than the best so far is
-    /// not looked into (its spheres lie inside it).
+    /// `scene`, at most `cap`.
     pub fn scene_clearance(&self, frames: &[Isometry3<f64>], scene: &Scene, cap: f64) -> f64 {
         if let Some(x) = &self.exact {
             let world = Isometry3::identity();
@@ -242,21 +235,10 @@ impl CollisionModel {
             }
             return best;
         }
-        let mut best = cap;
-        for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
-            if !self.moving[link] {
-                continue;
-            }
-            if let Some(b) = &self.bounds[link]
-                && scene.gap(&(f * b.center()), b.radius) >= best
-            {
-                continue;
-            }
-            for s in spheres {
-                best = best.min(scene.gap(&(f * s.center()), s.radius));
-            }
-        }
-        best
+        let gap = |c: &Point3<f64>, r: f64| scene.gap(c, r);
+        (self.trees.iter().zip(frames).enumerate())
+            .filter(|(link, _)| self.moving[*link])
+            .fold(cap, |best, (_, (tree, f))| tree.gap_to(f, gap, best))
     }
 
     /// Whether a moving link's sphere comes closer than `margin` to an obstacle of `scene`
@@ -268,23 +250,9 @@ impl CollisionModel {
                     .any(|k| self.obstacle_closer(x, frames, link, (scene, k), margin))
             });
         }
-        for (link, (spheres, f)) in self.spheres.iter().zip(frames).enumerate() {
-            if !self.moving[link] {
-                continue;
-            }
-            if let Some(b) = &self.bounds[link]
-                && scene.gap(&(f * b.center()), b.radius) >= margin
-            {
-                continue;
-            }
-            if spheres
-                .iter()
-                .any(|s| scene.gap(&(f * s.center()), s.radius) < margin)
-            {
-                return true;
-            }
-        }
-        false
+        let gap = |c: &Point3<f64>, r: f64| scene.gap(c, r);
+        (self.trees.iter().zip(frames).enumerate())
+            .any(|(link, (tree, f))| self.moving[link] && tree.closer_to(f, gap, margin))
     }
 
     /// The clearance against itself and, where given, the scene: at most `cap`.
@@ -318,56 +286,26 @@ impl CollisionModel {
             .collect()
     }
 
-    /// The smallest signed distance between the spheres of two links, `cap` where it is
-    /// larger (a link pair whose bounds are farther than `cap` apart is not looked into).
-    fn pair_gap(
-        &self,
-        placed: &[Vec<Placed>],
-        frames: &[Isometry3<f64>],
-        a: usize,
-        b: usize,
-        cap: f64,
-    ) -> f64 {
-        if let (Some(ba), Some(bb)) = (&self.bounds[a], &self.bounds[b]) {
-            let (pa, pb) = (frames[a] * ba.center(), frames[b] * bb.center());
-            if (pa - pb).norm() - ba.radius - bb.radius > cap {
-                return cap;
-            }
-        }
-        let mut best = cap;
-        for sa in &placed[a] {
-            for sb in &placed[b] {
-                best = best.min(gap(sa, sb));
-            }
-        }
-        best
-    }
-
     /// The checked pairs in collision at `frames` (closer than `margin`).
     pub fn colliding_pairs(&self, frames: &[Isometry3<f64>], margin: f64) -> Vec<(usize, usize)> {
-        let placed = self.place(frames);
         self.pairs
             .iter()
             .copied()
-            .filter(|&pair| self.pair_closer(&placed, frames, pair, margin))
+            .filter(|&pair| self.pair_closer(frames, pair, margin))
             .collect()
     }
 
     /// The smallest signed distance over the checked pairs, at most `cap` (the clearance
     /// further than `cap` is not needed).
     pub fn self_clearance(&self, frames: &[Isometry3<f64>], cap: f64) -> f64 {
-        let placed = self.place(frames);
+        let t = &self.trees;
         let Some(x) = &self.exact else {
-            return self.pairs.iter().fold(cap, |m, &(a, b)| {
-                m.min(self.pair_gap(&placed, frames, a, b, m))
-            });
+            return (self.pairs.iter())
+                .fold(cap, |m, &(a, b)| t[a].gap(&frames[a], &t[b], &frames[b], m));
         };
         self.pairs.iter().fold(cap, |m, &(a, b)| {
-            if let Some(slack) = x.sphere_slack {
-                let wide = m + 2.0 * slack;
-                if self.pair_gap(&placed, frames, a, b, wide) >= wide {
-                    return m;
-                }
+            if self.spheres_keep_pair_apart(x, frames, (a, b), m) {
+                return m;
             }
             m.min(x.links[a].gap(&frames[a], &x.links[b], &frames[b], m))
         })
@@ -375,32 +313,8 @@ impl CollisionModel {
 
     /// Whether a checked pair is closer than `margin` at `frames`.
     pub fn self_collides(&self, frames: &[Isometry3<f64>], margin: f64) -> bool {
-        if self.exact.is_none() {
-            return self.self_clearance(frames, margin) < margin;
-        }
-        let placed = self.place(frames);
         self.pairs
             .iter()
-            .any(|&pair| self.pair_closer(&placed, frames, pair, margin))
+            .any(|&pair| self.pair_closer(frames, pair, margin))
     }
-}
-
-/// The bounding sphere of some spheres (centred at their centres' mean).
-fn bounding(spheres: &[Sphere]) -> Option<Sphere> {
-    if spheres.is_empty() {
-        return None;
-    }
-    let n = spheres.len() as f64;
-    let c = spheres
-        .iter()
-        .fold(nalgebra::Vector3::zeros(), |a, s| a + s.center().coords)
-        / n;
-    let r = spheres
-        .iter()
-        .map(|s| (s.center().coords - c).norm() + s.radius)
-        .fold(0.0, f64::max);
-    Some(Sphere {
-        center: [c.x, c.y, c.z],
-        radius: r,
-    })
 }
