@@ -199,9 +199,10 @@ fn spheres_fine_where_links_come_close_raise_fewer_false_alarms() {
     }
     eprintln!("{free} free; false alarms: {alarms:?} (20 mm everywhere, fine where close)");
     assert!(free > 100 && alarms[0] > 20, "{free} {alarms:?}");
-    // At most 256 spheres a link: the base's wide top face, close to the swinging link
-    // wherever it passes, is covered coarser than its allowance asks (see the docs).
-    assert!(10 * alarms[1] < 8 * alarms[0], "{alarms:?}");
+    // Fine where close, the base's wide top face (close to the swinging link wherever it
+    // passes) takes thousands of spheres: at 256 a link it was covered coarser than its
+    // allowances asked, and raised 71 false alarms to 103.
+    assert!(10 * alarms[1] < 3 * alarms[0], "{alarms:?}");
 }
 
 #[test]

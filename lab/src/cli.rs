@@ -213,7 +213,8 @@ pub struct SphereFitArgs {
     pub protrusion_mm: Option<f64>,
     /// With --protrusion-mm: each point's spheres stand out at most half the least distance
     /// the links checked against it come to it, over 2,000 random collision-free
-    /// configurations (fine where links come close, coarse elsewhere).
+    /// configurations (fine where links come close, coarse elsewhere; at most 4,096 spheres a
+    /// link).
     #[arg(long)]
     pub where_close: bool,
 }

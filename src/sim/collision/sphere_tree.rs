@@ -63,7 +63,7 @@ impl SphereTree {
     /// `other` placed by `fb` (negative: overlapping), `cap` where none is closer.
     pub fn gap(&self, fa: &Isometry3<f64>, other: &Self, fb: &Isometry3<f64>, cap: f64) -> f64 {
         let mut best = cap;
-        self.walk(other, &(fa.inverse() * fb), cap, true, &mut |_, _, g| {
+        self.walk((fa, other, fb), cap, true, &mut |_, _, g| {
             best = g;
             false
         });
@@ -80,16 +80,10 @@ impl SphereTree {
         margin: f64,
     ) -> bool {
         let mut found = false;
-        self.walk(
-            other,
-            &(fa.inverse() * fb),
-            margin,
-            false,
-            &mut |_, _, _| {
-                found = true;
-                true
-            },
-        );
+        self.walk((fa, other, fb), margin, false, &mut |_, _, _| {
+            found = true;
+            true
+        });
         found
     }
 
@@ -102,26 +96,19 @@ impl SphereTree {
         within: f64,
     ) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
-        self.walk(
-            other,
-            &(fa.inverse() * fb),
-            within,
-            false,
-            &mut |i, j, _| {
-                out.push((i as usize, j as usize));
-                false
-            },
-        );
+        self.walk((fa, other, fb), within, false, &mut |i, j, _| {
+            out.push((i as usize, j as usize));
+            false
+        });
         out
     }
 
     /// The pairs of leaves closer than `reach`, each given to `visit` (with their gap) until it
     /// answers true; where `closest`, the reach shrinks to each pair's gap (so the last pair
-    /// given is the closest). `rel` places `other`'s frame in this one's.
+    /// given is the closest). This tree is placed by `fa`, `other` by `fb`.
     fn walk(
         &self,
-        other: &Self,
-        rel: &Isometry3<f64>,
+        (fa, other, fb): (&Isometry3<f64>, &Self, &Isometry3<f64>),
         mut reach: f64,
         closest: bool,
         visit: &mut dyn FnMut(u32, u32, f64) -> bool,
@@ -129,11 +116,20 @@ impl SphereTree {
         if self.nodes.is_empty() || other.nodes.is_empty() {
             return;
         }
+        // Most pairs of links are told apart by their roots: nothing more is set up for them.
+        let (ra, rb) = (&self.nodes[0], &other.nodes[0]);
+        let root = (fa * ra.center - fb * rb.center).norm() - ra.radius - rb.radius;
+        if root >= reach {
+            return;
+        }
+        // The rest in this tree's frame: one placement a node of the other's.
+        let rel = fa.inverse() * fb;
         let gap = |i: u32, j: u32| {
             let (a, b) = (&self.nodes[i as usize], &other.nodes[j as usize]);
             (a.center - rel * b.center).norm() - a.radius - b.radius
         };
-        let mut stack = vec![(0u32, 0u32, gap(0, 0))];
+        let mut stack = Vec::with_capacity(32);
+        stack.push((0u32, 0u32, root));
         while let Some((i, j, g)) = stack.pop() {
             if g >= reach {
                 continue;
@@ -228,7 +224,12 @@ impl SphereTree {
             let n = &self.nodes[i as usize];
             gap(&(f * n.center), n.radius)
         };
-        let mut stack = vec![(0u32, node_gap(0))];
+        let root = node_gap(0);
+        if root >= reach {
+            return;
+        }
+        let mut stack = Vec::with_capacity(32);
+        stack.push((0u32, root));
         while let Some((i, g)) = stack.pop() {
             if g >= reach {
                 continue;

@@ -63,6 +63,12 @@ impl Default for SphereFit {
 /// The most spheres a link may be given.
 pub const MAX_PER_LINK: usize = 256;
 
+/// The most spheres a link may be given fine where links come close
+/// ([`SphereBudget::WhereClose`]): a flat face another link passes close to wherever it goes
+/// takes thousands of small spheres, which the checks' sphere trees
+/// ([`crate::sim::collision::sphere_tree`]) afford.
+pub const MAX_WHERE_CLOSE_PER_LINK: usize = 4096;
+
 /// How much of the least distance other links come to a point its spheres may stand out
 /// there ([`SphereBudget::WhereClose`]): half, so two links' spheres meet only where the
 /// links come closer than they did in any configuration the fit looked at.
@@ -71,7 +77,8 @@ pub const WHERE_CLOSE_SHARE: f64 = 0.5;
 impl SphereFit {
     /// The default fit with a budget as a user gives it: `per_link` spheres, or the fewest
     /// (up to [`MAX_PER_LINK`]) within `protrusion_mm` (with `where_close`: and within
-    /// [`WHERE_CLOSE_SHARE`] of how close other links come); neither: the default's.
+    /// [`WHERE_CLOSE_SHARE`] of how close other links come, up to
+    /// [`MAX_WHERE_CLOSE_PER_LINK`]); neither: the default's.
     pub fn with_budget(
         per_link: Option<usize>,
         protrusion_mm: Option<f64>,
@@ -103,7 +110,7 @@ impl SphereFit {
             (None, Some(mm)) if where_close => SphereBudget::WhereClose {
                 mm,
                 share: WHERE_CLOSE_SHARE,
-                most: MAX_PER_LINK,
+                most: MAX_WHERE_CLOSE_PER_LINK,
             },
             (None, Some(mm)) => SphereBudget::Protrusion {
                 mm,
