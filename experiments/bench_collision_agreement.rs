@@ -22,9 +22,12 @@ struct Args {
         default_value = "../shared/robots/franka_description/urdf/panda.urdf"
     )]
     urdf: PathBuf,
-    /// The chain's last link [default: the whole tree].
+    /// The chain's last link [default: the deepest link of the tree].
     #[arg(long)]
     tip: Option<String>,
+    /// Which joints move (`--joints all`: the whole body of a humanoid); the others are held.
+    #[command(flatten)]
+    group: selfmodel_lab::cli::JointGroupArgs,
     /// Random configurations.
     #[arg(long, default_value_t = 10_000)]
     configurations: usize,
@@ -58,7 +61,7 @@ fn main() -> ExitCode {
             base_rpy: [0.0; 3],
             tip: args.tip.clone(),
             geometry: selfmodel::sim::urdf_loader::GeometryKind::None,
-            joints: Default::default(),
+            joints: args.group.group(Some(&args.urdf))?,
         };
         let cfg = AgreementConfig {
             configurations: args.configurations,
