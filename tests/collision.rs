@@ -205,6 +205,71 @@ fn spheres_fine_where_links_come_close_raise_fewer_false_alarms() {
     assert!(10 * alarms[1] < 3 * alarms[0], "{alarms:?}");
 }
 
+/// A small sphere on a swinging arm that passes through a solid box (a primitive): where it
+/// lies wholly inside, the two surfaces keep apart and spheres fitted to them need not meet,
+/// yet the links collide (as coal decides: a primitive is solid). The exact check agrees with
+/// the sphere-in-box distance at every configuration, wholly inside included.
+#[test]
+fn a_link_wholly_inside_another_s_solid_box_collides() {
+    use rand::SeedableRng;
+    let dir = common::tempdir();
+    let urdf = dir.path().join("bead.urdf");
+    let (half, bead, reach) = (0.05, 0.006, 0.17);
+    let text = format!(
+        "<robot name=\"bead\">\
+<link name=\"base\"><visual><geometry><box size=\"0.1 0.1 0.1\"/></geometry></visual></link>\
+<link name=\"arm\"/>\
+<link name=\"bead\"><visual><origin xyz=\"0 0 {reach}\"/><geometry><sphere radius=\"{bead}\"/></geometry></visual></link>\
+<joint name=\"turn\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/><axis xyz=\"0 0 1\"/><limit lower=\"-2.6\" upper=\"2.6\" effort=\"1\" velocity=\"1\"/></joint>\
+<joint name=\"tilt\" type=\"revolute\"><parent link=\"arm\"/><child link=\"bead\"/><origin xyz=\"0.2 0 0\"/><axis xyz=\"0 1 0\"/><limit lower=\"-2.6\" upper=\"2.6\" effort=\"1\" velocity=\"1\"/></joint>\
+</robot>"
+    );
+    std::fs::write(&urdf, text).unwrap();
+    let options = UrdfOptions {
+        geometry: GeometryKind::Visual,
+        ..UrdfOptions::default()
+    };
+    let robot = load_urdf_with(&urdf, &options).unwrap();
+    let sampling = PairSampling {
+        samples: 2_000,
+        ..PairSampling::default()
+    };
+    let fit = SphereFit::with_budget(None, Some(2.0), false).unwrap();
+    let model = selfmodel::sim::collision::model_for(&robot, None, &fit, &sampling).unwrap();
+    assert_eq!(model.pairs.len(), 1, "the base and the bead are checked");
+    let spheres = model.clone().spheres_only();
+    let exact = model.with_exact(selfmodel::sim::collision::exact_links(&robot), Some(0.0));
+    let bead_link = robot.chain.links.iter().position(|l| l == "bead").unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let ranges = robot.chain.joint_ranges();
+    let (mut inside, mut unseen_by_spheres) = (0, 0);
+    for _ in 0..4_000 {
+        let q = selfmodel::sim::trajectory::uniform_in(&mut rng, &ranges);
+        let frames = robot.chain.link_frames(&q);
+        let c = frames[bead_link] * Point3::new(0.0, 0.0, reach);
+        // The sphere-in-box signed distance (the box at the root, centred, axis-aligned).
+        let d = c.coords.abs().add_scalar(-half);
+        let gap = d.map(|v| v.max(0.0)).norm() + d.max().min(0.0) - bead;
+        if gap.abs() < 1e-6 {
+            continue;
+        }
+        assert_eq!(
+            exact.self_collides(&frames, 0.0),
+            gap < 0.0,
+            "at {q:?}: gap {gap}"
+        );
+        if gap < -2.0 * bead {
+            inside += 1;
+            unseen_by_spheres += usize::from(!spheres.self_collides(&frames, 0.0));
+        }
+    }
+    eprintln!("{inside} wholly inside, {unseen_by_spheres} of them with the spheres apart");
+    assert!(
+        inside > 20 && unseen_by_spheres > 0,
+        "{inside} {unseen_by_spheres}"
+    );
+}
+
 #[test]
 fn the_allowed_pairs_read_from_an_srdf_are_the_file_s_pairs() {
     let text = r#"<robot name="r">

@@ -164,16 +164,21 @@ impl CollisionModel {
     }
 
     /// Whether the spheres of links `a` and `b` show their exact shapes keep `margin` apart:
-    /// they keep the margin plus how far each link's shapes may stand outside its spheres.
+    /// they keep the margin plus how far each link's shapes may stand outside its spheres,
+    /// and neither link lies wholly inside a solid piece of the other (spheres fitted to
+    /// the surfaces need not fill a box or a cylinder).
     pub(super) fn spheres_keep_pair_apart(
         &self,
         x: &ExactLinks,
         frames: &[Isometry3<f64>],
-        pair: (usize, usize),
+        (a, b): (usize, usize),
         margin: f64,
     ) -> bool {
+        let (la, lb, fa, fb) = (&x.links[a], &x.links[b], &frames[a], &frames[b]);
         x.sphere_slack
-            .is_some_and(|slack| !self.spheres_closer(frames, pair, margin + 2.0 * slack))
+            .is_some_and(|slack| !self.spheres_closer(frames, (a, b), margin + 2.0 * slack))
+            && !la.holds_a_piece_of(fa, lb, fb)
+            && !lb.holds_a_piece_of(fb, la, fa)
     }
 
     /// Whether a sphere of link `a` comes closer than `margin` to one of link `b`.

@@ -52,6 +52,8 @@ pub struct ExactShapes {
     /// box): two shapes whose hulls keep a distance keep at least that distance, and a hull
     /// does not bulge past a flat face as a sphere does. None: no pieces, or flat.
     hull: Option<SharedShape>,
+    /// Whether a piece is a primitive (solid: another shape may lie wholly inside it).
+    solid: bool,
 }
 
 /// Where two shapes are closest, found exactly: the signed distance between them (m, negative
@@ -228,10 +230,12 @@ impl ExactShapes {
             h.as_convex_polyhedron()
                 .is_some_and(|c| c.points().len() <= MAX_HULL_VERTICES)
         });
+        let solid = pieces.iter().any(|p| p.shape.as_trimesh().is_none());
         Self {
             pieces,
             bound,
             hull,
+            solid,
         }
     }
 
@@ -379,6 +383,30 @@ impl ExactShapes {
             .any(|piece| match piece.shape.as_trimesh() {
                 Some(mesh) => winding_number(mesh, piece.pose.inverse() * q).abs() > 0.5,
                 None => piece.shape.contains_point(&piece.pose, q),
+            })
+    }
+
+    /// Whether a piece of `other` at `fb` lies inside a solid piece of these shapes at `fa`
+    /// (a primitive: a mesh is its surface, and nothing lies inside it), by one point of it
+    /// (a primitive's centre, a mesh's first vertex). Where the two surfaces keep apart, a
+    /// piece is wholly inside a primitive or wholly outside it: this is the collision that
+    /// spheres covering the surfaces cannot see.
+    pub fn holds_a_piece_of(&self, fa: &Isometry3<f64>, other: &Self, fb: &Isometry3<f64>) -> bool {
+        if !self.solid || self.bound_gap(fa, other, fb) > 0.0 {
+            return false;
+        }
+        let (pa, pb) = (pose_of(fa), pose_of(fb));
+        let point_of = |t: &Piece| {
+            let local = (t.shape.as_trimesh())
+                .and_then(|m| m.vertices().first().copied())
+                .unwrap_or(Vector::ZERO);
+            pb * (t.pose * local)
+        };
+        (self.pieces.iter())
+            .filter(|s| s.shape.as_trimesh().is_none())
+            .any(|s| {
+                let world = pa * s.pose;
+                (other.pieces.iter()).any(|t| s.shape.contains_point(&world, point_of(t)))
             })
     }
 
