@@ -109,7 +109,7 @@ impl SphereTree {
     fn walk(
         &self,
         (fa, other, fb): (&Isometry3<f64>, &Self, &Isometry3<f64>),
-        mut reach: f64,
+        reach: f64,
         closest: bool,
         visit: &mut dyn FnMut(u32, u32, f64) -> bool,
     ) {
@@ -124,41 +124,30 @@ impl SphereTree {
         }
         // The rest in this tree's frame: one placement a node of the other's.
         let rel = fa.inverse() * fb;
-        let gap = |i: u32, j: u32| {
-            let (a, b) = (&self.nodes[i as usize], &other.nodes[j as usize]);
+        let (a, b) = (&self.nodes, &other.nodes);
+        let gap = |(i, j): (u32, u32)| {
+            let (a, b) = (&a[i as usize], &b[j as usize]);
             (a.center - rel * b.center).norm() - a.radius - b.radius
         };
-        let mut stack = Vec::with_capacity(32);
-        stack.push((0u32, 0u32, root));
-        while let Some((i, j, g)) = stack.pop() {
-            if g >= reach {
-                continue;
-            }
-            let (a, b) = (&self.nodes[i as usize], &other.nodes[j as usize]);
-            if a.is_leaf() && b.is_leaf() {
-                if visit(a.sphere, b.sphere, g) {
-                    return;
+        // Open the wider node (a leaf cannot be opened).
+        let open = |(i, j): (u32, u32)| {
+            let (x, y) = (&a[i as usize], &b[j as usize]);
+            match (x.is_leaf(), y.is_leaf()) {
+                (true, true) => None,
+                (false, _) if y.is_leaf() || x.radius >= y.radius => {
+                    Some([(i + 1, j), (x.right, j)])
                 }
-                if closest {
-                    reach = g;
-                }
-                continue;
+                _ => Some([(i, j + 1), (i, y.right)]),
             }
-            // Open the wider node (a leaf cannot be opened).
-            let children = if b.is_leaf() || (!a.is_leaf() && a.radius >= b.radius) {
-                [(i + 1, j), (a.right, j)]
-            } else {
-                [(i, j + 1), (i, b.right)]
-            };
-            let [(i0, j0), (i1, j1)] = children;
-            let (g0, g1) = (gap(i0, j0), gap(i1, j1));
-            // The nearer one on top: looked into first.
-            if g0 <= g1 {
-                stack.extend([(i1, j1, g1), (i0, j0, g0)]);
-            } else {
-                stack.extend([(i0, j0, g0), (i1, j1, g1)]);
-            }
-        }
+        };
+        descend(
+            ((0, 0), root),
+            reach,
+            closest,
+            gap,
+            open,
+            &mut |(i, j), g| visit(a[i as usize].sphere, b[j as usize].sphere, g),
+        );
     }
 
     /// The smallest `gap(centre, radius)` over this tree's spheres placed by `f`, `cap` where
@@ -213,44 +202,69 @@ impl SphereTree {
         &self,
         f: &Isometry3<f64>,
         gap: &dyn Fn(&Point3<f64>, f64) -> f64,
-        mut reach: f64,
+        reach: f64,
         closest: bool,
         visit: &mut dyn FnMut(u32, f64) -> bool,
     ) {
         if self.nodes.is_empty() {
             return;
         }
+        let nodes = &self.nodes;
         let node_gap = |i: u32| {
-            let n = &self.nodes[i as usize];
+            let n = &nodes[i as usize];
             gap(&(f * n.center), n.radius)
         };
-        let root = node_gap(0);
-        if root >= reach {
-            return;
+        let open = |i: u32| {
+            let n = &nodes[i as usize];
+            (!n.is_leaf()).then_some([i + 1, n.right])
+        };
+        descend(
+            (0, node_gap(0)),
+            reach,
+            closest,
+            node_gap,
+            open,
+            &mut |i, g| visit(nodes[i as usize].sphere, g),
+        );
+    }
+}
+
+/// The search both walks share: from `root` (a node, or a pair of nodes, with its gap), the
+/// leaves closer than `reach` given to `visit` (with their gap) until it answers true; `open`
+/// gives an inner one's two children (none: a leaf), `gap` a lower bound of its leaves' gaps;
+/// where `closest`, the reach shrinks to each leaf's gap. The nearer child is looked into
+/// first.
+fn descend<K: Copy>(
+    root: (K, f64),
+    mut reach: f64,
+    closest: bool,
+    gap: impl Fn(K) -> f64,
+    open: impl Fn(K) -> Option<[K; 2]>,
+    visit: &mut dyn FnMut(K, f64) -> bool,
+) {
+    if root.1 >= reach {
+        return;
+    }
+    let mut stack = Vec::with_capacity(32);
+    stack.push(root);
+    while let Some((k, g)) = stack.pop() {
+        if g >= reach {
+            continue;
         }
-        let mut stack = Vec::with_capacity(32);
-        stack.push((0u32, root));
-        while let Some((i, g)) = stack.pop() {
-            if g >= reach {
-                continue;
+        let Some([k0, k1]) = open(k) else {
+            if visit(k, g) {
+                return;
             }
-            let n = &self.nodes[i as usize];
-            if n.is_leaf() {
-                if visit(n.sphere, g) {
-                    return;
-                }
-                if closest {
-                    reach = g;
-                }
-                continue;
+            if closest {
+                reach = g;
             }
-            let (i0, i1) = (i + 1, n.right);
-            let (g0, g1) = (node_gap(i0), node_gap(i1));
-            if g0 <= g1 {
-                stack.extend([(i1, g1), (i0, g0)]);
-            } else {
-                stack.extend([(i0, g0), (i1, g1)]);
-            }
+            continue;
+        };
+        let (g0, g1) = (gap(k0), gap(k1));
+        if g0 <= g1 {
+            stack.extend([(k1, g1), (k0, g0)]);
+        } else {
+            stack.extend([(k0, g0), (k1, g1)]);
         }
     }
 }
