@@ -7,7 +7,7 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::sim::collision::exact::Near;
-use crate::sim::collision::model::{CollisionModel, Placed};
+use crate::sim::collision::model::CollisionModel;
 use crate::sim::collision::scene::{Obstacle, Scene};
 
 /// Two spheres closer than the distance asked for.
@@ -67,23 +67,22 @@ impl CollisionModel {
         if self.exact.is_some() {
             return self.exact_contacts(frames, scene, self_collision, within);
         }
-        let placed = self.place(frames);
         let mut out = Vec::new();
         if self_collision {
             for &pair in &self.pairs {
-                self.sphere_pair_contacts(frames, &placed, pair, within, &mut out);
+                self.sphere_pair_contacts(frames, pair, within, &mut out);
             }
         }
         let Some(scene) = scene else {
             return out;
         };
         let gap = |c: &Point3<f64>, r: f64| scene.gap(c, r);
-        for a in 0..placed.len() {
+        for a in 0..frames.len() {
             if !self.moving[a] || !self.trees[a].closer_to(&frames[a], gap, within) {
                 continue;
             }
             for k in 0..scene.obstacles.len() {
-                self.sphere_obstacle_contacts(frames, &placed, (a, k), scene, within, &mut out);
+                self.sphere_obstacle_contacts(frames, (a, k), scene, within, &mut out);
             }
         }
         out
@@ -105,7 +104,6 @@ impl CollisionModel {
         let Some(x) = &self.exact else {
             return Vec::new();
         };
-        let placed = self.place(frames);
         let mut out = Vec::new();
         if self_collision {
             for &(a, b) in &self.pairs {
@@ -119,7 +117,7 @@ impl CollisionModel {
                     Some(Near::Apart(c)) => c,
                     Some(Near::Overlapping) => {
                         let before = out.len();
-                        self.sphere_pair_contacts(frames, &placed, (a, b), within, &mut out);
+                        self.sphere_pair_contacts(frames, (a, b), within, &mut out);
                         if out.len() > before {
                             continue;
                         }
@@ -155,8 +153,7 @@ impl CollisionModel {
                     Some(Near::Apart(c)) => c,
                     Some(Near::Overlapping) => {
                         let before = out.len();
-                        let at = (a, k);
-                        self.sphere_obstacle_contacts(frames, &placed, at, scene, within, &mut out);
+                        self.sphere_obstacle_contacts(frames, (a, k), scene, within, &mut out);
                         if out.len() > before {
                             continue;
                         }
@@ -180,11 +177,10 @@ impl CollisionModel {
 
 impl CollisionModel {
     /// The contacts of link `a`'s and link `b`'s spheres closer than `within` (in the order
-    /// of their spheres).
+    /// of their spheres), each placed as it is found.
     fn sphere_pair_contacts(
         &self,
         frames: &[Isometry3<f64>],
-        placed: &[Vec<Placed>],
         (a, b): (usize, usize),
         within: f64,
         out: &mut Vec<Placement>,
@@ -193,24 +189,24 @@ impl CollisionModel {
         let mut pairs = ta.pairs_within(&frames[a], tb, &frames[b], within);
         pairs.sort_unstable();
         for (i, j) in pairs {
-            let (sa, sb) = (&placed[a][i], &placed[b][j]);
-            let d = sa.center - sb.center;
+            let (sa, sb) = (&self.spheres[a][i], &self.spheres[b][j]);
+            let (ca, cb) = (frames[a] * sa.center(), frames[b] * sb.center());
+            let d = ca - cb;
             let n = d.try_normalize(1e-12).unwrap_or_else(Vector3::z);
             out.push(Placement {
                 contact: Contact::Spheres { a, i, b, j },
                 gap: d.norm() - sa.radius - sb.radius,
-                first: (a, sa.center, n),
-                second: Some((b, sb.center, -n)),
+                first: (a, ca, n),
+                second: Some((b, cb, -n)),
             });
         }
     }
 
     /// The contacts of link `a`'s spheres with obstacle `k` of `scene` closer than `within`
-    /// (in the order of the spheres).
+    /// (in the order of the spheres), each placed as it is found.
     fn sphere_obstacle_contacts(
         &self,
         frames: &[Isometry3<f64>],
-        placed: &[Vec<Placed>],
         (a, k): (usize, usize),
         scene: &Scene,
         within: f64,
@@ -221,11 +217,12 @@ impl CollisionModel {
         let mut near = self.trees[a].within_of(&frames[a], gap, within);
         near.sort_unstable();
         for i in near {
-            let s = &placed[a][i];
+            let s = &self.spheres[a][i];
+            let c = frames[a] * s.center();
             out.push(Placement {
                 contact: Contact::Obstacle { a, i, k },
-                gap: o.distance(&s.center) - s.radius,
-                first: (a, s.center, away_from(o, &s.center)),
+                gap: o.distance(&c) - s.radius,
+                first: (a, c, away_from(o, &c)),
                 second: None,
             });
         }

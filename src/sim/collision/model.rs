@@ -19,13 +19,6 @@ use crate::sim::collision::sphere_tree::SphereTree;
 use crate::sim::collision::spheres::Sphere;
 use crate::sim::kinematics::KinematicChain;
 
-/// A sphere placed in the world: its centre and radius.
-#[derive(Clone, Copy, Debug)]
-pub struct Placed {
-    pub center: Point3<f64>,
-    pub radius: f64,
-}
-
 /// What may touch what.
 #[derive(Clone, Debug)]
 pub struct CollisionModel {
@@ -273,22 +266,6 @@ impl CollisionModel {
     pub fn collides(&self, frames: &[Isometry3<f64>], scene: Option<&Scene>, margin: f64) -> bool {
         self.self_collides(frames, margin)
             || scene.is_some_and(|s| self.scene_collides(frames, s, margin))
-    }
-
-    /// Every link's spheres placed by the link frames.
-    pub fn place(&self, frames: &[Isometry3<f64>]) -> Vec<Vec<Placed>> {
-        self.spheres
-            .iter()
-            .zip(frames)
-            .map(|(s, f)| {
-                s.iter()
-                    .map(|s| Placed {
-                        center: f * s.center(),
-                        radius: s.radius,
-                    })
-                    .collect()
-            })
-            .collect()
     }
 
     /// The checked pairs in collision at `frames` (closer than `margin`).

@@ -51,14 +51,6 @@ impl SphereTree {
         Self { nodes }
     }
 
-    /// The sphere bounding them all (none without spheres).
-    pub fn bound(&self) -> Option<Sphere> {
-        self.nodes.first().map(|n| Sphere {
-            center: n.center.into(),
-            radius: n.radius,
-        })
-    }
-
     /// The smallest signed distance between a sphere of this tree placed by `fa` and one of
     /// `other` placed by `fb` (negative: overlapping), `cap` where none is closer.
     pub fn gap(&self, fa: &Isometry3<f64>, other: &Self, fb: &Isometry3<f64>, cap: f64) -> f64 {
