@@ -502,8 +502,9 @@ pub fn solve(
         (0..cfg.random_starts).map(|_| crate::sim::trajectory::uniform_in(&mut rng, ranges));
     for start in starts.iter().cloned().chain(random) {
         // A start with a collision check can take tens of milliseconds on a humanoid: Ctrl-C
-        // ends the search (the caller throws the answer away: `LearnedIk`'s `IkSolver::solve`).
-        if avoid.is_some() && crate::core::interrupt::requested() {
+        // ends the search (the caller throws the answer away: `LearnedIk`'s `IkSolver::solve`),
+        // after the first start, so that there is an answer to throw away.
+        if avoid.is_some() && tried > 0 && crate::core::interrupt::requested() {
             break;
         }
         let mut s = solve_from(paths, target, &start, ranges, cfg, None);
