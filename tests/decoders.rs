@@ -114,6 +114,31 @@ fn tiny_neurokin_beats_a_constant_predictor() {
     common::the_saved_model_scores_as_its_run(&cfg, dir.path(), q);
 }
 
+/// LinkSplat (a decoder fed where each link is) on the quick preset: it must beat the
+/// constant image by NeuroKin's margin, and its saved model (anchors in its state) must load
+/// and score as its run did.
+#[test]
+fn tiny_link_splat_beats_a_constant_predictor() {
+    let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = common::tempdir();
+    let mut cfg = selfmodel::self_models::link_splat::link_splat_run("quick").unwrap();
+    cfg.train.steps = 600;
+    let out = run(&cfg, dir.path(), DeviceChoice::Cpu, false).unwrap();
+    let (c_psnr, c_iou) = constant_predictor(&cfg);
+    let q = &out.quality;
+    eprintln!(
+        "LinkSplat IoU {:.3} ({:.2} dB), constant IoU {c_iou:.3} ({c_psnr:.2} dB)",
+        q.iou_test, q.psnr_db_test
+    );
+    assert!(
+        q.iou_test > c_iou + 0.1 && q.psnr_db_test > c_psnr,
+        "LinkSplat IoU {:.3} ({:.2} dB) vs constant IoU {c_iou:.3} ({c_psnr:.2} dB)",
+        q.iou_test,
+        q.psnr_db_test
+    );
+    common::the_saved_model_scores_as_its_run(&cfg, dir.path(), q);
+}
+
 #[test]
 fn tiny_resneurokin_d_learns_silhouette_and_metric_depth() {
     let _serial = TRAINING.lock().unwrap_or_else(|e| e.into_inner());

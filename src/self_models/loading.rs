@@ -11,6 +11,7 @@ use crate::core::input_file::file_fnv;
 use crate::data::npz::{ArrayData, read_npz};
 use crate::self_models::ffksm::Ffksm;
 use crate::self_models::k3dgs::K3dgs;
+use crate::self_models::link_splat::LinkSplatConfig;
 use crate::self_models::mean_silhouette::MeanSilhouette;
 use crate::self_models::neurokin::NeuroKinConfig;
 use crate::self_models::resneurokin_d::ResNeuroKinDConfig;
@@ -27,6 +28,7 @@ fn loader(kind: &str) -> Option<Loader> {
         ResNeuroKinDConfig::KIND => Some(load_as::<ResNeuroKinDConfig>),
         K3dgs::KIND => Some(load_as::<K3dgs>),
         Ffksm::KIND => Some(load_as::<Ffksm>),
+        LinkSplatConfig::KIND => Some(load_as::<LinkSplatConfig>),
         MeanSilhouette::KIND => Some(load_as::<MeanSilhouette>),
         _ => None,
     }

@@ -17,6 +17,7 @@ use selfmodel::core::error::Result;
 use selfmodel::self_models::ffksm::{Ffksm, FfksmVariant, ffksm_run};
 use selfmodel::self_models::harness::{RunOutcome, run_with};
 use selfmodel::self_models::k3dgs::{K3dgs, K3dgsVariant, k3dgs_run};
+use selfmodel::self_models::link_splat::{LinkSplatConfig, link_splat_run};
 use selfmodel::self_models::mean_silhouette::{MeanSilhouette, mean_silhouette_run};
 use selfmodel::self_models::model::{ReportContext, SelfModel};
 use selfmodel::self_models::nearest_pose::{NearestPose, nearest_pose_run};
@@ -62,6 +63,12 @@ pub fn run_studied<M: Studied>(
 impl Studied for NeuroKinConfig {
     fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
         neurokin_run(preset)
+    }
+}
+
+impl Studied for LinkSplatConfig {
+    fn preset_run(preset: &str) -> Result<SelfModelRun<Self>> {
+        link_splat_run(preset)
     }
 }
 

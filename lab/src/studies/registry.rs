@@ -11,6 +11,7 @@ use crate::studies::models::k3dgs_reports::RenderSpeedRow;
 use crate::studies::models::run_studied;
 use selfmodel::self_models::ffksm::{FfksmVariant, ffksm_run};
 use selfmodel::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+use selfmodel::self_models::link_splat::LinkSplatConfig;
 use selfmodel::self_models::mean_silhouette::MeanSilhouette;
 use selfmodel::self_models::neurokin::{
     NeuroKinConfig, neurokin_run, neurokin_tree_run, neurokin64_run,
@@ -425,6 +426,16 @@ pub const EXPERIMENTS: &[Experiment] = &[
         takes_robot: true,
         shares_output: false,
         run: run_neurokin_tree,
+    },
+    Experiment {
+        name: "link_splat",
+        about: "LinkSplat: a direct decoder that sees where each link is (anchors on every link placed by forward kinematics, splatted with learned features, decoded by a CNN), for robots of many joints",
+        default_dir: "reports/link_splat",
+        presets: SELF_MODEL_PRESETS,
+        in_table1: false,
+        takes_robot: true,
+        shares_output: false,
+        run: run_self_model::<LinkSplatConfig>,
     },
     Experiment::self_model(
         "resneurokin_d",

@@ -20,7 +20,7 @@ use selfmodel::sim::robots::BuiltinRobot;
 
 /// Self-models a Table I takes only when `--models` names them (beside those marked
 /// `in_table1`).
-pub const ON_REQUEST: &[&str] = &["neurokin_tree"];
+pub const ON_REQUEST: &[&str] = &["neurokin_tree", "link_splat"];
 
 /// Whether Table I can hold `e` (when `--models` names it).
 fn can_hold(e: &Experiment) -> bool {
