@@ -41,6 +41,7 @@ use crate::self_models::model::{
 };
 use crate::self_models::run_config::{SelfModelRun, model_preset};
 use crate::sim::camera::Camera;
+use crate::sim::kinematics::KinematicChain;
 use crate::sim::robot::Robot;
 use crate::sim::tensor_kinematics::TensorChain;
 use crate::train::batcher::Batch;
@@ -74,7 +75,7 @@ impl Preset for LinkSplatConfig {
             dof: 4,
             anchors_per_link: 4,
             hidden: 64,
-            features: 64,
+            features: 48,
             convs: 3,
             min_sigma_cells: 0.75,
             image: [100, 100],
@@ -208,6 +209,8 @@ impl LinkSplatConfig {
             ],
             head: conv3((c / 4).max(4), 1),
             chain: TensorChain::new(&robot.chain),
+            host: robot.chain.clone(),
+            through_tensors: false,
             camera: camera.clone(),
             min_sigma_cells: self.min_sigma_cells,
             image: self.image,
@@ -232,6 +235,13 @@ pub struct LinkSplat {
     head: Conv2d,
     #[module(skip)]
     chain: TensorChain,
+    /// The same chain for the host's forward kinematics.
+    #[module(skip)]
+    host: KinematicChain,
+    /// Whether the anchors are placed in tensor ops (differentiable in the angles) rather
+    /// than on the host.
+    #[module(skip)]
+    through_tensors: bool,
     #[module(skip)]
     camera: Camera,
     #[module(skip)]
@@ -252,8 +262,75 @@ struct Seen {
 }
 
 impl LinkSplat {
-    /// The anchors for joint angles `angles` `[B, dof]` (degrees) as the camera sees them.
+    /// The anchors for joint angles `angles` `[B, dof]` (degrees) as the camera sees them:
+    /// in tensor ops where the angles must carry gradients (reading the body back from an
+    /// image, [`BodyFit::differentiable`]), otherwise on the host ([`LinkSplat::see_on_host`]).
     fn see(&self, angles: Tensor<2>) -> Seen {
+        if self.through_tensors {
+            self.see_in_tensors(angles)
+        } else {
+            self.see_on_host(angles)
+        }
+    }
+
+    /// [`LinkSplat::see`] on the host, in f64: forward kinematics of one pose takes
+    /// microseconds there, where the tensor chain's hundred small ops dominate a batch of one.
+    fn see_on_host(&self, angles: Tensor<2>) -> Seen {
+        let [b, dof] = angles.dims();
+        let device = angles.device();
+        let q: Vec<f32> = angles
+            .into_data()
+            .convert::<f32>()
+            .to_vec()
+            .expect("joint angles as f32");
+        let a = self.anchors.links.len();
+        let f = self.camera.frame();
+        let (cx, cy) = self.camera.principal_point();
+        let cell = 1.0 / GRID_DIVISOR as f64;
+        let [gh, gw] = self.grid();
+        let to_grid = |p: f64| (p + 0.5) * cell - 0.5;
+        let (mut row, mut col, mut sigma) = (Vec::new(), Vec::new(), Vec::new());
+        let mut inputs = Vec::with_capacity(b * a * ANCHOR_INPUTS);
+        for pose in q.chunks(dof) {
+            let pose: Vec<f64> = pose.iter().map(|&v| v as f64).collect();
+            let frames = self.host.link_frames(&self.host.to_si(&pose));
+            for ((&l, c), &radius) in (self.anchors.links.iter())
+                .zip(&self.anchors.centres)
+                .zip(&self.anchors.radii)
+            {
+                let p = frames[l] * nalgebra::Point3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+                let rel = p - f.eye;
+                let z = rel.dot(&f.fwd).max(1e-3);
+                let (r, k) = (
+                    to_grid(cy - f.focal * rel.dot(&f.up) / z),
+                    to_grid(cx + f.focal * rel.dot(&f.right) / z),
+                );
+                row.push(r as f32);
+                col.push(k as f32);
+                sigma.push((radius as f64 / z * f.focal * cell).max(self.min_sigma_cells) as f32);
+                let m = frames[l].rotation.to_rotation_matrix();
+                for axis in [f.right, f.up, f.fwd] {
+                    let camera_row = axis.transpose() * m.matrix();
+                    inputs.extend(camera_row.iter().map(|&v| v as f32));
+                }
+                inputs.extend([
+                    z as f32,
+                    (r * 2.0 / gh as f64 - 1.0) as f32,
+                    (k * 2.0 / gw as f64 - 1.0) as f32,
+                ]);
+            }
+        }
+        let tensor = |v: Vec<f32>| Tensor::<2>::from_data(TensorData::new(v, [b, a]), &device);
+        Seen {
+            row: tensor(row),
+            col: tensor(col),
+            sigma: tensor(sigma),
+            inputs: Tensor::from_data(TensorData::new(inputs, [b * a, ANCHOR_INPUTS]), &device),
+        }
+    }
+
+    /// [`LinkSplat::see`] in tensor ops, differentiable in the angles.
+    fn see_in_tensors(&self, angles: Tensor<2>) -> Seen {
         let [b, _] = angles.dims();
         let device = angles.device();
         let a = self.anchors.links.len();
@@ -397,7 +474,9 @@ impl Render for LinkSplat {
 
 impl BodyFit for LinkSplat {
     fn differentiable(&self, autodiff: &Device) -> Option<Box<dyn Render>> {
-        Some(Box::new(self.clone().fork(autodiff).freeze()))
+        let mut network = self.clone().fork(autodiff).freeze();
+        network.through_tensors = true;
+        Some(Box::new(network))
     }
 }
 
@@ -473,9 +552,14 @@ mod tests {
     use crate::sim::robots::BuiltinRobot;
     use nalgebra::Point3;
 
-    /// The anchors as the network sees them (tensor forward kinematics, the camera in tensor
-    /// ops) against the slow reference: each anchor placed by the chain's `link_frames` in
-    /// f64 and projected by [`Camera::project`], then scaled to the grid.
+    fn values(t: Tensor<2>) -> Vec<f32> {
+        t.into_data().to_vec().unwrap()
+    }
+
+    /// The anchors as the network sees them, both ways: in tensor ops (tensor forward
+    /// kinematics, the camera in tensor ops) against the slow reference (each anchor placed
+    /// by the chain's `link_frames` in f64 and projected by [`Camera::project`], scaled to
+    /// the grid), and the host's fast path against the tensor ops, every value.
     #[test]
     fn anchors_project_where_the_camera_sees_them() {
         let robot = BuiltinRobot::Arm4.load();
@@ -487,28 +571,42 @@ mod tests {
         let device = Device::default();
         let anchors = anchors(&robot, 2).unwrap();
         assert!(anchors.links.len() >= 4, "{} anchors", anchors.links.len());
-        let net = cfg
+        let mut net = cfg
             .init(&robot, anchors.clone(), &camera, &device, 0)
             .unwrap();
-        let q = [20.0, -35.0, 50.0, 10.0];
-        let angles = Tensor::<2>::from_data(TensorData::new(q.to_vec(), [1, 4]), &device);
+        let poses = [[20.0, -35.0, 50.0, 10.0], [-60.0, 15.0, -20.0, 75.0]];
+        let angles = Tensor::<2>::from_data(TensorData::new(poses.concat(), [2, 4]), &device);
+        let host = net.see(angles.clone());
+        net.through_tensors = true;
         let seen = net.see(angles);
-        let rows: Vec<f32> = seen.row.into_data().to_vec().unwrap();
-        let cols: Vec<f32> = seen.col.into_data().to_vec().unwrap();
-        let frames = robot.chain.link_frames(&q.map(|d: f64| d.to_radians()));
-        for (k, (&l, c)) in anchors.links.iter().zip(&anchors.centres).enumerate() {
-            let p = frames[l] * Point3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-            let (row, col, _) = camera.project(&p).unwrap();
-            let grid = |px: f64| (px + 0.5) / GRID_DIVISOR as f64 - 0.5;
-            assert!(
-                (rows[k] as f64 - grid(row)).abs() < 1e-3
-                    && (cols[k] as f64 - grid(col)).abs() < 1e-3,
-                "anchor {k}: ({}, {}) against ({}, {})",
-                rows[k],
-                cols[k],
-                grid(row),
-                grid(col)
-            );
+        let rows = values(seen.row.clone());
+        let cols = values(seen.col.clone());
+        let a = anchors.links.len();
+        for (i, q) in poses.iter().enumerate() {
+            let frames = robot.chain.link_frames(&q.map(|d: f64| d.to_radians()));
+            for (k, (&l, c)) in anchors.links.iter().zip(&anchors.centres).enumerate() {
+                let p = frames[l] * Point3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+                let (row, col, _) = camera.project(&p).unwrap();
+                let grid = |px: f64| (px + 0.5) / GRID_DIVISOR as f64 - 0.5;
+                let (r, c) = (rows[i * a + k] as f64, cols[i * a + k] as f64);
+                assert!(
+                    (r - grid(row)).abs() < 1e-3 && (c - grid(col)).abs() < 1e-3,
+                    "pose {i} anchor {k}: ({r}, {c}) against ({}, {})",
+                    grid(row),
+                    grid(col)
+                );
+            }
+        }
+        let pairs = [
+            ("row", host.row, seen.row),
+            ("col", host.col, seen.col),
+            ("sigma", host.sigma, seen.sigma),
+            ("inputs", host.inputs, seen.inputs),
+        ];
+        for (what, fast, slow) in pairs {
+            for (k, (x, y)) in values(fast).iter().zip(values(slow)).enumerate() {
+                assert!((x - y).abs() < 1e-3, "{what}[{k}]: host {x}, tensors {y}");
+            }
         }
     }
 }
