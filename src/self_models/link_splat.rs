@@ -36,6 +36,7 @@ use crate::core::error::{Error, Result};
 use crate::core::preset::Preset;
 use crate::kernels::cpu_extension::{conv2d_layer, linear_layer, relu, sigmoid};
 use crate::kernels::upconv::{UpConv, UpConvConfig};
+use crate::self_models::k3dgs::splatting::{camera_rotation, project_centres};
 use crate::self_models::model::{
     BodyFit, Fit, LoadContext, Loaded, Render, SelfModel, Trained, train_network,
 };
@@ -281,7 +282,7 @@ impl LinkSplat {
         let q: Vec<f32> = angles
             .into_data()
             .convert::<f32>()
-            .to_vec()
+            .try_into_vec::<f32>()
             .expect("joint angles as f32");
         let a = self.anchors.links.len();
         let f = self.camera.frame();
@@ -350,32 +351,18 @@ impl LinkSplat {
             .matmul(local.reshape([1, a, 3, 1]))
             .reshape([b, a, 3])
             + t;
-        // World to camera: rows right, up, forward.
-        let f = self.camera.frame();
-        let w: Vec<f32> = [f.right, f.up, f.fwd]
-            .iter()
-            .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
-            .collect();
-        let w = Tensor::<2>::from_data(TensorData::new(w, [3, 3]), &device);
-        let eye = Tensor::<2>::from_data(
-            TensorData::new(vec![f.eye.x as f32, f.eye.y as f32, f.eye.z as f32], [1, 3]),
-            &device,
-        );
-        let cam = (world.reshape([b * a, 3]) - eye).matmul(w.clone().transpose());
-        let coord = |i: usize| cam.clone().slice([0..b * a, i..i + 1]).reshape([b, a]);
-        let (x, y, z) = (coord(0), coord(1), coord(2).clamp_min(1e-3));
-        let (cx, cy) = self.camera.principal_point();
+        let ([_, _, z], row, col) = project_centres(world, &self.camera);
         let cell = 1.0 / GRID_DIVISOR as f64;
         // Pixel centres at integer coordinates; grid cell k covers pixels 4k..4k+3.
         let to_grid = |p: Tensor<2>| p.add_scalar(0.5).mul_scalar(cell).sub_scalar(0.5);
-        let col = to_grid((x / z.clone()).mul_scalar(f.focal).add_scalar(cx));
-        let row = to_grid((y / z.clone()).mul_scalar(-f.focal).add_scalar(cy));
+        let (row, col) = (to_grid(row), to_grid(col));
         let radii =
             Tensor::<2>::from_data(TensorData::new(self.anchors.radii.clone(), [1, a]), &device);
         let sigma = (radii / z.clone())
-            .mul_scalar(f.focal * cell)
+            .mul_scalar(self.camera.focal_px() * cell)
             .clamp_min(self.min_sigma_cells);
         // The link's rotation in the camera frame: W R, [B, A, 9].
+        let w = camera_rotation(&self.camera, &device);
         let rotation = w.reshape([1, 1, 3, 3]).matmul(r).reshape([b * a, 9]);
         let [gh, gw] = self.grid();
         let inputs = Tensor::cat(
@@ -553,7 +540,7 @@ mod tests {
     use nalgebra::Point3;
 
     fn values(t: Tensor<2>) -> Vec<f32> {
-        t.into_data().to_vec().unwrap()
+        t.into_data().try_into_vec::<f32>().unwrap()
     }
 
     /// The anchors as the network sees them, both ways: in tensor ops (tensor forward

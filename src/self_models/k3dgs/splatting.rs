@@ -51,7 +51,7 @@ pub struct ImageGaussians {
 }
 
 /// The camera rotation `W` `[3, 3]`: rows right, up, forward (world to camera).
-fn camera_rotation(camera: &Camera, device: &burn::tensor::Device) -> Tensor<2> {
+pub fn camera_rotation(camera: &Camera, device: &burn::tensor::Device) -> Tensor<2> {
     let f = camera.frame();
     let w: Vec<f32> = [f.right, f.up, f.fwd]
         .iter()
@@ -63,7 +63,10 @@ fn camera_rotation(camera: &Camera, device: &burn::tensor::Device) -> Tensor<2> 
 /// The centres of world points `[B, N, 3]` in the camera: camera coordinates `[x, y, z]`
 /// (x right, y up, z forward, m; z clamped to at least 1 mm), and image row and column (px),
 /// each `[B, N]`.
-fn project_centres(means: Tensor<3>, camera: &Camera) -> ([Tensor<2>; 3], Tensor<2>, Tensor<2>) {
+pub fn project_centres(
+    means: Tensor<3>,
+    camera: &Camera,
+) -> ([Tensor<2>; 3], Tensor<2>, Tensor<2>) {
     let [b, n, _] = means.dims();
     let f = camera.frame();
     let device = means.device();
