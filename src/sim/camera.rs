@@ -410,15 +410,20 @@ impl CameraFrame {
     /// Project a world point: (row, column, depth along the camera axis). `None` behind the eye.
     #[inline]
     pub fn project(&self, p: &Point3<f64>) -> Option<(f64, f64, f64)> {
+        ((p - self.eye).dot(&self.fwd) > 1e-9).then(|| self.project_clamped(p, 0.0))
+    }
+
+    /// [`CameraFrame::project`] with the depth held at least `min_depth` (m): a point at or
+    /// behind the eye lands far out in the image instead of nowhere (as the splatting models'
+    /// tensor projections do).
+    #[inline]
+    pub fn project_clamped(&self, p: &Point3<f64>, min_depth: f64) -> (f64, f64, f64) {
         let v = p - self.eye;
-        let z = v.dot(&self.fwd);
-        if z <= 1e-9 {
-            return None;
-        }
-        Some((
+        let z = v.dot(&self.fwd).max(min_depth);
+        (
             self.cy - self.focal * v.dot(&self.up) / z,
             self.cx + self.focal * v.dot(&self.right) / z,
             z,
-        ))
+        )
     }
 }

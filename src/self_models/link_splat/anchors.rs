@@ -58,6 +58,10 @@ pub fn anchors(robot: &Robot, per_link: usize) -> Result<Anchors> {
     Ok(out)
 }
 
+/// The least depth an anchor is projected at (m), as
+/// [`crate::self_models::k3dgs::splatting::project_centres`] clamps it.
+const MIN_DEPTH_M: f64 = 1e-3;
+
 /// The anchors seen from a camera: image row and column and the splat's width (grid cells),
 /// `[B, A]` each, and each anchor's MLP input `[B * A, ANCHOR_INPUTS]`.
 pub(super) struct Seen {
@@ -91,7 +95,6 @@ impl LinkSplat {
             .expect("joint angles as f32");
         let a = self.anchors.links.len();
         let f = self.camera.frame();
-        let (cx, cy) = self.camera.principal_point();
         let cell = 1.0 / GRID_DIVISOR as f64;
         let [gh, gw] = self.grid();
         let to_grid = |p: f64| (p + 0.5) * cell - 0.5;
@@ -105,12 +108,8 @@ impl LinkSplat {
                 .zip(&self.anchors.radii)
             {
                 let p = frames[l] * nalgebra::Point3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-                let rel = p - f.eye;
-                let z = rel.dot(&f.fwd).max(1e-3);
-                let (r, k) = (
-                    to_grid(cy - f.focal * rel.dot(&f.up) / z),
-                    to_grid(cx + f.focal * rel.dot(&f.right) / z),
-                );
+                let (r, k, z) = f.project_clamped(&p, MIN_DEPTH_M);
+                let (r, k) = (to_grid(r), to_grid(k));
                 row.push(r as f32);
                 col.push(k as f32);
                 sigma.push((radius as f64 / z * f.focal * cell).max(self.min_sigma_cells) as f32);

@@ -144,11 +144,13 @@ impl LinkSplatConfig {
         device: &Device,
     ) -> LinkSplat {
         let a = anchors.links.len();
-        let (c, conv3) = (self.features, |cin: usize, cout: usize| {
+        // Features at the grid, halved and quartered (at least 4) at the two upsamplings.
+        let (c, half, quarter) = (self.features, self.features / 2, (self.features / 4).max(4));
+        let conv3 = |cin: usize, cout: usize| {
             Conv2dConfig::new([cin, cout], [3, 3])
                 .with_padding(PaddingConfig2d::Explicit(1, 1, 1, 1))
                 .init(device)
-        });
+        };
         let embedding = Tensor::random(
             [1, a, self.hidden],
             burn::tensor::Distribution::Normal(0.0, 0.1),
@@ -160,10 +162,10 @@ impl LinkSplatConfig {
             output: LinearConfig::new(self.hidden, c).init(device),
             convs: (0..self.convs).map(|_| conv3(c, c)).collect(),
             ups: vec![
-                UpConvConfig::new(c, c / 2, 4, 2, 1).init(device),
-                UpConvConfig::new(c / 2, (c / 4).max(4), 4, 2, 1).init(device),
+                UpConvConfig::new(c, half, 4, 2, 1).init(device),
+                UpConvConfig::new(half, quarter, 4, 2, 1).init(device),
             ],
-            head: conv3((c / 4).max(4), 1),
+            head: conv3(quarter, 1),
             chain: TensorChain::new(&robot.chain),
             host: robot.chain.clone(),
             through_tensors: false,
@@ -261,11 +263,6 @@ impl LinkSplat {
         }
         conv2d_layer(&self.head, x)
     }
-
-    /// Trainable parameters.
-    pub fn trainable_params(&self) -> usize {
-        self.num_params()
-    }
 }
 
 impl Render for LinkSplat {
@@ -323,7 +320,7 @@ impl SelfModel for LinkSplatConfig {
             fit.train.seed,
         )?;
         train_network(
-            network.trainable_params(),
+            network.num_params(),
             network,
             fit,
             fit.train_set,
