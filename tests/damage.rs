@@ -252,6 +252,7 @@ fn the_ewc_penalty_is_zero_at_the_old_weights_and_grows_away_from_them() {
         checkpoint_every: 0,
         log_every: 0,
         precision: Default::default(),
+        schedule: Default::default(),
     };
     let loss = cfg.training_loss();
     let ewc = selfmodel::train::ewc::Ewc::new(&model, &set, &train, 2, &loss, 100.0).unwrap();

@@ -59,6 +59,7 @@ fn neurokin_trains_in_every_precision_with_f32_master_weights() {
             checkpoint_every: 0,
             log_every: 5,
             precision,
+            schedule: Default::default(),
         };
         let model = cfg.init(&tdev, 0).unwrap();
         // The cast copy computes in the lower dtype; BatchNorm and the buffers stay f32.

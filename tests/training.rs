@@ -1,5 +1,6 @@
-//! The shared training loop: resume reproduces an uninterrupted run, a NaN loss stops cleanly
-//! keeping the last checkpoint, and gradient clipping bounds the global norm.
+//! The shared training loop: resume reproduces an uninterrupted run (its learning-rate
+//! schedule included), a NaN loss stops cleanly keeping the last checkpoint, and gradient
+//! clipping bounds the global norm.
 
 mod common;
 
@@ -42,6 +43,7 @@ fn cfg(steps: usize) -> TrainConfig {
         checkpoint_every: 5,
         log_every: 0,
         precision: Default::default(),
+        schedule: Default::default(),
     }
 }
 
@@ -118,6 +120,56 @@ fn resuming_reproduces_an_uninterrupted_run() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("different configuration"), "{err}");
+}
+
+#[test]
+fn a_cosine_schedule_falls_to_a_hundredth_and_resumes_where_it_stopped() {
+    use selfmodel::train::config::LrSchedule;
+    use selfmodel::train::trainer::Watch;
+    let cosine = LrSchedule::Cosine;
+    assert_eq!(cosine.rate(0.1, 0, 20), 0.1);
+    assert!((cosine.rate(0.1, 10, 20) - 0.1 * 0.505).abs() < 1e-12);
+    assert!((cosine.rate(0.1, 20, 20) - 0.001).abs() < 1e-12);
+    let dev = autodiff_device(&Device::flex(), 3);
+    let set = data(&dev);
+    dev.seed(11);
+    let init = LinearConfig::new(4, 1).init(&dev);
+    let cfg = TrainConfig {
+        schedule: cosine,
+        ..cfg(20)
+    };
+    let (full, _) = train(init.clone(), &set, &cfg, None, "full", loss).unwrap();
+    let (constant, _) = train(init.clone(), &set, &self::cfg(20), None, "constant", loss).unwrap();
+    let dir = common::tempdir();
+    let plan = |resume| CheckpointPlan {
+        dir: dir.path().join("ckpt"),
+        resume,
+        fingerprint: serde_json::json!({"test": 1}),
+    };
+    // Killed at step 12: the checkpoint of step 10 stays.
+    let mut kill = Watch(|_: &Linear, step: usize| {
+        if step == 12 {
+            Err(selfmodel::Error::Config("killed".into()))
+        } else {
+            Ok(())
+        }
+    });
+    let killed = Trainer::new(&cfg, "killed")
+        .checkpoint(Some(&plan(false)))
+        .hooks(&mut kill)
+        .fit(init.clone(), &set, loss);
+    assert!(killed.is_err());
+    let (resumed, log) = train(init, &set, &cfg, Some(&plan(true)), "resumed", loss).unwrap();
+    assert_eq!(log.resumed_from, Some(10));
+    let (a, b, c) = (weights(&full), weights(&resumed), weights(&constant));
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() < 1e-6, "{a:?} vs {b:?}");
+    }
+    // The schedule changed the run: its weights are not the constant rate's.
+    assert!(
+        a.iter().zip(&c).any(|(x, y)| (x - y).abs() > 1e-4),
+        "{a:?} vs {c:?}"
+    );
 }
 
 #[test]

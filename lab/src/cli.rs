@@ -451,6 +451,11 @@ pub struct ExperimentArgs {
     /// `precision` column says which.
     #[arg(long, value_enum, default_value_t = selfmodel::train::precision::Precision::F32)]
     pub precision: selfmodel::train::precision::Precision,
+    /// Self-models: the learning rate along training: constant (the papers' protocol), or
+    /// cosine (falling along a half cosine from the preset's rate to 1% of it at the last
+    /// step, to train to a flat curve). The results' notes say which.
+    #[arg(long, value_enum, default_value_t = selfmodel::train::config::LrSchedule::Constant)]
+    pub schedule: selfmodel::train::config::LrSchedule,
 }
 
 impl ExperimentArgs {
@@ -550,6 +555,7 @@ impl ExperimentArgs {
             latencies: self.latency.clone(),
             models: self.models.clone(),
             precision: self.precision,
+            schedule: self.schedule,
         };
         // Everything that can be checked is checked before the run writes its first file: the
         // device is compiled in, and a robot given by URDF loads and has a joint to move.

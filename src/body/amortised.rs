@@ -22,8 +22,7 @@ use crate::self_models::model::Render;
 use crate::train::losses::mse;
 use crate::train::{
     batcher::TrainSet,
-    config::TrainConfig,
-    hooks::Schedule,
+    config::{LrSchedule, TrainConfig},
     trainer::{Trainer, autodiff_device},
 };
 
@@ -51,6 +50,7 @@ impl AmortisedConfig {
             jitter_deg: 5.0,
             train: TrainConfig {
                 precision: Default::default(),
+                schedule: Default::default(),
                 steps: 6000,
                 batch: 64,
                 learning_rate: 1e-3,
@@ -210,10 +210,12 @@ pub fn train_estimator(
         )],
     };
     let model = cfg.init(image, dof, &tdev)?;
-    let mut schedule = Schedule::cosine(cfg.train.steps);
-    let (model, log) = Trainer::new(&cfg.train, "pose estimator (CNN)")
-        .hooks(&mut schedule)
-        .fit(model, &set, |m: &PoseCnn, b| {
+    let train = TrainConfig {
+        schedule: LrSchedule::Cosine,
+        ..cfg.train.clone()
+    };
+    let (model, log) =
+        Trainer::new(&train, "pose estimator (CNN)").fit(model, &set, |m: &PoseCnn, b| {
             mse(m.forward(b.targets[0].clone()), b.inputs.clone())
         })?;
     let tail = (log.curve.len() / 10).max(1);

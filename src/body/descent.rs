@@ -9,8 +9,7 @@ use crate::body::observations::{Observed, check_angles};
 use crate::core::error::{Error, Result};
 use crate::train::{
     batcher::{Batch, TrainSet},
-    config::TrainConfig,
-    hooks::Schedule,
+    config::{LrSchedule, TrainConfig},
     trainer::Trainer,
 };
 
@@ -48,6 +47,7 @@ impl<'a> Descent<'a> {
     ) -> Result<M> {
         let train = TrainConfig {
             precision: Default::default(),
+            schedule: LrSchedule::Cosine,
             steps: self.steps,
             batch: set.len(),
             learning_rate: self.learning_rate,
@@ -57,10 +57,8 @@ impl<'a> Descent<'a> {
             checkpoint_every: 0,
             log_every: 0,
         };
-        let mut schedule = Schedule::cosine(self.steps);
         let (fitted, _) = Trainer::new(&train, self.label)
             .quiet()
-            .hooks(&mut schedule)
             .fit(module, set, loss)?;
         Ok(fitted)
     }

@@ -6,7 +6,7 @@
 //! Starts: the caller's guess for each image (the amortised estimator's answer,
 //! [`crate::body::amortised`]) when given, then poses drawn uniformly within the joint
 //! ranges (the same draws for every image, seeded). The learning rate falls along a half
-//! cosine ([`crate::train::hooks::Schedule`]); the angles are in degrees, so the learning rate is about the
+//! cosine ([`crate::train::config::LrSchedule`]); the angles are in degrees, so the learning rate is about the
 //! largest step in degrees Adam takes.
 
 use burn::module::{Module, Param};

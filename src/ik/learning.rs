@@ -15,9 +15,8 @@ use burn::optim::ModuleOptimizer;
 
 use crate::train::{
     batcher::{Batch, TrainSet},
-    config::TrainConfig,
+    config::{LrSchedule, TrainConfig},
     convergence::{Convergence, ConvergenceLog, FitCheckpoint, train_to_convergence},
-    hooks::Schedule,
     trainer::Trainer,
 };
 
@@ -71,6 +70,11 @@ impl FitConfig {
     pub fn train_config(&self, samples: usize) -> TrainConfig {
         TrainConfig {
             precision: Default::default(),
+            schedule: if self.cosine {
+                LrSchedule::Cosine
+            } else {
+                LrSchedule::Constant
+            },
             steps: TrainConfig::steps_for_epochs(self.epochs, samples, self.batch),
             batch: self.batch,
             learning_rate: self.learning_rate,
@@ -129,14 +133,8 @@ pub fn fit_set(
     loss: impl Fn(&Mlp, &Batch) -> Tensor<1>,
 ) -> Result<(Mlp, ModuleOptimizer)> {
     let train_cfg = cfg.train_config(set.len());
-    let mut schedule = if cfg.cosine {
-        Schedule::cosine(train_cfg.steps)
-    } else {
-        Schedule::Constant
-    };
     let (model, optim, _) = Trainer::new(&train_cfg, label)
         .optimizer(optim)
-        .hooks(&mut schedule)
         .run(model, set, loss)?;
     Ok((model, optim))
 }

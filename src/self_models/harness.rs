@@ -494,6 +494,7 @@ impl Evaluation<'_> {
             preset: cfg.preset.clone(),
             device: self.device_choice.to_string(),
             precision: cfg.train.precision,
+            schedule: cfg.train.schedule,
             git_revision: self.git_revision.into(),
             parameters: trained.parameters,
             train_samples: fitted.train_range.len(),

@@ -196,6 +196,7 @@ pub fn k3dgs_run(preset: &str, variant: K3dgsVariant) -> Result<SelfModelRun<K3d
     let mut run = SelfModelRun::new(preset, name, model, 32)?;
     run.train = TrainConfig {
         precision: Default::default(),
+        schedule: Default::default(),
         steps,
         batch: 1,
         learning_rate: 5e-3,

@@ -14,6 +14,9 @@ pub struct ModelResult {
     /// The dtype it trained in (`precision`; rows written before the column: f32).
     #[serde(default)]
     pub precision: crate::train::precision::Precision,
+    /// The learning rate along training (rows written before the column: constant).
+    #[serde(default)]
+    pub schedule: crate::train::config::LrSchedule,
     pub git_revision: String,
     pub parameters: usize,
     pub train_samples: usize,

@@ -44,6 +44,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
         },
         "quick" => TrainConfig {
             precision: Default::default(),
+            schedule: Default::default(),
             steps: 200,
             batch: 16,
             learning_rate: 1e-3,
@@ -55,6 +56,7 @@ pub fn notebook_train(preset: &str) -> TrainConfig {
         },
         _ => TrainConfig {
             precision: Default::default(),
+            schedule: Default::default(),
             steps: 3000,
             batch: 32,
             learning_rate: 1e-3,

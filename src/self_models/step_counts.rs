@@ -51,6 +51,7 @@ pub fn neurokin_step_counts(
     let set = cfg.training_set(&set);
     let train = TrainConfig {
         precision: Default::default(),
+        schedule: Default::default(),
         steps,
         batch,
         learning_rate: 1e-3,

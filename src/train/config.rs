@@ -32,6 +32,40 @@ pub struct TrainConfig {
     /// [`super::precision`]). Absent from a saved config: f32.
     #[serde(default, skip_serializing_if = "Precision::is_f32")]
     pub precision: Precision,
+    /// How the learning rate moves along training. Absent from a saved config: constant.
+    #[serde(default, skip_serializing_if = "LrSchedule::is_constant")]
+    pub schedule: LrSchedule,
+}
+
+/// How the learning rate moves along training.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum LrSchedule {
+    /// The config's rate throughout.
+    #[default]
+    Constant,
+    /// Falling along a half cosine from the config's rate (the first step) to 1% of it (after
+    /// the last).
+    Cosine,
+}
+
+impl LrSchedule {
+    /// The rate of the step taken after `done` of `steps` steps, from `base`. A function of
+    /// the step alone, so a resumed run continues the schedule where it stopped.
+    pub fn rate(self, base: f64, done: usize, steps: usize) -> f64 {
+        match self {
+            LrSchedule::Constant => base,
+            LrSchedule::Cosine => {
+                let t = done as f64 / steps.max(1) as f64;
+                base * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+            }
+        }
+    }
+
+    pub fn is_constant(&self) -> bool {
+        *self == LrSchedule::Constant
+    }
 }
 
 impl TrainConfig {

@@ -1,43 +1,12 @@
 //! What a model may do during training besides descending the loss ([`TrainHooks`]): a
-//! learning-rate schedule, a closure watching every step, densification (K-3DGS), early
-//! stopping.
+//! closure watching every step, densification (K-3DGS), early stopping and its learning-rate
+//! cuts. (The schedule a run is given is its config's: [`super::config::LrSchedule`].)
 
 use std::path::Path;
 
 use burn::optim::GradientsParams;
 
 use crate::core::error::Result;
-
-/// A learning-rate schedule, as hooks: the config's rate throughout, or falling along a half
-/// cosine from it to 1% of it over `steps` steps.
-pub enum Schedule {
-    Constant,
-    Cosine { steps: usize, done: usize },
-}
-
-impl Schedule {
-    pub fn cosine(steps: usize) -> Self {
-        Schedule::Cosine { steps, done: 0 }
-    }
-}
-
-impl<M> TrainHooks<M> for Schedule {
-    fn after_step(&mut self, model: M, step: usize) -> Result<(M, bool)> {
-        if let Schedule::Cosine { done, .. } = self {
-            *done = step;
-        }
-        Ok((model, false))
-    }
-    fn learning_rate(&self, base: f64) -> f64 {
-        match *self {
-            Schedule::Constant => base,
-            Schedule::Cosine { steps, done } => {
-                let t = done as f64 / steps.max(1) as f64;
-                base * (0.01 + 0.99 * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
-            }
-        }
-    }
-}
 
 /// No hooks.
 pub(super) struct NoHooks;
@@ -78,7 +47,8 @@ pub trait TrainHooks<M> {
     fn wants_losses(&self, _steps_done: usize) -> bool {
         false
     }
-    /// The learning rate of the next step, given the config's (a schedule).
+    /// The learning rate of the next step, given the config's schedule's (a plateau rule's
+    /// cuts).
     fn learning_rate(&self, base: f64) -> f64 {
         base
     }

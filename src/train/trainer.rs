@@ -18,7 +18,7 @@ use super::batcher::{Batch, Batcher, TrainSet};
 use super::checkpoint::CheckpointPlan;
 use super::config::{TrainConfig, TrainLog};
 use super::hooks::NoHooks;
-pub use super::hooks::{Schedule, TrainHooks, Watch};
+pub use super::hooks::{TrainHooks, Watch};
 
 /// What a training step's loss function returns: the loss as a graph for burn's autodiff to
 /// differentiate, or its value with gradients computed some other way (FFKSM's hand-written
@@ -379,7 +379,7 @@ where
             }
             hooks.gradients(&model, &grads, step);
         }
-        let lr = hooks.learning_rate(cfg.learning_rate);
+        let lr = hooks.learning_rate(cfg.schedule.rate(cfg.learning_rate, step, cfg.steps));
         model = crate::train::adam::step(&mut optim, lr, model, grads, clip);
         log.train_seconds += t0.elapsed().as_secs_f64();
         log.images += n;

@@ -198,6 +198,7 @@ fn reject_self_model_switches(opts: &RunOptions, name: &str) -> Result<()> {
         (opts.paper_compatible, "--paper-compatible"),
         (opts.resume, "--resume"),
         (opts.steps.is_some(), "--steps"),
+        (!opts.schedule.is_constant(), "--schedule"),
         (opts.batch.is_some(), "--batch"),
         (opts.train_samples.is_some(), "--train-samples"),
         (
@@ -321,6 +322,7 @@ fn reject_model_switches(opts: &RunOptions, name: &str, why: &str) -> Result<()>
     let given: Vec<String> = [
         (opts.paper_compatible, "--paper-compatible".to_string()),
         (opts.steps.is_some(), "--steps".to_string()),
+        (!opts.schedule.is_constant(), "--schedule".to_string()),
         (
             !opts.precision.is_f32(),
             format!("--precision {}", opts.precision),

@@ -13,6 +13,7 @@ use selfmodel::self_models::{
     run_config::{SELF_MODEL_PRESETS, SelfModelRun},
 };
 use selfmodel::sim::robots::{BuiltinRobot, RobotSpec};
+use selfmodel::train::config::LrSchedule;
 
 /// How to run an experiment: the preset and the switches every experiment understands.
 #[derive(Clone, Debug)]
@@ -58,6 +59,8 @@ pub struct RunOptions {
     pub models: Option<Vec<String>>,
     /// Self-models: the dtype the network trains in (`--precision`, f32 master weights).
     pub precision: selfmodel::train::precision::Precision,
+    /// Self-models: the learning rate along training (`--schedule`).
+    pub schedule: selfmodel::train::config::LrSchedule,
 }
 
 impl RunOptions {
@@ -83,6 +86,7 @@ impl RunOptions {
             latencies: None,
             models: None,
             precision: Default::default(),
+            schedule: Default::default(),
         }
     }
 
@@ -162,6 +166,14 @@ impl RunOptions {
                 )));
             }
             cfg.train.precision = self.precision;
+        }
+        if self.schedule != cfg.train.schedule {
+            cfg.train.schedule = self.schedule;
+            let msg = match self.schedule {
+                LrSchedule::Cosine => "learning rate along a half cosine to 1% at the last step",
+                LrSchedule::Constant => "learning rate constant",
+            };
+            add_note(&mut cfg.note, msg.into());
         }
         let rebatched = self.override_batch(&mut cfg.train, &mut cfg.note);
         cfg.steps_override = self

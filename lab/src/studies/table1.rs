@@ -146,7 +146,7 @@ fn reusable_rows(opts: &RunOptions, default_dir: &str) -> Result<Option<Vec<Mode
 }
 
 /// The rows of the table at `path`, if it exists, has rows, and every row has this run's
-/// preset, dataset, step count and training-sample count (`--steps N`, `--train-samples N`:
+/// preset, dataset, precision, learning-rate schedule, step count and training-sample count (`--steps N`, `--train-samples N`:
 /// N; none: the preset's, so a shortened run, or one on more poses, is never taken for the
 /// preset's).
 fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResult>>> {
@@ -166,6 +166,7 @@ fn finished_rows(opts: &RunOptions, path: &Path) -> Result<Option<Vec<ModelResul
         r.preset == opts.preset
             && r.dataset == dataset
             && r.precision == opts.precision
+            && r.schedule == opts.schedule
             && match opts.steps {
                 Some(s) => r.train_steps == s,
                 None => r.steps_override.is_none(),

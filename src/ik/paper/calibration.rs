@@ -192,6 +192,7 @@ pub fn calibrate(
     for (i, &(steps, learning_rate)) in cfg.stages.iter().enumerate() {
         let train = TrainConfig {
             precision: Default::default(),
+            schedule: Default::default(),
             steps,
             batch: n,
             learning_rate,

@@ -184,6 +184,7 @@ pub fn ffksm_run(preset: &str, variant: FfksmVariant) -> Result<SelfModelRun<Ffk
     let mut run = SelfModelRun::new(preset, "FFKSM", model, 16)?;
     run.train = TrainConfig {
         precision: Default::default(),
+        schedule: Default::default(),
         steps: if quick { 400 } else { 8000 },
         batch: 1,
         learning_rate: if quick { 5e-3 } else { 5e-4 },
