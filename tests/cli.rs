@@ -121,6 +121,19 @@ fn switches_that_do_not_apply_fail_cleanly() {
         &["--train-samples", "50"],
     );
     assert_clean_failure(&out, &["--train-samples", "ablation_data_scale"], d);
+    // Its sizes and models are its own: named, each at least 1, models it can scale.
+    let out = run(env!("CARGO_BIN_EXE_neurokin"), &["--sizes", "50"]);
+    assert_clean_failure(&out, &["--sizes", "neurokin"], d);
+    let out = run(
+        env!("CARGO_BIN_EXE_ablation_data_scale"),
+        &["--sizes", "50,0"],
+    );
+    assert_clean_failure(&out, &["--sizes", "at least 1"], d);
+    let out = run(
+        env!("CARGO_BIN_EXE_ablation_data_scale"),
+        &["--models", "nearest_pose"],
+    );
+    assert_clean_failure(&out, &["nearest_pose", "link_splat"], d);
     // mesh_fidelity compares the papers' arm with its meshes: it has no --robot.
     let out = run(env!("CARGO_BIN_EXE_mesh_fidelity"), &["--robot", "ur5"]);
     assert!(!out.status.success());

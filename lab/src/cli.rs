@@ -440,11 +440,18 @@ pub struct ExperimentArgs {
     /// reports/ (same preset, dataset and steps) instead of training those models again.
     #[arg(long)]
     pub reuse: bool,
-    /// table1 only: the self-models to train and compare (registry names, e.g.
+    /// table1: the self-models to train and compare (registry names, e.g.
     /// `neurokin,neurokin_tree,k3dgs,nearest_pose,mean_silhouette`) instead of every model of
-    /// Table I; `neurokin_tree` is added only this way.
+    /// Table I; `neurokin_tree` is added only this way. ablation_data_scale: the self-models it
+    /// scales (neurokin, link_splat, k3dgs) instead of NeuroKin.
     #[arg(long, value_delimiter = ',', value_name = "NAMES")]
     pub models: Option<Vec<String>>,
+    /// ablation_data_scale only: train on the first N poses for each N (e.g.
+    /// `1600,3200,9600,25600,51200`), every size tested on the preset's test poses after the
+    /// largest, instead of the paper's three sizes. With --models: the self-models to scale
+    /// (neurokin, link_splat, k3dgs; default neurokin).
+    #[arg(long, value_delimiter = ',', value_name = "N")]
+    pub sizes: Option<Vec<usize>>,
     /// Self-models (neurokin, resneurokin_d): train the network in this dtype, as PyTorch's
     /// autocast (f32 master weights, Adam and losses; evaluated in f32). bf16 and f16 reach a
     /// GPU's tensor cores; flex32 (f32 stored, f16 computed) is a GPU dtype. The results'
@@ -462,13 +469,36 @@ impl ExperimentArgs {
     /// Refuse the options experiment `name` (`e`) does not take, and counts of zero, before
     /// anything runs.
     fn refuse_inapplicable(&self, name: &str, e: &crate::studies::run::Experiment) -> Result<()> {
-        if self.models.is_some() && name != "table1" {
+        if self.models.is_some() && !["table1", "ablation_data_scale"].contains(&name) {
             return Err(selfmodel::Error::Config(format!(
-                "--models applies to table1 only, not {name}"
+                "--models applies to table1 and ablation_data_scale only, not {name}"
             )));
         }
+        if self.sizes.is_some() && name != "ablation_data_scale" {
+            return Err(selfmodel::Error::Config(format!(
+                "--sizes applies to ablation_data_scale only, not {name}"
+            )));
+        }
+        if self.sizes.as_ref().is_some_and(|s| s.contains(&0)) {
+            return Err(selfmodel::Error::Config(
+                "--sizes: each training-pose count must be at least 1".into(),
+            ));
+        }
         if let Some(models) = &self.models {
-            crate::studies::table1::check_models(models, crate::studies::registry::EXPERIMENTS)?;
+            if name == "table1" {
+                crate::studies::table1::check_models(
+                    models,
+                    crate::studies::registry::EXPERIMENTS,
+                )?;
+            } else if let Some(m) = models
+                .iter()
+                .find(|m| !crate::studies::data_scale::MODELS.contains(&m.as_str()))
+            {
+                return Err(selfmodel::Error::Config(format!(
+                    "--models {m}: ablation_data_scale trains {}",
+                    crate::studies::data_scale::MODELS.join(", ")
+                )));
+            }
         }
         if self.reuse && name != "table1" {
             return Err(selfmodel::Error::Config(format!(
@@ -554,6 +584,7 @@ impl ExperimentArgs {
             dataset: self.dataset.clone(),
             latencies: self.latency.clone(),
             models: self.models.clone(),
+            sizes: self.sizes.clone(),
             precision: self.precision,
             schedule: self.schedule,
         };

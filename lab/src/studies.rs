@@ -7,6 +7,7 @@ pub mod ablations;
 pub mod bench;
 pub mod body_from_image;
 pub mod damage;
+pub mod data_scale;
 pub mod docs;
 pub mod emssl;
 pub mod mesh_fidelity;

@@ -6,10 +6,7 @@
 //! - `depth`: 2, 4 and 6 transposed convolutions (paper: 19.87 dB at 12,000 FPS, 21.88 at
 //!   7,400, 22.14 at 4,200).
 //! - `latent`: 256, 512, 1024, 2048 (paper: -, 20.12, 21.88, 21.95 dB).
-//! - `data_scale`: 400, 2,000 and 12,000 samples. We train on the first 80% of each (320,
-//!   1,600, 9,600 samples of one Lorenz trajectory) and test all three on the same 400
-//!   held-out samples (samples 12,000-12,399 of the trajectory), so the rows compare. The
-//!   paper only guessed the 12,000-sample figure ("~25-26 dB").
+//! (The data-scale ablation takes any of several models: [`super::data_scale`].)
 //! - `precision` (beyond the paper): trained in f32, bf16, f16 and flex32 (autocast,
 //!   [`selfmodel::train::precision`]), each evaluated in f32; a dtype the device cannot compute
 //!   in (flex32 on the CPU) is skipped and said so.
@@ -37,7 +34,6 @@ pub enum Ablation {
     Noise,
     Depth,
     Latent,
-    DataScale,
     Precision,
 }
 
@@ -55,7 +51,6 @@ impl Ablation {
             Ablation::Noise => "ablation_noise",
             Ablation::Depth => "ablation_depth",
             Ablation::Latent => "ablation_latent",
-            Ablation::DataScale => "ablation_data_scale",
             Ablation::Precision => "ablation_precision",
         }
     }
@@ -66,7 +61,6 @@ impl Ablation {
             Ablation::Noise,
             Ablation::Depth,
             Ablation::Latent,
-            Ablation::DataScale,
             Ablation::Precision,
         ]
         .into_iter()
@@ -78,7 +72,6 @@ impl Ablation {
             Ablation::Noise => "NeuroKin ablation: input noise",
             Ablation::Depth => "NeuroKin ablation: decoder depth (transposed convolutions)",
             Ablation::Latent => "NeuroKin ablation: latent width",
-            Ablation::DataScale => "NeuroKin ablation: dataset size",
             Ablation::Precision => "NeuroKin ablation: training precision (autocast)",
         }
     }
@@ -162,35 +155,6 @@ impl Ablation {
                     )
                 })
                 .collect()
-            }
-            Ablation::DataScale => {
-                let (sizes, test): (Vec<(usize, Option<f64>)>, usize) = if preset == "quick" {
-                    (vec![(50, None), (100, None), (200, None)], 50)
-                } else {
-                    (vec![(400, None), (2000, Some(21.88)), (12000, None)], 400)
-                };
-                let max = sizes.iter().map(|s| s.0).max().unwrap_or(0);
-                sizes
-                    .into_iter()
-                    .map(|(size, p)| {
-                        s(
-                            format!("{size} samples"),
-                            p,
-                            None,
-                            Box::new(move |c: &mut NeuroKinRun| {
-                                c.data.dataset.samples = max + test;
-                                c.data.dataset.train = max;
-                                c.data.train_samples = Some(size * 4 / 5);
-                                c.data.test = Some(max..max + test);
-                                c.note = format!(
-                                    "tested on samples {max}..{} of one {}-sample trajectory, the same for every size (not the standard split's last 400 of 2,000)",
-                                    max + test,
-                                    max + test
-                                );
-                            }),
-                        )
-                    })
-                    .collect()
             }
             Ablation::Precision => Precision::value_variants()
                 .iter()

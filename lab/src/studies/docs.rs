@@ -413,8 +413,14 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
                 }
             }
         }
-        // An ablation's training curves, one line per setting, from the settings' folders.
+        // An ablation's training curves, one line per setting, from the settings' folders
+        // (the data-scale ablation's with its scaling figure).
         if dir.join("training_curves.png").is_file()
+            && dir.file_name() == Some(std::ffi::OsStr::new("ablation_data_scale"))
+        {
+            crate::studies::data_scale::draw(&dir)?;
+            drawn += 1;
+        } else if dir.join("training_curves.png").is_file()
             && let Some(ablation) = dir
                 .file_name()
                 .and_then(|n| crate::studies::ablations::Ablation::named(&n.to_string_lossy()))

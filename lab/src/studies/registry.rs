@@ -183,12 +183,9 @@ fn run_ablation_precision(opts: &RunOptions, dir: &Path) -> Result<String> {
     ablation(Ablation::Precision, opts, dir)
 }
 fn run_ablation_data_scale(opts: &RunOptions, dir: &Path) -> Result<String> {
-    if opts.train_samples.is_some() {
-        return Err(selfmodel::Error::Config(
-            "--train-samples does not apply to ablation_data_scale: it sets its own sizes (400, 2,000 and 12,000 samples)".into(),
-        ));
-    }
-    ablation(Ablation::DataScale, opts, dir)
+    let rows =
+        crate::studies::data_scale::run(opts, opts.models.as_deref(), opts.sizes.as_deref(), dir)?;
+    Ok(summary(&rows))
 }
 
 /// The inverse-kinematics experiments train no self-model: the dataset, step and resume

@@ -55,8 +55,11 @@ pub struct RunOptions {
     pub camera: CameraChoice,
     /// The forward model's latencies of `emssl_sampling_speed`, instead of its preset's.
     pub latencies: Option<Vec<selfmodel::ik::paper::sampling_pass::Latency>>,
-    /// `table1`'s models (registry names), instead of every one marked for Table I.
+    /// `table1`'s models (registry names), instead of every one marked for Table I; the
+    /// data-scale ablation's (instead of NeuroKin).
     pub models: Option<Vec<String>>,
+    /// The data-scale ablation's training-pose counts, instead of the paper's sizes.
+    pub sizes: Option<Vec<usize>>,
     /// Self-models: the dtype the network trains in (`--precision`, f32 master weights).
     pub precision: selfmodel::train::precision::Precision,
     /// Self-models: the learning rate along training (`--schedule`).
@@ -85,6 +88,7 @@ impl RunOptions {
             dataset: None,
             latencies: None,
             models: None,
+            sizes: None,
             precision: Default::default(),
             schedule: Default::default(),
         }
