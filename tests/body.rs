@@ -1,4 +1,5 @@
-//! Reading the body from images through a tiny trained NeuroKin (the quick preset, 32x32):
+//! Reading the body from images through a tiny trained NeuroKin (the quick preset, 32x32), and
+//! the study through LinkSplat:
 //! joint angles from silhouettes beat the mean pose, encoder offsets are recovered, and bad
 //! inputs are refused with one line.
 
@@ -280,4 +281,52 @@ fn visual_calibration_of_a_tiny_k3dgs_recovers_a_lengthened_link() {
     for (j, c) in fitted.change_mm.iter().enumerate() {
         assert!(j == link || c.abs() < got, "{:.1?}", fitted.change_mm);
     }
+}
+
+/// The study reads through LinkSplat as through NeuroKin: on the quick arm, the refined CNN's
+/// joints beat the mean pose, a refinement started at the truth stays near it (the gradients
+/// through LinkSplat's anchors point home), and the groups table holds the arm's one chain.
+#[test]
+fn the_study_reads_poses_through_link_splat_better_than_the_mean_pose() {
+    use selfmodel::train::config::LrSchedule;
+    use selfmodel_lab::studies::body_from_image::{
+        BodyFromImageConfig, PoseRow, ReadThrough, groups::GroupRow, run,
+    };
+    let cfg = BodyFromImageConfig {
+        reads_through: ReadThrough::LinkSplat {
+            steps: 600,
+            schedule: LrSchedule::Cosine,
+        },
+        pose_only: true,
+        ..BodyFromImageConfig::preset("quick").unwrap()
+    };
+    let dir = common::tempdir();
+    let opts = selfmodel_lab::studies::run::RunOptions::preset("quick");
+    let summary = run(&cfg, &opts, dir.path()).unwrap();
+    assert!(summary.starts_with("pose from image"), "{summary}");
+    assert!(!dir.path().join("drift.csv").exists());
+    let read = |file: &str| dir.path().join(file);
+    let rows: Vec<PoseRow> = selfmodel::report::table::read_csv(&read("results.csv")).unwrap();
+    let groups: Vec<GroupRow> = selfmodel::report::table::read_csv(&read("groups.csv")).unwrap();
+    let error = |method: &str| {
+        rows.iter()
+            .find(|r| r.method.starts_with(method) && r.images == "clean")
+            .map(|r| r.mean_joint_error_deg)
+            .unwrap()
+    };
+    let (floor, refined, from_truth) = (
+        error("mean training pose"),
+        error("CNN + "),
+        error("true angles"),
+    );
+    println!(
+        "LinkSplat: refined {refined:.2} deg, from the truth {from_truth:.2}, mean pose {floor:.2}"
+    );
+    assert!(refined < floor, "refined {refined} vs floor {floor}");
+    assert!(
+        from_truth < 0.5 * floor,
+        "from the truth {from_truth} vs floor {floor}"
+    );
+    assert!(groups.iter().all(|r| r.joints == 4), "{groups:?}");
+    assert_eq!(groups[0].mean_joint_error_deg, floor);
 }

@@ -580,8 +580,15 @@ fn joint_groups_drive_several_tips_and_every_joint() {
         all.chain.input_parents(),
         [None, Some(0), Some(1), Some(0), Some(3), Some(4)]
     );
+    // Cut into chains at the branch point (the waist holds two arms): the per-group errors'
+    // groups.
+    assert_eq!(
+        all.chain.input_chains(),
+        [vec![0], vec![1, 2], vec![3, 4, 5]]
+    );
     let named = load(JointGroup::Named(vec!["l2".into(), "waist".into()])).unwrap();
     assert_eq!(named.chain.input_parents(), [None, Some(0)]);
+    assert_eq!(named.chain.input_chains(), [vec![0, 1]]);
     assert_eq!(named.chain.joint_names(), ["waist", "l2"]);
     let err = load(JointGroup::Tips(vec!["left_foot".into()]))
         .unwrap_err()

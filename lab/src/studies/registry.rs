@@ -588,7 +588,7 @@ pub const EXPERIMENTS: &[Experiment] = &[
         name: "body_from_image",
         about: "the self-model read backwards: joint angles from a silhouette (amortised CNN, refinement through NeuroKin, search) and encoder drift from k images",
         default_dir: "reports/body_from_image",
-        presets: &["paper", "quick", "large"],
+        presets: &["paper", "quick", "large", "humanoid"],
         in_table1: false,
         takes_robot: true,
         shares_output: false,

@@ -156,6 +156,31 @@ impl KinematicChain {
             .collect()
     }
 
+    /// The joint vector cut into chains between the tree's branch points (indices into it): a
+    /// chain starts at an input with no input above it, or below an input with several below
+    /// it, and runs down while each input has exactly one below it. In joint-vector order of
+    /// their first inputs. A serial arm is one chain; the G1's whole body five (two legs, the
+    /// waist, two arms).
+    pub fn input_chains(&self) -> Vec<Vec<usize>> {
+        let parents = self.input_parents();
+        let mut below = vec![Vec::new(); parents.len()];
+        for (i, p) in parents.iter().enumerate() {
+            if let Some(p) = *p {
+                below[p].push(i);
+            }
+        }
+        (0..parents.len())
+            .filter(|&i| parents[i].is_none_or(|p| below[p].len() != 1))
+            .map(|start| {
+                let mut chain = vec![start];
+                while let [next] = below[*chain.last().expect("a chain has a start")][..] {
+                    chain.push(next);
+                }
+                chain
+            })
+            .collect()
+    }
+
     /// Sampling range of each joint value (SI): the stated limits (a rotational joint's
     /// narrowed to +-180 degrees: a wider range repeats poses), else
     /// [`DEFAULT_ROTATIONAL_RANGE`] for rotational joints without limits. A prismatic joint

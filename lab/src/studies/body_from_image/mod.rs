@@ -21,12 +21,19 @@
 //! - `figures`: `pose_grid.png` (observed, rendered at the estimate, error), `drift_vs_k.png`
 //!   and `calibration_vs_k.png`.
 //!
+//! - `groups.csv`: the clean images' estimates scored per joint group (the chains between the
+//!   kinematic tree's branch points: on the G1 the legs, the waist and the arms).
+//!
 //! The self-models are NeuroKin (checkpointed, `--resume` continues it) and K-3DGS (isotropic,
-//! alpha compositing) of the same preset, trained here.
+//! alpha compositing) of the same preset, trained here. The `humanoid` preset (issue 75: the
+//! G1's whole body, `--urdf ... --joints all --train-samples 9600`) reads through LinkSplat
+//! instead, trained 12,000 steps along a half-cosine learning rate, and reads poses only
+//! (drift, detection and calibration are the arm's studies).
 
 mod bench;
 mod calibration;
 mod drift;
+pub mod groups;
 mod pose;
 
 use std::path::Path;
@@ -48,10 +55,32 @@ use selfmodel::body::pose::{PoseFitConfig, trained_ranges};
 use selfmodel::core::atomic_file::write_json;
 use selfmodel::core::error::{Error, Result};
 use selfmodel::core::provenance::git_revision;
+use selfmodel::self_models::harness::Fitted;
 use selfmodel::self_models::harness::fit_run;
 use selfmodel::self_models::k3dgs::{K3dgsVariant, k3dgs_run};
+use selfmodel::self_models::link_splat::link_splat_run;
+use selfmodel::self_models::model::Render;
 use selfmodel::self_models::neurokin::neurokin_run;
+use selfmodel::sim::robots::RobotSpec;
+use selfmodel::train::config::LrSchedule;
 use selfmodel::train::trainer::autodiff_device;
+
+/// The self-model the study reads through.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReadThrough {
+    /// NeuroKin of the preset (checkpointed).
+    #[default]
+    NeuroKin,
+    /// LinkSplat on the preset's data, trained `steps` steps along `schedule` (checkpointed).
+    LinkSplat { steps: usize, schedule: LrSchedule },
+}
+
+impl ReadThrough {
+    fn is_neurokin(&self) -> bool {
+        *self == ReadThrough::NeuroKin
+    }
+}
 
 /// The study's settings. Presets: `paper` (the 400 test poses) and `quick` (seconds).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -80,9 +109,25 @@ pub struct BodyFromImageConfig {
     pub calibration_ks: Vec<usize>,
     pub calibration: VisualCalibrationConfig,
     pub seed: u64,
+    /// The self-model read through (absent from a saved config: NeuroKin).
+    #[serde(default, skip_serializing_if = "ReadThrough::is_neurokin")]
+    pub reads_through: ReadThrough,
+    /// Pose from image only: no K-3DGS, drift, detection or calibration (absent: the whole
+    /// study).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub pose_only: bool,
 }
 
 impl BodyFromImageConfig {
+    /// The preset of the self-models it trains (`humanoid`'s: `paper`).
+    fn model_preset(&self) -> &str {
+        if self.preset == "humanoid" {
+            "paper"
+        } else {
+            &self.preset
+        }
+    }
+
     pub fn preset(name: &str) -> Result<Self> {
         let paper = BodyFromImageConfig {
             preset: "paper".into(),
@@ -112,12 +157,26 @@ impl BodyFromImageConfig {
             calibration_ks: vec![1, 3, 10, 30],
             calibration: VisualCalibrationConfig::paper(),
             seed: 0,
+            reads_through: ReadThrough::NeuroKin,
+            pose_only: false,
         };
         match name {
             "paper" => Ok(paper),
             // The same, reading through the self-models of the `large` preset (12,000 images).
             "large" => Ok(BodyFromImageConfig {
                 preset: "large".into(),
+                ..paper
+            }),
+            // The G1's whole body through LinkSplat: pose from image only; the search (random
+            // starts in 29 joints) on 20 poses.
+            "humanoid" => Ok(BodyFromImageConfig {
+                preset: "humanoid".into(),
+                search_poses: 20,
+                reads_through: ReadThrough::LinkSplat {
+                    steps: 12_000,
+                    schedule: LrSchedule::Cosine,
+                },
+                pose_only: true,
                 ..paper
             }),
             "quick" => Ok(BodyFromImageConfig {
@@ -146,7 +205,7 @@ impl BodyFromImageConfig {
                 ..paper
             }),
             other => Err(Error::Config(format!(
-                "unknown preset \"{other}\" for body_from_image (choose paper, large or quick)"
+                "unknown preset \"{other}\" for body_from_image (choose paper, large, humanoid or quick)"
             ))),
         }
     }
@@ -159,34 +218,21 @@ pub fn run(
     opts: &crate::studies::run::RunOptions,
     out: &Path,
 ) -> Result<String> {
-    let (device_choice, resume) = (opts.device, opts.resume);
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     // The robot and camera the options name (the papers' arm by default).
-    let model_run = opts.apply(neurokin_run(&cfg.preset)?)?;
-    let fitted = fit_run(&model_run, &out.join("checkpoint"), device_choice, resume)?.erased();
+    let (fitted, robot_spec, model) = read_through(cfg, opts, out)?;
     let device = fitted.device.clone();
     let autodiff = autodiff_device(&device, cfg.seed);
     let renderer = fitted.trained.renderers[0].1.as_ref();
     let differentiable = renderer
         .differentiable(&autodiff)
         .ok_or_else(|| Error::Config("the self-model cannot be differentiated".into()))?;
-    // K-3DGS (isotropic, alpha compositing) on the same data: its Gaussians hang on the
-    // chain, so it also reads link lengths. It keeps no checkpoint (densification changes its
-    // shapes); it trains in about a minute on the paper preset.
-    let k3dgs_run = opts.apply(k3dgs_run(&cfg.preset, K3dgsVariant::IsotropicAlpha)?)?;
-    let k3dgs_fitted = fit_run(
-        &k3dgs_run,
-        &out.join("k3dgs_checkpoint"),
-        device_choice,
-        false,
-    )?
-    .erased();
-    let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
-    let k3dgs = k3dgs_fitted.trained.renderers[0]
-        .1
-        .differentiable(&autodiff)
-        .ok_or_else(|| Error::Config("K-3DGS cannot be differentiated".into()))?;
-    let robot = model_run.data.robot.load()?;
+    let k3dgs = if cfg.pose_only {
+        None
+    } else {
+        Some(k3dgs(cfg, opts, out, &autodiff)?)
+    };
+    let robot = robot_spec.load()?;
     let data = &fitted.data;
     let seen = &data.angles[fitted.train_range.clone()];
     let bench = Bench {
@@ -199,14 +245,22 @@ pub fn run(
         autodiff: &autodiff,
         image: [data.height, data.width],
         ranges: trained_ranges(seen),
-        device_name: device_choice.to_string(),
+        device_name: opts.device.to_string(),
         revision: git_revision(),
     };
     let n = cfg.test_poses.min(fitted.test_range.len());
     let test: Vec<usize> = fitted.test_range.clone().take(n).collect();
     let truth: Vec<Vec<f64>> = test.iter().map(|&i| data.angles[i].clone()).collect();
     let observed = Observed::from_dataset(data, &test);
-    let rows = pose::pose_rows(&bench, k3dgs.as_ref(), seen, &observed, &truth, out)?;
+    let through = pose::Through {
+        model: &model,
+        k3dgs: k3dgs.as_deref(),
+    };
+    let rows = pose::pose_rows(&bench, through, seen, &observed, &truth, out)?;
+    let Some(k3dgs) = k3dgs else {
+        write_json(&out.join("config.json"), cfg)?;
+        return Ok(summary(&rows[2], &[], &[], &[]));
+    };
     // Drift, then detection, drawing from one generator and one run of capture seeds.
     let mut rng = StdRng::seed_from_u64(cfg.seed ^ 0xD41F7);
     let mut seed = 1000u64;
@@ -222,31 +276,80 @@ pub fn run(
     ))
 }
 
-/// The line the binary prints: the refined CNN, the drift at the largest k, the smallest
-/// offset detected in 90% of trials and the calibration at the largest k.
+/// The self-model the study reads through, trained (or resumed, `--resume`) on the data the
+/// options name, checkpointed in `out/checkpoint`; with the robot it sees and its name.
+fn read_through(
+    cfg: &BodyFromImageConfig,
+    opts: &crate::studies::run::RunOptions,
+    out: &Path,
+) -> Result<(Fitted<Box<dyn Render>>, RobotSpec, String)> {
+    let (device, resume, checkpoint) = (opts.device, opts.resume, out.join("checkpoint"));
+    let preset = cfg.model_preset();
+    Ok(match &cfg.reads_through {
+        ReadThrough::NeuroKin => {
+            let run = opts.apply(neurokin_run(preset)?)?;
+            let fitted = fit_run(&run, &checkpoint, device, resume)?.erased();
+            (fitted, run.data.robot.clone(), run.name)
+        }
+        ReadThrough::LinkSplat { steps, schedule } => {
+            let mut run = opts.apply(link_splat_run(preset)?)?;
+            run.train.steps = *steps;
+            run.train.schedule = *schedule;
+            let fitted = fit_run(&run, &checkpoint, device, resume)?.erased();
+            (fitted, run.data.robot.clone(), run.name)
+        }
+    })
+}
+
+/// K-3DGS (isotropic, alpha compositing) on the same data, differentiable on `autodiff`: its
+/// Gaussians hang on the chain, so it also reads link lengths. It keeps no checkpoint
+/// (densification changes its shapes); it trains in about a minute on the paper preset.
+fn k3dgs(
+    cfg: &BodyFromImageConfig,
+    opts: &crate::studies::run::RunOptions,
+    out: &Path,
+    autodiff: &burn::tensor::Device,
+) -> Result<Box<dyn Render>> {
+    let run = opts.apply(k3dgs_run(cfg.model_preset(), K3dgsVariant::IsotropicAlpha)?)?;
+    let fitted = fit_run(&run, &out.join("k3dgs_checkpoint"), opts.device, false)?.erased();
+    let _ = std::fs::remove_dir_all(out.join("k3dgs_checkpoint"));
+    fitted.trained.renderers[0]
+        .1
+        .differentiable(autodiff)
+        .ok_or_else(|| Error::Config("K-3DGS cannot be differentiated".into()))
+}
+
+/// The line the binary prints: the refined CNN and, where the study ran them, the drift at
+/// the largest k, the smallest offset detected in 90% of trials and the calibration at the
+/// largest k.
 fn summary(
     r: &PoseRow,
     drift_rows: &[DriftRow],
     detection_rows: &[DetectionRow],
     calibration_rows: &[CalibrationRow],
 ) -> String {
-    let smallest = detection_rows
-        .iter()
-        .find(|r| r.detected_share >= 0.9)
-        .map_or("none".to_string(), |r| format!("{} deg", r.offset_deg));
-    let calibrated = calibration_rows.last().map_or(String::new(), |c| {
-        format!(
-            "; links +{} cm from {} images: {:.1} mm mean error",
-            c.change_cm, c.k, c.mean_error_mm
-        )
-    });
-    format!(
-        "pose from image ({}): median joint error {:.2} deg, {:.0}% of poses within 2 deg, {:.1} ms/pose batched; drift from {} images: {:.2} deg; smallest offset detected in 90% of trials: {smallest}{calibrated}",
+    let mut line = format!(
+        "pose from image ({}): median joint error {:.2} deg, {:.0}% of poses within 2 deg, {:.1} ms/pose batched",
         r.method,
         r.median_joint_error_deg,
         100.0 * r.within_2deg_share,
         r.ms_per_pose_batched,
-        drift_rows.last().map_or(0, |d| d.k),
-        drift_rows.last().map_or(f64::NAN, |d| d.offset_error_deg),
-    )
+    );
+    if let Some(d) = drift_rows.last() {
+        let smallest = detection_rows
+            .iter()
+            .find(|r| r.detected_share >= 0.9)
+            .map_or("none".to_string(), |r| format!("{} deg", r.offset_deg));
+        line += &format!(
+            "; drift from {} images: {:.2} deg; smallest offset detected in 90% of trials: {smallest}",
+            d.k, d.offset_error_deg
+        );
+    }
+    if let Some(c) = calibration_rows.last() {
+        line += &format!(
+            "; links +{} cm from {} images: {:.1} mm mean error",
+            c.change_cm, c.k, c.mean_error_mm
+        );
+    }
+    line
 }

@@ -1,6 +1,7 @@
 //! Joint angles from a silhouette: the mean training pose (a baseline), the amortised CNN, the
 //! CNN refined through the self-model (and through K-3DGS), a search without a guess, and the
-//! refined CNN on spoiled images (`results.csv`, `pose_grid.png`).
+//! refined CNN on spoiled images (`results.csv`, `pose_grid.png`); the clean images' estimates
+//! per joint group (`groups.csv`).
 
 use std::path::Path;
 
@@ -16,13 +17,19 @@ use selfmodel::report::figures::{GridRow, image_grid};
 use selfmodel::report::table::{write_csv, write_markdown_report};
 use selfmodel::self_models::model::Render;
 
+/// What the poses are read through: the self-model's name, and K-3DGS trained on the same
+/// data (differentiable, on the autodiff device), if the study reads through it too.
+pub struct Through<'a> {
+    pub model: &'a str,
+    pub k3dgs: Option<&'a dyn Render>,
+}
+
 /// The rows of `results.csv` for the test poses `truth` seen in `observed`, written with their
-/// report and `pose_grid.png` into `out`; `seen` are the training poses (the baseline's mean),
-/// `k3dgs` the Gaussian self-model trained on the same data (differentiable, on the autodiff
-/// device).
+/// report, `groups.csv` and `pose_grid.png` into `out`; `seen` are the training poses (the
+/// baseline's mean).
 pub fn pose_rows(
     b: &Bench,
-    k3dgs: &dyn Render,
+    through: Through,
     seen: &[Vec<f64>],
     observed: &Observed,
     truth: &[Vec<f64>],
@@ -39,14 +46,10 @@ pub fn pose_rows(
         .map(|j| seen.iter().map(|q| q[j]).sum::<f64>() / seen.len() as f64)
         .collect();
     let nk: (&dyn Render, &burn::tensor::Device) = (b.renderer, device);
-    let mut rows = vec![b.row(
-        "mean training pose",
-        &vec![mean; n],
-        truth,
-        Ms::UNTIMED,
-        clean(),
-        nk,
-    )?];
+    let groups = super::groups::groups(b.robot);
+    let mean = vec![mean; n];
+    let mut rows = vec![b.row("mean training pose", &mean, truth, Ms::UNTIMED, clean(), nk)?];
+    let mut group_rows = super::groups::group_rows("mean training pose", &groups, &mean, truth);
     let estimator = train_estimator(&cfg.amortised, b.renderer, device, b.image, &b.ranges, seen)?;
     let t = std::time::Instant::now();
     let guesses = estimator.estimate(observed, device, 64)?;
@@ -61,6 +64,12 @@ pub fn pose_rows(
         batched: cnn_batched,
     };
     rows.push(b.row("amortised CNN", &guesses, truth, cnn, clean(), nk)?);
+    group_rows.extend(super::groups::group_rows(
+        "amortised CNN",
+        &groups,
+        &guesses,
+        truth,
+    ));
     let refined_label = format!("CNN + {} refinement steps", cfg.refine.steps);
     let t = std::time::Instant::now();
     let refined = b.refine(b.differentiable, observed, &guesses, &cfg.refine)?;
@@ -77,6 +86,12 @@ pub fn pose_rows(
         batched: refine_batched,
     };
     rows.push(b.row(&refined_label, &refined, truth, refine, clean(), nk)?);
+    group_rows.extend(super::groups::group_rows(
+        &refined_label,
+        &groups,
+        &refined,
+        truth,
+    ));
     // The diagnostic: the same refinement started at the true angles. Where it walks away
     // from them, the self-model's optimum is not the truth (its own error, or what a
     // silhouette cannot show).
@@ -87,20 +102,22 @@ pub fn pose_rows(
     );
     rows.push(b.row(&diagnostic, &from_truth, truth, Ms::UNTIMED, clean(), nk)?);
     // The same refinement through K-3DGS (trained on the same data), from the same CNN.
-    let t = std::time::Instant::now();
-    let through_gaussians = b.refine(k3dgs, observed, &guesses, &cfg.refine)?;
-    let gaussians = Ms {
-        b1: f64::NAN,
-        batched: 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched,
-    };
-    rows.push(b.row(
-        &format!("{refined_label}, through K-3DGS"),
-        &through_gaussians,
-        truth,
-        gaussians,
-        clean(),
-        (k3dgs, b.autodiff),
-    )?);
+    if let Some(k3dgs) = through.k3dgs {
+        let t = std::time::Instant::now();
+        let through_gaussians = b.refine(k3dgs, observed, &guesses, &cfg.refine)?;
+        let gaussians = Ms {
+            b1: f64::NAN,
+            batched: 1000.0 * t.elapsed().as_secs_f64() / n as f64 + cnn_batched,
+        };
+        rows.push(b.row(
+            &format!("{refined_label}, through K-3DGS"),
+            &through_gaussians,
+            truth,
+            gaussians,
+            clean(),
+            (k3dgs, b.autodiff),
+        )?);
+    }
     let m = cfg.search_poses.min(n);
     let t = std::time::Instant::now();
     let searched = pose_from_image(
@@ -124,6 +141,12 @@ pub fn pose_rows(
         cfg.search.starts, cfg.search.steps
     );
     rows.push(b.row(&label, &searched.angles, &truth[..m], search, clean(), nk)?);
+    group_rows.extend(super::groups::group_rows(
+        &label,
+        &groups,
+        &searched.angles,
+        &truth[..m],
+    ));
     for (i, p) in cfg.perturbations.iter().enumerate() {
         let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
         let g = estimator.estimate(&spoiled, device, 64)?;
@@ -139,11 +162,16 @@ pub fn pose_rows(
     }
     let pose_csv = out.join("results.csv");
     write_csv(&pose_csv, &rows)?;
+    let k3dgs_row = if through.k3dgs.is_some() {
+        " (one row: through K-3DGS, isotropic with alpha compositing, from the same CNN answers)"
+    } else {
+        ""
+    };
     write_markdown_report(
         &pose_csv,
         "Joint angles from a silhouette",
-        "The test poses' silhouettes read back through the trained NeuroKin (one row: through K-3DGS, \
-         isotropic with alpha compositing, from the same CNN answers). Errors are absolute joint \
+        &format!(
+            "The test poses' silhouettes read back through the trained {}{k3dgs_row}. Errors are absolute joint \
          errors in degrees (mean and median over every joint of every pose), the end effector's \
          distance in mm, and the share of poses with every joint within 2 degrees. The CNN is trained \
          on the self-model's own renderings; the refinement descends the silhouette's cross-entropy \
@@ -152,7 +180,10 @@ pub fn pose_rows(
          refinement at the true angles. `loss_below_truth_share`: the poses whose estimate the model \
          scores better than the truth (the model's optimum is elsewhere). Milliseconds on this \
          machine's CPU, one image at a time (b1) and per pose over a batch.",
+            through.model
+        ),
     )?;
+    super::groups::write(&group_rows, through.model, out)?;
     pose_grid(b, observed, &refined, truth, &out.join("pose_grid.png"))?;
     Ok(rows)
 }
