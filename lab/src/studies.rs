@@ -16,4 +16,5 @@ pub mod multiview;
 pub mod pareto;
 pub mod registry;
 pub mod run;
+pub mod scaling;
 pub mod table1;

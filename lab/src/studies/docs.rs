@@ -293,6 +293,10 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
             ));
         }
     }
+    // The self-models against the robot's joints, gathered from the robots' Table I.
+    if let Some(joints) = crate::studies::scaling::joints_csv(root)? {
+        out.push(joints);
+    }
     for md in reports {
         if let Some(text) = selfmodel::report::table::regenerated_report(&md)? {
             let rel = md.strip_prefix(root).unwrap_or(&md).to_path_buf();
@@ -374,7 +378,7 @@ pub fn redraw_figures(root: &Path) -> Result<usize> {
     let mut dirs = Vec::new();
     collect_dirs(&root.join("reports"), &mut dirs);
     dirs.sort();
-    let mut drawn = 0;
+    let mut drawn = usize::from(crate::studies::scaling::draw_joints(root)?);
     for dir in dirs {
         let results = dir.join("results.csv");
         if dir.join("pareto.png").is_file() && results.is_file() {

@@ -134,7 +134,7 @@ fn log_x_lines(
         let x_spec = (x_lo..x_hi).log_scale().with_key_points(xs);
         // The same chart on either y axis.
         macro_rules! draw_on {
-            ($y_spec:expr) => {{
+            ($y_spec:expr, $corner:expr) => {{
                 let mut chart = ChartBuilder::on(&root)
                     .caption(title, (FONT, 20))
                     .margin(15)
@@ -154,32 +154,90 @@ fn log_x_lines(
                     .map_err(|e| draw_err(path, e))?;
                 draw_line_runs(&mut chart, path, runs.iter().cloned())?;
                 draw_markers(&mut chart, path, &runs, 3)?;
-                draw_legend(
-                    &mut chart,
-                    path,
-                    if log_y {
-                        SeriesLabelPosition::UpperRight
-                    } else {
-                        SeriesLabelPosition::LowerRight
-                    },
-                )?;
+                draw_legend(&mut chart, path, $corner)?;
             }};
         }
         if log_y {
+            let corner = SeriesLabelPosition::UpperRight;
             let (y_lo, y_hi) = log_range(bounds(|p| p.1));
             draw_on!(
                 (nice_floor(y_lo)..nice_ceil(y_hi))
                     .log_scale()
-                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi)))
+                    .with_key_points(log_ticks(nice_floor(y_lo), nice_ceil(y_hi))),
+                corner
             );
         } else {
             let (lo, hi) = bounds(|p| p.1).unwrap_or((0.0, 1.0));
             let pad = ((hi - lo) * 0.08).max(0.5);
-            draw_on!((lo - pad)..(hi + pad));
+            // The legend where the lines leave the most room, lower right if as much.
+            let (y0, y1) = (lo - pad, hi + pad);
+            let unit = |p: &(f64, f64)| {
+                (
+                    (p.0 / x_lo).ln() / (x_hi / x_lo).ln(),
+                    (p.1 - y0) / (y1 - y0),
+                )
+            };
+            let lines: Vec<Vec<(f64, f64)>> = runs
+                .iter()
+                .map(|(_, c)| c.iter().map(unit).collect())
+                .collect();
+            let legend = (0.45, (runs.len() as f64 * 20.0 + 12.0) / (h as f64 - 110.0));
+            let corner = emptiest_corner(&lines, legend);
+            draw_on!(y0..y1, corner);
         }
         root.present().map_err(|e| draw_err(path, e))?;
     }
     save_rgb(path, &buf, w, h)
+}
+
+/// Of the four corners, the one whose box of `size` (a share of each axis) the `lines`
+/// (points in the unit square, joined) cross least; lower right where it ties with the least.
+fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> SeriesLabelPosition {
+    // Points along every segment, twenty a segment.
+    let along: Vec<(f64, f64)> = lines
+        .iter()
+        .flat_map(|l| {
+            let single = (l.len() == 1).then(|| l[0]);
+            l.windows(2)
+                .flat_map(|w| {
+                    (0..20).map(move |k| {
+                        let t = k as f64 / 20.0;
+                        (
+                            w[0].0 + t * (w[1].0 - w[0].0),
+                            w[0].1 + t * (w[1].1 - w[0].1),
+                        )
+                    })
+                })
+                .chain(l.last().copied())
+                .chain(single)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let count = |right: bool, upper: bool| {
+        along
+            .iter()
+            .filter(|&&(x, y)| {
+                (if right {
+                    x >= 1.0 - size.0
+                } else {
+                    x <= size.0
+                }) && (if upper {
+                    y >= 1.0 - size.1
+                } else {
+                    y <= size.1
+                })
+            })
+            .count()
+    };
+    [
+        (SeriesLabelPosition::LowerRight, count(true, false)),
+        (SeriesLabelPosition::UpperRight, count(true, true)),
+        (SeriesLabelPosition::LowerLeft, count(false, false)),
+        (SeriesLabelPosition::UpperLeft, count(false, true)),
+    ]
+    .into_iter()
+    .min_by_key(|(_, n)| *n)
+    .map_or(SeriesLabelPosition::LowerRight, |(c, _)| c)
 }
 
 /// Lines of `(x, y)` points, one per run, both axes linear over the points' range (a ROC
