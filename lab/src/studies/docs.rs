@@ -293,10 +293,8 @@ pub fn generate(root: &Path) -> Result<Vec<(PathBuf, String)>> {
             ));
         }
     }
-    // The self-models against the robot's joints, gathered from the robots' Table I.
-    if let Some(joints) = crate::studies::scaling::joints_csv(root)? {
-        out.push(joints);
-    }
+    // The self-models against the robot's joints and poses, gathered from the robots' Table I.
+    out.extend(crate::studies::scaling::tables(root)?);
     for md in reports {
         if let Some(text) = selfmodel::report::table::regenerated_report(&md)? {
             let rel = md.strip_prefix(root).unwrap_or(&md).to_path_buf();

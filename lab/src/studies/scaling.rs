@@ -1,8 +1,9 @@
-//! Self-models against the robot's joint count (issue 75): every self-model's Table I row on
-//! the papers' arm (4 joints), the UR5 (6), the Panda (7) and the G1's whole body (29), each on
-//! 1,600 training poses with the paper preset, gathered from the CSVs their runs wrote into
-//! `reports/scaling/joints.csv` (generated, as the docs are, by the `reports` binary) and drawn
-//! into `joints.png` (`reports --figures`).
+//! Self-models against the robot's joint count and their training poses (issue 75): every
+//! self-model's Table I row on the papers' arm (4 joints), the UR5 (6), the Panda (7) and the
+//! G1's whole body (29), each on 1,600 training poses with the paper preset, gathered from the
+//! CSVs their runs wrote into `reports/scaling/joints.csv`, and the Panda's and the G1's on
+//! 1,600 and 9,600 poses into `poses.csv` (generated, as the docs are, by the `reports`
+//! binary); `joints.png` drawn from the first (`reports --figures`).
 
 use std::path::{Path, PathBuf};
 
@@ -10,74 +11,138 @@ use selfmodel::core::error::Result;
 use selfmodel::report::figures::{LinePlot, line_plot};
 use selfmodel::self_models::result::{ModelResult, read_results};
 
-/// The robots: name, joints, and the folders whose `results.csv` hold its rows (its Table I,
-/// and LinkSplat's run, which joins a Table I only on request).
-const ROBOTS: &[(&str, usize, &[&str])] = &[
-    ("arm4", 4, &["reports/table1", "reports/link_splat"]),
-    (
-        "ur5",
-        6,
-        &[
+/// A column of a scaling table: a robot's rows on some number of training poses.
+struct Column {
+    robot: &'static str,
+    /// What the column is named by after the robot: its joints (`joints.csv`) or its training
+    /// poses (`poses.csv`).
+    key: usize,
+    /// The folders whose `results.csv` hold its rows (a Table I, and LinkSplat's run, which
+    /// joins a Table I only on request).
+    folders: &'static [&'static str],
+    train_samples: usize,
+}
+
+/// The robots, each on the paper preset's 1,600 poses, named by their joints.
+const JOINTS: &[Column] = &[
+    Column {
+        robot: "arm4",
+        key: 4,
+        folders: &["reports/table1", "reports/link_splat"],
+        train_samples: 1600,
+    },
+    Column {
+        robot: "ur5",
+        key: 6,
+        folders: &[
             "reports/robots/ur5/table1",
             "reports/robots/ur5/table1/link_splat",
         ],
-    ),
-    (
-        "panda",
-        7,
-        &[
+        train_samples: 1600,
+    },
+    Column {
+        robot: "panda",
+        key: 7,
+        folders: &[
             "reports/robots/panda/table1",
             "reports/robots/panda/table1/link_splat",
         ],
-    ),
-    (
-        "g1",
-        29,
-        &[
+        train_samples: 1600,
+    },
+    Column {
+        robot: "g1",
+        key: 29,
+        folders: &[
             "reports/robots/g1/table1",
             "reports/robots/g1/table1/link_splat",
         ],
-    ),
+        train_samples: 1600,
+    },
 ];
 
-/// Where the table and figure live.
+/// The robots with a Table I on six times the poses, on 1,600 and on 9,600.
+const POSES: &[Column] = &[
+    Column {
+        robot: "panda",
+        key: 1600,
+        folders: &[
+            "reports/robots/panda/table1",
+            "reports/robots/panda/table1/link_splat",
+        ],
+        train_samples: 1600,
+    },
+    Column {
+        robot: "panda",
+        key: 9600,
+        folders: &[
+            "reports/robots/panda/table1_9600",
+            "reports/robots/panda/table1_9600/link_splat",
+        ],
+        train_samples: 9600,
+    },
+    Column {
+        robot: "g1",
+        key: 1600,
+        folders: &[
+            "reports/robots/g1/table1",
+            "reports/robots/g1/table1/link_splat",
+        ],
+        train_samples: 1600,
+    },
+    Column {
+        robot: "g1",
+        key: 9600,
+        folders: &[
+            "reports/robots/g1/table1_9600",
+            "reports/robots/g1/table1_9600/link_splat",
+        ],
+        train_samples: 9600,
+    },
+];
+
+/// Where the tables and the figure live.
 pub const DIR: &str = "reports/scaling";
 
-/// Each robot's rows: the paper preset's, on the clean data and 1,600 training poses.
-fn rows(root: &Path) -> Result<Vec<(&'static str, usize, Vec<ModelResult>)>> {
+/// Each column's rows: the paper preset's, on the clean data and the column's poses.
+fn rows(
+    root: &Path,
+    columns: &'static [Column],
+) -> Result<Vec<(&'static Column, Vec<ModelResult>)>> {
     let mut out = Vec::new();
-    for &(robot, joints, folders) in ROBOTS {
+    for column in columns {
         let mut rows = Vec::new();
-        for folder in folders {
+        for folder in column.folders {
             let csv = root.join(folder).join("results.csv");
             if csv.is_file() {
                 rows.extend(read_results(&csv)?.into_iter().filter(|r| {
-                    r.preset == "paper" && r.dataset == "clean" && r.train_samples == 1600
+                    r.preset == "paper"
+                        && r.dataset == "clean"
+                        && r.train_samples == column.train_samples
                 }));
             }
         }
-        out.push((robot, joints, rows));
+        out.push((column, rows));
     }
     Ok(out)
 }
 
 /// The robots' rows and the models measured on two robots or more (in order of first
 /// appearance). `None` where no robot has rows.
-type Robots = Vec<(&'static str, usize, Vec<ModelResult>)>;
-fn table(root: &Path) -> Result<Option<(Robots, Vec<String>)>> {
-    let robots = rows(root)?;
-    if robots.iter().all(|(_, _, r)| r.is_empty()) {
+type Columns = Vec<(&'static Column, Vec<ModelResult>)>;
+fn table(root: &Path, columns: &'static [Column]) -> Result<Option<(Columns, Vec<String>)>> {
+    let robots = rows(root, columns)?;
+    if robots.iter().all(|(_, r)| r.is_empty()) {
         return Ok(None);
     }
     let mut models: Vec<String> = Vec::new();
-    for (_, _, rows) in &robots {
+    for (_, rows) in &robots {
         for r in rows {
             if !models.contains(&r.model) {
                 models.push(r.model.clone());
             }
         }
     }
-    models.retain(|m| robots.iter().filter(|(_, _, r)| on(m, r).is_some()).count() >= 2);
+    models.retain(|m| robots.iter().filter(|(_, r)| on(m, r).is_some()).count() >= 2);
     Ok(Some((robots, models)))
 }
 
@@ -86,23 +151,35 @@ fn on<'a>(model: &str, rows: &'a [ModelResult]) -> Option<&'a ModelResult> {
     rows.iter().find(|r| r.model == model)
 }
 
-/// `joints.csv`'s path and text: a row a model measured on two robots or more, PSNR and IoU
-/// on each robot's test poses (empty where it was not run).
-pub fn joints_csv(root: &Path) -> Result<Option<(PathBuf, String)>> {
-    let Some((robots, models)) = table(root)? else {
+/// The generated tables, each its path and text: `joints.csv` (the robots by joints) and
+/// `poses.csv` (the Panda and the G1 on 1,600 and 9,600 poses). A row a model measured in two
+/// columns or more, its PSNR and IoU on each column's test poses (empty where it was not run).
+pub fn tables(root: &Path) -> Result<Vec<(PathBuf, String)>> {
+    let mut out = Vec::new();
+    for (name, columns) in [("joints.csv", JOINTS), ("poses.csv", POSES)] {
+        if let Some(text) = csv(root, columns)? {
+            out.push((Path::new(DIR).join(name), text));
+        }
+    }
+    Ok(out)
+}
+
+/// One table's text: columns `<robot>_<key>_psnr_db`, then `<robot>_<key>_iou`.
+fn csv(root: &Path, columns: &'static [Column]) -> Result<Option<String>> {
+    let Some((robots, models)) = table(root, columns)? else {
         return Ok(None);
     };
     let mut text = String::from("model");
     for metric in ["psnr_db", "iou"] {
-        for (robot, joints, _) in &robots {
-            text += &format!(",{robot}_{joints}_{metric}");
+        for (c, _) in &robots {
+            text += &format!(",{}_{}_{metric}", c.robot, c.key);
         }
     }
     text.push('\n');
     for m in &models {
         text += &csv_cell(m);
         for metric in [0, 1] {
-            for (_, _, rows) in &robots {
+            for (_, rows) in &robots {
                 let cell = on(m, rows).map_or(String::new(), |r| {
                     format!("{}", [r.psnr_db_test, r.iou_test][metric])
                 });
@@ -111,7 +188,7 @@ pub fn joints_csv(root: &Path) -> Result<Option<(PathBuf, String)>> {
         }
         text.push('\n');
     }
-    Ok(Some((Path::new(DIR).join("joints.csv"), text)))
+    Ok(Some(text))
 }
 
 fn csv_cell(s: &str) -> String {
@@ -126,14 +203,14 @@ fn csv_cell(s: &str) -> String {
 /// kind of `joints.csv` (its name before any " ("): the variant with the best mean PSNR.
 /// Returns whether it drew (there is a table).
 pub fn draw_joints(root: &Path) -> Result<bool> {
-    let Some((robots, models)) = table(root)? else {
+    let Some((robots, models)) = table(root, JOINTS)? else {
         return Ok(false);
     };
     let kind = |m: &str| m.split(" (").next().unwrap_or(m).to_string();
     let mean = |m: &str| {
         let psnr: Vec<f64> = robots
             .iter()
-            .filter_map(|(_, _, rows)| on(m, rows).map(|r| r.psnr_db_test))
+            .filter_map(|(_, rows)| on(m, rows).map(|r| r.psnr_db_test))
             .collect();
         psnr.iter().sum::<f64>() / psnr.len().max(1) as f64
     };
@@ -151,9 +228,7 @@ pub fn draw_joints(root: &Path) -> Result<bool> {
         .map(|m| {
             let points = robots
                 .iter()
-                .filter_map(|(_, joints, rows)| {
-                    on(m, rows).map(|r| (*joints as f64, r.psnr_db_test))
-                })
+                .filter_map(|(c, rows)| on(m, rows).map(|r| (c.key as f64, r.psnr_db_test)))
                 .collect();
             (m.to_string(), points)
         })
