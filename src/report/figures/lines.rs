@@ -182,8 +182,14 @@ fn log_x_lines(
                 .map(|(_, c)| c.iter().map(unit).collect())
                 .collect();
             let legend = (0.45, (runs.len() as f64 * 20.0 + 12.0) / (h as f64 - 110.0));
-            let corner = emptiest_corner(&lines, legend);
-            draw_on!(y0..y1, corner);
+            let (corner, crossed) = emptiest_corner(&lines, legend);
+            if crossed > 0 {
+                // Every corner is crossed: room above the lines, as tall as the legend.
+                let top = y1 + (y1 - y0) * legend.1 / (1.0 - legend.1);
+                draw_on!(y0..top, SeriesLabelPosition::UpperRight);
+            } else {
+                draw_on!(y0..y1, corner);
+            }
         }
         root.present().map_err(|e| draw_err(path, e))?;
     }
@@ -191,8 +197,9 @@ fn log_x_lines(
 }
 
 /// Of the four corners, the one whose box of `size` (a share of each axis) the `lines`
-/// (points in the unit square, joined) cross least; lower right where it ties with the least.
-fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> SeriesLabelPosition {
+/// (points in the unit square, joined) cross least, lower right where it ties with the least;
+/// with how many of the points along the lines fall in it.
+fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> (SeriesLabelPosition, usize) {
     // Points along every segment, twenty a segment.
     let along: Vec<(f64, f64)> = lines
         .iter()
@@ -237,7 +244,7 @@ fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> SeriesLabelPo
     ]
     .into_iter()
     .min_by_key(|(_, n)| *n)
-    .map_or(SeriesLabelPosition::LowerRight, |(c, _)| c)
+    .unwrap_or((SeriesLabelPosition::LowerRight, 0))
 }
 
 /// Lines of `(x, y)` points, one per run, both axes linear over the points' range (a ROC
