@@ -169,34 +169,32 @@ fn csv(root: &Path, columns: &'static [Column]) -> Result<Option<String>> {
     let Some((robots, models)) = table(root, columns)? else {
         return Ok(None);
     };
-    let mut text = String::from("model");
+    let mut header = vec!["model".to_string()];
     for metric in ["psnr_db", "iou"] {
-        for (c, _) in &robots {
-            text += &format!(",{}_{}_{metric}", c.robot, c.key);
-        }
+        header.extend(
+            robots
+                .iter()
+                .map(|(c, _)| format!("{}_{}_{metric}", c.robot, c.key)),
+        );
     }
-    text.push('\n');
+    let mut csv = csv::Writer::from_writer(Vec::new());
+    let written = |e: csv::Error| selfmodel::Error::Config(format!("{DIR}: {e}"));
+    csv.write_record(&header).map_err(written)?;
     for m in &models {
-        text += &csv_cell(m);
+        let mut record = vec![m.clone()];
         for metric in [0, 1] {
-            for (_, rows) in &robots {
-                let cell = on(m, rows).map_or(String::new(), |r| {
+            record.extend(robots.iter().map(|(_, rows)| {
+                on(m, rows).map_or(String::new(), |r| {
                     format!("{}", [r.psnr_db_test, r.iou_test][metric])
-                });
-                text += &format!(",{cell}");
-            }
+                })
+            }));
         }
-        text.push('\n');
+        csv.write_record(&record).map_err(written)?;
     }
-    Ok(Some(text))
-}
-
-fn csv_cell(s: &str) -> String {
-    if s.contains(',') || s.contains('"') {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
+    let bytes = csv
+        .into_inner()
+        .map_err(|e| selfmodel::Error::Config(format!("{DIR}: {e}")))?;
+    Ok(Some(String::from_utf8_lossy(&bytes).into_owned()))
 }
 
 /// `joints.png`: PSNR on the test poses against the robot's joints (log), a line a model

@@ -204,7 +204,6 @@ fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> (SeriesLabelP
     let along: Vec<(f64, f64)> = lines
         .iter()
         .flat_map(|l| {
-            let single = (l.len() == 1).then(|| l[0]);
             l.windows(2)
                 .flat_map(|w| {
                     (0..20).map(move |k| {
@@ -216,7 +215,6 @@ fn emptiest_corner(lines: &[Vec<(f64, f64)>], size: (f64, f64)) -> (SeriesLabelP
                     })
                 })
                 .chain(l.last().copied())
-                .chain(single)
                 .collect::<Vec<_>>()
         })
         .collect();

@@ -16,6 +16,7 @@ use selfmodel::core::timing::{Repeats, median_seconds};
 use selfmodel::report::figures::{GridRow, image_grid};
 use selfmodel::report::table::{write_csv, write_markdown_report};
 use selfmodel::self_models::model::Render;
+use selfmodel::sim::robot::Robot;
 
 /// What the poses are read through: the self-model's name, and K-3DGS trained on the same
 /// data (differentiable, on the autodiff device), if the study reads through it too.
@@ -46,10 +47,8 @@ pub fn pose_rows(
         .map(|j| seen.iter().map(|q| q[j]).sum::<f64>() / seen.len() as f64)
         .collect();
     let nk: (&dyn Render, &burn::tensor::Device) = (b.renderer, device);
-    let groups = super::groups::groups(b.robot);
     let mean = vec![mean; n];
     let mut rows = vec![b.row("mean training pose", &mean, truth, Ms::UNTIMED, clean(), nk)?];
-    let mut group_rows = super::groups::group_rows("mean training pose", &groups, &mean, truth);
     let estimator = train_estimator(&cfg.amortised, b.renderer, device, b.image, &b.ranges, seen)?;
     let t = std::time::Instant::now();
     let guesses = estimator.estimate(observed, device, 64)?;
@@ -64,12 +63,6 @@ pub fn pose_rows(
         batched: cnn_batched,
     };
     rows.push(b.row("amortised CNN", &guesses, truth, cnn, clean(), nk)?);
-    group_rows.extend(super::groups::group_rows(
-        "amortised CNN",
-        &groups,
-        &guesses,
-        truth,
-    ));
     let refined_label = format!("CNN + {} refinement steps", cfg.refine.steps);
     let t = std::time::Instant::now();
     let refined = b.refine(b.differentiable, observed, &guesses, &cfg.refine)?;
@@ -86,12 +79,6 @@ pub fn pose_rows(
         batched: refine_batched,
     };
     rows.push(b.row(&refined_label, &refined, truth, refine, clean(), nk)?);
-    group_rows.extend(super::groups::group_rows(
-        &refined_label,
-        &groups,
-        &refined,
-        truth,
-    ));
     // The diagnostic: the same refinement started at the true angles. Where it walks away
     // from them, the self-model's optimum is not the truth (its own error, or what a
     // silhouette cannot show).
@@ -141,12 +128,6 @@ pub fn pose_rows(
         cfg.search.starts, cfg.search.steps
     );
     rows.push(b.row(&label, &searched.angles, &truth[..m], search, clean(), nk)?);
-    group_rows.extend(super::groups::group_rows(
-        &label,
-        &groups,
-        &searched.angles,
-        &truth[..m],
-    ));
     for (i, p) in cfg.perturbations.iter().enumerate() {
         let spoiled = observed.perturbed(*p, cfg.seed + 1 + i as u64);
         let g = estimator.estimate(&spoiled, device, 64)?;
@@ -160,8 +141,32 @@ pub fn pose_rows(
             rows.push(b.row(method, found, truth, Ms::UNTIMED, seen, nk)?);
         }
     }
+    // The clean images' estimates, scored per joint group (the diagnostic and K-3DGS rows
+    // are not estimates a user would make).
+    let estimates: [(&str, &[Vec<f64>]); 4] = [
+        ("mean training pose", &mean),
+        ("amortised CNN", &guesses),
+        (&refined_label, &refined),
+        (&label, &searched.angles),
+    ];
+    write_tables(b.robot, &rows, &through, &estimates, truth, out)?;
+    pose_grid(b, observed, &refined, truth, &out.join("pose_grid.png"))?;
+    Ok(rows)
+}
+
+/// `results.csv` (`rows`) with its report, and `groups.csv` for the clean images' `estimates`
+/// (each its method and its poses, the first of `truth`) on `robot`'s joint groups, into
+/// `out`.
+fn write_tables(
+    robot: &Robot,
+    rows: &[PoseRow],
+    through: &Through,
+    estimates: &[(&str, &[Vec<f64>])],
+    truth: &[Vec<f64>],
+    out: &Path,
+) -> Result<()> {
     let pose_csv = out.join("results.csv");
-    write_csv(&pose_csv, &rows)?;
+    write_csv(&pose_csv, rows)?;
     let k3dgs_row = if through.k3dgs.is_some() {
         " (one row: through K-3DGS, isotropic with alpha compositing, from the same CNN answers)"
     } else {
@@ -183,9 +188,14 @@ pub fn pose_rows(
             through.model
         ),
     )?;
-    super::groups::write(&group_rows, through.model, out)?;
-    pose_grid(b, observed, &refined, truth, &out.join("pose_grid.png"))?;
-    Ok(rows)
+    let groups = super::groups::groups(robot);
+    let group_rows: Vec<_> = estimates
+        .iter()
+        .flat_map(|(method, found)| {
+            super::groups::group_rows(method, &groups, found, &truth[..found.len()])
+        })
+        .collect();
+    super::groups::write(&group_rows, through.model, out)
 }
 
 /// Observed silhouettes, the self-model's rendering at the estimate and their difference,
